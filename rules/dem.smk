@@ -1,0 +1,33 @@
+# DEM stage: one LIGGGHTS run per operating point, then the grid's collision tables.
+
+
+rule dem_point:
+    output:
+        table=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/collisions.csv",
+        walls=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/wall_collisions.csv",
+        summary=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/summary.json",
+    params:
+        point=lambda wc: point_config(config, wc.dist),
+        run_dir=lambda wc: f"{RESULTS}/dem/rpm{wc.rpm}_{wc.dist}",
+    threads: config["dem"].get("mpi_ranks", 1)
+    resources:
+        mpi_ranks=config["dem"].get("mpi_ranks", 1),
+    log:
+        f"{RESULTS}/logs/dem/rpm{{rpm}}_{{dist}}.log",
+    script:
+        "../workflow/scripts/dem_point.py"
+
+
+rule collision_tables:
+    input:
+        tables=dem_outputs("collisions.csv"),
+        walls=dem_outputs("wall_collisions.csv"),
+        summaries=dem_outputs("summary.json"),
+    output:
+        table=f"{RESULTS}/dem/collisions.csv",
+        walls=f"{RESULTS}/dem/wall_collisions.csv",
+        runs=f"{RESULTS}/dem/runs.csv",
+    log:
+        f"{RESULTS}/logs/dem/collision_tables.log",
+    script:
+        "../workflow/scripts/collision_tables.py"

@@ -1,0 +1,71 @@
+"""The `pbmdem` command line.
+
+    pbmdem dem --config config/config.yaml --rpm 600 --distribution fine --out results/dem/rpm600_fine
+    pbmdem view RUN_DIR [--step N] [--screenshot out.png]
+    pbmdem pbm --config ... --kernel constant|table|ann ...
+    pbmdem surrogate train|predict ...
+
+Each stage registers its own subcommand (`add_cli(subparsers)` in its module).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def _dem(args: argparse.Namespace) -> int:
+    from pbmdem.config import load_config
+    from pbmdem.dem import plan_point, run_point
+
+    cfg = load_config(args.config)
+    plan = plan_point(cfg, args.rpm, args.distribution)
+    if args.plan_only:
+        print(json.dumps(plan.__dict__, indent=2))
+        return 0
+    summary = run_point(cfg, plan, args.out, timeout=cfg["dem"].get("timeout"))
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="pbmdem", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    dem = sub.add_parser("dem", help="run one DEM operating point with LIGGGHTS")
+    dem.add_argument("--config", required=True, help="workflow config (YAML)")
+    dem.add_argument("--rpm", required=True, type=float, help="impeller speed (1/min)")
+    dem.add_argument("--distribution", required=True, help="size distribution name from the config")
+    dem.add_argument("--out", default=None, help="run folder (default results/dem/<point id>)")
+    dem.add_argument("--plan-only", action="store_true", help="print the run plan and stop")
+    dem.set_defaults(func=_dem)
+
+    from pbmdem import viewer
+
+    viewer.add_cli(sub)
+    from pbmdem.pbm import cli as pbm_cli
+
+    pbm_cli.add_cli(sub)
+    from pbmdem.surrogate import cli as surrogate_cli
+
+    surrogate_cli.add_cli(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if getattr(args, "command", None) == "dem" and args.out is None:
+        from pbmdem.dem import point_id
+
+        args.out = f"results/dem/{point_id(args.rpm, args.distribution)}"
+    try:
+        return int(args.func(args) or 0)
+    except (ValueError, FileNotFoundError, RuntimeError) as exc:
+        print(f"pbmdem: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

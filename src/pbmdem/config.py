@@ -1,0 +1,148 @@
+"""Load and validate the workflow configuration.
+
+Two layers: the JSON schema in `workflow/schemas/config.schema.yaml` (types, ranges, required
+keys; the Snakefile applies it with `snakemake.utils.validate`) and `check_config`, which checks
+what a schema cannot express: number fractions that sum to 1, ascending diameters, particles that
+fit the bowl, a bed that covers the impeller, grid names that exist. Every error names the key,
+the offending value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import jsonschema
+import yaml
+from referencing import Registry, Resource
+from referencing.jsonschema import DRAFT202012
+
+FRACTION_TOLERANCE = 1e-6
+
+
+class ConfigError(ValueError):
+    """The configuration is invalid; the message names the key and what is allowed."""
+
+
+def schema_dir() -> Path:
+    here = Path(__file__).resolve()
+    for parent in here.parents:
+        candidate = parent / "workflow" / "schemas"
+        if candidate.is_dir():
+            return candidate
+    raise FileNotFoundError("workflow/schemas not found beside the pbmdem sources")
+
+
+def _registry(folder: Path) -> Registry:
+    resources = []
+    for path in folder.glob("*.schema.yaml"):
+        resources.append((path.name, Resource.from_contents(yaml.safe_load(path.read_text()),
+                                                            default_specification=DRAFT202012)))
+    return Registry().with_resources(resources)
+
+
+def _key(path) -> str:
+    out = ""
+    for part in path:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out or "(top level)"
+
+
+def _describe(error: jsonschema.ValidationError) -> str:
+    key = _key(error.absolute_path)
+    s = error.schema if isinstance(error.schema, dict) else {}
+    v = error.validator
+    if v == "required":
+        return f"{key}: {error.message}"
+    if v == "additionalProperties":
+        allowed = sorted(s.get("properties", {}))
+        return f"{key}: {error.message}; allowed keys: {allowed}"
+    limits = []
+    for name, word in (("minimum", ">="), ("exclusiveMinimum", ">"), ("maximum", "<="), ("exclusiveMaximum", "<")):
+        if name in s:
+            limits.append(f"{word} {s[name]}")
+    allowed = f" (allowed: {s.get('type', '')} {' and '.join(limits)})".replace("  ", " ") if limits else ""
+    if "enum" in s:
+        allowed = f" (allowed: {s['enum']})"
+    return f"config key {key} = {error.instance!r}: {error.message}{allowed}"
+
+
+def validate_schema(cfg: dict) -> None:
+    folder = schema_dir()
+    schema = yaml.safe_load((folder / "config.schema.yaml").read_text())
+    validator = jsonschema.Draft202012Validator(schema, registry=_registry(folder))
+    errors = sorted(validator.iter_errors(cfg), key=lambda e: list(map(str, e.absolute_path)))
+    if errors:
+        raise ConfigError("invalid configuration:\n  " + "\n  ".join(_describe(e) for e in errors))
+
+
+def check_config(cfg: dict) -> dict:
+    """Checks beyond the schema; returns cfg unchanged or raises ConfigError listing every problem."""
+    problems: list[str] = []
+    bowl = cfg["granulator"]["bowl"]
+    imp = cfg["granulator"]["impeller"]
+    radius = 0.5 * bowl["diameter"]
+    if imp["blade_length"] >= radius:
+        problems.append(f"granulator.impeller.blade_length = {imp['blade_length']}: must be smaller than the "
+                        f"bowl radius {radius}")
+    if imp.get("hub_diameter", 0.01) / 2 >= imp["blade_length"]:
+        problems.append(f"granulator.impeller.hub_diameter = {imp.get('hub_diameter')}: must be smaller than "
+                        f"twice the blade length {2 * imp['blade_length']}")
+    impeller_top = imp["clearance"] + imp["blade_height"]
+    if impeller_top >= bowl["height"]:
+        problems.append(f"granulator.impeller: clearance + blade_height = {impeller_top} must be below the "
+                        f"bowl height {bowl['height']}")
+    dem = cfg["dem"]
+    if dem["bed_height"] <= impeller_top:
+        problems.append(f"dem.bed_height = {dem['bed_height']}: the bed must cover the impeller, i.e. exceed "
+                        f"clearance + blade_height = {impeller_top}")
+    if dem["bed_height"] >= bowl["height"]:
+        problems.append(f"dem.bed_height = {dem['bed_height']}: must be below the bowl height {bowl['height']}")
+    gap = radius - imp["blade_length"]
+    for name, dist in cfg["size_distributions"].items():
+        d, w = dist["diameters"], dist["number_fractions"]
+        key = f"size_distributions.{name}"
+        if len(d) != len(w):
+            problems.append(f"{key}: {len(d)} diameters but {len(w)} number_fractions; one fraction per class")
+            continue
+        if any(b <= a for a, b in zip(d, d[1:])):
+            problems.append(f"{key}.diameters = {d}: must be strictly ascending (class k is the k-th size)")
+        total = math.fsum(w)
+        if abs(total - 1.0) > FRACTION_TOLERANCE:
+            problems.append(f"{key}.number_fractions = {w}: sum to {total:.6g}, must sum to 1 "
+                            f"(within {FRACTION_TOLERANCE})")
+        d_max = max(d)
+        free_height = bowl["height"] - impeller_top
+        if 3 * d_max >= free_height:
+            problems.append(f"{key}.diameters: largest {d_max} m does not fit the bowl: the space above the "
+                            f"impeller ({free_height:.4g} m) must exceed 3 particle diameters")
+        if 2 * d_max >= radius:
+            problems.append(f"{key}.diameters: largest {d_max} m does not fit the bowl: it must be below "
+                            f"half the bowl radius ({radius / 2:.4g} m)")
+        if d_max > 0 and gap < 0:
+            problems.append(f"{key}: no gap between blade tips and wall")
+    for name in cfg["grid"]["size_distributions"]:
+        if name not in cfg["size_distributions"]:
+            problems.append(f"grid.size_distributions: {name!r} is not defined; defined names: "
+                            f"{sorted(cfg['size_distributions'])}")
+    if problems:
+        raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
+    return cfg
+
+
+def validate(cfg: dict) -> dict:
+    validate_schema(cfg)
+    return check_config(cfg)
+
+
+def load_config(path: str | Path) -> dict:
+    path = Path(path)
+    try:
+        cfg = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"config file {path} does not exist") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"config file {path} is not valid YAML: {exc}") from None
+    if not isinstance(cfg, dict):
+        raise ConfigError(f"config file {path}: the top level must be a mapping of sections")
+    return validate(cfg)

@@ -1,0 +1,202 @@
+"""Granulator geometry: a closed cylindrical bowl and a bladed impeller as STL triangle meshes.
+
+The bowl's axis is the z axis, its bottom at z = 0. The impeller turns about the same axis. Both
+meshes are written with meshio; every closed part is watertight with outward normals (triangles
+ordered counter-clockwise seen from outside), which `check_closed_surface` verifies.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import meshio
+import numpy as np
+
+from pbmdem.atomic import atomic_path
+
+
+@dataclass(frozen=True)
+class Bowl:
+    diameter: float
+    height: float
+    segments: int = 48
+
+    @property
+    def radius(self) -> float:
+        return 0.5 * self.diameter
+
+
+@dataclass(frozen=True)
+class Impeller:
+    blades: int
+    blade_length: float
+    blade_height: float
+    blade_thickness: float
+    clearance: float
+    pitch_deg: float = 0.0
+    hub_diameter: float = 0.01
+
+    @property
+    def tip_radius(self) -> float:
+        return self.blade_length
+
+    @property
+    def top(self) -> float:
+        """Highest z reached by the blades (m), accounting for pitch."""
+        pitch = np.radians(self.pitch_deg)
+        half_extent = 0.5 * (self.blade_height * abs(np.cos(pitch)) + self.blade_thickness * abs(np.sin(pitch)))
+        return self.clearance + 0.5 * self.blade_height + half_extent
+
+
+def bowl_from_config(cfg: dict) -> Bowl:
+    b = cfg["granulator"]["bowl"]
+    return Bowl(diameter=float(b["diameter"]), height=float(b["height"]), segments=int(b.get("segments", 48)))
+
+
+def impeller_from_config(cfg: dict) -> Impeller:
+    i = cfg["granulator"]["impeller"]
+    return Impeller(
+        blades=int(i["blades"]),
+        blade_length=float(i["blade_length"]),
+        blade_height=float(i["blade_height"]),
+        blade_thickness=float(i["blade_thickness"]),
+        clearance=float(i["clearance"]),
+        pitch_deg=float(i.get("pitch_deg", 0.0)),
+        hub_diameter=float(i.get("hub_diameter", 0.01)),
+    )
+
+
+def _disc_fan(center: np.ndarray, ring: np.ndarray, upward: bool) -> np.ndarray:
+    """Triangles of a flat disc from a centre vertex index and a ring of vertex indices."""
+    nxt = np.roll(ring, -1)
+    c = np.full_like(ring, center)
+    if upward:
+        return np.stack([c, ring, nxt], axis=1)
+    return np.stack([c, nxt, ring], axis=1)
+
+
+def bowl_mesh(bowl: Bowl) -> tuple[np.ndarray, np.ndarray]:
+    """Closed cylinder (side, bottom, lid) with normals pointing out of the fluid region.
+
+    LIGGGHTS does not care about the normal direction of a wall, but a consistent orientation
+    lets the mesh be checked for being a closed surface.
+    """
+    n = int(bowl.segments)
+    if n < 8:
+        raise ValueError(f"granulator.bowl.segments = {n}: at least 8 facets are needed around the bowl")
+    theta = 2.0 * np.pi * np.arange(n) / n
+    x, y = bowl.radius * np.cos(theta), bowl.radius * np.sin(theta)
+    bottom = np.column_stack([x, y, np.zeros(n)])
+    top = np.column_stack([x, y, np.full(n, bowl.height)])
+    points = np.vstack([bottom, top, [[0.0, 0.0, 0.0]], [[0.0, 0.0, bowl.height]]])
+    ib, it = np.arange(n), np.arange(n, 2 * n)
+    jb, jt = np.roll(ib, -1), np.roll(it, -1)
+    side = np.vstack([np.stack([ib, jb, jt], axis=1), np.stack([ib, jt, it], axis=1)])
+    floor = _disc_fan(2 * n, ib, upward=False)  # outward = -z
+    lid = _disc_fan(2 * n + 1, it, upward=True)  # outward = +z
+    return points, np.vstack([side, floor, lid]).astype(np.int64)
+
+
+def _box(half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned box centred at the origin with outward-oriented triangles."""
+    hx, hy, hz = half
+    pts = np.array(
+        [[-hx, -hy, -hz], [hx, -hy, -hz], [hx, hy, -hz], [-hx, hy, -hz],
+         [-hx, -hy, hz], [hx, -hy, hz], [hx, hy, hz], [-hx, hy, hz]]
+    )
+    tris = np.array(
+        [[0, 2, 1], [0, 3, 2],  # bottom (-z)
+         [4, 5, 6], [4, 6, 7],  # top (+z)
+         [0, 1, 5], [0, 5, 4],  # -y
+         [1, 2, 6], [1, 6, 5],  # +x
+         [2, 3, 7], [2, 7, 6],  # +y
+         [3, 0, 4], [3, 4, 7]]  # -x
+    )
+    return pts, tris
+
+
+def _rotation(axis: str, angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    if axis == "x":
+        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    if axis == "z":
+        return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    raise ValueError(axis)
+
+
+def impeller_mesh(imp: Impeller, bowl: Bowl | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Hub (a closed prism) plus `blades` rectangular blades, each a closed box.
+
+    Blade k is a plate spanning radially from the hub axis to `blade_length`, of height
+    `blade_height` and thickness `blade_thickness`, its underside `clearance` above the bottom,
+    rotated by 2 pi k / blades about z and tilted by `pitch_deg` about its own radial axis.
+    """
+    if imp.blades < 1:
+        raise ValueError(f"granulator.impeller.blades = {imp.blades}: at least one blade is needed")
+    if bowl is not None and imp.blade_length >= bowl.radius:
+        raise ValueError(
+            f"granulator.impeller.blade_length = {imp.blade_length} m reaches the bowl wall "
+            f"(radius {bowl.radius} m); it must be smaller than the bowl radius"
+        )
+    parts_pts, parts_tris, offset = [], [], 0
+    zc = imp.clearance + 0.5 * imp.blade_height
+    for k in range(imp.blades):
+        pts, tris = _box(np.array([0.5 * imp.blade_length, 0.5 * imp.blade_thickness, 0.5 * imp.blade_height]))
+        pts = pts @ _rotation("x", np.radians(imp.pitch_deg)).T
+        pts[:, 0] += 0.5 * imp.blade_length
+        pts = pts @ _rotation("z", 2.0 * np.pi * k / imp.blades).T
+        pts[:, 2] += zc
+        parts_pts.append(pts)
+        parts_tris.append(tris + offset)
+        offset += len(pts)
+    # hub: a 12-sided closed prism from the bottom clearance to the blade top
+    m, r = 12, 0.5 * imp.hub_diameter
+    theta = 2.0 * np.pi * np.arange(m) / m
+    z0, z1 = imp.clearance, imp.clearance + imp.blade_height
+    ring0 = np.column_stack([r * np.cos(theta), r * np.sin(theta), np.full(m, z0)])
+    ring1 = np.column_stack([r * np.cos(theta), r * np.sin(theta), np.full(m, z1)])
+    hub_pts = np.vstack([ring0, ring1, [[0, 0, z0]], [[0, 0, z1]]])
+    i0, i1 = np.arange(m), np.arange(m, 2 * m)
+    j0, j1 = np.roll(i0, -1), np.roll(i1, -1)
+    hub_tris = np.vstack(
+        [np.stack([i0, j0, j1], axis=1), np.stack([i0, j1, i1], axis=1),
+         _disc_fan(2 * m, i0, upward=False), _disc_fan(2 * m + 1, i1, upward=True)]
+    )
+    parts_pts.append(hub_pts)
+    parts_tris.append(hub_tris + offset)
+    return np.vstack(parts_pts), np.vstack(parts_tris).astype(np.int64)
+
+
+def check_closed_surface(points: np.ndarray, triangles: np.ndarray) -> float:
+    """Return the enclosed volume; raise if some edge is not shared by exactly two triangles
+    traversed in opposite directions (i.e. the surface is not closed and consistently oriented)."""
+    edges = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    fwd = {tuple(e) for e in edges.tolist()}
+    if len(fwd) != len(edges):
+        raise ValueError("a directed edge is used twice: inconsistent triangle orientation")
+    missing = [e for e in fwd if (e[1], e[0]) not in fwd]
+    if missing:
+        raise ValueError(f"surface is not closed: {len(missing)} edges have no opposite twin, e.g. {missing[0]}")
+    a, b, c = (points[triangles[:, k]] for k in range(3))
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def write_stl(path: str | Path, points: np.ndarray, triangles: np.ndarray) -> Path:
+    """Write an ASCII STL atomically (LIGGGHTS reads ASCII STL)."""
+    path = Path(path)
+    mesh = meshio.Mesh(points=np.asarray(points, float), cells=[("triangle", np.asarray(triangles))])
+    with atomic_path(path) as tmp:
+        meshio.write(tmp, mesh, file_format="stl", binary=False)
+    return path
+
+
+def write_granulator(cfg: dict, outdir: str | Path) -> dict[str, Path]:
+    """Write bowl.stl and impeller.stl for the config's granulator into `outdir`."""
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    bowl, imp = bowl_from_config(cfg), impeller_from_config(cfg)
+    return {
+        "bowl": write_stl(outdir / "bowl.stl", *bowl_mesh(bowl)),
+        "impeller": write_stl(outdir / "impeller.stl", *impeller_mesh(imp, bowl)),
+    }

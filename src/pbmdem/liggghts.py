@@ -1,0 +1,105 @@
+"""Run the external LIGGGHTS engine and turn its failures into clear errors.
+
+LIGGGHTS (Debian package `liggghts`, binary `liggghts`) is run as a separate program, serially
+or under `mpirun -np N`. A run fails when the program exits non-zero, when its log contains an
+`ERROR` line (LIGGGHTS sometimes exits 0 after an error), or when particles were lost. The error
+message carries the last lines of the log; a `crash.json` beside the log records the failure so
+that crashed runs are kept and explained rather than hidden.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from pbmdem.atomic import write_json
+
+_ERROR_LINE = re.compile(r"^(ERROR|ERROR on proc \d+).*$", re.MULTILINE)
+_LOST = re.compile(r"Lost atoms|lost atoms", re.IGNORECASE)
+
+
+class LiggghtsError(RuntimeError):
+    """LIGGGHTS failed; the message ends with the tail of its log."""
+
+
+@dataclass
+class LiggghtsRun:
+    log: Path
+    wall_time: float
+    returncode: int
+
+
+def executable() -> str:
+    exe = os.environ.get("PBMDEM_LIGGGHTS", "liggghts")
+    path = shutil.which(exe)
+    if path is None:
+        raise LiggghtsError(
+            f"LIGGGHTS executable {exe!r} not found on PATH; install it with "
+            "'apt-get install --no-install-recommends liggghts' (or set PBMDEM_LIGGGHTS)"
+        )
+    return path
+
+
+def command(deck: str, ranks: int = 1) -> list[str]:
+    if not isinstance(ranks, int) or ranks < 1:
+        raise ValueError(f"mpi_ranks = {ranks!r}: a positive integer is required")
+    base = [executable(), "-in", deck, "-log", "log.liggghts", "-echo", "none"]
+    if ranks == 1:
+        return base
+    mpirun = shutil.which("mpirun")
+    if mpirun is None:
+        raise LiggghtsError("mpi_ranks > 1 needs mpirun (apt-get install openmpi-bin)")
+    return [mpirun, "--allow-run-as-root", "--oversubscribe", "-np", str(ranks), *base]
+
+
+def tail(path: Path, lines: int = 25) -> str:
+    try:
+        text = path.read_text(errors="replace").splitlines()
+    except FileNotFoundError:
+        return "(no log written)"
+    return "\n".join(text[-lines:])
+
+
+def run(deck: str | Path, workdir: str | Path, ranks: int = 1, timeout: float | None = None) -> LiggghtsRun:
+    """Run `deck` (a file in `workdir`) with the working directory `workdir`.
+
+    Raises LiggghtsError (after writing `workdir/crash.json`) on any failure.
+    """
+    workdir = Path(workdir)
+    deck_name = Path(deck).name
+    cmd = command(deck_name, ranks)
+    log = workdir / "log.liggghts"
+    t0 = time.perf_counter()
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    try:
+        proc = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=timeout, env=env)
+        returncode = proc.returncode
+        stderr = proc.stderr
+    except subprocess.TimeoutExpired:
+        returncode, stderr = -9, f"timed out after {timeout} s"
+    wall = time.perf_counter() - t0
+    log_text = log.read_text(errors="replace") if log.exists() else ""
+    problems = []
+    if returncode != 0:
+        problems.append(f"exit code {returncode}")
+    err = _ERROR_LINE.search(log_text)
+    if err:
+        problems.append(f"log says: {err.group(0).strip()}")
+    if _LOST.search(log_text):
+        problems.append("particles were lost")
+    if problems:
+        write_json(workdir / "crash.json", {
+            "command": cmd, "returncode": returncode, "problems": problems,
+            "wall_time_s": wall, "log_tail": tail(log, 40), "stderr_tail": stderr[-4000:],
+            "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        })
+        raise LiggghtsError(
+            f"LIGGGHTS failed in {workdir} ({'; '.join(problems)}). Last lines of the log:\n{tail(log)}"
+            + (f"\nstderr:\n{stderr[-2000:]}" if stderr.strip() else "")
+        )
+    return LiggghtsRun(log=log, wall_time=wall, returncode=returncode)

@@ -1,0 +1,123 @@
+"""Collision counting on small hand-written LIGGGHTS local dumps with known contact sequences."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pbmdem import collisions
+from pbmdem.collisions import DumpFormatError, count_pair_collisions, count_wall_collisions, read_dump
+
+
+def frame(step: int, rows: list[tuple], kind: str = "ENTRIES") -> str:
+    head = (f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF {kind}\n{len(rows)}\n"
+            "ITEM: BOX BOUNDS ff ff ff\n-1 1\n-1 1\n-1 1\n"
+            f"ITEM: {kind} c_pairs[1] c_pairs[2] c_pairs[4] \n")
+    return head + "".join(" ".join(str(v) for v in r) + " \n" for r in rows)
+
+
+def write(tmp_path: Path, name: str, frames: list[str]) -> Path:
+    path = tmp_path / name
+    path.write_text("".join(frames))
+    return path
+
+
+# Particles 1, 2 are class 0; 3, 4 class 1. Sequence over frames 0..4:
+#  (1,2): in contact at frame 0 and stays             -> 0 new contacts (began before the window)
+#  (1,3): touches at 1, separates at 2, touches at 3  -> 2 new contacts
+#  (2,4): touches at 2 and stays through 4, listed as (4,2) at frame 3 -> 1
+#  (3,4): listed at frame 1 with negative overlap (liquid bridge, not touching), touches at 4 -> 1
+SEQUENCE = [
+    frame(100, [(1, 2, 1e-5)]),
+    frame(105, [(1, 2, 1e-5), (1, 3, 2e-6), (3, 4, -1e-5)]),
+    frame(110, [(2, 1, 1e-5), (2, 4, 1e-6)]),
+    frame(115, [(1, 2, 1e-5), (3, 1, 3e-6), (4, 2, 2e-6)]),
+    frame(120, [(1, 2, 1e-5), (2, 4, 2e-6), (3, 4, 1e-6)]),
+]
+CLASS_OF = np.array([-1, 0, 0, 1, 1])
+
+
+def test_known_contact_sequence(tmp_path):
+    snaps = read_dump(write(tmp_path, "pairs.dump", SEQUENCE), 3)
+    assert snaps.frames == 5
+    assert snaps.steps.tolist() == [100, 105, 110, 115, 120]
+    counts = count_pair_collisions(snaps, CLASS_OF, 2)
+    # (1,3) twice and (2,4) once are class (0,1); (3,4) once is (1,1); (1,2) never counts
+    assert counts.tolist() == [[0, 3], [0, 1]]
+
+
+def test_stride_uses_every_second_snapshot(tmp_path):
+    snaps = read_dump(write(tmp_path, "pairs.dump", SEQUENCE), 3)
+    counts = count_pair_collisions(snaps, CLASS_OF, 2, stride=2)
+    # frames 0, 2, 4 only: (2,4) begins at 2; (3,4) begins at 4; (1,3) is never seen
+    assert counts.tolist() == [[0, 1], [0, 1]]
+
+
+def test_new_contacts_counts_a_mesh_contact_once_per_particle():
+    # particle 7 touches two triangles of the impeller (mesh 1) in frames 1 and 2
+    frame_idx = np.array([1, 1, 2, 2, 2])
+    key = np.array([17, 17, 17, 17, 5])
+    begins = collisions.new_contacts(frame_idx, key)
+    assert begins.sum() == 2  # key 17 begins at frame 1 once; key 5 begins at frame 2
+
+
+def test_wall_table_separates_bowl_and_impeller(tmp_path):
+    frames = [
+        frame(0, [(0, 1, 1e-6)]),
+        frame(5, [(0, 1, 1e-6), (1, 3, 1e-6), (1, 3, 2e-6)]),
+        frame(10, [(1, 3, 1e-6), (0, 4, 1e-6), (1, 1, -1e-6)]),
+    ]
+    snaps = read_dump(write(tmp_path, "walls.dump", frames), 3)
+    counts = count_wall_collisions(snaps, CLASS_OF, 2)
+    assert counts.tolist() == [[0, 1], [0, 1]]  # bowl: particle 4 (class 1); impeller: particle 3 once
+
+
+def test_empty_dump_gives_no_frames(tmp_path):
+    snaps = read_dump(write(tmp_path, "pairs.dump", []), 3)
+    assert snaps.frames == 0
+    assert count_pair_collisions(snaps, CLASS_OF, 2).sum() == 0
+
+
+def test_frames_without_contacts(tmp_path):
+    snaps = read_dump(write(tmp_path, "pairs.dump", [frame(0, []), frame(5, [(1, 3, 1e-6)]), frame(10, [])]), 3)
+    assert snaps.frames == 3
+    assert count_pair_collisions(snaps, CLASS_OF, 2).tolist() == [[0, 1], [0, 0]]
+
+
+def test_truncated_file_gives_clear_error(tmp_path):
+    text = "".join(SEQUENCE)
+    cut = text[: text.rindex("2 4 2e-06")]  # the run died while writing the last frame
+    path = tmp_path / "pairs.dump"
+    path.write_text(cut)
+    with pytest.raises(DumpFormatError, match="truncated"):
+        read_dump(path, 3)
+
+
+def test_truncated_header_gives_clear_error(tmp_path):
+    path = tmp_path / "pairs.dump"
+    path.write_text("".join(SEQUENCE) + "ITEM: TIMESTEP\n125\nITEM: NUMB")
+    with pytest.raises(DumpFormatError, match="truncated|malformed"):
+        read_dump(path, 3)
+
+
+def test_missing_file_gives_clear_error(tmp_path):
+    with pytest.raises(DumpFormatError, match="does not exist"):
+        read_dump(tmp_path / "nope.dump", 3)
+
+
+def test_not_a_dump(tmp_path):
+    path = tmp_path / "pairs.dump"
+    path.write_text("hello\n")
+    with pytest.raises(DumpFormatError, match="header"):
+        read_dump(path, 3)
+
+
+def test_pair_table_normalises_per_pair():
+    counts = np.array([[10, 6], [0, 4]])
+    n = np.array([5, 3])
+    table = collisions.pair_table(counts, n, [0.002, 0.003], 2.0,
+                                  {"point_id": "p", "rpm": 100.0, "distribution": "d"})
+    assert table[["class_i", "class_j"]].values.tolist() == [[0, 0], [0, 1], [1, 1]]
+    # pairs: 5*4/2 = 10 on the diagonal, 5*3 = 15 across, 3*2/2 = 3
+    np.testing.assert_allclose(table["frequency_per_pair"], [10 / (10 * 2), 6 / (15 * 2), 4 / (3 * 2)])
+    np.testing.assert_allclose(table["frequency"], [5.0, 3.0, 2.0])

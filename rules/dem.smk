@@ -14,6 +14,8 @@ rule dem_point:
         mpi_ranks=config["dem"].get("mpi_ranks", 1),
     log:
         f"{RESULTS}/logs/dem/rpm{{rpm}}_{{dist}}.log",
+    conda:
+        "../envs/pbmdem.yaml"
     script:
         "../workflow/scripts/dem_point.py"
 
@@ -29,5 +31,7 @@ rule collision_tables:
         runs=f"{RESULTS}/dem/runs.csv",
     log:
         f"{RESULTS}/logs/dem/collision_tables.log",
+    conda:
+        "../envs/pbmdem.yaml"
     script:
         "../workflow/scripts/collision_tables.py"

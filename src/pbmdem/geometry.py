@@ -128,7 +128,7 @@ def _rotation(axis: str, angle: float) -> np.ndarray:
 def impeller_mesh(imp: Impeller, bowl: Bowl | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Hub (a closed prism) plus `blades` rectangular blades, each a closed box.
 
-    Blade k is a plate spanning radially from the hub axis to `blade_length`, of height
+    Blade k is a plate spanning radially from half the hub radius to `blade_length`, of height
     `blade_height` and thickness `blade_thickness`, its underside `clearance` above the bottom,
     rotated by 2 pi k / blades about z and tilted by `pitch_deg` about its own radial axis.
     """
@@ -142,9 +142,13 @@ def impeller_mesh(imp: Impeller, bowl: Bowl | None = None) -> tuple[np.ndarray, 
     parts_pts, parts_tris, offset = [], [], 0
     zc = imp.clearance + 0.5 * imp.blade_height
     for k in range(imp.blades):
-        pts, tris = _box(np.array([0.5 * imp.blade_length, 0.5 * imp.blade_thickness, 0.5 * imp.blade_height]))
+        # blades start inside the hub (not at the axis), so that no two blades share a face:
+        # LIGGGHTS rejects meshes with coincident triangles
+        r0 = 0.5 * (0.5 * imp.hub_diameter)
+        span = imp.blade_length - r0
+        pts, tris = _box(np.array([0.5 * span, 0.5 * imp.blade_thickness, 0.5 * imp.blade_height]))
         pts = pts @ _rotation("x", np.radians(imp.pitch_deg)).T
-        pts[:, 0] += 0.5 * imp.blade_length
+        pts[:, 0] += r0 + 0.5 * span
         pts = pts @ _rotation("z", 2.0 * np.pi * k / imp.blades).T
         pts[:, 2] += zc
         parts_pts.append(pts)

@@ -78,12 +78,16 @@ def run(deck: str | Path, workdir: str | Path, ranks: int = 1, timeout: float | 
     env = dict(os.environ, OMP_NUM_THREADS="1")
     try:
         proc = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=timeout, env=env)
-        returncode = proc.returncode
-        stderr = proc.stderr
-    except subprocess.TimeoutExpired:
+        returncode, stdout, stderr = proc.returncode, proc.stdout, proc.stderr
+    except subprocess.TimeoutExpired as exc:
         returncode, stderr = -9, f"timed out after {timeout} s"
+        stdout = exc.stdout.decode(errors="replace") if isinstance(exc.stdout, bytes) else (exc.stdout or "")
     wall = time.perf_counter() - t0
+    screen = workdir / "screen.liggghts"
+    screen.write_text(stdout)
     log_text = log.read_text(errors="replace") if log.exists() else ""
+    # an error can reach the screen but not the log (e.g. when MPI aborts while reporting it)
+    log_text += "\n" + stdout
     problems = []
     if returncode != 0:
         problems.append(f"exit code {returncode}")
@@ -100,6 +104,7 @@ def run(deck: str | Path, workdir: str | Path, ranks: int = 1, timeout: float | 
         })
         raise LiggghtsError(
             f"LIGGGHTS failed in {workdir} ({'; '.join(problems)}). Last lines of the log:\n{tail(log)}"
+            + (f"\n{err.group(0).strip()}" if err and err.group(0) not in tail(log) else "")
             + (f"\nstderr:\n{stderr[-2000:]}" if stderr.strip() else "")
         )
     return LiggghtsRun(log=log, wall_time=wall, returncode=returncode)

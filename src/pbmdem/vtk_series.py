@@ -1,0 +1,40 @@
+"""ParaView collection (.pvd) index for the VTK snapshots of a run."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from xml.etree import ElementTree
+
+from pbmdem.atomic import write_text
+
+SERIES = {"particles": re.compile(r"^particles_(\d+)\.vtk$"), "impeller": re.compile(r"^impeller_(\d+)\.vtk$")}
+
+
+def snapshots(post_dir: str | Path, kind: str) -> list[tuple[int, Path]]:
+    """(step, path) of every snapshot of `kind`, in numeric step order (bounding boxes skipped)."""
+    pattern = SERIES[kind]
+    found = [(int(m.group(1)), p) for p in Path(post_dir).iterdir() if (m := pattern.match(p.name))]
+    return sorted(found)
+
+
+def write_series(post_dir: str | Path, timestep: float) -> dict[str, Path]:
+    post_dir = Path(post_dir)
+    out = {}
+    for kind in SERIES:
+        snaps = snapshots(post_dir, kind)
+        if not snaps:
+            raise FileNotFoundError(f"no {kind}_<step>.vtk snapshots in {post_dir}")
+        entries = "\n".join(
+            f'    <DataSet timestep="{step * timestep:.9g}" part="0" file="{path.name}"/>' for step, path in snaps
+        )
+        text = ('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
+                f"{entries}\n  </Collection>\n</VTKFile>\n")
+        out[kind] = write_text(post_dir / f"{kind}.pvd", text)
+    return out
+
+
+def read_series(pvd_path: str | Path) -> list[tuple[float, Path]]:
+    pvd_path = Path(pvd_path)
+    root = ElementTree.parse(pvd_path).getroot()
+    return [(float(d.get("timestep")), pvd_path.parent / d.get("file")) for d in root.iter("DataSet")]

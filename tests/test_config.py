@@ -1,0 +1,99 @@
+"""Config validation: every bad input names the key and what is allowed."""
+
+import copy
+import subprocess
+import sys
+
+import pytest
+import yaml
+
+from pbmdem.config import ConfigError, load_config, validate
+
+
+def bad(cfg, edit):
+    cfg = copy.deepcopy(cfg)
+    edit(cfg)
+    with pytest.raises(ConfigError) as info:
+        validate(cfg)
+    return str(info.value)
+
+
+def test_default_and_tiny_configs_are_valid(default_config, tiny_config):
+    assert default_config["grid"]["impeller_rpm"]
+    assert len(default_config["grid"]["impeller_rpm"]) >= 3
+    assert len(default_config["grid"]["size_distributions"]) >= 3
+    for name in default_config["grid"]["size_distributions"]:
+        assert len(default_config["size_distributions"][name]["diameters"]) >= 3
+
+
+def test_wrong_type(default_config):
+    msg = bad(default_config, lambda c: c["material"].__setitem__("density", "heavy"))
+    assert "material.density" in msg and "'heavy'" in msg and "number" in msg
+
+
+def test_missing_key(default_config):
+    msg = bad(default_config, lambda c: c["dem"].pop("sampling_time"))
+    assert "sampling_time" in msg and "required" in msg
+
+
+def test_negative_size(default_config):
+    msg = bad(default_config, lambda c: c["size_distributions"]["fine"]["diameters"].__setitem__(0, -0.002))
+    assert "size_distributions.fine.diameters[0]" in msg and "-0.002" in msg and ">= 1e-05" in msg
+
+
+def test_fractions_must_sum_to_one(default_config):
+    msg = bad(default_config, lambda c: c["size_distributions"]["fine"].__setitem__("number_fractions", [0.5, 0.3, 0.1]))
+    assert "size_distributions.fine.number_fractions" in msg and "sum to 0.9" in msg and "must sum to 1" in msg
+
+
+def test_particles_must_fit_the_bowl(default_config):
+    msg = bad(default_config, lambda c: c["size_distributions"]["fine"].__setitem__("diameters", [0.002, 0.003, 0.02]))
+    assert "size_distributions.fine.diameters" in msg and "does not fit the bowl" in msg
+
+
+def test_unknown_distribution_in_grid(default_config):
+    msg = bad(default_config, lambda c: c["grid"]["size_distributions"].append("huge"))
+    assert "'huge' is not defined" in msg and "fine" in msg
+
+
+def test_bed_must_cover_impeller(default_config):
+    msg = bad(default_config, lambda c: c["dem"].__setitem__("bed_height", 0.005))
+    assert "dem.bed_height" in msg and "cover the impeller" in msg
+
+
+def test_unknown_key_lists_allowed(default_config):
+    msg = bad(default_config, lambda c: c["material"].__setitem__("colour", "red"))
+    assert "colour" in msg and "allowed keys" in msg
+
+
+def test_injection_in_a_distribution_name_is_rejected(default_config):
+    evil = "fine\nshell touch /tmp/pwned"
+    def edit(c):
+        c["size_distributions"][evil] = c["size_distributions"]["fine"]
+        c["grid"]["size_distributions"] = [evil]
+    msg = bad(default_config, edit)
+    assert "does not match" in msg
+
+
+def test_snakemake_rejects_a_bad_config_before_running(tmp_path, root, default_config):
+    cfg = copy.deepcopy(default_config)
+    cfg["size_distributions"]["fine"]["diameters"][0] = -0.002
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    proc = subprocess.run(
+        [sys.executable, "-m", "snakemake", "-s", str(root / "Snakefile"), "--directory", str(tmp_path),
+         "--configfile", str(path), "-n", "--cores", "1"],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert proc.returncode != 0
+    assert "diameters" in proc.stdout + proc.stderr and "minimum" in proc.stdout + proc.stderr
+    assert not (tmp_path / "results").exists()
+
+
+def test_load_config_errors(tmp_path):
+    with pytest.raises(ConfigError, match="does not exist"):
+        load_config(tmp_path / "none.yaml")
+    p = tmp_path / "list.yaml"
+    p.write_text("- 1\n- 2\n")
+    with pytest.raises(ConfigError, match="mapping"):
+        load_config(p)

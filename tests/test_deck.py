@@ -1,0 +1,83 @@
+"""Deck rendering: only validated numbers and names reach a LIGGGHTS script."""
+
+import math
+
+import pytest
+
+from pbmdem import deck, dem
+from pbmdem.deck import DeckValueError
+
+
+@pytest.mark.parametrize("value", ["1\nshell rm -rf /", "0.1", None, True, math.nan, math.inf, [1]])
+def test_number_rejects_anything_but_a_finite_number(value):
+    with pytest.raises(DeckValueError, match="x ="):
+        deck.number("x", value)
+
+
+def test_number_range_and_integer():
+    assert deck.number("n", 3, integer=True) == "3"
+    assert float(deck.number("v", 2.5e-6)) == 2.5e-6
+    with pytest.raises(DeckValueError, match="at least 0"):
+        deck.number("n", -1, minimum=0)
+    with pytest.raises(DeckValueError, match="integer"):
+        deck.number("n", 2.5, integer=True)
+
+
+@pytest.mark.parametrize("value", ["fine\nshell ls", "a b", "${x}", "1abc", "", "x" * 65])
+def test_names_must_be_plain(value):
+    with pytest.raises(DeckValueError):
+        deck.known_name("distribution", value)
+
+
+def test_known_name_set():
+    assert deck.known_name("wall", "bowl", {"bowl", "impeller"}) == "bowl"
+    with pytest.raises(DeckValueError, match="allowed names"):
+        deck.known_name("wall", "lid", {"bowl", "impeller"})
+
+
+def test_render_refuses_unvalidated_text():
+    with pytest.raises(DeckValueError, match="not allowed"):
+        deck.render("granulator.in", {"timestep": "1e-5\nshell touch /tmp/x"})
+
+
+def test_rendered_deck_is_complete_and_has_no_shell(tiny_config):
+    plan = dem.plan_point(tiny_config, 600, "small")
+    text = deck.render("granulator.in", dem.deck_values(tiny_config, plan))
+    assert "${" not in text
+    assert "shell" not in text
+    assert f"timestep        {plan.timestep!r}" in text
+    assert "particledistribution/discrete/numberbased" in text
+    assert "move/mesh mesh impeller rotate" in text
+    # compute pair/gran/local is defined before the first run (LIGGGHTS 3.8 aborts otherwise)
+    assert text.index("pair/gran/local") < text.index("\nrun ")
+
+
+def test_injected_distribution_name_never_reaches_a_deck(tiny_config):
+    evil = "small\nshell touch /tmp/pwned"
+    tiny_config["size_distributions"][evil] = tiny_config["size_distributions"]["small"]
+    plan = dem.plan_point(tiny_config, 600, evil)
+    with pytest.raises(DeckValueError, match="name must start"):
+        dem.deck_values(tiny_config, plan)
+
+
+def test_timestep_from_rayleigh_time(tiny_config):
+    plan = dem.plan_point(tiny_config, 600, "small")
+    mat = tiny_config["material"]
+    g = mat["youngs_modulus"] / (2 * (1 + mat["poisson_ratio"]))
+    r = 0.001
+    t_r = math.pi * r * math.sqrt(mat["density"] / g) / (0.1631 * mat["poisson_ratio"] + 0.8766)
+    assert plan.rayleigh_time == pytest.approx(t_r)
+    assert plan.timestep == pytest.approx(tiny_config["dem"]["timestep_fraction"] * t_r)
+    # snapshots at least twice per Hertz contact of the smallest particles at tip speed
+    assert plan.collision_interval * plan.timestep <= plan.contact_time / 2
+
+
+def test_particle_count_fills_the_bed(default_config):
+    for name in default_config["grid"]["size_distributions"]:
+        plan = dem.plan_point(default_config, 600, name)
+        d = plan.diameters
+        solids = sum(c * math.pi / 6 * x**3 for c, x in zip(plan.counts, d))
+        r = default_config["granulator"]["bowl"]["diameter"] / 2
+        bed = solids / (default_config["dem"]["packing_fraction"] * math.pi * r * r)
+        assert bed == pytest.approx(default_config["dem"]["bed_height"], rel=0.01)
+        assert sum(plan.counts) == plan.n_particles

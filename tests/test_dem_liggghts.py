@@ -1,0 +1,146 @@
+"""The DEM stage with the real LIGGGHTS engine on the tiny granulator (no mocks)."""
+
+import copy
+import json
+import os
+import stat
+import sys
+import textwrap
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pbmdem import collisions, dem, liggghts
+
+pytestmark = pytest.mark.liggghts
+
+
+def test_tiny_run_counts_collisions_for_every_class_pair(tiny_run):
+    run_dir, plan = tiny_run["dir"], tiny_run["plan"]
+    table = pd.read_csv(run_dir / "collisions.csv")
+    k = len(plan.diameters)
+    assert len(table) == k * (k + 1) // 2
+    assert (table["collisions"] > 0).all(), table
+    assert (table["frequency_per_pair"] > 0).all()
+    # class counts are the particles actually in the bowl, and they add up to the plan
+    per_class = table.loc[table.class_i == table.class_j, "n_i"].to_numpy()
+    assert per_class.sum() == plan.n_particles
+    np.testing.assert_allclose(per_class / per_class.sum(), plan.number_fractions, atol=0.08)
+    # per-pair normalisation as documented
+    row = table.iloc[1]
+    assert row.frequency_per_pair == pytest.approx(row.collisions / (row.n_i * row.n_j * row.sampling_time))
+    walls = pd.read_csv(run_dir / "wall_collisions.csv")
+    assert set(walls["wall"]) == {"bowl", "impeller"}
+    assert walls.loc[walls.wall == "impeller", "collisions"].sum() > 0
+
+
+def test_tiny_run_summary_and_timestep_check(tiny_run):
+    summary = json.loads((tiny_run["dir"] / "summary.json").read_text())
+    assert summary["n_particles"] == tiny_run["plan"].n_particles
+    assert summary["particle_steps_per_s"] > 0
+    assert summary["total_collisions"] > 0
+    log = (tiny_run["dir"] / "log.liggghts").read_text()
+    # fix check/timestep/gran stays silent while dt is below 20 % of the Rayleigh and Hertz times
+    assert "time-step" not in log.lower() or "WARNING" not in log
+
+
+def test_halving_the_snapshot_interval_changes_counts_by_less_than_2_percent(tiny_run, tiny_config, tmp_path):
+    """Run with snapshots at half the automatic interval; counting every second snapshot is then
+    exactly the automatic interval, so the two counts compare interval h and h/2 on one trajectory."""
+    auto = tiny_run["plan"].collision_interval
+    assert auto >= 2
+    cfg = copy.deepcopy(tiny_config)
+    cfg["dem"]["collision_interval"] = auto // 2
+    cfg["dem"]["keep_contact_dumps"] = True
+    cfg["dem"]["sampling_time"] = 0.03
+    plan = dem.plan_point(cfg, 1200, "small")
+    dem.run_point(cfg, plan, tmp_path, timeout=600)
+    ids, classes = collisions.read_classes(tmp_path / "post" / "classes.dump")
+    lookup = collisions._class_lookup(ids, classes)
+    pairs = collisions.read_dump(tmp_path / "post" / "pairs.dump", 3)
+    fine = collisions.count_pair_collisions(pairs, lookup, 3).sum()
+    coarse = collisions.count_pair_collisions(pairs, lookup, 3, stride=2).sum()
+    assert fine > 200
+    assert abs(coarse - fine) / fine < 0.02, (fine, coarse)
+
+
+def test_vtk_series_is_written_and_readable(tiny_run):
+    pyvista = pytest.importorskip("pyvista")
+    post = tiny_run["dir"] / "post"
+    assert (post / "particles.pvd").exists() and (post / "impeller.pvd").exists()
+    reader = pyvista.get_reader(str(post / "particles.pvd"))
+    assert len(reader.time_values) >= 3
+    reader.set_active_time_value(reader.time_values[-1])
+    block = reader.read()
+    mesh = block[0] if isinstance(block, pyvista.MultiBlock) else block
+    assert mesh.n_points == tiny_run["plan"].n_particles
+    for name in ("radius", "type", "id"):
+        assert name in mesh.point_data
+    imp = pyvista.read(sorted(post.glob("impeller_*.vtk"))[-1])
+    assert imp.n_cells > 0
+
+
+def _failing_liggghts(tmp_path):
+    """A wrapper around the real engine that cuts the sampling phase short with an unknown fix
+    style, so that the real LIGGGHTS fails in the middle of sampling (after writing part of its
+    contact dumps)."""
+    real = liggghts.executable()
+    script = tmp_path / "liggghts-broken"
+    script.write_text(textwrap.dedent(f"""\
+        #!{sys.executable}
+        import os, sys
+        args = sys.argv[1:]
+        deck = args[args.index("-in") + 1]
+        lines = open(deck).read().splitlines()
+        last_run = max(i for i, line in enumerate(lines) if line.startswith("run "))
+        lines[last_run] = "run 50\\nfix broken all no/such/style"
+        open("broken.in", "w").write("\\n".join(lines) + "\\n")
+        args[args.index("-in") + 1] = "broken.in"
+        os.execv({real!r}, [{real!r}, *args])
+        """))
+    script.chmod(script.stat().st_mode | stat.S_IEXEC)
+    return script
+
+
+def test_a_failing_run_reports_the_log_and_leaves_no_table(tiny_config, tmp_path, monkeypatch):
+    monkeypatch.setenv("PBMDEM_LIGGGHTS", str(_failing_liggghts(tmp_path)))
+    plan = dem.plan_point(tiny_config, 600, "large")
+    run_dir = tmp_path / "run"
+    with pytest.raises(liggghts.LiggghtsError) as info:
+        dem.run_point(tiny_config, plan, run_dir, timeout=600)
+    msg = str(info.value)
+    assert "ERROR" in msg and "no/such/style" in msg  # the tail of the log is in the message
+    assert not (run_dir / "collisions.csv").exists()
+    assert not (run_dir / "wall_collisions.csv").exists()
+    crash = json.loads((run_dir / "crash.json").read_text())
+    assert crash["problems"] and "no/such/style" in crash["log_tail"]
+    assert (run_dir / "post" / "pairs.dump").stat().st_size > 0  # it really failed mid-sampling
+
+
+def test_missing_engine_gives_install_hint(monkeypatch):
+    monkeypatch.setenv("PBMDEM_LIGGGHTS", "liggghts-that-does-not-exist")
+    with pytest.raises(liggghts.LiggghtsError, match="apt-get install --no-install-recommends liggghts"):
+        liggghts.executable()
+
+
+def test_insertion_shortfall_is_an_error(tiny_config, tmp_path):
+    """A bed that cannot be inserted in the settling time must not yield a table with a wrong PSD."""
+    cfg = copy.deepcopy(tiny_config)
+    cfg["dem"]["settle_time"] = 0.004  # far too short to drop ~400 particles into the bowl
+    plan = dem.plan_point(cfg, 600, "small")
+    with pytest.raises(collisions.DumpFormatError, match="insertion did not place them all"):
+        dem.run_point(cfg, plan, tmp_path, timeout=600)
+    assert not (tmp_path / "collisions.csv").exists()
+
+
+def test_dem_cli_plan_only(root, capsys):
+    from pbmdem.cli import main
+
+    assert main(["dem", "--config", str(root / "config" / "test.yaml"), "--rpm", "600",
+                 "--distribution", "small", "--plan-only"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["point_id"] == "rpm600_small" and out["n_particles"] > 100
+    assert main(["dem", "--config", str(root / "config" / "test.yaml"), "--rpm", "600",
+                 "--distribution", "nope", "--plan-only"]) == 2
+    assert "'nope' is not defined" in capsys.readouterr().err

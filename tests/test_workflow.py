@@ -1,0 +1,133 @@
+"""The Snakemake workflow end to end on the tiny configuration (real LIGGGHTS)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import yaml
+
+pytestmark = [pytest.mark.liggghts, pytest.mark.workflow]
+
+
+def snakemake(root: Path, workdir: Path, configfile: Path, *args: str, env: dict | None = None,
+              check: bool = True) -> subprocess.CompletedProcess:
+    cmd = [sys.executable, "-m", "snakemake", "-s", str(root / "Snakefile"), "--directory", str(workdir),
+           "--configfile", str(configfile), *args]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1800, env=env)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"snakemake failed ({proc.returncode}):\n{proc.stdout[-4000:]}\n{proc.stderr[-6000:]}")
+    return proc
+
+
+@pytest.fixture(scope="module")
+def tiny_workflow(tmp_path_factory, root):
+    """`snakemake --cores 2` on config/test.yaml, run once for this module."""
+    workdir = tmp_path_factory.mktemp("workflow")
+    configfile = workdir / "config.yaml"
+    shutil.copy(root / "config" / "test.yaml", configfile)
+    snakemake(root, workdir, configfile, "--cores", "2")
+    return workdir, configfile
+
+
+def test_grid_tables_have_counts_for_every_class_pair(tiny_workflow):
+    workdir, configfile = tiny_workflow
+    cfg = yaml.safe_load(configfile.read_text())
+    table = pd.read_csv(workdir / "results" / "dem" / "collisions.csv")
+    points = {(float(r), d) for r in cfg["grid"]["impeller_rpm"] for d in cfg["grid"]["size_distributions"]}
+    assert set(zip(table.rpm, table.distribution)) == points
+    assert (table.collisions > 0).all(), table[table.collisions == 0]
+    expected_columns = ["point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j", "n_i", "n_j",
+                        "n_total", "collisions", "sampling_time", "frequency", "frequency_per_pair"]
+    assert list(table.columns) == expected_columns
+    runs = pd.read_csv(workdir / "results" / "dem" / "runs.csv")
+    assert len(runs) == len(points)
+    assert (runs.particle_steps_per_s > 0).all()
+    walls = pd.read_csv(workdir / "results" / "dem" / "wall_collisions.csv")
+    assert set(walls.wall) == {"bowl", "impeller"}
+
+
+def test_vtk_series_open_in_pyvista(tiny_workflow):
+    pyvista = pytest.importorskip("pyvista")
+    workdir, _ = tiny_workflow
+    for pvd in sorted((workdir / "results" / "dem").glob("*/post/particles.pvd")):
+        reader = pyvista.get_reader(str(pvd))
+        assert len(reader.time_values) >= 2
+        mesh = reader.read()
+        mesh = mesh[0] if isinstance(mesh, pyvista.MultiBlock) else mesh
+        assert mesh.n_points > 100 and "radius" in mesh.point_data
+
+
+def test_adding_an_operating_point_runs_only_that_point(tiny_workflow, root, tmp_path):
+    workdir, configfile = tiny_workflow
+    cfg = yaml.safe_load(configfile.read_text())
+    cfg["grid"]["impeller_rpm"].append(900)
+    grown = tmp_path / "grown.yaml"
+    grown.write_text(yaml.safe_dump(cfg))
+    proc = snakemake(root, workdir, grown, "-n", "--cores", "2", "--quiet", "rules")
+    out = proc.stdout + proc.stderr
+    dem_jobs = [line for line in out.splitlines() if line.strip().startswith("dem_point")]
+    assert dem_jobs, out
+    # one new rpm x every size distribution, and nothing for the points already computed
+    counts = {line.split()[0]: int(line.split()[1]) for line in out.splitlines()
+              if len(line.split()) == 2 and line.split()[1].isdigit()}
+    assert counts["dem_point"] == len(cfg["grid"]["size_distributions"]), out
+    # the new point's job is listed in the detailed dry run, the old ones are not
+    detail = snakemake(root, workdir, grown, "-n", "--cores", "2").stdout
+    assert "rpm900_" in detail
+    for rpm in (600, 1200):
+        assert f"results/dem/rpm{rpm}_small/collisions.csv" not in detail
+
+
+def test_lint_is_clean(root, tiny_workflow):
+    workdir, configfile = tiny_workflow
+    proc = snakemake(root, workdir, configfile, "--lint", check=False)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "Congratulations" in proc.stdout + proc.stderr
+
+
+def test_a_failed_point_keeps_the_finished_ones(root, tmp_path):
+    """One operating point's LIGGGHTS fails (a real engine run whose deck is broken mid-sampling):
+    the job fails with the log's last lines, leaves crash.json and no table; the other point is kept."""
+    from pbmdem import liggghts
+
+    real = liggghts.executable()
+    wrapper = tmp_path / "liggghts-fails-for-large"
+    wrapper.write_text(
+        f"#!{sys.executable}\n"
+        "import os, sys\n"
+        "args = sys.argv[1:]\n"
+        "if 'large' in os.getcwd():\n"
+        "    deck = args[args.index('-in') + 1]\n"
+        "    lines = open(deck).read().splitlines()\n"
+        "    k = max(i for i, l in enumerate(lines) if l.startswith('run '))\n"
+        "    lines[k] = 'run 50\\nfix broken all no/such/style'\n"
+        "    open('broken.in', 'w').write('\\n'.join(lines) + '\\n')\n"
+        "    args[args.index('-in') + 1] = 'broken.in'\n"
+        f"os.execv({real!r}, [{real!r}, *args])\n"
+    )
+    wrapper.chmod(0o755)
+    cfg = yaml.safe_load((root / "config" / "test.yaml").read_text())
+    cfg["grid"]["impeller_rpm"] = [600]
+    configfile = tmp_path / "config.yaml"
+    configfile.write_text(yaml.safe_dump(cfg))
+    workdir = tmp_path / "wd"
+    workdir.mkdir()
+    env = dict(__import__("os").environ, PBMDEM_LIGGGHTS=str(wrapper))
+    proc = snakemake(root, workdir, configfile, "--cores", "2", "--keep-going",
+                     "results/dem/rpm600_small/collisions.csv", "results/dem/rpm600_large/collisions.csv",
+                     env=env, check=False)
+    assert proc.returncode != 0
+    out = proc.stdout + proc.stderr
+    assert "no/such/style" in out  # the log's tail reaches the user
+    good, bad = workdir / "results/dem/rpm600_small", workdir / "results/dem/rpm600_large"
+    assert (good / "collisions.csv").exists() and (good / "summary.json").exists()
+    assert not (bad / "collisions.csv").exists()
+    assert not (bad / "summary.json").exists()
+    crash = json.loads((bad / "crash.json").read_text())
+    assert "no/such/style" in crash["log_tail"]

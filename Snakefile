@@ -18,6 +18,7 @@ check_config(config)
 
 include: "rules/common.smk"
 include: "rules/dem.smk"
+include: "rules/surrogate.smk"
 
 
 rule all:

@@ -26,6 +26,9 @@ def all_targets():
         f"{RESULTS}/dem/collisions.csv",
         f"{RESULTS}/dem/wall_collisions.csv",
         f"{RESULTS}/dem/runs.csv",
+        f"{RESULTS}/surrogate/model.skops",
+        f"{RESULTS}/surrogate/metrics.csv",
+        f"{RESULTS}/surrogate/parity.png",
     ]
     targets += extra_targets
     return targets

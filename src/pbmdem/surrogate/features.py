@@ -1,0 +1,230 @@
+"""Features and target of the collision-frequency surrogate.
+
+Input is the aggregated collision table of ``docs/architecture.md`` (one row per unordered class
+pair and DEM run, ``point_id`` identifies the run). Every row becomes one sample with the
+features in :data:`FEATURE_NAMES`; the target is ``log10(frequency_per_pair)``.
+
+The same code path builds features for the PBM (:func:`pair_table`): a size distribution given as
+class diameters and particle numbers is turned into a collision-table-like frame of all unordered
+class pairs, so training and prediction can never disagree about a feature's definition.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pandas as pd
+
+#: Impeller radius (m) used for the tip speed when none is given: ``granulator.impeller.blade_length``
+#: of ``config/config.yaml`` (axis to blade tip).
+DEFAULT_IMPELLER_RADIUS = 0.0265
+
+#: Columns of the collision-table contract (docs/architecture.md).
+TABLE_COLUMNS = (
+    "point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j", "n_i", "n_j",
+    "n_total", "collisions", "sampling_time", "frequency", "frequency_per_pair",
+)
+
+#: Columns needed to build features (the others are needed only for the target).
+FEATURE_SOURCE_COLUMNS = ("point_id", "rpm", "class_i", "class_j", "d_i", "d_j", "n_i", "n_j", "n_total")
+
+#: Model inputs, in this order.
+FEATURE_NAMES = (
+    "d_small",      # smaller diameter of the colliding pair (m)
+    "d_large",      # larger diameter of the colliding pair (m)
+    "frac_small",   # number fraction of the smaller particle's class in the run
+    "frac_large",   # number fraction of the larger particle's class in the run
+    "n_total",      # particles in the run
+    "d_mean",       # number-mean diameter of the run (m)
+    "rpm",          # impeller speed (1/min)
+    "tip_speed",    # impeller tip speed 2 pi R rpm / 60 (m/s)
+)
+
+TARGET_NAME = "log10_frequency_per_pair"
+
+#: How rows with zero collisions are treated when building the target.
+ZERO_POLICIES = ("drop", "floor")
+
+
+class CollisionTableError(ValueError):
+    """The collision table violates the contract of docs/architecture.md."""
+
+
+def tip_speed(rpm, impeller_radius: float = DEFAULT_IMPELLER_RADIUS):
+    """Impeller tip speed (m/s) for a speed in rpm and a radius in m."""
+    if not impeller_radius > 0:
+        raise ValueError(f"impeller_radius must be > 0 m, got {impeller_radius!r}")
+    return 2.0 * math.pi * impeller_radius * np.asarray(rpm, dtype=float) / 60.0
+
+
+def check_table(table: pd.DataFrame, columns=FEATURE_SOURCE_COLUMNS) -> None:
+    """Raise :class:`CollisionTableError` if ``table`` lacks columns or has invalid values."""
+    if not isinstance(table, pd.DataFrame):
+        raise TypeError(f"expected a pandas DataFrame collision table, got {type(table).__name__}")
+    missing = [c for c in columns if c not in table.columns]
+    if missing:
+        raise CollisionTableError(f"collision table lacks column(s) {missing}")
+    if len(table) == 0:
+        raise CollisionTableError("collision table has no rows")
+    numeric = [c for c in columns if c not in ("point_id", "distribution")]
+    values = table[numeric].apply(pd.to_numeric, errors="coerce")
+    bad = values.columns[values.isna().any()].tolist()
+    if bad:
+        raise CollisionTableError(f"non-numeric or missing values in column(s) {bad}")
+    for col in ("d_i", "d_j", "n_total", "rpm"):
+        if col in values and (values[col] <= 0).any():
+            raise CollisionTableError(f"column {col!r} must be > 0")
+    for col in ("n_i", "n_j"):
+        if col in values and (values[col] < 0).any():
+            raise CollisionTableError(f"column {col!r} must be >= 0")
+    if "sampling_time" in values and (values["sampling_time"] <= 0).any():
+        raise CollisionTableError("column 'sampling_time' must be > 0")
+    if (values["class_i"] > values["class_j"]).any():
+        raise CollisionTableError("rows must have class_i <= class_j")
+    per_run = table.groupby("point_id")[["rpm", "n_total"]].nunique()
+    inconsistent = per_run.index[(per_run > 1).any(axis=1)].tolist()
+    if inconsistent:
+        raise CollisionTableError(f"rpm or n_total not constant within run(s) {inconsistent}")
+
+
+def run_classes(table: pd.DataFrame) -> pd.DataFrame:
+    """Size classes of every run: one row per (point_id, class) with columns d, n.
+
+    Collected from both sides of every row, so any number of classes per run works (the diagonal
+    rows alone already list every class; off-diagonal rows only confirm them).
+    """
+    left = table[["point_id", "class_i", "d_i", "n_i"]].set_axis(["point_id", "cls", "d", "n"], axis=1)
+    right = table[["point_id", "class_j", "d_j", "n_j"]].set_axis(["point_id", "cls", "d", "n"], axis=1)
+    both = pd.concat([left, right], ignore_index=True)
+    both["d"] = both["d"].astype(float)
+    both["n"] = both["n"].astype(float)
+    spread = both.groupby(["point_id", "cls"])[["d", "n"]].agg(lambda s: s.max() - s.min())
+    if (spread["d"] > 1e-12 * both["d"].abs().max()).any() or (spread["n"] > 0).any():
+        bad = spread.index[(spread > 0).any(axis=1)].tolist()[:5]
+        raise CollisionTableError(f"a class has different d or n in different rows of one run: {bad}")
+    return both.drop_duplicates(["point_id", "cls"]).sort_values(["point_id", "cls"]).reset_index(drop=True)
+
+
+def run_descriptors(table: pd.DataFrame) -> pd.DataFrame:
+    """Per run (index point_id): n_total, n_classes, d_mean (number mean), solid_volume (m3)."""
+    classes = run_classes(table)
+    classes["nd"] = classes["n"] * classes["d"]
+    classes["nv"] = classes["n"] * math.pi / 6.0 * classes["d"] ** 3
+    agg = classes.groupby("point_id").agg(n_sum=("n", "sum"), nd=("nd", "sum"), solid_volume=("nv", "sum"),
+                                          n_classes=("cls", "size"))
+    n_total = table.groupby("point_id")["n_total"].first().astype(float)
+    agg["n_total"] = n_total
+    if (agg["n_sum"] <= 0).any():
+        raise CollisionTableError("a run has no particles in its classes")
+    mismatch = agg.index[~np.isclose(agg["n_sum"], agg["n_total"], rtol=1e-9)].tolist()
+    if mismatch:
+        warnings.warn(f"run(s) {mismatch[:5]}: class numbers do not add up to n_total; "
+                      "fractions use n_total, the mean diameter uses the listed classes", stacklevel=3)
+    agg["d_mean"] = agg["nd"] / agg["n_sum"]
+    return agg[["n_total", "n_classes", "d_mean", "solid_volume"]]
+
+
+def make_features(table: pd.DataFrame, impeller_radius: float = DEFAULT_IMPELLER_RADIUS) -> pd.DataFrame:
+    """Feature frame (columns :data:`FEATURE_NAMES`, same index as ``table``) of a collision table."""
+    check_table(table)
+    desc = run_descriptors(table)
+    d_i = table["d_i"].to_numpy(float)
+    d_j = table["d_j"].to_numpy(float)
+    n_total = table["n_total"].to_numpy(float)
+    f_i = table["n_i"].to_numpy(float) / n_total
+    f_j = table["n_j"].to_numpy(float) / n_total
+    i_small = d_i <= d_j
+    rpm = table["rpm"].to_numpy(float)
+    return pd.DataFrame(
+        {
+            "d_small": np.where(i_small, d_i, d_j),
+            "d_large": np.where(i_small, d_j, d_i),
+            "frac_small": np.where(i_small, f_i, f_j),
+            "frac_large": np.where(i_small, f_j, f_i),
+            "n_total": n_total,
+            "d_mean": desc["d_mean"].reindex(table["point_id"]).to_numpy(float),
+            "rpm": rpm,
+            "tip_speed": tip_speed(rpm, impeller_radius),
+        },
+        index=table.index,
+        columns=list(FEATURE_NAMES),
+    )
+
+
+def pairs_in_row(table: pd.DataFrame) -> np.ndarray:
+    """Number of distinct particle pairs of each row: n_i n_j, or n_i (n_i - 1) / 2 on the diagonal."""
+    n_i = table["n_i"].to_numpy(float)
+    n_j = table["n_j"].to_numpy(float)
+    diag = table["class_i"].to_numpy() == table["class_j"].to_numpy()
+    return np.where(diag, n_i * (n_i - 1.0) / 2.0, n_i * n_j)
+
+
+def prepare_training_table(table: pd.DataFrame, zero_policy: str = "drop") -> pd.DataFrame:
+    """Rows usable for fitting, with column :data:`TARGET_NAME` added.
+
+    * rows without any particle pair (pairs = 0) or with a non-finite frequency are dropped
+      with a warning;
+    * rows with zero collisions: ``"drop"`` (default) removes them with a warning; ``"floor"``
+      replaces the count by half a collision, i.e. the frequency by the detection limit
+      ``0.5 / (pairs x sampling_time)``, also with a warning. Column ``floored`` marks such rows.
+    """
+    if zero_policy not in ZERO_POLICIES:
+        raise ValueError(f"zero_policy must be one of {ZERO_POLICIES}, got {zero_policy!r}")
+    check_table(table, FEATURE_SOURCE_COLUMNS + ("collisions", "sampling_time", "frequency_per_pair"))
+    out = table.copy()
+    pairs = pairs_in_row(out)
+    fpp = pd.to_numeric(out["frequency_per_pair"], errors="coerce").to_numpy(float)
+    collisions = out["collisions"].to_numpy(float)
+    no_pairs = ~(pairs > 0)
+    if no_pairs.any():
+        warnings.warn(f"dropping {int(no_pairs.sum())} row(s) without particle pairs "
+                      f"(e.g. a class with a single particle on the diagonal)", stacklevel=2)
+    zero = ~no_pairs & ((collisions <= 0) | (np.nan_to_num(fpp, nan=1.0) <= 0))
+    out["floored"] = False
+    if zero.any():
+        ids = sorted(set(out.loc[zero, "point_id"].astype(str)))
+        if zero_policy == "drop":
+            warnings.warn(f"dropping {int(zero.sum())} row(s) with zero collisions (log10 undefined) "
+                          f"in run(s) {ids[:5]}", stacklevel=2)
+        else:
+            warnings.warn(f"flooring {int(zero.sum())} row(s) with zero collisions at half a collision "
+                          f"in the sampling window, run(s) {ids[:5]}", stacklevel=2)
+            fpp = fpp.copy()
+            fpp[zero] = 0.5 / (pairs[zero] * out["sampling_time"].to_numpy(float)[zero])
+            out["frequency_per_pair"] = fpp
+            out.loc[zero, "floored"] = True
+    drop = no_pairs | (zero if zero_policy == "drop" else np.zeros_like(zero))
+    bad = ~drop & ~(np.isfinite(fpp) & (fpp > 0))
+    if bad.any():
+        warnings.warn(f"dropping {int(bad.sum())} row(s) with a non-finite frequency_per_pair", stacklevel=2)
+    keep = ~(drop | bad)
+    out = out.loc[keep].copy()
+    out[TARGET_NAME] = np.log10(out["frequency_per_pair"].to_numpy(float))
+    if len(out) == 0:
+        raise CollisionTableError("no usable rows left in the collision table")
+    return out
+
+
+def pair_table(diameters, numbers, rpm: float) -> tuple[pd.DataFrame, np.ndarray, np.ndarray]:
+    """Collision-table-like frame of all unordered class pairs (i <= j) of one size distribution.
+
+    Returns the frame and the row/column indices (``iu``, ``ju``) of each row in the (K, K) matrix.
+    """
+    d = np.asarray(diameters, dtype=float)
+    n = np.asarray(numbers, dtype=float)
+    if d.ndim != 1 or n.shape != d.shape or d.size == 0:
+        raise ValueError(f"diameters and numbers must be 1-d of the same length, got {d.shape} and {n.shape}")
+    if not (np.all(np.isfinite(d)) and np.all(d > 0)):
+        raise ValueError("diameters must be finite and > 0")
+    if not (np.all(np.isfinite(n)) and np.all(n >= 0)) or n.sum() <= 0:
+        raise ValueError("numbers must be finite, >= 0 and not all zero")
+    if not (np.isfinite(rpm) and rpm > 0):
+        raise ValueError(f"rpm must be finite and > 0, got {rpm!r}")
+    iu, ju = np.triu_indices(d.size)
+    frame = pd.DataFrame({
+        "point_id": "query", "rpm": float(rpm), "class_i": iu, "class_j": ju,
+        "d_i": d[iu], "d_j": d[ju], "n_i": n[iu], "n_j": n[ju], "n_total": n.sum(),
+    })
+    return frame, iu, ju

@@ -1,0 +1,132 @@
+"""skops persistence of the surrogate: round trip, tampering, versions, type allow-list."""
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+import skops.io as sio
+from sklearn.linear_model import LinearRegression
+
+from pbmdem.surrogate import (
+    CollisionSurrogate,
+    IncompatibleVersionError,
+    TamperedModelError,
+    UntrustedTypesError,
+    load_surrogate,
+    save_surrogate,
+)
+from pbmdem.surrogate.persistence import ALLOWED_TYPES, schema_types, sha256_file
+from pbmdem.surrogate.synthetic import make_synthetic_table
+
+
+@pytest.fixture(scope="module")
+def table():
+    return make_synthetic_table(rpms=(300, 600, 900), seed=4)
+
+
+@pytest.fixture(scope="module")
+def fitted(table):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return CollisionSurrogate(hidden_layer_sizes=((4,),), alpha=(0.1,), ensemble_size=2,
+                                  max_iter=300).fit(table)
+
+
+@pytest.fixture()
+def saved(fitted, tmp_path):
+    model = tmp_path / "model.skops"
+    save_surrogate(fitted, model, cv_scores={"mlp": {"pooled_r2_log10": 0.9, "nan_value": float("nan")}})
+    return model, tmp_path / "model.json"
+
+
+def test_round_trip_identical_predictions(fitted, saved, table):
+    model, meta_path = saved
+    loaded = load_surrogate(model)
+    a, sa = fitted.predict(table, return_std=True)
+    b, sb = loaded.predict(table, return_std=True)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(sa, sb)
+    d, n = [0.002, 0.003, 0.004], [1200, 700, 300]
+    np.testing.assert_array_equal(fitted.frequency_matrix(d, n, 600, check_domain=False),
+                                  loaded.frequency_matrix(d, n, 600, check_domain=False))
+    assert loaded.get_params() == fitted.get_params()
+    assert loaded.feature_ranges() == fitted.feature_ranges()
+
+    meta = json.loads(meta_path.read_text())
+    assert meta["model_sha256"] == sha256_file(model)
+    assert meta["feature_names"] == list(fitted.feature_names_)
+    assert set(meta["feature_ranges"]) == set(fitted.feature_names_)
+    assert meta["training_point_ids"] == sorted(table["point_id"].unique())
+    assert {"sklearn", "numpy", "skops"} <= set(meta["versions"])
+    assert meta["cv_scores"]["mlp"]["pooled_r2_log10"] == 0.9
+    assert meta["cv_scores"]["mlp"]["nan_value"] is None  # strict JSON, no NaN
+
+
+def test_model_file_holds_only_allowed_types(saved):
+    model, _ = saved
+    assert schema_types(model) <= ALLOWED_TYPES
+    assert all(t.split(".")[0] in {"builtins", "numpy", "sklearn"} for t in ALLOWED_TYPES)
+
+
+def test_tampered_file_rejected(saved):
+    model, _ = saved
+    data = bytearray(model.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    model.write_bytes(bytes(data))
+    with pytest.raises(TamperedModelError, match="SHA-256"):
+        load_surrogate(model)
+
+
+def test_swapped_model_file_rejected(fitted, saved, tmp_path):
+    model, _ = saved
+    other = tmp_path / "other.skops"
+    sio.dump([fitted.estimators_[0]], other)
+    model.write_bytes(other.read_bytes())
+    with pytest.raises(TamperedModelError):
+        load_surrogate(model)
+
+
+def test_version_mismatch_rejected(saved):
+    model, meta_path = saved
+    meta = json.loads(meta_path.read_text())
+    meta["versions"]["sklearn"] = "0.99.0"
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(IncompatibleVersionError, match=r"scikit-learn 0\.99\.0"):
+        load_surrogate(model)
+
+
+def test_patch_version_difference_accepted(saved, monkeypatch):
+    import sklearn
+
+    model, meta_path = saved
+    major, minor = sklearn.__version__.split(".")[:2]
+    meta = json.loads(meta_path.read_text())
+    meta["versions"]["sklearn"] = f"{major}.{minor}.999"
+    meta_path.write_text(json.dumps(meta))
+    assert load_surrogate(model).estimators_
+
+
+def test_format_version_mismatch_rejected(saved):
+    model, meta_path = saved
+    meta = json.loads(meta_path.read_text())
+    meta["format_version"] = 99
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(IncompatibleVersionError, match="format version"):
+        load_surrogate(model)
+
+
+def test_types_outside_allow_list_rejected(saved):
+    # a well-formed skops file with the right hash but an sklearn type the surrogate never uses
+    model, meta_path = saved
+    sio.dump([LinearRegression().fit([[0.0], [1.0]], [0.0, 1.0])], model)
+    meta = json.loads(meta_path.read_text())
+    meta["model_sha256"] = sha256_file(model)
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(UntrustedTypesError, match="LinearRegression"):
+        load_surrogate(model)
+
+
+def test_unfitted_cannot_be_saved(tmp_path):
+    with pytest.raises(ValueError, match="fitted"):
+        save_surrogate(CollisionSurrogate(), tmp_path / "m.skops")

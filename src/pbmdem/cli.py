@@ -62,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
         args.out = f"results/dem/{point_id(args.rpm, args.distribution)}"
     try:
         return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError, RuntimeError) as exc:
+    except (ValueError, FileNotFoundError, RuntimeError, OSError) as exc:
         print(f"pbmdem: error: {exc}", file=sys.stderr)
         return 2
 

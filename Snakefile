@@ -19,6 +19,8 @@ check_config(config)
 include: "rules/common.smk"
 include: "rules/dem.smk"
 include: "rules/surrogate.smk"
+include: "rules/pbm.smk"
+include: "rules/validation.smk"
 
 
 rule all:

@@ -125,6 +125,13 @@ def check_config(cfg: dict) -> dict:
         if name not in cfg["size_distributions"]:
             problems.append(f"grid.size_distributions: {name!r} is not defined; defined names: "
                             f"{sorted(cfg['size_distributions'])}")
+    validation = cfg.get("validation") or {}
+    if "distribution" in validation and validation["distribution"] not in cfg["size_distributions"]:
+        problems.append(f"validation.distribution: {validation['distribution']!r} is not defined; defined names: "
+                        f"{sorted(cfg['size_distributions'])}")
+    sweep = validation.get("sweep") or {}
+    if "start" in sweep and "stop" in sweep and not sweep["stop"] > sweep["start"]:
+        problems.append(f"validation.sweep: stop = {sweep['stop']} must be greater than start = {sweep['start']}")
     if problems:
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
     return cfg

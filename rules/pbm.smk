@@ -1,0 +1,40 @@
+# PBM stage: the batch granulation with the constant collision-frequency kernel for every
+# operating point of the grid (impeller speed x size distribution). The constant kernel does not
+# depend on rpm (c_ij is the same), but each point is run so that the constant-kernel baseline
+# sits beside the DEM/ANN-kernel results of the same point id. The pbm section and the parts of
+# the config that fix the initial bed are params, so changing them reruns the rule.
+
+
+def pbm_params(wildcards):
+    return {
+        "pbm": config.get("pbm", {}),
+        "size_distributions": config["size_distributions"],
+        "dem": config["dem"],
+        "granulator": config["granulator"],
+    }
+
+
+def pbm_constant_outputs():
+    return [f"{RESULTS}/pbm/constant/rpm{rpm}_{dist}/summary.csv" for rpm, dist in grid_points()]
+
+
+rule pbm_constant:
+    output:
+        summary=f"{RESULTS}/pbm/constant/rpm{{rpm}}_{{dist}}/summary.csv",
+        bins=f"{RESULTS}/pbm/constant/rpm{{rpm}}_{{dist}}/bins.csv",
+        info=f"{RESULTS}/pbm/constant/rpm{{rpm}}_{{dist}}/run.json",
+        psd=f"{RESULTS}/pbm/constant/rpm{{rpm}}_{{dist}}/psd.png",
+        d50=f"{RESULTS}/pbm/constant/rpm{{rpm}}_{{dist}}/d50.png",
+    params:
+        config=pbm_params,
+        rpm=lambda wc: float(wc.rpm),
+        dist=lambda wc: wc.dist,
+    log:
+        f"{RESULTS}/logs/pbm/constant/rpm{{rpm}}_{{dist}}.log",
+    conda:
+        "../envs/pbmdem.yaml"
+    script:
+        "../workflow/scripts/run_pbm.py"
+
+
+extra_targets += pbm_constant_outputs()

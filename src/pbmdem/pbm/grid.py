@@ -1,0 +1,93 @@
+"""Geometric grid of solid volume: pivots v_k = v_0 r^k, k = 0 .. K-1.
+
+Every particle of bin k has the pivot's solid volume x_k; liquid and gas are carried as lumped
+per-bin totals. Cells are geometric too, [x_k 2/(1+r), x_k 2r/(1+r)], with the pivot at the
+arithmetic centre of its cell (the layout of Kumar et al. 2006). The last cell accepts new particles up to
+its pivot x_{K-1} only: anything larger is beyond the grid (see ``aggregation``).
+
+Sizes are solid-volume-equivalent diameters d_k = (6 x_k / pi)^(1/3): the PBM models the DEM bed
+with the DEM particle volume taken as the granule's solid volume (pbm.md, "Size coordinate").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import GridRangeError, PBMInputError, positive
+
+
+def volume_of(d):
+    return np.pi / 6.0 * np.asarray(d, float) ** 3
+
+
+def diameter_of(v):
+    return np.cbrt(6.0 / np.pi * np.asarray(v, float))
+
+
+class Grid:
+    """Pivots ``x`` (m3) of a geometric solid-volume grid with ``bins`` bins and ratio ``ratio``.
+
+    Give the first pivot either as a volume ``v0`` or as a diameter ``min_diameter``.
+    """
+
+    def __init__(self, bins: int, ratio: float = 2.0, v0: float | None = None,
+                 min_diameter: float | None = None):
+        if isinstance(bins, bool) or int(bins) != bins or bins < 3:
+            raise PBMInputError(f"grid bins = {bins!r}; allowed: an integer >= 3")
+        ratio = positive("grid ratio", ratio)
+        if ratio <= 1.0:
+            raise PBMInputError(f"grid ratio = {ratio!r}; allowed: a number > 1 (v_(k+1) = ratio * v_k)")
+        if (v0 is None) == (min_diameter is None):
+            raise PBMInputError("grid: give exactly one of v0 (first pivot volume, m3) and min_diameter (m)")
+        v0 = positive("grid v0", v0) if v0 is not None else float(volume_of(positive("grid min_diameter",
+                                                                                     min_diameter)))
+        self.bins = int(bins)
+        self.ratio = ratio
+        self.v0 = v0
+        self.x = v0 * ratio ** np.arange(self.bins, dtype=float)
+        self.d = diameter_of(self.x)
+        #: cell edges in volume (K + 1): cell k is [x_k 2/(1+r), x_k 2r/(1+r)], pivot at its centre
+        self.edges = np.concatenate([[self.x[0] * 2.0 / (1.0 + ratio)], self.x * 2.0 * ratio / (1.0 + ratio)])
+        #: diameter edges (K + 1), geometric midpoints of neighbouring pivot diameters (for PSDs)
+        q = ratio ** (1.0 / 6.0)
+        self.d_edges = np.concatenate([[self.d[0] / q], np.sqrt(self.d[:-1] * self.d[1:]), [self.d[-1] * q]])
+
+    def __repr__(self) -> str:
+        return f"Grid(bins={self.bins}, ratio={self.ratio:g}, v0={self.v0:.4g})"
+
+    def map_particles(self, volumes, numbers, what: str = "particles") -> tuple[np.ndarray, np.ndarray]:
+        """Put particles of solid ``volumes`` on the grid, conserving number and solid volume.
+
+        A class of volume u with x_i <= u <= x_(i+1) is split between the two pivots by the lever
+        rule. Returns ``(N, fraction)`` where ``N`` is the number per bin and ``fraction`` a
+        (n_classes, K) matrix: the share of each class's solid volume sent to each bin (use it to
+        carry liquid and gas with the solid). Raises GridRangeError outside [x_0, x_(K-1)].
+        """
+        u = np.atleast_1d(np.asarray(volumes, float))
+        n = np.atleast_1d(np.asarray(numbers, float))
+        if u.shape != n.shape:
+            raise PBMInputError(f"{what}: {u.size} volumes but {n.size} numbers")
+        if np.any(~np.isfinite(n)) or np.any(n < 0):
+            raise PBMInputError(f"{what}: numbers {n.tolist()} must be finite and >= 0")
+        lo, hi = self.x[0] * (1 - 1e-12), self.x[-1] * (1 + 1e-12)
+        bad = (u < lo) | (u > hi) | ~np.isfinite(u)
+        if np.any(bad):
+            d_bad = diameter_of(u[bad])
+            raise GridRangeError(
+                f"{what}: diameters {[float(f'{d:.4g}') for d in d_bad]} m (solid volumes "
+                f"{[float(f'{v:.4g}') for v in u[bad]]} m3) lie outside the grid; allowed: "
+                f"{self.d[0]:.4g} .. {self.d[-1]:.4g} m (pivots x_0 = {self.x[0]:.4g} .. "
+                f"x_{self.bins - 1} = {self.x[-1]:.4g} m3); change pbm.grid.min_diameter, bins or ratio")
+        u = np.clip(u, self.x[0], self.x[-1])
+        i = np.clip(np.searchsorted(self.x, u, side="right") - 1, 0, self.bins - 2)
+        w_hi = (u - self.x[i]) / (self.x[i + 1] - self.x[i])      # number fraction to i+1
+        frac = np.zeros((u.size, self.bins))
+        rows = np.arange(u.size)
+        n_hi = w_hi * n
+        n_lo = n - n_hi
+        N = np.zeros(self.bins)
+        np.add.at(N, i, n_lo)
+        np.add.at(N, i + 1, n_hi)
+        frac[rows, i + 1] = w_hi * self.x[i + 1] / u                # solid-volume fraction to i+1
+        frac[rows, i] = 1.0 - frac[rows, i + 1]
+        return N, frac

@@ -1,0 +1,259 @@
+"""PBM results: time series, size statistics, tidy tables, plots, atomic saving.
+
+Size statistics use the solid-volume-equivalent pivot diameters d_k. The mass (solid-volume)
+distribution puts the bin's solid N_k x_k between the diameter edges of the bin (geometric
+midpoints of neighbouring pivot diameters); its cumulative Q3 is piecewise linear in ln d
+between edges, and d10/d50/d90 are read from it. Number-mean diameter sum N_k d_k / sum N_k;
+mass-mean diameter sum N_k x_k d_k / sum N_k x_k. Mean liquid content sum L / sum S (liquid
+volume per solid volume); mean porosity sum G / (sum S + sum G).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .grid import Grid
+from .model import State, surface_fraction
+
+
+def _atomic():
+    try:
+        from pbmdem import atomic
+        return atomic.atomic_path
+    except ImportError:  # pragma: no cover - fallback if pbmdem.atomic is absent
+        import contextlib
+        import tempfile
+
+        @contextlib.contextmanager
+        def atomic_path(path):
+            path = Path(path)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+            os.close(fd)
+            try:
+                yield Path(tmp)
+                os.replace(tmp, path)
+            except BaseException:
+                Path(tmp).unlink(missing_ok=True)
+                raise
+        return atomic_path
+
+
+def mass_quantiles(mass: np.ndarray, d_edges: np.ndarray, q=(0.1, 0.5, 0.9)) -> np.ndarray:
+    """Diameters below which fractions ``q`` of the solid lie; ``mass`` (T, K) or (K,)."""
+    m = np.atleast_2d(np.asarray(mass, float))
+    out = np.full((m.shape[0], len(q)), np.nan)
+    le = np.log(d_edges)
+    for r, row in enumerate(m):
+        total = row.sum()
+        if total <= 0:
+            continue
+        C = np.concatenate([[0.0], np.cumsum(row) / total])
+        C[-1] = 1.0
+        for c, qq in enumerate(q):
+            k = int(np.searchsorted(C, qq, side="left"))
+            k = min(max(k, 1), C.size - 1)
+            f = (qq - C[k - 1]) / (C[k] - C[k - 1])
+            out[r, c] = np.exp(le[k - 1] + f * (le[k] - le[k - 1]))
+    return out if np.ndim(mass) == 2 else out[0]
+
+
+class Result:
+    """Time series of a PBM run: ``times`` (T,), ``number``/``liquid``/``gas`` (T, K) per bin,
+    ``state`` (the final, resumable :class:`State`) and ``info`` (run metadata)."""
+
+    def __init__(self, grid: Grid, records, state: State, info: dict):
+        self.grid = grid
+        self.times = np.asarray(records.times, float)
+        self.number = np.asarray(records.number, float)
+        self.liquid = np.asarray(records.liquid, float)
+        self.gas = np.asarray(records.gas, float)
+        self.liquid_added = np.asarray(records.liquid_added, float)
+        self.refused_volume = np.asarray(records.refused, float)
+        self.steps = np.asarray(records.steps, int)
+        self.state = state
+        self.info = dict(info)
+
+    @classmethod
+    def concat(cls, results: list["Result"]) -> "Result":
+        """Join consecutive runs (e.g. the intervals of a coupled loop); duplicate joint times are
+        kept once."""
+        first = results[0]
+
+        class _R:
+            pass
+
+        rec = _R()
+        keep = [np.ones(first.times.size, bool)] + [r.times > prev.times[-1] for prev, r in zip(results, results[1:])]
+        for name, attr in (("times", "times"), ("number", "number"), ("liquid", "liquid"), ("gas", "gas"),
+                           ("liquid_added", "liquid_added"), ("refused", "refused_volume"), ("steps", "steps")):
+            setattr(rec, name, np.concatenate([getattr(r, attr)[k] for r, k in zip(results, keep)]))
+        info = dict(results[-1].info)
+        info["steps"] = int(sum(r.info.get("steps", 0) for r in results))
+        info["wall_time_s"] = float(sum(r.info.get("wall_time_s", 0.0) for r in results))
+        info["segments"] = len(results)
+        return cls(first.grid, rec, results[-1].state, info)
+
+    # ------------------------------------------------------------- derived quantities
+    @property
+    def solid(self) -> np.ndarray:
+        return self.number * self.grid.x
+
+    def mass_fractions(self) -> np.ndarray:
+        S = self.solid
+        return S / S.sum(axis=1, keepdims=True)
+
+    def moments(self, orders=(0, 1, 2)) -> np.ndarray:
+        """Moments of the number distribution in solid volume, (T, len(orders))."""
+        return np.stack([(self.number * self.grid.x ** k).sum(axis=1) for k in orders], axis=1)
+
+    def summary(self) -> pd.DataFrame:
+        x, d = self.grid.x, self.grid.d
+        N, S, L, G = self.number, self.solid, self.liquid, self.gas
+        Ntot, Stot, Ltot, Gtot = N.sum(1), S.sum(1), L.sum(1), G.sum(1)
+        q = mass_quantiles(S, self.grid.d_edges)
+        return pd.DataFrame({
+            "time": self.times,
+            "total_number": Ntot,
+            "total_solid_volume": Stot,
+            "total_liquid_volume": Ltot,
+            "total_gas_volume": Gtot,
+            "d10": q[:, 0], "d50": q[:, 1], "d90": q[:, 2],
+            "number_mean_diameter": (N * d).sum(1) / Ntot,
+            "mass_mean_diameter": (S * d).sum(1) / Stot,
+            "mean_volume": Stot / Ntot,
+            "mean_liquid_content": Ltot / Stot,
+            "mean_porosity": Gtot / (Stot + Gtot),
+            "mean_surface_liquid_fraction": surface_fraction(Stot, Ltot, Gtot),
+            "liquid_added": self.liquid_added,
+            "refused_solid_volume": self.refused_volume,
+            "steps": self.steps,
+        })
+
+    def bins(self) -> pd.DataFrame:
+        """Tidy per-bin table: one row per (time, bin)."""
+        T, K = self.number.shape
+        S = self.solid
+        Stot = S.sum(1, keepdims=True)
+        g = self.grid
+        dlog = np.log(g.d_edges[1:] / g.d_edges[:-1])
+        lc = np.divide(self.liquid, S, out=np.zeros_like(S), where=S > 0)
+        eps = np.divide(self.gas, S + self.gas, out=np.zeros_like(S), where=(S + self.gas) > 0)
+        return pd.DataFrame({
+            "time": np.repeat(self.times, K),
+            "bin": np.tile(np.arange(K), T),
+            "solid_volume_pivot": np.tile(g.x, T),
+            "diameter": np.tile(g.d, T),
+            "number": self.number.ravel(),
+            "solid_volume": S.ravel(),
+            "liquid_volume": self.liquid.ravel(),
+            "gas_volume": self.gas.ravel(),
+            "mass_fraction": (S / Stot).ravel(),
+            "mass_density_lnd": (S / Stot / dlog).ravel(),
+            "liquid_content": lc.ravel(),
+            "porosity": eps.ravel(),
+            "surface_liquid_fraction": surface_fraction(S, self.liquid, self.gas).ravel(),
+        })
+
+    def to_frames(self) -> dict[str, pd.DataFrame]:
+        return {"summary": self.summary(), "bins": self.bins()}
+
+    # ------------------------------------------------------------- plots and files
+    def plot_psd(self, path=None, n_curves: int = 7, ax=None):
+        """Mass density per ln d at up to ``n_curves`` times (PSD evolution)."""
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        import matplotlib.pyplot as plt
+
+        own = ax is None
+        if own:
+            fig, ax = plt.subplots(figsize=(6, 4), layout="constrained")
+        g = self.grid
+        dens = self.mass_fractions() / np.log(g.d_edges[1:] / g.d_edges[:-1])
+        idx = np.unique(np.linspace(0, self.times.size - 1, min(n_curves, self.times.size)).round().astype(int))
+        cmap = plt.get_cmap("viridis")
+        occupied = np.nonzero(self.number.max(axis=0) > 1e-6 * self.number.max())[0]
+        lo, hi = occupied.min(), occupied.max()
+        for n, i in enumerate(idx):
+            ax.step(g.d * 1e3, dens[i], where="mid", color=cmap(n / max(1, len(idx) - 1)),
+                    label=f"t = {self.times[i]:g} s")
+        ax.set_xscale("log")
+        ax.set_xlim(g.d_edges[max(lo - 1, 0)] * 1e3, g.d_edges[min(hi + 2, g.bins)] * 1e3)
+        ax.set_xlabel("solid-equivalent diameter (mm)")
+        ax.set_ylabel("mass density q3(ln d)")
+        ax.set_title("PSD evolution")
+        ax.legend(fontsize=7)
+        if own and path is not None:
+            self._savefig(fig, path)
+            plt.close(fig)
+        return ax
+
+    def plot_sizes(self, path=None):
+        """d10/d50/d90, number- and mass-mean diameter, liquid content and porosity vs time."""
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        import matplotlib.pyplot as plt
+
+        s = self.summary()
+        fig, (a1, a2) = plt.subplots(2, 1, figsize=(6, 6), sharex=True, layout="constrained")
+        for col, style in (("d50", "-"), ("d10", ":"), ("d90", ":"), ("number_mean_diameter", "--"),
+                           ("mass_mean_diameter", "-.")):
+            a1.plot(s["time"], s[col] * 1e3, style, label=col)
+        a1.set_ylabel("diameter (mm)")
+        a1.legend(fontsize=7)
+        a1.set_title("d50 vs time")
+        a2.plot(s["time"], s["mean_liquid_content"], label="liquid / solid volume")
+        a2.plot(s["time"], s["mean_porosity"], label="porosity")
+        a2.plot(s["time"], s["mean_surface_liquid_fraction"], label="surface-liquid fraction")
+        a2.set_xlabel("time (s)")
+        a2.legend(fontsize=7)
+        if path is not None:
+            self._savefig(fig, path)
+        plt.close(fig)
+
+    @staticmethod
+    def _savefig(fig, path):
+        with _atomic()(path) as tmp:
+            fig.savefig(tmp, dpi=120)
+
+    def save(self, outdir) -> dict[str, Path]:
+        """Write summary.csv, bins.csv, run.json, psd.png and d50.png into ``outdir`` (atomically)."""
+        outdir = Path(outdir)
+        outdir.mkdir(parents=True, exist_ok=True)
+        atomic_path = _atomic()
+        paths = {}
+        for name, frame in self.to_frames().items():
+            p = outdir / f"{name}.csv"
+            with atomic_path(p) as tmp:
+                frame.to_csv(tmp, index=False)
+            paths[name] = p
+        p = outdir / "run.json"
+        with atomic_path(p) as tmp:
+            tmp.write_text(json.dumps(_jsonable(self.info), indent=2, sort_keys=True) + "\n")
+        paths["info"] = p
+        paths["psd"] = outdir / "psd.png"
+        self.plot_psd(paths["psd"])
+        paths["d50"] = outdir / "d50.png"
+        self.plot_sizes(paths["d50"])
+        return paths
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return str(obj)
+    return obj

@@ -1,0 +1,164 @@
+"""The ``pbm:`` config section: defaults, validation, model construction, ``run_pbm``.
+
+Defaults equal the pbm: section of config/config.yaml (a test keeps them equal); the schema is
+workflow/schemas/pbm.schema.yaml. The initial population is a named size distribution of the
+config (diameters = solid-equivalent diameters, number fractions) scaled to the solid volume of
+the DEM bed: bed_height x pi/4 bowl_diameter^2 x packing_fraction.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from .errors import PBMInputError
+from .grid import Grid, volume_of
+from .kernels import CollisionKernel, ConstantFrequency, SuccessProbability
+from .model import GranulationPBM, SolverSettings, State
+from .processes import Consolidation, LiquidAddition
+
+_REPO = Path(__file__).resolve().parents[3]
+SCHEMA_PATH = _REPO / "workflow" / "schemas" / "pbm.schema.yaml"
+DEFAULTS_PATH = _REPO / "config" / "config.yaml"  # its pbm: section holds the defaults
+
+#: Same values as the pbm: section of config/config.yaml (a test keeps them equal).
+DEFAULTS: dict = {
+    "grid": {"bins": 35, "ratio": 2.0, "min_diameter": 1.0e-3},
+    "process": {"premixing_time": 60.0, "liquid_addition_time": 180.0, "wet_massing_time": 240.0},
+    "initial": {"porosity": 0.5, "liquid_content": 0.0},
+    "liquid_addition": {"rate": 4.5e-8, "distribution": "surface_area"},
+    "consolidation": {"rate": 0.02, "min_porosity": 0.2},
+    "aggregation": {
+        "beta0": 5.0e-5,
+        "constant_frequency": 0.5,
+        "frequency_update_interval": 1.0,
+        "table_extrapolation": "clamp",
+        "success": {"model": "step", "threshold": 0.02, "width": 0.005},
+    },
+    "solver": {"method": "heun", "safety": 0.5, "rtol": 1.0e-3, "atol": 1.0e-6, "max_step": 5.0,
+               "max_overflow_fraction": 1.0e-6},
+    "output": {"interval": 10.0},
+}
+
+
+def _merge(base: dict, override: dict) -> dict:
+    out = copy.deepcopy(base)
+    for key, value in (override or {}).items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+def validate_section(section: dict) -> None:
+    import jsonschema
+
+    schema = yaml.safe_load(SCHEMA_PATH.read_text())
+    errors = sorted(jsonschema.Draft202012Validator(schema).iter_errors(section),
+                    key=lambda e: list(map(str, e.absolute_path)))
+    if errors:
+        msgs = []
+        for e in errors:
+            key = "pbm." + ".".join(map(str, e.absolute_path)) if e.absolute_path else "pbm"
+            msgs.append(f"{key} = {e.instance!r}: {e.message}")
+        raise PBMInputError("invalid pbm configuration: " + "; ".join(msgs))
+
+
+def resolve_settings(config: dict | None = None) -> dict:
+    """Complete, validated ``pbm:`` settings: the config's ``pbm`` section over :data:`DEFAULTS`."""
+    section = (config or {}).get("pbm") or {}
+    if not isinstance(section, dict):
+        raise PBMInputError(f"pbm section must be a mapping, got {type(section).__name__}")
+    merged = _merge(DEFAULTS, section)
+    validate_section(merged)
+    return merged
+
+
+def bed_solid_volume(config: dict) -> float:
+    """Solid volume of the DEM bed: bed_height x pi/4 bowl_diameter^2 x packing_fraction (m3)."""
+    dem, bowl = config["dem"], config["granulator"]["bowl"]
+    return float(dem["bed_height"]) * math.pi / 4 * float(bowl["diameter"]) ** 2 * float(dem["packing_fraction"])
+
+
+def process_times(settings: dict) -> tuple[float, float, float]:
+    """(spray start, spray end, end of process) from the phase durations."""
+    p = settings["process"]
+    t0 = float(p["premixing_time"])
+    t1 = t0 + float(p["liquid_addition_time"])
+    return t0, t1, t1 + float(p["wet_massing_time"])
+
+
+def build_model(settings: dict, source=None, rpm: float = 0.0) -> GranulationPBM:
+    """GranulationPBM from resolved settings; ``source`` defaults to ConstantFrequency."""
+    g = settings["grid"]
+    grid = Grid(g["bins"], g["ratio"], min_diameter=g["min_diameter"])
+    agg = settings["aggregation"]
+    if source is None:
+        source = ConstantFrequency(agg["constant_frequency"])
+    succ = agg["success"]
+    kernel = CollisionKernel(source, agg["beta0"], SuccessProbability(succ["model"], succ["threshold"],
+                                                                      succ["width"]),
+                             update_interval=agg["frequency_update_interval"])
+    t0, t1, _ = process_times(settings)
+    liquid = LiquidAddition(settings["liquid_addition"]["rate"], t0, t1,
+                            settings["liquid_addition"]["distribution"])
+    cons = Consolidation(settings["consolidation"]["rate"], settings["consolidation"]["min_porosity"])
+    s = settings["solver"]
+    solver = SolverSettings(method=s["method"], safety=s["safety"], max_step=s["max_step"], rtol=s["rtol"],
+                            atol=s["atol"], max_overflow_fraction=s["max_overflow_fraction"])
+    return GranulationPBM(grid, kernel, liquid, cons, solver, rpm=rpm)
+
+
+def initial_state_from_config(config: dict, model: GranulationPBM, distribution: str,
+                              settings: dict | None = None) -> State:
+    dists = config.get("size_distributions", {})
+    if distribution not in dists:
+        raise PBMInputError(f"size distribution {distribution!r} is not in the config; defined: {sorted(dists)}")
+    dist = dists[distribution]
+    d = np.asarray(dist["diameters"], float)
+    f = np.asarray(dist["number_fractions"], float)
+    if d.shape != f.shape or f.sum() <= 0:
+        raise PBMInputError(f"size_distributions.{distribution}: {d.size} diameters, {f.size} fractions "
+                            f"summing to {f.sum():g}; need one fraction per diameter and a positive sum")
+    u = volume_of(d)
+    f = f / f.sum()
+    total = bed_solid_volume(config)
+    numbers = total / float(np.sum(f * u)) * f
+    settings = settings or resolve_settings(config)
+    ini = settings["initial"]
+    return model.initial_state(u, numbers, liquid_content=ini["liquid_content"], porosity=ini["porosity"],
+                               what=f"size distribution {distribution!r}")
+
+
+def run_pbm(config: dict, source=None, rpm: float = 0.0, distribution_name: str | None = None, *,
+            t_end: float | None = None, output_times=None):
+    """Run the batch granulation of the config's ``pbm:`` section for one operating point.
+
+    ``source``: collision-frequency source ``(diameters, numbers, rpm) -> (K, K)`` (default
+    ConstantFrequency(pbm.aggregation.constant_frequency)); ``distribution_name``: a key of
+    ``size_distributions`` (default: the first of ``grid.size_distributions``). Returns a Result.
+    """
+    settings = resolve_settings(config)
+    if distribution_name is None:
+        names = config.get("grid", {}).get("size_distributions") or list(config.get("size_distributions", {}))
+        if not names:
+            raise PBMInputError("no size distribution given and none in the config")
+        distribution_name = names[0]
+    model = build_model(settings, source, rpm)
+    state = initial_state_from_config(config, model, distribution_name, settings)
+    _, _, t_final = process_times(settings)
+    t_end = t_final if t_end is None else float(t_end)
+    if output_times is None:
+        step = float(settings["output"]["interval"])
+        output_times = np.arange(0.0, t_end + 0.5 * step, step)
+    res = model.run(0.0, t_end, state, output_times=output_times)
+    res.info.update({"distribution": distribution_name, "source": repr(model.kernel.source),
+                     "frequency_evaluations": model.kernel.evaluations,
+                     "bed_solid_volume": bed_solid_volume(config), "settings": settings,
+                     "spray_window": list(process_times(settings)[:2])})
+    return res

@@ -1,0 +1,197 @@
+"""Every bad input gives a specific ValueError subclass naming the value and what is allowed."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from pbmdem.pbm import (
+    CollisionKernel,
+    Consolidation,
+    ConstantFrequency,
+    ConstantKernel,
+    GranulationPBM,
+    Grid,
+    GridOverflowError,
+    GridRangeError,
+    KernelShapeError,
+    LiquidAddition,
+    NegativePopulationError,
+    PBMError,
+    PBMInputError,
+    State,
+    SuccessProbability,
+    SumKernel,
+    run_pbm,
+)
+from pbmdem.pbm import analytical as an
+
+
+def test_errors_are_value_errors():
+    for cls in (PBMInputError, GridRangeError, GridOverflowError, KernelShapeError, NegativePopulationError):
+        assert issubclass(cls, PBMError) and issubclass(cls, ValueError)
+
+
+@pytest.mark.parametrize("make,match", [
+    (lambda: LiquidAddition(0.0, 0, 10), r"liquid addition rate \(m3/s\) = 0.0 .*allowed: a finite number > 0"),
+    (lambda: LiquidAddition(-1e-9, 0, 10), r"liquid addition rate .*= -1e-09"),
+    (lambda: LiquidAddition(1e-9, 10, 10), r"window \[10, 10\] s is empty; allowed: t_end > t_start"),
+    (lambda: LiquidAddition(1e-9, 0, 10, "mass"), r"distribution = 'mass'; allowed"),
+    (lambda: Consolidation(0.0, 0.2), r"consolidation rate \(1/s\) = 0.0"),
+    (lambda: Consolidation(-0.1, 0.2), r"consolidation rate \(1/s\) = -0.1"),
+    (lambda: Consolidation(0.1, 1.0), r"min_porosity = 1.0; allowed: 0 <= eps_min < 1"),
+    (lambda: ConstantKernel(0.0), r"beta0 = 0.0"),
+    (lambda: SumKernel(-1.0), r"sum kernel b = -1.0"),
+    (lambda: ConstantFrequency(0.0), r"constant collision frequency = 0.0"),
+    (lambda: ConstantFrequency(float("nan")), r"constant collision frequency = nan"),
+    (lambda: CollisionKernel(ConstantFrequency(1.0), -2.0), r"aggregation beta0 = -2.0"),
+    (lambda: SuccessProbability("always_on"), r"model = 'always_on'; allowed"),
+    (lambda: Grid(2, 2.0, v0=1.0), r"grid bins = 2; allowed: an integer >= 3"),
+    (lambda: Grid(10, 1.0, v0=1.0), r"grid ratio = 1.0; allowed: a number > 1"),
+    (lambda: Grid(10, 2.0, v0=-1.0), r"grid v0 = -1.0"),
+])
+def test_bad_parameters(make, match):
+    with pytest.raises(PBMInputError, match=match):
+        make()
+
+
+def test_initial_distribution_outside_the_grid():
+    g = Grid(10, 2.0, min_diameter=1e-3)
+    model = GranulationPBM(g, ConstantKernel(1e-3))
+    with pytest.raises(GridRangeError, match=r"diameters \[0\.0005\] m .*outside the grid; allowed: 0\.001 \.\. "):
+        model.initial_state(np.pi / 6 * np.array([0.5e-3, 2e-3]) ** 3, [10, 10])
+    with pytest.raises(GridRangeError, match=r"diameters \[0\.5\] m"):
+        model.initial_state(np.pi / 6 * np.array([0.5]) ** 3, [10])
+
+
+def test_initial_distribution_outside_the_configured_grid(default_config):
+    cfg = copy.deepcopy(default_config)
+    cfg["pbm"] = {"grid": {"min_diameter": 2.5e-3}}
+    with pytest.raises(GridRangeError, match=r"size distribution 'fine': diameters \[0\.002\] m"):
+        run_pbm(cfg, None, 600, "fine")
+
+
+def test_initial_porosity_below_minimum():
+    g = Grid(10, 2.0, min_diameter=1e-3)
+    model = GranulationPBM(g, ConstantKernel(1e-3), consolidation=Consolidation(0.1, 0.3))
+    with pytest.raises(PBMInputError, match=r"initial porosity = 0.2 is below the minimum porosity 0.3"):
+        model.initial_state(np.pi / 6 * np.array([2e-3]) ** 3, [10], porosity=0.2)
+
+
+def test_overflow_beyond_the_last_bin_is_reported():
+    g = Grid(8, 2.0, v0=1e-2)
+    N = an.discretise_exponential(g, 1.0, 0.1)
+    model = GranulationPBM(g, ConstantKernel(1.0))
+    s = State(0.0, N, np.zeros(8), np.zeros(8))
+    with pytest.raises(GridOverflowError, match=r"beyond the last bin .* by t = [0-9.e+-]+ s aggregates carrying "
+                                                r"[0-9.e+-]+ m3 of solid were refused, .*allowed: at most "
+                                                r"max_overflow_fraction = 1e-06"):
+        model.run(0.0, 50.0, s)
+
+
+def test_overflow_below_the_allowed_fraction_is_refused_and_conserves_solid():
+    g = Grid(8, 2.0, v0=1e-2)
+    N = an.discretise_exponential(g, 1.0, 0.1)
+    from pbmdem.pbm import SolverSettings
+
+    model = GranulationPBM(g, ConstantKernel(1.0), solver=SolverSettings(max_overflow_fraction=1.0))
+    res = model.run(0.0, 2.0, State(0.0, N, np.zeros(8), np.zeros(8)))
+    assert res.state.refused_volume > 0
+    M1 = res.moments()[:, 1]
+    assert abs(M1[-1] / M1[0] - 1) < 1e-12
+
+
+class _Source:
+    def __init__(self, fn):
+        self.fn = fn
+
+    def __call__(self, d, n, rpm):
+        return self.fn(d.size)
+
+    def __repr__(self):
+        return "BadSource"
+
+
+@pytest.mark.parametrize("fn,match", [
+    (lambda K: np.ones((K - 1, K)), r"BadSource returned shape \(9, 10\); expected \(10, 10\)"),
+    (lambda K: np.ones(K), r"returned shape \(10,\); expected \(10, 10\)"),
+    (lambda K: np.triu(np.ones((K, K))), r"non-symmetric matrix: c\[0,1\] = 1 but c\[1,0\] = 0"),
+    (lambda K: -np.ones((K, K)), r"negative value c\[0,0\] = -1; allowed: values >= 0"),
+    (lambda K: np.full((K, K), np.nan), r"non-finite value c\[0,0\] = nan"),
+])
+def test_inconsistent_frequency_source(fn, match):
+    g = Grid(10, 2.0, min_diameter=1e-3)
+    model = GranulationPBM(g, CollisionKernel(_Source(fn), 1.0))
+    state = model.initial_state(np.pi / 6 * np.array([2e-3]) ** 3, [100])
+    with pytest.raises(KernelShapeError, match=match):
+        model.run(0.0, 1.0, state)
+
+
+@pytest.mark.parametrize("what,value,match", [
+    ("number", -1.0, r"number of bin 3 .* is -1.0 at t = 2 s \(start of run\)"),
+    ("liquid", np.nan, r"liquid of bin 3 .* is nan at t = 2 s"),
+])
+def test_negative_or_nan_state(what, value, match):
+    g = Grid(10, 2.0, min_diameter=1e-3)
+    model = GranulationPBM(g, ConstantKernel(1e-3))
+    s = State(2.0, np.ones(10), np.zeros(10), np.zeros(10))
+    getattr(s, what)[3] = value
+    with pytest.raises(NegativePopulationError, match=match):
+        model.run(2.0, 3.0, s)
+
+
+@pytest.mark.filterwarnings("ignore:invalid value encountered:RuntimeWarning")
+def test_nan_during_the_run_names_time_and_bin():
+    class NaNLater:
+        def __init__(self):
+            self.calls = 0
+
+        def __call__(self, inp):
+            self.calls += 1
+            K = inp.volumes.size
+            beta = np.full((K, K), 1e-3)
+            if inp.t > 0.5:
+                beta[4, 4] = np.inf   # an infinite rate in bin 4
+            return beta
+
+        def prepare(self, inp):
+            pass
+
+        def reset(self):
+            pass
+
+    g = Grid(10, 2.0, min_diameter=1e-3)
+    from pbmdem.pbm import SolverSettings
+
+    model = GranulationPBM(g, NaNLater(), solver=SolverSettings(max_step=0.2, max_overflow_fraction=1.0))
+    N = np.zeros(10)
+    N[:6] = 1.0
+    s = State(0.0, N, np.zeros(10), np.zeros(10))
+    with pytest.raises(NegativePopulationError, match=r"of bin \d+ .* at t = 0\.[0-9]+ s"):
+        model.run(0.0, 2.0, s)
+
+
+def test_run_state_time_mismatch():
+    g = Grid(10, 2.0, min_diameter=1e-3)
+    model = GranulationPBM(g, ConstantKernel(1e-3))
+    s = State(1.0, np.ones(10), np.zeros(10), np.zeros(10))
+    with pytest.raises(PBMInputError, match=r"the state is at t = 1.0, not at t_start = 0.0"):
+        model.run(0.0, 2.0, s)
+    with pytest.raises(PBMInputError, match=r"t_end = 0.5 must be > t_start = 1.0"):
+        model.run(1.0, 0.5, s)
+
+
+def test_bad_config_section(default_config):
+    cfg = copy.deepcopy(default_config)
+    cfg["pbm"] = {"liquid_addition": {"rate": 0.0}}
+    with pytest.raises(PBMInputError, match=r"pbm\.liquid_addition\.rate = 0\.0: 0\.0 is less than or equal to "
+                                            r"the minimum of 0"):
+        run_pbm(cfg, None, 600, "fine")
+    cfg["pbm"] = {"consolidation": {"rate": 1.0, "speed": 2}}
+    with pytest.raises(PBMInputError, match=r"'speed' was unexpected"):
+        run_pbm(cfg, None, 600, "fine")
+    cfg["pbm"] = {}
+    with pytest.raises(PBMInputError, match=r"size distribution 'huge' is not in the config; defined: "):
+        run_pbm(cfg, None, 600, "huge")

@@ -1,0 +1,194 @@
+"""Collision-frequency sources (DEM table interpolation), success probability, the cell-average
+operator, config defaults/schema and the command line."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from pbmdem.pbm import (
+    CellAverageAggregation,
+    Grid,
+    PBMInputError,
+    SuccessProbability,
+    TableFrequency,
+)
+from pbmdem.pbm.settings import DEFAULTS, DEFAULTS_PATH, SCHEMA_PATH, resolve_settings
+
+D = np.array([0.002, 0.003, 0.004])
+
+
+def make_table(rpms=(300.0, 900.0), sym_law=True):
+    rows = []
+    for rpm in rpms:
+        for a in range(3):
+            for b in range(a, 3):
+                di, dj = D[a], D[b]
+                f = 1e-3 * (rpm / 300.0) * (di * dj / 4e-6) ** 1.2
+                rows.append({"rpm": rpm, "distribution": "fine", "class_i": a, "class_j": b, "d_i": di,
+                             "d_j": dj, "frequency_per_pair": f})
+    return pd.DataFrame(rows)
+
+
+def law(d1, d2, rpm):
+    return 1e-3 * (rpm / 300.0) * (d1 * d2 / 4e-6) ** 1.2
+
+
+def test_table_reproduces_nodes_and_power_law_between():
+    src = TableFrequency(make_table())
+    c = src(D, np.ones(3), 300.0)
+    np.testing.assert_allclose(c, law(D[:, None], D[None, :], 300.0), rtol=1e-12)
+    # log-log bilinear interpolation is exact for a power law between the nodes
+    d = np.array([0.0025, 0.0035])
+    np.testing.assert_allclose(src(d, np.ones(2), 900.0), law(d[:, None], d[None, :], 900.0), rtol=1e-12)
+    assert np.allclose(c, c.T)
+
+
+def test_table_rpm_interpolation_and_clamping():
+    src = TableFrequency(make_table())
+    mid = src(D, np.ones(3), 600.0)
+    lo, hi = src(D, np.ones(3), 300.0), src(D, np.ones(3), 900.0)
+    # log c linear in rpm: geometric mean half-way
+    np.testing.assert_allclose(mid, np.sqrt(lo * hi), rtol=1e-12)
+    np.testing.assert_allclose(src(D, np.ones(3), 100.0), lo)
+    np.testing.assert_allclose(src(D, np.ones(3), 2000.0), hi)
+
+
+def test_table_size_clamping_and_linear_extrapolation():
+    clamp = TableFrequency(make_table(), extrapolation="clamp")
+    lin = TableFrequency(make_table(), extrapolation="linear")
+    d = np.array([0.001, 0.002, 0.008])
+    c = clamp(d, np.ones(3), 300.0)
+    assert c[0, 0] == pytest.approx(law(0.002, 0.002, 300.0))
+    assert c[2, 2] == pytest.approx(law(0.004, 0.004, 300.0))
+    e = lin(d, np.ones(3), 300.0)
+    np.testing.assert_allclose(e, law(d[:, None], d[None, :], 300.0), rtol=1e-10)
+
+
+def test_table_averages_duplicate_pairs_and_floors_zeros():
+    t = make_table(rpms=(300.0,))
+    t2 = t.copy()
+    t2["distribution"] = "coarse"
+    t2["frequency_per_pair"] *= 3.0
+    src = TableFrequency(pd.concat([t, t2]))
+    np.testing.assert_allclose(src(D, np.ones(3), 300.0), 2.0 * law(D[:, None], D[None, :], 300.0), rtol=1e-12)
+    t3 = t.copy()
+    t3.loc[t3.index[-1], "frequency_per_pair"] = 0.0      # the (4 mm, 4 mm) pair saw no collision
+    c = TableFrequency(t3, zero_floor=1e-3)(D, np.ones(3), 300.0)
+    assert c[2, 2] == pytest.approx(1e-3 * t3["frequency_per_pair"][t3["frequency_per_pair"] > 0].min())
+
+
+def test_table_from_csv_selects_distribution(tmp_path):
+    t = make_table()
+    t2 = t.copy()
+    t2["distribution"] = "coarse"
+    t2["frequency_per_pair"] *= 5.0
+    p = tmp_path / "collisions.csv"
+    pd.concat([t, t2]).to_csv(p, index=False)
+    src = TableFrequency.from_csv(p, distribution="coarse")
+    np.testing.assert_allclose(src(D, np.ones(3), 300.0), 5 * law(D[:, None], D[None, :], 300.0), rtol=1e-12)
+    with pytest.raises(PBMInputError, match=r"no rows for distribution 'huge'; present: \['coarse', 'fine'\]"):
+        TableFrequency.from_csv(p, distribution="huge")
+
+
+@pytest.mark.parametrize("mutate,match", [
+    (lambda t: t.drop(columns=["frequency_per_pair"]), r"lacks columns \['frequency_per_pair'\]"),
+    (lambda t: t.assign(frequency_per_pair=-1.0), r"frequency_per_pair has values \[-1\."),
+    (lambda t: t.assign(d_i=0.0), r"column d_i has values \[0\."),
+    (lambda t: t.iloc[1:], r"no row for the pair d_i = 0.002, d_j = 0.002"),
+])
+def test_bad_tables(mutate, match):
+    with pytest.raises(PBMInputError, match=match):
+        TableFrequency(mutate(make_table(rpms=(300.0,))))
+
+
+def test_success_probability_models():
+    phi = np.array([0.0, 0.019, 0.02, 0.1])
+    step = SuccessProbability("step", threshold=0.02)
+    np.testing.assert_array_equal(step.per_particle(phi), [0, 0, 1, 1])
+    psi = step(phi)
+    assert psi[3, 2] == 1 and psi[3, 1] == 0 and psi[1, 1] == 0
+    logi = SuccessProbability("logistic", threshold=0.02, width=0.005)
+    p = logi.per_particle(phi)
+    assert p[2] == pytest.approx(0.5) and np.all(np.diff(p) > 0)
+    np.testing.assert_array_equal(SuccessProbability("always")(phi), np.ones((4, 4)))
+
+
+def test_cell_average_targets_and_conservation():
+    g = Grid(12, 2.0, v0=1.0)
+    op = CellAverageAggregation(g.x, g.edges[1:-1])
+    # equal pivots double exactly onto the next pivot; the last row/column is beyond the grid
+    assert op.target_matrix[3, 3] == 4
+    assert op.target_matrix[11, 11] == -1 and op.target_matrix[0, 11] == -1
+    rng = np.random.default_rng(1)
+    N = rng.random(12) * (np.arange(12) < 10)
+    l, gas = rng.random(12), rng.random(12)
+    beta = rng.random((12, 12))
+    beta = beta + beta.T
+    dN, dL, dG, refused = op.rates(beta, N, l, gas)
+    assert abs(np.sum(dN * g.x)) < 1e-12 * np.sum(N * g.x) * beta.max() * N.sum()
+    assert abs(dL.sum()) < 1e-13 and abs(dG.sum()) < 1e-13
+    # bins 10 and 11 are empty, so no aggregate leaves the grid; one particle is lost per event
+    assert refused == 0.0
+    events = 0.5 * (np.outer(N, N) * beta).sum()
+    assert dN.sum() == pytest.approx(-events, rel=1e-12)
+    # liquid proportional to solid (l = 0.3 x) stays proportional: liquid follows the solid volume
+    dN2, dL2, _, _ = op.rates(beta, N, 0.3 * g.x, gas)
+    np.testing.assert_allclose(dL2, 0.3 * dN2 * g.x, rtol=1e-10, atol=1e-12 * np.abs(dL2).max())
+
+
+def test_defaults_file_matches_code_and_schema():
+    data = yaml.safe_load(DEFAULTS_PATH.read_text())
+    assert data["pbm"] == DEFAULTS
+    import jsonschema
+
+    jsonschema.Draft202012Validator.check_schema(yaml.safe_load(SCHEMA_PATH.read_text()))
+    assert resolve_settings({"pbm": data["pbm"]}) == DEFAULTS
+
+
+def test_main_config_schema_accepts_pbm_section(default_config):
+    from pbmdem.config import validate_schema
+
+    cfg = dict(default_config)
+    cfg["pbm"] = DEFAULTS
+    validate_schema(cfg)
+    cfg["pbm"] = {"grid": {"bins": 1}}
+    with pytest.raises(ValueError, match=r"pbm.grid.bins = 1"):
+        validate_schema(cfg)
+
+
+def test_cli_constant_run(tmp_path, root):
+    from pbmdem.pbm import cli
+
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers(dest="command")
+    cli.add_cli(sub)
+    out = tmp_path / "rpm600_fine"
+    args = parser.parse_args(["pbm", "--config", str(root / "config" / "config.yaml"), "--kernel", "constant",
+                              "--rpm", "600", "--distribution", "fine", "--out", str(out)])
+    assert args.func(args) == 0
+    for name in ("summary.csv", "bins.csv", "run.json", "psd.png", "d50.png"):
+        assert (out / name).is_file()
+    args = parser.parse_args(["pbm", "--config", str(root / "config" / "config.yaml"), "--kernel", "table",
+                              "--rpm", "600", "--out", str(out)])
+    with pytest.raises(PBMInputError, match="--kernel table needs --table PATH"):
+        args.func(args)
+
+
+def test_cli_table_run(tmp_path, root):
+    from pbmdem.pbm import cli
+
+    table = tmp_path / "collisions.csv"
+    make_table().to_csv(table, index=False)
+    parser = argparse.ArgumentParser()
+    cli.add_cli(parser.add_subparsers(dest="command"))
+    out = tmp_path / "table"
+    args = parser.parse_args(["pbm", "--config", str(root / "config" / "config.yaml"), "--kernel", "table",
+                              "--table", str(table), "--rpm", "600", "--distribution", "mixed", "--out", str(out)])
+    assert args.func(args) == 0
+    s = pd.read_csv(out / "summary.csv")
+    assert s["number_mean_diameter"].iloc[-1] > s["number_mean_diameter"].iloc[0]

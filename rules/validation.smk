@@ -1,0 +1,120 @@
+# Validation: PBM-DEM (LIGGGHTS at every coupling interval) vs PBM-ANN vs PBM-constant, the
+# PBM-ANN impeller-speed sweep, and the self-contained HTML report.
+from pbmdem.coupling import settings_from_config
+
+VALIDATION = settings_from_config(config)
+VAL_RPMS = [f"{float(r):g}" for r in VALIDATION["rpm"]]
+MODEL = f"{RESULTS}/surrogate/model.skops"
+
+
+def loop_config():
+    """The config parts a validation loop depends on (rule params: other edits do not re-run it)."""
+    keys = ("granulator", "material", "dem", "pbm", "validation", "size_distributions")
+    return {k: config[k] for k in keys if k in config}
+
+
+def method_outputs(method):
+    return {
+        "summary": f"{RESULTS}/validation/rpm{{rpm}}/{method}/summary.csv",
+        "bins": f"{RESULTS}/validation/rpm{{rpm}}/{method}/final_bins.csv",
+        "timing": f"{RESULTS}/validation/rpm{{rpm}}/{method}/timing.json",
+    }
+
+
+rule pbm_dem_coupled:
+    output:
+        **method_outputs("pbm_dem"),
+        intervals=f"{RESULTS}/validation/rpm{{rpm}}/pbm_dem/intervals.csv",
+    params:
+        config=lambda wc: loop_config(),
+        method="dem",
+        outdir=lambda wc: f"{RESULTS}/validation/rpm{wc.rpm}/pbm_dem",
+    threads: config["dem"].get("mpi_ranks", 1)
+    log:
+        f"{RESULTS}/logs/validation/pbm_dem_rpm{{rpm}}.log",
+    conda:
+        "../envs/pbmdem.yaml"
+    script:
+        "../workflow/scripts/validation_loop.py"
+
+
+rule pbm_ann_coupled:
+    input:
+        model=MODEL,
+    output:
+        **method_outputs("pbm_ann"),
+        intervals=f"{RESULTS}/validation/rpm{{rpm}}/pbm_ann/intervals.csv",
+    params:
+        config=lambda wc: loop_config(),
+        method="ann",
+        outdir=lambda wc: f"{RESULTS}/validation/rpm{wc.rpm}/pbm_ann",
+    log:
+        f"{RESULTS}/logs/validation/pbm_ann_rpm{{rpm}}.log",
+    conda:
+        "../envs/pbmdem.yaml"
+    script:
+        "../workflow/scripts/validation_loop.py"
+
+
+rule pbm_constant_calibrated:
+    input:
+        model=MODEL,
+    output:
+        **method_outputs("pbm_constant"),
+    params:
+        config=lambda wc: loop_config(),
+        method="constant",
+        outdir=lambda wc: f"{RESULTS}/validation/rpm{wc.rpm}/pbm_constant",
+    log:
+        f"{RESULTS}/logs/validation/pbm_constant_rpm{{rpm}}.log",
+    conda:
+        "../envs/pbmdem.yaml"
+    script:
+        "../workflow/scripts/validation_loop.py"
+
+
+rule rpm_sweep:
+    input:
+        model=MODEL,
+    output:
+        table=f"{RESULTS}/validation/rpm_sweep.csv",
+        plot=f"{RESULTS}/validation/rpm_sweep.png",
+    params:
+        config=lambda wc: loop_config(),
+    log:
+        f"{RESULTS}/logs/validation/rpm_sweep.log",
+    conda:
+        "../envs/pbmdem.yaml"
+    script:
+        "../workflow/scripts/rpm_sweep.py"
+
+
+rule report:
+    input:
+        runs=f"{RESULTS}/dem/runs.csv",
+        collisions=f"{RESULTS}/dem/collisions.csv",
+        metrics=f"{RESULTS}/surrogate/metrics.csv",
+        parity=f"{RESULTS}/surrogate/parity.png",
+        metadata=f"{RESULTS}/surrogate/model.json",
+        sweep=f"{RESULTS}/validation/rpm_sweep.csv",
+        sweep_plot=f"{RESULTS}/validation/rpm_sweep.png",
+        loops=expand(f"{RESULTS}/validation/rpm{{rpm}}/{{method}}/summary.csv", rpm=VAL_RPMS,
+                     method=["pbm_dem", "pbm_ann", "pbm_constant"]),
+        intervals=expand(f"{RESULTS}/validation/rpm{{rpm}}/{{method}}/intervals.csv", rpm=VAL_RPMS,
+                         method=["pbm_dem", "pbm_ann"]),
+    output:
+        html=f"{RESULTS}/report/report.html",
+        comparison=f"{RESULTS}/report/comparison.csv",
+    params:
+        validation_dir=f"{RESULTS}/validation",
+        rpms=VAL_RPMS,
+        grid_rpm=config["grid"]["impeller_rpm"],
+    log:
+        f"{RESULTS}/logs/report.log",
+    conda:
+        "../envs/pbmdem.yaml"
+    script:
+        "../workflow/scripts/report.py"
+
+
+extra_targets.append(f"{RESULTS}/report/report.html")

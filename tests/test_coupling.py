@@ -1,0 +1,106 @@
+"""Coupled PBM-DEM loop: representative samples, and the loop on the real engine with resume."""
+
+import json
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pbmdem import coupling, liggghts
+
+
+def test_sample_conserves_number_and_volume_before_rounding():
+    x = 1e-9 * 2.0 ** np.arange(12)
+    n = np.array([400, 300, 200, 90, 40, 15, 6, 3, 1, 0.4, 0.1, 0.0])
+    s = coupling.representative_sample(x, n, max_classes=4, min_particles_per_class=20, max_particles=10_000)
+    assert len(s.diameters) <= 4
+    assert all(c >= 20 for c in s.counts)
+    assert sorted(sum(s.bins, [])) == [k for k in range(12) if n[k] > 0]  # every occupied bin, once
+    vol = np.pi / 6 * np.asarray(s.diameters) ** 3
+    exact = np.array([n[g].sum() for g in s.bins])
+    assert np.dot(exact, vol) == pytest.approx(np.dot(n, x), rel=1e-12)  # solid volume conserved
+    assert sum(s.counts) == pytest.approx(n.sum(), abs=len(s.counts))  # rounding only
+    assert s.diameters == sorted(s.diameters)
+
+
+def test_sample_merges_sparse_large_bins_into_the_last_class():
+    x = 1e-9 * 2.0 ** np.arange(6)
+    s = coupling.representative_sample(x, np.array([100, 50, 2, 1, 1, 1]), max_classes=5,
+                                       min_particles_per_class=20, max_particles=10_000)
+    assert s.bins == [[0], [1, 2, 3, 4, 5]]
+
+
+def test_sample_is_capped_with_a_warning():
+    x = 1e-9 * 2.0 ** np.arange(3)
+    with pytest.warns(UserWarning, match="capped at max_particles = 100"):
+        s = coupling.representative_sample(x, np.array([300.0, 200.0, 100.0]), max_particles=100)
+    assert sum(s.counts) == pytest.approx(100, abs=2)
+    assert s.scaled_down == pytest.approx(100 / 600)
+
+
+def test_sample_refuses_an_empty_bed():
+    with pytest.raises(ValueError, match="fewer than min_particles_per_class = 20"):
+        coupling.representative_sample([1e-9, 2e-9], [3.0, 2.0])
+
+
+def test_class_frequency_source_interpolates_and_clamps():
+    d = [0.002, 0.004]
+    c = np.array([[1.0, 2.0], [2.0, 4.0]])
+    src = coupling.ClassFrequencySource(d, c, "test")
+    out = src(np.array([0.002, 0.004, 0.008]), np.ones(3), 600.0)
+    assert out.shape == (3, 3)
+    np.testing.assert_allclose(out[:2, :2], c, rtol=1e-12)
+    assert out[2, 2] == pytest.approx(4.0)  # clamped beyond the largest class
+    np.testing.assert_allclose(out, out.T)
+
+
+def _failing_for_interval(tmp_path, interval: int):
+    real = liggghts.executable()
+    script = tmp_path / "liggghts-fails"
+    script.write_text(
+        f"#!{sys.executable}\n"
+        "import os, sys\n"
+        f"if 'interval_{interval:02d}' in os.getcwd():\n"
+        "    print('ERROR: simulated node failure (test)')\n"
+        "    sys.exit(1)\n"
+        f"os.execv({real!r}, [{real!r}, *sys.argv[1:]])\n"
+    )
+    script.chmod(0o755)
+    return script
+
+
+@pytest.mark.liggghts
+def test_pbm_dem_loop_stops_keeps_finished_intervals_and_resumes(tiny_config, tmp_path, monkeypatch):
+    cfg = tiny_config
+    v = coupling.settings_from_config(cfg)
+    assert v["coupling_intervals"] >= 2
+    out = tmp_path / "pbm_dem"
+    monkeypatch.setenv("PBMDEM_LIGGGHTS", str(_failing_for_interval(tmp_path, 1)))
+    with pytest.raises(coupling.CouplingError, match=r"(?s)interval 1 .*failed.*simulated node failure.*rerun to resume"):
+        coupling.run_method("dem", cfg, 600.0, out)
+    assert (out / "interval_00" / "interval.json").exists()
+    assert (out / "interval_00" / "dem" / "collisions.csv").exists()
+    assert not (out / "interval_01" / "interval.json").exists()
+    assert not (out / "summary.csv").exists()
+    first = (out / "interval_00" / "interval.json").read_text()
+    first_dem = (out / "interval_00" / "dem" / "summary.json").stat().st_mtime_ns
+
+    monkeypatch.delenv("PBMDEM_LIGGGHTS")
+    timing = coupling.run_method("dem", cfg, 600.0, out)
+    # interval 0 was resumed from disk, not re-run
+    assert (out / "interval_00" / "interval.json").read_text() == first
+    assert (out / "interval_00" / "dem" / "summary.json").stat().st_mtime_ns == first_dem
+    intervals = pd.read_csv(out / "intervals.csv")
+    assert intervals.interval.tolist() == list(range(v["coupling_intervals"]))
+    assert (intervals.dem_collisions > 0).all()
+    summary = pd.read_csv(out / "summary.csv")
+    assert summary.time.is_monotonic_increasing
+    # the PBM conserved solid volume across the coupled intervals
+    solid = summary.total_solid_volume.to_numpy()
+    assert np.abs(solid / solid[0] - 1).max() < 1e-10
+    assert timing["provider_wall_time_s"] > 0
+    # each interval's DEM sample follows the PBM distribution handed over at its start
+    for _, row in intervals.iterrows():
+        d = json.loads(row.class_diameters)
+        assert d == sorted(d) and row.sample_particles == sum(json.loads(row.class_counts))

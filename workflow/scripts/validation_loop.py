@@ -1,0 +1,12 @@
+"""Snakemake rules pbm_dem_coupled / pbm_ann_coupled / pbm_constant_calibrated (thin)."""
+import logging
+
+from pbmdem import coupling
+
+logging.basicConfig(filename=snakemake.log[0], level=logging.INFO,  # noqa: F821
+                    format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+logging.captureWarnings(True)
+cfg = snakemake.params.config  # noqa: F821
+rpm = float(snakemake.wildcards.rpm)  # noqa: F821
+coupling.run_method(snakemake.params.method, cfg, rpm, snakemake.params.outdir,  # noqa: F821
+                    model_path=snakemake.input.get("model"))  # noqa: F821

@@ -6,7 +6,11 @@ from snakemake.utils import min_version, validate
 min_version("8.0")
 
 
-configfile: "config/config.yaml"
+# The default configuration, unless one is given with --configfile/--config (Snakemake would
+# otherwise merge the two, e.g. the default grid's distributions into the tiny test bowl).
+if not config:
+
+    configfile: "config/config.yaml"
 
 
 validate(config, "workflow/schemas/config.schema.yaml")
@@ -17,6 +21,13 @@ check_config(config)
 
 
 include: "rules/common.smk"
+
+
+wildcard_constraints:
+    rpm=r"[0-9]+(\.[0-9]+)?",
+    dist=r"[A-Za-z][A-Za-z0-9_-]*",
+
+
 include: "rules/dem.smk"
 include: "rules/surrogate.smk"
 include: "rules/pbm.smk"

@@ -7,8 +7,8 @@ rule dem_point:
         walls=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/wall_collisions.csv",
         summary=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/summary.json",
     params:
-        point=lambda wc: point_config(config, wc.dist),
-        run_dir=lambda wc: f"{RESULTS}/dem/rpm{wc.rpm}_{wc.dist}",
+        point=lambda wc: canonical(point_config(config, wc.dist)),
+        run_dir=lambda wc, output: os.path.dirname(output.table),
     threads: config["dem"].get("mpi_ranks", 1)
     resources:
         mpi_ranks=config["dem"].get("mpi_ranks", 1),

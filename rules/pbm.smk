@@ -5,19 +5,6 @@
 # the config that fix the initial bed are params, so changing them reruns the rule.
 
 
-def pbm_params(wildcards):
-    return {
-        "pbm": config.get("pbm", {}),
-        "size_distributions": config["size_distributions"],
-        "dem": config["dem"],
-        "granulator": config["granulator"],
-    }
-
-
-def pbm_constant_outputs():
-    return [f"{RESULTS}/pbm/constant/rpm{rpm}_{dist}/summary.csv" for rpm, dist in grid_points()]
-
-
 rule pbm_constant:
     output:
         summary=f"{RESULTS}/pbm/constant/rpm{{rpm}}_{{dist}}/summary.csv",

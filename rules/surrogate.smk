@@ -12,7 +12,7 @@ rule train_surrogate:
         metrics="results/surrogate/metrics.csv",
         parity="results/surrogate/parity.png",
     params:
-        settings=lambda wildcards: config.get("surrogate", {}),
+        settings=lambda wildcards: canonical(config.get("surrogate", {})),
         impeller_radius=lambda wildcards: config["granulator"]["impeller"]["blade_length"],
     log:
         "results/logs/train_surrogate.log",

@@ -1,26 +1,5 @@
 # Validation: PBM-DEM (LIGGGHTS at every coupling interval) vs PBM-ANN vs PBM-constant, the
 # PBM-ANN impeller-speed sweep, and the self-contained HTML report.
-from pbmdem.coupling import settings_from_config
-
-VALIDATION = settings_from_config(config)
-VAL_RPMS = [f"{float(r):g}" for r in VALIDATION["rpm"]]
-MODEL = f"{RESULTS}/surrogate/model.skops"
-
-
-def loop_config():
-    """The config parts a validation loop depends on (rule params: other edits do not re-run it)."""
-    keys = ("granulator", "material", "dem", "pbm", "validation", "size_distributions")
-    return {k: config[k] for k in keys if k in config}
-
-
-def method_outputs(method):
-    return {
-        "summary": f"{RESULTS}/validation/rpm{{rpm}}/{method}/summary.csv",
-        "bins": f"{RESULTS}/validation/rpm{{rpm}}/{method}/final_bins.csv",
-        "timing": f"{RESULTS}/validation/rpm{{rpm}}/{method}/timing.json",
-    }
-
-
 rule pbm_dem_coupled:
     output:
         **method_outputs("pbm_dem"),
@@ -28,7 +7,7 @@ rule pbm_dem_coupled:
     params:
         config=lambda wc: loop_config(),
         method="dem",
-        outdir=lambda wc: f"{RESULTS}/validation/rpm{wc.rpm}/pbm_dem",
+        outdir=lambda wc, output: os.path.dirname(output.summary),
     threads: config["dem"].get("mpi_ranks", 1)
     log:
         f"{RESULTS}/logs/validation/pbm_dem_rpm{{rpm}}.log",
@@ -47,7 +26,7 @@ rule pbm_ann_coupled:
     params:
         config=lambda wc: loop_config(),
         method="ann",
-        outdir=lambda wc: f"{RESULTS}/validation/rpm{wc.rpm}/pbm_ann",
+        outdir=lambda wc, output: os.path.dirname(output.summary),
     log:
         f"{RESULTS}/logs/validation/pbm_ann_rpm{{rpm}}.log",
     conda:
@@ -64,7 +43,7 @@ rule pbm_constant_calibrated:
     params:
         config=lambda wc: loop_config(),
         method="constant",
-        outdir=lambda wc: f"{RESULTS}/validation/rpm{wc.rpm}/pbm_constant",
+        outdir=lambda wc, output: os.path.dirname(output.summary),
     log:
         f"{RESULTS}/logs/validation/pbm_constant_rpm{{rpm}}.log",
     conda:
@@ -80,7 +59,7 @@ rule rpm_sweep:
         table=f"{RESULTS}/validation/rpm_sweep.csv",
         plot=f"{RESULTS}/validation/rpm_sweep.png",
     params:
-        config=lambda wc: loop_config(),
+        config=lambda wc: {**loop_config(), "validation": canonical(VALIDATION)},
     log:
         f"{RESULTS}/logs/validation/rpm_sweep.log",
     conda:
@@ -106,7 +85,7 @@ rule report:
         html=f"{RESULTS}/report/report.html",
         comparison=f"{RESULTS}/report/comparison.csv",
     params:
-        validation_dir=f"{RESULTS}/validation",
+        validation_dir=lambda wc, input: os.path.dirname(input.sweep),
         rpms=VAL_RPMS,
         grid_rpm=config["grid"]["impeller_rpm"],
     log:

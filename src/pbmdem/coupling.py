@@ -158,10 +158,18 @@ class ClassFrequencySource:
         return f"ClassFrequencySource({self.label}, classes={len(self.diameters)})"
 
     def __call__(self, diameters, numbers, rpm) -> np.ndarray:
+        # within an interval the class frequencies are fixed and the PBM bins do not move, so the
+        # interpolated matrix is computed once per set of bin diameters
+        key = np.asarray(diameters, float).tobytes()
+        if getattr(self, "_cache_key", None) == key:
+            return self._cache
         if self._table is None:
             k = np.atleast_1d(diameters).size
-            return np.full((k, k), self._value)
-        return self._table(diameters, numbers, rpm)
+            out = np.full((k, k), self._value)
+        else:
+            out = self._table(diameters, numbers, rpm)
+        self._cache_key, self._cache = key, out
+        return out
 
 
 # ----------------------------------------------------------------------------- providers

@@ -77,7 +77,8 @@ def run(deck: str | Path, workdir: str | Path, ranks: int = 1, timeout: float | 
     t0 = time.perf_counter()
     env = dict(os.environ, OMP_NUM_THREADS="1")
     try:
-        proc = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=timeout, env=env)
+        proc = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, errors="replace", timeout=timeout,
+                              env=env)
         returncode, stdout, stderr = proc.returncode, proc.stdout, proc.stderr
     except subprocess.TimeoutExpired as exc:
         returncode, stderr = -9, f"timed out after {timeout} s"

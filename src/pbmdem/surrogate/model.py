@@ -37,6 +37,9 @@ from .features import (
 CV_STRATEGIES = ("leave_one_group_out", "group_kfold")
 
 
+PHYSICS_OFFSETS = ("cross_section", "none")
+
+
 class OutOfDomainWarning(UserWarning):
     """A prediction was requested outside the training domain of the surrogate."""
 
@@ -115,6 +118,12 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         (fraction of each feature's training range).
     n_jobs : int or None
         Parallel jobs of the grid search.
+    physics_offset : {"cross_section", "none"}
+        ``"cross_section"`` (default): the MLP learns the residual of log10 c_ij after the
+        collision cross-section 2 log10(d_i + d_j) (d in mm), which is added back at prediction.
+        Kinetic theory gives c_ij proportional to (d_i + d_j)^2 at a fixed bed volume, so the
+        learned part varies less and predictions for granules larger than the training sizes
+        follow the cross-section instead of a saturated tanh network. ``"none"``: plain log10 c.
     """
 
     def __init__(
@@ -133,6 +142,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         zero_policy: str = "drop",
         domain_margin: float = 0.0,
         n_jobs: int | None = None,
+        physics_offset: str = "cross_section",
     ):
         self.hidden_layer_sizes = hidden_layer_sizes
         self.alpha = alpha
@@ -148,6 +158,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         self.zero_policy = zero_policy
         self.domain_margin = domain_margin
         self.n_jobs = n_jobs
+        self.physics_offset = physics_offset
 
     # ------------------------------------------------------------------ helpers
     def _seed_list(self) -> list[int]:
@@ -173,6 +184,14 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
             raise ValueError("hidden_layer_sizes and alpha need at least one candidate each")
         return {"mlp__hidden_layer_sizes": sizes, "mlp__alpha": alphas}
 
+    def _offset(self, features: pd.DataFrame) -> np.ndarray:
+        """log10 of the physical part of c_ij that the MLP does not have to learn."""
+        if self.physics_offset == "none":
+            return np.zeros(len(features))
+        if self.physics_offset == "cross_section":
+            return 2.0 * np.log10(1e3 * (features["d_small"].to_numpy(float) + features["d_large"].to_numpy(float)))
+        raise ValueError(f"physics_offset = {self.physics_offset!r}; allowed: {PHYSICS_OFFSETS}")
+
     # ------------------------------------------------------------------ fit
     def fit(self, table: pd.DataFrame, y=None):
         """Fit on a collision table (``y`` is ignored: the target is read from the table)."""
@@ -186,7 +205,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         data = prepare_training_table(table, self.zero_policy)
         features = make_features(data, self.impeller_radius)
         X = features.to_numpy(float)
-        target = data[TARGET_NAME].to_numpy(float)
+        target = data[TARGET_NAME].to_numpy(float) - self._offset(features)
         groups = data["point_id"].astype(str).to_numpy()
         grid = self._param_grid()
         n_candidates = len(grid["mlp__hidden_layer_sizes"]) * len(grid["mlp__alpha"])
@@ -291,7 +310,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         arr = F.to_numpy(float)
         with single_threaded():
             preds = np.stack([m.predict(arr) for m in self.estimators_])
-        mean = preds.mean(axis=0)
+        mean = preds.mean(axis=0) + self._offset(F)
         if return_std:
             std = preds.std(axis=0, ddof=1) if len(self.estimators_) > 1 else np.zeros_like(mean)
             return mean, std

@@ -27,6 +27,7 @@ DEFAULTS: dict = {
     "cv": {"strategy": "leave_one_group_out", "n_splits": 5},
     "zero_collisions": "drop",
     "domain_margin": 0.0,
+    "physics_offset": "cross_section",
 }
 
 
@@ -108,4 +109,5 @@ def build_surrogate(settings: dict, impeller_radius: float = DEFAULT_IMPELLER_RA
         zero_policy=settings["zero_collisions"],
         domain_margin=float(settings["domain_margin"]),
         n_jobs=n_jobs,
+        physics_offset=settings["physics_offset"],
     )

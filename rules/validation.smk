@@ -75,6 +75,7 @@ rule report:
         metrics=f"{RESULTS}/surrogate/metrics.csv",
         parity=f"{RESULTS}/surrogate/parity.png",
         metadata=f"{RESULTS}/surrogate/model.json",
+        model=MODEL,
         sweep=f"{RESULTS}/validation/rpm_sweep.csv",
         sweep_plot=f"{RESULTS}/validation/rpm_sweep.png",
         loops=expand(f"{RESULTS}/validation/rpm{{rpm}}/{{method}}/summary.csv", rpm=VAL_RPMS,

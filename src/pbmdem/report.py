@@ -78,7 +78,7 @@ def _img_file(path: str | Path) -> str:
     return "data:image/png;base64," + base64.b64encode(Path(path).read_bytes()).decode()
 
 
-def figures(validation_dir: str | Path, rpm: str) -> list[tuple[str, str]]:
+def figures(validation_dir: str | Path, rpm: str, model: str | Path | None = None) -> list[tuple[str, str]]:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -113,19 +113,30 @@ def figures(validation_dir: str | Path, rpm: str) -> list[tuple[str, str]]:
     a1.set(xlabel="interval start (s)", ylabel="pair-weighted mean c (1/s per pair)",
            title=f"{rpm} rpm: collision frequency per interval")
     a1.legend()
-    # class-pair frequencies of the DEM samples vs the surrogate on the same samples
-    from pbmdem.surrogate import load_surrogate  # noqa: F401  (only to fail early if missing)
+    # class-pair frequencies: DEM vs the surrogate on the very same samples (the PBM-DEM loop's)
+    dem_c, ann_c = [], []
+    if model is not None:
+        import warnings
 
-    dem_c = np.concatenate([json.loads(x) for x in dem_i.class_frequencies])
-    a2.set(xscale="log", yscale="log", xlabel="DEM c_ij (1/s per pair)", ylabel="surrogate c_ij on the PBM-ANN sample",
-           title="class pairs, all intervals")
-    ann_c = np.concatenate([json.loads(x) for x in ann_i.class_frequencies])
-    if len(ann_c) == len(dem_c):
-        a2.loglog(dem_c, ann_c, "o", alpha=0.7)
-        lo, hi = min(dem_c[dem_c > 0].min(), ann_c.min()), max(dem_c.max(), ann_c.max())
+        from pbmdem.surrogate import load_surrogate
+
+        surrogate = load_surrogate(model)
+        for _, row in dem_i.iterrows():
+            d = np.asarray(json.loads(row.class_diameters))
+            n = np.asarray(json.loads(row.class_counts), float)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                c = surrogate.frequency_matrix(d, n, float(rpm))
+            dem_c.append(json.loads(row.class_frequencies))
+            ann_c.append(c[np.triu_indices(len(d))].tolist())
+    dem_c, ann_c = np.concatenate(dem_c or [[]]), np.concatenate(ann_c or [[]])
+    keep = dem_c > 0
+    a2.loglog(dem_c[keep], ann_c[keep], "o", alpha=0.7)
+    if keep.any():
+        lo, hi = min(dem_c[keep].min(), ann_c[keep].min()), max(dem_c.max(), ann_c.max())
         a2.plot([lo, hi], [lo, hi], "k:")
-    else:
-        a2.text(0.5, 0.5, "samples differ in class count:\nsee the left panel", ha="center", transform=a2.transAxes)
+    a2.set(xlabel="DEM c_ij (1/s per pair)", ylabel="surrogate c_ij, same sample",
+           title="class pairs of every PBM-DEM interval")
     fig.tight_layout()
     out.append((f"collision frequencies per coupling interval, {rpm} rpm", _png(fig)))
     return out
@@ -136,7 +147,7 @@ def _table(frame: pd.DataFrame, floatfmt: str = "{:.4g}") -> str:
 
 
 def build_report(*, validation_dir, rpms, grid_rpm, runs, collisions, metrics, parity, metadata, sweep,
-                 sweep_plot, html: str | Path, comparison: str | Path) -> pd.DataFrame:
+                 sweep_plot, html: str | Path, comparison: str | Path, model: str | Path | None = None) -> pd.DataFrame:
     table = compare(validation_dir, rpms, grid_rpm)
     write_csv(comparison, table)
     runs_df = pd.read_csv(runs)
@@ -163,7 +174,7 @@ def build_report(*, validation_dir, rpms, grid_rpm, runs, collisions, metrics, p
                  f"{'met' if (table.wall_time_ratio_dem_over_ann >= 1000).all() else 'not met'} (ratio "
                  f"{table.wall_time_ratio_dem_over_ann.min():.0f}-{table.wall_time_ratio_dem_over_ann.max():.0f}x).</p>")
     for rpm in rpms:
-        for caption, uri in figures(validation_dir, rpm):
+        for caption, uri in figures(validation_dir, rpm, model):
             parts.append(f"<h3>{html_escape(caption)}</h3><img src='{uri}'>")
     parts += ["<h2>Impeller-speed study (PBM-ANN)</h2>", _table(sweep_df), f"<img src='{_img_file(sweep_plot)}'>"]
     summary = met[met.get("fold", pd.Series(dtype=str)).astype(str).isin(["pooled", "mean"])] \

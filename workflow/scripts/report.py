@@ -10,6 +10,7 @@ report.build_report(
     metrics=snakemake.input.metrics,  # noqa: F821
     parity=snakemake.input.parity,  # noqa: F821
     metadata=snakemake.input.metadata,  # noqa: F821
+    model=snakemake.input.model,  # noqa: F821
     sweep=snakemake.input.sweep,  # noqa: F821
     sweep_plot=snakemake.input.sweep_plot,  # noqa: F821
     html=snakemake.output.html,  # noqa: F821

@@ -9,6 +9,7 @@ the offending value and what is allowed.
 
 from __future__ import annotations
 
+import copy
 import math
 from pathlib import Path
 
@@ -65,6 +66,17 @@ def _describe(error: jsonschema.ValidationError) -> str:
     if "enum" in s:
         allowed = f" (allowed: {s['enum']})"
     return f"config key {key} = {error.instance!r}: {error.message}{allowed}"
+
+
+def merge_defaults(defaults: dict, override: dict | None) -> dict:
+    """Deep copy of `defaults` with the keys of `override` replacing them, nested dicts merged."""
+    out = copy.deepcopy(defaults)
+    for key, value in (override or {}).items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = merge_defaults(out[key], value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
 
 
 def validate_schema(cfg: dict) -> None:

@@ -11,37 +11,15 @@ volume per solid volume); mean porosity sum G / (sum S + sum G).
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from pbmdem.atomic import atomic_path
+
 from .grid import Grid
 from .model import State, surface_fraction
-
-
-def _atomic():
-    try:
-        from pbmdem import atomic
-        return atomic.atomic_path
-    except ImportError:  # pragma: no cover - fallback if pbmdem.atomic is absent
-        import contextlib
-        import tempfile
-
-        @contextlib.contextmanager
-        def atomic_path(path):
-            path = Path(path)
-            path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
-            os.close(fd)
-            try:
-                yield Path(tmp)
-                os.replace(tmp, path)
-            except BaseException:
-                Path(tmp).unlink(missing_ok=True)
-                raise
-        return atomic_path
 
 
 def mass_quantiles(mass: np.ndarray, d_edges: np.ndarray, q=(0.1, 0.5, 0.9)) -> np.ndarray:
@@ -113,7 +91,7 @@ class Result:
         return np.stack([(self.number * self.grid.x ** k).sum(axis=1) for k in orders], axis=1)
 
     def summary(self) -> pd.DataFrame:
-        x, d = self.grid.x, self.grid.d
+        d = self.grid.d
         N, S, L, G = self.number, self.solid, self.liquid, self.gas
         Ntot, Stot, Ltot, Gtot = N.sum(1), S.sum(1), L.sum(1), G.sum(1)
         q = mass_quantiles(S, self.grid.d_edges)
@@ -220,14 +198,13 @@ class Result:
 
     @staticmethod
     def _savefig(fig, path):
-        with _atomic()(path) as tmp:
+        with atomic_path(path) as tmp:
             fig.savefig(tmp, dpi=120)
 
     def save(self, outdir) -> dict[str, Path]:
         """Write summary.csv, bins.csv, run.json, psd.png and d50.png into ``outdir`` (atomically)."""
         outdir = Path(outdir)
         outdir.mkdir(parents=True, exist_ok=True)
-        atomic_path = _atomic()
         paths = {}
         for name, frame in self.to_frames().items():
             p = outdir / f"{name}.csv"

@@ -8,12 +8,13 @@ the DEM bed: bed_height x pi/4 bowl_diameter^2 x packing_fraction.
 
 from __future__ import annotations
 
-import copy
 import math
 from pathlib import Path
 
 import numpy as np
 import yaml
+
+from pbmdem.config import merge_defaults
 
 from .errors import PBMInputError
 from .grid import Grid, volume_of
@@ -45,16 +46,6 @@ DEFAULTS: dict = {
 }
 
 
-def _merge(base: dict, override: dict) -> dict:
-    out = copy.deepcopy(base)
-    for key, value in (override or {}).items():
-        if isinstance(value, dict) and isinstance(out.get(key), dict):
-            out[key] = _merge(out[key], value)
-        else:
-            out[key] = copy.deepcopy(value)
-    return out
-
-
 def validate_section(section: dict) -> None:
     import jsonschema
 
@@ -74,7 +65,7 @@ def resolve_settings(config: dict | None = None) -> dict:
     section = (config or {}).get("pbm") or {}
     if not isinstance(section, dict):
         raise PBMInputError(f"pbm section must be a mapping, got {type(section).__name__}")
-    merged = _merge(DEFAULTS, section)
+    merged = merge_defaults(DEFAULTS, section)
     validate_section(merged)
     return merged
 

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import yaml
 
+from pbmdem.config import merge_defaults
+
 from .features import DEFAULT_IMPELLER_RADIUS
 from .model import CollisionSurrogate
 
@@ -33,16 +35,6 @@ DEFAULTS: dict = {
 
 class SurrogateConfigError(ValueError):
     """Invalid ``surrogate:`` configuration."""
-
-
-def _merge(base: dict, override: dict) -> dict:
-    out = copy.deepcopy(base)
-    for key, value in (override or {}).items():
-        if isinstance(value, dict) and isinstance(out.get(key), dict):
-            out[key] = _merge(out[key], value)
-        else:
-            out[key] = copy.deepcopy(value)
-    return out
 
 
 def load_schema(path: str | Path = SCHEMA_PATH) -> dict:
@@ -78,7 +70,7 @@ def resolve_settings(config: dict | None = None, schema_path: str | Path = SCHEM
     base = copy.deepcopy(DEFAULTS)
     if "ensemble_size" in section and "seeds" not in section:
         base["seeds"] = None
-    merged = _merge(base, section)
+    merged = merge_defaults(base, section)
     validate_section(merged, schema_path)
     return merged
 

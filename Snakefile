@@ -1,9 +1,18 @@
 # pbmdem: multi-scale PBM-DEM model of high-shear wet granulation.
 # Reproduce everything with `snakemake --cores 2`; a tiny configuration for tests is in
 # config/test.yaml. All logic is in src/pbmdem; rules only name inputs, outputs and params.
+import os
+import sys
+
 from snakemake.utils import min_version, validate
 
 min_version("8.0")
+
+# pbmdem is importable by the rule scripts whatever environment runs them (the project's venv,
+# a conda environment from envs/, or a cluster job): src/ goes on the module path.
+_SRC = os.path.join(workflow.basedir, "src")
+sys.path.insert(0, _SRC)
+os.environ.update(PYTHONPATH=os.pathsep.join(p for p in (_SRC, os.environ.get("PYTHONPATH")) if p))
 
 
 # The default configuration, unless one is given with --configfile/--config (Snakemake would

@@ -136,3 +136,36 @@ def test_a_failed_point_keeps_the_finished_ones(root, tmp_path):
     assert not (bad / "summary.json").exists()
     crash = json.loads((bad / "crash.json").read_text())
     assert "no/such/style" in crash["log_tail"]
+
+
+def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
+    """Downstream of the real DEM tables: the surrogate is trained and evaluated on held-out runs,
+    the PBM runs per grid point, the coupled loops ran LIGGGHTS, and the report has its numbers."""
+    from pbmdem.surrogate import load_surrogate
+
+    workdir, configfile = tiny_workflow
+    cfg = yaml.safe_load(configfile.read_text())
+    res = workdir / "results"
+    metrics = pd.read_csv(res / "surrogate" / "metrics.csv")
+    assert {"mlp", "hgb", "physical"} <= set(metrics.model)
+    pooled = metrics[metrics.fold.astype(str) == "pooled"].set_index("model")
+    assert pooled.loc["mlp", "n_test"] == len(pd.read_csv(res / "dem" / "collisions.csv"))
+    surrogate = load_surrogate(res / "surrogate" / "model.skops")
+    table = pd.read_csv(res / "dem" / "collisions.csv")
+    run = table[table.point_id == table.point_id.iloc[0]]
+    diag = run[run.class_i == run.class_j]
+    c = surrogate.frequency_matrix(diag.d_i.to_numpy(), diag.n_i.to_numpy(float), float(run.rpm.iloc[0]))
+    assert c.shape == (len(diag), len(diag)) and (c > 0).all()
+    for rpm in cfg["grid"]["impeller_rpm"]:
+        for dist in cfg["grid"]["size_distributions"]:
+            summary = pd.read_csv(res / "pbm" / "constant" / f"rpm{rpm}_{dist}" / "summary.csv")
+            assert summary.d50.iloc[-1] > summary.d50.iloc[0]
+    comparison = pd.read_csv(res / "report" / "comparison.csv")
+    assert sorted(comparison.rpm) == sorted(float(r) for r in cfg["validation"]["rpm"])
+    assert (comparison.dem_calls == cfg["validation"]["coupling_intervals"]).all()
+    assert (comparison.wall_time_ratio_dem_over_ann > 1).all()
+    for rpm in cfg["validation"]["rpm"]:
+        intervals = pd.read_csv(res / "validation" / f"rpm{rpm}" / "pbm_dem" / "intervals.csv")
+        assert (intervals.dem_collisions > 0).all()
+    html = (res / "report" / "report.html").read_text()
+    assert "PBM-ANN vs coupled PBM-DEM" in html and html.count("data:image/png;base64,") >= 4

@@ -184,6 +184,9 @@ class DemProvider:
         self.cfg["dem"]["keep_contact_dumps"] = False
         self.rpm = float(rpm)
 
+    def fingerprint(self) -> dict:
+        return {"name": self.name, "dem": self.cfg["dem"], "rpm": self.rpm}
+
     def __call__(self, sample: DemSample, interval_dir: Path, index: int) -> tuple[np.ndarray, dict]:
         from pbmdem import dem
 
@@ -207,7 +210,14 @@ class SurrogateProvider:
         from pbmdem.surrogate import load_surrogate
 
         self.model = load_surrogate(model_path)
+        self.model_path = Path(model_path)
         self.rpm = float(rpm)
+
+    def fingerprint(self) -> dict:
+        import hashlib
+
+        return {"name": self.name, "rpm": self.rpm,
+                "model_sha256": hashlib.sha256(self.model_path.read_bytes()).hexdigest()}
 
     def __call__(self, sample: DemSample, interval_dir: Path, index: int) -> tuple[np.ndarray, dict]:
         t0 = time.perf_counter()
@@ -222,6 +232,24 @@ class SurrogateProvider:
 
 
 # ----------------------------------------------------------------------------- the loop
+def _discard_stale_intervals(outdir: Path, inputs: dict) -> None:
+    """Finished intervals are reused only if they were computed from the same inputs (config,
+    speed, sample rule and provider, e.g. the surrogate file's hash); otherwise they are removed."""
+    import hashlib
+    import shutil
+
+    digest = hashlib.sha256(json.dumps(inputs, sort_keys=True, default=str).encode()).hexdigest()
+    stamp = outdir / "loop_inputs.json"
+    if stamp.exists() and json.loads(stamp.read_text()).get("sha256") == digest:
+        return
+    stale = sorted(outdir.glob("interval_*"))
+    if stale:
+        log.warning("inputs of %s changed: discarding %d finished intervals", outdir, len(stale))
+        for folder in stale:
+            shutil.rmtree(folder)
+    write_json(stamp, {"sha256": digest, "inputs": inputs}, default=str)
+
+
 def _save_interval(folder: Path, result, sample: DemSample, matrix: np.ndarray, info: dict) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     with atomic_path(folder / "records.npz") as tmp:
@@ -268,6 +296,10 @@ def run_loop(cfg: dict, provider, rpm: float, distribution: str, outdir: str | P
 
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
+    _discard_stale_intervals(outdir, {
+        "config": cfg, "rpm": float(rpm), "distribution": distribution, "intervals": int(intervals),
+        "sample_settings": sample_settings, "provider": provider.fingerprint(),
+    })
     settings = resolve_settings(cfg)
     model = build_model(settings, ConstantFrequency(1.0), rpm=rpm)
     state = initial_state_from_config(cfg, model, distribution, settings)

@@ -169,3 +169,23 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
         assert (intervals.dem_collisions > 0).all()
     html = (res / "report" / "report.html").read_text()
     assert "PBM-ANN vs coupled PBM-DEM" in html and html.count("data:image/png;base64,") >= 4
+
+
+@pytest.mark.parametrize("kernel", ["constant", "table", "ann"])
+def test_pbm_cli_with_each_kernel(tiny_workflow, tmp_path, kernel, capsys):
+    from pbmdem.cli import main
+
+    workdir, configfile = tiny_workflow
+    res = workdir / "results"
+    args = ["pbm", "--config", str(configfile), "--kernel", kernel, "--rpm", "900", "--distribution", "large",
+            "--out", str(tmp_path / kernel)]
+    if kernel == "table":
+        args += ["--table", str(res / "dem" / "collisions.csv")]
+    if kernel == "ann":
+        args += ["--model", str(res / "surrogate" / "model.skops")]
+    assert main(args) == 0, capsys.readouterr().err
+    out = json.loads(capsys.readouterr().out)
+    summary = pd.read_csv(tmp_path / kernel / "summary.csv")
+    assert out["d50_final_m"] == pytest.approx(summary.d50.iloc[-1])
+    assert summary.d50.iloc[-1] > summary.d50.iloc[0]
+    assert (tmp_path / kernel / "psd.png").exists()

@@ -475,3 +475,30 @@ def rpm_sweep(cfg: dict, model_path: str | Path, table_path: str | Path, plot_pa
         fig.savefig(tmp_png, dpi=110)
     plt.close(fig)
     return table
+
+
+class SampledSurrogateSource:
+    """The surrogate as a PBM collision-frequency source: the PBM distribution is reduced to the
+    representative DEM sample (as in the coupled loops), the surrogate predicts its class-pair
+    frequencies, and these are interpolated back onto the bins. Used by `pbmdem pbm --kernel ann`."""
+
+    def __init__(self, model_path: str | Path, sample_settings: dict | None = None):
+        from pbmdem.surrogate import load_surrogate
+
+        self.model = load_surrogate(model_path)
+        self.sample_settings = sample_settings or sample_settings_default()
+
+    def __repr__(self) -> str:
+        return f"SampledSurrogateSource({self.sample_settings})"
+
+    def __call__(self, diameters, numbers, rpm) -> np.ndarray:
+        d = np.asarray(diameters, float)
+        sample = representative_sample(np.pi / 6.0 * d**3, np.asarray(numbers, float), **self.sample_settings)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            c = self.model.frequency_matrix(np.asarray(sample.diameters), np.asarray(sample.counts, float), rpm)
+        return ClassFrequencySource(sample.diameters, c, "surrogate")(d, numbers, rpm)
+
+
+def sample_settings_default() -> dict:
+    return sample_settings(DEFAULTS)

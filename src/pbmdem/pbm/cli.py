@@ -42,14 +42,15 @@ def make_source(kind: str, config: dict, table=None, model=None, distribution: s
             raise PBMInputError("--kernel table needs --table PATH (a DEM collision table CSV)")
         from .kernels import TableFrequency
 
-        return TableFrequency.from_csv(table, extrapolation=settings["aggregation"]["table_extrapolation"])
+        # one distribution's rows: the grid's distributions have different class sizes
+        return TableFrequency.from_csv(table, distribution=distribution,
+                                       extrapolation=settings["aggregation"]["table_extrapolation"])
     if kind == "ann":
         if model is None:
             raise PBMInputError("--kernel ann needs --model PATH (a saved collision surrogate)")
-        import pbmdem.surrogate as surrogate  # lazy: optional, heavy (scikit-learn)
+        from pbmdem.coupling import SampledSurrogateSource, sample_settings, settings_from_config
 
-        loader = getattr(surrogate.CollisionSurrogate, "load", None) or surrogate.load_surrogate
-        return loader(model).frequency_matrix
+        return SampledSurrogateSource(model, sample_settings(settings_from_config(config)))
     raise PBMInputError(f"--kernel {kind!r}; allowed: constant, table, ann")
 
 
@@ -59,8 +60,9 @@ def run_cli(args) -> int:
     from .settings import run_pbm
 
     config = load_config(args.config)
-    source = make_source(args.kernel, config, args.table, args.model, args.distribution)
-    result = run_pbm(config, source, args.rpm, args.distribution)
+    distribution = args.distribution or config["grid"]["size_distributions"][0]
+    source = make_source(args.kernel, config, args.table, args.model, distribution)
+    result = run_pbm(config, source, args.rpm, distribution)
     result.info["kernel_source"] = args.kernel
     paths = result.save(args.out)
     last = result.summary().iloc[-1]

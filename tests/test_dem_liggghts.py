@@ -143,3 +143,15 @@ def test_dem_cli_plan_only(root, capsys):
     assert main(["dem", "--config", str(root / "config" / "test.yaml"), "--rpm", "600",
                  "--distribution", "nope", "--plan-only"]) == 2
     assert "'nope' is not defined" in capsys.readouterr().err
+
+
+def test_two_mpi_ranks(tiny_config, tmp_path):
+    """The same deck under `mpirun -np 2` (as on a cluster): domain split along x, same bed."""
+    tiny_config["dem"]["mpi_ranks"] = 2
+    plan = dem.plan_point(tiny_config, 600, "small")
+    summary = dem.run_point(tiny_config, plan, tmp_path, timeout=600)
+    assert "processors      2 1 1" in (tmp_path / "in.granulator").read_text()
+    assert "2 by 1 by 1 MPI processor grid" in (tmp_path / "log.liggghts").read_text()
+    table = pd.read_csv(tmp_path / "collisions.csv")
+    assert summary["n_particles"] == plan.n_particles
+    assert (table.collisions > 0).all()

@@ -15,7 +15,7 @@ rule dem_point:
     log:
         f"{RESULTS}/logs/dem/rpm{{rpm}}_{{dist}}.log",
     conda:
-        "../envs/pbmdem.yaml"
+        "../envs/dem.yaml"
     script:
         "../workflow/scripts/dem_point.py"
 
@@ -32,6 +32,6 @@ rule collision_tables:
     log:
         f"{RESULTS}/logs/dem/collision_tables.log",
     conda:
-        "../envs/pbmdem.yaml"
+        "../envs/dem.yaml"
     script:
         "../workflow/scripts/collision_tables.py"

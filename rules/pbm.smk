@@ -19,7 +19,7 @@ rule pbm_constant:
     log:
         f"{RESULTS}/logs/pbm/constant/rpm{{rpm}}_{{dist}}.log",
     conda:
-        "../envs/pbmdem.yaml"
+        "../envs/pbm.yaml"
     script:
         "../workflow/scripts/run_pbm.py"
 

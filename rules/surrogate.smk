@@ -18,6 +18,6 @@ rule train_surrogate:
         "results/logs/train_surrogate.log",
     threads: 2
     conda:
-        "../envs/pbmdem.yaml"
+        "../envs/surrogate.yaml"
     script:
         "../workflow/scripts/train_surrogate.py"

@@ -12,7 +12,7 @@ rule pbm_dem_coupled:
     log:
         f"{RESULTS}/logs/validation/pbm_dem_rpm{{rpm}}.log",
     conda:
-        "../envs/pbmdem.yaml"
+        "../envs/validation.yaml"
     script:
         "../workflow/scripts/validation_loop.py"
 
@@ -30,7 +30,7 @@ rule pbm_ann_coupled:
     log:
         f"{RESULTS}/logs/validation/pbm_ann_rpm{{rpm}}.log",
     conda:
-        "../envs/pbmdem.yaml"
+        "../envs/validation.yaml"
     script:
         "../workflow/scripts/validation_loop.py"
 
@@ -47,7 +47,7 @@ rule pbm_constant_calibrated:
     log:
         f"{RESULTS}/logs/validation/pbm_constant_rpm{{rpm}}.log",
     conda:
-        "../envs/pbmdem.yaml"
+        "../envs/validation.yaml"
     script:
         "../workflow/scripts/validation_loop.py"
 
@@ -63,7 +63,7 @@ rule rpm_sweep:
     log:
         f"{RESULTS}/logs/validation/rpm_sweep.log",
     conda:
-        "../envs/pbmdem.yaml"
+        "../envs/validation.yaml"
     script:
         "../workflow/scripts/rpm_sweep.py"
 
@@ -92,7 +92,7 @@ rule report:
     log:
         f"{RESULTS}/logs/report.log",
     conda:
-        "../envs/pbmdem.yaml"
+        "../envs/validation.yaml"
     script:
         "../workflow/scripts/report.py"
 

@@ -188,7 +188,7 @@ def test_cli_table_run(tmp_path, root):
     cli.add_cli(parser.add_subparsers(dest="command"))
     out = tmp_path / "table"
     args = parser.parse_args(["pbm", "--config", str(root / "config" / "config.yaml"), "--kernel", "table",
-                              "--table", str(table), "--rpm", "600", "--distribution", "mixed", "--out", str(out)])
+                              "--table", str(table), "--rpm", "600", "--distribution", "fine", "--out", str(out)])
     assert args.func(args) == 0
     s = pd.read_csv(out / "summary.csv")
     assert s["number_mean_diameter"].iloc[-1] > s["number_mean_diameter"].iloc[0]

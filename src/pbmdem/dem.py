@@ -256,7 +256,12 @@ def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | No
     if not cfg["dem"].get("keep_contact_dumps", False):
         for dump in ("pairs.dump", "walls.dump"):
             (run_dir / "post" / dump).unlink(missing_ok=True)
+    thermo = liggghts.thermo_table(result.log)
+    # fix check/timestep/gran: ts[1] = dt / Rayleigh time, ts[2] = dt / Hertz time (LIGGGHTS' own)
+    checks = {"dt_over_rayleigh_time": max(thermo.get("ts[1]", [float("nan")])),
+              "dt_over_hertz_time_max": max(thermo.get("ts[2]", [float("nan")]))}
     summary = {
+        **checks,
         "point_id": plan.point_id, "rpm": plan.rpm, "distribution": plan.distribution,
         "n_particles": plan.n_particles, "timestep": plan.timestep,
         "steps": plan.settle_steps + plan.spinup_steps + plan.sampling_steps,

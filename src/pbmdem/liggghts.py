@@ -109,3 +109,27 @@ def run(deck: str | Path, workdir: str | Path, ranks: int = 1, timeout: float | 
             + (f"\nstderr:\n{stderr[-2000:]}" if stderr.strip() else "")
         )
     return LiggghtsRun(log=log, wall_time=wall, returncode=returncode)
+
+
+def thermo_table(log: str | Path) -> dict[str, list[float]]:
+    """Columns of every thermo block in a LIGGGHTS log (header line starting with 'Step')."""
+    columns: dict[str, list[float]] = {}
+    header: list[str] | None = None
+    for line in Path(log).read_text(errors="replace").splitlines():
+        words = line.split()
+        if words[:1] == ["Step"]:
+            header = words
+            continue
+        if header is None:
+            continue
+        if len(words) != len(header):
+            if line.startswith("Loop time"):
+                header = None
+            continue
+        try:
+            values = [float(w) for w in words]
+        except ValueError:
+            continue
+        for name, value in zip(header, values):
+            columns.setdefault(name, []).append(value)
+    return columns

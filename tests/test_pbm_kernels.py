@@ -1,5 +1,5 @@
-"""Collision-frequency sources (DEM table interpolation), success probability, the cell-average
-operator, config defaults/schema and the command line."""
+"""Collision-frequency sources (DEM table interpolation), success probability, the aggregation
+operators, config defaults/schema and the command line."""
 
 from __future__ import annotations
 
@@ -11,7 +11,11 @@ import pytest
 import yaml
 
 from pbmdem.pbm import (
+    SCHEMES,
     CellAverageAggregation,
+    ConstantKernel,
+    FixedPivotAggregation,
+    GranulationPBM,
     Grid,
     PBMInputError,
     SuccessProbability,
@@ -118,9 +122,10 @@ def test_success_probability_models():
     np.testing.assert_array_equal(SuccessProbability("always")(phi), np.ones((4, 4)))
 
 
-def test_cell_average_targets_and_conservation():
+@pytest.mark.parametrize("scheme", ["cell_average", "fixed_pivot"])
+def test_aggregation_targets_and_conservation(scheme):
     g = Grid(12, 2.0, v0=1.0)
-    op = CellAverageAggregation(g.x, g.edges[1:-1])
+    op = SCHEMES[scheme](g.x, g.edges[1:-1])
     # equal pivots double exactly onto the next pivot; the last row/column is beyond the grid
     assert op.target_matrix[3, 3] == 4
     assert op.target_matrix[11, 11] == -1 and op.target_matrix[0, 11] == -1
@@ -139,6 +144,36 @@ def test_cell_average_targets_and_conservation():
     # liquid proportional to solid (l = 0.3 x) stays proportional: liquid follows the solid volume
     dN2, dL2, _, _ = op.rates(beta, N, 0.3 * g.x, gas)
     np.testing.assert_allclose(dL2, 0.3 * dN2 * g.x, rtol=1e-10, atol=1e-12 * np.abs(dL2).max())
+
+
+def test_fixed_pivot_splits_each_aggregate_between_its_two_pivots():
+    g = Grid(6, 2.0, v0=1.0)      # pivots 1, 2, 4, 8, 16, 32
+    fp = FixedPivotAggregation(g.x)
+    ca = CellAverageAggregation(g.x)
+    beta = np.zeros((6, 6))
+    beta[1, 2] = beta[2, 1] = 1.0          # only pairs (2, 4) -> 6, between pivots 4 and 8
+    beta[0, 3] = beta[3, 0] = 1.0          # and (1, 8) -> 9, between 8 and 16
+    N = np.array([0.0, 1.0, 2.0, 3.0, 0.0, 0.0]) + np.eye(6)[0]
+    dN, dL, _, _ = fp.rates(beta, N, np.ones(6), np.zeros(6))
+    r1, r2 = 1.0 * 2.0, 1.0 * 3.0          # event rates of (2, 4) and (1, 8)
+    births = np.array([0.0, 0.0, r1 * 0.5, r1 * 0.5 + r2 * 7 / 8, r2 / 8, 0.0])
+    deaths = np.array([r2, r1, r1, r2, 0.0, 0.0])
+    np.testing.assert_allclose(dN, births - deaths, rtol=1e-14)
+    # liquid (one unit per particle, two per aggregate) follows the solid each pivot receives
+    np.testing.assert_allclose(dL[4], 2 * r2 * (1 / 8) * 16 / 9, rtol=1e-14)
+    # the cell average pools both aggregates (6 and 9) in the cell of pivot 8 and splits their mean
+    # 7.8 between 4 and 8: other births per bin, the same number and solid-volume totals
+    dN_ca, _, _, _ = ca.rates(beta, N, np.zeros(6), np.zeros(6))
+    np.testing.assert_allclose(dN_ca, np.array([0.0, 0.0, 5 * 0.2 / 4, 5 - 5 * 0.2 / 4, 0.0, 0.0]) - deaths,
+                               rtol=1e-14)
+    assert dN_ca.sum() == pytest.approx(dN.sum()) and abs(dN_ca @ g.x) < 1e-13
+
+
+def test_unknown_aggregation_scheme_is_refused():
+    with pytest.raises(PBMInputError, match=r"aggregation scheme = 'pivot'; allowed: \['cell_average', 'fixed_pivot'\]"):
+        GranulationPBM(Grid(5, 2.0, v0=1.0), ConstantKernel(1.0), scheme="pivot")
+    with pytest.raises(PBMInputError, match=r"pbm.aggregation.scheme = 'pivot'"):
+        resolve_settings({"pbm": {"aggregation": {"scheme": "pivot"}}})
 
 
 def test_defaults_file_matches_code_and_schema():

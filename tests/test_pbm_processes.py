@@ -24,14 +24,18 @@ from pbmdem.pbm import (
 from pbmdem.pbm.settings import bed_solid_volume, process_times, resolve_settings
 
 
-def test_default_run_conserves_solid_and_liquid(default_config):
-    res = run_pbm(default_config, None, 600, "fine")
-    settings = resolve_settings(default_config)
+@pytest.mark.parametrize("scheme", ["cell_average", "fixed_pivot"])
+def test_default_run_conserves_solid_and_liquid(default_config, scheme):
+    cfg = copy.deepcopy(default_config)
+    cfg["pbm"]["aggregation"]["scheme"] = scheme
+    res = run_pbm(cfg, None, 600, "fine")
+    assert res.info["aggregation_scheme"] == scheme
+    settings = resolve_settings(cfg)
     t0, t1, t_end = process_times(settings)
     S = res.moments()[:, 1]
     assert S[0] == pytest.approx(bed_solid_volume(default_config), rel=1e-12)
     rel = np.abs(S / S[0] - 1).max()
-    print(f"default run: max relative solid-volume change {rel:.2e}")
+    print(f"default run ({scheme}): max relative solid-volume change {rel:.2e}")
     assert rel < 1e-10
     rate = settings["liquid_addition"]["rate"]
     L = res.liquid.sum(axis=1)
@@ -46,7 +50,9 @@ def test_default_run_conserves_solid_and_liquid(default_config):
           f"{s['d50'].iloc[-1]*1e3:.2f} mm, {res.info['steps']} steps")
     assert 1.8 < growth < 3.5
     assert s["mean_porosity"].iloc[-1] == pytest.approx(0.2, abs=2e-3)
-    assert res.state.refused_volume == 0.0
+    # nothing reaches the last pivot (the fixed pivot's numerical diffusion carries ~1e-124 of the
+    # solid there; the cell average nothing)
+    assert res.state.refused_volume < 1e-15 * S[0]
     assert np.all(res.number >= 0) and np.all(res.liquid >= 0) and np.all(res.gas >= 0)
 
 

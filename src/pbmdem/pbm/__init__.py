@@ -1,12 +1,12 @@
 """Population balance model of a batch high-shear wet granulator (see docs/pbm.md).
 
 Solid volume on a geometric grid, liquid and gas lumped per bin; aggregation by the cell-average
-technique with kernel beta0 * c_ij * psi_ij (c_ij from a pluggable collision-frequency source),
+(default) or fixed pivot technique with kernel beta0 * c_ij * psi_ij (c_ij from a pluggable collision-frequency source),
 binder addition during a spray window, consolidation toward a minimum porosity, adaptive
 positivity-preserving explicit integration.
 """
 
-from .aggregation import CellAverageAggregation
+from .aggregation import SCHEMES, CellAverageAggregation, FixedPivotAggregation
 from .errors import (
     GridOverflowError,
     GridRangeError,
@@ -31,7 +31,7 @@ from .results import Result, mass_quantiles
 from .settings import DEFAULTS, build_model, initial_state_from_config, resolve_settings, run_pbm
 
 __all__ = [
-    "CellAverageAggregation", "Grid", "diameter_of", "volume_of",
+    "SCHEMES", "CellAverageAggregation", "FixedPivotAggregation", "Grid", "diameter_of", "volume_of",
     "ConstantKernel", "SumKernel", "CollisionKernel", "ConstantFrequency", "TableFrequency",
     "SuccessProbability", "KernelInput", "GranulationPBM", "SolverSettings", "State", "surface_fraction",
     "LiquidAddition", "Consolidation", "Result", "mass_quantiles",

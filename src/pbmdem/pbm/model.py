@@ -1,7 +1,8 @@
 """The batch granulator population balance and its adaptive explicit time integration.
 
 State: numbers N_k, liquid L_k and gas (pore) G_k volume totals per bin of a :class:`Grid`
-(solid S_k = N_k x_k). Balances (aggregation: ``aggregation.CellAverageAggregation``):
+(solid S_k = N_k x_k). Balances (aggregation A: a scheme of ``aggregation.SCHEMES``, by default
+the cell-average technique):
 
     dN_k/dt = A_N,k
     dL_k/dt = A_L,k + Q w_k [t_start <= t < t_end]
@@ -23,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .aggregation import CellAverageAggregation
+from .aggregation import SCHEMES
 from .errors import GridOverflowError, NegativePopulationError, PBMInputError, positive
 from .grid import Grid
 from .kernels import Kernel, KernelInput
@@ -118,23 +119,26 @@ class GranulationPBM:
     """Batch granulator PBM: aggregation (+ optional liquid addition and consolidation).
 
     ``kernel``: any :class:`Kernel`; ``liquid``/``consolidation``: the processes or None (off);
-    ``rpm``: impeller speed handed to the kernel's collision-frequency source.
+    ``rpm``: impeller speed handed to the kernel's collision-frequency source; ``scheme``: the
+    aggregation discretisation, ``"cell_average"`` (default) or ``"fixed_pivot"``.
     """
 
     def __init__(self, grid: Grid, kernel: Kernel, liquid: LiquidAddition | None = None,
                  consolidation: Consolidation | None = None, solver: SolverSettings | None = None,
-                 rpm: float = 0.0):
+                 rpm: float = 0.0, scheme: str = "cell_average"):
         self.grid = grid
         self.kernel = kernel
         self.liquid = liquid
         self.consolidation = consolidation
         self.solver = solver or SolverSettings()
         self.rpm = positive("impeller speed (rpm)", rpm, allow_zero=True)
-        self.aggregation = CellAverageAggregation(grid.x, grid.edges[1:-1])
+        if scheme not in SCHEMES:
+            raise PBMInputError(f"aggregation scheme = {scheme!r}; allowed: {sorted(SCHEMES)}")
+        self.aggregation = SCHEMES[scheme](grid.x, grid.edges[1:-1])
 
     def __repr__(self) -> str:
         return (f"GranulationPBM({self.grid!r}, {self.kernel!r}, liquid={self.liquid!r}, "
-                f"consolidation={self.consolidation!r}, rpm={self.rpm:g})")
+                f"consolidation={self.consolidation!r}, rpm={self.rpm:g}, scheme={self.aggregation.name!r})")
 
     # ----------------------------------------------------------------- state helpers
     def initial_state(self, volumes, numbers, liquid_content: float = 0.0, porosity: float = 0.0,
@@ -300,5 +304,6 @@ class GranulationPBM:
         info = {"kernel": repr(self.kernel), "liquid_addition": repr(self.liquid),
                 "consolidation": repr(self.consolidation), "rpm": self.rpm, "steps": steps - state.steps,
                 "wall_time_s": _time.perf_counter() - wall0, "method": self.solver.method,
+                "aggregation_scheme": self.aggregation.name,
                 "safety": self.solver.safety}
         return Result(self.grid, rec, s, info)

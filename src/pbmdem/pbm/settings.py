@@ -34,6 +34,7 @@ DEFAULTS: dict = {
     "liquid_addition": {"rate": 4.5e-8, "distribution": "surface_area"},
     "consolidation": {"rate": 0.02, "min_porosity": 0.2},
     "aggregation": {
+        "scheme": "cell_average",
         "beta0": 5.0e-5,
         "constant_frequency": 0.5,
         "frequency_update_interval": 1.0,
@@ -102,7 +103,7 @@ def build_model(settings: dict, source=None, rpm: float = 0.0) -> GranulationPBM
     s = settings["solver"]
     solver = SolverSettings(method=s["method"], safety=s["safety"], max_step=s["max_step"], rtol=s["rtol"],
                             atol=s["atol"], max_overflow_fraction=s["max_overflow_fraction"])
-    return GranulationPBM(grid, kernel, liquid, cons, solver, rpm=rpm)
+    return GranulationPBM(grid, kernel, liquid, cons, solver, rpm=rpm, scheme=agg["scheme"])
 
 
 def initial_state_from_config(config: dict, model: GranulationPBM, distribution: str,

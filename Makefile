@@ -1,15 +1,18 @@
 # Convenience targets; the README's two commands do not need make.
 PY ?= .venv/bin/python
 
-.PHONY: bench bench-dem bench-pbm test lint
+.PHONY: bench bench-dem bench-pbm bench-pbm-accuracy test lint
 
-bench: bench-dem bench-pbm
+bench: bench-dem bench-pbm bench-pbm-accuracy
 
 bench-dem:
 	$(PY) benchmarks/bench_dem.py
 
 bench-pbm:
 	$(PY) benchmarks/bench_pbm.py
+
+bench-pbm-accuracy:
+	$(PY) benchmarks/bench_pbm_accuracy.py
 
 test:
 	$(PY) -m pytest -q

@@ -56,7 +56,6 @@ class PivotAggregation:
         bounds = np.asarray(bounds, float)
         if bounds.shape != (K - 1,) or np.any(bounds <= x[:-1]) or np.any(bounds >= x[1:]):
             raise ValueError("cell bounds must be K-1 values strictly between neighbouring pivots")
-        self.bounds = bounds
         valid = s <= x[-1] * (1.0 + 1e-12)
         pair_weight = np.where(iu == ju, 0.5, 1.0)
         self.i, self.j = iu[valid], ju[valid]
@@ -71,7 +70,8 @@ class PivotAggregation:
         tm[iu[valid], ju[valid]] = target[valid]
         tm[ju[valid], iu[valid]] = target[valid]
         self.target_matrix = tm
-        self._target = target[valid]
+        #: target cell of each valid pair's aggregate
+        self.target = target[valid]
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(K={self.K})"
@@ -114,7 +114,6 @@ class CellAverageAggregation(PivotAggregation):
     def __init__(self, x: np.ndarray, bounds: np.ndarray | None = None):
         super().__init__(x, bounds)
         x = self.x
-        self.target = self._target
         self.dx_up = np.append(x[1:] - x[:-1], np.inf)     # x_(c+1) - x_c (inf for the last cell)
         self.dx_down = np.insert(x[1:] - x[:-1], 0, np.inf)  # x_c - x_(c-1) (inf for the first)
         self.x_up = np.append(x[1:], 0.0)

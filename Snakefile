@@ -35,6 +35,7 @@ include: "rules/common.smk"
 wildcard_constraints:
     rpm=r"[0-9]+(\.[0-9]+)?",
     dist=r"[A-Za-z][A-Za-z0-9_-]*",
+    rep=r"[0-9]+",
 
 
 include: "rules/dem.smk"

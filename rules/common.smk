@@ -26,13 +26,19 @@ def grid_points():
 
 
 def dem_outputs(name):
-    return [f"{RESULTS}/dem/rpm{rpm}_{dist}/{name}" for rpm, dist in grid_points()]
+    """One file per operating point and replicate."""
+    return [
+        f"{RESULTS}/dem/rpm{rpm}_{dist}/rep{rep}/{name}"
+        for rpm, dist in grid_points()
+        for rep in range(config["dem"].get("replicates", 3))
+    ]
 
 
 def all_targets():
     targets = [
         f"{RESULTS}/dem/collisions.csv",
         f"{RESULTS}/dem/wall_collisions.csv",
+        f"{RESULTS}/dem/impact_velocity.csv",
         f"{RESULTS}/dem/runs.csv",
         f"{RESULTS}/surrogate/model.skops",
         f"{RESULTS}/surrogate/metrics.csv",

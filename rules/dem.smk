@@ -1,11 +1,15 @@
-# DEM stage: one LIGGGHTS run per operating point, then the grid's collision tables.
+# DEM stage: one LIGGGHTS run per operating point and replicate (insertion seed), then the
+# grid's collision tables (replicate means and standard errors).
 
 
 rule dem_point:
+    input:
+        template="liggghts_templates/granulator.in",
     output:
-        table=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/collisions.csv",
-        walls=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/wall_collisions.csv",
-        summary=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/summary.json",
+        table=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/collisions.csv",
+        walls=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/wall_collisions.csv",
+        velocities=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/impact_velocity.csv",
+        summary=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/summary.json",
     params:
         point=lambda wc: canonical(point_config(config, wc.dist)),
         run_dir=lambda wc, output: os.path.dirname(output.table),
@@ -13,7 +17,7 @@ rule dem_point:
     resources:
         mpi_ranks=config["dem"].get("mpi_ranks", 1),
     log:
-        f"{RESULTS}/logs/dem/rpm{{rpm}}_{{dist}}.log",
+        f"{RESULTS}/logs/dem/rpm{{rpm}}_{{dist}}_rep{{rep}}.log",
     conda:
         "../envs/dem.yaml"
     script:
@@ -24,10 +28,13 @@ rule collision_tables:
     input:
         tables=dem_outputs("collisions.csv"),
         walls=dem_outputs("wall_collisions.csv"),
+        velocities=dem_outputs("impact_velocity.csv"),
         summaries=dem_outputs("summary.json"),
     output:
         table=f"{RESULTS}/dem/collisions.csv",
         walls=f"{RESULTS}/dem/wall_collisions.csv",
+        velocities=f"{RESULTS}/dem/impact_velocity.csv",
+        replicates=f"{RESULTS}/dem/collisions_replicates.csv",
         runs=f"{RESULTS}/dem/runs.csv",
     log:
         f"{RESULTS}/logs/dem/collision_tables.log",

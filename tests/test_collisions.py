@@ -6,7 +6,20 @@ import numpy as np
 import pytest
 
 from pbmdem import collisions
-from pbmdem.collisions import DumpFormatError, count_pair_collisions, count_wall_collisions, read_dump
+from pbmdem.collisions import DumpFormatError, read_dump, window_starts
+
+
+def count_pair_collisions(snaps, class_of, k, stride=1):
+    """(K, K) contacts that begin after the first snapshot, per class pair (raw count)."""
+    s = window_starts(snaps, snaps.steps[0] if snaps.frames else 0, stride=stride)
+    ci, cj = class_of[s.first], class_of[s.second]
+    i, j = np.minimum(ci, cj), np.maximum(ci, cj)
+    return np.bincount(i * k + j, minlength=k * k).reshape(k, k)
+
+
+def count_wall_collisions(snaps, class_of, k):
+    s = window_starts(snaps, snaps.steps[0], wall=True)
+    return np.bincount(s.first * k + class_of[s.second], minlength=2 * k).reshape(2, k)
 
 
 def frame(step: int, rows: list[tuple], kind: str = "ENTRIES") -> str:
@@ -112,12 +125,43 @@ def test_not_a_dump(tmp_path):
         read_dump(path, 3)
 
 
+def test_previous_contact_frame_is_reported(tmp_path):
+    snaps = read_dump(write(tmp_path, "pairs.dump", SEQUENCE), 3)
+    s = window_starts(snaps, 100)
+    # (1,3) begins at 105 (no earlier contact) and again at 115 (previous contact at 105)
+    rows = sorted(zip(s.first.tolist(), s.second.tolist(), s.step.tolist(), s.prev_step.tolist()))
+    assert rows == [(1, 3, 105, -1), (1, 3, 115, 105), (2, 4, 110, -1), (3, 4, 120, -1)]
+    assert len(window_starts(snaps, 110).step) == 2  # only contacts beginning after step 110
+
+
 def test_pair_table_normalises_per_pair():
     counts = np.array([[10, 6], [0, 4]])
+    enc = np.array([[4, 3], [0, 1]])
+    median = np.array([[0.1, 0.2], [np.nan, 0.3]])
+    tally = collisions.Tally(counts, enc, np.zeros((2, 2, 17)), median)
     n = np.array([5, 3])
-    table = collisions.pair_table(counts, n, [0.002, 0.003], 2.0,
-                                  {"point_id": "p", "rpm": 100.0, "distribution": "d"})
+    table = collisions.pair_table(tally, n, [0.002, 0.003], 2.0,
+                                  {"point_id": "p", "rpm": 100.0, "distribution": "d", "replicate": 0})
     assert table[["class_i", "class_j"]].values.tolist() == [[0, 0], [0, 1], [1, 1]]
     # pairs: 5*4/2 = 10 on the diagonal, 5*3 = 15 across, 3*2/2 = 3
     np.testing.assert_allclose(table["frequency_per_pair"], [10 / (10 * 2), 6 / (15 * 2), 4 / (3 * 2)])
     np.testing.assert_allclose(table["frequency"], [5.0, 3.0, 2.0])
+    np.testing.assert_allclose(table["encounter_frequency_per_pair"], [4 / (10 * 2), 3 / (15 * 2), 1 / (3 * 2)])
+    np.testing.assert_allclose(table["impact_velocity_median"], [0.1, 0.2, 0.3])
+
+
+def test_replicate_mean_and_standard_error(tmp_path):
+    rows = []
+    for rep, (enc, f) in enumerate([(2.0, 0.1), (4.0, 0.3), (6.0, 0.2)]):
+        rows.append({"point_id": "p", "rpm": 100.0, "distribution": "d", "replicate": rep, "class_i": 0,
+                     "class_j": 0, "d_i": 0.002, "d_j": 0.002, "encounters": enc,
+                     "encounter_frequency_per_pair": f})
+    paths = []
+    for rep, row in enumerate(rows):
+        paths.append(tmp_path / f"rep{rep}.csv")
+        collisions.write_csv(paths[-1], __import__("pandas").DataFrame([row]))
+    grid = collisions.aggregate(paths, tmp_path / "grid.csv")
+    assert grid["n_replicates"].tolist() == [3]
+    assert grid["encounters"].tolist() == [4.0]
+    assert grid["encounter_frequency_per_pair"].iloc[0] == pytest.approx(0.2)
+    assert grid["encounter_frequency_per_pair_se"].iloc[0] == pytest.approx(0.1 / np.sqrt(3))

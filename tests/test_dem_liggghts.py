@@ -1,6 +1,7 @@
 """The DEM stage with the real LIGGGHTS engine on the tiny granulator (no mocks)."""
 
 import copy
+import dataclasses
 import json
 import stat
 import sys
@@ -10,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pbmdem import collisions, dem, liggghts
+from pbmdem import collisions, dem, geometry, liggghts
 
 pytestmark = pytest.mark.liggghts
 
@@ -46,9 +47,10 @@ def test_tiny_run_summary_and_timestep_check(tiny_run):
     assert 0 < summary["dt_over_hertz_time_max"] < 0.2
 
 
-def test_halving_the_snapshot_interval_changes_counts_by_less_than_2_percent(tiny_run, tiny_config, tmp_path):
-    """Run with snapshots at half the automatic interval; counting every second snapshot is then
-    exactly the automatic interval, so the two counts compare interval h and h/2 on one trajectory."""
+def test_halving_the_snapshot_interval_changes_encounters_by_less_than_5_percent(tiny_run, tiny_config, tmp_path):
+    """Run with contact and position snapshots at half the automatic intervals; using every second
+    snapshot is then exactly the automatic intervals, so the two counts compare interval h and h/2
+    on one trajectory."""
     auto = tiny_run["plan"].collision_interval
     assert auto >= 2
     cfg = copy.deepcopy(tiny_config)
@@ -57,13 +59,51 @@ def test_halving_the_snapshot_interval_changes_counts_by_less_than_2_percent(tin
     cfg["dem"]["sampling_time"] = 0.03
     plan = dem.plan_point(cfg, 1200, "small")
     dem.run_point(cfg, plan, tmp_path, timeout=600)
-    ids, classes = collisions.read_classes(tmp_path / "post" / "classes.dump")
-    lookup = collisions._class_lookup(ids, classes)
-    pairs = collisions.read_dump(tmp_path / "post" / "pairs.dump", 3)
-    fine = collisions.count_pair_collisions(pairs, lookup, 3).sum()
-    coarse = collisions.count_pair_collisions(pairs, lookup, 3, stride=2).sum()
+    analysis = collisions.RunAnalysis(tmp_path / "post", plan, geometry.bowl_from_config(cfg),
+                                      geometry.impeller_from_config(cfg))
+    fine = analysis.pair_events(stride=1)[0].encounter.sum()
+    coarse = analysis.pair_events(stride=2)[0].encounter.sum()
     assert fine > 200
-    assert abs(coarse - fine) / fine < 0.02, (fine, coarse)
+    assert abs(coarse - fine) / fine < 0.05, (fine, coarse)
+
+
+def test_encounters_are_fewer_than_new_contacts_and_have_impact_velocities(tiny_run):
+    table = pd.read_csv(tiny_run["dir"] / "collisions.csv")
+    assert (table["encounters"] > 0).all()
+    assert (table["encounters"] < table["collisions"]).all()  # re-touches are not encounters
+    assert ((table["impact_velocity_median"] > 0) & (table["impact_velocity_median"] < 10.0)).all()
+    velocities = pd.read_csv(tiny_run["dir"] / "impact_velocity.csv")
+    per_pair = velocities.groupby(["class_i", "class_j"])["encounters"].sum().to_numpy()
+    np.testing.assert_array_equal(per_pair, table["encounters"].to_numpy())
+    walls = pd.read_csv(tiny_run["dir"] / "wall_collisions.csv")
+    assert (walls["encounters"] <= walls["collisions"]).all()
+    assert walls.loc[walls.wall == "impeller", "encounters"].sum() > 0
+
+
+def test_replicates_differ_only_by_seed_and_aggregate_to_mean_and_se(tiny_run, tiny_config, tmp_path):
+    cfg = copy.deepcopy(tiny_config)
+    plans = [dem.plan_point(cfg, 600, "small", replicate=r) for r in range(3)]
+    base = dataclasses.asdict(plans[0])
+    for plan in plans[1:]:
+        other = dataclasses.asdict(plan)
+        assert {k for k in base if base[k] != other[k]} == {"seed", "replicate"}
+    decks = [dem.deck_values(cfg, p) for p in plans]
+    assert {k for k in decks[0] if decks[0][k] != decks[1][k]} <= {
+        "seed_dist", "seed_insert", "particle_templates_block"}
+    tables = [tiny_run["dir"] / "collisions.csv"]
+    for plan in plans[1:]:
+        run_dir = tmp_path / f"rep{plan.replicate}"
+        dem.run_point(cfg, plan, run_dir, timeout=600)
+        tables.append(run_dir / "collisions.csv")
+    runs = [pd.read_csv(t) for t in tables]
+    assert [int(r["replicate"].iloc[0]) for r in runs] == [0, 1, 2]
+    assert not runs[0]["encounters"].equals(runs[1]["encounters"])  # other seeds, other realisation
+    grid = collisions.aggregate(tables, tmp_path / "grid.csv")
+    f = np.stack([r["encounter_frequency_per_pair"].to_numpy() for r in runs])
+    np.testing.assert_allclose(grid["encounter_frequency_per_pair"], f.mean(axis=0), rtol=1e-12)
+    np.testing.assert_allclose(grid["encounter_frequency_per_pair_se"], f.std(axis=0, ddof=1) / np.sqrt(3),
+                               rtol=1e-12)
+    assert (grid["n_replicates"] == 3).all()
 
 
 def test_vtk_series_is_written_and_readable(tiny_run):

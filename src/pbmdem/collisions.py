@@ -94,14 +94,15 @@ def read_dump(path: str | Path, columns: int) -> Snapshots:
     return Snapshots(steps=steps, offsets=offsets, data=data)
 
 
-def new_contacts(frame: np.ndarray, key: np.ndarray, stride: int = 1) -> np.ndarray:
-    """Boolean mask of rows that are contacts beginning at their frame.
+def contact_starts(frame: np.ndarray, key: np.ndarray, stride: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Contacts that begin at their frame, and the frame of the same pair's previous contact.
 
     `frame` is the frame number of each row, `key` a unique integer per contact pair. With
     `stride` s only frames 0, s, 2s, ... are used (to measure convergence with the interval);
-    rows of other frames are never counted. A row counts when its frame is not the first used
-    frame and the same key was absent from the previous used frame. A key listed twice in one
-    frame (several triangles of a mesh touching one particle) counts once.
+    rows of other frames are never counted. A row begins a contact when its frame is not the
+    first used frame and the same key was absent from the previous used frame. A key listed
+    twice in one frame (several triangles of a mesh touching one particle) counts once.
+    Returns (mask of rows that begin a contact, previous contact frame per row or -1).
     """
     frame = np.asarray(frame, np.int64)
     key = np.asarray(key, np.int64)
@@ -113,19 +114,20 @@ def new_contacts(frame: np.ndarray, key: np.ndarray, stride: int = 1) -> np.ndar
     same_key = np.concatenate([[False], k_u[1:] == k_u[:-1]])
     duplicate = same_key & np.concatenate([[False], f_u[1:] == f_u[:-1]])
     continuing = same_key & np.concatenate([[False], f_u[1:] == f_u[:-1] + 1])
-    first_frame = 0  # the first snapshot of the window: contacts present there did not begin in it
-    begins_sorted = np.zeros(len(order), bool)
-    begins_sorted[np.flatnonzero(mask_used)] = ~duplicate & ~continuing & (f_u > first_frame)
-    result = np.zeros(len(order), bool)
-    result[order] = begins_sorted
-    return result
+    first_frame = 0  # the first snapshot of the record: contacts present there did not begin in it
+    begins_u = ~duplicate & ~continuing & (f_u > first_frame)
+    prev_u = np.where(same_key, np.concatenate([[-1], f_u[:-1]]) * stride, -1)
+    rows = order[np.flatnonzero(mask_used)]
+    begins = np.zeros(len(frame), bool)
+    begins[rows] = begins_u
+    prev = np.full(len(frame), -1, np.int64)
+    prev[rows] = prev_u
+    return begins, prev
 
 
-@dataclass
-class RunTables:
-    pairs: pd.DataFrame
-    walls: pd.DataFrame
-    diagnostics: dict = field(default_factory=dict)
+def new_contacts(frame: np.ndarray, key: np.ndarray, stride: int = 1) -> np.ndarray:
+    """Boolean mask of rows that are contacts beginning at their frame (see contact_starts)."""
+    return contact_starts(frame, key, stride)[0]
 
 
 def read_classes(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -143,125 +145,312 @@ def _class_lookup(ids: np.ndarray, classes: np.ndarray) -> np.ndarray:
     return lookup
 
 
-def count_pair_collisions(pairs: Snapshots, class_of: np.ndarray, n_classes: int, stride: int = 1) -> np.ndarray:
-    """(K, K) upper-triangular matrix of new particle-particle contacts per class pair."""
-    counts = np.zeros((n_classes, n_classes), np.int64)
-    if len(pairs.data) == 0:
-        return counts
-    touching = pairs.data[:, 2] > 0.0
-    a = pairs.data[touching, 0].astype(np.int64)
-    b = pairs.data[touching, 1].astype(np.int64)
-    frame = pairs.frame_index()[touching]
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    key = lo * (int(hi.max()) + 1) + hi
-    begins = new_contacts(frame, key, stride)
-    ci, cj = class_of[lo[begins]], class_of[hi[begins]]
-    if (ci < 0).any() or (cj < 0).any():
-        raise DumpFormatError("a contact names a particle id missing from the class map")
-    i, j = np.minimum(ci, cj), np.maximum(ci, cj)
-    counts += np.bincount(i * n_classes + j, minlength=n_classes * n_classes).reshape(n_classes, n_classes)
-    return counts
+def read_trajectories(path: str | Path, n_particles: int):
+    """Position snapshots (`dump custom ... id x y z vx vy vz`, sorted by id) as Trajectories."""
+    from pbmdem.encounters import Trajectories
+
+    snaps = read_dump(path, 7)
+    counts = np.diff(snaps.offsets)
+    if snaps.frames == 0 or (counts != n_particles).any():
+        raise DumpFormatError(f"{path}: every position snapshot must list the {n_particles} particles; "
+                              f"found {sorted(set(counts.tolist()))} rows per snapshot")
+    data = snaps.data.reshape(snaps.frames, n_particles, 7)
+    ids = data[0, :, 0].astype(np.int64)
+    if (np.diff(ids) <= 0).any() or not (data[:, :, 0] == data[0:1, :, 0]).all():
+        raise DumpFormatError(f"{path}: particle ids are not sorted identically in every snapshot "
+                              "(the deck must use dump_modify sort id)")
+    return Trajectories(steps=snaps.steps, ids=ids, pos=data[:, :, 1:4], vel=data[:, :, 4:7])
 
 
-def count_wall_collisions(walls: Snapshots, class_of: np.ndarray, n_classes: int, stride: int = 1) -> np.ndarray:
-    """(len(WALL_NAMES), K) new particle-wall contacts per wall and class."""
-    counts = np.zeros((len(WALL_NAMES), n_classes), np.int64)
-    if len(walls.data) == 0:
-        return counts
-    touching = walls.data[:, 2] > 0.0
-    mesh = walls.data[touching, 0].astype(np.int64)
-    pid = walls.data[touching, 1].astype(np.int64)
-    frame = walls.frame_index()[touching]
-    key = mesh * (int(pid.max()) + 1) + pid
-    begins = new_contacts(frame, key, stride)
-    m, c = mesh[begins], class_of[pid[begins]]
-    counts += np.bincount(m * n_classes + c, minlength=len(WALL_NAMES) * n_classes).reshape(-1, n_classes)
-    return counts
+@dataclass
+class Starts:
+    """Contacts that begin inside the sampling window: the two partners (particle ids, or wall
+    index and particle id), the step and the previous contact's step (-1 when none)."""
+
+    first: np.ndarray
+    second: np.ndarray
+    step: np.ndarray
+    prev_step: np.ndarray
 
 
-def pair_table(counts: np.ndarray, n: np.ndarray, diameters, sampling_time: float, meta: dict) -> pd.DataFrame:
+def window_starts(snaps: Snapshots, window_start: int, wall: bool = False, stride: int = 1) -> Starts:
+    """Contacts beginning at contact snapshots after `window_start` (a step) in a pair dump
+    (id1, id2, overlap) or a wall dump (mesh id, particle id, overlap)."""
+    empty = np.zeros(0, np.int64)
+    if len(snaps.data) == 0:
+        return Starts(empty, empty, empty, empty)
+    touching = snaps.data[:, 2] > 0.0
+    a = snaps.data[touching, 0].astype(np.int64)
+    b = snaps.data[touching, 1].astype(np.int64)
+    frame = snaps.frame_index()[touching]
+    if not wall:
+        a, b = np.minimum(a, b), np.maximum(a, b)
+    key = a * (int(b.max()) + 1) + b
+    begins, prev = contact_starts(frame, key, stride)
+    begins &= snaps.steps[frame] > window_start
+    prev_step = np.where(prev >= 0, snaps.steps[np.maximum(prev, 0)], -1)
+    return Starts(a[begins], b[begins], snaps.steps[frame[begins]], prev_step[begins])
+
+
+def _median_by(group: np.ndarray, values: np.ndarray, size: int) -> np.ndarray:
+    out = np.full(size, np.nan)
+    for g in np.unique(group):
+        out[g] = float(np.median(values[group == g]))
+    return out
+
+
+@dataclass
+class Tally:
+    """Per class pair (or per wall and class): raw contact starts, encounters, their impact-speed
+    histogram on pbmdem.impact.VELOCITY_EDGES and median impact speed."""
+
+    raw: np.ndarray
+    encounters: np.ndarray
+    histogram: np.ndarray
+    median_velocity: np.ndarray
+
+
+def _tally(group: np.ndarray, events, shape: tuple[int, ...]) -> Tally:
+    from pbmdem.impact import N_VELOCITY_BINS, velocity_bin
+
+    size = int(np.prod(shape))
+    raw = np.bincount(group, minlength=size)
+    g, v = group[events.encounter], events.velocity[events.encounter]
+    enc = np.bincount(g, minlength=size)
+    hist = np.bincount(g * N_VELOCITY_BINS + velocity_bin(v), minlength=size * N_VELOCITY_BINS)
+    return Tally(raw.reshape(shape), enc.reshape(shape), hist.reshape(*shape, N_VELOCITY_BINS),
+                 _median_by(g, v, size).reshape(shape))
+
+
+def pair_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, meta: dict) -> pd.DataFrame:
     """Tidy table with one row per unordered class pair (see docs/architecture.md)."""
     k = len(n)
     i, j = np.triu_indices(k)
-    pairs = np.where(i == j, n[i] * (n[i] - 1) / 2.0, n[i].astype(float) * n[j])
+    pairs = pair_counts(n)[i, j]
     d = np.asarray(diameters, float)
-    coll = counts[i, j]
+    coll, enc = tally.raw[i, j], tally.encounters[i, j]
     with np.errstate(divide="ignore", invalid="ignore"):
         per_pair = np.where(pairs > 0, coll / (pairs * sampling_time), np.nan)
+        enc_per_pair = np.where(pairs > 0, enc / (pairs * sampling_time), np.nan)
     return pd.DataFrame({
         "point_id": meta["point_id"], "rpm": meta["rpm"], "distribution": meta["distribution"],
+        "replicate": meta["replicate"],
         "class_i": i, "class_j": j, "d_i": d[i], "d_j": d[j], "n_i": n[i], "n_j": n[j],
         "n_total": int(n.sum()), "collisions": coll, "sampling_time": sampling_time,
         "frequency": coll / sampling_time, "frequency_per_pair": per_pair,
+        "encounters": enc, "encounter_frequency_per_pair": enc_per_pair,
+        "impact_velocity_median": tally.median_velocity[i, j],
     })
 
 
-def wall_table(counts: np.ndarray, n: np.ndarray, diameters, sampling_time: float, meta: dict) -> pd.DataFrame:
+def pair_counts(n: np.ndarray) -> np.ndarray:
+    """(K, K) number of distinct particle pairs: n_i n_j, and n_i (n_i - 1) / 2 on the diagonal."""
+    n = np.asarray(n, float)
+    pairs = np.outer(n, n)
+    np.fill_diagonal(pairs, n * (n - 1) / 2.0)
+    return pairs
+
+
+def velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
+    """Encounters per class pair and impact-velocity bin (long format, docs/architecture.md)."""
+    from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES
+
+    k = tally.raw.shape[0]
+    i, j = np.triu_indices(k)
+    b = np.arange(N_VELOCITY_BINS)
+    return pd.DataFrame({
+        "point_id": meta["point_id"], "rpm": meta["rpm"], "distribution": meta["distribution"],
+        "replicate": meta["replicate"],
+        "class_i": np.repeat(i, N_VELOCITY_BINS), "class_j": np.repeat(j, N_VELOCITY_BINS),
+        "v_lo": np.tile(VELOCITY_EDGES[:-1], len(i)), "v_hi": np.tile(VELOCITY_EDGES[1:], len(i)),
+        "encounters": tally.histogram[i, j][:, b].ravel(),
+    })
+
+
+def wall_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, meta: dict) -> pd.DataFrame:
     rows = []
     for w, wall in enumerate(WALL_NAMES):
         for c in range(len(n)):
             rows.append({
                 "point_id": meta["point_id"], "rpm": meta["rpm"], "distribution": meta["distribution"],
+                "replicate": meta["replicate"],
                 "class_i": c, "d_i": float(diameters[c]), "n_i": int(n[c]), "n_total": int(n.sum()),
-                "wall": wall, "collisions": int(counts[w, c]), "sampling_time": sampling_time,
-                "frequency": counts[w, c] / sampling_time,
-                "frequency_per_particle": counts[w, c] / (n[c] * sampling_time) if n[c] else np.nan,
+                "wall": wall, "collisions": int(tally.raw[w, c]), "sampling_time": sampling_time,
+                "frequency": tally.raw[w, c] / sampling_time,
+                "frequency_per_particle": tally.raw[w, c] / (n[c] * sampling_time) if n[c] else np.nan,
+                "encounters": int(tally.encounters[w, c]),
+                "encounter_frequency_per_particle":
+                    tally.encounters[w, c] / (n[c] * sampling_time) if n[c] else np.nan,
+                "impact_velocity_median": tally.median_velocity[w, c],
             })
     return pd.DataFrame(rows)
 
 
-def tabulate_run(post_dir: str | Path, plan) -> RunTables:
-    """Collision tables of one finished run (`plan` is the run's `pbmdem.dem.DemPlan`)."""
-    post_dir = Path(post_dir)
-    ids, classes = read_classes(post_dir / "classes.dump")
-    n_classes = len(plan.diameters)
-    if len(ids) != plan.n_particles:
-        raise DumpFormatError(
-            f"{plan.point_id}: {len(ids)} particles in the granulator at the start of sampling, "
-            f"{plan.n_particles} planned: insertion did not place them all (lower dem.bed_height, "
-            "or give the bowl more height / the settling phase more time)"
+@dataclass
+class RunTables:
+    pairs: pd.DataFrame
+    walls: pd.DataFrame
+    velocities: pd.DataFrame
+    diagnostics: dict = field(default_factory=dict)
+
+
+class RunAnalysis:
+    """Contact starts and encounters of one finished run (`plan`: its pbmdem.dem.DemPlan)."""
+
+    def __init__(self, post_dir: str | Path, plan, bowl, impeller):
+        from pbmdem import encounters
+
+        post_dir = Path(post_dir)
+        self.plan, self.bowl, self.impeller = plan, bowl, impeller
+        ids, classes = read_classes(post_dir / "classes.dump")
+        self.n_classes = n_classes = len(plan.diameters)
+        if len(ids) != plan.n_particles:
+            raise DumpFormatError(
+                f"{plan.point_id}: {len(ids)} particles in the granulator at the start of sampling, "
+                f"{plan.n_particles} planned: insertion did not place them all (lower dem.bed_height, "
+                "or give the bowl more height / the settling phase more time)"
+            )
+        if classes.min() < 0 or classes.max() >= n_classes:
+            raise DumpFormatError(f"{plan.point_id}: atom types outside 1..{n_classes} in the class map")
+        self.class_of = _class_lookup(ids, classes)
+        self.n = np.bincount(classes, minlength=n_classes)
+        self.radius_of_class = 0.5 * np.asarray(plan.diameters, float)
+        self.pairs = read_dump(post_dir / "pairs.dump", 3)
+        self.walls = read_dump(post_dir / "walls.dump", 3)
+        self.traj = read_trajectories(post_dir / "positions.dump", plan.n_particles)
+        window = self.pairs.steps[self.pairs.steps >= plan.window_start_step]
+        if len(window) < 2:
+            raise DumpFormatError(f"{plan.point_id}: fewer than two contact snapshots in the sampling window")
+        self.window_start = int(window[0])  # contacts beginning after this snapshot are counted
+        self.sampling_time = float(window[-1] - window[0]) * plan.timestep
+        self._encounters = encounters
+
+    def angle_of_step(self, steps):
+        """Impeller angle (rad): the rotation starts with the spin-up phase."""
+        return self.plan.omega * (np.asarray(steps, float) - self.plan.settle_steps) * self.plan.timestep
+
+    def pair_events(self, stride: int = 1):
+        s = window_starts(self.pairs, self.window_start, stride=stride)
+        ca, cb = self.class_of[s.first], self.class_of[s.second]
+        if (ca < 0).any() or (cb < 0).any():
+            raise DumpFormatError(f"{self.plan.point_id}: a contact names a particle id missing from the class map")
+        ev = self._encounters.pair_events(
+            self.traj, s.first, s.second, self.radius_of_class[ca], self.radius_of_class[cb], s.step, s.prev_step,
+            self.plan.encounter_gap_fraction, stride=stride)
+        i, j = np.minimum(ca, cb), np.maximum(ca, cb)
+        return ev, i * self.n_classes + j
+
+    def wall_events(self, stride: int = 1):
+        s = window_starts(self.walls, self.window_start, wall=True, stride=stride)
+        c = self.class_of[s.second]
+        if (c < 0).any():
+            raise DumpFormatError(f"{self.plan.point_id}: a wall contact names a particle id missing from the class map")
+        ev = self._encounters.wall_events(
+            self.traj, s.first, s.second, self.radius_of_class[c], s.step, s.prev_step,
+            self.plan.encounter_gap_fraction, self.bowl, self.impeller, self.angle_of_step, self.plan.omega,
+            stride=stride)
+        return ev, s.first * self.n_classes + c
+
+    def tables(self) -> RunTables:
+        K = self.n_classes
+        plan = self.plan
+        meta = {"point_id": plan.point_id, "rpm": plan.rpm, "distribution": plan.distribution,
+                "replicate": plan.replicate}
+        ev, group = self.pair_events()
+        pair_tally = _tally(group, ev, (K, K))
+        wev, wgroup = self.wall_events()
+        wall_tally = _tally(wgroup, wev, (len(WALL_NAMES), K))
+        ev2, group2 = self.pair_events(stride=2)
+        raw, raw2 = int(pair_tally.raw.sum()), int(np.bincount(group2, minlength=K * K).sum())
+        enc, enc2 = int(ev.encounter.sum()), int(ev2.encounter.sum())
+        mid = self.window_start + 0.5 * self.sampling_time / plan.timestep
+        history = {f"encounters_history_{f:g}": int((ev.encounter & (ev.lag_steps <= f * plan.history_steps)).sum())
+                   for f in (0.125, 0.25, 0.5, 1.0)}
+        diagnostics = {
+            "snapshots": int(self.pairs.frames), "position_snapshots": int(len(self.traj.steps)),
+            "contact_rows": int(len(self.pairs.data)),
+            "mean_contacts_per_snapshot": float(len(self.pairs.data) / max(self.pairs.frames, 1)),
+            "collisions_every_snapshot": raw, "collisions_every_second_snapshot": raw2,
+            "convergence_change_when_interval_doubled": (raw2 - raw) / raw if raw else float("nan"),
+            "encounters_every_snapshot": enc, "encounters_every_second_snapshot": enc2,
+            "encounter_change_when_interval_doubled": (enc2 - enc) / enc if enc else float("nan"),
+            "encounters_undetermined": int(ev.undetermined.sum()),
+            "encounters_first_half": int((ev.encounter & (ev.step <= mid)).sum()),
+            "encounters_second_half": int((ev.encounter & (ev.step > mid)).sum()),
+            **history,
+            "wall_encounters_bowl": int(wall_tally.encounters[0].sum()),
+            "wall_encounters_impeller": int(wall_tally.encounters[1].sum()),
+            "particles_per_class": self.n.tolist(),
+        }
+        return RunTables(
+            pairs=pair_table(pair_tally, self.n, plan.diameters, self.sampling_time, meta),
+            walls=wall_table(wall_tally, self.n, plan.diameters, self.sampling_time, meta),
+            velocities=velocity_table(pair_tally, meta),
+            diagnostics=diagnostics,
         )
-    if classes.min() < 0 or classes.max() >= n_classes:
-        raise DumpFormatError(f"{plan.point_id}: atom types outside 1..{n_classes} in the class map")
-    class_of = _class_lookup(ids, classes)
-    n = np.bincount(classes, minlength=n_classes)
-    pairs = read_dump(post_dir / "pairs.dump", 3)
-    walls = read_dump(post_dir / "walls.dump", 3)
-    if pairs.frames < 2:
-        raise DumpFormatError(f"{plan.point_id}: fewer than two contact snapshots; sampling window too short")
-    sampling_time = float(pairs.steps[-1] - pairs.steps[0]) * plan.timestep
-    meta = {"point_id": plan.point_id, "rpm": plan.rpm, "distribution": plan.distribution}
-    counts = count_pair_collisions(pairs, class_of, n_classes)
-    counts2 = count_pair_collisions(pairs, class_of, n_classes, stride=2)
-    total, total2 = int(counts.sum()), int(counts2.sum())
-    diagnostics = {
-        "snapshots": int(pairs.frames), "contact_rows": int(len(pairs.data)),
-        "mean_contacts_per_snapshot": float(len(pairs.data) / max(pairs.frames, 1)),
-        "collisions_every_snapshot": total, "collisions_every_second_snapshot": total2,
-        "convergence_change_when_interval_doubled": (total2 - total) / total if total else float("nan"),
-        "particles_per_class": n.tolist(),
-    }
-    return RunTables(
-        pairs=pair_table(counts, n, plan.diameters, sampling_time, meta),
-        walls=wall_table(count_wall_collisions(walls, class_of, n_classes), n, plan.diameters,
-                         sampling_time, meta),
-        diagnostics=diagnostics,
-    )
+
+
+def tabulate_run(post_dir: str | Path, plan, bowl, impeller) -> RunTables:
+    """Collision and encounter tables of one finished run."""
+    return RunAnalysis(post_dir, plan, bowl, impeller).tables()
 
 
 def write_tables(tables: RunTables, run_dir: str | Path) -> None:
     run_dir = Path(run_dir)
     write_csv(run_dir / "wall_collisions.csv", tables.walls)
+    write_csv(run_dir / "impact_velocity.csv", tables.velocities)
     write_csv(run_dir / "collisions.csv", tables.pairs)  # last: its presence marks a finished run
 
 
-def aggregate(tables: list[str | Path], out: str | Path) -> pd.DataFrame:
-    """Concatenate per-point tables into one grid table (sorted, written atomically)."""
-    frames = [pd.read_csv(p) for p in tables]
+POINT_KEYS = ["point_id", "rpm", "distribution"]
+# per key: columns averaged over replicates; the ones listed in SE_COLUMNS also get a standard error
+REPLICATE_KEYS = {
+    "pairs": POINT_KEYS + ["class_i", "class_j", "d_i", "d_j"],
+    "walls": POINT_KEYS + ["wall", "class_i", "d_i"],
+    "velocities": POINT_KEYS + ["class_i", "class_j", "v_lo", "v_hi"],
+}
+SE_COLUMNS = ("encounter_frequency_per_pair", "frequency_per_pair", "encounter_frequency_per_particle")
+
+
+def replicate_mean(frame: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
+    """Mean over the replicates of every numeric column, with `n_replicates` and the standard
+    error `<column>_se` (sample standard deviation / sqrt(n), NaN for one replicate) of the
+    frequencies in SE_COLUMNS."""
+    values = [c for c in frame.columns if c not in keys and c != "replicate"]
+    grouped = frame.groupby(keys, sort=True, dropna=False)
+    out = grouped[values].mean()
+    out.insert(0, "n_replicates", grouped["replicate"].nunique())
+    for col in SE_COLUMNS:
+        if col in values:
+            out[f"{col}_se"] = grouped[col].std(ddof=1) / np.sqrt(out["n_replicates"])
+    return out.reset_index()
+
+
+def read_tables(tables: list[str | Path]) -> pd.DataFrame:
+    """The per-run tables stacked into one frame (every replicate a row of its own)."""
+    frames = []
+    for p in tables:
+        try:
+            frames.append(pd.read_csv(p))
+        except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+            raise DumpFormatError(f"collision table {p}: cannot be read ({exc})") from None
     if not frames:
         raise ValueError("no collision tables to aggregate")
-    grid = pd.concat(frames, ignore_index=True)
-    keys = [c for c in ("rpm", "distribution", "class_i", "class_j", "wall") if c in grid.columns]
-    grid = grid.sort_values(keys, kind="stable").reset_index(drop=True)
+    runs = pd.concat(frames, ignore_index=True)
+    sort = [c for c in ("rpm", "distribution", "replicate", "wall", "class_i", "class_j", "v_lo") if c in runs.columns]
+    return runs.sort_values(sort, kind="stable").reset_index(drop=True)
+
+
+def aggregate(tables: list[str | Path], out: str | Path, kind: str = "pairs") -> pd.DataFrame:
+    """Replicate means of per-run tables (`kind`: pairs, walls or velocities), one row per point
+    and class pair (or wall, or velocity bin), sorted and written atomically."""
+    runs = read_tables(tables)
+    keys = REPLICATE_KEYS[kind]
+    missing = [c for c in keys + ["replicate"] if c not in runs.columns]
+    if missing:
+        raise DumpFormatError(f"collision tables {[str(t) for t in tables[:3]]}...: missing columns {missing}")
+    grid = replicate_mean(runs, keys)
+    sort = [c for c in ("rpm", "distribution", "wall", "class_i", "class_j", "v_lo") if c in grid.columns]
+    grid = grid.sort_values(sort, kind="stable").reset_index(drop=True)
     write_csv(out, grid)
     return grid

@@ -144,7 +144,7 @@ def class_table(diameters, matrix) -> pd.DataFrame:
 
 def matrix_from_table(table: pd.DataFrame, k: int) -> np.ndarray:
     c = np.zeros((k, k))
-    c[table.class_i.to_numpy(), table.class_j.to_numpy()] = table.frequency_per_pair.to_numpy()
+    c[table.class_i.to_numpy(), table.class_j.to_numpy()] = table.encounter_frequency_per_pair.to_numpy()
     return np.triu(c) + np.triu(c, 1).T
 
 
@@ -207,6 +207,7 @@ class DemProvider:
         return matrix_from_table(table, len(sample.diameters)), {
             "dem_wall_time_s": summary["liggghts_wall_time_s"] + summary["parse_time_s"],
             "dem_particles": summary["n_particles"], "dem_collisions": summary["total_collisions"],
+            "dem_encounters": summary["total_encounters"],
         }
 
 

@@ -27,6 +27,9 @@ from pbmdem.atomic import write_json, write_text
 # by 0.4 % when this interval is halved, 1.9 % when doubled). Measured convergence is
 # reported per run (counts with every snapshot vs every second one).
 SNAPSHOTS_PER_CONTACT = 2
+# Position snapshots (for encounter look-back and impact velocities) are taken every this many
+# contact snapshots by default: a gap of a quarter diameter takes far longer to open than that.
+POSITION_SNAPSHOT_MULTIPLE = 4
 
 
 def point_id(rpm: float, distribution: str) -> str:
@@ -74,6 +77,11 @@ class DemPlan:
     sampling_steps: int
     vtk_every: int
     tip_speed: float
+    history_steps: int = 0
+    position_interval: int = 1
+    encounter_gap_fraction: float = 0.25
+    omega: float = 0.0
+    replicate: int = 0
     mpi_ranks: int = 1
     seed: int = 20141
     extra: dict = field(default_factory=dict)
@@ -81,6 +89,11 @@ class DemPlan:
     @property
     def sampling_time(self) -> float:
         return self.sampling_steps * self.timestep
+
+    @property
+    def window_start_step(self) -> int:
+        """Step at which the sampling window opens (end of the spin-up)."""
+        return self.settle_steps + self.spinup_steps
 
     @property
     def particle_steps(self) -> float:
@@ -104,10 +117,21 @@ def bed_particle_count(cfg: dict, diameters, fractions) -> int:
     return int(round(solids / mean_volume))
 
 
+REPLICATE_SEED_STRIDE = 7919  # replicate r runs with seeds derived from dem.seed + r x this prime
+
+
+def phase_time(dem_cfg: dict, phase: str, rpm: float) -> float:
+    """Length (s) of the spin-up or sampling phase: `<phase>_revolutions` impeller revolutions,
+    but at least `<phase>_time` seconds."""
+    revolutions = float(dem_cfg.get(f"{phase}_revolutions", 0.0))
+    return max(float(dem_cfg[f"{phase}_time"]), revolutions * 60.0 / float(rpm))
+
+
 def plan_point(cfg: dict, rpm: float, distribution: str, *, n_particles: int | None = None,
-               diameters=None, number_fractions=None) -> DemPlan:
+               diameters=None, number_fractions=None, replicate: int = 0) -> DemPlan:
     """Plan a run. `diameters`/`number_fractions`/`n_particles` override the named distribution
-    (the coupled PBM-DEM loop hands its own size distribution this way)."""
+    (the coupled PBM-DEM loop hands its own size distribution this way); `replicate` selects the
+    insertion seeds (replicates of one point differ only by them)."""
     dist = cfg["size_distributions"].get(distribution) if diameters is None else None
     if diameters is None:
         if dist is None:
@@ -136,17 +160,32 @@ def plan_point(cfg: dict, rpm: float, distribution: str, *, n_particles: int | N
     interval = dem_cfg.get("collision_interval", "auto")
     if interval == "auto":
         interval = max(1, int(t_c / (SNAPSHOTS_PER_CONTACT * dt)))
+    position_interval = dem_cfg.get("position_interval", "auto")
+    if position_interval == "auto":
+        position_interval = POSITION_SNAPSHOT_MULTIPLE * interval
+    if position_interval % interval:
+        raise ValueError(f"dem.position_interval = {position_interval}: must be a multiple of the contact "
+                         f"snapshot interval ({interval} steps)")
     steps = lambda seconds: max(1, int(math.ceil(seconds / dt)))  # noqa: E731
-    sampling_steps = steps(dem_cfg["sampling_time"])
-    sampling_steps = int(math.ceil(sampling_steps / interval) * interval)
+    sampling_steps = steps(phase_time(dem_cfg, "sampling", rpm))
+    sampling_steps = int(math.ceil(sampling_steps / position_interval) * position_interval)
+    spinup_steps = steps(phase_time(dem_cfg, "spinup", rpm))
+    history_steps = int(math.ceil(steps(dem_cfg.get("history_time", 0.05)) / position_interval) * position_interval)
+    if history_steps >= spinup_steps:
+        raise ValueError(f"dem.history_time = {dem_cfg.get('history_time')} s: the position history before the "
+                         f"sampling window must be shorter than the spin-up ({spinup_steps * dt:.4g} s at {rpm:g} rpm)")
     return DemPlan(
         point_id=point_id(rpm, distribution), rpm=float(rpm), distribution=distribution,
         diameters=diameters, number_fractions=number_fractions, counts=counts,
         n_particles=int(sum(counts)), timestep=dt, rayleigh_time=t_r, contact_time=t_c,
         collision_interval=int(interval), settle_steps=steps(dem_cfg["settle_time"]),
-        spinup_steps=steps(dem_cfg["spinup_time"]), sampling_steps=sampling_steps,
+        spinup_steps=spinup_steps, sampling_steps=sampling_steps,
         vtk_every=steps(dem_cfg.get("vtk_interval", 0.02)), tip_speed=tip_speed,
-        mpi_ranks=int(dem_cfg.get("mpi_ranks", 1)), seed=int(dem_cfg.get("seed", 20141)),
+        history_steps=history_steps, position_interval=int(position_interval),
+        encounter_gap_fraction=float(dem_cfg.get("encounter_gap_fraction", 0.25)),
+        omega=2.0 * math.pi * float(rpm) / 60.0, replicate=int(replicate),
+        mpi_ranks=int(dem_cfg.get("mpi_ranks", 1)),
+        seed=int(dem_cfg.get("seed", 20141)) + REPLICATE_SEED_STRIDE * int(replicate),
     )
 
 
@@ -215,6 +254,9 @@ def deck_values(cfg: dict, plan: DemPlan) -> dict[str, str]:
         "settle_steps": num("settle_steps", plan.settle_steps, integer=True, minimum=1),
         "spinup_steps": num("spinup_steps", plan.spinup_steps, integer=True, minimum=1),
         "sampling_steps": num("sampling_steps", plan.sampling_steps, integer=True, minimum=1),
+        "spinup_pre_steps": num("spinup_pre_steps", plan.spinup_steps - plan.history_steps, integer=True, minimum=1),
+        "record_steps": num("record_steps", plan.history_steps + plan.sampling_steps, integer=True, minimum=1),
+        "position_interval": num("position_interval", plan.position_interval, integer=True, minimum=1),
         "rotation_period": num("rotation_period", 60.0 / plan.rpm, exclusive_minimum=True, minimum=0.0),
         "collision_interval": num("collision_interval", plan.collision_interval, integer=True, minimum=1),
     }
@@ -244,17 +286,18 @@ def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | No
     from pbmdem import collisions, vtk_series  # local: keep this module light to import
 
     run_dir = Path(run_dir)
-    for name in ("collisions.csv", "wall_collisions.csv", "summary.json"):
+    for name in ("collisions.csv", "wall_collisions.csv", "impact_velocity.csv", "summary.json"):
         (run_dir / name).unlink(missing_ok=True)
     deck_path = prepare_run(cfg, plan, run_dir)
     result = liggghts.run(deck_path, run_dir, ranks=plan.mpi_ranks, timeout=timeout)
     t0 = time.perf_counter()
-    tables = collisions.tabulate_run(run_dir / "post", plan)
+    tables = collisions.tabulate_run(run_dir / "post", plan, geometry.bowl_from_config(cfg),
+                                     geometry.impeller_from_config(cfg))
     parse_time = time.perf_counter() - t0
     collisions.write_tables(tables, run_dir)
     series = vtk_series.write_series(run_dir / "post", plan.timestep)
     if not cfg["dem"].get("keep_contact_dumps", False):
-        for dump in ("pairs.dump", "walls.dump"):
+        for dump in ("pairs.dump", "walls.dump", "positions.dump"):
             (run_dir / "post" / dump).unlink(missing_ok=True)
     thermo = liggghts.thermo_table(result.log)
     # fix check/timestep/gran: ts[1] = dt / Rayleigh time, ts[2] = dt / Hertz time (LIGGGHTS' own)
@@ -269,16 +312,19 @@ def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | No
         "particle_steps_per_s": plan.particle_steps / result.wall_time,
         "parse_time_s": parse_time, "parse_cost_ratio": parse_time / result.wall_time,
         "collision_interval": plan.collision_interval,
+        "replicate": plan.replicate, "seed": plan.seed,
         "total_collisions": int(tables.pairs["collisions"].sum()),
+        "total_encounters": int(tables.pairs["encounters"].sum()),
+        "sampling_time": float(tables.pairs["sampling_time"].iloc[0]),
         **tables.diagnostics, **{f"series_{k}": str(v) for k, v in series.items()},
     }
     write_json(run_dir / "summary.json", summary)
     return summary
 
 
-def run_operating_point(cfg: dict, rpm: float, distribution: str, run_dir: str | Path) -> dict:
-    """Plan and run one grid point of the config (the Snakemake rule's entry point)."""
-    plan = plan_point(cfg, rpm, distribution)
+def run_operating_point(cfg: dict, rpm: float, distribution: str, run_dir: str | Path, replicate: int = 0) -> dict:
+    """Plan and run one replicate of a grid point of the config (the Snakemake rule's entry point)."""
+    plan = plan_point(cfg, rpm, distribution, replicate=replicate)
     return run_point(cfg, plan, run_dir, timeout=cfg["dem"].get("timeout"))
 
 

@@ -5,6 +5,10 @@ from pbmdem.dem import run_operating_point
 
 logging.basicConfig(filename=snakemake.log[0], level=logging.INFO)
 summary = run_operating_point(
-    snakemake.params.point, float(snakemake.wildcards.rpm), snakemake.wildcards.dist, snakemake.params.run_dir
+    snakemake.params.point,
+    float(snakemake.wildcards.rpm),
+    snakemake.wildcards.dist,
+    snakemake.params.run_dir,
+    replicate=int(snakemake.wildcards.rep),
 )
 logging.info("finished %s", summary)

@@ -1,0 +1,125 @@
+"""Encounters on hand-made trajectories with known answers (no engine needed): a pair that
+chatters without separating is one encounter, a pair that separates beyond the gap and comes back
+is two, and the impact velocity is the known approach speed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pbmdem.collisions import Snapshots, window_starts
+from pbmdem.encounters import Trajectories, bowl_gap, impeller_gap, pair_events, wall_events
+from pbmdem.geometry import Bowl, Impeller
+
+R = 1.0e-3  # particle radius (m): diameter 2 mm, encounter gap 0.25 x 2 mm = 0.5 mm
+DT = 1.0e-5  # s per step
+
+
+def record(gaps: np.ndarray, speeds: np.ndarray, position_every: int = 1):
+    """Two particles (ids 7 and 3) on the x axis with the given surface gap (m) and velocity of
+    particle 3 (m/s, particle 7 at rest) at every step; returns contact snapshots at every step
+    and position snapshots every `position_every` steps."""
+    steps = np.arange(len(gaps))
+    x3 = 2 * R + gaps
+    rows, counts = [], []
+    for g in gaps:
+        if g < 0:
+            rows.append([7.0, 3.0, -g])  # id1, id2, overlap (LIGGGHTS may list them in any order)
+        counts.append(1 if g < 0 else 0)
+    data = np.array(rows).reshape(-1, 3)
+    snaps = Snapshots(steps=steps, offsets=np.concatenate([[0], np.cumsum(counts)]), data=data)
+    keep = steps % position_every == 0
+    pos = np.zeros((keep.sum(), 2, 3))
+    vel = np.zeros((keep.sum(), 2, 3))
+    pos[:, 0, 0] = x3[keep]  # ids are sorted: row 0 = id 3 (moving), row 1 = id 7 at the origin
+    vel[:, 0, 0] = speeds[keep]
+    traj = Trajectories(steps=steps[keep], ids=np.array([3, 7]), pos=pos, vel=vel)
+    return snaps, traj
+
+
+def approach_then(gaps_after: list[float], start_gap=2e-3, v=0.1, steps_in=30):
+    """Particle 3 approaches from `start_gap` at speed v, then follows `gaps_after`."""
+    approach = start_gap - v * DT * np.arange(steps_in)
+    approach = approach[approach >= 0]
+    gaps = np.concatenate([approach, gaps_after])
+    speeds = np.concatenate([np.full(len(approach), -v), np.zeros(len(gaps_after))])
+    return gaps, speeds
+
+
+def classify(snaps, traj, window_start=0, stride=1):
+    s = window_starts(snaps, window_start, stride=stride)
+    ev = pair_events(traj, s.first, s.second, np.full(len(s.first), R), np.full(len(s.first), R),
+                     s.step, s.prev_step, gap_fraction=0.25, stride=stride)
+    return s, ev
+
+
+def test_chattering_pair_is_one_encounter_with_known_velocity():
+    # approach at 0.1 m/s from a 2 mm gap, then touch and separate by 0.02 mm three times
+    chatter = [-1e-5, -1e-5, 2e-5, 2e-5, -1e-5, 2e-5, -1e-5, -1e-5, 1e-5, -1e-5]
+    gaps, speeds = approach_then(chatter, steps_in=2001)
+    snaps, traj = record(gaps, speeds)
+    s, ev = classify(snaps, traj)
+    assert len(s.step) == 4  # four contacts begin (the raw count) ...
+    assert ev.encounter.sum() == 1  # ... but only the first is an encounter
+    assert ev.encounter[np.argmin(s.step)]
+    assert ev.velocity[ev.encounter][0] == pytest.approx(0.1, rel=1e-12)
+
+
+def test_pair_that_separates_beyond_the_gap_and_returns_is_two_encounters():
+    away = list(np.linspace(0, 1.0e-3, 20)) + list(np.linspace(1.0e-3, 0, 20))  # 1 mm > 0.5 mm gap
+    gaps, speeds = approach_then([-1e-5, -1e-5] + away[1:-1] + [-1e-5, -1e-5], steps_in=2001)
+    snaps, traj = record(gaps, speeds)
+    s, ev = classify(snaps, traj)
+    assert len(s.step) == 2 and ev.encounter.sum() == 2
+
+
+def test_separation_below_the_gap_is_a_retouch():
+    near = list(np.linspace(0, 0.4e-3, 20)) + list(np.linspace(0.4e-3, 0, 20))  # 0.4 mm < 0.5 mm
+    gaps, speeds = approach_then([-1e-5] + near[1:-1] + [-1e-5], steps_in=2001)
+    snaps, traj = record(gaps, speeds)
+    s, ev = classify(snaps, traj)
+    assert len(s.step) == 2 and ev.encounter.sum() == 1
+
+
+def test_window_and_history():
+    """Contacts before the window are history only; a pair that never left the gap during the
+    whole record and has no earlier contact is undetermined, not an encounter."""
+    gaps = np.concatenate([np.full(50, 1e-4), [-1e-5, -1e-5]])  # hovering 0.1 mm apart, then touch
+    snaps, traj = record(gaps, np.zeros(len(gaps)))
+    s, ev = classify(snaps, traj)
+    assert len(s.step) == 1 and not ev.encounter.any() and ev.undetermined.all()
+    s, ev = classify(snaps, traj, window_start=int(snaps.steps[-1]))
+    assert len(s.step) == 0
+
+
+def test_coarser_position_snapshots_keep_the_count():
+    away = list(np.linspace(0, 1.0e-3, 40)) + list(np.linspace(1.0e-3, 0, 40))
+    gaps, speeds = approach_then([-1e-5, -1e-5] + away[1:-1] + [-1e-5, -1e-5], steps_in=2001)
+    snaps, traj = record(gaps, speeds, position_every=4)
+    s, ev = classify(snaps, traj)
+    assert ev.encounter.sum() == 2
+    s2, ev2 = classify(snaps, traj, stride=2)
+    assert ev2.encounter.sum() == 2
+
+
+def test_wall_gaps_and_impeller_velocity():
+    bowl = Bowl(diameter=0.06, height=0.05)
+    pos = np.array([[0.029, 0.0, 0.02], [0.0, 0.01, 0.0015], [0.0, 0.0, 0.0485]])
+    gap, normal = bowl_gap(pos, np.full(3, 1e-3), bowl)
+    np.testing.assert_allclose(gap, [0.0, 0.0005, 0.0005], atol=1e-12)
+    np.testing.assert_allclose(normal, [[1, 0, 0], [0, 0, -1], [0, 0, 1]], atol=1e-12)
+    imp = Impeller(blades=1, blade_length=0.02, blade_height=0.01, blade_thickness=0.002, clearance=0.001,
+                   hub_diameter=0.004)
+    # a particle 1 mm in front of the blade (turned by 90 degrees, so it lies along +y)
+    p = np.array([[-0.0030, 0.015, 0.006]])  # blade face at x = -0.001 after the turn
+    g, towards = impeller_gap(p, np.array([5e-4]), imp, np.array([np.pi / 2]))
+    assert g[0] == pytest.approx(0.0015, abs=1e-12)
+    np.testing.assert_allclose(towards[0], [1, 0, 0], atol=1e-12)
+    # a resting particle hit by the blade: its approach speed is the blade's omega x r
+    omega = 100.0
+    traj = Trajectories(steps=np.array([0, 1]), ids=np.array([1]), pos=np.repeat(p[None], 2, 0),
+                        vel=np.zeros((2, 1, 3)))
+    ev = wall_events(traj, [1], [1], [5e-4], [2], [-1], 0.25, bowl, imp, lambda s: np.full(len(s), np.pi / 2),
+                     omega)
+    assert ev.encounter[0]
+    assert ev.velocity[0] == pytest.approx(omega * 0.015, rel=1e-9)  # the face moves at omega x r towards it

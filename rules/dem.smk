@@ -4,7 +4,7 @@
 
 rule dem_point:
     input:
-        template="liggghts_templates/granulator.in",
+        template=os.path.join(workflow.basedir, "liggghts_templates", "granulator.in"),
     output:
         table=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/collisions.csv",
         walls=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/wall_collisions.csv",

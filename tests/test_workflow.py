@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 import yaml
@@ -43,10 +44,20 @@ def test_grid_tables_have_counts_for_every_class_pair(tiny_workflow):
     assert set(zip(table.rpm, table.distribution)) == points
     assert (table.collisions > 0).all(), table[table.collisions == 0]
     expected_columns = ["point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j", "n_i", "n_j",
-                        "n_total", "collisions", "sampling_time", "frequency", "frequency_per_pair"]
+                        "n_total", "collisions", "sampling_time", "frequency", "frequency_per_pair",
+                        "encounters", "encounter_frequency_per_pair", "impact_velocity_median", "n_replicates",
+                        "encounter_frequency_per_pair_se", "frequency_per_pair_se"]
     assert list(table.columns) == expected_columns
     runs = pd.read_csv(workdir / "results" / "dem" / "runs.csv")
-    assert len(runs) == len(points)
+    assert len(runs) == len(points) * cfg["dem"]["replicates"]
+    assert sorted(set(runs.replicate)) == list(range(cfg["dem"]["replicates"]))
+    assert (table.n_replicates == cfg["dem"]["replicates"]).all()
+    velocities = pd.read_csv(workdir / "results" / "dem" / "impact_velocity.csv")
+    assert list(velocities.columns) == ["point_id", "rpm", "distribution", "class_i", "class_j", "v_lo", "v_hi",
+                                        "encounters", "n_replicates"]
+    per_pair = velocities.groupby(["point_id", "class_i", "class_j"])["encounters"].sum()
+    np.testing.assert_allclose(per_pair.to_numpy(), table.set_index(["point_id", "class_i", "class_j"])
+                               .loc[per_pair.index, "encounters"].to_numpy())
     assert (runs.particle_steps_per_s > 0).all()
     walls = pd.read_csv(workdir / "results" / "dem" / "wall_collisions.csv")
     assert set(walls.wall) == {"bowl", "impeller"}
@@ -55,7 +66,7 @@ def test_grid_tables_have_counts_for_every_class_pair(tiny_workflow):
 def test_vtk_series_open_in_pyvista(tiny_workflow):
     pyvista = pytest.importorskip("pyvista")
     workdir, _ = tiny_workflow
-    for pvd in sorted((workdir / "results" / "dem").glob("*/post/particles.pvd")):
+    for pvd in sorted((workdir / "results" / "dem").glob("*/rep*/post/particles.pvd")):
         reader = pyvista.get_reader(str(pvd))
         assert len(reader.time_values) >= 2
         reader.set_active_time_value(reader.time_values[-1])  # the first frame precedes insertion
@@ -77,7 +88,8 @@ def test_adding_an_operating_point_runs_only_that_point(tiny_workflow, root, tmp
     # one new rpm x every size distribution, and nothing for the points already computed
     counts = {line.split()[0]: int(line.split()[1]) for line in out.splitlines()
               if len(line.split()) == 2 and line.split()[1].isdigit()}
-    assert counts["dem_point"] == len(cfg["grid"]["size_distributions"]), out
+    reps = cfg["dem"]["replicates"]
+    assert counts["dem_point"] == len(cfg["grid"]["size_distributions"]) * reps, out
     # the jobs of the detailed dry run are exactly the new speed's points
     detail = snakemake(root, workdir, grown, "-n", "--cores", "2").stdout
     planned, current = set(), None
@@ -86,7 +98,27 @@ def test_adding_an_operating_point_runs_only_that_point(tiny_workflow, root, tmp
             current = line.split()[1].rstrip(":")
         elif current == "dem_point" and line.strip().startswith("wildcards:"):
             planned.add(line.split("wildcards:")[1].strip())
-    assert planned == {f"rpm=900, dist={d}" for d in cfg["grid"]["size_distributions"]}, planned
+    assert planned == {f"rpm=900, dist={d}, rep={r}" for d in cfg["grid"]["size_distributions"]
+                       for r in range(reps)}, planned
+
+
+def test_adding_a_replicate_runs_only_that_replicate(tiny_workflow, root, tmp_path):
+    workdir, configfile = tiny_workflow
+    cfg = yaml.safe_load(configfile.read_text())
+    cfg["dem"]["replicates"] += 1
+    grown = tmp_path / "more.yaml"
+    grown.write_text(yaml.safe_dump(cfg))
+    detail = snakemake(root, workdir, grown, "-n", "--cores", "2").stdout
+    planned = set()
+    current = None
+    for line in detail.splitlines():
+        if line.startswith("rule ") or line.startswith("localrule "):
+            current = line.split()[1].rstrip(":")
+        elif current == "dem_point" and line.strip().startswith("wildcards:"):
+            planned.add(line.split("wildcards:")[1].strip())
+    new = cfg["dem"]["replicates"] - 1
+    assert planned == {f"rpm={float(r):g}, dist={d}, rep={new}" for r in cfg["grid"]["impeller_rpm"]
+                       for d in cfg["grid"]["size_distributions"]}, planned
 
 
 def test_lint_is_clean(root, tiny_workflow):
@@ -125,12 +157,12 @@ def test_a_failed_point_keeps_the_finished_ones(root, tmp_path):
     workdir.mkdir()
     env = dict(__import__("os").environ, PBMDEM_LIGGGHTS=str(wrapper))
     proc = snakemake(root, workdir, configfile, "--cores", "2", "--keep-going",
-                     "results/dem/rpm600_small/collisions.csv", "results/dem/rpm600_large/collisions.csv",
+                     "results/dem/rpm600_small/rep0/collisions.csv", "results/dem/rpm600_large/rep0/collisions.csv",
                      env=env, check=False)
     assert proc.returncode != 0
     out = proc.stdout + proc.stderr
     assert "no/such/style" in out  # the log's tail reaches the user
-    good, bad = workdir / "results/dem/rpm600_small", workdir / "results/dem/rpm600_large"
+    good, bad = workdir / "results/dem/rpm600_small/rep0", workdir / "results/dem/rpm600_large/rep0"
     assert (good / "collisions.csv").exists() and (good / "summary.json").exists()
     assert not (bad / "collisions.csv").exists()
     assert not (bad / "summary.json").exists()

@@ -419,11 +419,13 @@ def replicate_mean(frame: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
     values = [c for c in frame.columns if c not in keys and c != "replicate"]
     grouped = frame.groupby(keys, sort=True, dropna=False)
     out = grouped[values].mean()
-    out.insert(0, "n_replicates", grouped["replicate"].nunique())
+    out["n_replicates"] = grouped["replicate"].nunique()
     for col in SE_COLUMNS:
         if col in values:
             out[f"{col}_se"] = grouped[col].std(ddof=1) / np.sqrt(out["n_replicates"])
-    return out.reset_index()
+    out = out.reset_index()
+    first = [c for c in frame.columns if c in out.columns]
+    return out[first + [c for c in out.columns if c not in first]]
 
 
 def read_tables(tables: list[str | Path]) -> pd.DataFrame:

@@ -331,8 +331,10 @@ def run_operating_point(cfg: dict, rpm: float, distribution: str, run_dir: str |
 def point_config(cfg: dict, distribution: str) -> dict:
     """The part of the config that determines one DEM point's result (used as rule params, so
     that editing another point or another stage does not re-run this one)."""
+    # the number of replicates decides which runs exist, not what one run computes
+    dem_cfg = {k: v for k, v in cfg["dem"].items() if k != "replicates"}
     return {
-        "granulator": cfg["granulator"], "material": cfg["material"], "dem": cfg["dem"],
+        "granulator": cfg["granulator"], "material": cfg["material"], "dem": dem_cfg,
         "size_distributions": {distribution: cfg["size_distributions"][distribution]},
     }
 

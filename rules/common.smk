@@ -40,6 +40,8 @@ def all_targets():
         f"{RESULTS}/dem/wall_collisions.csv",
         f"{RESULTS}/dem/impact_velocity.csv",
         f"{RESULTS}/dem/runs.csv",
+        f"{RESULTS}/dem/speed_response.csv",
+        f"{RESULTS}/dem/flow_development.csv",
         f"{RESULTS}/surrogate/model.skops",
         f"{RESULTS}/surrogate/metrics.csv",
         f"{RESULTS}/surrogate/parity.png",

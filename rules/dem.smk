@@ -42,3 +42,29 @@ rule collision_tables:
         "../envs/dem.yaml"
     script:
         "../workflow/scripts/collision_tables.py"
+
+
+rule speed_response:
+    input:
+        replicates=f"{RESULTS}/dem/collisions_replicates.csv",
+        runs=f"{RESULTS}/dem/runs.csv",
+        velocities=f"{RESULTS}/dem/impact_velocity.csv",
+    output:
+        table=f"{RESULTS}/dem/speed_response.csv",
+        flow=f"{RESULTS}/dem/flow_development.csv",
+        plot=report(
+            f"{RESULTS}/dem/speed_response.png",
+            caption="../workflow/report/speed_response.rst",
+            category="DEM",
+        ),
+        velocity_plot=report(
+            f"{RESULTS}/dem/impact_velocity.png",
+            caption="../workflow/report/impact_velocity.rst",
+            category="DEM",
+        ),
+    log:
+        f"{RESULTS}/logs/dem/speed_response.log",
+    conda:
+        "../envs/dem.yaml"
+    script:
+        "../workflow/scripts/speed_response.py"

@@ -72,6 +72,10 @@ rule report:
     input:
         runs=f"{RESULTS}/dem/runs.csv",
         collisions=f"{RESULTS}/dem/collisions.csv",
+        speed_response=f"{RESULTS}/dem/speed_response.csv",
+        flow_development=f"{RESULTS}/dem/flow_development.csv",
+        speed_plot=f"{RESULTS}/dem/speed_response.png",
+        velocity_plot=f"{RESULTS}/dem/impact_velocity.png",
         metrics=f"{RESULTS}/surrogate/metrics.csv",
         parity=f"{RESULTS}/surrogate/parity.png",
         metadata=f"{RESULTS}/surrogate/model.json",

@@ -200,7 +200,15 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
         intervals = pd.read_csv(res / "validation" / f"rpm{rpm}" / "pbm_dem" / "intervals.csv")
         assert (intervals.dem_collisions > 0).all()
     html = (res / "report" / "report.html").read_text()
-    assert "PBM-ANN vs coupled PBM-DEM" in html and html.count("data:image/png;base64,") >= 4
+    assert "PBM-ANN vs coupled PBM-DEM" in html and html.count("data:image/png;base64,") >= 6
+    assert "encounter rate against impeller speed" in html
+    response = pd.read_csv(res / "dem" / "speed_response.csv")
+    assert len(response) == len(cfg["grid"]["impeller_rpm"]) * len(cfg["grid"]["size_distributions"])
+    assert (response.n_replicates == cfg["dem"]["replicates"]).all()
+    assert (response.encounters_per_particle_per_s > 0).all()
+    assert (response.encounters_per_particle_per_s_se > 0).all()
+    flow = pd.read_csv(res / "dem" / "flow_development.csv")
+    assert set(flow.columns) >= {"half_difference", "half_difference_se", "within_error"}
 
 
 @pytest.mark.parametrize("kernel", ["constant", "table", "ann"])

@@ -28,7 +28,8 @@ from pbmdem.atomic import write_json, write_text
 # reported per run (counts with every snapshot vs every second one).
 SNAPSHOTS_PER_CONTACT = 2
 # Position snapshots (for encounter look-back and impact velocities) are taken every this many
-# contact snapshots by default: a gap of a quarter diameter takes far longer to open than that.
+# contact snapshots by default (dem.position_every): a gap of a quarter diameter takes far longer
+# to open than that.
 POSITION_SNAPSHOT_MULTIPLE = 4
 
 
@@ -160,12 +161,7 @@ def plan_point(cfg: dict, rpm: float, distribution: str, *, n_particles: int | N
     interval = dem_cfg.get("collision_interval", "auto")
     if interval == "auto":
         interval = max(1, int(t_c / (SNAPSHOTS_PER_CONTACT * dt)))
-    position_interval = dem_cfg.get("position_interval", "auto")
-    if position_interval == "auto":
-        position_interval = POSITION_SNAPSHOT_MULTIPLE * interval
-    if position_interval % interval:
-        raise ValueError(f"dem.position_interval = {position_interval}: must be a multiple of the contact "
-                         f"snapshot interval ({interval} steps)")
+    position_interval = int(dem_cfg.get("position_every", POSITION_SNAPSHOT_MULTIPLE)) * interval
     steps = lambda seconds: max(1, int(math.ceil(seconds / dt)))  # noqa: E731
     sampling_steps = steps(phase_time(dem_cfg, "sampling", rpm))
     sampling_steps = int(math.ceil(sampling_steps / position_interval) * position_interval)

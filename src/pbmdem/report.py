@@ -147,7 +147,9 @@ def _table(frame: pd.DataFrame, floatfmt: str = "{:.4g}") -> str:
 
 
 def build_report(*, validation_dir, rpms, grid_rpm, runs, collisions, metrics, parity, metadata, sweep,
-                 sweep_plot, html: str | Path, comparison: str | Path, model: str | Path | None = None) -> pd.DataFrame:
+                 sweep_plot, html: str | Path, comparison: str | Path, model: str | Path | None = None,
+                 speed_study: dict | None = None) -> pd.DataFrame:
+    """`speed_study`: paths of the DEM speed-response outputs (table, flow, plot, velocity_plot)."""
     table = compare(validation_dir, rpms, grid_rpm)
     write_csv(comparison, table)
     runs_df = pd.read_csv(runs)
@@ -176,6 +178,8 @@ def build_report(*, validation_dir, rpms, grid_rpm, runs, collisions, metrics, p
     for rpm in rpms:
         for caption, uri in figures(validation_dir, rpm, model):
             parts.append(f"<h3>{html_escape(caption)}</h3><img src='{uri}'>")
+    if speed_study:
+        parts += speed_study_section(speed_study)
     parts += ["<h2>Impeller-speed study (PBM-ANN)</h2>", _table(sweep_df), f"<img src='{_img_file(sweep_plot)}'>"]
     summary = met[met.get("fold", pd.Series(dtype=str)).astype(str).isin(["pooled", "mean"])] \
         if "fold" in met.columns else met
@@ -192,6 +196,37 @@ def build_report(*, validation_dir, rpms, grid_rpm, runs, collisions, metrics, p
               f"{len(coll)} class-pair rows.</p>", "</body></html>"]
     write_text(html, "\n".join(parts))
     return table
+
+
+def speed_study_section(paths: dict) -> list[str]:
+    """Encounter rate against impeller speed with replicate errors, the flow-development check
+    and the impact-velocity distributions (sizes in the tables are per particle, rates in 1/s)."""
+    response = pd.read_csv(paths["table"])
+    flow = pd.read_csv(paths["flow"])
+    cols = ["distribution", "rpm", "n_replicates", "n_particles", "encounters_per_particle_per_s",
+            "encounters_per_particle_per_s_se", "new_contacts_per_particle_per_s",
+            "new_contacts_per_particle_per_s_se", "mean_encounter_frequency_per_pair",
+            "mean_encounter_frequency_per_pair_se", "impact_velocity_median"]
+    shown = response[[c for c in cols if c in response.columns]].rename(columns={
+        "encounters_per_particle_per_s": "encounters / particle (1/s)",
+        "encounters_per_particle_per_s_se": "SE",
+        "new_contacts_per_particle_per_s": "new contacts / particle (1/s)",
+        "new_contacts_per_particle_per_s_se": "SE ",
+        "mean_encounter_frequency_per_pair": "encounter freq. per pair (1/s)",
+        "mean_encounter_frequency_per_pair_se": "SE  ",
+        "impact_velocity_median": "median impact speed (m/s)"})
+    ok = int(flow.within_error.sum())
+    return [
+        "<h2>DEM: encounter rate against impeller speed</h2>",
+        "<p>An encounter is an impact of two granules that were apart by more than "
+        "<code>dem.encounter_gap_fraction</code> of the smaller diameter since their previous contact "
+        "(docs/dem.md). Mean over DEM replicates (insertion seeds) with standard errors.</p>",
+        _table(shown), f"<img src='{_img_file(paths['plot'])}'>",
+        f"<p>Flow development: the encounter rates of the first and second halves of the sampling window "
+        f"agree within twice their replicate standard error at {ok} of {len(flow)} operating points.</p>",
+        _table(flow[["distribution", "rpm", "half_difference", "half_difference_se", "within_error"]]),
+        "<h3>Impact-velocity distributions</h3>", f"<img src='{_img_file(paths['velocity_plot'])}'>",
+    ]
 
 
 def html_escape(text: str) -> str:

@@ -15,4 +15,10 @@ report.build_report(
     sweep_plot=snakemake.input.sweep_plot,  # noqa: F821
     html=snakemake.output.html,  # noqa: F821
     comparison=snakemake.output.comparison,  # noqa: F821
+    speed_study={
+        "table": snakemake.input.speed_response,  # noqa: F821
+        "flow": snakemake.input.flow_development,  # noqa: F821
+        "plot": snakemake.input.speed_plot,  # noqa: F821
+        "velocity_plot": snakemake.input.velocity_plot,  # noqa: F821
+    },
 )

@@ -1,0 +1,136 @@
+"""The speed response of the DEM stage, with replicate error bars.
+
+From the per-replicate tables of the grid (`results/dem/collisions_replicates.csv` and
+`results/dem/runs.csv`) this module derives, per operating point:
+
+* the kernel-relevant collision rate: encounters per particle and second
+  (2 x encounters / (N x sampling time)) and the pair-weighted mean encounter frequency per pair
+  (encounters / (pairs x sampling time), summed over class pairs), each as the mean over
+  replicates with its standard error; the raw new-contact rate beside them for comparison;
+* the flow-development check: the encounter rate in the first and second halves of the sampling
+  window, their relative difference and whether it lies within twice its replicate standard error.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from pbmdem.collisions import pair_counts
+
+
+def _mean_se(frame: pd.DataFrame, keys: list[str], columns: list[str]) -> pd.DataFrame:
+    g = frame.groupby(keys, sort=True)
+    mean = g[columns].mean()
+    n = g.size()
+    se = g[columns].std(ddof=1).div(np.sqrt(n), axis=0).add_suffix("_se")
+    out = pd.concat([mean, se], axis=1)
+    out.insert(0, "n_replicates", n)
+    return out.reset_index()
+
+
+def per_replicate_rates(replicates: pd.DataFrame) -> pd.DataFrame:
+    """One row per run (point and replicate) with its whole-bed rates (from per-pair rows)."""
+    rows = []
+    for (point, rpm, dist, rep), run in replicates.groupby(["point_id", "rpm", "distribution", "replicate"]):
+        k = int(max(run.class_i.max(), run.class_j.max())) + 1
+        n = np.zeros(k)
+        diag = run[run.class_i == run.class_j]
+        n[diag.class_i.to_numpy()] = diag.n_i.to_numpy()
+        pairs = pair_counts(n)[run.class_i.to_numpy(), run.class_j.to_numpy()].sum()
+        t = float(run.sampling_time.iloc[0])
+        total = float(n.sum())
+        rows.append({
+            "point_id": point, "rpm": rpm, "distribution": dist, "replicate": rep, "n_particles": total,
+            "encounters": float(run.encounters.sum()), "collisions": float(run.collisions.sum()),
+            "encounters_per_particle_per_s": 2.0 * run.encounters.sum() / (total * t),
+            "new_contacts_per_particle_per_s": 2.0 * run.collisions.sum() / (total * t),
+            "mean_encounter_frequency_per_pair": run.encounters.sum() / (pairs * t),
+            "impact_velocity_median": float(np.average(run.impact_velocity_median.fillna(0.0),
+                                                       weights=run.encounters.clip(lower=1e-12))),
+        })
+    return pd.DataFrame(rows)
+
+
+RATE_COLUMNS = ["encounters_per_particle_per_s", "new_contacts_per_particle_per_s",
+                "mean_encounter_frequency_per_pair", "impact_velocity_median", "n_particles"]
+
+
+def speed_response(replicates: pd.DataFrame) -> pd.DataFrame:
+    """Replicate mean and standard error of the whole-bed rates per operating point."""
+    return _mean_se(per_replicate_rates(replicates), ["distribution", "rpm", "point_id"], RATE_COLUMNS)
+
+
+def flow_development(runs: pd.DataFrame) -> pd.DataFrame:
+    """First vs second half of the sampling window per point: relative difference of the
+    encounter counts (second / first - 1), its replicate standard error, and `within_error` when
+    |mean| <= 2 SE (or, for a single replicate, when it is within the Poisson error)."""
+    r = runs.copy()
+    r["half_difference"] = r.encounters_second_half / r.encounters_first_half - 1.0
+    out = _mean_se(r, ["distribution", "rpm", "point_id"], ["half_difference", "encounters_first_half",
+                                                           "encounters_second_half"])
+    poisson = np.sqrt(1.0 / out.encounters_first_half + 1.0 / out.encounters_second_half)
+    err = out.half_difference_se.where(out.n_replicates > 1, poisson)
+    out["within_error"] = out.half_difference.abs() <= 2.0 * err
+    return out
+
+
+def plot_speed_response(response: pd.DataFrame, path) -> None:
+    """Encounters per particle and second against impeller speed, one line per feed, with
+    replicate standard errors; the raw new-contact rate on a second panel."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pbmdem.atomic import atomic_path
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for dist, g in response.groupby("distribution"):
+        g = g.sort_values("rpm")
+        axes[0].errorbar(g.rpm, g.encounters_per_particle_per_s, yerr=g.encounters_per_particle_per_s_se,
+                         marker="o", capsize=3, label=dist)
+        axes[1].errorbar(g.rpm, g.new_contacts_per_particle_per_s, yerr=g.new_contacts_per_particle_per_s_se,
+                         marker="s", capsize=3, label=dist)
+    axes[0].set(xlabel="impeller speed (rpm)", ylabel="encounters per particle (1/s)",
+                title="encounters (kernel-relevant), mean ± SE")
+    axes[1].set(xlabel="impeller speed (rpm)", ylabel="new contacts per particle (1/s)",
+                title="raw new contacts (diagnostic)")
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.grid(alpha=0.3)
+        ax.legend(title="feed")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+
+def plot_impact_velocities(velocities: pd.DataFrame, path) -> None:
+    """Distribution of impact speeds (all class pairs pooled) per speed, one panel per feed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pbmdem.atomic import atomic_path
+
+    feeds = sorted(velocities.distribution.unique())
+    fig, axes = plt.subplots(1, len(feeds), figsize=(4 * len(feeds), 3.6), squeeze=False)
+    for ax, dist in zip(axes[0], feeds):
+        sub = velocities[velocities.distribution == dist]
+        for rpm, g in sub.groupby("rpm"):
+            h = g.groupby(["v_lo", "v_hi"])["encounters"].sum().reset_index()
+            h = h[h.v_lo > 0]
+            total = h.encounters.sum()
+            if total <= 0:
+                continue
+            centre = np.sqrt(h.v_lo * h.v_hi)
+            ax.step(centre, h.encounters / total, where="mid", label=f"{rpm:g} rpm")
+        ax.set(xscale="log", xlabel="impact speed (m/s)", ylabel="fraction of encounters", title=f"feed {dist}")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)

@@ -216,6 +216,21 @@ def test_collision_kernel_sums_over_velocity_bins_by_hand():
     assert plain.velocity_fractions is None
 
 
+def test_collision_kernel_equals_the_sum_over_bins_of_the_definition():
+    # beta_ij = beta0 c_ij sum_b f_ij,b psi_ij(v_b), psi from SuccessProbability.resolved
+    crit = StokesCriterion(0.05, 0.6, 3e-6, 1200.0)
+    psi = SuccessProbability("logistic", 0.02, 0.005, velocity=crit)
+    src = FakeEncounters(value=0.7, spread=1.5)
+    d = np.geomspace(1e-3, 2e-2, 12)
+    phi = np.linspace(0.0, 0.08, 12)
+    inp = kernel_input(d, phi)
+    beta = CollisionKernel(src, 2e-3, psi)(inp)
+    rates = src.encounters(d, np.ones(d.size), inp.rpm)
+    expected = 2e-3 * rates.frequency * np.sum(rates.velocity_fractions * psi.resolved(d, phi, V), axis=2)
+    np.testing.assert_allclose(beta, expected, rtol=1e-12, atol=0.0)
+    assert 0 < np.count_nonzero(beta) < beta.size       # some pairs held, some not
+
+
 def test_collision_kernel_needs_encounters_for_a_velocity_model():
     psi = SuccessProbability("step", 0.02, velocity=StokesCriterion(0.1, 0.4, 5e-6, 1000.0))
     with pytest.raises(PBMInputError, match="has no encounters"):

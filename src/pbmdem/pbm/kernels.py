@@ -122,9 +122,9 @@ class SuccessProbability:
 
     def __init__(self, model: str = "step", threshold: float = 0.02, width: float = 0.005,
                  velocity=None):
-        if velocity is not None and not hasattr(velocity, "success"):
-            raise PBMInputError(f"success velocity criterion {velocity!r} has no success(d, phi, velocities); "
-                                "allowed: None or a pbmdem.pbm.success.StokesCriterion")
+        if velocity is not None and not (hasattr(velocity, "success") and hasattr(velocity, "critical_velocity")):
+            raise PBMInputError(f"success velocity criterion {velocity!r} lacks success(d, phi, velocities) or "
+                                "critical_velocity(d, phi); allowed: None or a pbmdem.pbm.success.StokesCriterion")
         self.velocity = velocity
         if model not in self.MODELS:
             raise PBMInputError(f"success probability model = {model!r}; allowed: {list(self.MODELS)}")
@@ -245,6 +245,12 @@ class CollisionKernel(Kernel):
                  update_interval: float = 0.0):
         self.beta0 = positive("aggregation beta0", beta0)
         self.success = success if success is not None else SuccessProbability()
+        if self.success.velocity_dependent:
+            from pbmdem.impact import representative_velocities
+
+            self._speeds = representative_velocities()
+            if not np.all(np.diff(self._speeds) > 0):  # pragma: no cover - guards pbmdem.impact
+                raise PBMInputError("representative impact speeds must rise with the velocity bin")
         self._check_source(source)
         self.source = source
         self.update_interval = positive("frequency update_interval", update_interval, allow_zero=True)
@@ -292,6 +298,7 @@ class CollisionKernel(Kernel):
             if self.success.velocity_dependent:
                 rates = self.source.encounters(inp.diameters, inp.numbers, inp.rpm)
                 self._c, self._fractions = check_encounter_rates(rates, K, repr(self.source))
+                self._cumulative = np.concatenate([np.zeros((K, K, 1)), np.cumsum(self._fractions, axis=2)], axis=2)
             else:
                 c = self.source(inp.diameters, inp.numbers, inp.rpm)
                 self._c = check_frequency_matrix(c, K, repr(self.source))
@@ -302,10 +309,13 @@ class CollisionKernel(Kernel):
         if self._c is None:
             self.prepare(inp)
         if self.success.velocity_dependent:
-            from pbmdem.impact import representative_velocities
-
-            psi = self.success.resolved(inp.diameters, inp.surface_fraction, representative_velocities())
-            return self.beta0 * self._c * np.einsum("ijb,ijb->ij", self._fractions, psi)
+            # the criterion holds an impact iff its speed is below the pair's critical speed w*, and
+            # the representative speeds rise with the bin: sum_b f_b [v_b < w*] is the cumulative
+            # fraction up to the last bin below w* (same as summing success.resolved(...) * f)
+            w_star = self.success.velocity.critical_velocity(inp.diameters, inp.surface_fraction)
+            n = np.searchsorted(self._speeds, w_star, side="left")
+            held = np.take_along_axis(self._cumulative, n[:, :, None], axis=2)[:, :, 0]
+            return self.beta0 * self._c * self.success(inp.surface_fraction) * held
         if self.success.model == "always":
             return self.beta0 * self._c
         return self.beta0 * self._c * self.success(inp.surface_fraction)

@@ -113,8 +113,11 @@ class StokesCriterion:
         """(K, K) critical approach speed w*_ij (m/s): impacts slower than w* are held (0 where
         St* <= 0)."""
         d = np.asarray(d, float)
-        st1 = self.stokes_number(d[:, None], d[None, :], 1.0)  # St_v at 1 m/s, linear in w
-        return np.maximum(self.critical_stokes(d, phi), 0.0) / st1
+        key = d.tobytes()
+        if getattr(self, "_st1_key", None) != key:  # the PBM's bins do not move: cache per diameters
+            self._st1 = self.stokes_number(d[:, None], d[None, :], 1.0)  # St_v at 1 m/s, linear in w
+            self._st1_key = key
+        return np.maximum(self.critical_stokes(d, phi), 0.0) / self._st1
 
     def success(self, d, phi, velocities) -> np.ndarray:
         """(K, K, V) 1 where an impact at velocities[b] (m/s) of the pair (i, j) is held, else 0."""

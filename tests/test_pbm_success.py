@@ -407,3 +407,61 @@ def test_pbm_on_a_velocity_resolved_table_conserves_solid_volume():
     s0 = float(np.sum(state.number * grid.x))
     assert abs(float(np.sum(res.state.number * grid.x)) - s0) <= 1e-13 * s0
     assert res.state.number.sum() < state.number.sum()
+
+
+# ----------------------------------------------------------------------------- constant source, CLI
+def test_constant_frequency_with_one_impact_velocity():
+    from pbmdem.pbm import ConstantFrequency
+
+    r = ConstantFrequency(0.5, impact_velocity=0.3).encounters(D2, np.ones(2), 600.0)
+    np.testing.assert_array_equal(r.frequency, 0.5)
+    np.testing.assert_array_equal(r.velocity_fractions.argmax(axis=2), velocity_bin(0.3))
+    np.testing.assert_array_equal(r.velocity_fractions.sum(axis=2), 1.0)
+    with pytest.raises(PBMInputError, match="constant_impact_velocity"):
+        ConstantFrequency(0.5).encounters(D2, np.ones(2), 600.0)
+
+
+def test_constant_baseline_with_stokes_needs_an_impact_velocity(default_config):
+    stokes = {"aggregation": {"success": {"velocity_model": "stokes"}}}
+    with pytest.raises(PBMInputError, match=r"constant_impact_velocity = a speed in m/s \(now null\)"):
+        run_pbm(dict(default_config, pbm=stokes), None, 600.0, "fine", t_end=10.0)
+    slow = {"aggregation": {"constant_impact_velocity": 0.05, "success": {"velocity_model": "stokes"}}}
+    fast = {"aggregation": {"constant_impact_velocity": 5.0, "success": {"velocity_model": "stokes"}}}
+    d_slow = run_pbm(dict(default_config, pbm=slow), None, 600.0, "fine").summary()["d50"]
+    d_plain = run_pbm(dict(default_config, pbm={}), None, 600.0, "fine").summary()["d50"]
+    d_fast = run_pbm(dict(default_config, pbm=fast), None, 600.0, "fine").summary()["d50"]
+    # slow impacts are all held once wet (same as velocity-independent), 5 m/s impacts never are
+    assert d_slow.iloc[-1] == pytest.approx(d_plain.iloc[-1], rel=1e-12)
+    assert d_fast.iloc[-1] == pytest.approx(d_fast.iloc[0], rel=1e-12)
+
+
+def test_cli_table_run_with_velocity_table(tmp_path, root):
+    import argparse
+
+    import yaml
+
+    from pbmdem.pbm import cli
+
+    pc, pv = tmp_path / "collisions.csv", tmp_path / "impact_velocity.csv"
+    pair_table().to_csv(pc, index=False)
+    velocity_table().to_csv(pv, index=False)
+    cfg = yaml.safe_load((root / "config" / "config.yaml").read_text())
+    cfg["pbm"]["aggregation"]["success"]["velocity_model"] = "stokes"
+    cfg_path = tmp_path / "config.yaml"
+    cfg_path.write_text(yaml.safe_dump(cfg))
+    parser = argparse.ArgumentParser()
+    cli.add_cli(parser.add_subparsers(dest="command"))
+    base = ["pbm", "--config", str(cfg_path), "--kernel", "table", "--table", str(pc), "--rpm", "600",
+            "--distribution", "fine", "--out", str(tmp_path / "out")]
+    args = parser.parse_args(base)
+    with pytest.raises(PBMInputError, match="needs --velocity-table PATH"):
+        args.func(args)
+    args = parser.parse_args(base + ["--velocity-table", str(pv)])
+    assert args.func(args) == 0
+    s = pd.read_csv(tmp_path / "out" / "summary.csv")
+    assert s["total_solid_volume"].iloc[-1] == pytest.approx(s["total_solid_volume"].iloc[0], rel=1e-13)
+    assert s["number_mean_diameter"].iloc[-1] > s["number_mean_diameter"].iloc[0]
+    args = parser.parse_args(["pbm", "--config", str(cfg_path), "--kernel", "constant", "--velocity-table", str(pv),
+                              "--rpm", "600", "--out", str(tmp_path / "o2")])
+    with pytest.raises(PBMInputError, match="read with --kernel table only"):
+        args.func(args)

@@ -322,17 +322,37 @@ class CollisionKernel(Kernel):
 
 
 class ConstantFrequency:
-    """c_ij = value for every pair (1/s per pair)."""
+    """c_ij = value for every pair (1/s per pair).
 
-    def __init__(self, value: float):
+    ``impact_velocity`` (m/s, optional): one impact speed for every encounter; it enables
+    :meth:`encounters` (all encounters in the velocity bin of that speed), so that the constant
+    baseline can run with a velocity-dependent success probability.
+    """
+
+    def __init__(self, value: float, impact_velocity: float | None = None):
         self.value = positive("constant collision frequency", value)
+        self.impact_velocity = None if impact_velocity is None else \
+            positive("constant impact velocity (m/s)", impact_velocity)
 
     def __repr__(self) -> str:
-        return f"ConstantFrequency({self.value:g})"
+        vel = "" if self.impact_velocity is None else f", impact_velocity={self.impact_velocity:g}"
+        return f"ConstantFrequency({self.value:g}{vel})"
 
     def __call__(self, diameters, numbers, rpm) -> np.ndarray:
         K = np.atleast_1d(diameters).size
         return np.full((K, K), self.value)
+
+    def encounters(self, diameters, numbers, rpm):
+        """EncounterRates: c_ij = value, every encounter in the bin of ``impact_velocity``."""
+        from pbmdem.impact import N_VELOCITY_BINS, EncounterRates, velocity_bin
+
+        if self.impact_velocity is None:
+            raise PBMInputError("ConstantFrequency.encounters needs an impact velocity "
+                                "(pbm.aggregation.constant_impact_velocity, m/s)")
+        K = np.atleast_1d(diameters).size
+        f = np.zeros((K, K, N_VELOCITY_BINS))
+        f[:, :, int(velocity_bin(self.impact_velocity))] = 1.0
+        return EncounterRates(self(diameters, numbers, rpm), f)
 
 
 #: The DEM table column the PBM kernel is built on (docs/architecture.md: encounters, i.e. impacts of

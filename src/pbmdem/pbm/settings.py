@@ -38,6 +38,7 @@ DEFAULTS: dict = {
         "scheme": "cell_average",
         "beta0": 5.0e-5,
         "constant_frequency": 0.5,
+        "constant_impact_velocity": None,
         "frequency_update_interval": 1.0,
         "table_extrapolation": "clamp",
         "success": {"model": "step", "threshold": 0.02, "width": 0.005, "velocity_model": "none",
@@ -113,7 +114,12 @@ def build_model(settings: dict, source=None, rpm: float = 0.0) -> GranulationPBM
     grid = Grid(g["bins"], g["ratio"], min_diameter=g["min_diameter"])
     agg = settings["aggregation"]
     if source is None:
-        source = ConstantFrequency(agg["constant_frequency"])
+        if velocity_resolved(settings) and agg["constant_impact_velocity"] is None:
+            raise PBMInputError("pbm.aggregation.success.velocity_model = "
+                                f"{agg['success']['velocity_model']!r} needs impact velocities; the constant "
+                                "collision-frequency kernel has them only with pbm.aggregation."
+                                "constant_impact_velocity = a speed in m/s (now null)")
+        source = ConstantFrequency(agg["constant_frequency"], agg["constant_impact_velocity"])
     kernel = CollisionKernel(source, agg["beta0"], build_success(agg["success"]),
                              update_interval=agg["frequency_update_interval"])
     t0, t1, _ = process_times(settings)

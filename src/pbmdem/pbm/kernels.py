@@ -111,10 +111,11 @@ class SuccessProbability:
     p = 1 / (1 + exp(-(phi - threshold) / width)); ``"always"`` p = 1 (dry or pure-aggregation
     tests). phi = surface liquid / granule volume (see ``model.surface_fraction``).
 
-    ``velocity``: optional impact-velocity criterion (``pbmdem.pbm.success.StokesCriterion``);
-    with it the success of an impact at speed v is psi_ij(v) = p(phi_i) p(phi_j) x [criterion
-    holds at v] (:meth:`resolved`), and :class:`CollisionKernel` needs velocity-resolved
-    encounter rates from its source. Without it (default) the success is velocity-independent,
+    ``velocity``: optional impact-velocity criterion (``pbmdem.pbm.success.StokesCriterion``: it
+    holds an impact iff its speed is below ``critical_velocity(d, phi)``, and ``success(d, phi,
+    velocities)`` gives that step per speed); with it the success of an impact at speed v is
+    psi_ij(v) = p(phi_i) p(phi_j) x [criterion holds at v] (:meth:`resolved`), and
+    :class:`CollisionKernel` needs velocity-resolved encounter rates from its source. Without it (default) the success is velocity-independent,
     as in the seed study.
     """
 
@@ -238,7 +239,8 @@ class CollisionKernel(Kernel):
     If ``success.velocity_dependent``, the source must offer ``encounters(diameters, numbers,
     rpm) -> pbmdem.impact.EncounterRates`` (docs/architecture.md): c_ij is then the encounter
     frequency per pair and f_ij,b the fraction of the pair's encounters in impact-velocity bin b,
-    whose speed v_b is ``pbmdem.impact.representative_velocities()[b]``.
+    whose speed v_b is ``pbmdem.impact.representative_velocities()[b]``. A pair whose fractions
+    are all 0 (no velocity data) gets beta_ij = 0.
     """
 
     def __init__(self, source, beta0: float, success: SuccessProbability | None = None,

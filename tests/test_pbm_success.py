@@ -465,3 +465,15 @@ def test_cli_table_run_with_velocity_table(tmp_path, root):
                               "--rpm", "600", "--out", str(tmp_path / "o2")])
     with pytest.raises(PBMInputError, match="read with --kernel table only"):
         args.func(args)
+
+
+def test_single_size_table_with_velocities():
+    t = pair_table(rpms=(300.0,))
+    t = t[(t.class_i == 0) & (t.class_j == 0)]
+    vt = velocity_table()
+    vt = vt[(vt.rpm == 300.0) & (vt.class_i == 0) & (vt.class_j == 0)]
+    r = TableFrequency(t, velocity_table=vt).encounters(np.array([0.001, 0.003, 0.02]), np.ones(3), 300.0)
+    np.testing.assert_allclose(r.frequency, 0.1, rtol=1e-12)
+    for i in range(3):
+        for j in range(3):
+            np.testing.assert_allclose(r.velocity_fractions[i, j], hand_fractions(300.0, 0, 0), atol=1e-15)

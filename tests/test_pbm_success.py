@@ -388,7 +388,8 @@ def test_table_encounters_from_csv(tmp_path):
     (lambda v: v.drop(columns=["encounters"]), r"impact-velocity table lacks columns \['encounters'\]"),
     (lambda v: v.assign(encounters=-1.0), r"encounters has values \[-1\."),
     (lambda v: v.assign(v_lo=v.v_lo * 1.5), r"is not one of the project's velocity bins"),
-    (lambda v: v.assign(point_id="rpm600_fine"), r"has no row in the collision table"),
+    (lambda v: v.assign(point_id="rpm600_fine"), r"has no rows for the collision table's points"),
+    (lambda v: v.assign(class_j=np.where(v.class_j == 1, 2, v.class_j)), r"has no row in the collision table"),
     (lambda v: v.assign(encounters=np.where((v.class_i == 0) & (v.class_j == 1), 0.0, v.encounters)),
      r"pair d_i = 0.002, d_j = 0.004 has encounter_frequency_per_pair = 0.2 but no encounters"),
 ])
@@ -465,6 +466,13 @@ def test_cli_table_run_with_velocity_table(tmp_path, root):
                               "--rpm", "600", "--out", str(tmp_path / "o2")])
     with pytest.raises(PBMInputError, match="read with --kernel table only"):
         args.func(args)
+
+
+def test_velocity_rows_of_other_points_are_left_out():
+    # one point's collision table beside the grid's velocity table
+    t = pair_table(rpms=(900.0,))
+    r = TableFrequency(t, velocity_table=velocity_table()).encounters(D2, np.ones(2), 900.0)
+    np.testing.assert_allclose(r.velocity_fractions[0, 1], hand_fractions(900.0, 0, 1), atol=1e-15)
 
 
 def test_single_size_table_with_velocities():

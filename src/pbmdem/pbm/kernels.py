@@ -387,7 +387,7 @@ class TableFrequency:
 
     ``velocity_table`` (optional): the impact-velocity table (results/dem/impact_velocity.csv,
     columns ``point_id, class_i, class_j, v_lo, v_hi, encounters``), joined to ``table`` on
-    (point_id, class_i, class_j); it enables :meth:`encounters`. Per speed, the encounter counts of
+    (point_id, class_i, class_j) (rows of points absent from ``table`` are left out); it enables :meth:`encounters`. Per speed, the encounter counts of
     a pair (and of its mirror and of duplicate rows) are pooled and normalised to fractions per
     velocity bin; a table pair without encounters gets the pooled distribution of all pairs at
     that speed (its frequency is floored, not zero, see above). The fractions are interpolated
@@ -472,7 +472,12 @@ class TableFrequency:
         if missing:
             raise PBMInputError(f"collision table lacks columns {missing}, needed to join the impact-velocity "
                                 f"table on {keys}; present: {list(t.columns)}")
-        vt = velocity_table
+        # rows of other DEM points (e.g. the grid's velocity table beside one point's collision table)
+        points = set(t["point_id"].astype(str))
+        vt = velocity_table[velocity_table["point_id"].astype(str).isin(points)]
+        if vt.empty:
+            raise PBMInputError(f"impact-velocity table has no rows for the collision table's points "
+                                f"{sorted(points)[:5]}; both tables must come from the same DEM runs")
         n = vt["encounters"].to_numpy(float)
         if not np.all(np.isfinite(n) & (n >= 0)):
             raise PBMInputError(f"impact-velocity table encounters has values {n[~(np.isfinite(n) & (n >= 0))][:5]}; "

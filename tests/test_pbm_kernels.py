@@ -33,8 +33,8 @@ def make_table(rpms=(300.0, 900.0), sym_law=True):
             for b in range(a, 3):
                 di, dj = D[a], D[b]
                 f = 1e-3 * (rpm / 300.0) * (di * dj / 4e-6) ** 1.2
-                rows.append({"rpm": rpm, "distribution": "fine", "class_i": a, "class_j": b, "d_i": di,
-                             "d_j": dj, "frequency_per_pair": f})
+                rows.append({"point_id": f"rpm{rpm:g}_fine", "rpm": rpm, "distribution": "fine", "class_i": a,
+                             "class_j": b, "d_i": di, "d_j": dj, "encounter_frequency_per_pair": f})
     return pd.DataFrame(rows)
 
 
@@ -77,20 +77,20 @@ def test_table_averages_duplicate_pairs_and_floors_zeros():
     t = make_table(rpms=(300.0,))
     t2 = t.copy()
     t2["distribution"] = "coarse"
-    t2["frequency_per_pair"] *= 3.0
+    t2["encounter_frequency_per_pair"] *= 3.0
     src = TableFrequency(pd.concat([t, t2]))
     np.testing.assert_allclose(src(D, np.ones(3), 300.0), 2.0 * law(D[:, None], D[None, :], 300.0), rtol=1e-12)
     t3 = t.copy()
-    t3.loc[t3.index[-1], "frequency_per_pair"] = 0.0      # the (4 mm, 4 mm) pair saw no collision
+    t3.loc[t3.index[-1], "encounter_frequency_per_pair"] = 0.0      # the (4 mm, 4 mm) pair saw no collision
     c = TableFrequency(t3, zero_floor=1e-3)(D, np.ones(3), 300.0)
-    assert c[2, 2] == pytest.approx(1e-3 * t3["frequency_per_pair"][t3["frequency_per_pair"] > 0].min())
+    assert c[2, 2] == pytest.approx(1e-3 * t3["encounter_frequency_per_pair"][t3["encounter_frequency_per_pair"] > 0].min())
 
 
 def test_table_from_csv_selects_distribution(tmp_path):
     t = make_table()
     t2 = t.copy()
     t2["distribution"] = "coarse"
-    t2["frequency_per_pair"] *= 5.0
+    t2["encounter_frequency_per_pair"] *= 5.0
     p = tmp_path / "collisions.csv"
     pd.concat([t, t2]).to_csv(p, index=False)
     src = TableFrequency.from_csv(p, distribution="coarse")
@@ -100,8 +100,8 @@ def test_table_from_csv_selects_distribution(tmp_path):
 
 
 @pytest.mark.parametrize("mutate,match", [
-    (lambda t: t.drop(columns=["frequency_per_pair"]), r"lacks columns \['frequency_per_pair'\]"),
-    (lambda t: t.assign(frequency_per_pair=-1.0), r"frequency_per_pair has values \[-1\."),
+    (lambda t: t.drop(columns=["encounter_frequency_per_pair"]), r"lacks columns \['encounter_frequency_per_pair'\]"),
+    (lambda t: t.assign(encounter_frequency_per_pair=-1.0), r"encounter_frequency_per_pair has values \[-1\."),
     (lambda t: t.assign(d_i=0.0), r"column d_i has values \[0\."),
     (lambda t: t.iloc[1:], r"no row for the pair d_i = 0.002, d_j = 0.002"),
 ])

@@ -211,21 +211,35 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
     assert set(flow.columns) >= {"half_difference", "half_difference_se", "within_error"}
 
 
-@pytest.mark.parametrize("kernel", ["constant", "table", "ann"])
+@pytest.mark.parametrize("kernel", ["constant", "table", "table_stokes", "ann"])
 def test_pbm_cli_with_each_kernel(tiny_workflow, tmp_path, kernel, capsys):
     from pbmdem.cli import main
 
     workdir, configfile = tiny_workflow
     res = workdir / "results"
-    args = ["pbm", "--config", str(configfile), "--kernel", kernel, "--rpm", "900", "--distribution", "large",
-            "--out", str(tmp_path / kernel)]
-    if kernel == "table":
+    if kernel == "table_stokes":
+        # the DEM tables with their impact velocities, success by the Stokes criterion
+        cfg = yaml.safe_load(Path(configfile).read_text())
+        cfg.setdefault("pbm", {}).setdefault("aggregation", {})["success"] = {"velocity_model": "stokes"}
+        configfile = tmp_path / "stokes.yaml"
+        configfile.write_text(yaml.safe_dump(cfg))
+    args = ["pbm", "--config", str(configfile), "--kernel", kernel.split("_")[0], "--rpm", "900",
+            "--distribution", "large", "--out", str(tmp_path / kernel)]
+    if kernel.startswith("table"):
         args += ["--table", str(res / "dem" / "collisions.csv")]
+    if kernel == "table_stokes":
+        args += ["--velocity-table", str(res / "dem" / "impact_velocity.csv")]
     if kernel == "ann":
         args += ["--model", str(res / "surrogate" / "model.skops")]
     assert main(args) == 0, capsys.readouterr().err
     out = json.loads(capsys.readouterr().out)
     summary = pd.read_csv(tmp_path / kernel / "summary.csv")
     assert out["d50_final_m"] == pytest.approx(summary.d50.iloc[-1])
-    assert summary.d50.iloc[-1] > summary.d50.iloc[0]
+    solid = summary.total_solid_volume
+    assert abs(solid.iloc[-1] - solid.iloc[0]) <= 1e-12 * solid.iloc[0]
+    if kernel == "table_stokes":
+        # how many encounters the Stokes criterion holds depends on the DEM's impact speeds
+        assert summary.d50.iloc[-1] >= summary.d50.iloc[0]
+    else:
+        assert summary.d50.iloc[-1] > summary.d50.iloc[0]
     assert (tmp_path / kernel / "psd.png").exists()

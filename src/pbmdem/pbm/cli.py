@@ -1,7 +1,8 @@
 """``pbmdem pbm`` subcommand: one batch granulation run of the PBM (wired in by ``add_cli``).
 
     pbmdem pbm --config config/config.yaml --kernel constant --rpm 600 --distribution fine --out DIR
-    pbmdem pbm --config ... --kernel table --table results/dem/collisions.csv ...
+    pbmdem pbm --config ... --kernel table --table results/dem/collisions.csv \
+        [--velocity-table results/dem/impact_velocity.csv] ...
     pbmdem pbm --config ... --kernel ann --model results/surrogate/model.skops ...
 """
 
@@ -19,6 +20,9 @@ def add_cli(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--kernel", choices=["constant", "table", "ann"], default="constant",
                    help="collision-frequency source: constant c_ij, DEM collision table, or the ANN surrogate")
     p.add_argument("--table", type=Path, help="collision table CSV (with --kernel table)")
+    p.add_argument("--velocity-table", type=Path, default=None,
+                   help="impact-velocity table CSV (results/dem/impact_velocity.csv; with --kernel table); "
+                        "needed when pbm.aggregation.success.velocity_model is not 'none'")
     p.add_argument("--model", type=Path, help="surrogate model file (with --kernel ann)")
     p.add_argument("--rpm", required=True, type=float, help="impeller speed (1/min)")
     p.add_argument("--distribution", default=None, help="size distribution name (default: first of the grid)")
@@ -27,23 +31,31 @@ def add_cli(subparsers) -> argparse.ArgumentParser:
     return p
 
 
-def make_source(kind: str, config: dict, table=None, model=None, distribution: str | None = None):
+def make_source(kind: str, config: dict, table=None, model=None, distribution: str | None = None,
+                velocity_table=None):
     """The collision-frequency source named on the command line."""
     from .errors import PBMInputError
-    from .settings import resolve_settings
+    from .settings import resolve_settings, velocity_resolved
 
     settings = resolve_settings(config)
+    if velocity_table is not None and kind != "table":
+        raise PBMInputError(f"--velocity-table {velocity_table} is read with --kernel table only, not --kernel {kind}")
+    if kind == "table" and velocity_table is None and velocity_resolved(settings):
+        raise PBMInputError("pbm.aggregation.success.velocity_model = "
+                            f"{settings['aggregation']['success']['velocity_model']!r} needs impact velocities: "
+                            "--kernel table needs --velocity-table PATH (results/dem/impact_velocity.csv)")
     if kind == "constant":
         from .kernels import ConstantFrequency
 
-        return ConstantFrequency(settings["aggregation"]["constant_frequency"])
+        return ConstantFrequency(settings["aggregation"]["constant_frequency"],
+                                 settings["aggregation"]["constant_impact_velocity"])
     if kind == "table":
         if table is None:
             raise PBMInputError("--kernel table needs --table PATH (a DEM collision table CSV)")
         from .kernels import TableFrequency
 
         # one distribution's rows: the grid's distributions have different class sizes
-        return TableFrequency.from_csv(table, distribution=distribution,
+        return TableFrequency.from_csv(table, distribution=distribution, velocity_path=velocity_table,
                                        extrapolation=settings["aggregation"]["table_extrapolation"])
     if kind == "ann":
         if model is None:
@@ -61,7 +73,7 @@ def run_cli(args) -> int:
 
     config = load_config(args.config)
     distribution = args.distribution or config["grid"]["size_distributions"][0]
-    source = make_source(args.kernel, config, args.table, args.model, distribution)
+    source = make_source(args.kernel, config, args.table, args.model, distribution, args.velocity_table)
     result = run_pbm(config, source, args.rpm, distribution)
     result.info["kernel_source"] = args.kernel
     paths = result.save(args.out)

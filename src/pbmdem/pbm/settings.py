@@ -21,6 +21,7 @@ from .grid import Grid, volume_of
 from .kernels import CollisionKernel, ConstantFrequency, SuccessProbability
 from .model import GranulationPBM, SolverSettings, State
 from .processes import Consolidation, LiquidAddition
+from .success import StokesCriterion
 
 _REPO = Path(__file__).resolve().parents[3]
 SCHEMA_PATH = _REPO / "workflow" / "schemas" / "pbm.schema.yaml"
@@ -37,9 +38,12 @@ DEFAULTS: dict = {
         "scheme": "cell_average",
         "beta0": 5.0e-5,
         "constant_frequency": 0.5,
+        "constant_impact_velocity": None,
         "frequency_update_interval": 1.0,
         "table_extrapolation": "clamp",
-        "success": {"model": "step", "threshold": 0.02, "width": 0.005},
+        "success": {"model": "step", "threshold": 0.02, "width": 0.005, "velocity_model": "none",
+                    "stokes": {"binder_viscosity": 0.1, "restitution": 0.4, "asperity_height": 5.0e-6,
+                               "granule_density": 1000.0}},
     },
     "solver": {"method": "heun", "safety": 0.5, "rtol": 1.0e-3, "atol": 1.0e-6, "max_step": 5.0,
                "max_overflow_fraction": 1.0e-6},
@@ -85,16 +89,38 @@ def process_times(settings: dict) -> tuple[float, float, float]:
     return t0, t1, t1 + float(p["wet_massing_time"])
 
 
+def build_success(succ: dict) -> SuccessProbability:
+    """SuccessProbability of a resolved ``pbm.aggregation.success`` section: the surface-liquid
+    condition, times the Stokes criterion if ``velocity_model: stokes``."""
+    velocity = None
+    if succ["velocity_model"] == "stokes":
+        st = succ["stokes"]
+        velocity = StokesCriterion(st["binder_viscosity"], st["restitution"], st["asperity_height"],
+                                   st["granule_density"])
+    elif succ["velocity_model"] != "none":
+        raise PBMInputError(f"pbm.aggregation.success.velocity_model = {succ['velocity_model']!r}; "
+                            "allowed: 'none', 'stokes'")
+    return SuccessProbability(succ["model"], succ["threshold"], succ["width"], velocity=velocity)
+
+
+def velocity_resolved(settings: dict) -> bool:
+    """True if the resolved settings' success probability needs impact velocities."""
+    return settings["aggregation"]["success"]["velocity_model"] != "none"
+
+
 def build_model(settings: dict, source=None, rpm: float = 0.0) -> GranulationPBM:
     """GranulationPBM from resolved settings; ``source`` defaults to ConstantFrequency."""
     g = settings["grid"]
     grid = Grid(g["bins"], g["ratio"], min_diameter=g["min_diameter"])
     agg = settings["aggregation"]
     if source is None:
-        source = ConstantFrequency(agg["constant_frequency"])
-    succ = agg["success"]
-    kernel = CollisionKernel(source, agg["beta0"], SuccessProbability(succ["model"], succ["threshold"],
-                                                                      succ["width"]),
+        if velocity_resolved(settings) and agg["constant_impact_velocity"] is None:
+            raise PBMInputError("pbm.aggregation.success.velocity_model = "
+                                f"{agg['success']['velocity_model']!r} needs impact velocities; the constant "
+                                "collision-frequency kernel has them only with pbm.aggregation."
+                                "constant_impact_velocity = a speed in m/s (now null)")
+        source = ConstantFrequency(agg["constant_frequency"], agg["constant_impact_velocity"])
+    kernel = CollisionKernel(source, agg["beta0"], build_success(agg["success"]),
                              update_interval=agg["frequency_update_interval"])
     t0, t1, _ = process_times(settings)
     liquid = LiquidAddition(settings["liquid_addition"]["rate"], t0, t1,

@@ -1,0 +1,125 @@
+"""Velocity-dependent aggregation success: the viscous Stokes criterion of wet granule impacts.
+
+Ennis, Tardos & Pfeffer (1991, Powder Technol. 65:257) and Liu, Litster, Iveson & Ennis (2000,
+AIChE J. 46:529): two granules covered by a binder layer of thickness h meet at relative normal
+approach speed w. The viscous lubrication force of the layer, F = 6 pi mu a*^2 (dx/dt) / x at
+gap x (Reynolds, two spheres of reduced radius a* = a_i a_j / (a_i + a_j)), decelerates the relative
+motion of the reduced mass m* = m_i m_j / (m_i + m_j). Integrating m* dw = -6 pi mu a*^2 dx / x from
+the gap at which the layers meet to the gap at which the surface asperities meet, the approach is
+stopped before the solids touch if
+
+    St_v = m* w / (6 pi mu a*^2) < ln(h / h_a).
+
+If the asperities do touch, the granules rebound with restitution e and the layer dissipates on
+separation too; they stay together if St_v < St* = (1 + 1/e) ln(h / h_a) (Ennis et al. 1991, the
+rebound criterion used here). In the harmonic means of the pair, m~ = 2 m_i m_j / (m_i + m_j) and
+d~ = 2 d_i d_j / (d_i + d_j) (so m* = m~/2, a* = d~/4):
+
+    St_v = 4 m~ w / (3 pi mu d~^2) = 8 m~ u0 / (3 pi mu d~^2),  u0 = w / 2,
+
+which is the form of Liu et al. (2000) with their u0 = half the relative collision velocity, and
+for equal granules of radius a and density rho the form 8 rho u0 a / (9 mu) of Ennis et al. (1991).
+This module uses w, the relative normal approach speed (docs/architecture.md), throughout.
+
+Pair layers: the layers of granules i and j first meet at the gap h_i + h_j and the asperities at
+2 h_a, so h / h_a of a pair is (h_i + h_j) / (2 h_a). A layer no thicker than the asperities
+(h <= h_a) gives St* <= 0: no impact of that pair is held at any speed.
+
+Layer thickness from the PBM: a granule of diameter d whose surface liquid is the volume fraction
+phi of the granule carries a shell of thickness h = d/2 (1 - (1 - phi)^(1/3)) (about phi d / 6 for
+thin layers). d is the PBM size coordinate (the solid-equivalent diameter, which is also the DEM
+particle diameter), and the mass is m = rho_g pi d^3 / 6 with rho_g the granule density (the DEM
+material density). Every quantity is in SI units; the criterion depends only on the dimensionless
+groups St_v, h/h_a and e, so any consistent unit system gives the same answer.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .errors import PBMInputError, positive
+
+
+def harmonic_mean(a, b) -> np.ndarray:
+    """2 a b / (a + b) elementwise (0 where a + b = 0)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    s = a + b
+    return np.divide(2.0 * a * b, s, out=np.zeros(np.broadcast(a, b).shape), where=s > 0)
+
+
+def sphere_mass(d, density: float) -> np.ndarray:
+    """Mass (kg) of spheres of diameter d (m) and density (kg/m3)."""
+    return density * math.pi / 6.0 * np.asarray(d, float) ** 3
+
+
+def viscous_stokes_number(d_i, d_j, w, viscosity: float, density: float) -> np.ndarray:
+    """St_v = 4 m~ w / (3 pi mu d~^2) of granules of diameters d_i, d_j (m) and density (kg/m3)
+    meeting at relative normal approach speed w (m/s) through a binder of viscosity mu (Pa s).
+    Broadcasts over d_i, d_j and w."""
+    m = harmonic_mean(sphere_mass(d_i, density), sphere_mass(d_j, density))
+    d = harmonic_mean(d_i, d_j)
+    return 4.0 * m * np.asarray(w, float) / (3.0 * math.pi * viscosity * d ** 2)
+
+
+def layer_thickness(d, phi) -> np.ndarray:
+    """Thickness (m) of a surface-liquid shell that is the volume fraction phi (0 <= phi < 1) of a
+    granule of diameter d (m): d/2 (1 - (1 - phi)^(1/3))."""
+    phi = np.clip(np.asarray(phi, float), 0.0, 1.0)
+    return 0.5 * np.asarray(d, float) * -np.expm1(np.log1p(-phi) / 3.0)
+
+
+def critical_stokes_number(h, asperity_height: float, restitution: float) -> np.ndarray:
+    """St* = (1 + 1/e) ln(h / h_a) (Ennis et al. 1991); h (m) the layer thickness of the pair,
+    h_a (m) the asperity height. -inf where h = 0 (no layer: nothing is held)."""
+    h = np.asarray(h, float)
+    with np.errstate(divide="ignore"):
+        return (1.0 + 1.0 / restitution) * np.log(h / asperity_height)
+
+
+class StokesCriterion:
+    """Success of an impact: St_v(w) < St* (a step in the approach speed).
+
+    ``viscosity``: binder viscosity mu (Pa s); ``restitution``: e of the solid (asperity) contact;
+    ``asperity_height``: h_a (m); ``density``: granule density rho_g (kg/m3).
+
+    The step is evaluated at one speed per velocity bin (the bin's representative speed), so the
+    success of a pair is the fraction of its encounters in the bins whose speed is below the pair's
+    critical speed w* = St* 6 pi mu a*^2 / m*.
+    """
+
+    def __init__(self, viscosity: float, restitution: float, asperity_height: float, density: float):
+        self.viscosity = positive("success stokes binder_viscosity (Pa s)", viscosity)
+        self.restitution = positive("success stokes restitution", restitution)
+        if self.restitution > 1:
+            raise PBMInputError(f"success stokes restitution = {restitution!r}; allowed: 0 < e <= 1")
+        self.asperity_height = positive("success stokes asperity_height (m)", asperity_height)
+        self.density = positive("success stokes granule_density (kg/m3)", density)
+
+    def __repr__(self) -> str:
+        return (f"StokesCriterion(viscosity={self.viscosity:g} Pa s, restitution={self.restitution:g}, "
+                f"asperity_height={self.asperity_height:g} m, density={self.density:g} kg/m3)")
+
+    def stokes_number(self, d_i, d_j, w) -> np.ndarray:
+        return viscous_stokes_number(d_i, d_j, w, self.viscosity, self.density)
+
+    def critical_stokes(self, d, phi) -> np.ndarray:
+        """(K, K) St* of every pair of bins with diameters d (m) and surface-liquid fractions phi."""
+        h = layer_thickness(d, phi)
+        return critical_stokes_number(0.5 * (h[:, None] + h[None, :]), self.asperity_height, self.restitution)
+
+    def critical_velocity(self, d, phi) -> np.ndarray:
+        """(K, K) critical approach speed w*_ij (m/s): impacts slower than w* are held (0 where
+        St* <= 0)."""
+        d = np.asarray(d, float)
+        key = d.tobytes()
+        if getattr(self, "_st1_key", None) != key:  # the PBM's bins do not move: cache per diameters
+            self._st1 = self.stokes_number(d[:, None], d[None, :], 1.0)  # St_v at 1 m/s, linear in w
+            self._st1_key = key
+        return np.maximum(self.critical_stokes(d, phi), 0.0) / self._st1
+
+    def success(self, d, phi, velocities) -> np.ndarray:
+        """(K, K, V) 1 where an impact at velocities[b] (m/s) of the pair (i, j) is held, else 0."""
+        w = np.asarray(velocities, float)
+        return (w[None, None, :] < self.critical_velocity(d, phi)[:, :, None]).astype(float)

@@ -1,4 +1,4 @@
-"""Parity plot of held-out predictions (DEM vs model, log-log, coloured by impeller speed)."""
+"""Parity plot of held-out encounter-frequency predictions (DEM vs model, log-log, coloured by impeller speed)."""
 
 from __future__ import annotations
 
@@ -52,13 +52,17 @@ def parity_plot(predictions: pd.DataFrame, path: str | os.PathLike, metrics: pd.
         ax.set_xlim(lo, hi)
         ax.set_ylim(lo, hi)
         ax.set_aspect("equal")
-        ax.set_xlabel("DEM collision frequency per pair (1/s)")
+        ax.set_xlabel("DEM encounter frequency per pair (1/s)")
         ax.set_ylabel("predicted (held-out runs) (1/s)")
         title = MODEL_LABELS.get(m, m)
         if metrics is not None:
             row = metrics[(metrics["model"] == m) & (metrics["fold"] == "pooled")]
+            if "target" in row:
+                row = row[row["target"] == "encounter_frequency"]
             if len(row):
                 title += f"\nR2(log10) {row['r2_log10'].iloc[0]:.3f}, MAE {row['mae_log10'].iloc[0]:.3f} dec"
+                if "noise_floor_r2_log10" in row and np.isfinite(row["noise_floor_r2_log10"].iloc[0]):
+                    title += f"\n(replicate noise floor R2 {row['noise_floor_r2_log10'].iloc[0]:.3f})"
         ax.set_title(title, fontsize=10)
         ax.grid(True, which="both", lw=0.3, alpha=0.5)
     axes[0][0].legend(title="impeller", fontsize=8, loc="upper left")

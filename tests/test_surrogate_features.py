@@ -48,7 +48,7 @@ def one_run(diameters=(0.002, 0.003, 0.004), numbers=(600, 300, 100), rpm=600, p
             rows.append(dict(point_id=pid, rpm=rpm, distribution="x", class_i=i, class_j=j,
                              d_i=diameters[i], d_j=diameters[j], n_i=numbers[i], n_j=numbers[j],
                              n_total=n_total, collisions=c, sampling_time=0.2, frequency=c / 0.2,
-                             frequency_per_pair=c / (pairs * 0.2), n_replicates=2, encounters=e,
+                             frequency_per_pair=c / (pairs * 0.2) if pairs else np.nan, n_replicates=2, encounters=e,
                              encounter_frequency_per_pair=e / (pairs * 0.2) if pairs else np.nan,
                              encounter_frequency_per_pair_se=0.1 * e / (pairs * 0.2) if pairs else np.nan,
                              impact_velocity_median=0.2))
@@ -220,3 +220,20 @@ def test_lognormal_fit_recovers_known_law():
     m, s = velocity_law(0.002, 0.004, 600)
     assert 10 ** m == pytest.approx(0.12 * 2 * math.pi * DEFAULT_IMPELLER_RADIUS * 600 / 60 * 0.5 ** 0.5)
     assert s == pytest.approx(0.30)
+
+
+def test_rows_without_pairs_or_finite_frequency_are_dropped_with_a_warning():
+    # a class with a single particle has no pair on the diagonal: the DEM table has NaN there
+    t = one_run(numbers=(600, 300, 1))
+    assert np.isnan(t.loc[5, "encounter_frequency_per_pair"])
+    with pytest.warns(UserWarning, match="without particle pairs"):
+        data = prepare_training_table(t)
+    assert len(data) == 5 and np.isfinite(data[TARGET_NAME]).all()
+    bad = one_run()
+    bad.loc[2, "encounter_frequency_per_pair"] = np.inf
+    with pytest.warns(UserWarning, match="non-finite encounter_frequency_per_pair"):
+        assert len(prepare_training_table(bad)) == 5
+    with pytest.raises(CollisionTableError, match="encounter_frequency_per_pair"):
+        prepare_training_table(one_run().drop(columns=["encounter_frequency_per_pair"]))
+    with pytest.raises(CollisionTableError, match="n_replicates"):
+        prepare_training_table(one_run().assign(n_replicates=0))

@@ -236,7 +236,9 @@ def prepare_training_table(table: pd.DataFrame, zero_policy: str = "drop") -> pd
     """
     if zero_policy not in ZERO_POLICIES:
         raise ValueError(f"zero_policy must be one of {ZERO_POLICIES}, got {zero_policy!r}")
-    check_table(table, FEATURE_SOURCE_COLUMNS + ("encounters", "sampling_time", TARGET_COLUMN))
+    check_table(table, FEATURE_SOURCE_COLUMNS + ("encounters", "sampling_time"))
+    if TARGET_COLUMN not in table.columns:
+        raise CollisionTableError(f"collision table lacks column(s) {[TARGET_COLUMN]}")
     out = table.copy()
     pairs = pairs_in_row(out)
     fpp = pd.to_numeric(out[TARGET_COLUMN], errors="coerce").to_numpy(float)

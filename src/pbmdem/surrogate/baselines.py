@@ -1,4 +1,4 @@
-"""Baselines for the collision-frequency surrogate, evaluated on the same grouped folds.
+"""Baselines for the encounter surrogate, evaluated on the same grouped folds.
 
 * :class:`HGBBaseline`: ``HistGradientBoostingRegressor`` on the surrogate's features and target
   (log10 frequency per pair).

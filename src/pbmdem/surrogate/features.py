@@ -1,4 +1,4 @@
-"""Features and target of the collision-frequency surrogate.
+"""Features and target of the encounter surrogate.
 
 Input is the aggregated collision table of ``docs/architecture.md`` (one row per unordered class
 pair and DEM run, ``point_id`` identifies the run). Every row becomes one sample with the

@@ -21,7 +21,7 @@ import pandas as pd
 from scipy.optimize import minimize
 from scipy.special import log_ndtr, ndtr
 
-from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES
+from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, representative_velocities
 
 from .features import CollisionTableError
 
@@ -37,9 +37,8 @@ SIGMA_BOUNDS = (0.05, 3.0)
 
 #: log10 of the inner bin edges; bin 0 starts at -inf (v -> 0), the last bin ends at +inf.
 _LOG_EDGES = np.concatenate([[-np.inf], np.log10(VELOCITY_EDGES[1:-1]), [np.inf]])
-_LOG_CENTRES = np.log10(np.where(VELOCITY_EDGES[:-1] > 0,
-                                 np.sqrt(np.maximum(VELOCITY_EDGES[:-1], VELOCITY_EDGES[1]) * VELOCITY_EDGES[1:]),
-                                 0.5 * VELOCITY_EDGES[1]))
+#: log10 of one representative speed per bin (start values of the fit).
+_LOG_CENTRES = np.log10(representative_velocities())
 
 
 def attach_velocity_bins(table: pd.DataFrame, velocity: pd.DataFrame, source: str = "impact-velocity table") -> pd.DataFrame:

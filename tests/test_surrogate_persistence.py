@@ -17,12 +17,14 @@ from pbmdem.surrogate import (
     save_surrogate,
 )
 from pbmdem.surrogate.persistence import ALLOWED_TYPES, schema_types, sha256_file
-from pbmdem.surrogate.synthetic import make_synthetic_table
+from pbmdem.surrogate.persistence import FORMAT_VERSION
+from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables
+from pbmdem.surrogate.velocity import attach_velocity_bins
 
 
 @pytest.fixture(scope="module")
 def table():
-    return make_synthetic_table(rpms=(300, 600, 900), seed=4)
+    return attach_velocity_bins(*make_synthetic_tables(rpms=(300, 600, 900), seed=4))
 
 
 @pytest.fixture(scope="module")
@@ -52,6 +54,15 @@ def test_round_trip_identical_predictions(fitted, saved, table):
                                   loaded.frequency_matrix(d, n, 600, check_domain=False))
     assert loaded.get_params() == fitted.get_params()
     assert loaded.feature_ranges() == fitted.feature_ranges()
+    # the impact-velocity model round-trips too
+    assert loaded.has_velocity_model() and len(loaded.velocity_estimators_) == len(fitted.velocity_estimators_)
+    for x, y in zip(fitted.predict_velocity(table, return_std=True), loaded.predict_velocity(table, return_std=True)):
+        np.testing.assert_array_equal(x, y)
+    ea = fitted.encounters(d, n, 600, check_domain=False)
+    eb = loaded.encounters(d, n, 600, check_domain=False)
+    np.testing.assert_array_equal(ea.frequency, eb.frequency)
+    np.testing.assert_array_equal(ea.velocity_fractions, eb.velocity_fractions)
+    assert loaded.velocity_best_params_ == fitted.velocity_best_params_
 
     meta = json.loads(meta_path.read_text())
     assert meta["model_sha256"] == sha256_file(model)
@@ -61,6 +72,29 @@ def test_round_trip_identical_predictions(fitted, saved, table):
     assert {"sklearn", "numpy", "skops"} <= set(meta["versions"])
     assert meta["cv_scores"]["mlp"]["pooled_r2_log10"] == 0.9
     assert meta["cv_scores"]["mlp"]["nan_value"] is None  # strict JSON, no NaN
+    assert meta["format_version"] == FORMAT_VERSION == 2
+    assert meta["target"].startswith("log10_encounter_frequency_per_pair")
+    assert meta["n_velocity_rows"] == len(table) and len(meta["velocity_edges"]) == 18
+
+
+def test_frequency_only_model_round_trips(tmp_path):
+    t = make_synthetic_table(rpms=(300, 600, 900), seed=4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = CollisionSurrogate(hidden_layer_sizes=((4,),), alpha=(0.1,), ensemble_size=2, max_iter=300).fit(t)
+    save_surrogate(m, tmp_path / "model.skops")
+    loaded = load_surrogate(tmp_path / "model.skops")
+    assert not loaded.has_velocity_model()
+    np.testing.assert_array_equal(m.predict(t), loaded.predict(t))
+
+
+def test_other_velocity_bins_rejected(saved):
+    model, meta_path = saved
+    meta = json.loads(meta_path.read_text())
+    meta["velocity_edges"] = meta["velocity_edges"][:-1]
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(IncompatibleVersionError, match="VELOCITY_EDGES"):
+        load_surrogate(model)
 
 
 def test_model_file_holds_only_allowed_types(saved):
@@ -130,3 +164,16 @@ def test_types_outside_allow_list_rejected(saved):
 def test_unfitted_cannot_be_saved(tmp_path):
     with pytest.raises(ValueError, match="fitted"):
         save_surrogate(CollisionSurrogate(), tmp_path / "m.skops")
+
+
+def test_version_1_layout_rejected(fitted, saved):
+    # a format-1 file (a bare list of frequency pipelines) with a matching hash is refused clearly
+    from pbmdem.surrogate import SurrogateLoadError
+
+    model, meta_path = saved
+    sio.dump(list(fitted.estimators_), model)
+    meta = json.loads(meta_path.read_text())
+    meta["model_sha256"] = sha256_file(model)
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(SurrogateLoadError, match="frequency and velocity pipelines"):
+        load_surrogate(model)

@@ -21,7 +21,8 @@ from pbmdem.surrogate.settings import (
     impeller_radius_from,
     resolve_settings,
 )
-from pbmdem.surrogate.synthetic import make_synthetic_table
+from pbmdem.impact import N_VELOCITY_BINS
+from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables
 from pbmdem.surrogate.train import train_and_report
 
 REPO = Path(__file__).resolve().parents[1]
@@ -65,48 +66,71 @@ def test_build_surrogate_from_settings():
 
 
 def test_train_and_report_writes_outputs(tmp_path):
-    table = make_synthetic_table(rpms=(300, 600, 900), seed=7)
-    table.loc[3, ["collisions", "frequency", "frequency_per_pair"]] = 0.0  # dropped with a warning
+    table, velocity = make_synthetic_tables(rpms=(300, 600, 900), seed=7)
+    table.loc[3, ["encounters", "encounter_frequency_per_pair"]] = 0.0  # dropped with a warning
+    velocity.loc[(velocity["point_id"] == table.loc[3, "point_id"]) & (velocity["class_i"] == table.loc[3, "class_i"])
+                 & (velocity["class_j"] == table.loc[3, "class_j"]), "encounters"] = 0.0
     csv = tmp_path / "collisions.csv"
+    vcsv = tmp_path / "impact_velocity.csv"
     table.to_csv(csv, index=False)
+    velocity.to_csv(vcsv, index=False)
     out = tmp_path / "surrogate"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        meta = train_and_report(csv, out / "model.skops", settings={"surrogate": TINY})
+        meta = train_and_report(csv, out / "model.skops", settings={"surrogate": TINY}, velocity_table=vcsv)
     for name in ("model.skops", "model.json", "metrics.csv", "parity.png"):
         assert (out / name).stat().st_size > 0
     metrics = pd.read_csv(out / "metrics.csv", dtype={"fold": str})
-    assert list(metrics.columns[:2]) == ["model", "fold"]
-    assert {"r2_log10", "mae_log10"} <= set(metrics.columns)
-    assert set(metrics["model"]) == {"mlp", "hgb", "physical"}
-    assert len(metrics) == 3 * (3 + 2)  # 3 folds + pooled + mean, per model
+    assert list(metrics.columns[:3]) == ["target", "model", "fold"]
+    assert {"r2_log10", "mae_log10", "noise_floor_r2_log10", "tv_distance"} <= set(metrics.columns)
+    freq = metrics[metrics["target"] == "encounter_frequency"]
+    vel = metrics[metrics["target"] == "impact_velocity"]
+    assert set(freq["model"]) == {"mlp", "hgb", "physical"} and set(vel["model"]) == {"mlp", "physical"}
+    assert len(freq) == 3 * (3 + 2) and len(vel) == 2 * (3 + 2)  # 3 folds + pooled + mean, per model
+    # the noise floor stands next to the grouped-CV R2 of every model
+    assert freq[freq["fold"] == "pooled"]["noise_floor_r2_log10"].between(0.9, 1.0).all()
     assert meta["n_dropped_rows"] == 1 and meta["seeds"] == [3, 4]
     assert set(meta["cv_scores"]["outer_summary"]) == {"mlp", "hgb", "physical"}
+    assert meta["cv_scores"]["noise_floor_r2_log10"] == pytest.approx(
+        freq[freq["fold"] == "pooled"]["noise_floor_r2_log10"].iloc[0])
+    assert set(meta["cv_scores"]["velocity_summary"]) == {"mlp", "physical"}
+    assert meta["velocity_table"] == str(vcsv) and meta["n_velocity_rows"] == len(table) - 1
     assert (out / "parity.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert load_surrogate(out / "model.skops").n_training_rows_ == len(table) - 1
 
 
 def test_cli_train_and_predict(tmp_path, capsys):
-    table = make_synthetic_table(rpms=(300, 600, 900), seed=8)
+    table, velocity = make_synthetic_tables(rpms=(300, 600, 900), seed=8)
     csv = tmp_path / "collisions.csv"
+    vcsv = tmp_path / "impact_velocity.csv"
     table.to_csv(csv, index=False)
+    velocity.to_csv(vcsv, index=False)
     cfg = {"granulator": {"impeller": {"blade_length": 0.03}}, "surrogate": TINY}
     cfg_path = tmp_path / "config.yaml"
     cfg_path.write_text(yaml.safe_dump(cfg))
     out = tmp_path / "out"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        assert main(["surrogate", "train", "--table", str(csv), "--config", str(cfg_path), "--out", str(out)]) == 0
+        assert main(["surrogate", "train", "--table", str(csv), "--velocity-table", str(vcsv),
+                     "--config", str(cfg_path), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "replicate noise floor" in printed and "median impact speed" in printed
     assert json.loads((out / "model.json").read_text())["params"]["impeller_radius"] == 0.03
     assert main(["surrogate", "predict", "--model", str(out / "model.skops"), "--diameters", "0.002", "0.004",
                  "--numbers", "1500", "500", "--rpm", "600"]) == 0
     printed = capsys.readouterr().out
-    c = np.array(json.loads(printed[printed.index("{"):])["frequency_per_pair"])
+    result = json.loads(printed[printed.index("{"):])
+    c = np.array(result["encounter_frequency_per_pair"])
     assert c.shape == (2, 2) and np.allclose(c, c.T) and (c > 0).all()
+    v = np.array(result["velocity_fractions"])
+    assert v.shape == (2, 2, N_VELOCITY_BINS) and np.allclose(v.sum(axis=-1), 1.0)
+    assert len(result["velocity_edges"]) == N_VELOCITY_BINS + 1
     pred_csv = tmp_path / "pred.csv"
     assert main(["surrogate", "predict", "--model", str(out / "model.skops"), "--table", str(csv),
                  "--output", str(pred_csv)]) == 0
-    assert (pd.read_csv(pred_csv)["predicted_frequency_per_pair"] > 0).all()
+    pred = pd.read_csv(pred_csv)
+    assert (pred["predicted_encounter_frequency_per_pair"] > 0).all()
+    assert (pred["predicted_impact_velocity_median"] > 0).all()
 
 
 def test_add_cli_registers_subcommands():
@@ -121,11 +145,12 @@ def test_add_cli_registers_subcommands():
 def test_rule_declares_contract_paths():
     text = (REPO / "rules" / "surrogate.smk").read_text()
     assert "rule train_surrogate" in text
-    for path in ("results/dem/collisions.csv", "results/surrogate/model.skops", "results/surrogate/model.json",
+    for path in ("results/dem/collisions.csv", "results/dem/impact_velocity.csv", "results/surrogate/model.skops", "results/surrogate/model.json",
                  "results/surrogate/metrics.csv", "results/surrogate/parity.png",
                  "../workflow/scripts/train_surrogate.py"):
         assert path in text
-    assert (REPO / "workflow" / "scripts" / "train_surrogate.py").exists()
+    script = (REPO / "workflow" / "scripts" / "train_surrogate.py").read_text()
+    assert "velocity_table=snakemake.input.velocity" in script
 
 
 def test_single_run_table_still_trains(tmp_path):

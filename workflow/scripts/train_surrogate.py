@@ -17,4 +17,5 @@ train_and_report(
     settings=snakemake.params.settings,  # noqa: F821
     impeller_radius=float(snakemake.params.impeller_radius),  # noqa: F821
     n_jobs=snakemake.threads,  # noqa: F821
+    velocity_table=snakemake.input.velocity,  # noqa: F821
 )

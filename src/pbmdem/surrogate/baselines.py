@@ -1,4 +1,4 @@
-"""Baselines for the collision-frequency surrogate, evaluated on the same grouped folds.
+"""Baselines for the encounter surrogate, evaluated on the same grouped folds.
 
 * :class:`HGBBaseline`: ``HistGradientBoostingRegressor`` on the surrogate's features and target
   (log10 frequency per pair).
@@ -9,7 +9,10 @@
   collision cross-section ~ (d_i + d_j)^2, relative velocity ~ impeller tip speed, and the
   probability that a given pair meets ~ 1 / bed volume. The bed volume is taken as the run's
   solid volume ``sum_k n_k pi d_k^3 / 6`` (the packing fraction, a constant, is absorbed in K).
-  K is fitted by least squares in log space: ``log10 K`` = mean residual.
+  K is fitted by least squares in log space: ``log10 K`` = mean residual. Its impact-speed law
+  (when the table carries velocity bins) is one log-normal for all pairs with the median
+  proportional to the tip speed: ``log10(median / v_tip)`` and ``sigma`` are the means of the
+  per-pair log-normal fits.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from sklearn.metrics import r2_score
 from sklearn.utils.validation import check_is_fitted
 
 from ._threads import single_threaded
+from .velocity import bin_counts, fit_lognormal, lognormal_fractions, velocity_rows
 from .features import (
     DEFAULT_IMPELLER_RADIUS,
     TARGET_NAME,
@@ -45,7 +49,7 @@ class _LogTableRegressor(RegressorMixin, BaseEstimator):
 
 
 class HGBBaseline(_LogTableRegressor):
-    """Gradient-boosted trees on the surrogate features, fitted to log10(frequency_per_pair)."""
+    """Gradient-boosted trees on the surrogate features, fitted to log10(encounter_frequency_per_pair)."""
 
     def __init__(self, max_iter: int = 200, learning_rate: float = 0.1, min_samples_leaf: int = 5,
                  random_state: int = 0, impeller_radius: float = DEFAULT_IMPELLER_RADIUS,
@@ -97,7 +101,27 @@ class PhysicalScaling(_LogTableRegressor):
         data = prepare_training_table(table, self.zero_policy)
         self.log10_K_ = float(np.mean(data[TARGET_NAME].to_numpy(float) - self._log10_shape(data)))
         self.K_ = 10.0 ** self.log10_K_
+        vmask = velocity_rows(data)
+        if vmask.any():
+            mu, sigma = fit_lognormal(bin_counts(data.loc[vmask]))
+            v_tip = tip_speed(data.loc[vmask, "rpm"].to_numpy(float), self.impeller_radius)
+            self.log10_speed_ratio_ = float(np.mean(mu - np.log10(v_tip)))
+            self.log10_sigma_ = float(np.mean(np.log10(sigma)))
+        else:
+            self.log10_speed_ratio_ = self.log10_sigma_ = None
         return self
+
+    def predict_velocity(self, table: pd.DataFrame):
+        """``(mu, sigma)`` per row: log10 median = log10 v_tip + constant, sigma constant."""
+        check_is_fitted(self, "log10_K_")
+        if self.log10_speed_ratio_ is None:
+            raise ValueError("PhysicalScaling was fitted without impact-velocity bins")
+        v_tip = tip_speed(table["rpm"].to_numpy(float), self.impeller_radius)
+        mu = self.log10_speed_ratio_ + np.log10(v_tip)
+        return mu, np.full(len(mu), 10.0 ** self.log10_sigma_)
+
+    def velocity_fractions(self, table: pd.DataFrame) -> np.ndarray:
+        return lognormal_fractions(*self.predict_velocity(table))
 
     def predict_log10(self, table: pd.DataFrame) -> np.ndarray:
         check_is_fitted(self, "log10_K_")

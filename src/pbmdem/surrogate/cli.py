@@ -14,12 +14,16 @@ import numpy as np
 
 def add_cli(subparsers) -> argparse.ArgumentParser:
     """Register ``surrogate`` with subcommands ``train`` and ``predict`` on an argparse subparsers."""
-    parser = subparsers.add_parser("surrogate", help="MLP collision-frequency surrogate",
-                                   description="Train or query the collision-frequency surrogate.")
+    parser = subparsers.add_parser("surrogate", help="MLP encounter surrogate",
+                                   description="Train or query the encounter surrogate (encounter frequency "
+                                               "and impact-velocity distribution per class pair).")
     sub = parser.add_subparsers(dest="surrogate_command", required=True)
 
     train = sub.add_parser("train", help="train on a collision table (grouped CV, baselines, parity plot)")
     train.add_argument("--table", required=True, type=Path, help="aggregated collision table (CSV)")
+    train.add_argument("--velocity-table", type=Path, default=None,
+                       help="impact-velocity table (results/dem/impact_velocity.csv); without it only the "
+                            "encounter frequency is learned")
     train.add_argument("--config", type=Path, default=None,
                        help="workflow config YAML (uses its surrogate: section and "
                             "granulator.impeller.blade_length) or a bare surrogate section")
@@ -53,12 +57,21 @@ def _train(args) -> int:
             config = yaml.safe_load(fh) or {}
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     meta = train_and_report(args.table, args.out / "model.skops", settings=resolve_settings(config),
-                            impeller_radius=impeller_radius_from(config), n_jobs=args.jobs)
+                            impeller_radius=impeller_radius_from(config), n_jobs=args.jobs,
+                            velocity_table=args.velocity_table)
     summary = meta["cv_scores"]["outer_summary"]
     for name, s in summary.items():
-        print(f"{name:9s} held-out R2(log10) {s['pooled_r2_log10']:.3f}  MAE {s['pooled_mae_log10']:.3f} decades")
+        print(f"{name:9s} held-out R2(log10 c) {_fmt(s['pooled_r2_log10'])} (replicate noise floor "
+              f"{_fmt(s['noise_floor_r2_log10'])})  MAE {_fmt(s['pooled_mae_log10'])} decades")
+    for name, s in meta["cv_scores"]["velocity_summary"].items():
+        print(f"{name:9s} held-out median impact speed MAE {_fmt(s['pooled_mae_log10'])} decades, "
+              f"bin-fraction distance (TV) {_fmt(s['pooled_tv_distance'])}")
     print(f"wrote {args.out}/model.skops, model.json, metrics.csv, parity.png")
     return 0
+
+
+def _fmt(x) -> str:
+    return "n/a" if x is None else f"{x:.3f}"
 
 
 def _predict(args) -> int:
@@ -73,7 +86,10 @@ def _predict(args) -> int:
         if args.table is not None:
             table = pd.read_csv(args.table)
             value, std = model.predict(table, return_std=True)
-            out = table.assign(predicted_frequency_per_pair=value, predicted_std_log10=std)
+            out = table.assign(predicted_encounter_frequency_per_pair=value, predicted_std_log10=std)
+            if model.has_velocity_model():
+                mu, sigma = model.predict_velocity(table, check_domain=False)
+                out = out.assign(predicted_impact_velocity_median=10.0 ** mu, predicted_impact_velocity_sigma_log10=sigma)
             if args.output:
                 out.to_csv(args.output, index=False)
             else:
@@ -83,8 +99,16 @@ def _predict(args) -> int:
                 raise SystemExit("--diameters needs --numbers and --rpm")
             c, s = model.frequency_matrix(np.array(args.diameters), np.array(args.numbers), args.rpm,
                                           return_std=True)
-            text = json.dumps({"diameters": args.diameters, "numbers": args.numbers, "rpm": args.rpm,
-                               "frequency_per_pair": c.tolist(), "std_log10": s.tolist()}, indent=2)
+            result = {"diameters": args.diameters, "numbers": args.numbers, "rpm": args.rpm,
+                      "encounter_frequency_per_pair": c.tolist(), "std_log10": s.tolist()}
+            if model.has_velocity_model():
+                from pbmdem.impact import VELOCITY_EDGES
+
+                rates = model.encounters(np.array(args.diameters), np.array(args.numbers), args.rpm,
+                                         check_domain=False)
+                result.update(velocity_edges=VELOCITY_EDGES.tolist(),
+                              velocity_fractions=rates.velocity_fractions.tolist())
+            text = json.dumps(result, indent=2)
             if args.output:
                 args.output.write_text(text + "\n", encoding="utf-8")
             else:

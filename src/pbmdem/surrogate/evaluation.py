@@ -3,6 +3,16 @@
 The outer folds hold out whole DEM runs. For the MLP the hyperparameter search runs *inside*
 each outer training set (nested, again grouped), so the held-out runs never influence the model
 that predicts them.
+
+Two targets are scored on the same folds (column ``target`` of the metrics):
+
+* ``encounter_frequency``: R2 and MAE of log10(encounter_frequency_per_pair), next to the
+  *replicate noise floor* ``noise_floor_r2_log10`` (:func:`noise_floor_r2`): the R2 that a model
+  predicting the true replicate-free value would reach, limited only by the spread between
+  DEM replicates;
+* ``impact_velocity``: R2 and MAE of log10 of the median impact speed (log-normal fit of the DEM
+  bins vs prediction) and ``tv_distance``, the mean total-variation distance between the
+  predicted and the DEM fractions per velocity bin (0 identical, 1 disjoint).
 """
 
 from __future__ import annotations
@@ -15,16 +25,47 @@ from sklearn.base import clone
 from sklearn.metrics import mean_absolute_error, r2_score
 
 from .baselines import HGBBaseline, PhysicalScaling
-from .features import TARGET_NAME, prepare_training_table
+from .features import TARGET_COLUMN, TARGET_NAME, TARGET_NOISE_VAR, prepare_training_table
 from .model import CollisionSurrogate, grouped_splits
+from .velocity import bin_counts, empirical_fractions, fit_lognormal, total_variation, velocity_rows
 
 MODEL_NAMES = ("mlp", "hgb", "physical")
-METRIC_COLUMNS = ["model", "fold", "test_point_ids", "n_train_runs", "n_test", "r2_log10", "mae_log10"]
+#: Models scored on the impact-velocity distribution (the HGB baseline is a frequency baseline only).
+VELOCITY_MODEL_NAMES = ("mlp", "physical")
+TARGETS = ("encounter_frequency", "impact_velocity")
+METRIC_COLUMNS = ["target", "model", "fold", "test_point_ids", "n_train_runs", "n_test", "r2_log10", "mae_log10",
+                  "noise_floor_r2_log10", "tv_distance"]
+
+
+def noise_floor_r2(y, noise_var) -> float:
+    """R2 that replicate noise alone allows: ``1 - mean(noise_var) / var(y)``.
+
+    ``y``: the observed targets (log10 of the replicate means); ``noise_var``: the variance of each
+    y from the spread between replicates, ``(SE / (c ln 10))^2`` by the delta method. A model that
+    predicts every row's replicate-free value exactly has an expected residual sum of squares of
+    ``sum(noise_var)``, so its expected R2 (population variance of y, as in ``r2_score``) is this
+    value. Rows with unknown noise (NaN, e.g. one replicate) are left out; NaN if none is left
+    or ``y`` has no spread.
+    """
+    y = np.asarray(y, float)
+    noise_var = np.asarray(noise_var, float)
+    ok = np.isfinite(y) & np.isfinite(noise_var)
+    if ok.sum() < 2:
+        return float("nan")
+    var = float(np.var(y[ok]))
+    if not var > 0:
+        return float("nan")
+    return float(1.0 - np.mean(noise_var[ok]) / var)
 
 
 def _metrics(y: np.ndarray, p: np.ndarray) -> tuple[float, float]:
     r2 = float(r2_score(y, p)) if len(y) >= 2 and np.var(y) > 0 else float("nan")
     return r2, float(mean_absolute_error(y, p))
+
+
+def _row(target, model, fold, ids, n_train, n_test, r2, mae, floor=np.nan, tv=np.nan) -> dict:
+    return {"target": target, "model": model, "fold": fold, "test_point_ids": ids, "n_train_runs": n_train,
+            "n_test": n_test, "r2_log10": r2, "mae_log10": mae, "noise_floor_r2_log10": floor, "tv_distance": tv}
 
 
 def default_baselines(surrogate: CollisionSurrogate) -> dict:
@@ -54,18 +95,39 @@ def cross_validate_models(table: pd.DataFrame, surrogate: CollisionSurrogate, ba
     groups = data["point_id"].astype(str).to_numpy()
     splits = grouped_splits(groups, cv or surrogate.cv, n_splits or surrogate.n_splits)
 
-    rows = []
-    pred = data[["point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j",
-                 "frequency_per_pair", TARGET_NAME]].copy() if "distribution" in data else \
-        data[["point_id", "rpm", "class_i", "class_j", "d_i", "d_j", "frequency_per_pair", TARGET_NAME]].copy()
+    keep = [c for c in ("point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j", TARGET_COLUMN,
+                        TARGET_NAME, TARGET_NOISE_VAR) if c in data]
+    pred = data[keep].copy()
     pred["fold"] = -1
     for name in models:
         pred[f"{name}_log10"] = np.nan
     pred["mlp_std_log10"] = np.nan
 
+    # impact-velocity distribution: DEM fractions and log-normal fit of every row with bins
+    vmask = velocity_rows(data)
+    vel_models = [m for m in VELOCITY_MODEL_NAMES if m in models] if vmask.any() else []
+    if vmask.any():
+        counts = bin_counts(data.loc[vmask])
+        obs_frac = empirical_fractions(counts)
+        mu_obs, sigma_obs = fit_lognormal(counts)
+        pred["velocity_mu_log10"] = np.nan
+        pred["velocity_sigma"] = np.nan
+        pred.loc[vmask, "velocity_mu_log10"] = mu_obs
+        pred.loc[vmask, "velocity_sigma"] = sigma_obs
+        for name in vel_models:
+            pred[f"{name}_velocity_mu_log10"] = np.nan
+            pred[f"{name}_velocity_sigma"] = np.nan
+            pred[f"{name}_velocity_tv"] = np.nan
+        obs_frac_full = np.full((len(data), obs_frac.shape[1]), np.nan)
+        obs_frac_full[vmask] = obs_frac
+
+    rows = []
     for k, (train, test) in enumerate(splits):
         tr, te = data.iloc[train], data.iloc[test]
         y = te[TARGET_NAME].to_numpy(float)
+        ids = ";".join(sorted(set(groups[test])))
+        n_train = len(set(groups[train]))
+        floor = noise_floor_r2(y, te[TARGET_NOISE_VAR].to_numpy(float))
         pred.loc[pred.index[test], "fold"] = k
         for name, model in models.items():
             fitted = clone(model).fit(tr)
@@ -78,27 +140,52 @@ def cross_validate_models(table: pd.DataFrame, surrogate: CollisionSurrogate, ba
                 p = fitted.predict_log10(te)
             pred.loc[pred.index[test], f"{name}_log10"] = p
             r2, mae = _metrics(y, p)
-            rows.append({"model": name, "fold": str(k), "test_point_ids": ";".join(sorted(set(groups[test]))),
-                         "n_train_runs": len(set(groups[train])), "n_test": len(test),
-                         "r2_log10": r2, "mae_log10": mae})
+            rows.append(_row("encounter_frequency", name, str(k), ids, n_train, len(test), r2, mae, floor))
+            vt = test[vmask[test]]
+            if name in vel_models and len(vt):
+                te_v = data.iloc[vt]
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", UserWarning)
+                    mu, sigma = fitted.predict_velocity(te_v)
+                    frac = fitted.velocity_fractions(te_v)
+                tv = total_variation(frac, obs_frac_full[vt])
+                idx = pred.index[vt]
+                pred.loc[idx, f"{name}_velocity_mu_log10"] = mu
+                pred.loc[idx, f"{name}_velocity_sigma"] = sigma
+                pred.loc[idx, f"{name}_velocity_tv"] = tv
+                r2v, maev = _metrics(pred.loc[idx, "velocity_mu_log10"].to_numpy(float), mu)
+                rows.append(_row("impact_velocity", name, str(k), ids, n_train, len(vt), r2v, maev, tv=float(tv.mean())))
 
     metrics = pd.DataFrame(rows, columns=METRIC_COLUMNS)
     summary = []
-    for name in models:
-        r2, mae = _metrics(pred[TARGET_NAME].to_numpy(float), pred[f"{name}_log10"].to_numpy(float))
-        per = metrics[metrics["model"] == name]
-        summary.append({"model": name, "fold": "pooled", "test_point_ids": "all", "n_train_runs": np.nan,
-                        "n_test": len(pred), "r2_log10": r2, "mae_log10": mae})
-        summary.append({"model": name, "fold": "mean", "test_point_ids": "all",
-                        "n_train_runs": float(per["n_train_runs"].mean()), "n_test": float(per["n_test"].mean()),
-                        "r2_log10": float(per["r2_log10"].mean()), "mae_log10": float(per["mae_log10"].mean())})
+    floor = noise_floor_r2(pred[TARGET_NAME].to_numpy(float), pred[TARGET_NOISE_VAR].to_numpy(float))
+    for target, names in (("encounter_frequency", list(models)), ("impact_velocity", vel_models)):
+        for name in names:
+            per = metrics[(metrics["model"] == name) & (metrics["target"] == target)]
+            if target == "encounter_frequency":
+                r2, mae = _metrics(pred[TARGET_NAME].to_numpy(float), pred[f"{name}_log10"].to_numpy(float))
+                n_test, tv, fl = len(pred), np.nan, floor
+            else:
+                sel = vmask
+                r2, mae = _metrics(pred.loc[sel, "velocity_mu_log10"].to_numpy(float),
+                                   pred.loc[sel, f"{name}_velocity_mu_log10"].to_numpy(float))
+                n_test, tv, fl = int(sel.sum()), float(pred.loc[sel, f"{name}_velocity_tv"].mean()), np.nan
+            summary.append(_row(target, name, "pooled", "all", np.nan, n_test, r2, mae, fl, tv))
+            summary.append(_row(target, name, "mean", "all", float(per["n_train_runs"].mean()),
+                                float(per["n_test"].mean()), float(per["r2_log10"].mean()),
+                                float(per["mae_log10"].mean()), float(per["noise_floor_r2_log10"].mean()),
+                                float(per["tv_distance"].mean())))
     metrics = pd.concat([metrics, pd.DataFrame(summary, columns=METRIC_COLUMNS)], ignore_index=True)
     return metrics, pred
 
 
-def summarise(metrics: pd.DataFrame) -> dict:
-    """{model: {pooled_r2_log10, pooled_mae_log10, mean_fold_r2_log10, mean_fold_mae_log10, n_folds}}."""
+def summarise(metrics: pd.DataFrame, target: str = "encounter_frequency") -> dict:
+    """{model: {pooled_r2_log10, pooled_mae_log10, mean_fold_r2_log10, mean_fold_mae_log10, n_folds,
+    noise_floor_r2_log10, pooled_tv_distance}} of one target (``encounter_frequency`` or
+    ``impact_velocity``, where R2/MAE refer to log10 of the median impact speed)."""
     out = {}
+    if "target" in metrics:
+        metrics = metrics[metrics["target"] == target]
     for name, g in metrics.groupby("model", sort=False):
         pooled = g[g["fold"] == "pooled"].iloc[0]
         mean = g[g["fold"] == "mean"].iloc[0]
@@ -106,5 +193,7 @@ def summarise(metrics: pd.DataFrame) -> dict:
             "pooled_r2_log10": float(pooled["r2_log10"]), "pooled_mae_log10": float(pooled["mae_log10"]),
             "mean_fold_r2_log10": float(mean["r2_log10"]), "mean_fold_mae_log10": float(mean["mae_log10"]),
             "n_folds": int((~g["fold"].isin(["pooled", "mean"])).sum()),
+            "noise_floor_r2_log10": float(pooled["noise_floor_r2_log10"]),
+            "pooled_tv_distance": float(pooled["tv_distance"]),
         }
     return out

@@ -1,8 +1,11 @@
-"""Features and target of the collision-frequency surrogate.
+"""Features and target of the encounter surrogate.
 
 Input is the aggregated collision table of ``docs/architecture.md`` (one row per unordered class
 pair and DEM run, ``point_id`` identifies the run). Every row becomes one sample with the
-features in :data:`FEATURE_NAMES`; the target is ``log10(frequency_per_pair)``.
+features in :data:`FEATURE_NAMES`; the target is ``log10(encounter_frequency_per_pair)``, the
+frequency per pair of *encounters* (impacts of granules that were apart), averaged over the DEM
+replicates (insertion seeds) of the run. The raw new-contact columns ``collisions`` and
+``frequency_per_pair`` are diagnostics and are not learned.
 
 The same code path builds features for the PBM (:func:`pair_table`): a size distribution given as
 class diameters and particle numbers is turned into a collision-table-like frame of all unordered
@@ -14,18 +17,39 @@ from __future__ import annotations
 import math
 import warnings
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
+import yaml
+
+_CONFIG_PATH = Path(__file__).resolve().parents[3] / "config" / "config.yaml"
+
+
+def _configured_impeller_radius(path: Path = _CONFIG_PATH) -> float | None:
+    """``granulator.impeller.blade_length`` (m) of the project config, None if it cannot be read."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return float(yaml.safe_load(fh)["granulator"]["impeller"]["blade_length"])
+    except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError):
+        return None
+
 
 #: Impeller radius (m) used for the tip speed when none is given: ``granulator.impeller.blade_length``
-#: of ``config/config.yaml`` (axis to blade tip).
-DEFAULT_IMPELLER_RADIUS = 0.0265
+#: of ``config/config.yaml`` (axis to blade tip), read from that file, not repeated here.
+DEFAULT_IMPELLER_RADIUS = _configured_impeller_radius()
 
 #: Columns of the collision-table contract (docs/architecture.md).
 TABLE_COLUMNS = (
     "point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j", "n_i", "n_j",
     "n_total", "collisions", "sampling_time", "frequency", "frequency_per_pair",
+    "n_replicates", "encounters", "encounter_frequency_per_pair", "encounter_frequency_per_pair_se",
+    "impact_velocity_median",
 )
+
+#: Columns of the collision table the target is built from.
+TARGET_SOURCE_COLUMNS = ("n_replicates", "encounters", "sampling_time", "encounter_frequency_per_pair",
+                         "encounter_frequency_per_pair_se")
 
 #: Columns needed to build features (the others are needed only for the target).
 FEATURE_SOURCE_COLUMNS = ("point_id", "rpm", "class_i", "class_j", "d_i", "d_j", "n_i", "n_j", "n_total")
@@ -37,12 +61,23 @@ FEATURE_NAMES = (
     "frac_small",   # number fraction of the smaller particle's class in the run
     "frac_large",   # number fraction of the larger particle's class in the run
     "n_total",      # particles in the run
-    "d_mean",       # number-mean diameter of the run (m)
-    "rpm",          # impeller speed (1/min)
     "tip_speed",    # impeller tip speed 2 pi R rpm / 60 (m/s)
 )
+# Not features, because they duplicate one above (docs/surrogate.md, "Features"):
+# * rpm: tip_speed = 2 pi R rpm / 60 with one impeller radius R;
+# * d_mean (number-mean diameter of the run): every DEM bed has the same solid volume, so
+#   n_total ~ 1 / <d^3>, and on the configured grid log n_total and log d_mean correlate at -0.9994.
 
-TARGET_NAME = "log10_frequency_per_pair"
+#: |Pearson r| above which two features of a training table count as duplicates (warned at fit).
+DUPLICATE_CORRELATION = 0.999
+
+#: Column of the collision table that is learned (1/s per pair, mean over replicates).
+TARGET_COLUMN = "encounter_frequency_per_pair"
+#: Its standard error over replicates (for the replicate noise floor).
+TARGET_SE_COLUMN = "encounter_frequency_per_pair_se"
+TARGET_NAME = "log10_encounter_frequency_per_pair"
+#: Delta-method variance of TARGET_NAME from the replicate SE: (SE / (c ln 10))^2 (decades^2).
+TARGET_NOISE_VAR = "log10_noise_var"
 
 #: How rows with zero collisions are treated when building the target.
 ZERO_POLICIES = ("drop", "floor")
@@ -54,8 +89,9 @@ class CollisionTableError(ValueError):
 
 def tip_speed(rpm, impeller_radius: float = DEFAULT_IMPELLER_RADIUS):
     """Impeller tip speed (m/s) for a speed in rpm and a radius in m."""
-    if not impeller_radius > 0:
-        raise ValueError(f"impeller_radius must be > 0 m, got {impeller_radius!r}")
+    if impeller_radius is None or not impeller_radius > 0:
+        raise ValueError(f"impeller_radius must be > 0 m (granulator.impeller.blade_length), "
+                         f"got {impeller_radius!r}")
     return 2.0 * math.pi * impeller_radius * np.asarray(rpm, dtype=float) / 60.0
 
 
@@ -129,7 +165,7 @@ def run_descriptors(table: pd.DataFrame) -> pd.DataFrame:
 def make_features(table: pd.DataFrame, impeller_radius: float = DEFAULT_IMPELLER_RADIUS) -> pd.DataFrame:
     """Feature frame (columns :data:`FEATURE_NAMES`, same index as ``table``) of a collision table."""
     check_table(table)
-    desc = run_descriptors(table)
+    run_descriptors(table)  # checks the classes of every run are consistent
     d_i = table["d_i"].to_numpy(float)
     d_j = table["d_j"].to_numpy(float)
     n_total = table["n_total"].to_numpy(float)
@@ -144,13 +180,35 @@ def make_features(table: pd.DataFrame, impeller_radius: float = DEFAULT_IMPELLER
             "frac_small": np.where(i_small, f_i, f_j),
             "frac_large": np.where(i_small, f_j, f_i),
             "n_total": n_total,
-            "d_mean": desc["d_mean"].reindex(table["point_id"]).to_numpy(float),
-            "rpm": rpm,
             "tip_speed": tip_speed(rpm, impeller_radius),
         },
         index=table.index,
         columns=list(FEATURE_NAMES),
     )
+
+
+def duplicated_features(features: pd.DataFrame, threshold: float = DUPLICATE_CORRELATION) -> list[tuple[str, str, float]]:
+    """Pairs of feature columns whose |Pearson r| (of the values and of their logs) exceeds ``threshold``.
+
+    Such a pair carries one piece of information twice on this table: the network cannot tell
+    the two apart, and predictions where they disagree are extrapolations.
+    """
+    out = []
+    cols = list(features.columns)
+    vals = features.to_numpy(float)
+    for transform in (lambda x: x, lambda x: np.log(np.abs(x))):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            v = transform(vals)
+        for a in range(len(cols)):
+            for b in range(a + 1, len(cols)):
+                x, y = v[:, a], v[:, b]
+                ok = np.isfinite(x) & np.isfinite(y)
+                if ok.sum() < 3 or np.std(x[ok]) == 0 or np.std(y[ok]) == 0:
+                    continue
+                r = float(np.corrcoef(x[ok], y[ok])[0, 1])
+                if abs(r) > threshold and not any(p[:2] == (cols[a], cols[b]) for p in out):
+                    out.append((cols[a], cols[b], r))
+    return out
 
 
 def pairs_in_row(table: pd.DataFrame) -> np.ndarray:
@@ -162,46 +220,70 @@ def pairs_in_row(table: pd.DataFrame) -> np.ndarray:
 
 
 def prepare_training_table(table: pd.DataFrame, zero_policy: str = "drop") -> pd.DataFrame:
-    """Rows usable for fitting, with column :data:`TARGET_NAME` added.
+    """Rows usable for fitting, with columns :data:`TARGET_NAME` and :data:`TARGET_NOISE_VAR` added.
 
-    * rows without any particle pair (pairs = 0) or with a non-finite frequency are dropped
-      with a warning;
-    * rows with zero collisions: ``"drop"`` (default) removes them with a warning; ``"floor"``
-      replaces the count by half a collision, i.e. the frequency by the detection limit
-      ``0.5 / (pairs x sampling_time)``, also with a warning. Column ``floored`` marks such rows.
+    The target is ``log10(encounter_frequency_per_pair)`` (mean over the run's replicates).
+
+    * rows without any particle pair (pairs = 0) or with a non-finite encounter frequency are
+      dropped with a warning;
+    * rows with zero encounters: ``"drop"`` (default) removes them with a warning; ``"floor"``
+      replaces the count by half an encounter over all replicates, i.e. the frequency by the
+      detection limit ``0.5 / (n_replicates x pairs x sampling_time)``, also with a warning.
+      Column ``floored`` marks such rows.
+
+    :data:`TARGET_NOISE_VAR` is the replicate noise of the target by the delta method,
+    ``(SE / (c ln 10))^2`` (NaN where the SE is unknown, e.g. a single replicate or a floored row).
     """
     if zero_policy not in ZERO_POLICIES:
         raise ValueError(f"zero_policy must be one of {ZERO_POLICIES}, got {zero_policy!r}")
-    check_table(table, FEATURE_SOURCE_COLUMNS + ("collisions", "sampling_time", "frequency_per_pair"))
+    check_table(table, FEATURE_SOURCE_COLUMNS + ("encounters", "sampling_time"))
+    if TARGET_COLUMN not in table.columns:
+        raise CollisionTableError(f"collision table lacks column(s) {[TARGET_COLUMN]}")
     out = table.copy()
     pairs = pairs_in_row(out)
-    fpp = pd.to_numeric(out["frequency_per_pair"], errors="coerce").to_numpy(float)
-    collisions = out["collisions"].to_numpy(float)
+    fpp = pd.to_numeric(out[TARGET_COLUMN], errors="coerce").to_numpy(float)
+    counts = out["encounters"].to_numpy(float)
+    if "n_replicates" in out:
+        reps = pd.to_numeric(out["n_replicates"], errors="coerce").to_numpy(float)
+        if not (np.isfinite(reps) & (reps >= 1)).all():
+            raise CollisionTableError("column 'n_replicates' must be an integer >= 1 in every row")
+    else:
+        reps = np.ones(len(out))
+    if TARGET_SE_COLUMN in out:
+        se = pd.to_numeric(out[TARGET_SE_COLUMN], errors="coerce").to_numpy(float)
+        if (se < 0).any():
+            raise CollisionTableError(f"column {TARGET_SE_COLUMN!r} must be >= 0 (or NaN for one replicate)")
+    else:
+        se = np.full(len(out), np.nan)
     no_pairs = ~(pairs > 0)
     if no_pairs.any():
         warnings.warn(f"dropping {int(no_pairs.sum())} row(s) without particle pairs "
                       f"(e.g. a class with a single particle on the diagonal)", stacklevel=2)
-    zero = ~no_pairs & ((collisions <= 0) | (np.nan_to_num(fpp, nan=1.0) <= 0))
+    zero = ~no_pairs & ((counts <= 0) | (np.nan_to_num(fpp, nan=1.0) <= 0))
     out["floored"] = False
     if zero.any():
         ids = sorted(set(out.loc[zero, "point_id"].astype(str)))
         if zero_policy == "drop":
-            warnings.warn(f"dropping {int(zero.sum())} row(s) with zero collisions (log10 undefined) "
+            warnings.warn(f"dropping {int(zero.sum())} row(s) with zero encounters (log10 undefined) "
                           f"in run(s) {ids[:5]}", stacklevel=2)
         else:
-            warnings.warn(f"flooring {int(zero.sum())} row(s) with zero collisions at half a collision "
-                          f"in the sampling window, run(s) {ids[:5]}", stacklevel=2)
+            warnings.warn(f"flooring {int(zero.sum())} row(s) with zero encounters at half an encounter "
+                          f"over all replicates of the sampling window, run(s) {ids[:5]}", stacklevel=2)
             fpp = fpp.copy()
-            fpp[zero] = 0.5 / (pairs[zero] * out["sampling_time"].to_numpy(float)[zero])
-            out["frequency_per_pair"] = fpp
+            fpp[zero] = 0.5 / (reps[zero] * pairs[zero] * out["sampling_time"].to_numpy(float)[zero])
+            out[TARGET_COLUMN] = fpp
             out.loc[zero, "floored"] = True
+            se = np.where(zero, np.nan, se)
     drop = no_pairs | (zero if zero_policy == "drop" else np.zeros_like(zero))
     bad = ~drop & ~(np.isfinite(fpp) & (fpp > 0))
     if bad.any():
-        warnings.warn(f"dropping {int(bad.sum())} row(s) with a non-finite frequency_per_pair", stacklevel=2)
+        warnings.warn(f"dropping {int(bad.sum())} row(s) with a non-finite {TARGET_COLUMN}", stacklevel=2)
     keep = ~(drop | bad)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        noise_var = (se / (fpp * math.log(10.0))) ** 2
+    out[TARGET_NOISE_VAR] = noise_var
     out = out.loc[keep].copy()
-    out[TARGET_NAME] = np.log10(out["frequency_per_pair"].to_numpy(float))
+    out[TARGET_NAME] = np.log10(out[TARGET_COLUMN].to_numpy(float))
     if len(out) == 0:
         raise CollisionTableError("no usable rows left in the collision table")
     return out

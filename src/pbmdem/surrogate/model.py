@@ -1,9 +1,13 @@
-"""MLP collision-frequency surrogate (scikit-learn estimator conventions).
+"""MLP encounter surrogate (scikit-learn estimator conventions).
 
-:class:`CollisionSurrogate` is fitted on a collision table and predicts collision frequencies per
-particle pair (1/s) in physical units. Internally it is an ensemble of
-``Pipeline(StandardScaler, MLPRegressor)`` members fitted to ``log10(frequency_per_pair)``; the
-members differ only in their random seed, their spread is the uncertainty estimate.
+:class:`CollisionSurrogate` is fitted on a collision table (with the impact-velocity bins attached,
+:func:`pbmdem.surrogate.velocity.attach_velocity_bins`) and predicts, per particle pair, the
+encounter frequency (1/s) and the distribution of impact speeds over
+:data:`pbmdem.impact.VELOCITY_EDGES`. Internally it is an ensemble of
+``Pipeline(StandardScaler, MLPRegressor)`` members fitted to ``log10(encounter_frequency_per_pair)``
+and a second ensemble of two-output members fitted to the log-normal summary (log10 median,
+log10 spread) of each pair's impact speeds; the members differ only in their random seed, their
+spread is the uncertainty estimate.
 Hyperparameters (``hidden_layer_sizes``, ``alpha``) are chosen by a grid search whose folds hold
 out whole DEM runs (``point_id`` groups), so no run is on both sides of a split.
 """
@@ -24,15 +28,19 @@ from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.utils.validation import check_is_fitted
 
+from pbmdem.impact import EncounterRates
+
 from ._threads import single_threaded
 from .features import (
     DEFAULT_IMPELLER_RADIUS,
     FEATURE_NAMES,
     TARGET_NAME,
+    duplicated_features,
     make_features,
     pair_table,
     prepare_training_table,
 )
+from .velocity import bin_counts, fit_lognormal, lognormal_fractions, velocity_rows
 
 CV_STRATEGIES = ("leave_one_group_out", "group_kfold")
 
@@ -73,7 +81,7 @@ def grouped_splits(groups, strategy: str = "leave_one_group_out", n_splits: int 
 
 
 def _as_features(X, impeller_radius: float) -> pd.DataFrame:
-    """Accept a collision table, a feature frame or an (n, 8) array; return the feature frame."""
+    """Accept a collision table, a feature frame or an (n, len(FEATURE_NAMES)) array; return the feature frame."""
     if isinstance(X, pd.DataFrame):
         if all(c in X.columns for c in FEATURE_NAMES):
             return X.loc[:, list(FEATURE_NAMES)].astype(float)
@@ -85,8 +93,12 @@ def _as_features(X, impeller_radius: float) -> pd.DataFrame:
     return pd.DataFrame(arr, columns=list(FEATURE_NAMES))
 
 
+class VelocityModelMissingError(RuntimeError):
+    """The surrogate was trained without impact-velocity bins, so it cannot predict them."""
+
+
 class CollisionSurrogate(RegressorMixin, BaseEstimator):
-    """Ensemble-MLP surrogate of DEM collision frequencies per particle pair.
+    """Ensemble-MLP surrogate of DEM encounter frequencies and impact speeds per particle pair.
 
     Parameters
     ----------
@@ -123,7 +135,9 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         collision cross-section 2 log10(d_i + d_j) (d in mm), which is added back at prediction.
         Kinetic theory gives c_ij proportional to (d_i + d_j)^2 at a fixed bed volume, so the
         learned part varies less and predictions for granules larger than the training sizes
-        follow the cross-section instead of a saturated tanh network. ``"none"``: plain log10 c.
+        follow the cross-section instead of a saturated tanh network. The velocity networks
+        likewise learn log10(median impact speed / impeller tip speed), impacts being driven by
+        the impeller. ``"none"``: plain log10 c and log10 median speed.
     """
 
     def __init__(
@@ -192,6 +206,60 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
             return 2.0 * np.log10(1e3 * (features["d_small"].to_numpy(float) + features["d_large"].to_numpy(float)))
         raise ValueError(f"physics_offset = {self.physics_offset!r}; allowed: {PHYSICS_OFFSETS}")
 
+    def _velocity_offset(self, features: pd.DataFrame) -> np.ndarray:
+        """log10 of the speed scale the velocity networks do not have to learn (the tip speed)."""
+        if self.physics_offset == "none":
+            return np.zeros(len(features))
+        if self.physics_offset == "cross_section":
+            return np.log10(features["tip_speed"].to_numpy(float))
+        raise ValueError(f"physics_offset = {self.physics_offset!r}; allowed: {PHYSICS_OFFSETS}")
+
+    def _search_and_ensemble(self, X, target, groups, seeds):
+        """Grouped grid search (if possible) then one member per seed; returns a dict of results."""
+        grid = self._param_grid()
+        n_candidates = len(grid["mlp__hidden_layer_sizes"]) * len(grid["mlp__alpha"])
+        n_runs = len(np.unique(groups))
+        splits = grouped_splits(groups, self.cv, self.n_splits) if n_runs >= 2 else []
+        n_conv = 0
+        if n_candidates > 1 and splits:
+            search = GridSearchCV(
+                self._pipeline().set_params(mlp__random_state=seeds[0]), grid, cv=splits,
+                scoring="neg_mean_squared_error", refit=False, n_jobs=self.n_jobs, error_score="raise",
+            )
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", ConvergenceWarning)
+                search.fit(X, target)
+            n_conv += sum(issubclass(w.category, ConvergenceWarning) for w in caught)
+            best = dict(search.best_params_)
+            res = search.cv_results_
+            results = pd.DataFrame({
+                "hidden_layer_sizes": [str(tuple(p)) for p in res["param_mlp__hidden_layer_sizes"]],
+                "alpha": np.asarray(res["param_mlp__alpha"], dtype=float),
+                "rmse_log10": np.sqrt(-np.asarray(res["mean_test_score"], dtype=float)),
+                "fold_mse_log10_std": np.asarray(res["std_test_score"], dtype=float),
+                "rank": np.asarray(res["rank_test_score"], dtype=int),
+            })
+            best_score = float(np.sqrt(-search.best_score_))
+        else:
+            best = {k: v[0] for k, v in grid.items()}
+            results = pd.DataFrame({
+                "hidden_layer_sizes": [str(best["mlp__hidden_layer_sizes"])],
+                "alpha": [best["mlp__alpha"]], "rmse_log10": [np.nan], "fold_mse_log10_std": [np.nan], "rank": [1],
+            })
+            best_score = float("nan")
+        best_params = {"hidden_layer_sizes": tuple(best["mlp__hidden_layer_sizes"]), "alpha": float(best["mlp__alpha"])}
+        members = []
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ConvergenceWarning)
+            for seed in seeds:
+                est = clone(self._pipeline()).set_params(
+                    mlp__hidden_layer_sizes=best_params["hidden_layer_sizes"],
+                    mlp__alpha=best_params["alpha"], mlp__random_state=seed)
+                members.append(est.fit(X, target))
+        n_conv += sum(issubclass(w.category, ConvergenceWarning) for w in caught)
+        return {"members": members, "best_params": best_params, "best_score": best_score,
+                "search_results": results, "splits": splits, "n_conv": n_conv}
+
     # ------------------------------------------------------------------ fit
     def fit(self, table: pd.DataFrame, y=None):
         """Fit on a collision table (``y`` is ignored: the target is read from the table)."""
@@ -207,64 +275,54 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         X = features.to_numpy(float)
         target = data[TARGET_NAME].to_numpy(float) - self._offset(features)
         groups = data["point_id"].astype(str).to_numpy()
+        self.duplicated_features_ = duplicated_features(features)
+        for a, b, r in self.duplicated_features_:
+            warnings.warn(f"features {a} and {b} are duplicates on this training table (Pearson r = {r:.4f}): "
+                          f"predictions where they disagree are extrapolations", UserWarning, stacklevel=3)
         grid = self._param_grid()
         n_candidates = len(grid["mlp__hidden_layer_sizes"]) * len(grid["mlp__alpha"])
-        n_runs = len(np.unique(groups))
-        if n_candidates > 1 and n_runs < 2:
+        if n_candidates > 1 and len(np.unique(groups)) < 2:
             warnings.warn("only one DEM run: no grouped hyperparameter search possible, "
                           "using the first candidate of hidden_layer_sizes and alpha", UserWarning, stacklevel=3)
-        splits = grouped_splits(groups, self.cv, self.n_splits) if n_runs >= 2 else []
-        n_conv = 0
-        if n_candidates > 1 and splits:
-            search = GridSearchCV(
-                self._pipeline().set_params(mlp__random_state=seeds[0]), grid, cv=splits,
-                scoring="neg_mean_squared_error", refit=False, n_jobs=self.n_jobs, error_score="raise",
-            )
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always", ConvergenceWarning)
-                search.fit(X, target)
-            n_conv += sum(issubclass(w.category, ConvergenceWarning) for w in caught)
-            best = dict(search.best_params_)
-            res = search.cv_results_
-            self.search_results_ = pd.DataFrame({
-                "hidden_layer_sizes": [str(tuple(p)) for p in res["param_mlp__hidden_layer_sizes"]],
-                "alpha": np.asarray(res["param_mlp__alpha"], dtype=float),
-                "rmse_log10": np.sqrt(-np.asarray(res["mean_test_score"], dtype=float)),
-                "fold_mse_log10_std": np.asarray(res["std_test_score"], dtype=float),
-                "rank": np.asarray(res["rank_test_score"], dtype=int),
-            })
-            self.best_score_ = float(np.sqrt(-search.best_score_))
-        else:
-            best = {k: v[0] for k, v in grid.items()}
-            self.search_results_ = pd.DataFrame({
-                "hidden_layer_sizes": [str(best["mlp__hidden_layer_sizes"])],
-                "alpha": [best["mlp__alpha"]], "rmse_log10": [np.nan], "fold_mse_log10_std": [np.nan], "rank": [1],
-            })
-            self.best_score_ = float("nan")
-        self.best_params_ = {"hidden_layer_sizes": tuple(best["mlp__hidden_layer_sizes"]),
-                             "alpha": float(best["mlp__alpha"])}
+        freq = self._search_and_ensemble(X, target, groups, seeds)
+        n_conv = freq["n_conv"]
 
-        members = []
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", ConvergenceWarning)
-            for seed in seeds:
-                est = clone(self._pipeline()).set_params(
-                    mlp__hidden_layer_sizes=self.best_params_["hidden_layer_sizes"],
-                    mlp__alpha=self.best_params_["alpha"], mlp__random_state=seed)
-                members.append(est.fit(X, target))
-        n_conv += sum(issubclass(w.category, ConvergenceWarning) for w in caught)
+        # impact-velocity distribution: log-normal (mu, log10 sigma) per pair, second ensemble
+        vmask = velocity_rows(data)
+        self.velocity_estimators_ = []
+        self.velocity_best_params_ = None
+        self.velocity_best_score_ = float("nan")
+        self.velocity_search_results_ = None
+        self.n_velocity_rows_ = int(vmask.sum())
+        if vmask.any():
+            mu, sigma = fit_lognormal(bin_counts(data.loc[vmask]))
+            Fv = features.loc[vmask]
+            Y = np.column_stack([mu - self._velocity_offset(Fv), np.log10(sigma)])
+            vel = self._search_and_ensemble(Fv.to_numpy(float), Y, groups[vmask], seeds)
+            n_conv += vel["n_conv"]
+            self.velocity_estimators_ = vel["members"]
+            self.velocity_best_params_ = vel["best_params"]
+            self.velocity_best_score_ = vel["best_score"]
+            self.velocity_search_results_ = vel["search_results"]
+        elif len(data):
+            warnings.warn("the collision table carries no impact-velocity bins (results/dem/impact_velocity.csv "
+                          "not attached): the surrogate predicts encounter frequencies only", UserWarning,
+                          stacklevel=3)
         if n_conv:
             warnings.warn(f"{n_conv} MLP fit(s) stopped at max_iter={self.max_iter} before converging",
                           ConvergenceWarning, stacklevel=2)
 
-        self.estimators_ = members
+        self.estimators_ = freq["members"]
+        self.search_results_ = freq["search_results"]
+        self.best_score_ = freq["best_score"]
+        self.best_params_ = freq["best_params"]
         self.seeds_ = seeds
         self.feature_names_ = tuple(FEATURE_NAMES)
         self.n_features_in_ = len(FEATURE_NAMES)
         self.feature_min_ = features.min().to_numpy(float)
         self.feature_max_ = features.max().to_numpy(float)
         self.training_point_ids_ = sorted(set(groups))
-        self.cv_folds_ = [sorted(set(groups[test])) for _, test in splits]
+        self.cv_folds_ = [sorted(set(groups[test])) for _, test in freq["splits"]]
         self.n_training_rows_ = int(len(data))
         self.n_dropped_rows_ = int(len(table) - len(data))
         self.n_floored_rows_ = int(data["floored"].sum())
@@ -302,7 +360,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
 
     # ------------------------------------------------------------------ predict
     def predict_log10(self, X, return_std: bool = False, check_domain: bool = True):
-        """Ensemble mean of log10(frequency per pair); with ``return_std`` also the members' std."""
+        """Ensemble mean of log10(encounter frequency per pair); with ``return_std`` also the members' std."""
         check_is_fitted(self, "estimators_")
         F = _as_features(X, self.impeller_radius)
         if check_domain:
@@ -317,16 +375,52 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         return mean
 
     def predict(self, X, return_std: bool = False, check_domain: bool = True):
-        """Collision frequency per particle pair (1/s): 10 ** ensemble-mean log10 (geometric mean).
+        """Encounter frequency per particle pair (1/s): 10 ** ensemble-mean log10 (geometric mean).
 
-        ``X`` is a collision table (contract columns), a feature frame or an (n, 8) array. With
+        ``X`` is a collision table (contract columns), a feature frame or an (n, len(FEATURE_NAMES)) array. With
         ``return_std`` the spread (std of the members' log10 predictions, in decades) is returned too.
         """
         mean, std = self.predict_log10(X, return_std=True, check_domain=check_domain)
         return (10.0 ** mean, std) if return_std else 10.0 ** mean
 
+    def has_velocity_model(self) -> bool:
+        """True if the surrogate was trained with impact-velocity bins."""
+        check_is_fitted(self, "estimators_")
+        return bool(getattr(self, "velocity_estimators_", None))
+
+    def predict_velocity(self, X, return_std: bool = False, check_domain: bool = True):
+        """Log-normal impact-speed law per row: ``(mu, sigma)``.
+
+        ``mu`` is log10 of the median impact speed (m/s), ``sigma`` the standard deviation of
+        log10 v (decades); both the ensemble mean (sigma through its log10). With ``return_std``
+        also the members' spread of ``mu`` and of ``log10 sigma`` (decades).
+        """
+        check_is_fitted(self, "estimators_")
+        if not self.has_velocity_model():
+            raise VelocityModelMissingError(
+                "this surrogate was trained without impact-velocity bins (results/dem/impact_velocity.csv); "
+                "retrain it with the impact-velocity table to predict impact speeds")
+        F = _as_features(X, self.impeller_radius)
+        if check_domain:
+            self._warn_domain(F, stacklevel=3)
+        arr = F.to_numpy(float)
+        with single_threaded():
+            preds = np.stack([m.predict(arr).reshape(len(arr), 2) for m in self.velocity_estimators_])
+        mean = preds.mean(axis=0)
+        mu = mean[:, 0] + self._velocity_offset(F)
+        sigma = 10.0 ** mean[:, 1]
+        if return_std:
+            std = preds.std(axis=0, ddof=1) if len(preds) > 1 else np.zeros_like(mean)
+            return mu, sigma, std[:, 0], std[:, 1]
+        return mu, sigma
+
+    def velocity_fractions(self, X, check_domain: bool = True) -> np.ndarray:
+        """(n, N_VELOCITY_BINS) predicted fraction of each row's encounters per velocity bin (rows sum to 1)."""
+        mu, sigma = self.predict_velocity(X, check_domain=check_domain)
+        return lognormal_fractions(mu, sigma)
+
     def score(self, X, y=None, sample_weight=None):
-        """R2 of log10(frequency_per_pair) on a collision table (``y`` is ignored)."""
+        """R2 of log10(encounter_frequency_per_pair) on a collision table (``y`` is ignored)."""
         data = prepare_training_table(X, self.zero_policy)
         return float(r2_score(data[TARGET_NAME].to_numpy(float), self.predict_log10(data),
                               sample_weight=sample_weight))
@@ -334,7 +428,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
     # ------------------------------------------------------------------ PBM kernel
     def frequency_matrix(self, diameters, numbers, rpm: float, return_std: bool = False,
                          check_domain: bool = True):
-        """(K,) diameters (m) and (K,) particle numbers -> (K, K) symmetric c_ij (1/s per pair).
+        """(K,) diameters (m) and (K,) particle numbers -> (K, K) symmetric encounter frequency c_ij (1/s per pair).
 
         One vectorised predict over the K (K + 1) / 2 unordered class pairs. ``numbers`` are
         particle numbers on the DEM scale (the run's ``n_total`` is their sum). With
@@ -356,6 +450,31 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         s[iu, ju] = std
         s[ju, iu] = std
         return c, s
+
+    def encounters(self, diameters, numbers, rpm: float, check_domain: bool = True) -> EncounterRates:
+        """(K,) diameters (m), (K,) particle numbers, impeller speed (1/min) -> EncounterRates.
+
+        One vectorised prediction over the K (K + 1) / 2 unordered class pairs gives the (K, K)
+        symmetric encounter frequency per pair (1/s) and the (K, K, V) fractions of each pair's
+        encounters per bin of :data:`pbmdem.impact.VELOCITY_EDGES` (summing to 1 over bins).
+        """
+        check_is_fitted(self, "estimators_")
+        if not self.has_velocity_model():
+            self.predict_velocity(np.zeros((0, len(FEATURE_NAMES))))  # raises VelocityModelMissingError
+        frame, iu, ju = pair_table(diameters, numbers, rpm)
+        F = make_features(frame, self.impeller_radius)
+        if check_domain:
+            self._warn_domain(F, stacklevel=3)
+        log_c = self.predict_log10(F, check_domain=False)
+        fractions = self.velocity_fractions(F, check_domain=False)
+        k = len(np.atleast_1d(diameters))
+        c = np.empty((k, k))
+        c[iu, ju] = 10.0 ** log_c
+        c[ju, iu] = 10.0 ** log_c
+        v = np.empty((k, k, fractions.shape[1]))
+        v[iu, ju] = fractions
+        v[ju, iu] = fractions
+        return EncounterRates(frequency=c, velocity_fractions=v)
 
     def __call__(self, diameters, numbers, rpm: float):
         """Collision-frequency source interface of ``pbmdem.pbm`` (docs/architecture.md)."""

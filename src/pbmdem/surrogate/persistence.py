@@ -2,8 +2,9 @@
 
 Two files:
 
-* ``model.skops`` - the fitted ensemble (a list of ``Pipeline(StandardScaler, MLPRegressor)``)
-  written with :func:`skops.io.dump`. Only scikit-learn/numpy objects are stored; the wrapper
+* ``model.skops`` - the fitted ensembles, ``{"frequency": [...], "velocity": [...]}`` (lists of
+  ``Pipeline(StandardScaler, MLPRegressor)``; ``velocity`` is empty for a surrogate trained
+  without impact-velocity bins) written with :func:`skops.io.dump`. Only scikit-learn/numpy objects are stored; the wrapper
   class itself is rebuilt from the metadata, so no project class has to be trusted.
 * ``model.json`` - metadata: estimator parameters, feature names and training ranges, training
   runs, CV scores, library versions and the SHA-256 of ``model.skops``.
@@ -34,12 +35,15 @@ import skops
 import skops.io as sio
 import sklearn
 
+from pbmdem.impact import VELOCITY_EDGES
+
 from ._io import atomic_write
 from .features import FEATURE_NAMES, TARGET_NAME
 from .model import CollisionSurrogate
 
 FORMAT = "pbmdem-surrogate"
-FORMAT_VERSION = 1
+#: 2: encounter target, velocity ensemble, features without rpm (version 1: raw collision target).
+FORMAT_VERSION = 2
 
 #: Every type that may appear in a surrogate model file (module.qualname).
 ALLOWED_TYPES = frozenset({
@@ -116,7 +120,9 @@ def save_surrogate(surrogate: CollisionSurrogate, model_path: str | os.PathLike,
         raise ValueError("only a fitted CollisionSurrogate can be saved")
     model_path = Path(model_path)
     metadata_path = metadata_path_for(model_path) if metadata_path is None else Path(metadata_path)
-    atomic_write(model_path, lambda tmp: sio.dump(list(surrogate.estimators_), tmp))
+    velocity = list(getattr(surrogate, "velocity_estimators_", None) or [])
+    atomic_write(model_path, lambda tmp: sio.dump({"frequency": list(surrogate.estimators_), "velocity": velocity},
+                                                  tmp))
     params = surrogate.get_params()
     meta = {
         "format": FORMAT,
@@ -127,6 +133,16 @@ def save_surrogate(surrogate: CollisionSurrogate, model_path: str | os.PathLike,
         "estimator": "pbmdem.surrogate.CollisionSurrogate",
         "params": params,
         "target": f"{TARGET_NAME} (fitted in log10 space; predict returns 1/s per particle pair)",
+        "velocity_target": ("log-normal impact-speed law per pair: [log10 median speed (m/s) minus the "
+                            "physics offset, log10 sigma (decades)], fitted by ML to the bins of "
+                            "pbmdem.impact.VELOCITY_EDGES" if velocity else None),
+        "velocity_edges": [float(e) for e in VELOCITY_EDGES],
+        "velocity_best_params": getattr(surrogate, "velocity_best_params_", None),
+        "velocity_search": {"best_rmse_log10": getattr(surrogate, "velocity_best_score_", None),
+                            "results": (surrogate.velocity_search_results_.to_dict(orient="records")
+                                        if getattr(surrogate, "velocity_search_results_", None) is not None else [])},
+        "n_velocity_rows": getattr(surrogate, "n_velocity_rows_", 0),
+        "duplicated_features": [list(p) for p in getattr(surrogate, "duplicated_features_", [])],
         "feature_names": list(surrogate.feature_names_),
         "feature_ranges": {k: list(v) for k, v in surrogate.feature_ranges().items()},
         "best_params": surrogate.best_params_,
@@ -212,9 +228,16 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
     bad = sorted(set(untrusted) - ALLOWED_TYPES)
     if bad:
         raise UntrustedTypesError(f"{model_path} contains types outside the allow-list: {bad}")
-    estimators = sio.load(model_path, trusted=list(untrusted))
-    if not isinstance(estimators, list) or not estimators:
-        raise SurrogateLoadError(f"{model_path} does not hold a list of fitted pipelines")
+    stored = sio.load(model_path, trusted=list(untrusted))
+    if (not isinstance(stored, dict) or not isinstance(stored.get("frequency"), list) or not stored["frequency"]
+            or not isinstance(stored.get("velocity"), list)):
+        raise SurrogateLoadError(f"{model_path} does not hold the fitted frequency and velocity pipelines")
+    estimators = stored["frequency"]
+    edges = meta.get("velocity_edges")
+    if edges is None or len(edges) != len(VELOCITY_EDGES) or not np.allclose(edges, VELOCITY_EDGES, rtol=1e-9):
+        raise IncompatibleVersionError(
+            f"{metadata_path}: velocity bins {edges} differ from this version's pbmdem.impact.VELOCITY_EDGES; "
+            f"retrain the surrogate")
 
     if list(meta["feature_names"]) != list(FEATURE_NAMES):
         raise IncompatibleVersionError(
@@ -241,5 +264,15 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
     surrogate.n_training_rows_ = meta["n_training_rows"]
     surrogate.n_dropped_rows_ = meta["n_dropped_rows"]
     surrogate.n_floored_rows_ = meta["n_floored_rows"]
+    surrogate.velocity_estimators_ = stored["velocity"]
+    vbest = meta.get("velocity_best_params")
+    surrogate.velocity_best_params_ = (None if vbest is None else
+                                       {"hidden_layer_sizes": tuple(vbest["hidden_layer_sizes"]),
+                                        "alpha": float(vbest["alpha"])})
+    surrogate.velocity_best_score_ = meta["velocity_search"]["best_rmse_log10"]
+    vres = meta["velocity_search"]["results"]
+    surrogate.velocity_search_results_ = pd.DataFrame(vres) if vres else None
+    surrogate.n_velocity_rows_ = meta["n_velocity_rows"]
+    surrogate.duplicated_features_ = [tuple(p) for p in meta.get("duplicated_features", [])]
     surrogate.metadata_ = meta
     return surrogate

@@ -1,4 +1,4 @@
-"""Parity plot of held-out predictions (DEM vs model, log-log, coloured by impeller speed)."""
+"""Parity plot of held-out encounter-frequency predictions (DEM vs model, log-log, coloured by impeller speed)."""
 
 from __future__ import annotations
 
@@ -31,8 +31,37 @@ def parity_plot(predictions: pd.DataFrame, path: str | os.PathLike, metrics: pd.
     lo = np.nanmin(np.concatenate([obs, all_pred])) / 1.5
     hi = np.nanmax(np.concatenate([obs, all_pred])) * 1.5
 
-    fig, axes = plt.subplots(1, len(models), figsize=(4.2 * len(models), 4.6), squeeze=False,
+    vel_models = [m for m in models if f"{m}_velocity_mu_log10" in predictions]
+    n_rows = 2 if vel_models else 1
+    fig, axes = plt.subplots(n_rows, len(models), figsize=(4.2 * len(models), 4.6 * n_rows), squeeze=False,
                              layout="constrained")
+    for ax in axes[1][len(vel_models):] if vel_models else []:
+        ax.axis("off")
+    for ax, m in zip(axes[1] if vel_models else [], vel_models):
+        sel_v = predictions[f"{m}_velocity_mu_log10"].notna().to_numpy()
+        obs_v = 10.0 ** predictions["velocity_mu_log10"].to_numpy(float)
+        pred_v = 10.0 ** predictions[f"{m}_velocity_mu_log10"].to_numpy(float)
+        both = np.concatenate([obs_v[sel_v], pred_v[sel_v]])
+        vlo, vhi = np.nanmin(both) / 1.5, np.nanmax(both) * 1.5
+        for r in rpms:
+            sel = sel_v & (predictions["rpm"].to_numpy() == r)
+            ax.plot(obs_v[sel], pred_v[sel], "o", ms=4, color=colours[r], alpha=0.85, label=f"{r:g} rpm")
+        ax.plot([vlo, vhi], [vlo, vhi], "k-", lw=0.8)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlim(vlo, vhi)
+        ax.set_ylim(vlo, vhi)
+        ax.set_aspect("equal")
+        ax.set_xlabel("DEM median impact speed (m/s, log-normal fit)")
+        ax.set_ylabel("predicted (held-out runs) (m/s)")
+        title = f"{MODEL_LABELS.get(m, m)}: impact speed"
+        if metrics is not None and "target" in metrics:
+            row = metrics[(metrics["model"] == m) & (metrics["fold"] == "pooled") & (metrics["target"] == "impact_velocity")]
+            if len(row):
+                title += (f"\nMAE {row['mae_log10'].iloc[0]:.3f} dec, bin-fraction TV distance "
+                          f"{row['tv_distance'].iloc[0]:.3f}")
+        ax.set_title(title, fontsize=10)
+        ax.grid(True, which="both", lw=0.3, alpha=0.5)
     for ax, m in zip(axes[0], models):
         pred = 10.0 ** predictions[f"{m}_log10"].to_numpy(float)
         for r in rpms:
@@ -52,13 +81,17 @@ def parity_plot(predictions: pd.DataFrame, path: str | os.PathLike, metrics: pd.
         ax.set_xlim(lo, hi)
         ax.set_ylim(lo, hi)
         ax.set_aspect("equal")
-        ax.set_xlabel("DEM collision frequency per pair (1/s)")
+        ax.set_xlabel("DEM encounter frequency per pair (1/s)")
         ax.set_ylabel("predicted (held-out runs) (1/s)")
         title = MODEL_LABELS.get(m, m)
         if metrics is not None:
             row = metrics[(metrics["model"] == m) & (metrics["fold"] == "pooled")]
+            if "target" in row:
+                row = row[row["target"] == "encounter_frequency"]
             if len(row):
                 title += f"\nR2(log10) {row['r2_log10'].iloc[0]:.3f}, MAE {row['mae_log10'].iloc[0]:.3f} dec"
+                if "noise_floor_r2_log10" in row and np.isfinite(row["noise_floor_r2_log10"].iloc[0]):
+                    title += f"\n(replicate noise floor R2 {row['noise_floor_r2_log10'].iloc[0]:.3f})"
         ax.set_title(title, fontsize=10)
         ax.grid(True, which="both", lw=0.3, alpha=0.5)
     axes[0][0].legend(title="impeller", fontsize=8, loc="upper left")

@@ -1,11 +1,27 @@
-"""Synthetic collision tables with a known law, for tests and benchmarks of the surrogate."""
+"""Synthetic collision and impact-velocity tables with known laws, for tests and benchmarks.
+
+Both tables follow the contract of docs/architecture.md ("Collision tables"): every run
+(rpm x distribution) is replicated ``n_replicates`` times; the encounter frequency per pair of a
+replicate is the known law times log-normal replicate noise, the table holds the mean over
+replicates and its standard error; the impact speeds of a pair follow a known log-normal law
+(:func:`velocity_law`), binned on :data:`pbmdem.impact.VELOCITY_EDGES` (expected counts, or
+multinomial samples of each replicate's encounters with ``sample_velocities``).
+"""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pandas as pd
 
-from .features import TABLE_COLUMNS
+from pbmdem.impact import VELOCITY_EDGES
+
+from .features import DEFAULT_IMPELLER_RADIUS, TABLE_COLUMNS
+from .velocity import VELOCITY_TABLE_COLUMNS, lognormal_fractions
+
+#: Raw new contacts per encounter in the synthetic tables (re-contacts of a pair that bounces).
+CONTACTS_PER_ENCOUNTER = 1.6
 
 
 def power_law(d_i, d_j, rpm, n_total, c0: float = 1e-3):
@@ -14,7 +30,22 @@ def power_law(d_i, d_j, rpm, n_total, c0: float = 1e-3):
     return c0 * ((d_i + d_j) / 0.006) ** 2 * (np.asarray(rpm, float) / 600.0) * (2000.0 / np.asarray(n_total, float))
 
 
-def make_synthetic_table(
+def velocity_law(d_i, d_j, rpm, impeller_radius: float = DEFAULT_IMPELLER_RADIUS):
+    """Reference impact-speed law: ``(mu, sigma)`` of log10 v (m/s, decades).
+
+    median = 0.12 v_tip (d_small / d_large)^0.5 (unequal pairs meet more gently in this toy law),
+    sigma = 0.30 (600 / rpm)^0.25 decades (a slower impeller gives a broader spread).
+    """
+    d_i, d_j = np.asarray(d_i, float), np.asarray(d_j, float)
+    rpm = np.asarray(rpm, float)
+    v_tip = 2.0 * math.pi * impeller_radius * rpm / 60.0
+    ratio = np.minimum(d_i, d_j) / np.maximum(d_i, d_j)
+    mu = np.log10(0.12 * v_tip * ratio ** 0.5)
+    sigma = 0.30 * (600.0 / rpm) ** 0.25
+    return mu, sigma
+
+
+def make_synthetic_tables(
     rpms=(300, 450, 600, 750, 900),
     distributions: dict | None = None,
     diameters=(0.002, 0.003, 0.004),
@@ -23,22 +54,32 @@ def make_synthetic_table(
     run_noise_log10: float = 0.0,
     sampling_time: float = 0.2,
     law=power_law,
+    n_replicates: int = 3,
+    vlaw=velocity_law,
+    sample_velocities: bool = False,
     seed: int = 0,
-) -> pd.DataFrame:
-    """A collision table (contract columns) for every rpm x distribution.
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """``(collisions, impact_velocity)`` tables for every rpm x distribution.
 
     ``distributions`` maps names to number fractions over ``diameters``; by default a handful of
     random ones. ``n_total`` of a distribution decreases with its mean size (fixed bed volume).
-    frequency_per_pair = law x 10**N(0, noise_log10) per row x 10**N(0, run_noise_log10) per run.
+    Replicate r of a row has encounter_frequency_per_pair = law x 10**N(0, noise_log10) x (run
+    factor 10**N(0, run_noise_log10), shared by the replicates of a run); the table holds the mean
+    over replicates and its standard error (NaN for one replicate). ``collisions`` (raw new
+    contacts) are :data:`CONTACTS_PER_ENCOUNTER` times the encounters.
     """
     rng = np.random.default_rng(seed)
+    if int(n_replicates) < 1:
+        raise ValueError(f"n_replicates must be >= 1, got {n_replicates!r}")
+    R = int(n_replicates)
     d = np.asarray(diameters, dtype=float)
     if distributions is None:
         distributions = {f"dist{k}": rng.dirichlet(np.full(d.size, 2.0)) for k in range(4)}
     lo, hi = n_total_range
     d3 = {name: float(np.dot(np.asarray(f, float), d ** 3)) for name, f in distributions.items()}
     d3_lo, d3_hi = min(d3.values()), max(d3.values())
-    rows = []
+    rows, vrows = [], []
+    v_lo, v_hi = VELOCITY_EDGES[:-1], VELOCITY_EDGES[1:]
     for rpm in rpms:
         for name, fractions in distributions.items():
             f = np.asarray(fractions, float) / np.sum(fractions)
@@ -52,13 +93,41 @@ def make_synthetic_table(
             for i in range(d.size):
                 for j in range(i, d.size):
                     pairs = n[i] * (n[i] - 1) / 2 if i == j else n[i] * n[j]
-                    fpp = float(law(d[i], d[j], rpm, n_total)) * run_factor * 10.0 ** rng.normal(0.0, noise_log10)
-                    collisions = fpp * pairs * sampling_time
+                    reps = float(law(d[i], d[j], rpm, n_total)) * run_factor * 10.0 ** rng.normal(0.0, noise_log10, R)
+                    efpp = float(reps.mean()) if pairs > 0 else np.nan
+                    se = float(reps.std(ddof=1) / math.sqrt(R)) if (R > 1 and pairs > 0) else np.nan
+                    encounters = efpp * pairs * sampling_time if pairs > 0 else 0.0
+                    mu, sigma = vlaw(d[i], d[j], rpm)
+                    frac = lognormal_fractions(mu, sigma)[0]
+                    if sample_velocities and pairs > 0:
+                        counts = np.mean([rng.multinomial(int(round(r * pairs * sampling_time)), frac)
+                                          for r in reps], axis=0)
+                    else:
+                        counts = encounters * frac
+                    if counts.sum() > 0:
+                        cdf = np.cumsum(counts) / counts.sum()
+                        b = int(np.searchsorted(cdf, 0.5))
+                        median = float(np.sqrt(max(v_lo[b], VELOCITY_EDGES[1]) * v_hi[b]))
+                    else:
+                        median = np.nan
+                    collisions = CONTACTS_PER_ENCOUNTER * encounters
                     rows.append({
                         "point_id": pid, "rpm": rpm, "distribution": name, "class_i": i, "class_j": j,
                         "d_i": d[i], "d_j": d[j], "n_i": int(n[i]), "n_j": int(n[j]), "n_total": n_total,
                         "collisions": collisions, "sampling_time": sampling_time,
                         "frequency": collisions / sampling_time,
                         "frequency_per_pair": collisions / (pairs * sampling_time) if pairs > 0 else np.nan,
+                        "n_replicates": R, "encounters": encounters,
+                        "encounter_frequency_per_pair": efpp, "encounter_frequency_per_pair_se": se,
+                        "impact_velocity_median": median,
                     })
-    return pd.DataFrame(rows, columns=list(TABLE_COLUMNS))
+                    for b in range(len(counts)):
+                        vrows.append({"point_id": pid, "rpm": rpm, "distribution": name, "class_i": i,
+                                      "class_j": j, "v_lo": v_lo[b], "v_hi": v_hi[b], "encounters": counts[b]})
+    return (pd.DataFrame(rows, columns=list(TABLE_COLUMNS)),
+            pd.DataFrame(vrows, columns=list(VELOCITY_TABLE_COLUMNS)))
+
+
+def make_synthetic_table(*args, **kwargs) -> pd.DataFrame:
+    """The collision table of :func:`make_synthetic_tables` (same arguments)."""
+    return make_synthetic_tables(*args, **kwargs)[0]

@@ -1,4 +1,4 @@
-"""Train the surrogate on a collision table and write model, metadata, metrics and parity plot."""
+"""Train the surrogate on the collision and impact-velocity tables; write model, metadata, metrics, parity plot."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ from ._io import atomic_write
 from .persistence import save_surrogate
 from .plots import empty_plot, parity_plot
 from .settings import build_surrogate, resolve_settings
+from .velocity import attach_velocity_bins
 
 log = logging.getLogger(__name__)
 
@@ -24,13 +25,26 @@ def _write_csv(frame: pd.DataFrame, path: Path) -> None:
     atomic_write(path, lambda tmp: frame.to_csv(tmp, index=False, float_format="%.6g"))
 
 
+def _read_table(table, what: str) -> tuple[pd.DataFrame, str]:
+    if isinstance(table, pd.DataFrame):
+        return table, "<DataFrame>"
+    try:
+        return pd.read_csv(table), str(table)
+    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        raise ValueError(f"cannot read the {what} {table}: {exc}") from exc
+
+
 def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | os.PathLike,
                      metadata_path: str | os.PathLike | None = None, metrics_path: str | os.PathLike | None = None,
                      parity_path: str | os.PathLike | None = None, settings: dict | None = None,
-                     impeller_radius: float = DEFAULT_IMPELLER_RADIUS, n_jobs: int | None = None) -> dict:
+                     impeller_radius: float = DEFAULT_IMPELLER_RADIUS, n_jobs: int | None = None,
+                     velocity_table: str | os.PathLike | pd.DataFrame | None = None) -> dict:
     """Grouped CV of MLP and baselines, final fit on every run, then write the outputs.
 
-    Output paths default to siblings of ``model_path``: ``model.json``, ``metrics.csv``, ``parity.png``.
+    ``table`` is the collision table (``results/dem/collisions.csv``), ``velocity_table`` the
+    impact-velocity table (``results/dem/impact_velocity.csv``); without it the surrogate learns
+    the encounter frequency only (with a warning). Output paths default to siblings of
+    ``model_path``: ``model.json``, ``metrics.csv``, ``parity.png``.
     Returns the metadata written to ``model.json``.
     """
     model_path = Path(model_path)
@@ -39,9 +53,15 @@ def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | 
     metrics_path = Path(metrics_path) if metrics_path else out / "metrics.csv"
     parity_path = Path(parity_path) if parity_path else out / "parity.png"
     settings = resolve_settings(settings)
-    frame = table if isinstance(table, pd.DataFrame) else pd.read_csv(table)
-    source = "<DataFrame>" if isinstance(table, pd.DataFrame) else str(table)
+    frame, source = _read_table(table, "collision table")
+    if "point_id" not in frame:
+        raise ValueError(f"collision table {source} lacks column 'point_id'")
     log.info("collision table %s: %d rows, %d runs", source, len(frame), frame["point_id"].nunique())
+    velocity_source = None
+    if velocity_table is not None:
+        vframe, velocity_source = _read_table(velocity_table, "impact-velocity table")
+        frame = attach_velocity_bins(frame, vframe, source=f"impact-velocity table {velocity_source}")
+        log.info("impact-velocity table %s: %d rows", velocity_source, len(vframe))
 
     surrogate = build_surrogate(settings, impeller_radius, n_jobs=n_jobs)
     t0 = time.perf_counter()
@@ -52,9 +72,14 @@ def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | 
         metrics, predictions = pd.DataFrame(columns=METRIC_COLUMNS), None
     t_cv = time.perf_counter() - t0
     summary = summarise(metrics)
+    velocity_summary = summarise(metrics, "impact_velocity")
     for name, s in summary.items():
-        log.info("%-8s held-out R2(log10) %.3f (pooled), MAE %.3f decades", name, s["pooled_r2_log10"],
-                 s["pooled_mae_log10"])
+        log.info("%-8s held-out R2(log10 c) %.3f (pooled; replicate noise floor %.3f), MAE %.3f decades", name,
+                 s["pooled_r2_log10"], s["noise_floor_r2_log10"], s["pooled_mae_log10"])
+    for name, s in velocity_summary.items():
+        log.info("%-8s held-out median impact speed: MAE %.3f decades, R2(log10) %.3f; bin fractions: "
+                 "mean total-variation distance %.3f", name, s["pooled_mae_log10"], s["pooled_r2_log10"],
+                 s["pooled_tv_distance"])
 
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
@@ -69,11 +94,13 @@ def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | 
     cv_scores = {
         "strategy": surrogate.cv,
         "outer_summary": summary,
+        "noise_floor_r2_log10": (next(iter(summary.values()))["noise_floor_r2_log10"] if summary else None),
+        "velocity_summary": velocity_summary,
         "outer_folds": metrics[~metrics["fold"].isin(["pooled", "mean"])].to_dict(orient="records"),
         "search_best_rmse_log10": surrogate.best_score_,
     }
     meta = save_surrogate(surrogate, model_path, metadata_path, cv_scores=cv_scores,
-                          extra={"training_table": source, "settings": settings,
+                          extra={"training_table": source, "velocity_table": velocity_source, "settings": settings,
                                  "timing_s": {"cross_validation": t_cv, "final_fit": t_fit}})
     _write_csv(metrics, metrics_path)
     if predictions is not None:

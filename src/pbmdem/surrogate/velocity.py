@@ -1,0 +1,180 @@
+"""Impact-velocity distributions per class pair: reading, log-normal summary and bin fractions.
+
+``results/dem/impact_velocity.csv`` (docs/architecture.md) holds, per run and class pair, the mean
+number of encounters per replicate in every bin of :data:`pbmdem.impact.VELOCITY_EDGES`. The
+surrogate summarises each pair's binned distribution by a log-normal law of the impact speed v,
+
+    log10 v ~ Normal(mu, sigma),   median = 10**mu (m/s),  geometric spread = 10**sigma,
+
+fitted by maximum likelihood to the bin counts (interval-censored: bin 0 is (0, 1 mm/s), the last
+bin is open upwards because faster impacts are counted there). The MLP learns ``mu`` and
+``log10 sigma`` per pair; :func:`lognormal_fractions` turns them back into fractions per bin, so
+predicted fractions always lie on the project's bins, are >= 0 and sum to 1.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import minimize
+from scipy.special import log_ndtr, ndtr
+
+from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, representative_velocities
+
+from .features import CollisionTableError
+
+#: Columns of the impact-velocity table contract (docs/architecture.md).
+VELOCITY_TABLE_COLUMNS = ("point_id", "rpm", "distribution", "class_i", "class_j", "v_lo", "v_hi", "encounters")
+
+#: Wide columns holding a pair's encounter counts per velocity bin once attached to the collision table.
+VELOCITY_COUNT_COLUMNS = tuple(f"vbin{b:02d}" for b in range(N_VELOCITY_BINS))
+
+#: Bounds of the fitted geometric spread sigma (decades). The lower bound is a fifth of a bin width
+#: (bins are 0.25 decades): a pair whose encounters all fall into one bin cannot resolve less.
+SIGMA_BOUNDS = (0.05, 3.0)
+
+#: log10 of the inner bin edges; bin 0 starts at -inf (v -> 0), the last bin ends at +inf.
+_LOG_EDGES = np.concatenate([[-np.inf], np.log10(VELOCITY_EDGES[1:-1]), [np.inf]])
+#: log10 of one representative speed per bin (start values of the fit).
+_LOG_CENTRES = np.log10(representative_velocities())
+
+
+def attach_velocity_bins(table: pd.DataFrame, velocity: pd.DataFrame, source: str = "impact-velocity table") -> pd.DataFrame:
+    """The collision table with one column per velocity bin (:data:`VELOCITY_COUNT_COLUMNS`).
+
+    ``velocity`` is the impact-velocity table (long format, one row per run, pair and bin). Bins a
+    pair lacks count 0; pairs of the collision table without any row in ``velocity`` get NaN (no
+    velocity data). The bins must be those of :data:`pbmdem.impact.VELOCITY_EDGES`.
+    """
+    missing = [c for c in VELOCITY_TABLE_COLUMNS if c not in velocity.columns]
+    if missing:
+        raise CollisionTableError(f"{source} lacks column(s) {missing}; expected {list(VELOCITY_TABLE_COLUMNS)}")
+    v = velocity.copy()
+    for col in ("class_i", "class_j", "v_lo", "v_hi", "encounters"):
+        v[col] = pd.to_numeric(v[col], errors="coerce")
+    bad = [c for c in ("class_i", "class_j", "v_lo", "encounters") if v[c].isna().any()]
+    if bad:
+        raise CollisionTableError(f"{source}: non-numeric or missing values in column(s) {bad}")
+    if (v["encounters"] < 0).any():
+        raise CollisionTableError(f"{source}: column 'encounters' must be >= 0, "
+                                  f"got {v.loc[v['encounters'] < 0, 'encounters'].iloc[0]!r}")
+    lo = v["v_lo"].to_numpy(float)
+    b = np.searchsorted(VELOCITY_EDGES[:-1], lo)
+    b = np.clip(b, 0, N_VELOCITY_BINS - 1)
+    ok_lo = np.isclose(VELOCITY_EDGES[b], lo, rtol=1e-6, atol=1e-12)
+    hi = v["v_hi"].to_numpy(float)
+    ok_hi = np.isclose(VELOCITY_EDGES[b + 1], hi, rtol=1e-6, atol=1e-12) | ((b == N_VELOCITY_BINS - 1) & np.isinf(hi))
+    if not (ok_lo & ok_hi).all():
+        k = int(np.flatnonzero(~(ok_lo & ok_hi))[0])
+        raise CollisionTableError(
+            f"{source}: velocity bin [{lo[k]!r}, {hi[k]!r}) m/s is not a bin of pbmdem.impact.VELOCITY_EDGES "
+            f"(allowed: [0, 1e-3) then 4 log bins per decade up to 10 m/s)")
+    v["bin"] = b
+    v["point_id"] = v["point_id"].astype(str)
+    key = ["point_id", "class_i", "class_j"]
+    dup = v.duplicated(key + ["bin"])
+    if dup.any():
+        raise CollisionTableError(f"{source}: bin listed twice for {v.loc[dup, key + ['bin']].iloc[0].to_dict()}")
+    wide = v.pivot_table(index=key, columns="bin", values="encounters", aggfunc="sum", fill_value=0.0)
+    wide = wide.reindex(columns=range(N_VELOCITY_BINS), fill_value=0.0)
+    wide.columns = list(VELOCITY_COUNT_COLUMNS)
+    wide = wide.reset_index()
+    wide["class_i"] = wide["class_i"].astype(int)
+    wide["class_j"] = wide["class_j"].astype(int)
+    out = table.drop(columns=[c for c in VELOCITY_COUNT_COLUMNS if c in table.columns]).copy()
+    out_key = out[key].assign(point_id=out["point_id"].astype(str), class_i=out["class_i"].astype(int),
+                              class_j=out["class_j"].astype(int))
+    known = set(map(tuple, out_key.to_numpy().tolist()))
+    extra = [k for k in map(tuple, wide[key].to_numpy().tolist()) if k not in known]
+    if extra:
+        raise CollisionTableError(f"{source}: pair(s) {extra[:3]} (point_id, class_i, class_j) are not in the "
+                                  f"collision table")
+    merged = out_key.merge(wide, on=key, how="left")
+    for col in VELOCITY_COUNT_COLUMNS:
+        out[col] = merged[col].to_numpy(float)
+    return out
+
+
+def has_velocity(table: pd.DataFrame) -> bool:
+    """True if the table carries velocity bin counts (see :func:`attach_velocity_bins`)."""
+    return all(c in table.columns for c in VELOCITY_COUNT_COLUMNS)
+
+
+def bin_counts(table: pd.DataFrame) -> np.ndarray:
+    """(n, N_VELOCITY_BINS) encounter counts per bin of every row (NaN rows: no velocity data)."""
+    return table.loc[:, list(VELOCITY_COUNT_COLUMNS)].to_numpy(float)
+
+
+def velocity_rows(table: pd.DataFrame) -> np.ndarray:
+    """Boolean mask of rows with a usable velocity distribution (finite counts, positive total)."""
+    if not has_velocity(table):
+        return np.zeros(len(table), bool)
+    counts = bin_counts(table)
+    return np.isfinite(counts).all(axis=1) & (np.nan_to_num(counts).sum(axis=1) > 0)
+
+
+def empirical_fractions(counts) -> np.ndarray:
+    """Counts per bin -> fractions per bin (rows sum to 1)."""
+    counts = np.atleast_2d(np.asarray(counts, float))
+    total = counts.sum(axis=1, keepdims=True)
+    if not (total > 0).all():
+        raise ValueError("every row needs a positive total count")
+    return counts / total
+
+
+def lognormal_fractions(mu, sigma) -> np.ndarray:
+    """(n, N_VELOCITY_BINS) fraction of a log-normal speed distribution in each velocity bin.
+
+    ``mu``: log10 of the median speed (m/s); ``sigma``: standard deviation of log10 v (decades).
+    Bin 0 takes everything below 1 mm/s, the last bin everything from its lower edge up.
+    """
+    mu = np.atleast_1d(np.asarray(mu, float))[:, None]
+    sigma = np.atleast_1d(np.asarray(sigma, float))[:, None]
+    cdf = ndtr((_LOG_EDGES[None, :] - mu) / sigma)
+    frac = np.diff(cdf, axis=1)
+    frac = np.clip(frac, 0.0, None)
+    return frac / frac.sum(axis=1, keepdims=True)
+
+
+def _neg_loglik(theta, counts):
+    mu, log_sigma = theta
+    z = (_LOG_EDGES - mu) / np.exp(log_sigma)
+    # log P(bin) = log(Phi(z_hi) - Phi(z_lo)), computed stably from log Phi
+    lo, hi = log_ndtr(z[:-1]), log_ndtr(z[1:])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        logp = hi + np.log1p(-np.exp(np.minimum(lo - hi, 0.0)))
+    logp = np.where(counts > 0, logp, 0.0)
+    return -float(np.sum(counts * np.maximum(logp, -745.0)))
+
+
+def fit_lognormal(counts) -> tuple[np.ndarray, np.ndarray]:
+    """Maximum-likelihood log-normal fit to binned counts, one per row.
+
+    Returns ``(mu, sigma)``: log10 median speed (m/s) and standard deviation of log10 v (decades),
+    sigma within :data:`SIGMA_BOUNDS`. Counts may be non-integer (means over replicates): they act
+    as weights of the multinomial likelihood.
+    """
+    counts = np.atleast_2d(np.asarray(counts, float))
+    if counts.shape[1] != N_VELOCITY_BINS:
+        raise ValueError(f"expected {N_VELOCITY_BINS} bins per row, got {counts.shape[1]}")
+    if not (np.isfinite(counts).all() and (counts >= 0).all()):
+        raise ValueError("bin counts must be finite and >= 0")
+    mus, sigmas = np.empty(len(counts)), np.empty(len(counts))
+    log_bounds = (np.log(SIGMA_BOUNDS[0]), np.log(SIGMA_BOUNDS[1]))
+    for r, c in enumerate(counts):
+        w = c / c.sum()
+        m0 = float(np.dot(w, _LOG_CENTRES))
+        s0 = float(np.clip(np.sqrt(np.dot(w, (_LOG_CENTRES - m0) ** 2) + 0.25 ** 2 / 12), *SIGMA_BOUNDS))
+        res = minimize(_neg_loglik, x0=[m0, np.log(s0)], args=(w,), method="L-BFGS-B",
+                       bounds=[(np.log10(VELOCITY_EDGES[1]) - 3.0, np.log10(VELOCITY_EDGES[-1]) + 3.0), log_bounds])
+        if not res.success and not np.isfinite(res.fun):
+            warnings.warn(f"log-normal fit of velocity row {r} did not converge: {res.message}", stacklevel=2)
+        mus[r], sigmas[r] = res.x[0], np.exp(res.x[1])
+    return mus, sigmas
+
+
+def total_variation(p, q) -> np.ndarray:
+    """Total-variation distance 0.5 sum |p - q| of fraction rows (0: identical, 1: disjoint)."""
+    return 0.5 * np.abs(np.asarray(p, float) - np.asarray(q, float)).sum(axis=-1)

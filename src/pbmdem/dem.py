@@ -29,8 +29,15 @@ from pbmdem.atomic import write_json, write_text
 SNAPSHOTS_PER_CONTACT = 2
 
 
+def rpm_text(rpm: float) -> str:
+    """The impeller speed as it appears in ids and paths: the shortest decimal that reads back as
+    the same float, never in exponent form (so the rules' rpm wildcard `[0-9]+(\\.[0-9]+)?`
+    accepts every speed the schema allows, and two different speeds never share an id)."""
+    return np.format_float_positional(float(rpm), trim="-")
+
+
 def point_id(rpm: float, distribution: str) -> str:
-    return f"rpm{float(rpm):g}_{distribution}"
+    return f"rpm{rpm_text(rpm)}_{distribution}"
 
 
 def rayleigh_time(radius: float, density: float, youngs: float, poisson: float) -> float:

@@ -20,7 +20,7 @@ def add_cli(subparsers) -> argparse.ArgumentParser:
                    help="collision-frequency source: constant c_ij, DEM collision table, or the ANN surrogate")
     p.add_argument("--table", type=Path, help="collision table CSV (with --kernel table)")
     p.add_argument("--model", type=Path, help="surrogate model file (with --kernel ann)")
-    p.add_argument("--rpm", required=True, type=float, help="impeller speed (1/min)")
+    p.add_argument("--rpm", required=True, help="impeller speed (1/min), 0 < rpm <= 20000")
     p.add_argument("--distribution", default=None, help="size distribution name (default: first of the grid)")
     p.add_argument("--out", required=True, type=Path, help="output folder (tables, plots, run.json)")
     p.set_defaults(func=run_cli)
@@ -55,10 +55,11 @@ def make_source(kind: str, config: dict, table=None, model=None, distribution: s
 
 
 def run_cli(args) -> int:
-    from pbmdem.config import load_config
+    from pbmdem.config import check_rpm, load_config
 
     from .settings import run_pbm
 
+    args.rpm = check_rpm(args.rpm, "--rpm")
     config = load_config(args.config)
     distribution = args.distribution or config["grid"]["size_distributions"][0]
     source = make_source(args.kernel, config, args.table, args.model, distribution)

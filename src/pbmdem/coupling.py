@@ -202,7 +202,9 @@ class DemProvider:
         plan = dem.plan_point(self.cfg, self.rpm, f"interval{index:02d}", n_particles=sample.n_particles,
                               diameters=sample.diameters, number_fractions=sample.number_fractions)
         plan.counts = list(sample.counts)
-        summary = dem.run_point(self.cfg, plan, interval_dir / "dem", timeout=self.cfg["dem"].get("timeout"))
+        # an interval without interval.json is unfinished, whatever its DEM folder holds
+        summary = dem.run_point(self.cfg, plan, interval_dir / "dem", timeout=self.cfg["dem"].get("timeout"),
+                                force=True)
         table = pd.read_csv(interval_dir / "dem" / "collisions.csv")
         return matrix_from_table(table, len(sample.diameters)), {
             "dem_wall_time_s": summary["liggghts_wall_time_s"] + summary["parse_time_s"],

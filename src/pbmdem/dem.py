@@ -11,6 +11,7 @@ series index. Tables are written atomically and only after LIGGGHTS succeeded.
 from __future__ import annotations
 
 import math
+import os
 import shutil
 import time
 from dataclasses import asdict, dataclass, field
@@ -242,17 +243,93 @@ def prepare_run(cfg: dict, plan: DemPlan, run_dir: str | Path) -> Path:
     return run_dir / "in.granulator"
 
 
-def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | None = None) -> dict:
+class FinishedRunError(ValueError):
+    """The run folder holds a finished run; it is only replaced when asked to (force)."""
+
+
+FINISHED_MARKERS = ("collisions.csv", "summary.json")
+
+
+def is_finished(run_dir: str | Path) -> bool:
+    """A run folder holds a finished run once its collision table or summary exists."""
+    return any((Path(run_dir) / name).exists() for name in FINISHED_MARKERS)
+
+
+# what a run writes into its folder (besides whatever LIGGGHTS itself adds)
+RUN_PRODUCTS = ("bowl.stl", "impeller.stl", "in.granulator", "plan.json", "log.liggghts", "screen.liggghts",
+                "crash.json", "post", "wall_collisions.csv", *FINISHED_MARKERS)
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    else:
+        path.unlink(missing_ok=True)
+
+
+def _move_into(stage: Path, run_dir: Path) -> None:
+    """Move a finished (or crashed) attempt from `stage` into `run_dir`: the old run's finished
+    markers go first (so a half-replaced folder never looks finished), products of the old run
+    that the new one lacks (e.g. a stale crash.json) are removed, the new markers come last.
+    Anything else in `run_dir` is left alone."""
+    run_dir.mkdir(parents=True, exist_ok=True)
+    for name in FINISHED_MARKERS:
+        (run_dir / name).unlink(missing_ok=True)
+    for name in RUN_PRODUCTS:
+        if not (stage / name).exists() and (run_dir / name).exists():
+            _remove(run_dir / name)
+    last = [stage / n for n in ("wall_collisions.csv", *FINISHED_MARKERS) if (stage / n).exists()]
+    for item in [p for p in sorted(stage.iterdir()) if p not in last] + last:
+        target = run_dir / item.name
+        if target.is_dir() and not target.is_symlink():
+            shutil.rmtree(target)
+        os.replace(item, target)
+    stage.rmdir()
+
+
+def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | None = None, *,
+              force: bool = False) -> dict:
     """Run LIGGGHTS for `plan` in `run_dir`, then tabulate collisions and index the VTK files.
 
-    Returns a summary dict (also written to `run_dir/summary.json`). Raises LiggghtsError on
-    failure, leaving `crash.json` and the log in `run_dir` and no collision table.
+    Everything is validated before any file is touched: the speed and the whole deck, and a
+    finished run in `run_dir` is refused unless `force`. The run is made in a staging folder
+    beside `run_dir` and moved into place only after it succeeded, so a failure (or a signal)
+    never removes a finished run. Returns a summary dict (also `run_dir/summary.json`). Raises
+    LiggghtsError on failure, leaving `crash.json` and the log in `run_dir` (or, when `run_dir`
+    holds a finished run, in the staging folder named in the message) and no collision table.
     """
-    from pbmdem import collisions, vtk_series  # local: keep this module light to import
+    from pbmdem.config import check_rpm
 
     run_dir = Path(run_dir)
-    for name in ("collisions.csv", "wall_collisions.csv", "summary.json"):
-        (run_dir / name).unlink(missing_ok=True)
+    check_rpm(plan.rpm, f"operating point {plan.point_id}: impeller rpm")
+    deck.render("granulator.in", deck_values(cfg, plan))  # raises on any bad value, before any I/O
+    finished = is_finished(run_dir)
+    if finished and not force:
+        raise FinishedRunError(
+            f"{run_dir} already holds a finished run ({', '.join(n for n in FINISHED_MARKERS if (run_dir / n).exists())}); "
+            "refusing to overwrite it (rerunning would give it new time stamps, so Snakemake would redo "
+            "everything downstream). Use --force to replace it, or --out to write elsewhere.")
+    where = run_dir.resolve()
+    stage = where.parent / f".{where.name}.staging"
+    if stage.exists():
+        shutil.rmtree(stage)
+    stage.mkdir(parents=True)
+    try:
+        summary = _run_in(cfg, plan, stage, run_dir, timeout)
+    except BaseException as exc:
+        if not finished:  # nothing to protect: keep the crash and the logs in the run folder
+            _move_into(stage, run_dir)
+        elif len(exc.args) == 1 and isinstance(exc.args[0], str):
+            exc.args = (f"{exc.args[0]}\n(the finished run in {run_dir} is untouched; this attempt is in {stage})",)
+        raise
+    _move_into(stage, run_dir)
+    return summary
+
+
+def _run_in(cfg: dict, plan: DemPlan, run_dir: Path, final_dir: Path, timeout: float | None) -> dict:
+    """run_point's work in the (staging) folder `run_dir`; paths in the summary name `final_dir`."""
+    from pbmdem import collisions, vtk_series  # local: keep this module light to import
+
     deck_path = prepare_run(cfg, plan, run_dir)
     result = liggghts.run(deck_path, run_dir, ranks=plan.mpi_ranks, timeout=timeout)
     t0 = time.perf_counter()
@@ -277,7 +354,7 @@ def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | No
         "parse_time_s": parse_time, "parse_cost_ratio": parse_time / result.wall_time,
         "collision_interval": plan.collision_interval,
         "total_collisions": int(tables.pairs["collisions"].sum()),
-        **tables.diagnostics, **{f"series_{k}": str(v) for k, v in series.items()},
+        **tables.diagnostics, **{f"series_{k}": str(final_dir / "post" / Path(v).name) for k, v in series.items()},
     }
     write_json(run_dir / "summary.json", summary)
     return summary

@@ -1,0 +1,227 @@
+"""Data integrity: bad values are refused with a message naming the file or key and the value,
+before anything is deleted; finished runs are never lost or silently rewritten."""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from pbmdem import collisions, dem
+from pbmdem.config import ConfigError, load_config, validate
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def _snakemake(root: Path, workdir: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "snakemake", "-s", str(root / "Snakefile"), "--directory",
+                           str(workdir), *args], capture_output=True, text=True, timeout=600)
+
+
+# ----------------------------------------------------------------------------- defect 4: duplicate keys
+def test_duplicate_key_in_a_config_file_is_refused_with_key_and_line(root, tmp_path):
+    text = (root / "config" / "test.yaml").read_text().replace("  seed: 20141\n", "  seed: 20141\n  seed: 7\n")
+    path = _write(tmp_path / "dup.yaml", text)
+    line = text.splitlines().index("  seed: 7") + 1
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    msg = str(info.value)
+    assert str(path) in msg and "duplicate key 'seed'" in msg and f"line {line}" in msg
+
+
+def test_snakemake_refuses_a_duplicate_key(root, tmp_path):
+    text = (root / "config" / "test.yaml").read_text().replace("  seed: 20141\n", "  seed: 20141\n  seed: 7\n")
+    path = _write(tmp_path / "dup.yaml", text)
+    proc = _snakemake(root, tmp_path, "--configfile", str(path), "-n", "--cores", "1")
+    assert proc.returncode != 0
+    assert "duplicate key 'seed'" in proc.stderr and "Traceback" not in proc.stderr
+
+
+# ----------------------------------------------------------------------------- defect 3: non-finite numbers
+@pytest.mark.parametrize("text, key", [(".nan", "material.restitution"), (".inf", "material.restitution"),
+                                       ("-.inf", "material.restitution")])
+def test_non_finite_config_values_name_key_and_value(root, tmp_path, text, key):
+    cfg_text = (root / "config" / "test.yaml").read_text().replace("restitution: 0.4", f"restitution: {text}")
+    path = _write(tmp_path / "bad.yaml", cfg_text)
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    msg = str(info.value)
+    assert key in msg and repr(float(text.replace(".", ""))) in msg and str(path) in msg
+
+
+def test_nan_speed_in_the_grid_is_refused(tiny_config):
+    cfg = copy.deepcopy(tiny_config)
+    cfg["grid"]["impeller_rpm"] = [600, float("nan")]
+    with pytest.raises(ConfigError, match=r"grid\.impeller_rpm\[1\] = nan"):
+        validate(cfg)
+
+
+@pytest.mark.parametrize("rpm", ["0", "inf", "nan", "-5", "1e9", "fast"])
+def test_impossible_cli_speeds_are_refused_and_leave_a_finished_run_alone(tiny_run, tmp_path, root, capsys, rpm):
+    """Defect 2 and 3: an impossible speed with --out at a finished run is refused, the run untouched."""
+    from pbmdem.cli import main
+
+    run = tmp_path / "run"
+    shutil.copytree(tiny_run["dir"], run)
+    before = {p: (p.stat().st_mtime_ns, p.stat().st_size) for p in run.rglob("*")}
+    code = main(["dem", "--config", str(root / "config" / "test.yaml"), "--rpm", rpm, "--distribution", "small",
+                 "--out", str(run), "--force"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "--rpm" in err and repr(rpm) in err and "Traceback" not in err
+    assert {p: (p.stat().st_mtime_ns, p.stat().st_size) for p in run.rglob("*")} == before
+
+
+@pytest.mark.parametrize("rpm", ["0", "inf", "nan"])
+def test_impossible_speed_for_the_pbm_cli(root, tmp_path, capsys, rpm):
+    from pbmdem.cli import main
+
+    code = main(["pbm", "--config", str(root / "config" / "test.yaml"), "--rpm", rpm, "--out", str(tmp_path / "o")])
+    assert code == 2 and "--rpm" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def _dump(path: Path, rows: list[str]) -> Path:
+    text = (f"ITEM: TIMESTEP\n100\nITEM: NUMBER OF ENTRIES\n{len(rows)}\nITEM: BOX BOUNDS ff ff ff\n"
+            "-0.01 0.01\n-0.01 0.01\n0 0.03\nITEM: ENTRIES c_1 c_2 c_3\n")
+    return _write(path, text + "".join(r + "\n" for r in rows))
+
+
+@pytest.mark.parametrize("rows, col", [(["1 2 0.001", "nan 3 0.002"], 1), (["1 2 0.001", "2 3 nan"], 3),
+                                       (["1 2 inf", "2 3 0.002"], 3)])
+def test_non_finite_value_in_a_dump_names_file_and_column(tmp_path, rows, col):
+    path = _dump(tmp_path / "pairs.dump", rows)
+    with pytest.raises(collisions.DumpFormatError) as info:
+        collisions.read_dump(path, 3)
+    msg = str(info.value)
+    assert str(path) in msg and f"column {col}" in msg and "step 100" in msg
+    assert "nan" in msg or "inf" in msg
+
+
+def test_nan_in_a_real_contact_dump_fails_the_tabulation(tiny_run, tmp_path):
+    """A NaN overlap in LIGGGHTS' own pair dump must not silently change the count."""
+    post = tmp_path / "post"
+    shutil.copytree(tiny_run["dir"] / "post", post)
+    lines = (post / "pairs.dump").read_text().splitlines()
+    k = next(i for i, line in enumerate(lines) if len(line.split()) == 3 and not line.startswith("ITEM"))
+    parts = lines[k].split()
+    lines[k] = f"{parts[0]} {parts[1]} nan"
+    (post / "pairs.dump").write_text("\n".join(lines) + "\n")
+    with pytest.raises(collisions.DumpFormatError, match="pairs.dump: non-finite value nan in column 3"):
+        collisions.tabulate_run(post, tiny_run["plan"])
+
+
+# ----------------------------------------------------------------------------- defect 5: operating-point ids
+def test_every_allowed_speed_gives_an_id_the_rule_wildcard_accepts(root):
+    snakefile = (root / "Snakefile").read_text()
+    wildcard = re.search(r'rpm=r"([^"]+)"', snakefile).group(1)
+    schema = yaml.safe_load((root / "workflow" / "schemas" / "config.schema.yaml").read_text())
+    limits = schema["properties"]["grid"]["properties"]["impeller_rpm"]["items"]
+    assert limits["exclusiveMinimum"] == 0
+    speeds = [1e-9, 1.5e-7, 0.1 + 0.2, 0.5, 1, 600, 1234.567, 1234.5678901, 19999.999999, limits["maximum"]]
+    ids = set()
+    for rpm in speeds:
+        text = dem.rpm_text(rpm)
+        assert re.fullmatch(wildcard, text), (rpm, text)
+        assert float(text) == float(rpm)  # the rule reads the speed back from the wildcard
+        ids.add(dem.point_id(rpm, "fine"))
+    assert len(ids) == len(speeds)  # close speeds never share a run folder
+    assert dem.point_id(600.0, "fine") == "rpm600_fine"
+
+
+def test_snakemake_plans_a_tiny_speed(root, tmp_path, tiny_config):
+    cfg = copy.deepcopy(tiny_config)
+    cfg["grid"]["impeller_rpm"] = [1e-9, 1234.567]
+    path = _write(tmp_path / "c.yaml", yaml.safe_dump(cfg))
+    proc = _snakemake(root, tmp_path, "--configfile", str(path), "-n", "--cores", "1",
+                      "results/dem/collisions.csv")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "rpm0.000000001_small" in proc.stdout + proc.stderr
+    assert "rpm1234.567_large" in proc.stdout + proc.stderr
+
+
+# ----------------------------------------------------------------------------- defect 10: tidy errors
+def test_snakemake_lists_every_config_error_tidily(root, tmp_path, tiny_config):
+    cfg = copy.deepcopy(tiny_config)
+    cfg["material"]["restitution"] = 7.0
+    cfg["material"]["density"] = "heavy"
+    cfg["grid"]["impeller_rpm"] = [600, -3]
+    cfg["dem"]["foo"] = 1
+    path = _write(tmp_path / "bad.yaml", yaml.safe_dump(cfg))
+    proc = _snakemake(root, tmp_path, "--configfile", str(path), "-n", "--cores", "1")
+    assert proc.returncode != 0
+    err = proc.stderr
+    for key, value in (("material.restitution", "7.0"), ("material.density", "'heavy'"),
+                       ("grid.impeller_rpm[1]", "-3"), ("dem", "'foo'")):
+        assert key in err and value in err, (key, err)
+    assert "allowed" in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) < 15  # no schema or config dump
+    assert not (tmp_path / "results").exists()
+
+
+# ----------------------------------------------------------------------------- defects 2 and 8: finished runs
+def _state(folder: Path) -> dict:
+    return {p.relative_to(folder): (p.stat().st_mtime_ns, p.stat().st_size) for p in folder.rglob("*")}
+
+
+def test_manual_run_refuses_to_rewrite_a_finished_point(tiny_run, tmp_path, root, capsys):
+    from pbmdem.cli import main
+
+    run = tmp_path / "rpm600_small"
+    shutil.copytree(tiny_run["dir"], run)
+    before = _state(run)
+    code = main(["dem", "--config", str(root / "config" / "test.yaml"), "--rpm", "600", "--distribution", "small",
+                 "--out", str(run)])
+    err = capsys.readouterr().err
+    assert code == 2 and "already holds a finished run" in err and "--force" in err
+    assert _state(run) == before
+    assert not list(tmp_path.glob(".*staging"))
+
+
+def test_forced_run_that_fails_leaves_the_finished_run_untouched(tiny_run, tmp_path, root, monkeypatch, capsys):
+    """Real LIGGGHTS, cut short mid-sampling: the finished run must survive a forced rerun that fails."""
+    from test_dem_liggghts import _failing_liggghts
+
+    from pbmdem.cli import main
+
+    run = tmp_path / "rpm600_small"
+    shutil.copytree(tiny_run["dir"], run)
+    before = _state(run)
+    monkeypatch.setenv("PBMDEM_LIGGGHTS", str(_failing_liggghts(tmp_path)))
+    code = main(["dem", "--config", str(root / "config" / "test.yaml"), "--rpm", "600", "--distribution", "small",
+                 "--out", str(run), "--force"])
+    err = capsys.readouterr().err
+    assert code == 2 and "no/such/style" in err and "untouched" in err
+    assert _state(run) == before
+    stage = tmp_path / ".rpm600_small.staging"
+    assert (stage / "crash.json").exists() and not (stage / "collisions.csv").exists()
+
+
+def test_forced_run_replaces_a_finished_point(tiny_config, tmp_path):
+    """Real LIGGGHTS: --force swaps the new run in; stale products of the old one go, nothing else does."""
+    plan = dem.plan_point(tiny_config, 1200, "large")
+    run = tmp_path / "run"
+    run.mkdir()
+    _write(run / "notes.txt", "the user's own file")
+    _write(run / "crash.json", "{}")  # a stale crash of an earlier attempt
+    _write(run / "summary.json", json.dumps({"old": True}))
+    with pytest.raises(dem.FinishedRunError):
+        dem.run_point(tiny_config, plan, run, timeout=600)
+    summary = dem.run_point(tiny_config, plan, run, timeout=600, force=True)
+    assert json.loads((run / "summary.json").read_text()) == json.loads(json.dumps(summary))
+    assert (run / "collisions.csv").exists() and not (run / "crash.json").exists()
+    assert (run / "notes.txt").read_text() == "the user's own file"
+    assert Path(summary["series_particles"]).parent == run / "post" and Path(summary["series_particles"]).exists()
+    assert not list(tmp_path.glob(".*staging")) and not list(tmp_path.glob(".*replaced"))

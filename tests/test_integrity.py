@@ -225,3 +225,64 @@ def test_forced_run_replaces_a_finished_point(tiny_config, tmp_path):
     assert (run / "notes.txt").read_text() == "the user's own file"
     assert Path(summary["series_particles"]).parent == run / "post" and Path(summary["series_particles"]).exists()
     assert not list(tmp_path.glob(".*staging")) and not list(tmp_path.glob(".*replaced"))
+
+
+# ----------------------------------------------------------------------------- defect 7: out-of-domain warnings
+@pytest.fixture(scope="module")
+def small_surrogate(tmp_path_factory):
+    """A surrogate trained on synthetic tables at 300-900 rpm (so 5000 rpm is outside its domain)."""
+    import warnings
+
+    from pbmdem.surrogate import CollisionSurrogate, save_surrogate
+    from pbmdem.surrogate.synthetic import make_synthetic_table
+
+    table = make_synthetic_table(rpms=(300, 600, 900), diameters=(0.002, 0.0025, 0.003), seed=4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # convergence of this deliberately tiny fit is not the point
+        model = CollisionSurrogate(hidden_layer_sizes=((4,),), alpha=(0.1,), ensemble_size=2,
+                                   max_iter=300).fit(table)
+    path = tmp_path_factory.mktemp("surrogate") / "model.skops"
+    save_surrogate(model, path)
+    return path
+
+
+def test_pbm_cli_with_the_ann_kernel_reports_out_of_domain_use(small_surrogate, root, tmp_path, capsys):
+    from pbmdem.cli import main
+
+    out = tmp_path / "pbm"
+    code = main(["pbm", "--config", str(root / "config" / "test.yaml"), "--kernel", "ann", "--model",
+                 str(small_surrogate), "--rpm", "5000", "--distribution", "small", "--out", str(out)])
+    assert code == 0
+    err = capsys.readouterr().err
+    assert "outside its training domain" in err and "5000" in err
+    domain = json.loads((out / "run.json").read_text())["surrogate_domain"]
+    assert domain["out_of_domain_evaluations"] == domain["surrogate_evaluations"] > 0
+    assert any("rpm" in feature or "tip" in feature for feature in domain["out_of_domain_by_feature"])
+
+
+def test_validation_loops_log_count_and_report_out_of_domain_use(small_surrogate, tiny_config, tmp_path, caplog):
+    import logging
+
+    from pbmdem import coupling, report
+
+    vdir = tmp_path / "validation"
+    caplog.set_level(logging.INFO, logger="pbmdem.coupling")
+    for method in ("ann", "constant"):
+        coupling.run_method(method, tiny_config, 5000.0, vdir / "rpm5000" / f"pbm_{method}",
+                            model_path=small_surrogate)
+    intervals = __import__("pandas").read_csv(vdir / "rpm5000" / "pbm_ann" / "intervals.csv")
+    n = tiny_config["validation"]["coupling_intervals"]
+    assert len(intervals) == n and (intervals.out_of_domain_count > 0).all()
+    assert intervals.out_of_domain.str.contains("outside the training range").all()
+    timing = json.loads((vdir / "rpm5000" / "pbm_ann" / "timing.json").read_text())
+    assert timing["out_of_domain_intervals"] == n
+    constant = json.loads((vdir / "rpm5000" / "pbm_constant" / "timing.json").read_text())
+    assert constant["out_of_domain_count"] > 0
+    text = caplog.text
+    assert "surrogate out of its training domain" in text  # logged as they happen
+    assert f"interval {n} of {n}" in text and "PBM wall time" in text and "out-of-domain" in text
+    data = {m: report.load_method(vdir, "5000", m) for m in ("pbm_ann", "pbm_constant")}
+    counts = report.domain_counts(data)
+    assert counts["ann_out_of_domain_intervals"] == n and counts["constant_calibration_out_of_domain_warnings"] > 0
+    statement = report.domain_statement(__import__("pandas").DataFrame([counts]), vdir, ["5000"])
+    assert "outside its training domain" in statement and f"in {n} of {n} intervals" in statement

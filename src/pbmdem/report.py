@@ -61,8 +61,45 @@ def compare(validation_dir: str | Path, rpms, grid_rpm) -> pd.DataFrame:
             "pbm_dem_wall_s": t_dem, "pbm_dem_liggghts_wall_s": data["pbm_dem"]["timing"]["provider_wall_time_s"],
             "pbm_ann_wall_s": t_ann, "pbm_constant_wall_s": data["pbm_constant"]["timing"]["total_wall_time_s"],
             "wall_time_ratio_dem_over_ann": t_dem / t_ann if t_ann > 0 else float("nan"),
+            **domain_counts(data),
         })
     return pd.DataFrame(rows)
+
+
+def domain_counts(data: dict) -> dict:
+    """How often the surrogate was used outside its training domain at one speed: PBM-ANN
+    intervals with an out-of-domain warning (of all intervals) and the constant kernel's
+    calibration (older results without the columns count as unknown, NaN)."""
+    ann = data["pbm_ann"].get("intervals")
+    if ann is not None and "out_of_domain_count" in ann.columns:
+        counts = ann.out_of_domain_count.fillna(0)
+        ann_intervals, ann_warnings = int((counts > 0).sum()), int(counts.sum())
+    else:
+        ann_intervals = ann_warnings = float("nan")
+    return {"ann_out_of_domain_intervals": ann_intervals,
+            "ann_intervals": int(len(ann)) if ann is not None else 0,
+            "ann_out_of_domain_warnings": ann_warnings,
+            "constant_calibration_out_of_domain_warnings":
+                data["pbm_constant"]["timing"].get("out_of_domain_count", float("nan"))}
+
+
+def domain_statement(table: pd.DataFrame, validation_dir, rpms) -> str:
+    """HTML paragraph stating where the surrogate left its training domain (never left out)."""
+    lines = []
+    for rpm, row in zip(rpms, table.itertuples()):
+        if row.ann_out_of_domain_intervals and row.ann_out_of_domain_intervals == row.ann_out_of_domain_intervals:
+            ann = load_method(validation_dir, rpm, "pbm_ann")["intervals"]
+            messages = sorted({m for m in ann.get("out_of_domain", pd.Series(dtype=str)).dropna().astype(str) if m})
+            lines.append(f"{rpm} rpm: PBM-ANN used the surrogate outside its training domain in "
+                         f"{row.ann_out_of_domain_intervals} of {row.ann_intervals} intervals "
+                         f"({row.ann_out_of_domain_warnings} warnings): " + html_escape("; ".join(messages)[:2000]))
+        if row.constant_calibration_out_of_domain_warnings:
+            lines.append(f"{rpm} rpm: the constant kernel's calibration used the surrogate outside its training "
+                         f"domain ({row.constant_calibration_out_of_domain_warnings} warnings)")
+    if not lines:
+        return "<p>Surrogate domain: every PBM-ANN interval and calibration stayed within the training range.</p>"
+    return ("<p><b>Warning: surrogate outside its training domain.</b> Its predictions there are "
+            "extrapolations.</p><ul>" + "".join(f"<li>{line}</li>" for line in lines) + "</ul>")
 
 
 def _png(fig) -> str:
@@ -115,18 +152,18 @@ def figures(validation_dir: str | Path, rpm: str, model: str | Path | None = Non
     a1.legend()
     # class-pair frequencies: DEM vs the surrogate on the very same samples (the PBM-DEM loop's)
     dem_c, ann_c = [], []
+    outside = 0
     if model is not None:
-        import warnings
-
+        from pbmdem.coupling import out_of_domain_recorded
         from pbmdem.surrogate import load_surrogate
 
         surrogate = load_surrogate(model)
         for _, row in dem_i.iterrows():
             d = np.asarray(json.loads(row.class_diameters))
             n = np.asarray(json.loads(row.class_counts), float)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+            with out_of_domain_recorded(f"report, {rpm} rpm, PBM-DEM interval {row.interval}") as found:
                 c = surrogate.frequency_matrix(d, n, float(rpm))
+            outside += bool(found)
             dem_c.append(json.loads(row.class_frequencies))
             ann_c.append(c[np.triu_indices(len(d))].tolist())
     dem_c, ann_c = np.concatenate(dem_c or [[]]), np.concatenate(ann_c or [[]])
@@ -138,7 +175,11 @@ def figures(validation_dir: str | Path, rpm: str, model: str | Path | None = Non
     a2.set(xlabel="DEM c_ij (1/s per pair)", ylabel="surrogate c_ij, same sample",
            title="class pairs of every PBM-DEM interval")
     fig.tight_layout()
-    out.append((f"collision frequencies per coupling interval, {rpm} rpm", _png(fig)))
+    caption = f"collision frequencies per coupling interval, {rpm} rpm"
+    if outside:
+        caption += (f" (the surrogate was outside its training domain on {outside} of {len(dem_i)} "
+                    "PBM-DEM samples)")
+    out.append((caption, _png(fig)))
     return out
 
 
@@ -173,6 +214,7 @@ def build_report(*, validation_dir, rpms, grid_rpm, runs, collisions, metrics, p
                  f"PBM-ANN at least 1000x faster - "
                  f"{'met' if (table.wall_time_ratio_dem_over_ann >= 1000).all() else 'not met'} (ratio "
                  f"{table.wall_time_ratio_dem_over_ann.min():.0f}-{table.wall_time_ratio_dem_over_ann.max():.0f}x).</p>")
+    parts.append(domain_statement(table, validation_dir, rpms))
     for rpm in rpms:
         for caption, uri in figures(validation_dir, rpm, model):
             parts.append(f"<h3>{html_escape(caption)}</h3><img src='{uri}'>")

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 
@@ -65,6 +66,14 @@ def run_cli(args) -> int:
     source = make_source(args.kernel, config, args.table, args.model, distribution)
     result = run_pbm(config, source, args.rpm, distribution)
     result.info["kernel_source"] = args.kernel
+    domain = source.domain_report() if hasattr(source, "domain_report") else None
+    if domain is not None:
+        result.info["surrogate_domain"] = domain
+        if domain["out_of_domain_evaluations"]:
+            print(f"warning: the surrogate was evaluated outside its training domain in "
+                  f"{domain['out_of_domain_evaluations']} of {domain['surrogate_evaluations']} kernel evaluations "
+                  f"(by input: {domain['out_of_domain_by_feature']}); first: "
+                  + "; ".join(domain["out_of_domain_first"].values()), file=sys.stderr)
     paths = result.save(args.out)
     last = result.summary().iloc[-1]
     print(json.dumps({"out": str(args.out), "files": sorted(p.name for p in paths.values()),

@@ -286,3 +286,59 @@ def test_validation_loops_log_count_and_report_out_of_domain_use(small_surrogate
     assert counts["ann_out_of_domain_intervals"] == n and counts["constant_calibration_out_of_domain_warnings"] > 0
     statement = report.domain_statement(__import__("pandas").DataFrame([counts]), vdir, ["5000"])
     assert "outside its training domain" in statement and f"in {n} of {n} intervals" in statement
+
+
+# ----------------------------------------------------------------------------- defect 9: resume after kill -9
+def test_the_readme_resume_command_works_after_kill_9_of_snakemake(root, tmp_path, tiny_config):
+    """kill -9 Snakemake while a (real) LIGGGHTS job runs; the README's exact command resumes."""
+    import signal
+    import stat
+    import textwrap
+    import time
+
+    from pbmdem import liggghts
+
+    readme = (root / "README.md").read_text()
+    assert "`.venv/bin/snakemake --unlock && .venv/bin/snakemake --cores 2`" in readme
+    cfg = copy.deepcopy(tiny_config)
+    cfg["grid"]["impeller_rpm"] = [600]
+    config = _write(tmp_path / "c.yaml", yaml.safe_dump(cfg))
+    started = tmp_path / "started"
+    slow = tmp_path / "liggghts-slow"
+    real = liggghts.executable()
+    slow.write_text(textwrap.dedent(f"""\
+        #!{sys.executable}
+        import os, sys, time
+        open({str(started)!r}, "a").write(f"{{os.getpid()}}\\n")
+        time.sleep(600)
+        os.execv({real!r}, [{real!r}, *sys.argv[1:]])
+        """))
+    slow.chmod(slow.stat().st_mode | stat.S_IEXEC)
+    base = [sys.executable, "-m", "snakemake", "-s", str(root / "Snakefile"), "--directory", str(tmp_path),
+            "--configfile", str(config)]
+    target = "results/dem/collisions.csv"
+    proc = subprocess.Popen([*base, "--cores", "1", target], env=dict(os.environ, PBMDEM_LIGGGHTS=str(slow)),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 300
+        while not started.exists() and time.monotonic() < deadline:
+            time.sleep(0.5)
+        assert started.exists(), "no LIGGGHTS job started"
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        for pid in started.read_text().split() if started.exists() else []:
+            try:
+                os.kill(int(pid), signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+    blocked = subprocess.run([*base, "--cores", "1", target], capture_output=True, text=True, timeout=600)
+    assert blocked.returncode != 0 and "cannot be locked" in blocked.stdout + blocked.stderr
+    # the README's command (with the target of this test)
+    unlock = subprocess.run([*base, "--unlock"], capture_output=True, text=True, timeout=600)
+    assert unlock.returncode == 0, unlock.stderr[-2000:]
+    resumed = subprocess.run([*base, "--cores", "1", target], capture_output=True, text=True, timeout=900)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert "workflow specific profile" in resumed.stderr  # profiles/default was read
+    table = __import__("pandas").read_csv(tmp_path / target)
+    assert set(table.point_id) == {"rpm600_small", "rpm600_large"}

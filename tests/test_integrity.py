@@ -342,3 +342,47 @@ def test_the_readme_resume_command_works_after_kill_9_of_snakemake(root, tmp_pat
     assert "workflow specific profile" in resumed.stderr  # profiles/default was read
     table = __import__("pandas").read_csv(tmp_path / target)
     assert set(table.point_id) == {"rpm600_small", "rpm600_large"}
+
+
+# ----------------------------------------------------------------------------- progress of DEM jobs
+def test_dem_progress_is_read_from_liggghts_thermo_while_it_runs(tiny_config, tmp_path, caplog, capsys):
+    """Real LIGGGHTS: the progress reader sees the run move through its phases while it runs."""
+    import logging
+
+    from pbmdem import liggghts
+    from pbmdem.progress import ThermoProgress
+
+    plan = dem.plan_point(tiny_config, 600, "small")
+    deck = dem.prepare_run(tiny_config, plan, tmp_path)
+    seen = []
+
+    class Recording(ThermoProgress):
+        def update(self):
+            super().update()
+            seen.append((self.step, self.phase(), self.atoms))
+
+    phases = [("settling", plan.settle_steps), ("spin-up", plan.spinup_steps), ("sampling", plan.sampling_steps)]
+    caplog.set_level(logging.INFO, logger="pbmdem.progress")
+    progress = Recording(tmp_path / "log.liggghts", phases, label="DEM test", bar=True, log_every=0.0)
+    liggghts.run(deck, tmp_path, timeout=600, progress=progress, poll=0.02)
+    total = plan.settle_steps + plan.spinup_steps + plan.sampling_steps
+    steps = [s for s, _, _ in seen]
+    assert steps == sorted(steps) and steps[-1] == total  # the last thermo line is the last step
+    assert any(0 < s < total for s in steps[:-1])  # seen while running (the deck flushes thermo)
+    assert {p for _, p, _ in seen} >= {"settling", "sampling"}
+    assert seen[-1][2] == plan.n_particles
+    lines = [r.getMessage() for r in caplog.records if r.name == "pbmdem.progress"]
+    assert any(re.search(r"DEM test: (settling|spin-up|sampling), step \d+ of %d \(\d+ %%\), \d+ particles, "
+                         r"elapsed \d+:\d\d, remaining ~" % total, line) for line in lines), lines
+    assert f"step {total} of {total}" in lines[-1]
+    assert f"{total}/{total}" in capsys.readouterr().err  # tqdm's bar, complete
+
+
+def test_dem_cli_logs_progress_lines_when_not_on_a_terminal(root, tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "pbmdem.cli", "dem", "--config", str(root / "config" / "test.yaml"),
+                           "--rpm", "600", "--distribution", "small", "--out", str(tmp_path / "run")],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert re.search(r"pbmdem.progress: DEM rpm600_small: (settling|spin-up|sampling), step \d+ of \d+ "
+                     r"\(\d+ %\), \d+ particles, elapsed", proc.stderr), proc.stderr
+    assert "engine stopped at step" in proc.stderr

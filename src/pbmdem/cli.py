@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 
 
@@ -25,7 +26,11 @@ def _dem(args: argparse.Namespace) -> int:
     if args.plan_only:
         print(json.dumps(plan.__dict__, indent=2))
         return 0
-    summary = run_point(cfg, plan, args.out, timeout=cfg["dem"].get("timeout"), force=args.force)
+    # progress: a bar on a terminal, plain log lines (at least every ~10 s) otherwise
+    bar = sys.stderr.isatty()
+    if not bar:
+        logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stderr)
+    summary = run_point(cfg, plan, args.out, timeout=cfg["dem"].get("timeout"), force=args.force, progress_bar=bar)
     print(json.dumps(summary, indent=2))
     return 0
 

@@ -288,7 +288,7 @@ def _move_into(stage: Path, run_dir: Path) -> None:
 
 
 def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | None = None, *,
-              force: bool = False) -> dict:
+              force: bool = False, progress_bar: bool = False) -> dict:
     """Run LIGGGHTS for `plan` in `run_dir`, then tabulate collisions and index the VTK files.
 
     Everything is validated before any file is touched: the speed and the whole deck, and a
@@ -315,7 +315,7 @@ def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | No
         shutil.rmtree(stage)
     stage.mkdir(parents=True)
     try:
-        summary = _run_in(cfg, plan, stage, run_dir, timeout)
+        summary = _run_in(cfg, plan, stage, run_dir, timeout, progress_bar)
     except BaseException as exc:
         if not finished:  # nothing to protect: keep the crash and the logs in the run folder
             _move_into(stage, run_dir)
@@ -326,12 +326,17 @@ def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | No
     return summary
 
 
-def _run_in(cfg: dict, plan: DemPlan, run_dir: Path, final_dir: Path, timeout: float | None) -> dict:
+def _run_in(cfg: dict, plan: DemPlan, run_dir: Path, final_dir: Path, timeout: float | None,
+            progress_bar: bool = False) -> dict:
     """run_point's work in the (staging) folder `run_dir`; paths in the summary name `final_dir`."""
     from pbmdem import collisions, vtk_series  # local: keep this module light to import
+    from pbmdem.progress import ThermoProgress
 
     deck_path = prepare_run(cfg, plan, run_dir)
-    result = liggghts.run(deck_path, run_dir, ranks=plan.mpi_ranks, timeout=timeout)
+    progress = ThermoProgress(run_dir / "log.liggghts", [("settling", plan.settle_steps), ("spin-up", plan.spinup_steps),
+                                                         ("sampling", plan.sampling_steps)],
+                              label=f"DEM {plan.point_id}", bar=progress_bar)
+    result = liggghts.run(deck_path, run_dir, ranks=plan.mpi_ranks, timeout=timeout, progress=progress)
     t0 = time.perf_counter()
     tables = collisions.tabulate_run(run_dir / "post", plan)
     parse_time = time.perf_counter() - t0

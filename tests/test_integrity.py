@@ -386,3 +386,61 @@ def test_dem_cli_logs_progress_lines_when_not_on_a_terminal(root, tmp_path):
     assert re.search(r"pbmdem.progress: DEM rpm600_small: (settling|spin-up|sampling), step \d+ of \d+ "
                      r"\(\d+ %\), \d+ particles, elapsed", proc.stderr), proc.stderr
     assert "engine stopped at step" in proc.stderr
+
+
+# ----------------------------------------------------------------------------- defect 6: errors name the file
+@pytest.mark.parametrize("text", ["", "a,b\n1,2\n", "d_i,d_j,frequency_per_pair\n0.002,0.002,nan\n",
+                                  "\x00\x01garbage"])
+def test_bad_collision_table_for_the_pbm_names_the_file(tmp_path, text):
+    from pbmdem.pbm.errors import PBMInputError
+    from pbmdem.pbm.kernels import TableFrequency
+
+    path = _write(tmp_path / "collisions.csv", text)
+    with pytest.raises(PBMInputError) as info:
+        TableFrequency.from_csv(path)
+    assert str(path) in str(info.value)
+
+
+def test_bad_tables_and_summaries_name_the_file(tmp_path):
+    from pbmdem import report
+    from pbmdem.readers import InputFileError
+    from pbmdem.surrogate.train import train_and_report
+
+    bad = _write(tmp_path / "bad.csv", "x,y\n1,2\n")
+    with pytest.raises(InputFileError, match=re.escape(str(bad)) + ".*point_id"):
+        collisions.aggregate([bad], tmp_path / "grid.csv")
+    with pytest.raises(InputFileError, match=re.escape(str(bad))):
+        train_and_report(bad, tmp_path / "model.skops")
+    empty = _write(tmp_path / "summary.json", "{not json")
+    with pytest.raises(InputFileError, match=re.escape(str(empty))):
+        dem.run_table([empty], tmp_path / "runs.csv")
+    folder = tmp_path / "v" / "rpm600" / "pbm_ann"
+    folder.mkdir(parents=True)
+    _write(folder / "summary.csv", "time,d50\n0,0.001\n1,nan\n")
+    _write(folder / "final_bins.csv", "diameter,mass_fraction\n0.001,1\n")
+    _write(folder / "timing.json", "{}")
+    with pytest.raises(InputFileError, match=re.escape(str(folder / "summary.csv")) + ".*d50.*row 2"):
+        report.load_method(tmp_path / "v", "600", "pbm_ann")
+    _write(folder / "summary.csv", "time,d50\n0,0.001\n1,0.002\n")
+    with pytest.raises(InputFileError, match=re.escape(str(folder / "timing.json")) + ".*total_wall_time_s"):
+        report.load_method(tmp_path / "v", "600", "pbm_ann")
+
+
+@pytest.mark.parametrize("edit", ["unknown_param", "missing_field", "missing_param"])
+def test_model_metadata_with_unknown_or_missing_fields_is_a_version_error(small_surrogate, tmp_path, edit):
+    from pbmdem.surrogate import load_surrogate
+    from pbmdem.surrogate.persistence import IncompatibleVersionError, metadata_path_for
+
+    model = tmp_path / "model.skops"
+    shutil.copy(small_surrogate, model)
+    meta = json.loads(metadata_path_for(small_surrogate).read_text())
+    if edit == "unknown_param":
+        meta["params"]["new_option_of_a_later_version"] = 3
+    elif edit == "missing_field":
+        del meta["feature_ranges"]
+    else:
+        del meta["params"]["alpha"]
+    metadata_path_for(model).write_text(json.dumps(meta))
+    with pytest.raises(IncompatibleVersionError) as info:
+        load_surrogate(model)
+    assert str(metadata_path_for(model)) in str(info.value) and "retrain" in str(info.value)

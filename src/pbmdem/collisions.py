@@ -268,7 +268,9 @@ def write_tables(tables: RunTables, run_dir: str | Path) -> None:
 
 def aggregate(tables: list[str | Path], out: str | Path) -> pd.DataFrame:
     """Concatenate per-point tables into one grid table (sorted, written atomically)."""
-    frames = [pd.read_csv(p) for p in tables]
+    from pbmdem.readers import read_table
+
+    frames = [read_table(p, "collision table", columns=("point_id",)) for p in tables]
     if not frames:
         raise ValueError("no collision tables to aggregate")
     grid = pd.concat(frames, ignore_index=True)

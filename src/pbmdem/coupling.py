@@ -41,6 +41,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.atomic import atomic_path, write_csv, write_json
+from pbmdem.readers import read_json, read_table
 
 log = logging.getLogger(__name__)
 
@@ -227,7 +228,8 @@ class DemProvider:
         # an interval without interval.json is unfinished, whatever its DEM folder holds
         summary = dem.run_point(self.cfg, plan, interval_dir / "dem", timeout=self.cfg["dem"].get("timeout"),
                                 force=True)
-        table = pd.read_csv(interval_dir / "dem" / "collisions.csv")
+        table = read_table(interval_dir / "dem" / "collisions.csv", "collision table of a coupling interval",
+                           columns=("class_i", "class_j", "frequency_per_pair"), finite=("frequency_per_pair",))
         return matrix_from_table(table, len(sample.diameters)), {
             "dem_wall_time_s": summary["liggghts_wall_time_s"] + summary["parse_time_s"],
             "dem_particles": summary["n_particles"], "dem_collisions": summary["total_collisions"],
@@ -308,7 +310,7 @@ def _load_interval(folder: Path, grid):
         setattr(rec, name, data[name])
     state = State(float(data["state_t"]), data["state_number"], data["state_liquid"], data["state_gas"],
                   float(data["state_refused"]), float(data["state_liquid_added"]), int(data["state_steps"]))
-    info = json.loads((folder / "interval.json").read_text())
+    info = read_json(folder / "interval.json", "coupling interval record")
     return Result(grid, rec, state, {"wall_time_s": info.get("pbm_wall_time_s", 0.0)}), info, data["class_matrix"]
 
 

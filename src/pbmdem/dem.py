@@ -388,7 +388,9 @@ def run_table(summaries: list[str | Path], out: str | Path):
 
     from pbmdem.atomic import write_csv
 
-    rows = [json.loads(Path(p).read_text()) for p in summaries]
+    from pbmdem.readers import read_json
+
+    rows = [read_json(p, "DEM run summary") for p in summaries]
     frame = pd.DataFrame(rows).drop(columns=[c for c in ("particles_per_class",) if c in rows[0]], errors="ignore")
     frame = frame.sort_values(["rpm", "distribution"]).reset_index(drop=True)
     write_csv(out, frame)

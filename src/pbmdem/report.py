@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.atomic import write_csv, write_text
+from pbmdem.readers import read_json, read_table
 
 METHODS = {"pbm_dem": "PBM-DEM", "pbm_ann": "PBM-ANN", "pbm_constant": "PBM-constant"}
 STYLES = {"pbm_dem": dict(color="black", lw=2.2), "pbm_ann": dict(color="tab:orange", ls="--", lw=2),
@@ -26,10 +27,12 @@ STYLES = {"pbm_dem": dict(color="black", lw=2.2), "pbm_ann": dict(color="tab:ora
 
 def load_method(validation_dir: str | Path, rpm: str, method: str) -> dict:
     folder = Path(validation_dir) / f"rpm{rpm}" / method
-    out = {"summary": pd.read_csv(folder / "summary.csv"), "bins": pd.read_csv(folder / "final_bins.csv"),
-           "timing": json.loads((folder / "timing.json").read_text())}
+    what = f"{METHODS.get(method, method)} result"
+    out = {"summary": read_table(folder / "summary.csv", what, columns=("time", "d50"), finite=("time", "d50")),
+           "bins": read_table(folder / "final_bins.csv", what),
+           "timing": read_json(folder / "timing.json", what, keys=("total_wall_time_s",))}
     if (folder / "intervals.csv").exists():
-        out["intervals"] = pd.read_csv(folder / "intervals.csv")
+        out["intervals"] = read_table(folder / "intervals.csv", what)
     return out
 
 
@@ -191,11 +194,11 @@ def build_report(*, validation_dir, rpms, grid_rpm, runs, collisions, metrics, p
                  sweep_plot, html: str | Path, comparison: str | Path, model: str | Path | None = None) -> pd.DataFrame:
     table = compare(validation_dir, rpms, grid_rpm)
     write_csv(comparison, table)
-    runs_df = pd.read_csv(runs)
-    coll = pd.read_csv(collisions)
-    met = pd.read_csv(metrics)
-    meta = json.loads(Path(metadata).read_text())
-    sweep_df = pd.read_csv(sweep)
+    runs_df = read_table(runs, "DEM run table", columns=("total_collisions",))
+    coll = read_table(collisions, "collision table")
+    met = read_table(metrics, "surrogate metrics table")
+    meta = read_json(metadata, "surrogate metadata")
+    sweep_df = read_table(sweep, "impeller-speed sweep table")
     parts = [
         "<!doctype html><html><head><meta charset='utf-8'><title>pbmdem report</title><style>",
         "body{font-family:sans-serif;max-width:1100px;margin:2em auto;line-height:1.4}"

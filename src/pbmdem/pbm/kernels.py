@@ -316,10 +316,13 @@ class TableFrequency:
     @classmethod
     def from_csv(cls, path, distribution: str | None = None, **kwargs) -> "TableFrequency":
         """Read a collision table CSV; ``distribution`` keeps only that distribution's rows."""
+        from pbmdem.readers import InputFileError, read_table
+
         path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"collision table {path} does not exist")
-        table = pd.read_csv(path)
+        try:
+            table = read_table(path, "collision table")
+        except InputFileError as exc:
+            raise PBMInputError(str(exc)) from None
         if distribution is not None:
             if "distribution" not in table.columns:
                 raise PBMInputError(f"{path}: no 'distribution' column to select {distribution!r}")
@@ -327,7 +330,10 @@ class TableFrequency:
             table = table[table["distribution"].astype(str) == distribution]
             if table.empty:
                 raise PBMInputError(f"{path}: no rows for distribution {distribution!r}; present: {names}")
-        return cls(table, **kwargs)
+        try:
+            return cls(table, **kwargs)
+        except PBMInputError as exc:
+            raise PBMInputError(f"collision table {path}: {exc}") from None
 
     def _log_matrix(self, k: int, d: np.ndarray) -> np.ndarray:
         ld = np.log(d)

@@ -71,7 +71,9 @@ def _predict(args) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", OutOfDomainWarning)
         if args.table is not None:
-            table = pd.read_csv(args.table)
+            from pbmdem.readers import read_table
+
+            table = read_table(args.table, "collision table")
             value, std = model.predict(table, return_std=True)
             out = table.assign(predicted_frequency_per_pair=value, predicted_std_log10=std)
             if args.output:

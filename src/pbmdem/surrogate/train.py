@@ -39,8 +39,13 @@ def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | 
     metrics_path = Path(metrics_path) if metrics_path else out / "metrics.csv"
     parity_path = Path(parity_path) if parity_path else out / "parity.png"
     settings = resolve_settings(settings)
-    frame = table if isinstance(table, pd.DataFrame) else pd.read_csv(table)
     source = "<DataFrame>" if isinstance(table, pd.DataFrame) else str(table)
+    if isinstance(table, pd.DataFrame):
+        frame = table
+    else:
+        from pbmdem.readers import read_table
+
+        frame = read_table(table, "collision table", columns=("point_id",))
     log.info("collision table %s: %d rows, %d runs", source, len(frame), frame["point_id"].nunique())
 
     surrogate = build_surrogate(settings, impeller_radius, n_jobs=n_jobs)

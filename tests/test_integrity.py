@@ -444,3 +444,24 @@ def test_model_metadata_with_unknown_or_missing_fields_is_a_version_error(small_
     with pytest.raises(IncompatibleVersionError) as info:
         load_surrogate(model)
     assert str(metadata_path_for(model)) in str(info.value) and "retrain" in str(info.value)
+
+
+# ----------------------------------------------------------------------------- progress of the surrogate
+def test_surrogate_cross_validation_logs_each_fold_and_candidate(caplog):
+    import logging
+    import warnings
+
+    from pbmdem.surrogate import CollisionSurrogate, cross_validate_models
+    from pbmdem.surrogate.synthetic import make_synthetic_table
+
+    table = make_synthetic_table(rpms=(300, 600, 900), seed=4)
+    model = CollisionSurrogate(hidden_layer_sizes=((4,), (6,)), alpha=(0.1,), ensemble_size=1, max_iter=200)
+    caplog.set_level(logging.INFO, logger="pbmdem.surrogate")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        metrics, _ = cross_validate_models(table, model, cv="group_kfold", n_splits=3)
+    folds = [r.getMessage() for r in caplog.records if r.getMessage().startswith("CV fold")]
+    assert len(folds) == 3 and folds[-1].startswith("CV fold 3 of 3 done") and "mlp R2" in folds[0]
+    assert "remaining ~" in folds[0]
+    candidates = [r.getMessage() for r in caplog.records if r.getMessage().startswith("hyperparameter candidate")]
+    assert len(candidates) == 3 * 2  # two candidates in each outer fold's inner search

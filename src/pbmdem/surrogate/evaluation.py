@@ -7,6 +7,8 @@ that predicts them.
 
 from __future__ import annotations
 
+import logging
+import time
 import warnings
 
 import numpy as np
@@ -17,6 +19,8 @@ from sklearn.metrics import mean_absolute_error, r2_score
 from .baselines import HGBBaseline, PhysicalScaling
 from .features import TARGET_NAME, prepare_training_table
 from .model import CollisionSurrogate, grouped_splits
+
+log = logging.getLogger(__name__)
 
 MODEL_NAMES = ("mlp", "hgb", "physical")
 METRIC_COLUMNS = ["model", "fold", "test_point_ids", "n_train_runs", "n_test", "r2_log10", "mae_log10"]
@@ -63,8 +67,10 @@ def cross_validate_models(table: pd.DataFrame, surrogate: CollisionSurrogate, ba
         pred[f"{name}_log10"] = np.nan
     pred["mlp_std_log10"] = np.nan
 
+    t_start = time.perf_counter()
     for k, (train, test) in enumerate(splits):
         tr, te = data.iloc[train], data.iloc[test]
+        t_fold = time.perf_counter()
         y = te[TARGET_NAME].to_numpy(float)
         pred.loc[pred.index[test], "fold"] = k
         for name, model in models.items():
@@ -81,6 +87,11 @@ def cross_validate_models(table: pd.DataFrame, surrogate: CollisionSurrogate, ba
             rows.append({"model": name, "fold": str(k), "test_point_ids": ";".join(sorted(set(groups[test]))),
                          "n_train_runs": len(set(groups[train])), "n_test": len(test),
                          "r2_log10": r2, "mae_log10": mae})
+        elapsed = time.perf_counter() - t_start
+        log.info("CV fold %d of %d done (held out %s) in %.1f s: %s; elapsed %.0f s, remaining ~%.0f s",
+                 k + 1, len(splits), ";".join(sorted(set(groups[test]))), time.perf_counter() - t_fold,
+                 ", ".join(f"{r['model']} R2 {r['r2_log10']:.3f} MAE {r['mae_log10']:.3f}" for r in rows[-len(models):]),
+                 elapsed, elapsed / (k + 1) * (len(splits) - k - 1))
 
     metrics = pd.DataFrame(rows, columns=METRIC_COLUMNS)
     summary = []

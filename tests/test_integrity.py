@@ -465,3 +465,17 @@ def test_surrogate_cross_validation_logs_each_fold_and_candidate(caplog):
     assert "remaining ~" in folds[0]
     candidates = [r.getMessage() for r in caplog.records if r.getMessage().startswith("hyperparameter candidate")]
     assert len(candidates) == 3 * 2  # two candidates in each outer fold's inner search
+
+
+@pytest.mark.parametrize("args, flag", [(["--rpm", "nan"], "--rpm"), (["--rpm", "0"], "--rpm"),
+                                        (["--rpm", "600", "--diameters", "0.002", "nan"], "--diameters")])
+def test_surrogate_predict_refuses_non_finite_inputs(small_surrogate, capsys, args, flag):
+    from pbmdem.cli import main
+
+    base = {"--rpm": "600", "--diameters": ["0.002", "0.003"], "--numbers": ["10", "20"]}
+    argv = ["surrogate", "predict", "--model", str(small_surrogate), "--numbers", "10", "20"]
+    if "--diameters" not in args:
+        argv += ["--diameters", *base["--diameters"]]
+    assert main(argv + args) == 2
+    err = capsys.readouterr().err
+    assert flag in err and ("nan" in err or "0" in err) and "Traceback" not in err

@@ -83,6 +83,13 @@ def _predict(args) -> int:
         else:
             if args.numbers is None or args.rpm is None:
                 raise SystemExit("--diameters needs --numbers and --rpm")
+            from pbmdem.config import check_rpm
+
+            args.rpm = check_rpm(args.rpm, "--rpm")
+            for flag, values in (("--diameters", args.diameters), ("--numbers", args.numbers)):
+                bad = [v for v in values if not np.isfinite(v) or v <= 0]
+                if bad:
+                    raise ValueError(f"{flag} = {bad[0]!r}: every value must be a finite number > 0")
             c, s = model.frequency_matrix(np.array(args.diameters), np.array(args.numbers), args.rpm,
                                           return_std=True)
             text = json.dumps({"diameters": args.diameters, "numbers": args.numbers, "rpm": args.rpm,

@@ -90,15 +90,18 @@ def domain_statement(table: pd.DataFrame, validation_dir, rpms) -> str:
     """HTML paragraph stating where the surrogate left its training domain (never left out)."""
     lines = []
     for rpm, row in zip(rpms, table.itertuples()):
-        if row.ann_out_of_domain_intervals and row.ann_out_of_domain_intervals == row.ann_out_of_domain_intervals:
+        if row.ann_out_of_domain_intervals > 0:  # NaN (results from before the count) is not > 0
             ann = load_method(validation_dir, rpm, "pbm_ann")["intervals"]
             messages = sorted({m for m in ann.get("out_of_domain", pd.Series(dtype=str)).dropna().astype(str) if m})
             lines.append(f"{rpm} rpm: PBM-ANN used the surrogate outside its training domain in "
                          f"{row.ann_out_of_domain_intervals} of {row.ann_intervals} intervals "
                          f"({row.ann_out_of_domain_warnings} warnings): " + html_escape("; ".join(messages)[:2000]))
-        if row.constant_calibration_out_of_domain_warnings:
+        if row.constant_calibration_out_of_domain_warnings > 0:
             lines.append(f"{rpm} rpm: the constant kernel's calibration used the surrogate outside its training "
                          f"domain ({row.constant_calibration_out_of_domain_warnings} warnings)")
+    if not lines and table.ann_out_of_domain_intervals.isna().any():
+        return ("<p>Surrogate domain: not recorded for (some of) these results; they were computed before "
+                "out-of-domain counting. Rerun the validation rules to count.</p>")
     if not lines:
         return "<p>Surrogate domain: every PBM-ANN interval and calibration stayed within the training range.</p>"
     return ("<p><b>Warning: surrogate outside its training domain.</b> Its predictions there are "

@@ -504,6 +504,9 @@ def rpm_sweep(cfg: dict, model_path: str | Path, table_path: str | Path, plot_pa
                          "wall_time_s": wall, "out_of_domain_intervals": int((ood.fillna(0) > 0).sum()),
                          "out_of_domain_count": int(ood.fillna(0).sum())})
             curves.append((rpm, summary.time.to_numpy(), summary.d50.to_numpy()))
+            log.info("rpm sweep: %g rpm done (%d of %d) in %.2f s; final d50 %.4g m; surrogate out of its "
+                     "training domain in %d interval(s)", rpm, len(rows), len(speeds), wall, last.d50,
+                     rows[-1]["out_of_domain_intervals"])
     table = pd.DataFrame(rows)
     write_csv(table_path, table)
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))

@@ -479,3 +479,17 @@ def test_surrogate_predict_refuses_non_finite_inputs(small_surrogate, capsys, ar
     assert main(argv + args) == 2
     err = capsys.readouterr().err
     assert flag in err and ("nan" in err or "0" in err) and "Traceback" not in err
+
+
+def test_surrogate_train_config_with_duplicate_or_nan_is_refused(root, tmp_path, capsys):
+    from pbmdem.cli import main
+
+    table = _write(tmp_path / "t.csv", "point_id\n")
+    for name, text in (("dup.yaml", "surrogate:\n  max_iter: 10\n  max_iter: 20\n"),
+                       ("nan.yaml", "surrogate:\n  alpha: [.nan]\n")):
+        path = _write(tmp_path / name, text)
+        assert main(["surrogate", "train", "--table", str(table), "--config", str(path),
+                     "--out", str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err
+        assert str(path) in err and ("duplicate key 'max_iter'" in err or "surrogate.alpha[0] = nan" in err)
+        assert not (tmp_path / "out").exists()

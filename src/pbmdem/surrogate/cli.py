@@ -42,15 +42,19 @@ def add_cli(subparsers) -> argparse.ArgumentParser:
 
 
 def _train(args) -> int:
-    import yaml
-
     from .settings import impeller_radius_from, resolve_settings
     from .train import train_and_report
 
+    from pbmdem.config import ConfigError, load_yaml, non_finite_values
+
     config = {}
     if args.config is not None:
-        with open(args.config, encoding="utf-8") as fh:
-            config = yaml.safe_load(fh) or {}
+        config = load_yaml(args.config, "config file") or {}  # duplicate keys refused, file named
+        if not isinstance(config, dict):
+            raise ConfigError(f"config file {args.config}: the top level must be a mapping of sections")
+        bad = non_finite_values(config)
+        if bad:
+            raise ConfigError(f"config file {args.config}:\n  " + "\n  ".join(bad))
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     meta = train_and_report(args.table, args.out / "model.skops", settings=resolve_settings(config),
                             impeller_radius=impeller_radius_from(config), n_jobs=args.jobs)

@@ -206,3 +206,17 @@ def test_job_logs_show_progress(tiny_workflow):
     ann = (logs / "validation" / "pbm_ann_rpm600.log").read_text()
     assert "pbm_ann at rpm 600: interval 1 of" in ann
     assert "rpm sweep: 600 rpm done" in (logs / "validation" / "rpm_sweep.log").read_text()
+
+
+def test_a_manual_dem_run_on_a_finished_point_changes_nothing(tiny_workflow, root):
+    """The README's `pbmdem dem` on a point the workflow finished is refused without --force, so
+    Snakemake still has nothing to redo."""
+    workdir, configfile = tiny_workflow
+    point = workdir / "results" / "dem" / "rpm600_small"
+    before = {p: p.stat().st_mtime_ns for p in point.rglob("*")}
+    proc = subprocess.run([sys.executable, "-m", "pbmdem.cli", "dem", "--config", str(configfile), "--rpm", "600",
+                           "--distribution", "small"], cwd=workdir, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 2 and "already holds a finished run" in proc.stderr and "--force" in proc.stderr
+    assert {p: p.stat().st_mtime_ns for p in point.rglob("*")} == before
+    dry = snakemake(root, workdir, configfile, "-n", "--cores", "2")
+    assert "Nothing to be done" in dry.stdout + dry.stderr, dry.stdout[-3000:]

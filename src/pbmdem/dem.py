@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pbmdem import deck, geometry, liggghts
+from pbmdem import deck, geometry, liggghts, progress
 from pbmdem.atomic import write_json, write_text
 
 # Hertz contact duration t_c = 2.87 (m*^2 / (R* E*^2 v))^(1/5) (Johnson 1985); snapshots are
@@ -207,7 +207,9 @@ def deck_values(cfg: dict, plan: DemPlan) -> dict[str, str]:
         "rolling_matrix": _matrix("material.rolling_friction", mat["rolling_friction"], n),
         "timestep": num("timestep", plan.timestep, exclusive_minimum=True, minimum=0.0),
         "bowl_stl": "bowl.stl", "impeller_stl": "impeller.stl", "post_dir": "post",
-        "check_every": num("check_every", max(1, plan.vtk_every), integer=True, minimum=1),
+        # thermo reads fix check/timestep/gran, so both run at the same interval (LIGGGHTS requires it)
+        "check_every": num("check_every", progress.thermo_interval(plan.n_particles, plan.vtk_every),
+                           integer=True, minimum=1),
         "particle_templates_block": "\n".join(templates),
         "seed_dist": num("seed", next_prime(seed + 1), integer=True),
         "distribution_weights": weights,
@@ -218,7 +220,8 @@ def deck_values(cfg: dict, plan: DemPlan) -> dict[str, str]:
         "n_particles": num("n_particles", plan.n_particles, integer=True, minimum=1),
         "insert_rate": num("insert_rate", plan.n_particles / insert_time, exclusive_minimum=True, minimum=0.0),
         "insert_every": num("insert_every", insert_every, integer=True, minimum=1),
-        "thermo_every": num("thermo_every", max(1, plan.vtk_every), integer=True, minimum=1),
+        "thermo_every": num("thermo_every", progress.thermo_interval(plan.n_particles, plan.vtk_every),
+                            integer=True, minimum=1),
         "vtk_every": num("vtk_every", plan.vtk_every, integer=True, minimum=1),
         "settle_steps": num("settle_steps", plan.settle_steps, integer=True, minimum=1),
         "spinup_steps": num("spinup_steps", plan.spinup_steps, integer=True, minimum=1),
@@ -319,6 +322,8 @@ def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | No
     except BaseException as exc:
         if not finished:  # nothing to protect: keep the crash and the logs in the run folder
             _move_into(stage, run_dir)
+            if len(exc.args) == 1 and isinstance(exc.args[0], str):
+                exc.args = (exc.args[0].replace(str(stage), str(run_dir)),)
         elif len(exc.args) == 1 and isinstance(exc.args[0], str):
             exc.args = (f"{exc.args[0]}\n(the finished run in {run_dir} is untouched; this attempt is in {stage})",)
         raise
@@ -333,10 +338,10 @@ def _run_in(cfg: dict, plan: DemPlan, run_dir: Path, final_dir: Path, timeout: f
     from pbmdem.progress import ThermoProgress
 
     deck_path = prepare_run(cfg, plan, run_dir)
-    progress = ThermoProgress(run_dir / "log.liggghts", [("settling", plan.settle_steps), ("spin-up", plan.spinup_steps),
-                                                         ("sampling", plan.sampling_steps)],
-                              label=f"DEM {plan.point_id}", bar=progress_bar)
-    result = liggghts.run(deck_path, run_dir, ranks=plan.mpi_ranks, timeout=timeout, progress=progress)
+    watcher = ThermoProgress(run_dir / "log.liggghts", [("settling", plan.settle_steps), ("spin-up", plan.spinup_steps),
+                                                        ("sampling", plan.sampling_steps)],
+                             label=f"DEM {plan.point_id}", bar=progress_bar)
+    result = liggghts.run(deck_path, run_dir, ranks=plan.mpi_ranks, timeout=timeout, progress=watcher)
     t0 = time.perf_counter()
     tables = collisions.tabulate_run(run_dir / "post", plan)
     parse_time = time.perf_counter() - t0

@@ -493,3 +493,17 @@ def test_surrogate_train_config_with_duplicate_or_nan_is_refused(root, tmp_path,
         err = capsys.readouterr().err
         assert str(path) in err and ("duplicate key 'max_iter'" in err or "surrogate.alpha[0] = nan" in err)
         assert not (tmp_path / "out").exists()
+
+
+def test_a_failed_first_run_is_kept_in_and_named_by_its_run_folder(tiny_config, tmp_path, monkeypatch):
+    from test_dem_liggghts import _failing_liggghts
+
+    from pbmdem import liggghts
+
+    monkeypatch.setenv("PBMDEM_LIGGGHTS", str(_failing_liggghts(tmp_path)))
+    run = tmp_path / "run"
+    with pytest.raises(liggghts.LiggghtsError) as info:
+        dem.run_point(tiny_config, dem.plan_point(tiny_config, 600, "small"), run, timeout=600)
+    assert str(run) in str(info.value) and "staging" not in str(info.value)
+    assert (run / "crash.json").exists() and (run / "log.liggghts").exists() and not dem.is_finished(run)
+    assert not list(tmp_path.glob(".*staging"))

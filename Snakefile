@@ -22,11 +22,20 @@ if not config:
     configfile: "config/config.yaml"
 
 
+# The same tidy list of every error (key, value, allowed) as the pbmdem CLI, and duplicate keys
+# in the config files refused (YAML would silently keep the last one); then Snakemake's own
+# validation, which only fills in the schema's defaults once the config is known to be valid.
+from pbmdem.config import ConfigError, load_yaml
+from pbmdem.config import validate as validate_config
+
+try:
+    for _path in workflow.configfiles:
+        load_yaml(_path, "config file")
+    validate_config(config)
+except ConfigError as _exc:
+    print(f"pbmdem: error: {_exc}", file=sys.stderr)
+    sys.exit(1)
 validate(config, "workflow/schemas/config.schema.yaml")
-
-from pbmdem.config import check_config
-
-check_config(config)
 
 
 include: "rules/common.smk"

@@ -1,7 +1,7 @@
 # Shared helpers: the operating grid, parameters of the rules and the list of final targets.
 import os
 
-from pbmdem.dem import point_config, point_id
+from pbmdem.dem import point_config, point_id, rpm_text
 
 RESULTS = "results"
 
@@ -19,7 +19,7 @@ def canonical(obj):
 def grid_points():
     """(rpm, distribution) of every operating point of the config's grid."""
     return [
-        (f"{float(rpm):g}", dist)
+        (rpm_text(rpm), dist)
         for rpm in config["grid"]["impeller_rpm"]
         for dist in config["grid"]["size_distributions"]
     ]
@@ -72,7 +72,7 @@ def pbm_constant_outputs():
 from pbmdem.coupling import settings_from_config
 
 VALIDATION = settings_from_config(config)
-VAL_RPMS = [f"{float(r):g}" for r in VALIDATION["rpm"]]
+VAL_RPMS = [rpm_text(r) for r in VALIDATION["rpm"]]
 MODEL = f"{RESULTS}/surrogate/model.skops"
 
 

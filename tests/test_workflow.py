@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -244,3 +245,33 @@ def test_pbm_cli_with_each_kernel(tiny_workflow, tmp_path, kernel, capsys):
     else:
         assert summary.d50.iloc[-1] > summary.d50.iloc[0]
     assert (tmp_path / kernel / "psd.png").exists()
+
+
+def test_job_logs_show_progress(tiny_workflow):
+    """DEM jobs log LIGGGHTS progress, the surrogate each CV fold, the coupled loops each interval."""
+    workdir, _ = tiny_workflow
+    logs = workdir / "results" / "logs"
+    dem_log = (logs / "dem" / "rpm600_small.log").read_text()
+    assert re.search(r"pbmdem.progress: DEM rpm600_small: \w[\w-]*, step \d+ of \d+ \(\d+ %\), \d+ particles", dem_log)
+    assert "CV fold 1 of" in (logs / "train_surrogate.log").read_text()
+    loop = (logs / "validation" / "pbm_dem_rpm600.log").read_text()
+    assert re.search(r"pbm_dem at rpm 600: interval 1 of \d+ .* DEM wall time [\d.]+ s, PBM wall time [\d.]+ s, "
+                     r"\d+ surrogate out-of-domain", loop), loop[-2000:]
+    assert "pbmdem.progress: DEM" in loop  # the loop's LIGGGHTS calls report progress too
+    ann = (logs / "validation" / "pbm_ann_rpm600.log").read_text()
+    assert "pbm_ann at rpm 600: interval 1 of" in ann
+    assert "rpm sweep: 600 rpm done" in (logs / "validation" / "rpm_sweep.log").read_text()
+
+
+def test_a_manual_dem_run_on_a_finished_point_changes_nothing(tiny_workflow, root):
+    """The README's `pbmdem dem` on a point the workflow finished is refused without --force, so
+    Snakemake still has nothing to redo."""
+    workdir, configfile = tiny_workflow
+    point = workdir / "results" / "dem" / "rpm600_small"
+    before = {p: p.stat().st_mtime_ns for p in point.rglob("*")}
+    proc = subprocess.run([sys.executable, "-m", "pbmdem.cli", "dem", "--config", str(configfile), "--rpm", "600",
+                           "--distribution", "small"], cwd=workdir, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 2 and "already holds a finished run" in proc.stderr and "--force" in proc.stderr
+    assert {p: p.stat().st_mtime_ns for p in point.rglob("*")} == before
+    dry = snakemake(root, workdir, configfile, "-n", "--cores", "2")
+    assert "Nothing to be done" in dry.stdout + dry.stderr, dry.stdout[-3000:]

@@ -12,19 +12,25 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 
 
 def _dem(args: argparse.Namespace) -> int:
-    from pbmdem.config import load_config
+    from pbmdem.config import check_rpm, load_config
     from pbmdem.dem import plan_point, run_point
 
+    rpm = check_rpm(args.rpm, "--rpm")
     cfg = load_config(args.config)
-    plan = plan_point(cfg, args.rpm, args.distribution)
+    plan = plan_point(cfg, rpm, args.distribution)
     if args.plan_only:
         print(json.dumps(plan.__dict__, indent=2))
         return 0
-    summary = run_point(cfg, plan, args.out, timeout=cfg["dem"].get("timeout"))
+    # progress: a bar on a terminal, plain log lines (at least every ~10 s) otherwise
+    bar = sys.stderr.isatty()
+    if not bar:
+        logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stderr)
+    summary = run_point(cfg, plan, args.out, timeout=cfg["dem"].get("timeout"), force=args.force, progress_bar=bar)
     print(json.dumps(summary, indent=2))
     return 0
 
@@ -35,10 +41,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     dem = sub.add_parser("dem", help="run one DEM operating point with LIGGGHTS")
     dem.add_argument("--config", required=True, help="workflow config (YAML)")
-    dem.add_argument("--rpm", required=True, type=float, help="impeller speed (1/min)")
+    dem.add_argument("--rpm", required=True, help="impeller speed (1/min), 0 < rpm <= 20000")
     dem.add_argument("--distribution", required=True, help="size distribution name from the config")
     dem.add_argument("--out", default=None, help="run folder (default results/dem/<point id>)")
     dem.add_argument("--plan-only", action="store_true", help="print the run plan and stop")
+    dem.add_argument("--force", action="store_true",
+                     help="replace a finished run in the run folder (refused otherwise: it would make "
+                          "Snakemake redo everything downstream of that point)")
     dem.set_defaults(func=_dem)
 
     from pbmdem import viewer
@@ -56,11 +65,12 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    if getattr(args, "command", None) == "dem" and args.out is None:
-        from pbmdem.dem import point_id
-
-        args.out = f"results/dem/{point_id(args.rpm, args.distribution)}"
     try:
+        if getattr(args, "command", None) == "dem" and args.out is None:
+            from pbmdem.config import check_rpm
+            from pbmdem.dem import point_id
+
+            args.out = f"results/dem/{point_id(check_rpm(args.rpm, '--rpm'), args.distribution)}"
         return int(args.func(args) or 0)
     except (ValueError, FileNotFoundError, RuntimeError, OSError) as exc:
         print(f"pbmdem: error: {exc}", file=sys.stderr)

@@ -80,12 +80,23 @@ def read_dump(path: str | Path, columns: int) -> Snapshots:
         except (ValueError, pd.errors.ParserError) as exc:
             raise DumpFormatError(f"{path}: malformed entry rows ({exc})") from None
         data = frame.to_numpy()
-    if len(data) != total or (total and np.isnan(data[-1]).any()):
+    # a short last row (fewer fields than columns) is truncation; a literal 'nan' is caught below
+    short_last = bool(total) and len(body.rstrip().rsplit(b"\n", 1)[-1].split()) < columns
+    if len(data) != total or short_last:
         raise DumpFormatError(
             f"{path}: truncated or inconsistent: headers announce {total} rows in {len(steps)} frames, "
             f"found {len(data)} complete rows (the run was probably interrupted)"
         )
     offsets = np.concatenate([[0], np.cumsum(counts)])
+    # 'nan' or 'inf' in any column (ids, overlaps, positions) would silently change the counts
+    bad = ~np.isfinite(data)
+    if bad.any():
+        row, col = (int(x) for x in np.argwhere(bad)[0])
+        frame = int(np.searchsorted(offsets, row, side="right") - 1)
+        raise DumpFormatError(
+            f"{path}: non-finite value {float(data[row, col])!r} in column {col + 1} of entry row {row - offsets[frame] + 1} "
+            f"of the frame at step {steps[frame]} ({int(bad.sum())} non-finite value(s) in all); every value of a "
+            "dump must be a finite number")
     # each frame's rows must be as many as its header says; a short last frame is truncation
     last_lines = bodies[-1].count(b"\n")
     if last_lines < counts[-1]:
@@ -430,12 +441,9 @@ def replicate_mean(frame: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
 
 def read_tables(tables: list[str | Path]) -> pd.DataFrame:
     """The per-run tables stacked into one frame (every replicate a row of its own)."""
-    frames = []
-    for p in tables:
-        try:
-            frames.append(pd.read_csv(p))
-        except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
-            raise DumpFormatError(f"collision table {p}: cannot be read ({exc})") from None
+    from pbmdem.readers import read_table
+
+    frames = [read_table(p, "collision table", columns=("point_id", "replicate")) for p in tables]
     if not frames:
         raise ValueError("no collision tables to aggregate")
     runs = pd.concat(frames, ignore_index=True)

@@ -25,6 +25,74 @@ class ConfigError(ValueError):
     """The configuration is invalid; the message names the key and what is allowed."""
 
 
+class UniqueKeyLoader(yaml.SafeLoader):
+    """YAML SafeLoader that rejects a key given twice in one mapping (PyYAML silently keeps the
+    last one), naming the key and both lines."""
+
+    def construct_mapping(self, node, deep=False):
+        seen: dict = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            try:
+                first = seen.get(key)
+            except TypeError:  # unhashable key: let PyYAML report it
+                continue
+            line = key_node.start_mark.line + 1
+            if first is not None:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r} on line {line} (first given on line {first}); "
+                    "each key may appear only once in a mapping", key_node.start_mark)
+            seen[key] = line
+        return super().construct_mapping(node, deep=deep)
+
+
+def load_yaml(path: str | Path, what: str = "YAML file"):
+    """Parse a YAML file with duplicate keys rejected; errors name the file (ConfigError)."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ConfigError(f"{what} {path} does not exist") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{what} {path} cannot be read: {exc}") from None
+    try:
+        return yaml.load(text, Loader=UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{what} {path} is not valid YAML: {exc}") from None
+
+
+def non_finite_values(obj, prefix: str = "") -> list[str]:
+    """Every NaN or infinite number in a nested config, as 'config key K = V: ...' messages
+    (JSON-schema range checks let NaN through, since every comparison with NaN is false)."""
+    out: list[str] = []
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            out += non_finite_values(v, f"{prefix}.{k}" if prefix else str(k))
+    elif isinstance(obj, (list, tuple)):
+        for i, v in enumerate(obj):
+            out += non_finite_values(v, f"{prefix}[{i}]")
+    elif isinstance(obj, float) and not math.isfinite(obj):
+        out.append(f"config key {prefix or '(top level)'} = {obj!r}: not a finite number (allowed: finite numbers "
+                   "within the key's range)")
+    return out
+
+
+RPM_MAX = 20000.0
+
+
+def check_rpm(rpm, key: str = "--rpm") -> float:
+    """An impeller speed as a float, or ConfigError naming `key` and the value (> 0, <= 20000 rpm,
+    the range the schema allows for grid.impeller_rpm and validation.rpm)."""
+    try:
+        value = float(rpm)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{key} = {rpm!r}: not a number (allowed: 0 < rpm <= {RPM_MAX:g})") from None
+    if not math.isfinite(value) or not 0.0 < value <= RPM_MAX:
+        raise ConfigError(f"{key} = {rpm!r}: impossible impeller speed (allowed: a finite number, "
+                          f"0 < rpm <= {RPM_MAX:g})")
+    return value
+
+
 def schema_dir() -> Path:
     here = Path(__file__).resolve()
     for parent in here.parents:
@@ -84,8 +152,12 @@ def validate_schema(cfg: dict) -> None:
     schema = yaml.safe_load((folder / "config.schema.yaml").read_text())
     validator = jsonschema.Draft202012Validator(schema, registry=_registry(folder))
     errors = sorted(validator.iter_errors(cfg), key=lambda e: list(map(str, e.absolute_path)))
-    if errors:
-        raise ConfigError("invalid configuration:\n  " + "\n  ".join(_describe(e) for e in errors))
+    problems = non_finite_values(cfg)
+    # a non-finite value is reported once, by the check above
+    problems += [_describe(e) for e in errors
+                 if not (isinstance(e.instance, float) and not math.isfinite(e.instance))]
+    if problems:
+        raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
 
 
 def check_config(cfg: dict) -> dict:
@@ -156,12 +228,10 @@ def validate(cfg: dict) -> dict:
 
 def load_config(path: str | Path) -> dict:
     path = Path(path)
-    try:
-        cfg = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"config file {path} does not exist") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"config file {path} is not valid YAML: {exc}") from None
+    cfg = load_yaml(path, "config file")
     if not isinstance(cfg, dict):
         raise ConfigError(f"config file {path}: the top level must be a mapping of sections")
-    return validate(cfg)
+    try:
+        return validate(cfg)
+    except ConfigError as exc:
+        raise ConfigError(f"config file {path}: {exc}") from None

@@ -28,6 +28,7 @@ frequencies, timings) before the next begins; a rerun resumes after the last fin
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
@@ -40,6 +41,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.atomic import atomic_path, write_csv, write_json
+from pbmdem.readers import read_json, read_table
 
 log = logging.getLogger(__name__)
 
@@ -57,6 +59,27 @@ DEFAULTS = {
 
 class CouplingError(RuntimeError):
     """The coupled loop stopped; finished intervals are kept on disk."""
+
+
+@contextlib.contextmanager
+def out_of_domain_recorded(where: str, log_each: bool = True):
+    """Collect the surrogate's OutOfDomainWarning messages (its own mechanism for inputs outside
+    the training range) into the yielded list and log each one; every other warning is passed on
+    unchanged. Nothing is silenced: the caller counts and reports what was collected."""
+    from pbmdem.surrogate import OutOfDomainWarning
+
+    found: list[str] = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", OutOfDomainWarning)
+        yield found
+    for w in caught:
+        if issubclass(w.category, OutOfDomainWarning):
+            found.append(str(w.message))
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    if log_each:
+        for message in found:
+            log.warning("%s: surrogate out of its training domain: %s", where, message)
 
 
 def settings_from_config(cfg: dict) -> dict:
@@ -203,8 +226,11 @@ class DemProvider:
         plan = dem.plan_point(self.cfg, self.rpm, f"interval{index:02d}", n_particles=sample.n_particles,
                               diameters=sample.diameters, number_fractions=sample.number_fractions)
         plan.counts = list(sample.counts)
-        summary = dem.run_point(self.cfg, plan, interval_dir / "dem", timeout=self.cfg["dem"].get("timeout"))
-        table = pd.read_csv(interval_dir / "dem" / "collisions.csv")
+        # an interval without interval.json is unfinished, whatever its DEM folder holds
+        summary = dem.run_point(self.cfg, plan, interval_dir / "dem", timeout=self.cfg["dem"].get("timeout"),
+                                force=True)
+        table = read_table(interval_dir / "dem" / "collisions.csv", "collision table of a coupling interval",
+                           columns=("class_i", "class_j", "frequency_per_pair"), finite=("frequency_per_pair",))
         return matrix_from_table(table, len(sample.diameters)), {
             "dem_wall_time_s": summary["liggghts_wall_time_s"] + summary["parse_time_s"],
             "dem_particles": summary["n_particles"], "dem_collisions": summary["total_collisions"],
@@ -232,14 +258,11 @@ class SurrogateProvider:
 
     def __call__(self, sample: DemSample, interval_dir: Path, index: int) -> tuple[np.ndarray, dict]:
         t0 = time.perf_counter()
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
+        with out_of_domain_recorded(f"{self.name} at rpm {self.rpm:g}, interval {index}") as found:
             c = self.model.frequency_matrix(np.asarray(sample.diameters), np.asarray(sample.counts, float), self.rpm)
-        from pbmdem.surrogate import OutOfDomainWarning
-
-        out_of_domain = sorted({str(w.message) for w in caught if issubclass(w.category, OutOfDomainWarning)})
         return np.asarray(c, float), {"ann_wall_time_s": time.perf_counter() - t0,
-                                      "out_of_domain": "; ".join(out_of_domain)}
+                                      "out_of_domain": "; ".join(sorted(set(found))),
+                                      "out_of_domain_count": len(found)}
 
 
 # ----------------------------------------------------------------------------- the loop
@@ -289,7 +312,7 @@ def _load_interval(folder: Path, grid):
         setattr(rec, name, data[name])
     state = State(float(data["state_t"]), data["state_number"], data["state_liquid"], data["state_gas"],
                   float(data["state_refused"]), float(data["state_liquid_added"]), int(data["state_steps"]))
-    info = json.loads((folder / "interval.json").read_text())
+    info = read_json(folder / "interval.json", "coupling interval record")
     return Result(grid, rec, state, {"wall_time_s": info.get("pbm_wall_time_s", 0.0)}), info, data["class_matrix"]
 
 
@@ -354,6 +377,10 @@ def run_loop(cfg: dict, provider, rpm: float, distribution: str, outdir: str | P
             "provider_wall_time_s": provider_wall, "pbm_wall_time_s": pbm_wall, **extra,
         }
         _save_interval(folder, result, sample, matrix, info)
+        log.info("%s at rpm %g: interval %d of %d (%.4g-%.4g s) done: %s wall time %.2f s, PBM wall time %.3f s, "
+                 "%d surrogate out-of-domain warning(s)", provider.name, rpm, k + 1, int(intervals), t0, t1,
+                 "DEM" if provider.name == "pbm_dem" else "provider", provider_wall, pbm_wall,
+                 int(extra.get("out_of_domain_count", 0)))
         results.append(result)
         rows.append(info)
         state = result.state
@@ -367,12 +394,21 @@ def run_loop(cfg: dict, provider, rpm: float, distribution: str, outdir: str | P
         "provider_wall_time_s": float(sum(r["provider_wall_time_s"] for r in rows)),
         "pbm_wall_time_s": float(sum(r["pbm_wall_time_s"] for r in rows)),
     }
+    if any("out_of_domain_count" in r for r in rows):
+        per_interval = [int(r.get("out_of_domain_count", 0) or 0) for r in rows]
+        totals["out_of_domain_count"] = int(sum(per_interval))
+        totals["out_of_domain_intervals"] = int(sum(c > 0 for c in per_interval))
+        if totals["out_of_domain_count"]:
+            log.warning("%s at rpm %g: the surrogate was outside its training domain in %d of %d intervals "
+                        "(%d warnings; see intervals.csv)", provider.name, rpm, totals["out_of_domain_intervals"],
+                        len(rows), totals["out_of_domain_count"])
     totals["total_wall_time_s"] = totals["provider_wall_time_s"] + totals["pbm_wall_time_s"]
     write_json(outdir / "timing.json", totals)
     return totals
 
 
-def run_constant(cfg: dict, rpm: float, distribution: str, outdir: str | Path, frequency: float) -> dict:
+def run_constant(cfg: dict, rpm: float, distribution: str, outdir: str | Path, frequency: float,
+                 info: dict | None = None) -> dict:
     """PBM with one constant c for every pair (`frequency`, 1/s per pair)."""
     from pbmdem.pbm.kernels import ConstantFrequency
     from pbmdem.pbm.settings import run_pbm
@@ -385,15 +421,16 @@ def run_constant(cfg: dict, rpm: float, distribution: str, outdir: str | Path, f
     bins = result.bins()
     write_csv(outdir / "final_bins.csv", bins[bins.time == bins.time.max()])
     totals = {"method": "pbm_constant", "rpm": rpm, "distribution": distribution, "frequency": frequency,
-              "total_wall_time_s": wall, "pbm_wall_time_s": wall, "provider_wall_time_s": 0.0}
+              "total_wall_time_s": wall, "pbm_wall_time_s": wall, "provider_wall_time_s": 0.0, **(info or {})}
     write_json(outdir / "timing.json", totals)
     return totals
 
 
 def initial_frequency(cfg: dict, model_path: str | Path, rpm: float, distribution: str,
-                      sample_settings: dict) -> float:
+                      sample_settings: dict, out_of_domain: list | None = None) -> float:
     """Pair-weighted mean per-pair frequency of the surrogate for the initial distribution: the
-    constant kernel is calibrated to the same initial collision rate sum_ij c_ij pairs_ij."""
+    constant kernel is calibrated to the same initial collision rate sum_ij c_ij pairs_ij.
+    The surrogate's out-of-domain warnings are logged and appended to `out_of_domain`."""
     from pbmdem.pbm.kernels import ConstantFrequency
     from pbmdem.pbm.settings import build_model, initial_state_from_config, resolve_settings
     from pbmdem.surrogate import load_surrogate
@@ -403,9 +440,10 @@ def initial_frequency(cfg: dict, model_path: str | Path, rpm: float, distributio
     state = initial_state_from_config(cfg, model, distribution, settings)
     sample = representative_sample(model.grid.x, state.number, **sample_settings)
     surrogate = load_surrogate(model_path)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with out_of_domain_recorded(f"constant-kernel calibration at rpm {rpm:g}") as found:
         c = surrogate.frequency_matrix(np.asarray(sample.diameters), np.asarray(sample.counts, float), rpm)
+    if out_of_domain is not None:
+        out_of_domain.extend(found)
     n = np.asarray(sample.counts, float)
     pairs = np.outer(n, n)
     np.fill_diagonal(pairs, n * (n - 1) / 2.0)
@@ -431,8 +469,10 @@ def run_method(method: str, cfg: dict, rpm: float, outdir: str | Path, model_pat
         provider = SurrogateProvider(model_path, rpm)
         return run_loop(cfg, provider, rpm, dist, outdir, intervals=v["coupling_intervals"], sample_settings=samples)
     if method == "constant":
-        c0 = initial_frequency(cfg, model_path, rpm, dist, samples)
-        return run_constant(cfg, rpm, dist, outdir, c0)
+        found: list[str] = []
+        c0 = initial_frequency(cfg, model_path, rpm, dist, samples, out_of_domain=found)
+        return run_constant(cfg, rpm, dist, outdir, c0, info={"out_of_domain": "; ".join(sorted(set(found))),
+                                                               "out_of_domain_count": len(found)})
     raise ValueError(f"validation method {method!r}: allowed 'dem', 'ann', 'constant'")
 
 
@@ -458,12 +498,17 @@ def rpm_sweep(cfg: dict, model_path: str | Path, table_path: str | Path, plot_pa
                      intervals=v["coupling_intervals"], sample_settings=sample_settings(v))
             wall = time.perf_counter() - t0
             summary = pd.read_csv(Path(tmp) / f"rpm{rpm:g}" / "summary.csv")
+            ood = pd.read_csv(Path(tmp) / f"rpm{rpm:g}" / "intervals.csv").get("out_of_domain_count", pd.Series([0]))
             last = summary.iloc[-1]
             rows.append({"rpm": float(rpm), "d10": last.d10, "d50": last.d50, "d90": last.d90,
                          "number_mean_diameter": last.number_mean_diameter,
                          "mass_mean_diameter": last.mass_mean_diameter, "total_number": last.total_number,
-                         "wall_time_s": wall})
+                         "wall_time_s": wall, "out_of_domain_intervals": int((ood.fillna(0) > 0).sum()),
+                         "out_of_domain_count": int(ood.fillna(0).sum())})
             curves.append((rpm, summary.time.to_numpy(), summary.d50.to_numpy()))
+            log.info("rpm sweep: %g rpm done (%d of %d) in %.2f s; final d50 %.4g m; surrogate out of its "
+                     "training domain in %d interval(s)", rpm, len(rows), len(speeds), wall, last.d50,
+                     rows[-1]["out_of_domain_intervals"])
     table = pd.DataFrame(rows)
     write_csv(table_path, table)
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
@@ -498,6 +543,10 @@ class SampledSurrogateSource:
 
         self.model = load_surrogate(model_path)
         self.sample_settings = sample_settings or sample_settings_default()
+        self.calls = 0  # surrogate evaluations
+        self.calls_out_of_domain = 0  # of which with at least one input outside the training range
+        self.out_of_domain: dict[str, int] = {}  # feature -> evaluations with it out of range
+        self.first_message: dict[str, str] = {}
 
     def __repr__(self) -> str:
         return f"SampledSurrogateSource({self.sample_settings})"
@@ -505,10 +554,23 @@ class SampledSurrogateSource:
     def __call__(self, diameters, numbers, rpm) -> np.ndarray:
         d = np.asarray(diameters, float)
         sample = representative_sample(np.pi / 6.0 * d**3, np.asarray(numbers, float), **self.sample_settings)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with out_of_domain_recorded("pbm --kernel ann", log_each=False) as found:
             c = self.model.frequency_matrix(np.asarray(sample.diameters), np.asarray(sample.counts, float), rpm)
+        self.calls += 1
+        self.calls_out_of_domain += bool(found)
+        for message in found:  # the PBM evaluates the kernel often: log each input's first excursion
+            feature = message.split(" = ", 1)[0]
+            if feature not in self.out_of_domain:
+                self.first_message[feature] = message
+                log.warning("pbm --kernel ann: surrogate out of its training domain: %s", message)
+            self.out_of_domain[feature] = self.out_of_domain.get(feature, 0) + 1
         return ClassFrequencySource(sample.diameters, c, "surrogate")(d, numbers, rpm)
+
+    def domain_report(self) -> dict:
+        """Counts of out-of-domain evaluations, for run.json and the CLI's message."""
+        return {"surrogate_evaluations": self.calls, "out_of_domain_evaluations": self.calls_out_of_domain,
+                "out_of_domain_by_feature": dict(self.out_of_domain),
+                "out_of_domain_first": dict(self.first_message)}
 
 
 def sample_settings_default() -> dict:

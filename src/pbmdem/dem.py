@@ -11,6 +11,7 @@ series index. Tables are written atomically and only after LIGGGHTS succeeded.
 from __future__ import annotations
 
 import math
+import os
 import shutil
 import time
 from dataclasses import asdict, dataclass, field
@@ -18,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pbmdem import deck, geometry, liggghts
+from pbmdem import deck, geometry, liggghts, progress
 from pbmdem.atomic import write_json, write_text
 
 # Hertz contact duration t_c = 2.87 (m*^2 / (R* E*^2 v))^(1/5) (Johnson 1985); snapshots are
@@ -33,8 +34,15 @@ SNAPSHOTS_PER_CONTACT = 2
 POSITION_SNAPSHOT_MULTIPLE = 4
 
 
+def rpm_text(rpm: float) -> str:
+    """The impeller speed as it appears in ids and paths: the shortest decimal that reads back as
+    the same float, never in exponent form (so the rules' rpm wildcard `[0-9]+(\\.[0-9]+)?`
+    accepts every speed the schema allows, and two different speeds never share an id)."""
+    return np.format_float_positional(float(rpm), trim="-")
+
+
 def point_id(rpm: float, distribution: str) -> str:
-    return f"rpm{float(rpm):g}_{distribution}"
+    return f"rpm{rpm_text(rpm)}_{distribution}"
 
 
 def rayleigh_time(radius: float, density: float, youngs: float, poisson: float) -> float:
@@ -234,7 +242,9 @@ def deck_values(cfg: dict, plan: DemPlan) -> dict[str, str]:
         "rolling_matrix": _matrix("material.rolling_friction", mat["rolling_friction"], n),
         "timestep": num("timestep", plan.timestep, exclusive_minimum=True, minimum=0.0),
         "bowl_stl": "bowl.stl", "impeller_stl": "impeller.stl", "post_dir": "post",
-        "check_every": num("check_every", max(1, plan.vtk_every), integer=True, minimum=1),
+        # thermo reads fix check/timestep/gran, so both run at the same interval (LIGGGHTS requires it)
+        "check_every": num("check_every", progress.thermo_interval(plan.n_particles, plan.vtk_every),
+                           integer=True, minimum=1),
         "particle_templates_block": "\n".join(templates),
         "seed_dist": num("seed", next_prime(seed + 1), integer=True),
         "distribution_weights": weights,
@@ -245,7 +255,8 @@ def deck_values(cfg: dict, plan: DemPlan) -> dict[str, str]:
         "n_particles": num("n_particles", plan.n_particles, integer=True, minimum=1),
         "insert_rate": num("insert_rate", plan.n_particles / insert_time, exclusive_minimum=True, minimum=0.0),
         "insert_every": num("insert_every", insert_every, integer=True, minimum=1),
-        "thermo_every": num("thermo_every", max(1, plan.vtk_every), integer=True, minimum=1),
+        "thermo_every": num("thermo_every", progress.thermo_interval(plan.n_particles, plan.vtk_every),
+                            integer=True, minimum=1),
         "vtk_every": num("vtk_every", plan.vtk_every, integer=True, minimum=1),
         "settle_steps": num("settle_steps", plan.settle_steps, integer=True, minimum=1),
         "spinup_steps": num("spinup_steps", plan.spinup_steps, integer=True, minimum=1),
@@ -273,19 +284,103 @@ def prepare_run(cfg: dict, plan: DemPlan, run_dir: str | Path) -> Path:
     return run_dir / "in.granulator"
 
 
-def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | None = None) -> dict:
+class FinishedRunError(ValueError):
+    """The run folder holds a finished run; it is only replaced when asked to (force)."""
+
+
+FINISHED_MARKERS = ("collisions.csv", "summary.json")
+
+
+def is_finished(run_dir: str | Path) -> bool:
+    """A run folder holds a finished run once its collision table or summary exists."""
+    return any((Path(run_dir) / name).exists() for name in FINISHED_MARKERS)
+
+
+# what a run writes into its folder (besides whatever LIGGGHTS itself adds)
+RUN_PRODUCTS = ("bowl.stl", "impeller.stl", "in.granulator", "plan.json", "log.liggghts", "screen.liggghts",
+                "crash.json", "post", "wall_collisions.csv", "impact_velocity.csv", *FINISHED_MARKERS)
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    else:
+        path.unlink(missing_ok=True)
+
+
+def _move_into(stage: Path, run_dir: Path) -> None:
+    """Move a finished (or crashed) attempt from `stage` into `run_dir`: the old run's finished
+    markers go first (so a half-replaced folder never looks finished), products of the old run
+    that the new one lacks (e.g. a stale crash.json) are removed, the new markers come last.
+    Anything else in `run_dir` is left alone."""
+    run_dir.mkdir(parents=True, exist_ok=True)
+    for name in FINISHED_MARKERS:
+        (run_dir / name).unlink(missing_ok=True)
+    for name in RUN_PRODUCTS:
+        if not (stage / name).exists() and (run_dir / name).exists():
+            _remove(run_dir / name)
+    last = [stage / n for n in ("wall_collisions.csv", "impact_velocity.csv", *FINISHED_MARKERS)
+            if (stage / n).exists()]
+    for item in [p for p in sorted(stage.iterdir()) if p not in last] + last:
+        target = run_dir / item.name
+        if target.is_dir() and not target.is_symlink():
+            shutil.rmtree(target)
+        os.replace(item, target)
+    stage.rmdir()
+
+
+def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | None = None, *,
+              force: bool = False, progress_bar: bool = False) -> dict:
     """Run LIGGGHTS for `plan` in `run_dir`, then tabulate collisions and index the VTK files.
 
-    Returns a summary dict (also written to `run_dir/summary.json`). Raises LiggghtsError on
-    failure, leaving `crash.json` and the log in `run_dir` and no collision table.
+    Everything is validated before any file is touched: the speed and the whole deck, and a
+    finished run in `run_dir` is refused unless `force`. The run is made in a staging folder
+    beside `run_dir` and moved into place only after it succeeded, so a failure (or a signal)
+    never removes a finished run. Returns a summary dict (also `run_dir/summary.json`). Raises
+    LiggghtsError on failure, leaving `crash.json` and the log in `run_dir` (or, when `run_dir`
+    holds a finished run, in the staging folder named in the message) and no collision table.
     """
-    from pbmdem import collisions, vtk_series  # local: keep this module light to import
+    from pbmdem.config import check_rpm
 
     run_dir = Path(run_dir)
-    for name in ("collisions.csv", "wall_collisions.csv", "impact_velocity.csv", "summary.json"):
-        (run_dir / name).unlink(missing_ok=True)
+    check_rpm(plan.rpm, f"operating point {plan.point_id}: impeller rpm")
+    deck.render("granulator.in", deck_values(cfg, plan))  # raises on any bad value, before any I/O
+    finished = is_finished(run_dir)
+    if finished and not force:
+        raise FinishedRunError(
+            f"{run_dir} already holds a finished run ({', '.join(n for n in FINISHED_MARKERS if (run_dir / n).exists())}); "
+            "refusing to overwrite it (rerunning would give it new time stamps, so Snakemake would redo "
+            "everything downstream). Use --force to replace it, or --out to write elsewhere.")
+    where = run_dir.resolve()
+    stage = where.parent / f".{where.name}.staging"
+    if stage.exists():
+        shutil.rmtree(stage)
+    stage.mkdir(parents=True)
+    try:
+        summary = _run_in(cfg, plan, stage, run_dir, timeout, progress_bar)
+    except BaseException as exc:
+        if not finished:  # nothing to protect: keep the crash and the logs in the run folder
+            _move_into(stage, run_dir)
+            if len(exc.args) == 1 and isinstance(exc.args[0], str):
+                exc.args = (exc.args[0].replace(str(stage), str(run_dir)),)
+        elif len(exc.args) == 1 and isinstance(exc.args[0], str):
+            exc.args = (f"{exc.args[0]}\n(the finished run in {run_dir} is untouched; this attempt is in {stage})",)
+        raise
+    _move_into(stage, run_dir)
+    return summary
+
+
+def _run_in(cfg: dict, plan: DemPlan, run_dir: Path, final_dir: Path, timeout: float | None,
+            progress_bar: bool = False) -> dict:
+    """run_point's work in the (staging) folder `run_dir`; paths in the summary name `final_dir`."""
+    from pbmdem import collisions, vtk_series  # local: keep this module light to import
+    from pbmdem.progress import ThermoProgress
+
     deck_path = prepare_run(cfg, plan, run_dir)
-    result = liggghts.run(deck_path, run_dir, ranks=plan.mpi_ranks, timeout=timeout)
+    watcher = ThermoProgress(run_dir / "log.liggghts", [("settling", plan.settle_steps), ("spin-up", plan.spinup_steps),
+                                                        ("sampling", plan.sampling_steps)],
+                             label=f"DEM {plan.point_id}", bar=progress_bar)
+    result = liggghts.run(deck_path, run_dir, ranks=plan.mpi_ranks, timeout=timeout, progress=watcher)
     t0 = time.perf_counter()
     tables = collisions.tabulate_run(run_dir / "post", plan, geometry.bowl_from_config(cfg),
                                      geometry.impeller_from_config(cfg))
@@ -312,7 +407,7 @@ def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | No
         "total_collisions": int(tables.pairs["collisions"].sum()),
         "total_encounters": int(tables.pairs["encounters"].sum()),
         "sampling_time": float(tables.pairs["sampling_time"].iloc[0]),
-        **tables.diagnostics, **{f"series_{k}": str(v) for k, v in series.items()},
+        **tables.diagnostics, **{f"series_{k}": str(final_dir / "post" / Path(v).name) for k, v in series.items()},
     }
     write_json(run_dir / "summary.json", summary)
     return summary
@@ -343,7 +438,9 @@ def run_table(summaries: list[str | Path], out: str | Path):
 
     from pbmdem.atomic import write_csv
 
-    rows = [json.loads(Path(p).read_text()) for p in summaries]
+    from pbmdem.readers import read_json
+
+    rows = [read_json(p, "DEM run summary") for p in summaries]
     frame = pd.DataFrame(rows).drop(columns=[c for c in ("particles_per_class",) if c in rows[0]], errors="ignore")
     frame = frame.sort_values(["rpm", "distribution"]).reset_index(drop=True)
     write_csv(out, frame)

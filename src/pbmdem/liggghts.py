@@ -65,10 +65,13 @@ def tail(path: Path, lines: int = 25) -> str:
     return "\n".join(text[-lines:])
 
 
-def run(deck: str | Path, workdir: str | Path, ranks: int = 1, timeout: float | None = None) -> LiggghtsRun:
+def run(deck: str | Path, workdir: str | Path, ranks: int = 1, timeout: float | None = None,
+        progress=None, poll: float = 1.0) -> LiggghtsRun:
     """Run `deck` (a file in `workdir`) with the working directory `workdir`.
 
-    Raises LiggghtsError (after writing `workdir/crash.json`) on any failure.
+    `progress` (e.g. a `pbmdem.progress.ThermoProgress` on the log) gets `update()` every `poll`
+    seconds while the engine runs and `close()` when it stopped. Raises LiggghtsError (after
+    writing `workdir/crash.json`) on any failure.
     """
     workdir = Path(workdir)
     deck_name = Path(deck).name
@@ -76,13 +79,30 @@ def run(deck: str | Path, workdir: str | Path, ranks: int = 1, timeout: float | 
     log = workdir / "log.liggghts"
     t0 = time.perf_counter()
     env = dict(os.environ, OMP_NUM_THREADS="1")
+    proc = subprocess.Popen(cmd, cwd=workdir, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            errors="replace", env=env)
     try:
-        proc = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, errors="replace", timeout=timeout,
-                              env=env)
-        returncode, stdout, stderr = proc.returncode, proc.stdout, proc.stderr
-    except subprocess.TimeoutExpired as exc:
-        returncode, stderr = -9, f"timed out after {timeout} s"
-        stdout = exc.stdout.decode(errors="replace") if isinstance(exc.stdout, bytes) else (exc.stdout or "")
+        while True:
+            left = None if timeout is None else timeout - (time.perf_counter() - t0)
+            try:
+                stdout, stderr = proc.communicate(timeout=poll if left is None else max(0.0, min(poll, left)))
+                returncode = proc.returncode
+                break
+            except subprocess.TimeoutExpired:
+                if left is not None and left <= poll:
+                    proc.kill()
+                    stdout, _ = proc.communicate()
+                    returncode, stderr = -9, f"timed out after {timeout} s"
+                    break
+                if progress is not None:
+                    progress.update()
+    except BaseException:  # e.g. KeyboardInterrupt: do not leave the engine running
+        proc.kill()
+        proc.communicate()
+        raise
+    finally:
+        if progress is not None:
+            progress.close()
     wall = time.perf_counter() - t0
     screen = workdir / "screen.liggghts"
     screen.write_text(stdout)

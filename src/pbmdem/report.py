@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.atomic import write_csv, write_text
+from pbmdem.readers import read_json, read_table
 
 METHODS = {"pbm_dem": "PBM-DEM", "pbm_ann": "PBM-ANN", "pbm_constant": "PBM-constant"}
 STYLES = {"pbm_dem": dict(color="black", lw=2.2), "pbm_ann": dict(color="tab:orange", ls="--", lw=2),
@@ -26,10 +27,12 @@ STYLES = {"pbm_dem": dict(color="black", lw=2.2), "pbm_ann": dict(color="tab:ora
 
 def load_method(validation_dir: str | Path, rpm: str, method: str) -> dict:
     folder = Path(validation_dir) / f"rpm{rpm}" / method
-    out = {"summary": pd.read_csv(folder / "summary.csv"), "bins": pd.read_csv(folder / "final_bins.csv"),
-           "timing": json.loads((folder / "timing.json").read_text())}
+    what = f"{METHODS.get(method, method)} result"
+    out = {"summary": read_table(folder / "summary.csv", what, columns=("time", "d50"), finite=("time", "d50")),
+           "bins": read_table(folder / "final_bins.csv", what),
+           "timing": read_json(folder / "timing.json", what, keys=("total_wall_time_s",))}
     if (folder / "intervals.csv").exists():
-        out["intervals"] = pd.read_csv(folder / "intervals.csv")
+        out["intervals"] = read_table(folder / "intervals.csv", what)
     return out
 
 
@@ -61,8 +64,48 @@ def compare(validation_dir: str | Path, rpms, grid_rpm) -> pd.DataFrame:
             "pbm_dem_wall_s": t_dem, "pbm_dem_liggghts_wall_s": data["pbm_dem"]["timing"]["provider_wall_time_s"],
             "pbm_ann_wall_s": t_ann, "pbm_constant_wall_s": data["pbm_constant"]["timing"]["total_wall_time_s"],
             "wall_time_ratio_dem_over_ann": t_dem / t_ann if t_ann > 0 else float("nan"),
+            **domain_counts(data),
         })
     return pd.DataFrame(rows)
+
+
+def domain_counts(data: dict) -> dict:
+    """How often the surrogate was used outside its training domain at one speed: PBM-ANN
+    intervals with an out-of-domain warning (of all intervals) and the constant kernel's
+    calibration (older results without the columns count as unknown, NaN)."""
+    ann = data["pbm_ann"].get("intervals")
+    if ann is not None and "out_of_domain_count" in ann.columns:
+        counts = ann.out_of_domain_count.fillna(0)
+        ann_intervals, ann_warnings = int((counts > 0).sum()), int(counts.sum())
+    else:
+        ann_intervals = ann_warnings = float("nan")
+    return {"ann_out_of_domain_intervals": ann_intervals,
+            "ann_intervals": int(len(ann)) if ann is not None else 0,
+            "ann_out_of_domain_warnings": ann_warnings,
+            "constant_calibration_out_of_domain_warnings":
+                data["pbm_constant"]["timing"].get("out_of_domain_count", float("nan"))}
+
+
+def domain_statement(table: pd.DataFrame, validation_dir, rpms) -> str:
+    """HTML paragraph stating where the surrogate left its training domain (never left out)."""
+    lines = []
+    for rpm, row in zip(rpms, table.itertuples()):
+        if row.ann_out_of_domain_intervals > 0:  # NaN (results from before the count) is not > 0
+            ann = load_method(validation_dir, rpm, "pbm_ann")["intervals"]
+            messages = sorted({m for m in ann.get("out_of_domain", pd.Series(dtype=str)).dropna().astype(str) if m})
+            lines.append(f"{rpm} rpm: PBM-ANN used the surrogate outside its training domain in "
+                         f"{row.ann_out_of_domain_intervals} of {row.ann_intervals} intervals "
+                         f"({row.ann_out_of_domain_warnings} warnings): " + html_escape("; ".join(messages)[:2000]))
+        if row.constant_calibration_out_of_domain_warnings > 0:
+            lines.append(f"{rpm} rpm: the constant kernel's calibration used the surrogate outside its training "
+                         f"domain ({row.constant_calibration_out_of_domain_warnings} warnings)")
+    if not lines and table.ann_out_of_domain_intervals.isna().any():
+        return ("<p>Surrogate domain: not recorded for (some of) these results; they were computed before "
+                "out-of-domain counting. Rerun the validation rules to count.</p>")
+    if not lines:
+        return "<p>Surrogate domain: every PBM-ANN interval and calibration stayed within the training range.</p>"
+    return ("<p><b>Warning: surrogate outside its training domain.</b> Its predictions there are "
+            "extrapolations.</p><ul>" + "".join(f"<li>{line}</li>" for line in lines) + "</ul>")
 
 
 def _png(fig) -> str:
@@ -115,18 +158,18 @@ def figures(validation_dir: str | Path, rpm: str, model: str | Path | None = Non
     a1.legend()
     # class-pair frequencies: DEM vs the surrogate on the very same samples (the PBM-DEM loop's)
     dem_c, ann_c = [], []
+    outside = 0
     if model is not None:
-        import warnings
-
+        from pbmdem.coupling import out_of_domain_recorded
         from pbmdem.surrogate import load_surrogate
 
         surrogate = load_surrogate(model)
         for _, row in dem_i.iterrows():
             d = np.asarray(json.loads(row.class_diameters))
             n = np.asarray(json.loads(row.class_counts), float)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+            with out_of_domain_recorded(f"report, {rpm} rpm, PBM-DEM interval {row.interval}") as found:
                 c = surrogate.frequency_matrix(d, n, float(rpm))
+            outside += bool(found)
             dem_c.append(json.loads(row.class_frequencies))
             ann_c.append(c[np.triu_indices(len(d))].tolist())
     dem_c, ann_c = np.concatenate(dem_c or [[]]), np.concatenate(ann_c or [[]])
@@ -138,7 +181,11 @@ def figures(validation_dir: str | Path, rpm: str, model: str | Path | None = Non
     a2.set(xlabel="DEM c_ij (1/s per pair)", ylabel="surrogate c_ij, same sample",
            title="class pairs of every PBM-DEM interval")
     fig.tight_layout()
-    out.append((f"collision frequencies per coupling interval, {rpm} rpm", _png(fig)))
+    caption = f"collision frequencies per coupling interval, {rpm} rpm"
+    if outside:
+        caption += (f" (the surrogate was outside its training domain on {outside} of {len(dem_i)} "
+                    "PBM-DEM samples)")
+    out.append((caption, _png(fig)))
     return out
 
 
@@ -152,11 +199,11 @@ def build_report(*, validation_dir, rpms, grid_rpm, runs, collisions, metrics, p
     """`speed_study`: paths of the DEM speed-response outputs (table, flow, plot, velocity_plot)."""
     table = compare(validation_dir, rpms, grid_rpm)
     write_csv(comparison, table)
-    runs_df = pd.read_csv(runs)
-    coll = pd.read_csv(collisions)
-    met = pd.read_csv(metrics)
-    meta = json.loads(Path(metadata).read_text())
-    sweep_df = pd.read_csv(sweep)
+    runs_df = read_table(runs, "DEM run table", columns=("total_collisions",))
+    coll = read_table(collisions, "collision table")
+    met = read_table(metrics, "surrogate metrics table")
+    meta = read_json(metadata, "surrogate metadata")
+    sweep_df = read_table(sweep, "impeller-speed sweep table")
     parts = [
         "<!doctype html><html><head><meta charset='utf-8'><title>pbmdem report</title><style>",
         "body{font-family:sans-serif;max-width:1100px;margin:2em auto;line-height:1.4}"
@@ -175,6 +222,7 @@ def build_report(*, validation_dir, rpms, grid_rpm, runs, collisions, metrics, p
                  f"PBM-ANN at least 1000x faster - "
                  f"{'met' if (table.wall_time_ratio_dem_over_ann >= 1000).all() else 'not met'} (ratio "
                  f"{table.wall_time_ratio_dem_over_ann.min():.0f}-{table.wall_time_ratio_dem_over_ann.max():.0f}x).</p>")
+    parts.append(domain_statement(table, validation_dir, rpms))
     for rpm in rpms:
         for caption, uri in figures(validation_dir, rpm, model):
             parts.append(f"<h3>{html_escape(caption)}</h3><img src='{uri}'>")

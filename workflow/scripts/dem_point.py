@@ -3,7 +3,9 @@ import logging
 
 from pbmdem.dem import run_operating_point
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO)
+# progress lines (phase, step of total, particles, elapsed, remaining) go to the job log and the terminal
+logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s",
+                    handlers=[logging.FileHandler(snakemake.log[0]), logging.StreamHandler()])  # noqa: F821
 summary = run_operating_point(
     snakemake.params.point,
     float(snakemake.wildcards.rpm),

@@ -4,8 +4,9 @@ import logging
 
 from pbmdem.surrogate.train import train_and_report
 
-logging.basicConfig(filename=snakemake.log[0], filemode="w", level=logging.INFO,  # noqa: F821
-                    format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+# each CV fold and hyperparameter candidate is logged as it finishes: job log and terminal
+logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+                    handlers=[logging.FileHandler(snakemake.log[0], mode="w"), logging.StreamHandler()])  # noqa: F821
 logging.captureWarnings(True)
 
 train_and_report(

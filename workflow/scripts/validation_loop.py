@@ -3,8 +3,9 @@ import logging
 
 from pbmdem import coupling
 
-logging.basicConfig(filename=snakemake.log[0], level=logging.INFO,  # noqa: F821
-                    format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+# interval lines (DEM and PBM wall time, out-of-domain count) and DEM progress: job log and terminal
+logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+                    handlers=[logging.FileHandler(snakemake.log[0]), logging.StreamHandler()])  # noqa: F821
 logging.captureWarnings(True)
 cfg = snakemake.params.config  # noqa: F821
 rpm = float(snakemake.wildcards.rpm)  # noqa: F821

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 
@@ -24,7 +25,7 @@ def add_cli(subparsers) -> argparse.ArgumentParser:
                    help="impact-velocity table CSV (results/dem/impact_velocity.csv; with --kernel table); "
                         "needed when pbm.aggregation.success.velocity_model is not 'none'")
     p.add_argument("--model", type=Path, help="surrogate model file (with --kernel ann)")
-    p.add_argument("--rpm", required=True, type=float, help="impeller speed (1/min)")
+    p.add_argument("--rpm", required=True, help="impeller speed (1/min), 0 < rpm <= 20000")
     p.add_argument("--distribution", default=None, help="size distribution name (default: first of the grid)")
     p.add_argument("--out", required=True, type=Path, help="output folder (tables, plots, run.json)")
     p.set_defaults(func=run_cli)
@@ -67,15 +68,24 @@ def make_source(kind: str, config: dict, table=None, model=None, distribution: s
 
 
 def run_cli(args) -> int:
-    from pbmdem.config import load_config
+    from pbmdem.config import check_rpm, load_config
 
     from .settings import run_pbm
 
+    args.rpm = check_rpm(args.rpm, "--rpm")
     config = load_config(args.config)
     distribution = args.distribution or config["grid"]["size_distributions"][0]
     source = make_source(args.kernel, config, args.table, args.model, distribution, args.velocity_table)
     result = run_pbm(config, source, args.rpm, distribution)
     result.info["kernel_source"] = args.kernel
+    domain = source.domain_report() if hasattr(source, "domain_report") else None
+    if domain is not None:
+        result.info["surrogate_domain"] = domain
+        if domain["out_of_domain_evaluations"]:
+            print(f"warning: the surrogate was evaluated outside its training domain in "
+                  f"{domain['out_of_domain_evaluations']} of {domain['surrogate_evaluations']} kernel evaluations "
+                  f"(by input: {domain['out_of_domain_by_feature']}); first: "
+                  + "; ".join(domain["out_of_domain_first"].values()), file=sys.stderr)
     paths = result.save(args.out)
     last = result.summary().iloc[-1]
     print(json.dumps({"out": str(args.out), "files": sorted(p.name for p in paths.values()),

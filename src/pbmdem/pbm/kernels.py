@@ -555,7 +555,12 @@ class TableFrequency:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"{what} {path} does not exist")
-        table = pd.read_csv(path)
+        from pbmdem.readers import InputFileError, read_table
+
+        try:
+            table = read_table(path, what)
+        except InputFileError as exc:
+            raise PBMInputError(str(exc)) from None
         if distribution is not None:
             if "distribution" not in table.columns:
                 raise PBMInputError(f"{path}: no 'distribution' column to select {distribution!r}")

@@ -46,15 +46,19 @@ def add_cli(subparsers) -> argparse.ArgumentParser:
 
 
 def _train(args) -> int:
-    import yaml
-
     from .settings import impeller_radius_from, resolve_settings
     from .train import train_and_report
 
+    from pbmdem.config import ConfigError, load_yaml, non_finite_values
+
     config = {}
     if args.config is not None:
-        with open(args.config, encoding="utf-8") as fh:
-            config = yaml.safe_load(fh) or {}
+        config = load_yaml(args.config, "config file") or {}  # duplicate keys refused, file named
+        if not isinstance(config, dict):
+            raise ConfigError(f"config file {args.config}: the top level must be a mapping of sections")
+        bad = non_finite_values(config)
+        if bad:
+            raise ConfigError(f"config file {args.config}:\n  " + "\n  ".join(bad))
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     meta = train_and_report(args.table, args.out / "model.skops", settings=resolve_settings(config),
                             impeller_radius=impeller_radius_from(config), n_jobs=args.jobs,
@@ -84,7 +88,9 @@ def _predict(args) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", OutOfDomainWarning)
         if args.table is not None:
-            table = pd.read_csv(args.table)
+            from pbmdem.readers import read_table
+
+            table = read_table(args.table, "collision table")
             value, std = model.predict(table, return_std=True)
             out = table.assign(predicted_encounter_frequency_per_pair=value, predicted_std_log10=std)
             if model.has_velocity_model():
@@ -97,6 +103,13 @@ def _predict(args) -> int:
         else:
             if args.numbers is None or args.rpm is None:
                 raise SystemExit("--diameters needs --numbers and --rpm")
+            from pbmdem.config import check_rpm
+
+            args.rpm = check_rpm(args.rpm, "--rpm")
+            for flag, values in (("--diameters", args.diameters), ("--numbers", args.numbers)):
+                bad = [v for v in values if not np.isfinite(v) or v <= 0]
+                if bad:
+                    raise ValueError(f"{flag} = {bad[0]!r}: every value must be a finite number > 0")
             c, s = model.frequency_matrix(np.array(args.diameters), np.array(args.numbers), args.rpm,
                                           return_std=True)
             result = {"diameters": args.diameters, "numbers": args.numbers, "rpm": args.rpm,

@@ -17,6 +17,8 @@ Two targets are scored on the same folds (column ``target`` of the metrics):
 
 from __future__ import annotations
 
+import logging
+import time
 import warnings
 
 import numpy as np
@@ -28,6 +30,8 @@ from .baselines import HGBBaseline, PhysicalScaling
 from .features import TARGET_COLUMN, TARGET_NAME, TARGET_NOISE_VAR, prepare_training_table
 from .model import CollisionSurrogate, grouped_splits
 from .velocity import bin_counts, empirical_fractions, fit_lognormal, total_variation, velocity_rows
+
+log = logging.getLogger(__name__)
 
 MODEL_NAMES = ("mlp", "hgb", "physical")
 #: Models scored on the impact-velocity distribution (the HGB baseline is a frequency baseline only).
@@ -122,7 +126,9 @@ def cross_validate_models(table: pd.DataFrame, surrogate: CollisionSurrogate, ba
         obs_frac_full[vmask] = obs_frac
 
     rows = []
+    t_start = time.perf_counter()
     for k, (train, test) in enumerate(splits):
+        t_fold = time.perf_counter()
         tr, te = data.iloc[train], data.iloc[test]
         y = te[TARGET_NAME].to_numpy(float)
         ids = ";".join(sorted(set(groups[test])))
@@ -155,6 +161,12 @@ def cross_validate_models(table: pd.DataFrame, surrogate: CollisionSurrogate, ba
                 pred.loc[idx, f"{name}_velocity_tv"] = tv
                 r2v, maev = _metrics(pred.loc[idx, "velocity_mu_log10"].to_numpy(float), mu)
                 rows.append(_row("impact_velocity", name, str(k), ids, n_train, len(vt), r2v, maev, tv=float(tv.mean())))
+        elapsed = time.perf_counter() - t_start
+        done = [r for r in rows if r["fold"] == str(k) and r["target"] == "encounter_frequency"]
+        log.info("CV fold %d of %d done (held out %s) in %.1f s: %s; elapsed %.0f s, remaining ~%.0f s",
+                 k + 1, len(splits), ids, time.perf_counter() - t_fold,
+                 ", ".join(f"{r['model']} R2 {r['r2_log10']:.3f}" for r in done),
+                 elapsed, elapsed / (k + 1) * (len(splits) - k - 1))
 
     metrics = pd.DataFrame(rows, columns=METRIC_COLUMNS)
     summary = []

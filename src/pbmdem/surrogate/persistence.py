@@ -239,6 +239,18 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
             f"{metadata_path}: velocity bins {edges} differ from this version's pbmdem.impact.VELOCITY_EDGES; "
             f"retrain the surrogate")
 
+    try:
+        return _from_metadata(estimators, meta, metadata_path)
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        what = f"missing field {exc}" if isinstance(exc, KeyError) else str(exc)
+        raise IncompatibleVersionError(
+            f"{metadata_path}: metadata does not fit this pbmdem version ({type(exc).__name__}: {what}); "
+            "it was written by another version or edited; retrain the surrogate") from None
+
+
+def _from_metadata(estimators, meta: dict, metadata_path) -> CollisionSurrogate:
+    """The surrogate object from its fitted estimators and metadata (KeyError/TypeError when the
+    metadata has missing or unknown fields)."""
     if list(meta["feature_names"]) != list(FEATURE_NAMES):
         raise IncompatibleVersionError(
             f"{metadata_path}: features {meta['feature_names']} differ from this version's {list(FEATURE_NAMES)}")

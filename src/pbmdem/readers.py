@@ -1,0 +1,61 @@
+"""Reading the files the library consumes (tables, JSON metadata), with errors that name the file.
+
+Every failure (missing, unreadable, empty, malformed, a required column missing, a non-finite
+number where a finite one is required) raises `InputFileError`, a ValueError whose message starts
+with what the file is and its path, never a bare pandas or JSON traceback.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+
+class InputFileError(ValueError):
+    """A file read by pbmdem is missing or malformed; the message names the file."""
+
+
+def read_table(path: str | Path, what: str = "table", *, columns=(), finite=()) -> pd.DataFrame:
+    """A CSV table; `columns` must be present, the numeric `finite` columns must hold finite numbers."""
+    path = Path(path)
+    try:
+        frame = pd.read_csv(path)
+    except FileNotFoundError:
+        raise InputFileError(f"{what} {path} does not exist") from None
+    except pd.errors.EmptyDataError:
+        raise InputFileError(f"{what} {path} is empty (no header, no rows)") from None
+    except (OSError, UnicodeDecodeError, pd.errors.ParserError, ValueError) as exc:
+        raise InputFileError(f"{what} {path} cannot be read as CSV: {exc}") from None
+    missing = [c for c in columns if c not in frame.columns]
+    if missing:
+        raise InputFileError(f"{what} {path}: missing column(s) {missing}; present: {list(frame.columns)}")
+    for name in finite:
+        if name not in frame.columns:
+            continue
+        values = pd.to_numeric(frame[name], errors="coerce").to_numpy(float)
+        bad = ~np.isfinite(values)
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise InputFileError(f"{what} {path}: column {name!r} row {row + 1} = {frame[name].iloc[row]!r}: "
+                                 f"a finite number is required ({int(bad.sum())} such row(s))")
+    return frame
+
+
+def read_json(path: str | Path, what: str = "JSON file", *, keys=()) -> dict:
+    """A JSON object; `keys` must be present."""
+    path = Path(path)
+    try:
+        obj = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputFileError(f"{what} {path} does not exist") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputFileError(f"{what} {path} cannot be read as JSON: {exc}") from None
+    if not isinstance(obj, dict):
+        raise InputFileError(f"{what} {path}: a JSON object is required, found {type(obj).__name__}")
+    missing = [k for k in keys if k not in obj]
+    if missing:
+        raise InputFileError(f"{what} {path}: missing field(s) {missing}")
+    return obj

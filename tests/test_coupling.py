@@ -155,3 +155,24 @@ def test_finished_intervals_are_reused_only_for_the_same_inputs(tiny_config, tmp
     assert changed.calls == 2  # stale intervals discarded and recomputed
     intervals = pd.read_csv(tmp_path / "intervals.csv")
     assert (intervals.mean_frequency_per_pair == 5.0).all()
+
+
+def test_velocity_fractions_of_a_dem_interval_reach_the_pbm_bins():
+    from pbmdem.coupling import ClassFrequencySource, fractions_from_table
+    from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, EncounterRates
+
+    rows = []
+    for i, j, counts in [(0, 0, {3: 2.0, 5: 2.0}), (0, 1, {5: 3.0}), (1, 1, {})]:
+        for b in range(N_VELOCITY_BINS):
+            rows.append({"class_i": i, "class_j": j, "v_lo": VELOCITY_EDGES[b], "v_hi": VELOCITY_EDGES[b + 1],
+                         "encounters": counts.get(b, 0.0)})
+    frac = fractions_from_table(pd.DataFrame(rows), 2)
+    assert frac.shape == (2, 2, N_VELOCITY_BINS)
+    np.testing.assert_allclose(frac.sum(axis=2), 1.0)
+    assert frac[0, 0, 3] == pytest.approx(0.5) and frac[0, 1, 5] == 1.0 and frac[1, 0, 5] == 1.0
+    # the pair without encounters gets the pooled distribution: 2, 5 of 7 encounters in bins 3 and 5
+    assert frac[1, 1, 3] == pytest.approx(2 / 7) and frac[1, 1, 5] == pytest.approx(5 / 7)
+    source = ClassFrequencySource([2e-3, 4e-3], EncounterRates(np.array([[1.0, 2.0], [2.0, 3.0]]), frac), "t")
+    rates = source.encounters(np.array([1.9e-3, 2.1e-3, 3.9e-3]), np.ones(3), 300.0)
+    assert rates.velocity_fractions[0, 2, 5] == 1.0 and rates.velocity_fractions[0, 1, 3] == pytest.approx(0.5)
+    np.testing.assert_allclose(rates.frequency, source(np.array([1.9e-3, 2.1e-3, 3.9e-3]), np.ones(3), 300.0))

@@ -41,6 +41,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.atomic import atomic_path, write_csv, write_json
+from pbmdem.impact import EncounterRates
 from pbmdem.readers import read_json, read_table
 
 log = logging.getLogger(__name__)
@@ -165,6 +166,22 @@ def class_table(diameters, matrix) -> pd.DataFrame:
     return pd.DataFrame({"d_i": d[i], "d_j": d[j], "frequency_per_pair": np.asarray(matrix, float)[i, j]})
 
 
+def fractions_from_table(velocities: pd.DataFrame, k: int) -> np.ndarray:
+    """(K, K, V) fraction of each class pair's encounters per velocity bin, from one DEM run's
+    impact_velocity.csv (a pair without encounters gets the fractions pooled over all pairs)."""
+    from pbmdem.impact import N_VELOCITY_BINS, velocity_bin
+
+    upper = np.zeros((k, k, N_VELOCITY_BINS))
+    b = velocity_bin(velocities.v_lo.to_numpy(float))
+    np.add.at(upper, (velocities.class_i.to_numpy(), velocities.class_j.to_numpy(), b),
+              velocities.encounters.to_numpy(float))
+    counts = upper + np.transpose(np.triu(np.ones((k, k)), 1)[:, :, None] * upper, (1, 0, 2))
+    pooled = upper.sum(axis=(0, 1))
+    fallback = pooled / pooled.sum() if pooled.sum() > 0 else np.full(N_VELOCITY_BINS, 1.0 / N_VELOCITY_BINS)
+    total = counts.sum(axis=2, keepdims=True)
+    return np.where(total > 0, counts / np.where(total > 0, total, 1.0), fallback)
+
+
 def matrix_from_table(table: pd.DataFrame, k: int) -> np.ndarray:
     c = np.zeros((k, k))
     c[table.class_i.to_numpy(), table.class_j.to_numpy()] = table.encounter_frequency_per_pair.to_numpy()
@@ -172,12 +189,21 @@ def matrix_from_table(table: pd.DataFrame, k: int) -> np.ndarray:
 
 
 class ClassFrequencySource:
-    """Hold class frequencies for an interval and interpolate them onto any PBM bins."""
+    """Hold class frequencies for an interval and interpolate them onto any PBM bins.
+
+    `matrix` is the (K, K) encounter frequency per class pair, or a pbmdem.impact.EncounterRates
+    whose velocity fractions then make the source velocity-resolved (:meth:`encounters`): a PBM
+    bin takes the fractions of the DEM class nearest to it in log diameter."""
 
     def __init__(self, diameters, matrix, label: str):
+        from pbmdem.impact import EncounterRates
         from pbmdem.pbm.kernels import TableFrequency
 
         self.diameters = list(map(float, diameters))
+        self.fractions = None
+        if isinstance(matrix, EncounterRates):
+            self.fractions = np.asarray(matrix.velocity_fractions, float)
+            matrix = matrix.frequency
         self.matrix = np.asarray(matrix, float)
         self.label = label
         if len(self.diameters) == 1:
@@ -189,6 +215,15 @@ class ClassFrequencySource:
 
     def __repr__(self) -> str:
         return f"ClassFrequencySource({self.label}, classes={len(self.diameters)})"
+
+    def encounters(self, diameters, numbers, rpm):
+        from pbmdem.impact import EncounterRates
+
+        if self.fractions is None:
+            raise ValueError(f"{self.label}: no impact-velocity distribution for a velocity-dependent success model")
+        d = np.log(np.atleast_1d(np.asarray(diameters, float)))
+        nearest = np.abs(d[:, None] - np.log(np.asarray(self.diameters))[None, :]).argmin(axis=1)
+        return EncounterRates(self(diameters, numbers, rpm), self.fractions[np.ix_(nearest, nearest)])
 
     def __call__(self, diameters, numbers, rpm) -> np.ndarray:
         # within an interval the class frequencies are fixed and the PBM bins do not move, so the
@@ -230,8 +265,14 @@ class DemProvider:
         summary = dem.run_point(self.cfg, plan, interval_dir / "dem", timeout=self.cfg["dem"].get("timeout"),
                                 force=True)
         table = read_table(interval_dir / "dem" / "collisions.csv", "collision table of a coupling interval",
-                           columns=("class_i", "class_j", "frequency_per_pair"), finite=("frequency_per_pair",))
-        return matrix_from_table(table, len(sample.diameters)), {
+                           columns=("class_i", "class_j", "encounter_frequency_per_pair"),
+                           finite=("encounter_frequency_per_pair",))
+        velocities = read_table(interval_dir / "dem" / "impact_velocity.csv",
+                                "impact-velocity table of a coupling interval",
+                                columns=("class_i", "class_j", "v_lo", "encounters"), finite=("encounters",))
+        k = len(sample.diameters)
+        rates = EncounterRates(matrix_from_table(table, k), fractions_from_table(velocities, k))
+        return rates, {
             "dem_wall_time_s": summary["liggghts_wall_time_s"] + summary["parse_time_s"],
             "dem_particles": summary["n_particles"], "dem_collisions": summary["total_collisions"],
             "dem_encounters": summary["total_encounters"],
@@ -249,6 +290,8 @@ class SurrogateProvider:
         self.model = load_surrogate(model_path)
         self.model_path = Path(model_path)
         self.rpm = float(rpm)
+        # with a velocity model the provider also hands over impact-velocity fractions (one call)
+        self.velocity_resolved = bool(getattr(self.model, "velocity_estimators_", None))
 
     def fingerprint(self) -> dict:
         import hashlib
@@ -258,9 +301,13 @@ class SurrogateProvider:
 
     def __call__(self, sample: DemSample, interval_dir: Path, index: int) -> tuple[np.ndarray, dict]:
         t0 = time.perf_counter()
+        d, n = np.asarray(sample.diameters), np.asarray(sample.counts, float)
         with out_of_domain_recorded(f"{self.name} at rpm {self.rpm:g}, interval {index}") as found:
-            c = self.model.frequency_matrix(np.asarray(sample.diameters), np.asarray(sample.counts, float), self.rpm)
-        return np.asarray(c, float), {"ann_wall_time_s": time.perf_counter() - t0,
+            if self.velocity_resolved:
+                c = self.model.encounters(d, n, self.rpm)
+            else:
+                c = np.asarray(self.model.frequency_matrix(d, n, self.rpm), float)
+        return c, {"ann_wall_time_s": time.perf_counter() - t0,
                                       "out_of_domain": "; ".join(sorted(set(found))),
                                       "out_of_domain_count": len(found)}
 
@@ -354,12 +401,13 @@ def run_loop(cfg: dict, provider, rpm: float, distribution: str, outdir: str | P
         sample = representative_sample(model.grid.x, state.number, **sample_settings)
         t_provider = time.perf_counter()
         try:
-            matrix, extra = provider(sample, folder, k)
+            rates, extra = provider(sample, folder, k)
         except Exception as exc:
             raise CouplingError(f"{provider.name} at rpm {rpm:g}: interval {k} ({t0:g}-{t1:g} s) failed: {exc}. "
                                 f"Intervals 0..{k - 1} are kept in {outdir}; rerun to resume.") from exc
         provider_wall = time.perf_counter() - t_provider
-        model.kernel.set_source(ClassFrequencySource(sample.diameters, matrix, f"{provider.name} interval {k}"))
+        model.kernel.set_source(ClassFrequencySource(sample.diameters, rates, f"{provider.name} interval {k}"))
+        matrix = rates.frequency if isinstance(rates, EncounterRates) else np.asarray(rates, float)
         times = np.arange(t0, t1 + 0.5 * out_step, out_step)
         times = times[(times >= t0) & (times <= t1)]
         t_pbm = time.perf_counter()

@@ -8,6 +8,7 @@ the DEM bed: bed_height x pi/4 bowl_diameter^2 x packing_fraction.
 
 from __future__ import annotations
 
+import functools
 import math
 from pathlib import Path
 
@@ -41,17 +42,21 @@ DEFAULTS: dict = {
         "table_extrapolation": "clamp",
         "success": {"model": "step", "threshold": 0.02, "width": 0.005},
     },
-    "solver": {"method": "heun", "safety": 0.5, "rtol": 1.0e-3, "atol": 1.0e-6, "max_step": 5.0,
-               "max_overflow_fraction": 1.0e-6},
+    "solver": {"method": "ssp3", "safety": 0.5, "rtol": 1.0e-3, "atol": 1.0e-6, "max_step": 10.0,
+               "max_overflow_fraction": 1.0e-6, "max_steps": 1000000, "max_wall_time": 3600.0},
     "output": {"interval": 10.0},
 }
 
 
-def validate_section(section: dict) -> None:
+@functools.lru_cache(maxsize=1)
+def _validator():
     import jsonschema
 
-    schema = yaml.safe_load(SCHEMA_PATH.read_text())
-    errors = sorted(jsonschema.Draft202012Validator(schema).iter_errors(section),
+    return jsonschema.Draft202012Validator(yaml.safe_load(SCHEMA_PATH.read_text()))
+
+
+def validate_section(section: dict) -> None:
+    errors = sorted(_validator().iter_errors(section),
                     key=lambda e: list(map(str, e.absolute_path)))
     if errors:
         msgs = []
@@ -102,7 +107,8 @@ def build_model(settings: dict, source=None, rpm: float = 0.0) -> GranulationPBM
     cons = Consolidation(settings["consolidation"]["rate"], settings["consolidation"]["min_porosity"])
     s = settings["solver"]
     solver = SolverSettings(method=s["method"], safety=s["safety"], max_step=s["max_step"], rtol=s["rtol"],
-                            atol=s["atol"], max_overflow_fraction=s["max_overflow_fraction"])
+                            atol=s["atol"], max_overflow_fraction=s["max_overflow_fraction"],
+                            max_steps=s["max_steps"], max_wall_time=s["max_wall_time"])
     return GranulationPBM(grid, kernel, liquid, cons, solver, rpm=rpm, scheme=agg["scheme"])
 
 

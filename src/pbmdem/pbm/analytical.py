@@ -14,7 +14,6 @@ Sum (Golovin) kernel beta(u, v) = b (u + v) (Golovin 1963; Scott 1968), tau = 1 
 from __future__ import annotations
 
 import numpy as np
-from scipy import integrate, special
 
 
 def constant_number_density(v, t, beta, N0, m):
@@ -39,6 +38,8 @@ def sum_tau(t, b, N0, m):
 
 
 def sum_number_density(v, t, b, N0, m):
+    from scipy import special
+
     v = np.asarray(v, float)
     tau = sum_tau(t, b, N0, m)
     if tau == 0.0:
@@ -56,6 +57,8 @@ def sum_moments(t, b, N0, m):
 
 def cell_integrals(density, edges):
     """Number and volume of a number density ``density(v)`` in each cell [edges[k], edges[k+1]]."""
+    from scipy import integrate
+
     num, vol = [], []
     for a, b in zip(edges[:-1], edges[1:]):
         num.append(integrate.quad(density, a, b, limit=200, epsrel=1e-12, epsabs=0)[0])

@@ -20,7 +20,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from . import analytical
 from .errors import KernelShapeError, PBMInputError, positive
@@ -256,6 +255,7 @@ class TableFrequency:
     """
 
     def __init__(self, table: pd.DataFrame, extrapolation: str = "clamp", zero_floor: float = 1e-3):
+        import pandas as pd
         from scipy.interpolate import RegularGridInterpolator
 
         if extrapolation not in ("clamp", "linear"):
@@ -316,6 +316,8 @@ class TableFrequency:
     @classmethod
     def from_csv(cls, path, distribution: str | None = None, **kwargs) -> "TableFrequency":
         """Read a collision table CSV; ``distribution`` keeps only that distribution's rows."""
+        import pandas as pd
+
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"collision table {path} does not exist")

@@ -13,9 +13,6 @@ import math
 from pathlib import Path
 
 import numpy as np
-import yaml
-
-from pbmdem.config import merge_defaults
 
 from .errors import PBMInputError
 from .grid import Grid, volume_of
@@ -51,6 +48,7 @@ DEFAULTS: dict = {
 @functools.lru_cache(maxsize=1)
 def _validator():
     import jsonschema
+    import yaml
 
     return jsonschema.Draft202012Validator(yaml.safe_load(SCHEMA_PATH.read_text()))
 
@@ -68,6 +66,8 @@ def validate_section(section: dict) -> None:
 
 def resolve_settings(config: dict | None = None) -> dict:
     """Complete, validated ``pbm:`` settings: the config's ``pbm`` section over :data:`DEFAULTS`."""
+    from pbmdem.config import merge_defaults
+
     section = (config or {}).get("pbm") or {}
     if not isinstance(section, dict):
         raise PBMInputError(f"pbm section must be a mapping, got {type(section).__name__}")

@@ -26,7 +26,7 @@ DEFAULTS_PATH = _REPO / "config" / "config.yaml"  # its pbm: section holds the d
 
 #: Same values as the pbm: section of config/config.yaml (a test keeps them equal).
 DEFAULTS: dict = {
-    "grid": {"bins": 35, "ratio": 2.0, "min_diameter": 1.0e-3},
+    "grid": {"ratio": 1.4142135623730951, "min_diameter": None, "max_diameter": 0.032, "bins": None},
     "process": {"premixing_time": 60.0, "liquid_addition_time": 180.0, "wet_massing_time": 240.0},
     "initial": {"porosity": 0.5, "liquid_content": 0.0},
     "liquid_addition": {"rate": 4.5e-8, "distribution": "surface_area"},
@@ -73,6 +73,14 @@ def resolve_settings(config: dict | None = None) -> dict:
         raise PBMInputError(f"pbm section must be a mapping, got {type(section).__name__}")
     merged = merge_defaults(DEFAULTS, section)
     validate_section(merged)
+    g = merged["grid"]
+    if g["min_diameter"] is None:
+        # the first pivot is the smallest feed class of the config's size distributions
+        dists = (config or {}).get("size_distributions") or {}
+        smallest = [min(float(d) for d in v["diameters"]) for v in dists.values()
+                    if isinstance(v, dict) and v.get("diameters")]
+        if smallest:
+            g["min_diameter"] = min(smallest)
     return merged
 
 
@@ -93,7 +101,13 @@ def process_times(settings: dict) -> tuple[float, float, float]:
 def build_model(settings: dict, source=None, rpm: float = 0.0) -> GranulationPBM:
     """GranulationPBM from resolved settings; ``source`` defaults to ConstantFrequency."""
     g = settings["grid"]
-    grid = Grid(g["bins"], g["ratio"], min_diameter=g["min_diameter"])
+    if g["min_diameter"] is None:
+        raise PBMInputError("pbm.grid.min_diameter = null (the smallest class of size_distributions) but the "
+                            "config defines no size_distributions; allowed: a diameter (m) or size_distributions")
+    if g.get("bins") is not None:
+        grid = Grid(g["bins"], g["ratio"], min_diameter=g["min_diameter"])
+    else:
+        grid = Grid.spanning(g["min_diameter"], g["max_diameter"], g["ratio"])
     agg = settings["aggregation"]
     if source is None:
         source = ConstantFrequency(agg["constant_frequency"])

@@ -26,7 +26,7 @@ DEFAULTS_PATH = _REPO / "config" / "config.yaml"  # its pbm: section holds the d
 
 #: Same values as the pbm: section of config/config.yaml (a test keeps them equal).
 DEFAULTS: dict = {
-    "grid": {"ratio": 1.4142135623730951, "min_diameter": None, "max_diameter": 0.032, "bins": None},
+    "grid": {"ratio": 1.2599210498948732, "min_diameter": None, "max_diameter": 0.032, "bins": None},
     "process": {"premixing_time": 60.0, "liquid_addition_time": 180.0, "wet_massing_time": 240.0},
     "initial": {"porosity": 0.5, "liquid_content": 0.0},
     "liquid_addition": {"rate": 4.5e-8, "distribution": "surface_area"},

@@ -78,6 +78,9 @@ class Result:
         info["steps"] = int(sum(r.info.get("steps", 0) for r in results))
         info["wall_time_s"] = float(sum(r.info.get("wall_time_s", 0.0) for r in results))
         info["segments"] = len(results)
+        limits = [r.info["step_limits"] for r in results if isinstance(r.info.get("step_limits"), dict)]
+        if limits:
+            info["step_limits"] = {k: int(sum(lim.get(k, 0) for lim in limits)) for k in limits[-1]}
         return cls(first.grid, rec, results[-1].state, info)
 
     # ------------------------------------------------------------- derived quantities

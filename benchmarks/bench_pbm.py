@@ -61,15 +61,22 @@ def _probe(src: Path, config: Path, repeat: int) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def _imports(src: Path, repeat: int) -> list[float]:
-    return [_probe_import(src) for _ in range(repeat)]
+def _imports(src: Path, repeat: int) -> tuple[list[float], list[float]]:
+    """(in-process import times, wall times of `python -c "import pbmdem.pbm"`)."""
+    inner, whole = [], []
+    for _ in range(repeat):
+        a, b = _probe_import(src)
+        inner.append(a)
+        whole.append(b)
+    return inner, whole
 
 
-def _probe_import(src: Path) -> float:
+def _probe_import(src: Path) -> tuple[float, float]:
     env = dict(os.environ, PYTHONPATH=str(src))
     code = "import time; t = time.perf_counter(); import pbmdem.pbm; print(time.perf_counter() - t)"
+    t0 = time.perf_counter()
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
-    return float(out.stdout.strip())
+    return float(out.stdout.strip()), time.perf_counter() - t0
 
 
 def _fmt(values, scale=1e3, unit="ms") -> str:
@@ -104,10 +111,11 @@ def main():
     print(f"\n`import pbmdem.pbm` (fresh interpreter, {args.repeat} times) and the default batch "
           f"(run_pbm, 480 s of process, {args.repeat} times):")
     for name, src, cfg in rows:
-        imp = _imports(src, args.repeat)
+        imp, whole = _imports(src, args.repeat)
         r = _probe(src, cfg, args.repeat)
         walls = r["walls"][1:] if len(r["walls"]) > 1 else r["walls"]    # the first call warms caches
-        print(f"  {name:22s} import {_fmt(imp, 1.0, 's')} | batch {_fmt(walls)} | {r['steps']} steps, "
+        print(f"  {name:22s} import {_fmt(imp)} (python -c 'import pbmdem.pbm': {_fmt(whole)})")
+        print(f"  {'':22s} batch  {_fmt(walls)} | {r['steps']} steps, "
               f"{r['bins']} bins, d50 {r['d50'][0] * 1e3:.2f} -> {r['d50'][1] * 1e3:.2f} mm")
         if r.get("step_limits"):
             print(f"  {'':22s} step limits: {r['step_limits']}")

@@ -8,12 +8,16 @@ the cell-average technique):
     dL_k/dt = A_L,k + Q w_k [t_start <= t < t_end]
     dG_k/dt = A_G,k - c (G_k - eps_min / (1 - eps_min) S_k)
 
-Time integration: strong-stability-preserving explicit Runge-Kutta, ``"heun"`` (SSP-RK2, default)
-or ``"euler"``, with dt = safety x min over depleting entries (rate < 0) of value / |rate|,
-capped by ``max_step``, output times and the spray window edges (so every step sees a constant
-spray rate). A step that would leave a negative entry is repeated with half the step; after
-``max_halvings`` the run stops with NegativePopulationError naming the time and bin. A NaN stops
-the run at once. ``run(t_start, t_end, state)`` resumes from any :class:`State`, so a coupled
+Time integration: strong-stability-preserving explicit Runge-Kutta, ``"ssp3"`` (SSP-RK3 with
+an embedded Heun estimate, default), ``"heun"`` (SSP-RK2 with an embedded Euler estimate) or
+``"euler"``; dt = min(safety x min over depleting entries (rate < 0) of value / |rate|, the
+error-controlled step, ``max_step``, the next output time or spray-window edge) (so every step
+sees a constant spray rate). What limited each step is counted in ``result.info["step_limits"]``.
+A step that would leave a negative entry is repeated with half the step; after ``max_halvings``
+the run stops with NegativePopulationError naming the time and bin. A NaN stops the run at once;
+``max_steps`` / ``max_wall_time`` stop it with SolverLimitError. Internally volumes are in units
+of the first pivot (unit independence; docs/pbm.md, "Time integration"). ``run(t_start, t_end,
+state)`` resumes from any :class:`State`, so a coupled
 loop can swap the collision-frequency source between intervals.
 """
 

@@ -24,6 +24,7 @@ from pbmdem.pbm import (
 )
 from pbmdem.pbm import analytical as an
 from pbmdem.pbm.errors import PBMInputError, SolverLimitError
+from pbmdem.pbm.kernels import Kernel
 from pbmdem.pbm.settings import DEFAULTS, build_model
 
 D_CLASSES = np.array([2e-3, 3e-3, 4e-3])
@@ -182,3 +183,66 @@ def test_default_grid_is_converged_in_d10_d50_d90(default_config):
         out[label] = s[["d10", "d50", "d90"]].iloc[-1].to_numpy()
         print(f"{label}: {res.grid.bins} bins, d10/d50/d90 {np.round(out[label] * 1e3, 4)} mm")
     np.testing.assert_allclose(out["default"], out["4x finer"], rtol=0.01)
+
+
+def _monodisperse_run(kernel, t_end, ratio=DEFAULTS["grid"]["ratio"], top=1e5):
+    grid = Grid(int(np.ceil(np.log(top) / np.log(ratio))) + 1, ratio, v0=1.0)
+    N = np.zeros(grid.bins)
+    N[0] = 1.0
+    model = GranulationPBM(grid, kernel, solver=SolverSettings(rtol=1e-5, atol=1e-12, max_step=np.inf))
+    return grid, model.run(0.0, t_end, State(0.0, N, np.zeros(grid.bins), np.zeros(grid.bins)))
+
+
+def _cumulative_mass_error(name, grid, number, t, kmax):
+    k = np.arange(1.0, kmax + 1.0)
+    c = an.monodisperse_numbers(name, t, k)
+    cell = np.searchsorted(grid.edges[1:-1], k, side="right")
+    vol = np.bincount(cell, c * k, grid.bins)
+    Q = np.cumsum(number * grid.x) / np.sum(number * grid.x)
+    return float(np.abs(Q - np.cumsum(vol) / vol.sum()).max())
+
+
+class _Product(Kernel):
+    """beta = b u v (verification kernel)."""
+
+    def __init__(self, b):
+        self.b = b
+
+    def __repr__(self):
+        return f"ProductKernel(b={self.b:g})"
+
+    def __call__(self, inp):
+        return self.b * np.outer(inp.volumes, inp.volumes)
+
+
+def test_product_kernel_before_gelation_moments_and_psd():
+    # monodisperse start, M2 = 1 / (1 - t): 10x at t = 0.9 (gelation at t = 1); McLeod's solution
+    t = 0.9
+    grid, res = _monodisperse_run(_Product(1.0), t)
+    M = res.moments()[-1]
+    exact = an.product_moments(t, 1.0, 1.0, 1.0, 1.0)
+    err = M / np.array(exact) - 1.0
+    assert abs(err[0]) < 1e-5 and abs(err[1]) < 1e-5
+    k = np.arange(1.0, 2e5)
+    c = an.monodisperse_numbers("product", t, k)
+    assert (c * k * k).sum() == pytest.approx(exact[2], rel=1e-9)
+    psd = _cumulative_mass_error("product", grid, res.number[-1], t, 2e5)
+    # measured (benchmarks/bench_pbm_accuracy.py): M2 +0.89 %, PSD 1.7e-2 at ratio 2^(1/3)
+    assert abs(err[2]) < 0.01 and psd < 0.02
+    print(f"product kernel, ratio {grid.ratio:.4f}: M2 error {err[2]:+.2e}, cumulative-mass error {psd:.2e}")
+
+
+@pytest.mark.parametrize("name,kernel,t", [("constant", ConstantKernel(1.0), 98.0),
+                                           ("sum", SumKernel(1.0), float(np.log(50.0)))])
+def test_monodisperse_start_50x_growth(name, kernel, t):
+    grid, res = _monodisperse_run(kernel, t, top=2e6 if name == "sum" else 1e5)
+    k = np.arange(1.0, 4e6 if name == "sum" else 2e5)
+    c = an.monodisperse_numbers(name, t, k)
+    exact = np.array([c.sum(), (c * k).sum(), (c * k * k).sum()])
+    err = res.moments()[-1] / exact - 1.0
+    assert abs(err[0]) < 1e-5 and abs(err[1]) < 1e-5
+    psd = _cumulative_mass_error(name, grid, res.number[-1], t, k[-1])
+    if name == "constant":
+        assert abs(err[2]) < 0.01                       # measured -0.60 % at ratio 2^(1/3)
+    print(f"{name} kernel, monodisperse, mean volume x50: M2 error {err[2]:+.2e}, cumulative-mass error {psd:.2e}")
+    assert psd < 0.02

@@ -27,7 +27,7 @@ import warnings
 import numpy as np
 from scipy.integrate import IntegrationWarning
 
-from pbmdem.pbm import ConstantKernel, GranulationPBM, Grid, SolverSettings, State, SumKernel
+from pbmdem.pbm import ConstantKernel, GranulationPBM, Grid, GridOverflowError, SolverSettings, State, SumKernel
 from pbmdem.pbm import analytical as an
 from pbmdem.pbm.kernels import Kernel
 
@@ -162,7 +162,13 @@ def main():
                     print("   ratio  bins    M0 err     M1 err     M2 err   |  L1 cells  | PSD (Q3) | steps  wall")
                     m2s, l1s = [], []
                     for q in qs:
-                        grid, err, l1, psd, wall, res = run_case(kernel, start, growth, q, scheme)
+                        try:
+                            grid, err, l1, psd, wall, res = run_case(kernel, start, growth, q, scheme)
+                        except GridOverflowError as exc:
+                            print(f"  {2 ** (1 / q):6.4f}  stopped: {str(exc)[:90]}...")
+                            m2s.append(np.nan)
+                            l1s.append(np.nan)
+                            continue
                         m2s.append(err[2])
                         l1s.append(l1)
                         lost = res.state.refused_volume

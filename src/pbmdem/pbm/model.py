@@ -347,8 +347,8 @@ class GranulationPBM:
             neg = k1 < 0
             dt_pos = opt.safety * float(np.min(u[neg] / -k1[neg])) if neg.any() else np.inf
             cands = (dt_pos, dt_prop, opt.max_step, t_next - t)
-            why = int(np.argmin(cands))
-            dt = cands[why]
+            dt = min(cands)
+            why = cands.index(dt)
             rejected = 0
             for _ in range(opt.max_halvings + 1):
                 u1 = u + dt * k1

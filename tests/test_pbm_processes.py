@@ -137,6 +137,8 @@ def test_run_is_resumable_and_source_swappable(default_config):
         state = r.state
     joined = Result.concat(parts)
     np.testing.assert_allclose(joined.times, [0, 100, 200, 300, 400])
+    assert joined.info["steps"] == sum(p.info["steps"] for p in parts)
+    assert joined.info["step_limits"]["event"] == sum(p.info["step_limits"]["event"] for p in parts)
     np.testing.assert_allclose(state.number, whole.state.number, rtol=2e-3, atol=1e-6 * state.number.sum())
     assert state.liquid.sum() == pytest.approx(whole.state.liquid.sum(), rel=1e-12)
     # swapping the source between intervals takes effect: a 10x larger c_ij aggregates faster

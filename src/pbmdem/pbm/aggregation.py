@@ -10,20 +10,30 @@ particle of bin k has solid volume x_k), selected by ``pbm.aggregation.scheme``:
   between the two pivots that bracket its own volume.
 
 Both preserve number and solid volume exactly and differ only in how births are placed. Every
-unordered pair (i <= j) is precomputed once per grid: the aggregate volume s_ij = x_i + x_j and
-where it goes. A rate evaluation, with event rates R_ij = beta_ij N_i N_j (i < j) and
-R_ii = beta_ii N_i^2 / 2, works like this:
+ordered pair (i, j) is mapped once per grid: the aggregate volume s_ij = x_i + x_j and where it
+goes. A rate evaluation works on bin *totals* (numbers N, liquid L and gas G per bin) and never
+divides by a number or a volume of the state:
 
-1. deaths: each event removes one particle of each partner, with its own liquid and gas
-   (per particle: l, g);
-2. births: number, solid volume, and liquid and gas sum R (l_i + l_j), sum R (g_i + g_j) go to
-   pivots as the scheme decides. Liquid and gas follow the solid volume sent to each pivot, so
-   per-bin totals are conserved.
+* ordered-pair rates R_ij = beta_ij N_i N_j, RL_ij = beta_ij L_i N_j, RG_ij = beta_ij G_i N_j
+  (the event rate of the unordered pair i < j is R_ij, of i = i it is R_ii / 2; the liquid an
+  event of (i, j) brings is l_i + l_j, so sum RL over both orders is the liquid born);
+* one precomputed sparse map (scipy.sparse, block-diagonal over R, RL, RG) turns these 3 K^2
+  rates into every per-bin total the scheme needs: deaths (N_i sum_j beta_ij N_j and the same
+  for L and G: each event removes one particle of each partner with its own liquid and gas),
+  births and the refused solid rate. One sparse product per evaluation, no Python loop.
+
+Cell average, volumes in units of the cell's pivot: with B_c = sum R (number born in cell c) and
+D_c = sum R (s/x_c - 1) (first moment of the births about the pivot, in units of x_c), the mean
+a_c = x_c (1 + D_c/B_c) goes up if D_c > 0: n_up = D_c x_c/(x_(c+1) - x_c), or down if D_c < 0:
+n_down = -D_c x_c/(x_c - x_(c-1)); the rest stays. |D_c| <= B_c (r - 1)/(r + 1) by construction,
+so every share is non-negative whatever the unit of volume and however small the rates; no
+mean volume a_c = V_c/B_c is ever formed (that ratio of two underflowing sums is where a run in
+m3 could produce negative births). Liquid and gas born in a cell follow the solid volume each
+pivot receives.
 
 Pairs whose aggregate exceeds the last pivot x_(K-1) are refused: no birth and no death, so solid
 volume is conserved to round-off. The solid-volume rate of refused aggregates is returned, so
 the solver can account for it and stop (GridOverflowError) once it exceeds the allowed fraction.
-No Python loop runs over pairs; scatter sums use ``np.bincount``.
 
 Accuracy (docs/pbm.md, ``benchmarks/bench_pbm_accuracy.py``): both schemes are exact in the
 zeroth and first moments. The fixed pivot places every aggregate on the two pivots around it,
@@ -49,100 +59,167 @@ class PivotAggregation:
         self.x = x
         K = self.K = x.size
         iu, ju = np.triu_indices(K)
-        s = x[iu] + x[ju]
+        # work in units of the first pivot: every volume of the maps is O(1) .. O(r^K)
+        xr = x / x[0]
+        s = xr[iu] + xr[ju]
         if bounds is None:
             r = x[1] / x[0]
             bounds = x[:-1] * 2.0 * r / (1.0 + r)
         bounds = np.asarray(bounds, float)
         if bounds.shape != (K - 1,) or np.any(bounds <= x[:-1]) or np.any(bounds >= x[1:]):
             raise ValueError("cell bounds must be K-1 values strictly between neighbouring pivots")
-        valid = s <= x[-1] * (1.0 + 1e-12)
-        pair_weight = np.where(iu == ju, 0.5, 1.0)
-        self.i, self.j = iu[valid], ju[valid]
-        self.weight = pair_weight[valid]
-        self.s = s[valid]
-        self.refused_i, self.refused_j = iu[~valid], ju[~valid]
-        self.refused_s = s[~valid]
-        self.refused_weight = pair_weight[~valid]
+        valid = s <= xr[-1] * (1.0 + 1e-12)
+        self.xr = xr
+        target = np.searchsorted(bounds / x[0], s, side="right")
         #: (K, K) target cell of each pair's aggregate (-1 = beyond the grid), for inspection
-        target = np.searchsorted(bounds, s, side="right")
         tm = np.full((K, K), -1, dtype=int)
         tm[iu[valid], ju[valid]] = target[valid]
         tm[ju[valid], iu[valid]] = target[valid]
         self.target_matrix = tm
-        #: target cell of each valid pair's aggregate
-        self.target = target[valid]
+        # ordered pairs (i, j), flattened row-major: column i * K + j of the maps
+        I, J = np.divmod(np.arange(K * K), K)
+        S = xr[I] + xr[J]
+        ok = tm.ravel() >= 0
+        self._I, self._J, self._S, self._ok = I, J, S, ok
+        self._T = tm.ravel()
+        self._build()
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(K={self.K})"
 
-    def rates(self, beta: np.ndarray, N: np.ndarray, l: np.ndarray, g: np.ndarray):
-        """Aggregation rates of change.
+    # ----------------------------------------------------------------- sparse maps
+    def _number_rows(self):
+        """(rows, cols, values) of the scheme's map applied to R (rows 0 .. 2K-1)."""
+        raise NotImplementedError
 
-        Parameters: kernel ``beta`` (K, K), numbers ``N`` (K,), per-particle liquid ``l`` and gas
-        ``g`` (K,). Returns ``(dN, dL, dG, refused_rate)``: per-bin rates of number, liquid and gas
-        totals and the solid-volume rate (m3/s) of refused aggregates beyond the last bin.
-        """
-        K = self.K
-        i, j = self.i, self.j
-        R = beta[i, j] * N[i] * N[j] * self.weight
-        if self.refused_s.size:
-            ri, rj = self.refused_i, self.refused_j
-            refused = float(np.sum(beta[ri, rj] * N[ri] * N[rj] * self.refused_weight * self.refused_s))
+    def _liquid_rows(self):
+        """(rows, cols, values) of the scheme's map applied to RL and RG (rows 0 .. 2K-1)."""
+        raise NotImplementedError
+
+    def _build(self):
+        from scipy import sparse
+
+        K, I, ok = self.K, self._I, self._ok
+        cols = np.arange(K * K)
+        # every block (R, RL, RG) has 3K + 1 rows: [0, K) the scheme's first K rows (births),
+        # [K, 2K) its second K rows (cell average: D_c, R block only), [2K, 3K) the deaths (row i
+        # collects beta_ij N_j x (N_i, L_i or G_i) over valid j; the pair (i, i) removes two
+        # particles at the event rate R_ii / 2), 3K the refused solid (R block only, x_0 units)
+        R = self.R = 3 * K + 1
+        dr, dc = 2 * K + I[ok], cols[ok]
+        refused = ~ok
+        blocks = []
+        for rows, cc, vals in (self._number_rows(), self._liquid_rows(), self._liquid_rows()):
+            if len(blocks) == 0:
+                extra_r = np.concatenate([dr, np.full(int(refused.sum()), 3 * K)])
+                extra_c = np.concatenate([dc, cols[refused]])
+                extra_v = np.concatenate([np.ones(dr.size), 0.5 * self._S[refused]])
+            else:
+                extra_r, extra_c, extra_v = dr, dc, np.ones(dr.size)
+            blocks.append(sparse.csr_matrix((np.concatenate([vals, extra_v]),
+                                             (np.concatenate([rows, extra_r]), np.concatenate([cc, extra_c]))),
+                                            shape=(R, K * K)))
+        m = sparse.block_diag(blocks, format="csr")
+        m.sum_duplicates()
+        m.sort_indices()
+        self._map = m
+        self._y = np.zeros(3 * R)
+        self._U = np.empty((3, K, K))
+        try:                                   # the bare CSR kernel skips scipy's dispatch (~5 us)
+            from scipy.sparse import _sparsetools
+            self._matvec = _sparsetools.csr_matvec
+        except ImportError:                    # pragma: no cover - other scipy layouts
+            self._matvec = None
+
+    # ----------------------------------------------------------------- evaluation
+    def totals(self, beta: np.ndarray, N: np.ndarray, L: np.ndarray, G: np.ndarray):
+        """Aggregation rates from bin totals: ``beta`` (K, K) symmetric, numbers ``N``, liquid ``L``
+        and gas ``G`` totals per bin (K,) in any unit of volume. Returns ``(d, refused)``: ``d``
+        (3, K) the rates of N, L and G (in the units of L and G) and the refused solid-volume
+        rate in units of the first pivot x_0 (multiply by x_0)."""
+        return self.totals_stacked(beta, np.stack((N, L, G)))
+
+    def totals_stacked(self, beta: np.ndarray, nlg: np.ndarray):
+        """:meth:`totals` with N, L, G given as one (3, K) array."""
+        U = np.multiply(nlg[:, :, None], beta * nlg[0], out=self._U)     # R, RL, RG
+        m, y = self._map, self._y
+        if self._matvec is not None:
+            y.fill(0.0)
+            self._matvec(m.shape[0], m.shape[1], m.indptr, m.indices, m.data, U.reshape(-1), y)
         else:
-            refused = 0.0
-        loss = np.bincount(i, R, K) + np.bincount(j, R, K)
-        bN, bL, bG = self._births(R, l[i] + l[j], g[i] + g[j])
-        return bN - loss, bL - loss * l, bG - loss * g, refused
+            y = m @ U.reshape(-1)
+        Y = y.reshape(3, self.R)
+        K = self.K
+        return self._births(Y) - Y[:, 2 * K:3 * K], float(Y[0, 3 * K])
 
-    def _births(self, R, pair_liquid, pair_gas):
-        """Per-bin birth rates of number, liquid and gas for event rates ``R`` of the valid pairs."""
+    def rates(self, beta: np.ndarray, N: np.ndarray, l: np.ndarray, g: np.ndarray):
+        """Aggregation rates of change from per-particle liquid ``l`` and gas ``g`` (K,).
+
+        Returns ``(dN, dL, dG, refused_rate)``: per-bin rates of number, liquid and gas totals and
+        the solid-volume rate (in the unit of ``x``) of refused aggregates beyond the last bin.
+        """
+        N = np.asarray(N, float)
+        d, refused = self.totals(np.asarray(beta, float), N, N * l, N * g)
+        return d[0], d[1], d[2], refused * self.x[0]
+
+    def _births(self, Y: np.ndarray) -> np.ndarray:
+        """(3, K) birth rates of number, liquid and gas from the mapped sums ``Y`` (3, 3K + 1)."""
         raise NotImplementedError
 
 
 class CellAverageAggregation(PivotAggregation):
     """Cell-average technique (Kumar et al. 2006).
 
-    Births are collected per cell c (number B_c, solid V_c, liquid, gas). Their mean volume
-    a_c = V_c / B_c is split between x_c and x_(c+1) if a_c > x_c, or between x_(c-1) and x_c if
-    a_c < x_c, so that number and solid volume are exact. Liquid and gas born in c go to those
-    pivots in proportion to the solid volume each receives.
+    Births are collected per cell c (number B_c, first moment about the pivot D_c, liquid, gas).
+    Their mean volume x_c (1 + D_c/B_c) is split between x_c and x_(c+1) if D_c > 0, or between
+    x_(c-1) and x_c if D_c < 0, so that number and solid volume are exact. Liquid and gas born
+    in c go to those pivots in proportion to the solid volume each receives.
     """
 
     name = "cell_average"
 
-    def __init__(self, x: np.ndarray, bounds: np.ndarray | None = None):
-        super().__init__(x, bounds)
-        x = self.x
-        self.dx_up = np.append(x[1:] - x[:-1], np.inf)     # x_(c+1) - x_c (inf for the last cell)
-        self.dx_down = np.insert(x[1:] - x[:-1], 0, np.inf)  # x_c - x_(c-1) (inf for the first)
-        self.x_up = np.append(x[1:], 0.0)
-        self.x_down = np.insert(x[:-1], 0, 0.0)
+    def _number_rows(self):
+        K, T, ok, S, xr = self.K, self._T, self._ok, self._S, self.xr
+        cols = np.arange(K * K)[ok]
+        t = T[ok]
+        # rows 0..K-1: B_c (weight 1/2 per ordered pair); rows K..2K-1: D_c = sum R (s/x_c - 1)
+        rows = np.concatenate([t, K + t])
+        vals = np.concatenate([np.full(t.size, 0.5), 0.5 * (S[ok] / xr[t] - 1.0)])
+        return rows, np.concatenate([cols, cols]), vals
 
-    def _births(self, R, pair_liquid, pair_gas):
-        K, x, t = self.K, self.x, self.target
-        B = np.bincount(t, R, K)
-        V = np.bincount(t, R * self.s, K)
-        BL = np.bincount(t, R * pair_liquid, K)
-        BG = np.bincount(t, R * pair_gas, K)
-        has = B > 0
-        a = np.where(has, V / np.where(has, B, 1.0), x)
-        n_up = np.where(a > x, B * (a - x) / self.dx_up, 0.0)
-        n_down = np.where(a < x, B * (x - a) / self.dx_down, 0.0)
-        n_stay = B - n_up - n_down
-        # share of each cell's born solid volume sent up / down (the rest stays at x_c)
-        Vs = np.where(V > 0, V, 1.0)
-        f_up = n_up * self.x_up / Vs
-        f_down = n_down * self.x_down / Vs
-        f_stay = 1.0 - f_up - f_down
-        out = []
-        for stay, up, down in ((n_stay, n_up, n_down), (BL * f_stay, BL * f_up, BL * f_down),
-                               (BG * f_stay, BG * f_up, BG * f_down)):
-            b = stay.copy()
-            b[1:] += up[:-1]
-            b[:-1] += down[1:]
-            out.append(b)
-        return tuple(out)
+    def _liquid_rows(self):
+        K, ok = self.K, self._ok
+        cols = np.arange(K * K)[ok]
+        return self._T[ok], cols, np.ones(cols.size)
+
+    def _build(self):
+        super()._build()
+        xr = self.xr
+        dx_up = np.append(xr[1:] - xr[:-1], np.inf)
+        dx_down = np.insert(xr[1:] - xr[:-1], 0, np.inf)
+        self._cu = xr / dx_up            # n_up = D_c x_c / (x_(c+1) - x_c); 0 for the last cell
+        self._ncd = -xr / dx_down        # n_down = -D_c x_c / (x_c - x_(c-1)); 0 for the first cell
+        self._ru = np.append(xr[1:] / xr[:-1], 0.0)     # x_(c+1) / x_c
+        self._rd = np.insert(xr[:-1] / xr[1:], 0, 0.0)  # x_(c-1) / x_c
+
+    def _births(self, Y):
+        K = self.K
+        A = Y[:, :K]                                    # number, liquid, gas born per cell
+        B, D = A[0], Y[0, K:2 * K]
+        up = np.maximum(D, 0.0) * self._cu
+        down = np.minimum(D, 0.0) * self._ncd
+        V = B + D                                       # solid born, units of x_c (>= B 2/(1+r))
+        inv = np.divide(1.0, V, out=np.zeros(K), where=V > 0)
+        mu = np.empty((3, K))
+        md = np.empty((3, K))
+        mu[0] = up
+        md[0] = down
+        np.multiply(A[1:], up * self._ru * inv, out=mu[1:])     # liquid and gas follow the solid
+        np.multiply(A[1:], down * self._rd * inv, out=md[1:])
+        out = A - mu - md
+        out[:, 1:] += mu[:, :-1]
+        out[:, :-1] += md[:, 1:]
+        return out
 
 
 class FixedPivotAggregation(PivotAggregation):
@@ -155,20 +232,26 @@ class FixedPivotAggregation(PivotAggregation):
 
     name = "fixed_pivot"
 
-    def __init__(self, x: np.ndarray, bounds: np.ndarray | None = None):
-        super().__init__(x, bounds)
-        x, s = self.x, self.s
-        lo = np.clip(np.searchsorted(x, s, side="right") - 1, 0, self.K - 2)
-        self.lower = lo
-        self.up_number = (s - x[lo]) / (x[lo + 1] - x[lo])    # number fraction to lo + 1
-        self.up_solid = self.up_number * x[lo + 1] / s        # solid-volume fraction to lo + 1
+    def _split(self):
+        K, ok, S, xr = self.K, self._ok, self._S, self.xr
+        s = S[ok]
+        lo = np.clip(np.searchsorted(xr, s, side="right") - 1, 0, K - 2)
+        up_number = (s - xr[lo]) / (xr[lo + 1] - xr[lo])
+        up_solid = up_number * xr[lo + 1] / s
+        return np.arange(K * K)[ok], lo, up_number, up_solid
 
-    def _births(self, R, pair_liquid, pair_gas):
-        K, lo, hi = self.K, self.lower, self.lower + 1
-        out = []
-        for amount, up in ((R, self.up_number), (R * pair_liquid, self.up_solid), (R * pair_gas, self.up_solid)):
-            out.append(np.bincount(lo, amount * (1.0 - up), K) + np.bincount(hi, amount * up, K))
-        return tuple(out)
+    def _number_rows(self):
+        cols, lo, up, _ = self._split()
+        rows = np.concatenate([lo, lo + 1])
+        return rows, np.concatenate([cols, cols]), 0.5 * np.concatenate([1.0 - up, up])
+
+    def _liquid_rows(self):
+        cols, lo, _, up = self._split()
+        rows = np.concatenate([lo, lo + 1])
+        return rows, np.concatenate([cols, cols]), np.concatenate([1.0 - up, up])
+
+    def _births(self, Y):
+        return Y[:, :self.K]
 
 
 #: the aggregation schemes by config name

@@ -14,7 +14,6 @@ Sum (Golovin) kernel beta(u, v) = b (u + v) (Golovin 1963; Scott 1968), tau = 1 
 from __future__ import annotations
 
 import numpy as np
-from scipy import integrate, special
 
 
 def constant_number_density(v, t, beta, N0, m):
@@ -39,6 +38,8 @@ def sum_tau(t, b, N0, m):
 
 
 def sum_number_density(v, t, b, N0, m):
+    from scipy import special
+
     v = np.asarray(v, float)
     tau = sum_tau(t, b, N0, m)
     if tau == 0.0:
@@ -56,6 +57,8 @@ def sum_moments(t, b, N0, m):
 
 def cell_integrals(density, edges):
     """Number and volume of a number density ``density(v)`` in each cell [edges[k], edges[k+1]]."""
+    from scipy import integrate
+
     num, vol = [], []
     for a, b in zip(edges[:-1], edges[1:]):
         num.append(integrate.quad(density, a, b, limit=200, epsrel=1e-12, epsabs=0)[0])
@@ -120,3 +123,38 @@ def cell_errors(kernel, grid, number, t, N0: float = 1.0, m: float = 1.0):
     l1 = np.abs(number - num).sum() / num.sum()
     Q = np.cumsum(number * grid.x) / np.sum(number * grid.x)
     return float(l1), float(np.abs(Q - np.cumsum(vol) / vol.sum()).max())
+
+
+def product_moments(t, b, M0, M1, M2):
+    """(M0, M1, M2) of the product kernel beta = b u v before gelation, from the initial moments
+    (any initial distribution): dM0/dt = -b M1^2 / 2, M1 constant, dM2/dt = b M2^2, so
+    M2 = M2(0) / (1 - b M2(0) t) and gelation at t = 1 / (b M2(0))."""
+    t_gel = 1.0 / (b * M2)
+    if t >= t_gel:
+        raise ValueError(f"product kernel: t = {t:g} is at or beyond gelation t_gel = {t_gel:g}")
+    return M0 - 0.5 * b * M1 * M1 * t, M1, M2 / (1.0 - b * M2 * t)
+
+
+def monodisperse_numbers(kernel: str, t: float, k) -> np.ndarray:
+    """Number of k-mers (k = 1, 2, ...; unit monomer volume) at time t from one monomer per unit
+    volume, c_1(0) = 1, for the kernels beta = 1 (``"constant"``), i + j (``"sum"``) and i j
+    (``"product"``, before gelation at t = 1): the classical discrete solutions (Smoluchowski;
+    Golovin; McLeod 1962), evaluated in logs so that large k do not overflow."""
+    from scipy.special import gammaln
+
+    k = np.asarray(k, float)
+    if kernel == "constant":
+        tau = 0.5 * t                                   # c_k = tau^(k-1) / (1 + tau)^(k+1)
+        return np.exp((k - 1) * np.log(tau) - (k + 1) * np.log1p(tau)) if tau > 0 else (k == 1) * 1.0
+    if kernel == "sum":
+        tau = -np.expm1(-t)                             # c_k = (1-tau) (k tau)^(k-1) e^(-k tau) / k!
+        if tau == 0:
+            return (k == 1) * 1.0
+        return np.exp(np.log1p(-tau) + (k - 1) * np.log(k * tau) - k * tau - gammaln(k + 1))
+    if kernel == "product":
+        if not 0 <= t < 1:
+            raise ValueError(f"product kernel: t = {t:g}; the solution holds before gelation at t = 1")
+        if t == 0:
+            return (k == 1) * 1.0                       # c_k = k^(k-3) t^(k-1) e^(-k t) / (k-1)!
+        return np.exp((k - 3) * np.log(k) + (k - 1) * np.log(t) - k * t - gammaln(k))
+    raise ValueError(f"kernel {kernel!r}; allowed: 'constant', 'sum', 'product'")

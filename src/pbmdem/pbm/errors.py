@@ -42,3 +42,7 @@ def positive(name: str, value, allow_zero: bool = False) -> float:
         raise PBMInputError(f"{name} = {value!r} is not allowed; allowed: a finite number "
                             f"{'>= 0' if allow_zero else '> 0'}")
     return v
+
+
+class SolverLimitError(PBMError):
+    """A run exceeded its step or wall-time guard (``solver.max_steps`` / ``solver.max_wall_time``)."""

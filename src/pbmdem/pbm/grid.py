@@ -52,6 +52,21 @@ class Grid:
         q = ratio ** (1.0 / 6.0)
         self.d_edges = np.concatenate([[self.d[0] / q], np.sqrt(self.d[:-1] * self.d[1:]), [self.d[-1] * q]])
 
+    @classmethod
+    def spanning(cls, min_diameter: float, max_diameter: float, ratio: float) -> "Grid":
+        """Grid of ``ratio`` from the first pivot of diameter ``min_diameter`` to the first pivot at
+        or above ``max_diameter`` (m): bins = ceil(ln(x_max / x_0) / ln(ratio)) + 1."""
+        dmin = positive("grid min_diameter", min_diameter)
+        dmax = positive("grid max_diameter", max_diameter)
+        ratio = positive("grid ratio", ratio)
+        if ratio <= 1.0:
+            raise PBMInputError(f"grid ratio = {ratio!r}; allowed: a number > 1 (v_(k+1) = ratio * v_k)")
+        if not dmax > dmin:
+            raise PBMInputError(f"grid max_diameter = {dmax!r} m must be larger than min_diameter = {dmin!r} m")
+        steps = 3.0 * np.log(dmax / dmin) / np.log(ratio)
+        bins = int(np.ceil(steps - 1e-9)) + 1
+        return cls(max(bins, 3), ratio, min_diameter=dmin)
+
     def __repr__(self) -> str:
         return f"Grid(bins={self.bins}, ratio={self.ratio:g}, v0={self.v0:.4g})"
 

@@ -20,7 +20,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from . import analytical
 from .errors import KernelShapeError, PBMInputError, positive
@@ -398,6 +397,8 @@ class TableFrequency:
 
     def __init__(self, table: pd.DataFrame, extrapolation: str = "clamp", zero_floor: float = 1e-3,
                  column: str = FREQUENCY_COLUMN, velocity_table: pd.DataFrame | None = None):
+        import pandas as pd
+
         from scipy.interpolate import RegularGridInterpolator
 
         if extrapolation not in ("clamp", "linear"):
@@ -461,6 +462,8 @@ class TableFrequency:
     @staticmethod
     def _velocity_counts(t: pd.DataFrame, velocity_table: pd.DataFrame) -> np.ndarray:
         """(rows of t, V) encounter counts per velocity bin of every collision-table row."""
+        import pandas as pd
+
         from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES
 
         missing = [c for c in VELOCITY_TABLE_COLUMNS if c not in velocity_table.columns]

@@ -8,12 +8,16 @@ the cell-average technique):
     dL_k/dt = A_L,k + Q w_k [t_start <= t < t_end]
     dG_k/dt = A_G,k - c (G_k - eps_min / (1 - eps_min) S_k)
 
-Time integration: strong-stability-preserving explicit Runge-Kutta, ``"heun"`` (SSP-RK2, default)
-or ``"euler"``, with dt = safety x min over depleting entries (rate < 0) of value / |rate|,
-capped by ``max_step``, output times and the spray window edges (so every step sees a constant
-spray rate). A step that would leave a negative entry is repeated with half the step; after
-``max_halvings`` the run stops with NegativePopulationError naming the time and bin. A NaN stops
-the run at once. ``run(t_start, t_end, state)`` resumes from any :class:`State`, so a coupled
+Time integration: strong-stability-preserving explicit Runge-Kutta, ``"ssp3"`` (SSP-RK3 with
+an embedded Heun estimate, default), ``"heun"`` (SSP-RK2 with an embedded Euler estimate) or
+``"euler"``; dt = min(safety x min over depleting entries (rate < 0) of value / |rate|, the
+error-controlled step, ``max_step``, the next output time or spray-window edge) (so every step
+sees a constant spray rate). What limited each step is counted in ``result.info["step_limits"]``.
+A step that would leave a negative entry is repeated with half the step; after ``max_halvings``
+the run stops with NegativePopulationError naming the time and bin. A NaN stops the run at once;
+``max_steps`` / ``max_wall_time`` stop it with SolverLimitError. Internally volumes are in units
+of the first pivot (unit independence; docs/pbm.md, "Time integration"). ``run(t_start, t_end,
+state)`` resumes from any :class:`State`, so a coupled
 loop can swap the collision-frequency source between intervals.
 """
 
@@ -25,12 +29,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .aggregation import SCHEMES
-from .errors import GridOverflowError, NegativePopulationError, PBMInputError, positive
+from .errors import GridOverflowError, NegativePopulationError, PBMInputError, SolverLimitError, positive
 from .grid import Grid
 from .kernels import Kernel, KernelInput
 from .processes import Consolidation, LiquidAddition
 
 TIME_EPS = 1e-12
+#: time integrators (strong-stability-preserving explicit Runge-Kutta with an embedded lower order)
+METHODS = ("ssp3", "heun", "euler")
+#: relative size below which state entries are flushed to zero (see GranulationPBM.run)
+FLUSH = 1e-100
+_FREEZE = False
 
 
 @dataclass
@@ -56,17 +65,29 @@ class State:
 
 @dataclass
 class SolverSettings:
-    method: str = "heun"
-    safety: float = 0.25
-    max_step: float = np.inf
+    """Time-integration settings; the defaults equal ``pbm.solver`` of config/config.yaml.
+
+    ``safety``: fraction of the fastest depletion time value/|rate| a step may take (positivity);
+    ``rtol``/``atol``: local error per step of the embedded Euler-Heun pair, relative to each entry
+    and as a floor in units of the total solid volume; ``max_step`` (s); ``max_overflow_fraction``:
+    largest solid volume refused beyond the last bin, as a fraction of the total solid volume;
+    ``max_steps``/``max_wall_time`` (s): guards of one ``run`` (a clear error instead of a run that
+    never ends); ``max_halvings``: step reductions of one step before giving up.
+    """
+
+    method: str = "ssp3"
+    safety: float = 0.5
+    max_step: float = 10.0
     max_overflow_fraction: float = 1e-6
     max_halvings: int = 60
     rtol: float = 1e-3
-    atol: float = 1e-9
+    atol: float = 1e-6
+    max_steps: int = 1_000_000
+    max_wall_time: float = 3600.0
 
     def __post_init__(self):
-        if self.method not in ("heun", "euler"):
-            raise PBMInputError(f"solver method = {self.method!r}; allowed: 'heun', 'euler'")
+        if self.method not in METHODS:
+            raise PBMInputError(f"solver method = {self.method!r}; allowed: {list(METHODS)}")
         self.safety = positive("solver safety", self.safety)
         if self.safety > 1:
             raise PBMInputError(f"solver safety = {self.safety!r}; allowed: 0 < safety <= 1 (fraction of the "
@@ -77,6 +98,10 @@ class SolverSettings:
         self.atol = positive("solver atol", self.atol)
         self.max_overflow_fraction = positive("solver max_overflow_fraction", self.max_overflow_fraction,
                                               allow_zero=True)
+        if isinstance(self.max_steps, bool) or int(self.max_steps) != self.max_steps or self.max_steps < 1:
+            raise PBMInputError(f"solver max_steps = {self.max_steps!r}; allowed: an integer >= 1")
+        self.max_steps = int(self.max_steps)
+        self.max_wall_time = positive("solver max_wall_time (s)", self.max_wall_time)
 
 
 def surface_fraction(S: np.ndarray, L: np.ndarray, G: np.ndarray) -> np.ndarray:
@@ -91,8 +116,14 @@ def surface_fraction(S: np.ndarray, L: np.ndarray, G: np.ndarray) -> np.ndarray:
     return np.divide(np.maximum(L - G, 0.0), V, out=np.zeros(V.shape), where=V > 0)
 
 
-def _per_particle(total: np.ndarray, N: np.ndarray) -> np.ndarray:
-    return np.divide(total, N, out=np.zeros_like(total), where=N > 0)
+def _flushed(u: np.ndarray, K: int, flush_n: float, flush_v: float) -> np.ndarray:
+    """Zero (in place) the entries of u = [N, L, G] below their flush level; a bin whose number
+    is flushed loses its liquid and gas with it."""
+    tiny = u[:K] < flush_n
+    if tiny.any():
+        u.reshape(3, K)[:, tiny] = 0.0
+    u[K:][u[K:] < flush_v] = 0.0
+    return u
 
 
 @dataclass
@@ -135,6 +166,13 @@ class GranulationPBM:
         if scheme not in SCHEMES:
             raise PBMInputError(f"aggregation scheme = {scheme!r}; allowed: {sorted(SCHEMES)}")
         self.aggregation = SCHEMES[scheme](grid.x, grid.edges[1:-1])
+        # internal unit of volume: the first pivot x_0 (pivots 1, r, r^2, ...)
+        self._flush_n = self._flush_v = 0.0
+        self._xr = grid.x / grid.x[0]
+        if liquid is not None:
+            self._spray_weight = (grid.d / grid.d[0]) ** 2 if liquid.rule == "surface_area" else self._xr
+            self._spray_rate = liquid.rate / grid.x[0]
+        self._gas_min = consolidation.gas_per_solid * self._xr if consolidation is not None else None
 
     def __repr__(self) -> str:
         return (f"GranulationPBM({self.grid!r}, {self.kernel!r}, liquid={self.liquid!r}, "
@@ -158,20 +196,54 @@ class GranulationPBM:
         return State(float(t), N, lc * S_bins, eps / (1.0 - eps) * S_bins)
 
     def kernel_input(self, t: float, N, L, G) -> KernelInput:
+        """Kernel input at (t, N, L, G); L and G in m3 or in any unit (only ratios are used)."""
         S = N * self.grid.x
         return KernelInput(t=t, volumes=self.grid.x, diameters=self.grid.d, numbers=N,
                            surface_fraction=surface_fraction(S, L, G), rpm=self.rpm)
 
     def rates(self, t: float, N, L, G, spraying: bool):
-        """Rates (dN, dL, dG) and the refused solid-volume rate at (t, N, L, G)."""
-        inp = self.kernel_input(t, N, L, G)
-        beta = self.kernel(inp)
-        dN, dL, dG, refused = self.aggregation.rates(beta, N, _per_particle(L, N), _per_particle(G, N))
+        """Rates (dN, dL, dG) in m3 and the refused solid-volume rate (m3/s) at (t, N, L, G)."""
+        x0 = self.grid.x[0]
+        u = np.concatenate([N, np.asarray(L, float) / x0, np.asarray(G, float) / x0])
+        self.kernel.prepare(self.kernel_input(t, N, L, G))
+        d, refused = self._rates(t, u, spraying)
+        K = self.grid.bins
+        return d[:K], d[K:2 * K] * x0, d[2 * K:] * x0, refused * x0
+
+    def _rates(self, t: float, u: np.ndarray, spraying: bool, beta: np.ndarray | None = None):
+        """Rates (3K,) of the scaled state u = [N, L/x_0, G/x_0] and the refused solid rate (x_0 units).
+
+        Volumes enter only as ratios to the first pivot x_0, so the same problem in m3, mm3 or
+        units of x_0 gives the same numbers (up to the rounding of the unit conversion).
+        ``beta``: the kernel matrix if the caller has it for this state.
+        """
+        K = self.grid.bins
+        if self._flush_n > 0 and ((u > 0) & (u < self._flush_vec)).any():
+            # entries below the flush level count as zero (they are zeroed after every step; here
+            # also inside a step, so no event rate can underflow)
+            u = _flushed(u.copy(), K, self._flush_n, self._flush_v)
+            beta = None
+        nlg = u.reshape(3, K)
+        if beta is None:
+            beta = self.kernel(self._input(t, nlg))
+        d, refused = self.aggregation.totals_stacked(beta, nlg)
         if spraying:
-            dL = dL + self.liquid.rates(N, self.grid.x, self.grid.d)
+            w = nlg[0] * self._spray_weight
+            total = w.sum()
+            if total > 0:
+                d[1] += (self._spray_rate / total) * w
         if self.consolidation is not None:
-            dG = dG + self.consolidation.rates(N * self.grid.x, G)
-        return dN, dL, dG, refused
+            d[2] -= self.consolidation.rate * (nlg[2] - self._gas_min * nlg[0])
+        return d.reshape(-1), refused
+
+    def _input(self, t: float, nlg: np.ndarray) -> KernelInput:
+        """KernelInput of the scaled state (3, K): surface-liquid fraction from bin totals."""
+        S = nlg[0] * self._xr
+        L, G = nlg[1], nlg[2]
+        V = S + np.maximum(L, G)
+        phi = np.divide(np.maximum(L - G, 0.0), V, out=np.zeros(V.size), where=V > 0)
+        return KernelInput(t=t, volumes=self.grid.x, diameters=self.grid.d, numbers=nlg[0],
+                           surface_fraction=phi, rpm=self.rpm)
 
     def check_state(self, s: State, where: str = "") -> None:
         for name, arr in (("number", s.number), ("liquid", s.liquid), ("gas", s.gas)):
@@ -183,20 +255,18 @@ class GranulationPBM:
                     f"{where}; allowed: finite values >= 0")
 
     # ----------------------------------------------------------------- integration
-    def _depletion_step(self, u: np.ndarray, du: np.ndarray) -> float:
-        mask = (du < 0) & (u > 0)
-        if not mask.any():
-            return np.inf
-        return self.solver.safety * float(np.min(u[mask] / -du[mask]))
+    #: what can limit a step (``result.info["step_limits"]`` counts them; ``rejected_*`` count retries)
+    STEP_LIMITS = ("positivity", "error", "max_step", "event", "rejected_negative", "rejected_error")
 
-    def _raise_bad(self, t: float, arr: np.ndarray, why: str):
+    def _raise_bad(self, t: float, arr: np.ndarray, why: str, scale: float = 1.0):
         K = self.grid.bins
         bad = ~np.isfinite(arr) | (arr < 0)
         idx = int(np.argmax(bad))
         name = ("number", "liquid", "gas")[idx // K]
         k = idx % K
+        value = float(arr[idx]) * (scale if idx >= K else 1.0)
         raise NegativePopulationError(
-            f"{name} of bin {k} (diameter {self.grid.d[k]:.4g} m) became {float(arr[idx])!r} at t = {t:.6g} s "
+            f"{name} of bin {k} (diameter {self.grid.d[k]:.4g} m) became {value!r} at t = {t:.6g} s "
             f"({why}); populations must stay finite and >= 0")
 
     def run(self, t_start: float, t_end: float, state: State, output_times=None):
@@ -204,6 +274,12 @@ class GranulationPBM:
 
         ``output_times``: times in [t_start, t_end] to record (t_start and t_end always are).
         The input state is not modified; ``result.state`` is the state at ``t_end``.
+
+        Internally volumes are in units of the first pivot x_0 (the state is [N, L/x_0, G/x_0]),
+        so the steps and the result do not depend on the unit of volume. Entries below
+        ``FLUSH`` (1e-100) of the total number (numbers) or of the total solid (liquid, gas) are
+        set to zero after every step: they cannot matter, and keeping them would let event rates
+        of far-tail bins underflow to subnormal floats.
         """
         from .results import Result
 
@@ -221,6 +297,7 @@ class GranulationPBM:
         self.check_state(s, " (start of run)")
         self.kernel.reset()
         wall0 = _time.perf_counter()
+        opt = self.solver
 
         outs = set()
         if output_times is not None:
@@ -233,77 +310,129 @@ class GranulationPBM:
         rec = _Records()
         rec.add(s)
 
-        x = self.grid.x
-        total_solid = float(np.sum(s.number * x))
-        allowed_refused = self.solver.max_overflow_fraction * total_solid
-        u = np.concatenate([s.number, s.liquid, s.gas])
-        # error weights: number entries count by their solid volume, liquid and gas as volumes
-        w = np.concatenate([x, np.ones(K), np.ones(K)])
-        err_floor = self.solver.atol * max(total_solid, 1e-300)
-        rtol = self.solver.rtol
+        x0 = float(self.grid.x[0])
+        xr = self._xr
+        u = np.concatenate([s.number, s.liquid / x0, s.gas / x0])
+        total_solid = float(np.sum(s.number * xr))            # x_0 units
+        allowed_refused = opt.max_overflow_fraction * total_solid
+        refused = s.refused_volume / x0
+        # error scale of entry k: rtol |u_k| + atol x total solid / w_k, where number entries count
+        # by their solid volume (w = x_k / x_0) and liquid and gas as volumes (w = 1)
+        err_floor = opt.atol * max(total_solid, 1e-300) / np.concatenate([xr, np.ones(2 * K)])
+        flush_n = self._flush_n = FLUSH * float(np.sum(s.number))
+        flush_v = self._flush_v = FLUSH * total_solid
+        self._flush_vec = np.concatenate([np.full(K, flush_n), np.full(2 * K, flush_v)])
+        u = _flushed(u, K, flush_n, flush_v)
+        rtol = opt.rtol
+        order = {"euler": 1, "heun": 2, "ssp3": 3}[opt.method]
+        expo = 1.0 / order
+        limits = dict.fromkeys(self.STEP_LIMITS, 0)
+        refresh0 = getattr(self.kernel, "evaluations", None)
         t = t_start
         steps = s.steps
+        taken = 0
         ev = 0
-        heun = self.solver.method == "heun"
-        dt_prop = self.solver.max_step
+        dt_prop = opt.max_step
+        spraying_rate = self.liquid.rate if self.liquid is not None else 0.0
         while t < t_end:
             while events[ev] <= t:
                 ev += 1
             t_next = events[ev]
-            N, L, G = u[:K], u[K:2 * K], u[2 * K:]
             spraying = self.liquid is not None and self.liquid.active(t)
-            self.kernel.prepare(self.kernel_input(t, N, L, G))
-            dN, dL, dG, r1 = self.rates(t, N, L, G, spraying)
-            k1 = np.concatenate([dN, dL, dG])
-            if not np.all(np.isfinite(k1)):
-                self._raise_bad(t, np.where(np.isfinite(k1), u, np.nan), "non-finite rate")
-            dt = min(self._depletion_step(u, k1), dt_prop, self.solver.max_step, t_next - t)
-            for _ in range(self.solver.max_halvings + 1):
+            inp = self._input(t, u.reshape(3, K))
+            self.kernel.prepare(inp)
+            k1, r1 = self._rates(t, u, spraying, self.kernel(inp))
+            if not np.isfinite(k1).all():
+                self._raise_bad(t, np.where(np.isfinite(k1), u, np.nan), "non-finite rate", x0)
+            neg = k1 < 0
+            dt_pos = opt.safety * float(np.min(u[neg] / -k1[neg])) if neg.any() else np.inf
+            cands = (dt_pos, dt_prop, opt.max_step, t_next - t)
+            dt = min(cands)
+            why = cands.index(dt)
+            rejected = 0
+            for _ in range(opt.max_halvings + 1):
                 u1 = u + dt * k1
                 refused_rate = r1
                 err = 0.0
-                if heun and np.all(u1 >= 0):
-                    dN2, dL2, dG2, r2 = self.rates(t + dt, u1[:K], u1[K:2 * K], u1[2 * K:], spraying)
-                    u_new = 0.5 * (u + u1 + dt * np.concatenate([dN2, dL2, dG2]))
-                    refused_rate = 0.5 * (r1 + r2)
-                    # embedded Euler-Heun error estimate, relative to each entry (floor: atol x solid)
-                    err = float(np.max(np.abs(u_new - u1) * w / (np.abs(u_new) * w + err_floor)))
-                else:
-                    u_new = u1
-                if np.isnan(u_new).any():
-                    self._raise_bad(t, u_new, "NaN after a step")
-                if not np.all(u_new >= 0):
+                u_new = u1
+                if order > 1 and not (u1 < 0).any():
+                    k2, r2 = self._rates(t + dt, u1, spraying)
+                    # increment forms of the Shu-Osher stages: zero rates leave u exactly unchanged
+                    u_h = u + (0.5 * dt) * (k1 + k2)               # Heun (SSP-RK2)
+                    if order == 2:
+                        u_new, u_low = u_h, u1
+                        refused_rate = 0.5 * (r1 + r2)
+                    else:
+                        u2 = u + (0.25 * dt) * (k1 + k2)           # SSP-RK3 (Shu & Osher 1988)
+                        u_low = u_h
+                        if (u2 < 0).any():
+                            u_new = u2
+                        else:
+                            k3, r3 = self._rates(t + 0.5 * dt, u2, spraying)
+                            u_new = u + (dt / 6.0) * (k1 + k2 + 4.0 * k3)
+                            refused_rate = (r1 + r2 + 4.0 * r3) / 6.0
+                if not (u_new >= 0).all():
+                    if np.isnan(u_new).any():
+                        self._raise_bad(t, u_new, "NaN after a step", x0)
                     dt *= 0.5
+                    limits["rejected_negative"] += 1
+                    why = 0
                     continue
-                if err > rtol:
-                    dt *= max(0.2, 0.9 * np.sqrt(rtol / err))
-                    continue
+                if order > 1:
+                    # embedded error estimate, relative to each entry (floor: atol x total solid)
+                    err = float(np.max(np.abs(u_new - u_low) / (rtol * u_new + err_floor)))
+                    if err > 1.0:
+                        # a second rejection in a row: the error did not fall as dt^order (a
+                        # switch of the success probability inside the step): shrink as for a
+                        # first-order error
+                        dt *= max(0.1, 0.9 * err ** -(1.0 if rejected else expo))
+                        rejected += 1
+                        limits["rejected_error"] += 1
+                        why = 1
+                        continue
                 break
             else:
-                self._raise_bad(t, u_new, f"negative even after {self.solver.max_halvings} step reductions")
-            if heun:
-                dt_prop = dt * min(5.0, 0.9 * np.sqrt(rtol / max(err, 1e-300)))
+                self._raise_bad(t, u_new, f"negative even after {opt.max_halvings} step reductions", x0)
+            limits[("positivity", "error", "max_step", "event")[why]] += 1
+            if order > 1:
+                # no growth right after a rejection (Hairer, Norsett & Wanner, Solving ODE I, II.4)
+                dt_prop = dt * min(1.0 if rejected else 5.0, 0.9 * max(err, 1e-300) ** -expo)
             capped = dt == t_next - t
             t = t_next if capped else t + dt
-            u = u_new
+            u = _flushed(u_new, K, flush_n, flush_v)
             steps += 1
-            s.refused_volume += refused_rate * dt
+            taken += 1
+            refused += refused_rate * dt
             if spraying:
-                s.liquid_added += self.liquid.rate * dt
-            if s.refused_volume > allowed_refused:
+                s.liquid_added += spraying_rate * dt
+            if refused > allowed_refused:
                 raise GridOverflowError(
-                    f"aggregation beyond the last bin (pivot {x[-1]:.4g} m3, diameter {self.grid.d[-1]:.4g} m): "
-                    f"by t = {t:.6g} s aggregates carrying {s.refused_volume:.4g} m3 of solid were refused, "
-                    f"{s.refused_volume / total_solid:.3g} of the total solid volume {total_solid:.4g} m3; "
-                    f"allowed: at most max_overflow_fraction = {self.solver.max_overflow_fraction:g}. "
-                    "Use more bins or a larger grid ratio (pbm.grid.bins / pbm.grid.ratio)")
+                    f"aggregation beyond the last bin (pivot {self.grid.x[-1]:.4g} m3, diameter "
+                    f"{self.grid.d[-1]:.4g} m): by t = {t:.6g} s aggregates carrying {refused * x0:.4g} m3 of solid "
+                    f"were refused, {refused / total_solid:.3g} of the total solid volume {total_solid * x0:.4g} m3; "
+                    f"allowed: at most max_overflow_fraction = {opt.max_overflow_fraction:g} of the total solid. "
+                    "Raise the top of the grid (pbm.grid.max_diameter, or bins / ratio)")
+            if taken >= opt.max_steps and t < t_end:
+                raise SolverLimitError(
+                    f"run stopped at t = {t:.6g} s of [{t_start:g}, {t_end:g}] s after {taken} steps "
+                    f"(solver max_steps = {opt.max_steps}); step limits so far: {limits}")
+            if taken % 64 == 0 and _time.perf_counter() - wall0 > opt.max_wall_time and t < t_end:
+                raise SolverLimitError(
+                    f"run stopped at t = {t:.6g} s of [{t_start:g}, {t_end:g}] s after {taken} steps and "
+                    f"{_time.perf_counter() - wall0:.3g} s of wall time (solver max_wall_time = "
+                    f"{opt.max_wall_time:g} s); step limits so far: {limits}")
             if capped and t in record_at:
-                s.t, s.number, s.liquid, s.gas, s.steps = t, u[:K].copy(), u[K:2 * K].copy(), u[2 * K:].copy(), steps
+                s.t, s.steps = t, steps
+                s.number, s.liquid, s.gas = u[:K].copy(), u[K:2 * K] * x0, u[2 * K:] * x0
+                s.refused_volume = refused * x0
                 rec.add(s)
-        s.t, s.number, s.liquid, s.gas, s.steps = t_end, u[:K].copy(), u[K:2 * K].copy(), u[2 * K:].copy(), steps
+        s.t, s.steps = t_end, steps
+        s.number, s.liquid, s.gas = u[:K].copy(), u[K:2 * K] * x0, u[2 * K:] * x0
+        s.refused_volume = refused * x0
+        if refresh0 is not None:
+            limits["kernel_refreshes"] = int(self.kernel.evaluations - refresh0)
         info = {"kernel": repr(self.kernel), "liquid_addition": repr(self.liquid),
-                "consolidation": repr(self.consolidation), "rpm": self.rpm, "steps": steps - state.steps,
-                "wall_time_s": _time.perf_counter() - wall0, "method": self.solver.method,
-                "aggregation_scheme": self.aggregation.name,
-                "safety": self.solver.safety}
+                "consolidation": repr(self.consolidation), "rpm": self.rpm, "steps": taken,
+                "wall_time_s": _time.perf_counter() - wall0, "method": opt.method,
+                "aggregation_scheme": self.aggregation.name, "safety": opt.safety, "step_limits": limits}
         return Result(self.grid, rec, s, info)

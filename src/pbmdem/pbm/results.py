@@ -12,14 +12,17 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from pbmdem.atomic import atomic_path
 
 from .grid import Grid
 from .model import State, surface_fraction
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 def mass_quantiles(mass: np.ndarray, d_edges: np.ndarray, q=(0.1, 0.5, 0.9)) -> np.ndarray:
@@ -75,6 +78,9 @@ class Result:
         info["steps"] = int(sum(r.info.get("steps", 0) for r in results))
         info["wall_time_s"] = float(sum(r.info.get("wall_time_s", 0.0) for r in results))
         info["segments"] = len(results)
+        limits = [r.info["step_limits"] for r in results if isinstance(r.info.get("step_limits"), dict)]
+        if limits:
+            info["step_limits"] = {k: int(sum(lim.get(k, 0) for lim in limits)) for k in limits[-1]}
         return cls(first.grid, rec, results[-1].state, info)
 
     # ------------------------------------------------------------- derived quantities
@@ -95,6 +101,8 @@ class Result:
         N, S, L, G = self.number, self.solid, self.liquid, self.gas
         Ntot, Stot, Ltot, Gtot = N.sum(1), S.sum(1), L.sum(1), G.sum(1)
         q = mass_quantiles(S, self.grid.d_edges)
+        import pandas as pd
+
         return pd.DataFrame({
             "time": self.times,
             "total_number": Ntot,
@@ -122,6 +130,8 @@ class Result:
         dlog = np.log(g.d_edges[1:] / g.d_edges[:-1])
         lc = np.divide(self.liquid, S, out=np.zeros_like(S), where=S > 0)
         eps = np.divide(self.gas, S + self.gas, out=np.zeros_like(S), where=(S + self.gas) > 0)
+        import pandas as pd
+
         return pd.DataFrame({
             "time": np.repeat(self.times, K),
             "bin": np.tile(np.arange(K), T),

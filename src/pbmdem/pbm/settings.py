@@ -8,13 +8,11 @@ the DEM bed: bed_height x pi/4 bowl_diameter^2 x packing_fraction.
 
 from __future__ import annotations
 
+import functools
 import math
 from pathlib import Path
 
 import numpy as np
-import yaml
-
-from pbmdem.config import merge_defaults
 
 from .errors import PBMInputError
 from .grid import Grid, volume_of
@@ -29,15 +27,15 @@ DEFAULTS_PATH = _REPO / "config" / "config.yaml"  # its pbm: section holds the d
 
 #: Same values as the pbm: section of config/config.yaml (a test keeps them equal).
 DEFAULTS: dict = {
-    "grid": {"bins": 35, "ratio": 2.0, "min_diameter": 1.0e-3},
+    "grid": {"ratio": 1.2599210498948732, "min_diameter": None, "max_diameter": 0.032, "bins": None},
     "process": {"premixing_time": 60.0, "liquid_addition_time": 180.0, "wet_massing_time": 240.0},
     "initial": {"porosity": 0.5, "liquid_content": 0.0},
-    "liquid_addition": {"rate": 4.5e-8, "distribution": "surface_area"},
+    "liquid_addition": {"rate": 5.8e-8, "distribution": "surface_area"},
     "consolidation": {"rate": 0.02, "min_porosity": 0.2},
     "aggregation": {
         "scheme": "cell_average",
-        "beta0": 5.0e-5,
-        "constant_frequency": 0.5,
+        "beta0": 2.0e-4,
+        "constant_frequency": 0.12,
         "constant_impact_velocity": None,
         "frequency_update_interval": 1.0,
         "table_extrapolation": "clamp",
@@ -45,17 +43,22 @@ DEFAULTS: dict = {
                     "stokes": {"binder_viscosity": 0.1, "restitution": 0.4, "asperity_height": 5.0e-6,
                                "granule_density": 1000.0}},
     },
-    "solver": {"method": "heun", "safety": 0.5, "rtol": 1.0e-3, "atol": 1.0e-6, "max_step": 5.0,
-               "max_overflow_fraction": 1.0e-6},
+    "solver": {"method": "ssp3", "safety": 0.5, "rtol": 1.0e-3, "atol": 1.0e-6, "max_step": 10.0,
+               "max_overflow_fraction": 1.0e-6, "max_steps": 1000000, "max_wall_time": 3600.0},
     "output": {"interval": 10.0},
 }
 
 
-def validate_section(section: dict) -> None:
+@functools.lru_cache(maxsize=1)
+def _validator():
     import jsonschema
+    import yaml
 
-    schema = yaml.safe_load(SCHEMA_PATH.read_text())
-    errors = sorted(jsonschema.Draft202012Validator(schema).iter_errors(section),
+    return jsonschema.Draft202012Validator(yaml.safe_load(SCHEMA_PATH.read_text()))
+
+
+def validate_section(section: dict) -> None:
+    errors = sorted(_validator().iter_errors(section),
                     key=lambda e: list(map(str, e.absolute_path)))
     if errors:
         msgs = []
@@ -67,11 +70,21 @@ def validate_section(section: dict) -> None:
 
 def resolve_settings(config: dict | None = None) -> dict:
     """Complete, validated ``pbm:`` settings: the config's ``pbm`` section over :data:`DEFAULTS`."""
+    from pbmdem.config import merge_defaults
+
     section = (config or {}).get("pbm") or {}
     if not isinstance(section, dict):
         raise PBMInputError(f"pbm section must be a mapping, got {type(section).__name__}")
     merged = merge_defaults(DEFAULTS, section)
     validate_section(merged)
+    g = merged["grid"]
+    if g["min_diameter"] is None:
+        # the first pivot is the smallest feed class of the config's size distributions
+        dists = (config or {}).get("size_distributions") or {}
+        smallest = [min(float(d) for d in v["diameters"]) for v in dists.values()
+                    if isinstance(v, dict) and v.get("diameters")]
+        if smallest:
+            g["min_diameter"] = min(smallest)
     return merged
 
 
@@ -111,7 +124,13 @@ def velocity_resolved(settings: dict) -> bool:
 def build_model(settings: dict, source=None, rpm: float = 0.0) -> GranulationPBM:
     """GranulationPBM from resolved settings; ``source`` defaults to ConstantFrequency."""
     g = settings["grid"]
-    grid = Grid(g["bins"], g["ratio"], min_diameter=g["min_diameter"])
+    if g["min_diameter"] is None:
+        raise PBMInputError("pbm.grid.min_diameter = null (the smallest class of size_distributions) but the "
+                            "config defines no size_distributions; allowed: a diameter (m) or size_distributions")
+    if g.get("bins") is not None:
+        grid = Grid(g["bins"], g["ratio"], min_diameter=g["min_diameter"])
+    else:
+        grid = Grid.spanning(g["min_diameter"], g["max_diameter"], g["ratio"])
     agg = settings["aggregation"]
     if source is None:
         if velocity_resolved(settings) and agg["constant_impact_velocity"] is None:
@@ -128,7 +147,8 @@ def build_model(settings: dict, source=None, rpm: float = 0.0) -> GranulationPBM
     cons = Consolidation(settings["consolidation"]["rate"], settings["consolidation"]["min_porosity"])
     s = settings["solver"]
     solver = SolverSettings(method=s["method"], safety=s["safety"], max_step=s["max_step"], rtol=s["rtol"],
-                            atol=s["atol"], max_overflow_fraction=s["max_overflow_fraction"])
+                            atol=s["atol"], max_overflow_fraction=s["max_overflow_fraction"],
+                            max_steps=s["max_steps"], max_wall_time=s["max_wall_time"])
     return GranulationPBM(grid, kernel, liquid, cons, solver, rpm=rpm, scheme=agg["scheme"])
 
 

@@ -232,7 +232,6 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
     if (not isinstance(stored, dict) or not isinstance(stored.get("frequency"), list) or not stored["frequency"]
             or not isinstance(stored.get("velocity"), list)):
         raise SurrogateLoadError(f"{model_path} does not hold the fitted frequency and velocity pipelines")
-    estimators = stored["frequency"]
     edges = meta.get("velocity_edges")
     if edges is None or len(edges) != len(VELOCITY_EDGES) or not np.allclose(edges, VELOCITY_EDGES, rtol=1e-9):
         raise IncompatibleVersionError(
@@ -240,7 +239,7 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
             f"retrain the surrogate")
 
     try:
-        return _from_metadata(estimators, meta, metadata_path)
+        return _from_metadata(stored, meta, metadata_path)
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         what = f"missing field {exc}" if isinstance(exc, KeyError) else str(exc)
         raise IncompatibleVersionError(
@@ -248,9 +247,11 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
             "it was written by another version or edited; retrain the surrogate") from None
 
 
-def _from_metadata(estimators, meta: dict, metadata_path) -> CollisionSurrogate:
-    """The surrogate object from its fitted estimators and metadata (KeyError/TypeError when the
-    metadata has missing or unknown fields)."""
+def _from_metadata(stored: dict, meta: dict, metadata_path) -> CollisionSurrogate:
+    """The surrogate object from its fitted estimators (`stored`: the skops file's frequency and
+    velocity lists) and metadata (KeyError/TypeError when the metadata has missing or unknown
+    fields)."""
+    estimators = stored["frequency"]
     if list(meta["feature_names"]) != list(FEATURE_NAMES):
         raise IncompatibleVersionError(
             f"{metadata_path}: features {meta['feature_names']} differ from this version's {list(FEATURE_NAMES)}")

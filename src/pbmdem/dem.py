@@ -235,6 +235,25 @@ def prepare_run(cfg: dict, plan: DemPlan, run_dir: str | Path) -> Path:
     return run_dir / "in.granulator"
 
 
+def planned_dumps(plan: DemPlan) -> dict[str, tuple[int, int]]:
+    """Frames and last step each contact dump of a finished run holds: one at the start of the
+    sampling (`dump_modify first yes`), then one at every multiple of the interval up to the end."""
+    start = plan.settle_steps + plan.spinup_steps
+    end = start + plan.sampling_steps
+    every = plan.collision_interval
+    multiples = end // every - (start + every - 1) // every + 1
+    frames = multiples + (1 if start % every else 0)
+    last = end // every * every if multiples > 0 else start
+    return {"post/pairs.dump": (frames, last), "post/walls.dump": (frames, last)}
+
+
+def check_finished(plan: DemPlan, run_dir: str | Path) -> None:
+    """Raise LiggghtsError (and write crash.json) unless the run reached every planned step and
+    contact snapshot. LIGGGHTS exits 0 when interrupted, so the exit code proves nothing."""
+    liggghts.check_finished(run_dir, plan.settle_steps + plan.spinup_steps + plan.sampling_steps,
+                            planned_dumps(plan))
+
+
 def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | None = None) -> dict:
     """Run LIGGGHTS for `plan` in `run_dir`, then tabulate collisions and index the VTK files.
 
@@ -248,6 +267,7 @@ def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | No
         (run_dir / name).unlink(missing_ok=True)
     deck_path = prepare_run(cfg, plan, run_dir)
     result = liggghts.run(deck_path, run_dir, ranks=plan.mpi_ranks, timeout=timeout)
+    check_finished(plan, run_dir)
     t0 = time.perf_counter()
     tables = collisions.tabulate_run(run_dir / "post", plan)
     parse_time = time.perf_counter() - t0

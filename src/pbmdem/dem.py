@@ -302,11 +302,36 @@ def run_operating_point(cfg: dict, rpm: float, distribution: str, run_dir: str |
     return run_point(cfg, plan, run_dir, timeout=cfg["dem"].get("timeout"))
 
 
+# dem: settings that change how a run is executed, not its result (the same run on 1 or 2 ranks
+# gives statistically the same tables). They are kept out of the rules' params, so changing them
+# reruns nothing that has finished; the rule scripts add them back from the live config and
+# the job's resources (`execution_settings`).
+EXECUTION_KEYS = ("mpi_ranks", "timeout")
+
+
+def result_settings(dem_cfg: dict) -> dict:
+    """The dem: section without its execution-only keys."""
+    return {k: v for k, v in dem_cfg.items() if k not in EXECUTION_KEYS}
+
+
+def with_execution(cfg: dict, config: dict, resources=None) -> dict:
+    """`cfg` (rule params) with the execution settings of the live `config` put back; a job's
+    `tasks` resource (set by a cluster profile) overrides dem.mpi_ranks."""
+    execution = {k: config.get("dem", {})[k] for k in EXECUTION_KEYS if k in config.get("dem", {})}
+    tasks = resources.get("tasks") if resources is not None else None
+    if tasks:
+        execution["mpi_ranks"] = int(tasks)
+    out = dict(cfg)
+    out["dem"] = {**cfg["dem"], **execution}
+    return out
+
+
 def point_config(cfg: dict, distribution: str) -> dict:
     """The part of the config that determines one DEM point's result (used as rule params, so
-    that editing another point or another stage does not re-run this one)."""
+    that editing another point or another stage, or an execution-only setting, does not re-run
+    this one)."""
     return {
-        "granulator": cfg["granulator"], "material": cfg["material"], "dem": cfg["dem"],
+        "granulator": cfg["granulator"], "material": cfg["material"], "dem": result_settings(cfg["dem"]),
         "size_distributions": {distribution: cfg["size_distributions"][distribution]},
     }
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import os
 import re
+import shlex
 import shutil
 import signal
 import subprocess
@@ -62,6 +63,10 @@ def command(deck: str, ranks: int = 1) -> list[str]:
     base = [executable(), "-in", deck, "-log", "log.liggghts", "-echo", "none"]
     if ranks == 1:
         return base
+    # inside a cluster job the job's own launcher (the rule's `mpi` resource, e.g. "srun --mpi=pmix")
+    launcher = os.environ.get("PBMDEM_MPI_LAUNCHER", "").strip()
+    if launcher:
+        return [*shlex.split(launcher), "-n", str(ranks), *base]
     mpirun = shutil.which("mpirun")
     if mpirun is None:
         raise LiggghtsError("mpi_ranks > 1 needs mpirun (apt-get install openmpi-bin)")

@@ -108,6 +108,7 @@ def test_tiny_workflow_through_the_slurm_profile(cluster, root, tmp_path):
     cfg = yaml.safe_load((root / "config" / "test.yaml").read_text())
     # a sampling window long enough to cancel a job inside it (the tiny one lasts ~0.3 s)
     cfg["dem"]["sampling_time"] = 0.08
+    cfg["validation"]["rpm"] = [600]  # one coupled loop (2-rank jobs take the whole 2-core node)
     configfile = workdir / "config.yaml"
     configfile.write_text(yaml.safe_dump(cfg))
     profile = ["--profile", str(root / "profiles" / "slurm"), *FAST]

@@ -90,15 +90,16 @@ def test_adding_an_operating_point_runs_only_that_point(tiny_workflow, root, tmp
 
 
 def test_execution_settings_rerun_nothing(tiny_workflow, root, tmp_path):
-    """MPI ranks, timeouts and the cores given change how jobs run, not their results: a finished
-    workflow schedules no job (no DEM point, no coupled loop) when they change."""
+    """MPI ranks, timeouts, threads, resources and the cores given change how jobs run, not their
+    results: a finished workflow schedules no job (no DEM point, no coupled loop) when they change."""
     workdir, configfile = tiny_workflow
     cfg = yaml.safe_load(configfile.read_text())
     cfg["dem"]["mpi_ranks"] = 2
     cfg["dem"]["timeout"] = 1234
     changed = tmp_path / "ranks.yaml"
     changed.write_text(yaml.safe_dump(cfg))
-    proc = snakemake(root, workdir, changed, "-n", "--cores", "1", "--set-resources", "dem_point:tasks=2")
+    proc = snakemake(root, workdir, changed, "-n", "--cores", "1", "--set-resources", "dem_point:tasks=2",
+                     "dem_point:runtime=90", "--set-threads", "dem_point=2", "pbm_dem_coupled=2")
     out = proc.stdout + proc.stderr
     assert "Nothing to be done" in out, out
     # a change that does alter results is still seen (the check above is not vacuous)

@@ -9,9 +9,10 @@ that crashed runs are kept and explained rather than hidden.
 An exit code 0 does not mean the run finished: on SIGINT or SIGTERM (Ctrl-C, `scancel`, a batch
 system's time limit) LIGGGHTS writes `restart_forced_liggghts_<step>.data`, logs
 `Forced restart written` and exits 0. `run` treats that log line as a failure; SIGINT/SIGTERM
-reaching this Python process while LIGGGHTS runs are passed on to LIGGGHTS and the run is
-recorded as interrupted. `check_finished` judges a run against its plan (last thermo step and
-number of dump frames), whatever the exit code said.
+reaching this Python process while LIGGGHTS runs are recorded (and passed on to LIGGGHTS if it
+did not get them too), so that the run is recorded as interrupted rather than Python dying
+first. `check_finished` judges a run against its plan (last thermo step and number of dump
+frames), whatever the exit code said; the restart file is removed and recorded in crash.json.
 """
 
 from __future__ import annotations

@@ -119,7 +119,7 @@ def test_tiny_workflow_through_the_slurm_profile(cluster, root, tmp_path):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         jobid = _cancel_in_sampling(proc, workdir, env)
-        stdout, stderr = proc.communicate(timeout=420)
+        stdout, stderr = proc.communicate(timeout=600)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -147,7 +147,7 @@ def test_tiny_workflow_through_the_slurm_profile(cluster, root, tmp_path):
     assert counts.get("dem_point") == 1, dry.stdout + dry.stderr
     assert "pbm_constant" not in counts and "pbm_dem_coupled" not in counts, counts
     t1 = time.perf_counter()
-    rerun = _run(_snakemake_cmd(root, workdir, configfile, *profile), env, 420, workdir)
+    rerun = _run(_snakemake_cmd(root, workdir, configfile, *profile), env, 600, workdir)
     second = time.perf_counter() - t1
     assert rerun.returncode == 0, (rerun.stdout + rerun.stderr)[-5000:]
     assert (cancelled / "collisions.csv").exists() and not (cancelled / "crash.json").exists()

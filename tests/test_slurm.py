@@ -83,7 +83,7 @@ def _job_counts(text: str) -> dict[str, int]:
             if len(w) == 2 and w[1].isdigit() and w[0] != "total"}
 
 
-def _cancel_in_sampling(proc: subprocess.Popen, workdir: Path, env: dict, timeout: float = 300) -> str:
+def _cancel_in_sampling(proc: subprocess.Popen, workdir: Path, env: dict, timeout: float = 500) -> str:
     """Wait until the DEM point CANCEL is in its sampling phase, then scancel its SLURM job."""
     rpm, dist = CANCEL
     pairs = workdir / "results" / "dem" / f"rpm{rpm}_{dist}" / "post" / "pairs.dump"

@@ -1,7 +1,7 @@
 # Shared helpers: the operating grid, parameters of the rules and the list of final targets.
 import os
 
-from pbmdem.dem import point_config, point_id, rpm_text
+from pbmdem.dem import point_config, point_id, result_settings, rpm_text
 
 RESULTS = "results"
 
@@ -59,7 +59,7 @@ def pbm_params(wildcards):
     return canonical({
         "pbm": config.get("pbm", {}),
         "size_distributions": {wildcards.dist: config["size_distributions"][wildcards.dist]},
-        "dem": config["dem"],
+        "dem": result_settings(config["dem"]),
         "granulator": config["granulator"],
     })
 
@@ -80,6 +80,7 @@ def loop_config():
     """The config parts a validation loop depends on (as params, so that other edits do not re-run it)."""
     keys = ("granulator", "material", "dem", "pbm", "validation")
     out = {k: config[k] for k in keys if k in config}
+    out["dem"] = result_settings(config["dem"])  # ranks and timeouts do not change a result
     # the list of speeds and the sweep do not change one speed's loop
     out["validation"] = {k: v for k, v in VALIDATION.items() if k not in ("rpm", "sweep")}
     dist = VALIDATION["distribution"]

@@ -13,9 +13,12 @@ rule dem_point:
     params:
         point=lambda wc: canonical(point_config(config, wc.dist)),
         run_dir=lambda wc, output: os.path.dirname(output.table),
+    # MPI ranks of LIGGGHTS: dem.mpi_ranks (threads, for a local run), or the `tasks` resource a
+    # cluster profile sets (with an `mpi` launcher such as "srun --mpi=pmix", and threads 1);
+    # none of them is a param, so changing them reruns nothing that has finished
     threads: config["dem"].get("mpi_ranks", 1)
     resources:
-        mpi_ranks=config["dem"].get("mpi_ranks", 1),
+        tasks=config["dem"].get("mpi_ranks", 1),
     log:
         f"{RESULTS}/logs/dem/rpm{{rpm}}_{{dist}}_rep{{rep}}.log",
     conda:

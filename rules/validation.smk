@@ -9,6 +9,8 @@ rule pbm_dem_coupled:
         method="dem",
         outdir=lambda wc, output: os.path.dirname(output.summary),
     threads: config["dem"].get("mpi_ranks", 1)
+    resources:
+        tasks=config["dem"].get("mpi_ranks", 1),
     log:
         f"{RESULTS}/logs/validation/pbm_dem_rpm{{rpm}}.log",
     conda:

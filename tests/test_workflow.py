@@ -122,6 +122,27 @@ def test_adding_a_replicate_runs_only_that_replicate(tiny_workflow, root, tmp_pa
                        for d in cfg["grid"]["size_distributions"]}, planned
 
 
+def test_execution_settings_rerun_nothing(tiny_workflow, root, tmp_path):
+    """MPI ranks, timeouts, threads, resources and the cores given change how jobs run, not their
+    results: a finished workflow schedules no job (no DEM point, no coupled loop) when they change."""
+    workdir, configfile = tiny_workflow
+    cfg = yaml.safe_load(configfile.read_text())
+    cfg["dem"]["mpi_ranks"] = 2
+    cfg["dem"]["timeout"] = 1234
+    changed = tmp_path / "ranks.yaml"
+    changed.write_text(yaml.safe_dump(cfg))
+    proc = snakemake(root, workdir, changed, "-n", "--cores", "1", "--set-resources", "dem_point:tasks=2",
+                     "dem_point:runtime=90", "--set-threads", "dem_point=2", "pbm_dem_coupled=2")
+    out = proc.stdout + proc.stderr
+    assert "Nothing to be done" in out, out
+    # a change that does alter results is still seen (the check above is not vacuous)
+    cfg["dem"]["seed"] = 20143
+    reseeded = tmp_path / "seed.yaml"
+    reseeded.write_text(yaml.safe_dump(cfg))
+    out = snakemake(root, workdir, reseeded, "-n", "--cores", "1", "--quiet", "rules").stdout
+    assert "dem_point" in out and "pbm_dem_coupled" in out, out
+
+
 def test_lint_is_clean(root, tiny_workflow):
     workdir, configfile = tiny_workflow
     proc = snakemake(root, workdir, configfile, "--lint", check=False)

@@ -329,6 +329,29 @@ def _move_into(stage: Path, run_dir: Path) -> None:
     stage.rmdir()
 
 
+def planned_dumps(plan: DemPlan) -> dict[str, tuple[int, int]]:
+    """Frames and last step each dump of a finished run holds: one at the start of the recording
+    (`dump_modify first yes`, the position history before the sampling window), then one at every
+    multiple of its interval up to the end."""
+    start = plan.window_start_step - plan.history_steps
+    end = plan.window_start_step + plan.sampling_steps
+
+    def frames_and_last(every: int) -> tuple[int, int]:
+        multiples = end // every - (start + every - 1) // every + 1
+        return multiples + (1 if start % every else 0), (end // every * every if multiples > 0 else start)
+
+    contacts = frames_and_last(plan.collision_interval)
+    return {"post/pairs.dump": contacts, "post/walls.dump": contacts,
+            "post/positions.dump": frames_and_last(plan.position_interval)}
+
+
+def check_finished(plan: DemPlan, run_dir: str | Path) -> None:
+    """Raise LiggghtsError (and write crash.json) unless the run reached every planned step and
+    contact snapshot. LIGGGHTS exits 0 when interrupted, so the exit code proves nothing."""
+    liggghts.check_finished(run_dir, plan.settle_steps + plan.spinup_steps + plan.sampling_steps,
+                            planned_dumps(plan))
+
+
 def run_point(cfg: dict, plan: DemPlan, run_dir: str | Path, timeout: float | None = None, *,
               force: bool = False, progress_bar: bool = False) -> dict:
     """Run LIGGGHTS for `plan` in `run_dir`, then tabulate collisions and index the VTK files.
@@ -381,6 +404,7 @@ def _run_in(cfg: dict, plan: DemPlan, run_dir: Path, final_dir: Path, timeout: f
                                                         ("sampling", plan.sampling_steps)],
                              label=f"DEM {plan.point_id}", bar=progress_bar)
     result = liggghts.run(deck_path, run_dir, ranks=plan.mpi_ranks, timeout=timeout, progress=watcher)
+    check_finished(plan, run_dir)
     t0 = time.perf_counter()
     tables = collisions.tabulate_run(run_dir / "post", plan, geometry.bowl_from_config(cfg),
                                      geometry.impeller_from_config(cfg))
@@ -419,11 +443,36 @@ def run_operating_point(cfg: dict, rpm: float, distribution: str, run_dir: str |
     return run_point(cfg, plan, run_dir, timeout=cfg["dem"].get("timeout"))
 
 
+# dem: settings that change how a run is executed, not its result (the same run on 1 or 2 ranks
+# gives statistically the same tables). They are kept out of the rules' params, so changing them
+# reruns nothing that has finished; the rule scripts add them back from the live config and
+# the job's resources (`execution_settings`).
+EXECUTION_KEYS = ("mpi_ranks", "timeout")
+
+
+def result_settings(dem_cfg: dict) -> dict:
+    """The dem: section without its execution-only keys."""
+    return {k: v for k, v in dem_cfg.items() if k not in EXECUTION_KEYS}
+
+
+def with_execution(cfg: dict, config: dict, resources=None) -> dict:
+    """`cfg` (rule params) with the execution settings of the live `config` put back; a job's
+    `tasks` resource (set by a cluster profile) overrides dem.mpi_ranks."""
+    execution = {k: config.get("dem", {})[k] for k in EXECUTION_KEYS if k in config.get("dem", {})}
+    tasks = resources.get("tasks") if resources is not None else None
+    if tasks:
+        execution["mpi_ranks"] = int(tasks)
+    out = dict(cfg)
+    out["dem"] = {**cfg["dem"], **execution}
+    return out
+
+
 def point_config(cfg: dict, distribution: str) -> dict:
     """The part of the config that determines one DEM point's result (used as rule params, so
-    that editing another point or another stage does not re-run this one)."""
+    that editing another point or another stage, or an execution-only setting, does not re-run
+    this one)."""
     # the number of replicates decides which runs exist, not what one run computes
-    dem_cfg = {k: v for k, v in cfg["dem"].items() if k != "replicates"}
+    dem_cfg = {k: v for k, v in result_settings(cfg["dem"]).items() if k != "replicates"}
     return {
         "granulator": cfg["granulator"], "material": cfg["material"], "dem": dem_cfg,
         "size_distributions": {distribution: cfg["size_distributions"][distribution]},

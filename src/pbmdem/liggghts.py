@@ -5,14 +5,25 @@ or under `mpirun -np N`. A run fails when the program exits non-zero, when its l
 `ERROR` line (LIGGGHTS sometimes exits 0 after an error), or when particles were lost. The error
 message carries the last lines of the log; a `crash.json` beside the log records the failure so
 that crashed runs are kept and explained rather than hidden.
+
+An exit code 0 does not mean the run finished: on SIGINT or SIGTERM (Ctrl-C, `scancel`, a batch
+system's time limit) LIGGGHTS writes `restart_forced_liggghts_<step>.data`, logs
+`Forced restart written` and exits 0. `run` treats that log line as a failure; SIGINT/SIGTERM
+reaching this Python process while LIGGGHTS runs are recorded (and passed on to LIGGGHTS if it
+did not get them too), so that the run is recorded as interrupted rather than Python dying
+first. `check_finished` judges a run against its plan (last thermo step and number of dump
+frames), whatever the exit code said; the restart file is removed and recorded in crash.json.
 """
 
 from __future__ import annotations
 
 import os
 import re
+import shlex
 import shutil
+import signal
 import subprocess
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +32,8 @@ from pbmdem.atomic import write_json
 
 _ERROR_LINE = re.compile(r"^(ERROR|ERROR on proc \d+).*$", re.MULTILINE)
 _LOST = re.compile(r"Lost atoms|lost atoms", re.IGNORECASE)
+_FORCED_RESTART = re.compile(r"Forced restart written")
+_DUMP_FRAME = re.compile(rb"^ITEM: TIMESTEP\n(\d+)\n", re.MULTILINE)
 
 
 class LiggghtsError(RuntimeError):
@@ -51,6 +64,10 @@ def command(deck: str, ranks: int = 1) -> list[str]:
     base = [executable(), "-in", deck, "-log", "log.liggghts", "-echo", "none"]
     if ranks == 1:
         return base
+    # inside a cluster job the job's own launcher (the rule's `mpi` resource, e.g. "srun --mpi=pmix")
+    launcher = os.environ.get("PBMDEM_MPI_LAUNCHER", "").strip()
+    if launcher:
+        return [*shlex.split(launcher), "-n", str(ranks), *base]
     mpirun = shutil.which("mpirun")
     if mpirun is None:
         raise LiggghtsError("mpi_ranks > 1 needs mpirun (apt-get install openmpi-bin)")
@@ -63,6 +80,72 @@ def tail(path: Path, lines: int = 25) -> str:
     except FileNotFoundError:
         return "(no log written)"
     return "\n".join(text[-lines:])
+
+
+def _forced_restarts(workdir: Path) -> list[dict]:
+    """Remove the restart files LIGGGHTS writes when interrupted; return what was removed.
+
+    Such a file cannot resume a pbmdem run (the deck re-creates meshes and fixes), so it is only
+    recorded in crash.json."""
+    removed = []
+    for path in sorted(workdir.glob("restart_forced_*")):
+        step = re.search(r"(\d+)", path.name.rsplit("_", 1)[-1])
+        removed.append({"file": path.name, "bytes": path.stat().st_size,
+                        "step": int(step.group(1)) if step else None, "removed": True})
+        path.unlink()
+    return removed
+
+
+def record_crash(workdir: Path, problems: list[str], **details) -> None:
+    """Write `workdir/crash.json` and raise LiggghtsError naming the problems and the log's tail."""
+    log = workdir / "log.liggghts"
+    restarts = _forced_restarts(workdir)
+    write_json(workdir / "crash.json", {
+        "problems": problems, **details, "forced_restart_files": restarts,
+        "log_tail": tail(log, 40), "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    })
+    stderr = details.get("stderr_tail") or ""
+    err = details.get("error_line")
+    raise LiggghtsError(
+        f"LIGGGHTS failed in {workdir} ({'; '.join(problems)}). Last lines of the log:\n{tail(log)}"
+        + (f"\n{err}" if err and err not in tail(log) else "")
+        + (f"\nstderr:\n{stderr[-2000:]}" if stderr.strip() else "")
+        + f"\nNo tables were written; details in {workdir / 'crash.json'}."
+    )
+
+
+class _PassSignals:
+    """While LIGGGHTS runs, SIGINT/SIGTERM sent to this process are remembered instead of killing
+    Python before it can record the interruption. A signal sent to the whole job (Ctrl-C, `scancel`,
+    a time limit) reaches LIGGGHTS too; only if LIGGGHTS is still running `grace` seconds later is
+    the signal passed on (a second signal at once would make it quit without its restart file).
+    Only possible in the main thread; elsewhere nothing is changed."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self, proc: subprocess.Popen, grace: float = 5.0):
+        self.proc, self.grace, self.received, self.saved = proc, grace, [], {}
+
+    def _forward(self, signum):
+        if self.proc.poll() is None:
+            self.proc.send_signal(signum)
+
+    def _handler(self, signum, frame):
+        self.received.append(signal.Signals(signum).name)
+        if self.proc.poll() is None:
+            timer = threading.Timer(self.grace, self._forward, args=(signum,))
+            timer.daemon = True
+            timer.start()
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for sig in self.SIGNALS:
+                self.saved[sig] = signal.signal(sig, self._handler)
+        return self
+
+    def __exit__(self, *exc):
+        for sig, old in self.saved.items():
+            signal.signal(sig, old)
 
 
 def run(deck: str | Path, workdir: str | Path, ranks: int = 1, timeout: float | None = None,
@@ -81,28 +164,29 @@ def run(deck: str | Path, workdir: str | Path, ranks: int = 1, timeout: float | 
     env = dict(os.environ, OMP_NUM_THREADS="1")
     proc = subprocess.Popen(cmd, cwd=workdir, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             errors="replace", env=env)
-    try:
-        while True:
-            left = None if timeout is None else timeout - (time.perf_counter() - t0)
-            try:
-                stdout, stderr = proc.communicate(timeout=poll if left is None else max(0.0, min(poll, left)))
-                returncode = proc.returncode
-                break
-            except subprocess.TimeoutExpired:
-                if left is not None and left <= poll:
-                    proc.kill()
-                    stdout, _ = proc.communicate()
-                    returncode, stderr = -9, f"timed out after {timeout} s"
+    with _PassSignals(proc) as signals:
+        try:
+            while True:
+                left = None if timeout is None else timeout - (time.perf_counter() - t0)
+                try:
+                    stdout, stderr = proc.communicate(timeout=poll if left is None else max(0.0, min(poll, left)))
+                    returncode = proc.returncode
                     break
-                if progress is not None:
-                    progress.update()
-    except BaseException:  # e.g. KeyboardInterrupt: do not leave the engine running
-        proc.kill()
-        proc.communicate()
-        raise
-    finally:
-        if progress is not None:
-            progress.close()
+                except subprocess.TimeoutExpired:
+                    if left is not None and left <= poll:
+                        proc.kill()
+                        stdout, _ = proc.communicate()
+                        returncode, stderr = -9, f"timed out after {timeout} s"
+                        break
+                    if progress is not None:
+                        progress.update()
+        except BaseException:  # e.g. KeyboardInterrupt: do not leave the engine running
+            proc.kill()
+            proc.communicate()
+            raise
+        finally:
+            if progress is not None:
+                progress.close()
     wall = time.perf_counter() - t0
     screen = workdir / "screen.liggghts"
     screen.write_text(stdout)
@@ -110,6 +194,8 @@ def run(deck: str | Path, workdir: str | Path, ranks: int = 1, timeout: float | 
     # an error can reach the screen but not the log (e.g. when MPI aborts while reporting it)
     log_text += "\n" + stdout
     problems = []
+    if signals.received:
+        problems.append(f"interrupted by {', '.join(signals.received)}")
     if returncode != 0:
         problems.append(f"exit code {returncode}")
     err = _ERROR_LINE.search(log_text)
@@ -117,18 +203,41 @@ def run(deck: str | Path, workdir: str | Path, ranks: int = 1, timeout: float | 
         problems.append(f"log says: {err.group(0).strip()}")
     if _LOST.search(log_text):
         problems.append("particles were lost")
+    if _FORCED_RESTART.search(log_text):
+        problems.append("interrupted: LIGGGHTS wrote a forced restart (it received SIGINT or SIGTERM)")
     if problems:
-        write_json(workdir / "crash.json", {
-            "command": cmd, "returncode": returncode, "problems": problems,
-            "wall_time_s": wall, "log_tail": tail(log, 40), "stderr_tail": stderr[-4000:],
-            "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-        })
-        raise LiggghtsError(
-            f"LIGGGHTS failed in {workdir} ({'; '.join(problems)}). Last lines of the log:\n{tail(log)}"
-            + (f"\n{err.group(0).strip()}" if err and err.group(0) not in tail(log) else "")
-            + (f"\nstderr:\n{stderr[-2000:]}" if stderr.strip() else "")
-        )
+        record_crash(workdir, problems, command=cmd, returncode=returncode, wall_time_s=wall,
+                     stderr_tail=stderr[-4000:], error_line=err.group(0).strip() if err else None)
     return LiggghtsRun(log=log, wall_time=wall, returncode=returncode)
+
+
+def dump_steps(path: str | Path) -> list[int]:
+    """Time steps of the frames of a LIGGGHTS dump file (empty if the file is missing)."""
+    try:
+        data = Path(path).read_bytes()
+    except FileNotFoundError:
+        return []
+    return [int(m.group(1)) for m in _DUMP_FRAME.finditer(data)]
+
+
+def check_finished(workdir: str | Path, total_steps: int, dumps: dict[str, tuple[int, int]]) -> None:
+    """Judge a run against its plan, not its exit code: the last thermo step of the log must be
+    `total_steps` and each dump `name -> (frames, last step)` must hold exactly that many frames
+    ending at that step. Otherwise crash.json is written and LiggghtsError raised."""
+    workdir = Path(workdir)
+    log = workdir / "log.liggghts"
+    problems = []
+    steps = thermo_table(log).get("Step", []) if log.exists() else []
+    last = int(steps[-1]) if steps else None
+    if last != total_steps:
+        problems.append(f"unfinished: the log's last thermo step is {last}, the plan has {total_steps} steps")
+    for name, (frames, last_step) in dumps.items():
+        found = dump_steps(workdir / name)
+        if len(found) != frames or (found and found[-1] != last_step):
+            problems.append(f"unfinished: {name} holds {len(found)} frames up to step "
+                            f"{found[-1] if found else None}, the plan has {frames} up to step {last_step}")
+    if problems:
+        record_crash(workdir, problems, last_thermo_step=last, planned_steps=total_steps)
 
 
 def thermo_table(log: str | Path) -> dict[str, list[float]]:

@@ -1,0 +1,122 @@
+"""An interrupted LIGGGHTS run is never accepted as finished (real engine, tiny configuration).
+
+LIGGGHTS answers SIGINT/SIGTERM by writing a forced restart file and exiting 0. These tests
+interrupt a real run during its sampling phase and check that `pbmdem dem` fails with a message
+saying so, tabulates nothing, and records the interruption (and the removed restart file) in
+crash.json.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import psutil
+import pytest
+import yaml
+
+pytestmark = pytest.mark.liggghts
+
+
+def _start_dem(root: Path, tmp_path: Path) -> tuple[subprocess.Popen, Path]:
+    cfg = yaml.safe_load((root / "config" / "test.yaml").read_text())
+    cfg["dem"]["sampling_time"] = 0.5  # a sampling window of a few seconds to interrupt
+    config = tmp_path / "config.yaml"
+    config.write_text(yaml.safe_dump(cfg))
+    out = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pbmdem.cli", "dem", "--config", str(config), "--rpm", "600",
+         "--distribution", "small", "--out", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    return proc, out
+
+
+def _wait_for_sampling(proc: subprocess.Popen, out: Path, timeout: float = 120.0) -> None:
+    """Until the contact dump has a few frames (LIGGGHTS is in its sampling run)."""
+    t0 = time.monotonic()
+    pairs = out / "post" / "pairs.dump"
+    while time.monotonic() - t0 < timeout:
+        if proc.poll() is not None:
+            raise AssertionError(f"the run ended before sampling:\n{proc.communicate()}")
+        if pairs.exists() and pairs.read_bytes().count(b"ITEM: TIMESTEP") >= 3:
+            return
+        time.sleep(0.02)
+    proc.kill()
+    raise AssertionError("the run did not reach its sampling phase")
+
+
+def _liggghts_child(proc: subprocess.Popen) -> psutil.Process:
+    for _ in range(100):
+        kids = [p for p in psutil.Process(proc.pid).children(recursive=True) if "liggghts" in p.name()]
+        if kids:
+            return kids[0]
+        time.sleep(0.05)
+    raise AssertionError("no LIGGGHTS process found under pbmdem dem")
+
+
+def _check_rejected(proc: subprocess.Popen, out: Path, interrupted_by: str | None) -> None:
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode != 0, stdout + stderr
+    assert "interrupted" in stderr and "No tables were written" in stderr, stderr
+    for table in ("collisions.csv", "wall_collisions.csv", "summary.json"):
+        assert not (out / table).exists(), table
+    crash = json.loads((out / "crash.json").read_text())
+    problems = " ".join(crash["problems"])
+    assert "forced restart" in problems, crash
+    if interrupted_by:
+        assert f"interrupted by {interrupted_by}" in problems, crash
+    # the restart file is removed and recorded
+    assert crash["forced_restart_files"] and all(r["removed"] for r in crash["forced_restart_files"]), crash
+    assert not list(out.glob("restart_forced_*"))
+    plan = json.loads((out / "plan.json").read_text())
+    step = crash["forced_restart_files"][0]["step"]
+    assert plan["settle_steps"] + plan["spinup_steps"] < step < (
+        plan["settle_steps"] + plan["spinup_steps"] + plan["sampling_steps"]), (step, plan)
+
+
+def test_sigterm_to_liggghts_during_sampling_is_a_failure(root, tmp_path):
+    """SIGTERM to LIGGGHTS alone (exit code 0, forced restart): the run is judged unfinished."""
+    proc, out = _start_dem(root, tmp_path)
+    try:
+        _wait_for_sampling(proc, out)
+        _liggghts_child(proc).send_signal(signal.SIGTERM)
+        _check_rejected(proc, out, interrupted_by=None)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+def test_sigterm_to_the_job_during_sampling_is_recorded(root, tmp_path):
+    """SIGTERM to every process of the job, as `scancel` or a time limit sends it."""
+    proc, out = _start_dem(root, tmp_path)
+    try:
+        _wait_for_sampling(proc, out)
+        _liggghts_child(proc)
+        os.killpg(proc.pid, signal.SIGTERM)
+        _check_rejected(proc, out, interrupted_by="SIGTERM")
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+def test_a_run_cut_short_without_a_forced_restart_is_a_failure(tiny_run, tmp_path):
+    """The plan check alone (no restart line, exit code 0): a log and dumps that stop early fail."""
+    import shutil
+
+    from pbmdem import dem, liggghts
+
+    run = tmp_path / "cut"
+    shutil.copytree(tiny_run["dir"], run)
+    plan = tiny_run["plan"]
+    dem.check_finished(plan, run)  # the finished run passes
+    pairs = run / "post" / "pairs.dump"
+    frames = pairs.read_bytes().split(b"ITEM: TIMESTEP\n")
+    pairs.write_bytes(b"ITEM: TIMESTEP\n".join(frames[:-1]))
+    with pytest.raises(liggghts.LiggghtsError, match="pairs.dump holds"):
+        dem.check_finished(plan, run)
+    assert "pairs.dump" in json.loads((run / "crash.json").read_text())["problems"][0]

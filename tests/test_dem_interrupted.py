@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -37,14 +38,20 @@ def _start_dem(root: Path, tmp_path: Path) -> tuple[subprocess.Popen, Path]:
 
 
 def _wait_for_sampling(proc: subprocess.Popen, out: Path, timeout: float = 120.0) -> None:
-    """Until the contact dump has a few frames (LIGGGHTS is in its sampling run)."""
+    """Until the contact dump has frames past the start of the sampling window (the run is made
+    in the staging folder beside `out`; its dumps start with the position history before the
+    window)."""
     t0 = time.monotonic()
-    pairs = out / "post" / "pairs.dump"
+    stage = out.parent / f".{out.name}.staging"
     while time.monotonic() - t0 < timeout:
         if proc.poll() is not None:
             raise AssertionError(f"the run ended before sampling:\n{proc.communicate()}")
-        if pairs.exists() and pairs.read_bytes().count(b"ITEM: TIMESTEP") >= 3:
-            return
+        pairs, plan = stage / "post" / "pairs.dump", stage / "plan.json"
+        if pairs.exists() and plan.exists():
+            p = json.loads(plan.read_text())
+            steps = [int(s) for s in re.findall(rb"ITEM: TIMESTEP\n(\d+)\n", pairs.read_bytes())]
+            if steps and steps[-1] > p["settle_steps"] + p["spinup_steps"] + 3 * p["collision_interval"]:
+                return
         time.sleep(0.02)
     proc.kill()
     raise AssertionError("the run did not reach its sampling phase")

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import yaml
 
-from pbmdem import collisions, dem
+from pbmdem import collisions, dem, geometry
 from pbmdem.config import ConfigError, load_config, validate
 
 
@@ -120,7 +120,8 @@ def test_nan_in_a_real_contact_dump_fails_the_tabulation(tiny_run, tmp_path):
     lines[k] = f"{parts[0]} {parts[1]} nan"
     (post / "pairs.dump").write_text("\n".join(lines) + "\n")
     with pytest.raises(collisions.DumpFormatError, match="pairs.dump: non-finite value nan in column 3"):
-        collisions.tabulate_run(post, tiny_run["plan"])
+        collisions.tabulate_run(post, tiny_run["plan"], geometry.bowl_from_config(tiny_run["config"]),
+                                geometry.impeller_from_config(tiny_run["config"]))
 
 
 # ----------------------------------------------------------------------------- defect 5: operating-point ids
@@ -254,7 +255,7 @@ def test_pbm_cli_with_the_ann_kernel_reports_out_of_domain_use(small_surrogate, 
                  str(small_surrogate), "--rpm", "5000", "--distribution", "small", "--out", str(out)])
     assert code == 0
     err = capsys.readouterr().err
-    assert "outside its training domain" in err and "5000" in err
+    assert "outside its training domain" in err and "tip_speed" in err  # 5000 rpm: tip speed far out
     domain = json.loads((out / "run.json").read_text())["surrogate_domain"]
     assert domain["out_of_domain_evaluations"] == domain["surrogate_evaluations"] > 0
     assert any("rpm" in feature or "tip" in feature for feature in domain["out_of_domain_by_feature"])

@@ -14,6 +14,8 @@ out whole DEM runs (``point_id`` groups), so no run is on both sides of a split.
 
 from __future__ import annotations
 
+import logging
+
 import warnings
 from collections.abc import Sequence
 
@@ -240,6 +242,10 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
                 "rank": np.asarray(res["rank_test_score"], dtype=int),
             })
             best_score = float(np.sqrt(-search.best_score_))
+            for row in results.itertuples():
+                logging.getLogger(__name__).info(
+                    "hyperparameter candidate hidden_layer_sizes=%s alpha=%g: RMSE %.4f (log10) over %d grouped "
+                    "folds, rank %d", row.hidden_layer_sizes, row.alpha, row.rmse_log10, len(splits), row.rank)
         else:
             best = {k: v[0] for k, v in grid.items()}
             results = pd.DataFrame({

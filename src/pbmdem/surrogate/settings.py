@@ -18,8 +18,8 @@ DEFAULTS_PATH = _REPO / "config" / "config.yaml"  # its surrogate: section holds
 
 #: Same values as the surrogate: section of config/config.yaml (a test keeps them equal).
 DEFAULTS: dict = {
-    "hidden_layer_sizes": [[4], [8], [8, 8]],
-    "alpha": [0.001, 0.01, 0.1, 1.0],
+    "hidden_layer_sizes": [[8], [8, 8]],
+    "alpha": [0.01, 0.1, 1.0],
     "ensemble_size": 5,
     "seeds": [0, 1, 2, 3, 4],
     "random_state": 0,

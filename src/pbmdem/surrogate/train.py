@@ -25,13 +25,13 @@ def _write_csv(frame: pd.DataFrame, path: Path) -> None:
     atomic_write(path, lambda tmp: frame.to_csv(tmp, index=False, float_format="%.6g"))
 
 
-def _read_table(table, what: str) -> tuple[pd.DataFrame, str]:
+def _read_table(table, what: str, columns=()) -> tuple[pd.DataFrame, str]:
+    """A table given as a frame or a CSV path (errors name the file: pbmdem.readers)."""
+    from pbmdem.readers import read_table
+
     if isinstance(table, pd.DataFrame):
         return table, "<DataFrame>"
-    try:
-        return pd.read_csv(table), str(table)
-    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
-        raise ValueError(f"cannot read the {what} {table}: {exc}") from exc
+    return read_table(table, what, columns=columns), str(table)
 
 
 def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | os.PathLike,
@@ -53,7 +53,7 @@ def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | 
     metrics_path = Path(metrics_path) if metrics_path else out / "metrics.csv"
     parity_path = Path(parity_path) if parity_path else out / "parity.png"
     settings = resolve_settings(settings)
-    frame, source = _read_table(table, "collision table")
+    frame, source = _read_table(table, "collision table", columns=("point_id",))
     if "point_id" not in frame:
         raise ValueError(f"collision table {source} lacks column 'point_id'")
     log.info("collision table %s: %d rows, %d runs", source, len(frame), frame["point_id"].nunique())

@@ -86,15 +86,24 @@ def _job_counts(text: str) -> dict[str, int]:
 def _cancel_in_sampling(proc: subprocess.Popen, workdir: Path, env: dict, timeout: float = 500) -> str:
     """Wait until the DEM point CANCEL is in its sampling phase, then scancel its SLURM job."""
     rpm, dist = CANCEL
-    pairs = workdir / "results" / "dem" / f"rpm{rpm}_{dist}" / "post" / "pairs.dump"
-    logs = workdir / "results" / "logs" / "slurm" / "rule_dem_point" / f"{rpm}_{dist}"
+    # the run is made in a staging folder beside rep0/; its dumps begin with the position history
+    stage = workdir / "results" / "dem" / f"rpm{rpm}_{dist}" / ".rep0.staging"
+    logs = workdir / "results" / "logs" / "slurm" / "rule_dem_point"
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout:
         if proc.poll() is not None:
             raise AssertionError("the workflow ended before the DEM job could be cancelled:\n"
                                  + proc.stdout.read() + proc.stderr.read())
-        if pairs.exists() and pairs.read_bytes().count(b"ITEM: TIMESTEP") >= 3 and list(logs.glob("*.log")):
-            jobid = sorted(logs.glob("*.log"))[-1].stem
+        pairs, plan = stage / "post" / "pairs.dump", stage / "plan.json"
+        job_logs = sorted(logs.glob(f"{rpm}_{dist}*/*.log"))
+        if pairs.exists() and plan.exists() and job_logs:
+            p = json.loads(plan.read_text())
+            steps = [int(s) for s in re.findall(rb"ITEM: TIMESTEP\n(\d+)\n", pairs.read_bytes())]
+            in_window = steps and steps[-1] > p["settle_steps"] + p["spinup_steps"] + 3 * p["collision_interval"]
+        else:
+            in_window = False
+        if in_window:
+            jobid = job_logs[-1].stem
             subprocess.run(["scancel", jobid], env=env, check=True, timeout=30)
             return jobid
         time.sleep(0.1)
@@ -109,6 +118,7 @@ def test_tiny_workflow_through_the_slurm_profile(cluster, root, tmp_path):
     # a sampling window long enough to cancel a job inside it (the tiny one lasts ~0.3 s)
     cfg["dem"]["sampling_time"] = 0.08
     cfg["validation"]["rpm"] = [600]  # one coupled loop (2-rank jobs take the whole 2-core node)
+    cfg["dem"]["replicates"] = 1  # one run per point keeps the cluster test short
     configfile = workdir / "config.yaml"
     configfile.write_text(yaml.safe_dump(cfg))
     profile = ["--profile", str(root / "profiles" / "slurm"), *FAST]
@@ -130,7 +140,7 @@ def test_tiny_workflow_through_the_slurm_profile(cluster, root, tmp_path):
     assert re.search(rf"Error in rule dem_point:.*?SLURM-jobid.*?{jobid}|{jobid}.*?(CANCELLED|failed)", out,
                      re.DOTALL), out[-5000:]
     res = workdir / "results"
-    cancelled = res / "dem" / f"rpm{CANCEL[0]}_{CANCEL[1]}"
+    cancelled = res / "dem" / f"rpm{CANCEL[0]}_{CANCEL[1]}" / "rep0"
     for table in ("collisions.csv", "wall_collisions.csv", "summary.json"):
         assert not (cancelled / table).exists(), f"{table} was written from a cancelled run"
     assert not (res / "dem" / "collisions.csv").exists()  # nothing aggregated from the grid
@@ -139,7 +149,7 @@ def test_tiny_workflow_through_the_slurm_profile(cluster, root, tmp_path):
     finished = [(r, d) for r in cfg["grid"]["impeller_rpm"] for d in cfg["grid"]["size_distributions"]
                 if (f"{r}", d) != CANCEL]
     for rpm, dist in finished:  # keep-going: the other points finished
-        assert (res / "dem" / f"rpm{rpm}_{dist}" / "collisions.csv").exists(), (rpm, dist)
+        assert (res / "dem" / f"rpm{rpm}_{dist}" / "rep0" / "collisions.csv").exists(), (rpm, dist)
 
     # 4. the rerun redoes the cancelled point and what depends on it, nothing else
     dry = _run(_snakemake_cmd(root, workdir, configfile, *profile, "-n", "--quiet", "rules"), env, 120, workdir)
@@ -158,7 +168,7 @@ def test_tiny_workflow_through_the_slurm_profile(cluster, root, tmp_path):
 
     # 5. the DEM points ran as 2-rank MPI jobs under SLURM's launcher
     for rpm, dist in [*finished, CANCEL]:
-        run = res / "dem" / f"rpm{rpm}_{dist}"
+        run = res / "dem" / f"rpm{rpm}_{dist}" / "rep0"
         assert json.loads((run / "plan.json").read_text())["mpi_ranks"] == RANKS
         assert re.search(rf"Loop time of .* on {RANKS} procs", (run / "log.liggghts").read_text())
     slurm_logs = sorted((res / "logs" / "slurm" / "rule_dem_point").glob("*/*.log"))

@@ -233,7 +233,7 @@ def build_report(*, validation_dir, rpms, grid_rpm, runs, collisions, metrics, p
         if "fold" in met.columns else met
     parts += ["<h2>Surrogate (held-out DEM runs)</h2>", _table(summary),
               f"<p>Selected: {html_escape(json.dumps(meta.get('best_params', meta.get('params', {}))))}; "
-              f"training runs: {len(meta.get('training_groups', meta.get('training_runs', [])))}.</p>",
+              f"training runs: {len(meta.get('training_point_ids', []))}.</p>",
               f"<img src='{_img_file(parity)}'>"]
     facts = runs_df[[c for c in ("point_id", "n_particles", "timestep", "steps", "collision_interval",
                                  "total_collisions", "liggghts_wall_time_s", "particle_steps_per_s",

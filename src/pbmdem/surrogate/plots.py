@@ -14,6 +14,15 @@ from .features import TARGET_NAME
 MODEL_LABELS = {"mlp": "MLP ensemble", "hgb": "gradient boosting", "physical": "physical scaling"}
 
 
+
+def _square_log_axes(ax, lo: float, hi: float) -> None:
+    """Log-log parity axes with the same range on both."""
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(lo, hi)
+    ax.set_aspect("equal")
+
 def parity_plot(predictions: pd.DataFrame, path: str | os.PathLike, metrics: pd.DataFrame | None = None,
                 models=("mlp", "hgb", "physical"), dpi: int = 120) -> Path:
     """Write a PNG with one panel per model: held-out DEM vs predicted frequency per pair."""
@@ -47,11 +56,7 @@ def parity_plot(predictions: pd.DataFrame, path: str | os.PathLike, metrics: pd.
             sel = sel_v & (predictions["rpm"].to_numpy() == r)
             ax.plot(obs_v[sel], pred_v[sel], "o", ms=4, color=colours[r], alpha=0.85, label=f"{r:g} rpm")
         ax.plot([vlo, vhi], [vlo, vhi], "k-", lw=0.8)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlim(vlo, vhi)
-        ax.set_ylim(vlo, vhi)
-        ax.set_aspect("equal")
+        _square_log_axes(ax, vlo, vhi)
         ax.set_xlabel("DEM median impact speed (m/s, log-normal fit)")
         ax.set_ylabel("predicted (held-out runs) (m/s)")
         title = f"{MODEL_LABELS.get(m, m)}: impact speed"
@@ -76,11 +81,7 @@ def parity_plot(predictions: pd.DataFrame, path: str | os.PathLike, metrics: pd.
         ax.plot([lo, hi], [lo, hi], "k-", lw=0.8)
         ax.plot([lo, hi], [2 * lo, 2 * hi], "k:", lw=0.6)
         ax.plot([lo, hi], [lo / 2, hi / 2], "k:", lw=0.6)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlim(lo, hi)
-        ax.set_ylim(lo, hi)
-        ax.set_aspect("equal")
+        _square_log_axes(ax, lo, hi)
         ax.set_xlabel("DEM encounter frequency per pair (1/s)")
         ax.set_ylabel("predicted (held-out runs) (1/s)")
         title = MODEL_LABELS.get(m, m)

@@ -32,6 +32,12 @@ def test_speed_response_mean_and_se():
 def test_flow_development_flags_a_drift():
     runs = pd.DataFrame({"point_id": "p", "rpm": 100.0, "distribution": "f", "replicate": [0, 1, 2],
                          "encounters_first_half": [100, 104, 98], "encounters_second_half": [101, 99, 103]})
-    assert flow_development(runs).within_error.iloc[0]
+    flow = flow_development(runs)
+    assert flow.within_error.iloc[0]
+    # means 100.67 and 101.0; SEs sqrt(var/3) of [100, 104, 98] and [101, 99, 103]
+    se1, se2 = np.std([100, 104, 98], ddof=1) / np.sqrt(3), np.std([101, 99, 103], ddof=1) / np.sqrt(3)
+    assert flow.half_z.iloc[0] == pytest.approx((101.0 - 302 / 3) / np.hypot(se1, se2))
     runs["encounters_second_half"] = [150, 155, 149]
     assert not flow_development(runs).within_error.iloc[0]
+    single = runs.iloc[:1].copy()  # one replicate: the Poisson error of the counts
+    assert flow_development(single).half_z.iloc[0] == pytest.approx(50 / np.sqrt(250))

@@ -272,7 +272,7 @@ def test_job_logs_show_progress(tiny_workflow):
     """DEM jobs log LIGGGHTS progress, the surrogate each CV fold, the coupled loops each interval."""
     workdir, _ = tiny_workflow
     logs = workdir / "results" / "logs"
-    dem_log = (logs / "dem" / "rpm600_small.log").read_text()
+    dem_log = (logs / "dem" / "rpm600_small_rep0.log").read_text()
     assert re.search(r"pbmdem.progress: DEM rpm600_small: \w[\w-]*, step \d+ of \d+ \(\d+ %\), \d+ particles", dem_log)
     assert "CV fold 1 of" in (logs / "train_surrogate.log").read_text()
     loop = (logs / "validation" / "pbm_dem_rpm600.log").read_text()
@@ -288,7 +288,7 @@ def test_a_manual_dem_run_on_a_finished_point_changes_nothing(tiny_workflow, roo
     """The README's `pbmdem dem` on a point the workflow finished is refused without --force, so
     Snakemake still has nothing to redo."""
     workdir, configfile = tiny_workflow
-    point = workdir / "results" / "dem" / "rpm600_small"
+    point = workdir / "results" / "dem" / "rpm600_small" / "rep0"
     before = {p: p.stat().st_mtime_ns for p in point.rglob("*")}
     proc = subprocess.run([sys.executable, "-m", "pbmdem.cli", "dem", "--config", str(configfile), "--rpm", "600",
                            "--distribution", "small"], cwd=workdir, capture_output=True, text=True, timeout=600)

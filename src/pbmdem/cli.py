@@ -1,6 +1,6 @@
 """The `pbmdem` command line.
 
-    pbmdem dem --config config/config.yaml --rpm 600 --distribution fine --out results/dem/rpm600_fine
+    pbmdem dem --config config/config.yaml --rpm 600 --distribution fine --out results/dem/rpm600_fine/rep0
     pbmdem view RUN_DIR [--step N] [--screenshot out.png]
     pbmdem pbm --config ... --kernel constant|table|ann ...
     pbmdem surrogate train|predict ...
@@ -22,7 +22,7 @@ def _dem(args: argparse.Namespace) -> int:
 
     rpm = check_rpm(args.rpm, "--rpm")
     cfg = load_config(args.config)
-    plan = plan_point(cfg, rpm, args.distribution)
+    plan = plan_point(cfg, rpm, args.distribution, replicate=args.replicate)
     if args.plan_only:
         print(json.dumps(plan.__dict__, indent=2))
         return 0
@@ -43,7 +43,8 @@ def build_parser() -> argparse.ArgumentParser:
     dem.add_argument("--config", required=True, help="workflow config (YAML)")
     dem.add_argument("--rpm", required=True, help="impeller speed (1/min), 0 < rpm <= 20000")
     dem.add_argument("--distribution", required=True, help="size distribution name from the config")
-    dem.add_argument("--out", default=None, help="run folder (default results/dem/<point id>)")
+    dem.add_argument("--replicate", type=int, default=0, help="replicate (insertion seeds), 0 .. dem.replicates-1")
+    dem.add_argument("--out", default=None, help="run folder (default results/dem/<point id>/rep<replicate>)")
     dem.add_argument("--plan-only", action="store_true", help="print the run plan and stop")
     dem.add_argument("--force", action="store_true",
                      help="replace a finished run in the run folder (refused otherwise: it would make "
@@ -70,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
             from pbmdem.config import check_rpm
             from pbmdem.dem import point_id
 
-            args.out = f"results/dem/{point_id(check_rpm(args.rpm, '--rpm'), args.distribution)}"
+            args.out = f"results/dem/{point_id(check_rpm(args.rpm, '--rpm'), args.distribution)}/rep{args.replicate}"
         return int(args.func(args) or 0)
     except (ValueError, FileNotFoundError, RuntimeError, OSError) as exc:
         print(f"pbmdem: error: {exc}", file=sys.stderr)

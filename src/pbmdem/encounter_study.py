@@ -8,7 +8,7 @@ From the per-replicate tables of the grid (`results/dem/collisions_replicates.cs
   (encounters / (pairs x sampling time), summed over class pairs), each as the mean over
   replicates with its standard error; the raw new-contact rate beside them for comparison;
 * the flow-development check: the encounter rate in the first and second halves of the sampling
-  window, their relative difference and whether it lies within twice its replicate standard error.
+  window, their relative difference and whether the two agree within twice their replicate error.
 """
 
 from __future__ import annotations
@@ -62,16 +62,22 @@ def speed_response(replicates: pd.DataFrame) -> pd.DataFrame:
 
 
 def flow_development(runs: pd.DataFrame) -> pd.DataFrame:
-    """First vs second half of the sampling window per point: relative difference of the
-    encounter counts (second / first - 1), its replicate standard error, and `within_error` when
-    |mean| <= 2 SE (or, for a single replicate, when it is within the Poisson error)."""
+    """First vs second half of the sampling window per point.
+
+    `half_difference`: mean over replicates of (second / first - 1) with its standard error;
+    `half_z`: the difference of the replicate-mean counts of the two halves in units of their
+    combined replicate standard error, sqrt(SE_1^2 + SE_2^2) (for a single replicate, the Poisson
+    error of the counts); `within_error` when |half_z| <= 2, i.e. the two half-window rates agree
+    within their replicate error."""
     r = runs.copy()
     r["half_difference"] = r.encounters_second_half / r.encounters_first_half - 1.0
     out = _mean_se(r, ["distribution", "rpm", "point_id"], ["half_difference", "encounters_first_half",
                                                            "encounters_second_half"])
-    poisson = np.sqrt(1.0 / out.encounters_first_half + 1.0 / out.encounters_second_half)
-    err = out.half_difference_se.where(out.n_replicates > 1, poisson)
-    out["within_error"] = out.half_difference.abs() <= 2.0 * err
+    combined = np.sqrt(out.encounters_first_half_se ** 2 + out.encounters_second_half_se ** 2)
+    poisson = np.sqrt(out.encounters_first_half + out.encounters_second_half)
+    err = combined.where(out.n_replicates > 1, poisson)
+    out["half_z"] = (out.encounters_second_half - out.encounters_first_half) / err
+    out["within_error"] = out.half_z.abs() <= 2.0
     return out
 
 

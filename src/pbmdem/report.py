@@ -271,8 +271,9 @@ def speed_study_section(paths: dict) -> list[str]:
         "(docs/dem.md). Mean over DEM replicates (insertion seeds) with standard errors.</p>",
         _table(shown), f"<img src='{_img_file(paths['plot'])}'>",
         f"<p>Flow development: the encounter rates of the first and second halves of the sampling window "
-        f"agree within twice their replicate standard error at {ok} of {len(flow)} operating points.</p>",
-        _table(flow[["distribution", "rpm", "half_difference", "half_difference_se", "within_error"]]),
+        f"agree within twice their replicate standard error at {ok} of {len(flow)} operating points "
+        f"(half_z: their difference in combined standard errors).</p>",
+        _table(flow[["distribution", "rpm", "half_difference", "half_difference_se", "half_z", "within_error"]]),
         "<h3>Impact-velocity distributions</h3>", f"<img src='{_img_file(paths['velocity_plot'])}'>",
     ]
 

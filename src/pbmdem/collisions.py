@@ -136,11 +136,6 @@ def contact_starts(frame: np.ndarray, key: np.ndarray, stride: int = 1) -> tuple
     return begins, prev
 
 
-def new_contacts(frame: np.ndarray, key: np.ndarray, stride: int = 1) -> np.ndarray:
-    """Boolean mask of rows that are contacts beginning at their frame (see contact_starts)."""
-    return contact_starts(frame, key, stride)[0]
-
-
 def read_classes(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """Particle ids and 0-based size classes (atom type - 1) from the class-map dump's first frame."""
     snaps = read_dump(path, 3)
@@ -260,6 +255,14 @@ def pair_counts(n: np.ndarray) -> np.ndarray:
     pairs = np.outer(n, n)
     np.fill_diagonal(pairs, n * (n - 1) / 2.0)
     return pairs
+
+
+def pair_weighted_mean(matrix: np.ndarray, n: np.ndarray) -> float:
+    """Mean of a symmetric (K, K) per-pair frequency over all distinct particle pairs of a bed
+    with n particles per class (the bed's mean frequency per pair)."""
+    pairs = pair_counts(n)
+    iu = np.triu_indices(len(pairs))
+    return float((np.asarray(matrix, float)[iu] * pairs[iu]).sum() / pairs[iu].sum())
 
 
 def velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:

@@ -41,6 +41,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.atomic import atomic_path, write_csv, write_json
+from pbmdem.collisions import pair_weighted_mean
 from pbmdem.impact import EncounterRates
 from pbmdem.readers import read_json, read_table
 
@@ -413,15 +414,13 @@ def run_loop(cfg: dict, provider, rpm: float, distribution: str, outdir: str | P
         t_pbm = time.perf_counter()
         result = model.run(t0, t1, state, output_times=times)
         pbm_wall = time.perf_counter() - t_pbm
-        pairs = np.outer(sample.counts, sample.counts).astype(float)
-        np.fill_diagonal(pairs, np.asarray(sample.counts) * (np.asarray(sample.counts) - 1) / 2.0)
         iu = np.triu_indices(len(sample.counts))
         info = {
             "interval": k, "t_start": t0, "t_end": t1, "rpm": rpm, "method": provider.name,
             "classes": len(sample.counts), "class_diameters": json.dumps(sample.diameters),
             "class_counts": json.dumps(sample.counts), "sample_particles": sample.n_particles,
             "class_frequencies": json.dumps(matrix[iu].tolist()),
-            "mean_frequency_per_pair": float((matrix[iu] * pairs[iu]).sum() / pairs[iu].sum()),
+            "mean_frequency_per_pair": pair_weighted_mean(matrix, sample.counts),
             "provider_wall_time_s": provider_wall, "pbm_wall_time_s": pbm_wall, **extra,
         }
         _save_interval(folder, result, sample, matrix, info)
@@ -492,11 +491,7 @@ def initial_frequency(cfg: dict, model_path: str | Path, rpm: float, distributio
         c = surrogate.frequency_matrix(np.asarray(sample.diameters), np.asarray(sample.counts, float), rpm)
     if out_of_domain is not None:
         out_of_domain.extend(found)
-    n = np.asarray(sample.counts, float)
-    pairs = np.outer(n, n)
-    np.fill_diagonal(pairs, n * (n - 1) / 2.0)
-    iu = np.triu_indices(len(n))
-    return float((c[iu] * pairs[iu]).sum() / pairs[iu].sum())
+    return pair_weighted_mean(c, sample.counts)
 
 
 def sample_settings(validation: dict) -> dict:

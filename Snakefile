@@ -4,7 +4,7 @@
 import os
 import sys
 
-from snakemake.utils import min_version, validate
+from snakemake.utils import min_version
 
 min_version("8.0")
 
@@ -12,7 +12,9 @@ min_version("8.0")
 # a conda environment from envs/, or a cluster job): src/ goes on the module path.
 _SRC = os.path.join(workflow.basedir, "src")
 sys.path.insert(0, _SRC)
-os.environ.update(PYTHONPATH=os.pathsep.join(p for p in (_SRC, os.environ.get("PYTHONPATH")) if p))
+os.environ.update(
+    PYTHONPATH=os.pathsep.join(p for p in (_SRC, os.environ.get("PYTHONPATH")) if p)
+)
 
 
 # The default configuration, unless one is given with --configfile/--config (Snakemake would
@@ -22,20 +24,20 @@ if not config:
     configfile: "config/config.yaml"
 
 
-# The same tidy list of every error (key, value, allowed) as the pbmdem CLI, and duplicate keys
-# in the config files refused (YAML would silently keep the last one); then Snakemake's own
-# validation, which only fills in the schema's defaults once the config is known to be valid.
-from pbmdem.config import ConfigError, load_yaml
-from pbmdem.config import validate as validate_config
+# The settings layer of pbmdem, the same path as the pbmdem command line: duplicate keys in the
+# config files refused, the schema checked once with its defaults filled in, the checks a schema
+# cannot express, every error listed tidily (key, value, allowed). CFG is the typed config;
+# `config` is completed in place so that rule scripts read the same values.
+from pbmdem.config import Config, ConfigError, load_yaml
 
 try:
     for _path in workflow.configfiles:
         load_yaml(_path, "config file")
-    validate_config(config)
+    CFG = Config.from_mapping(config)
 except ConfigError as _exc:
     print(f"pbmdem: error: {_exc}", file=sys.stderr)
     sys.exit(1)
-validate(config, "workflow/schemas/config.schema.yaml")
+config.update(CFG.to_dict())
 
 
 include: "rules/common.smk"

@@ -12,14 +12,14 @@ agree within their combined standard error x 2. Prints figures, asserts nothing.
 from __future__ import annotations
 
 import argparse
-import copy
 import math
 import statistics
 import tempfile
 import time
 
-from pbmdem import dem
 from pbmdem.config import load_config
+from pbmdem.dem.plan import plan_point
+from pbmdem.dem.run import run_point
 
 
 def main() -> None:
@@ -34,12 +34,13 @@ def main() -> None:
     results: dict[int, list[tuple[float, int]]] = {}
     for ranks in args.ranks:
         for seed in args.seeds:
-            cfg = copy.deepcopy(base)
-            cfg["dem"]["mpi_ranks"], cfg["dem"]["seed"] = ranks, seed
-            plan = dem.plan_point(cfg, args.rpm, args.distribution)
+            point = base.dem_point(args.distribution)
+            point = point.replace(dem=point.dem.replace(seed=seed))
+            plan = plan_point(point, args.rpm)
+            execution = base.dem_execution.replace(mpi_ranks=ranks, timeout=3600.0)
             with tempfile.TemporaryDirectory() as tmp:
                 t0 = time.perf_counter()
-                summary = dem.run_point(cfg, plan, tmp, timeout=3600)
+                summary = run_point(point, plan, tmp, execution)
                 wall = time.perf_counter() - t0
             results.setdefault(ranks, []).append((summary["liggghts_wall_time_s"], summary["total_collisions"]))
             print(f"ranks {ranks} seed {seed}: {plan.n_particles} particles, LIGGGHTS {summary['liggghts_wall_time_s']:.1f} s "

@@ -17,7 +17,6 @@ grid speed, feed `fine`) and a few replicates, it runs LIGGGHTS and reports:
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import sys
 import tempfile
@@ -29,16 +28,17 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from pbmdem import collisions, dem, geometry  # noqa: E402
 from pbmdem.config import load_config  # noqa: E402
+from pbmdem.dem import collisions  # noqa: E402
+from pbmdem.dem.plan import plan_point  # noqa: E402
+from pbmdem.dem.run import run_point  # noqa: E402
 
 
-def run(cfg, rpm, dist, replicate, workdir, keep=True):
-    cfg = copy.deepcopy(cfg)
-    cfg["dem"]["keep_contact_dumps"] = keep
-    plan = dem.plan_point(cfg, rpm, dist, replicate=replicate)
+def run(cfg, point, rpm, replicate, workdir, keep=True):
+    point = point.replace(dem=point.dem.replace(keep_contact_dumps=keep))
+    plan = plan_point(point, rpm, replicate=replicate)
     t0 = time.perf_counter()
-    summary = dem.run_point(cfg, plan, workdir, timeout=7200)
+    summary = run_point(point, plan, workdir, cfg.dem_execution.replace(timeout=7200.0))
     summary["study_wall_time_s"] = time.perf_counter() - t0
     return plan, summary
 
@@ -62,14 +62,15 @@ def main(argv=None):
     ap.add_argument("--json", help="write the figures to this file too")
     args = ap.parse_args(argv)
     cfg = load_config(args.config)
-    speeds = args.rpm or [min(cfg["grid"]["impeller_rpm"]), max(cfg["grid"]["impeller_rpm"])]
+    speeds = args.rpm or [min(cfg.grid.impeller_rpm), max(cfg.grid.impeller_rpm)]
+    point = cfg.dem_point(args.distribution)
     results = {}
     for rpm in speeds:
         res = results.setdefault(f"{rpm:g}", {})
         with tempfile.TemporaryDirectory() as tmp:
             base_raw, base_enc, halves, history, fine, coarse, stiff_raw, stiff_enc = ([] for _ in range(8))
             for rep in range(args.replicates):
-                plan, s = run(cfg, rpm, args.distribution, rep, Path(tmp) / f"base{rep}", keep=False)
+                plan, s = run(cfg, point, rpm, rep, Path(tmp) / f"base{rep}", keep=False)
                 base_raw.append(s["collisions_every_snapshot"])
                 base_enc.append(s["encounters_every_snapshot"])
                 halves.append((s["encounters_first_half"], s["encounters_second_half"]))
@@ -77,16 +78,15 @@ def main(argv=None):
                 print(f"[{rpm:g} rpm rep {rep}] {plan.n_particles} particles, {s['study_wall_time_s']:.0f} s, "
                       f"raw {base_raw[-1]}, encounters {base_enc[-1]}", flush=True)
                 # half intervals on the same seed: every snapshot = h/2, every second = h
-                half = copy.deepcopy(cfg)
-                half["dem"]["collision_interval"] = max(1, plan.collision_interval // 2)
-                plan_h, _ = run(half, rpm, args.distribution, rep, Path(tmp) / f"half{rep}")
+                half = point.replace(dem=point.dem.replace(collision_interval=max(1, plan.collision_interval // 2)))
+                plan_h, _ = run(cfg, half, rpm, rep, Path(tmp) / f"half{rep}")
                 analysis = collisions.RunAnalysis(Path(tmp) / f"half{rep}" / "post", plan_h,
-                                                  geometry.bowl_from_config(half), geometry.impeller_from_config(half))
+                                                  cfg.granulator.bowl, cfg.granulator.impeller)
                 fine.append(int(analysis.pair_events(stride=1)[0].encounter.sum()))
                 coarse.append(int(analysis.pair_events(stride=2)[0].encounter.sum()))
-                stiff = copy.deepcopy(cfg)
-                stiff["material"]["youngs_modulus"] *= 10.0
-                _, s10 = run(stiff, rpm, args.distribution, rep, Path(tmp) / f"stiff{rep}", keep=False)
+                stiff = point.replace(material=point.material.replace(
+                    youngs_modulus=10.0 * point.material.youngs_modulus))
+                _, s10 = run(cfg, stiff, rpm, rep, Path(tmp) / f"stiff{rep}", keep=False)
                 stiff_raw.append(s10["collisions_every_snapshot"])
                 stiff_enc.append(s10["encounters_every_snapshot"])
         rel = lambda a, b: (np.mean(b) - np.mean(a)) / np.mean(a)  # noqa: E731

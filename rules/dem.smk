@@ -4,21 +4,21 @@
 
 rule dem_point:
     input:
-        template=os.path.join(workflow.basedir, "liggghts_templates", "granulator.in"),
+        template=TEMPLATE,
     output:
         table=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/collisions.csv",
         walls=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/wall_collisions.csv",
         velocities=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/impact_velocity.csv",
         summary=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/summary.json",
     params:
-        point=lambda wc: canonical(point_config(config, wc.dist)),
+        point=dem_point_params,
         run_dir=lambda wc, output: os.path.dirname(output.table),
     # MPI ranks of LIGGGHTS: dem.mpi_ranks (threads, for a local run), or the `tasks` resource a
     # cluster profile sets (with an `mpi` launcher such as "srun --mpi=pmix", and threads 1);
     # none of them is a param, so changing them reruns nothing that has finished
-    threads: config["dem"].get("mpi_ranks", 1)
+    threads: DEM_RANKS
     resources:
-        tasks=config["dem"].get("mpi_ranks", 1),
+        tasks=DEM_RANKS,
     log:
         f"{RESULTS}/logs/dem/rpm{{rpm}}_{{dist}}_rep{{rep}}.log",
     conda:

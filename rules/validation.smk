@@ -1,16 +1,21 @@
 # Validation: PBM-DEM (LIGGGHTS at every coupling interval) vs PBM-ANN vs PBM-constant, the
-# PBM-ANN impeller-speed sweep, and the self-contained HTML report.
+# PBM-ANN impeller-speed sweep, and the report. The params of the loops are what one speed's loop
+# uses (CFG.coupled_loop()): neither the list of validation speeds nor the sweep.
+
+
 rule pbm_dem_coupled:
+    input:
+        template=TEMPLATE,
     output:
         **method_outputs("pbm_dem"),
         intervals=f"{RESULTS}/validation/rpm{{rpm}}/pbm_dem/intervals.csv",
     params:
-        config=lambda wc: loop_config(),
+        loop=loop_params,
         method="dem",
         outdir=lambda wc, output: os.path.dirname(output.summary),
-    threads: config["dem"].get("mpi_ranks", 1)
+    threads: DEM_RANKS
     resources:
-        tasks=config["dem"].get("mpi_ranks", 1),
+        tasks=DEM_RANKS,
     log:
         f"{RESULTS}/logs/validation/pbm_dem_rpm{{rpm}}.log",
     conda:
@@ -26,7 +31,7 @@ rule pbm_ann_coupled:
         **method_outputs("pbm_ann"),
         intervals=f"{RESULTS}/validation/rpm{{rpm}}/pbm_ann/intervals.csv",
     params:
-        config=lambda wc: loop_config(),
+        loop=loop_params,
         method="ann",
         outdir=lambda wc, output: os.path.dirname(output.summary),
     log:
@@ -43,7 +48,7 @@ rule pbm_constant_calibrated:
     output:
         **method_outputs("pbm_constant"),
     params:
-        config=lambda wc: loop_config(),
+        loop=loop_params,
         method="constant",
         outdir=lambda wc, output: os.path.dirname(output.summary),
     log:
@@ -61,7 +66,8 @@ rule rpm_sweep:
         table=f"{RESULTS}/validation/rpm_sweep.csv",
         plot=f"{RESULTS}/validation/rpm_sweep.png",
     params:
-        config=lambda wc: {**loop_config(), "validation": canonical(VALIDATION)},
+        loop=loop_params,
+        sweep=lambda wc: CFG.validation.sweep.to_dict(),
     log:
         f"{RESULTS}/logs/validation/rpm_sweep.log",
     conda:
@@ -84,17 +90,17 @@ rule report:
         model=MODEL,
         sweep=f"{RESULTS}/validation/rpm_sweep.csv",
         sweep_plot=f"{RESULTS}/validation/rpm_sweep.png",
-        loops=expand(f"{RESULTS}/validation/rpm{{rpm}}/{{method}}/summary.csv", rpm=VAL_RPMS,
-                     method=["pbm_dem", "pbm_ann", "pbm_constant"]),
-        intervals=expand(f"{RESULTS}/validation/rpm{{rpm}}/{{method}}/intervals.csv", rpm=VAL_RPMS,
-                         method=["pbm_dem", "pbm_ann"]),
+        summaries=validation_files("summary.csv"),
+        bins=validation_files("final_bins.csv"),
+        timings=validation_files("timing.json"),
+        intervals=validation_files("intervals.csv", ["pbm_dem", "pbm_ann"]),
     output:
         html=f"{RESULTS}/report/report.html",
         comparison=f"{RESULTS}/report/comparison.csv",
     params:
         validation_dir=lambda wc, input: os.path.dirname(input.sweep),
         rpms=VAL_RPMS,
-        grid_rpm=config["grid"]["impeller_rpm"],
+        grid_rpm=list(CFG.grid.impeller_rpm),
     log:
         f"{RESULTS}/logs/report.log",
     conda:

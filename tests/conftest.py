@@ -1,4 +1,9 @@
-"""Shared fixtures. DEM fixtures run the real LIGGGHTS engine on the tiny test configuration."""
+"""Shared fixtures. DEM fixtures run the real LIGGGHTS engine on the tiny test configuration.
+
+Configurations come through the settings layer like every other path: `tiny_config` and
+`default_config` are typed `pbmdem.config.Config` objects; a test that needs an edited
+configuration edits the completed mapping (`tiny_mapping`) and builds it with `config_of`.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from pbmdem.config import load_config
+from pbmdem.config import Config, load_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -18,35 +23,46 @@ def pytest_collection_modifyitems(config, items):
         raise pytest.UsageError("LIGGGHTS is not installed: run scripts/bootstrap.sh first (README command 2)")
 
 
+def config_of(mapping: dict) -> Config:
+    """A Config from a (possibly edited) configuration mapping, validated as in the workflow."""
+    return Config.from_mapping(mapping)
+
+
 @pytest.fixture(scope="session")
 def root() -> Path:
     return ROOT
 
 
 @pytest.fixture(scope="session")
-def _tiny_config() -> dict:
+def tiny_config() -> Config:
+    """config/test.yaml as a typed Config (frozen: tests cannot modify it)."""
     return load_config(ROOT / "config" / "test.yaml")
 
 
 @pytest.fixture
-def tiny_config(_tiny_config) -> dict:
-    """A fresh deep copy of config/test.yaml (tests may modify it)."""
-    return copy.deepcopy(_tiny_config)
+def tiny_mapping(tiny_config) -> dict:
+    """A fresh copy of config/test.yaml's completed mapping (defaults filled), to edit."""
+    return copy.deepcopy(tiny_config.to_dict())
 
 
 @pytest.fixture(scope="session")
-def default_config() -> dict:
+def default_config() -> Config:
     return load_config(ROOT / "config" / "config.yaml")
 
 
-@pytest.fixture(scope="session")
-def tiny_run(tmp_path_factory, _tiny_config):
-    """One real LIGGGHTS run of the tiny granulator (600 rpm, 'small'), contact dumps kept."""
-    from pbmdem import dem
+@pytest.fixture
+def default_mapping(default_config) -> dict:
+    return copy.deepcopy(default_config.to_dict())
 
-    cfg = copy.deepcopy(_tiny_config)
-    cfg["dem"]["keep_contact_dumps"] = True
-    plan = dem.plan_point(cfg, 600, "small")
+
+@pytest.fixture(scope="session")
+def tiny_run(tmp_path_factory, tiny_config):
+    """One real LIGGGHTS run of the tiny granulator (600 rpm, 'small'), contact dumps kept."""
+    from pbmdem.dem import plan_point, run_point
+
+    point = tiny_config.dem_point("small")
+    point = point.replace(dem=point.dem.replace(keep_contact_dumps=True))
+    plan = plan_point(point, 600)
     run_dir = tmp_path_factory.mktemp("tiny_run")
-    summary = dem.run_point(cfg, plan, run_dir, timeout=600)
-    return {"dir": run_dir, "plan": plan, "summary": summary, "config": cfg}
+    summary = run_point(point, plan, run_dir, tiny_config.dem_execution.replace(timeout=600))
+    return {"dir": run_dir, "plan": plan, "summary": summary, "config": tiny_config, "point": point}

@@ -5,8 +5,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pbmdem import collisions
-from pbmdem.collisions import DumpFormatError, read_dump, window_starts
+from pbmdem.atomic import write_csv
+from pbmdem.dem import collisions
+from pbmdem.dem.grid_tables import aggregate
+from pbmdem.dem.collisions import window_starts
+from pbmdem.dem.dumps import DumpFormatError, read_dump
 
 
 def count_pair_collisions(snaps, class_of, k, stride=1):
@@ -159,8 +162,8 @@ def test_replicate_mean_and_standard_error(tmp_path):
     paths = []
     for rep, row in enumerate(rows):
         paths.append(tmp_path / f"rep{rep}.csv")
-        collisions.write_csv(paths[-1], __import__("pandas").DataFrame([row]))
-    grid = collisions.aggregate(paths, tmp_path / "grid.csv")
+        write_csv(paths[-1], __import__("pandas").DataFrame([row]))
+    grid = aggregate(paths, tmp_path / "grid.csv")
     assert grid["n_replicates"].tolist() == [3]
     assert grid["encounters"].tolist() == [4.0]
     assert grid["encounter_frequency_per_pair"].iloc[0] == pytest.approx(0.2)

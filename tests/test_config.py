@@ -7,23 +7,22 @@ import sys
 import pytest
 import yaml
 
-from pbmdem.config import ConfigError, load_config, validate
+from pbmdem.config import Config, ConfigError, load_config
 
 
-def bad(cfg, edit):
-    cfg = copy.deepcopy(cfg)
-    edit(cfg)
+def bad(cfg: Config, edit):
+    mapping = copy.deepcopy(cfg.to_dict())
+    edit(mapping)
     with pytest.raises(ConfigError) as info:
-        validate(cfg)
+        Config.from_mapping(mapping)
     return str(info.value)
 
 
 def test_default_and_tiny_configs_are_valid(default_config, tiny_config):
-    assert default_config["grid"]["impeller_rpm"]
-    assert len(default_config["grid"]["impeller_rpm"]) >= 3
-    assert len(default_config["grid"]["size_distributions"]) >= 3
-    for name in default_config["grid"]["size_distributions"]:
-        assert len(default_config["size_distributions"][name]["diameters"]) >= 3
+    assert len(default_config.grid.impeller_rpm) >= 3
+    assert len(default_config.grid.size_distributions) >= 3
+    for name in default_config.grid.size_distributions:
+        assert len(default_config.size_distributions[name].diameters) >= 3
 
 
 def test_wrong_type(default_config):
@@ -75,8 +74,8 @@ def test_injection_in_a_distribution_name_is_rejected(default_config):
     assert "does not match" in msg
 
 
-def test_snakemake_rejects_a_bad_config_before_running(tmp_path, root, default_config):
-    cfg = copy.deepcopy(default_config)
+def test_snakemake_rejects_a_bad_config_before_running(tmp_path, root, default_mapping):
+    cfg = default_mapping
     cfg["size_distributions"]["fine"]["diameters"][0] = -0.002
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(cfg))

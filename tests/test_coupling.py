@@ -7,13 +7,21 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pbmdem import coupling, liggghts
+from pbmdem import coupling
+from pbmdem.config import SampleRule
+from pbmdem.coupling.class_source import ClassFrequencySource
+from pbmdem.coupling.sample import DIAMETER_RESOLUTION
+from pbmdem.dem import engine
+
+
+def rule(max_classes=5, min_particles_per_class=20, max_particles=10_000):
+    return SampleRule(max_classes, min_particles_per_class, max_particles)
 
 
 def test_sample_conserves_number_and_volume_up_to_rounding():
     x = 1e-9 * 2.0 ** np.arange(12)
     n = np.array([400, 300, 200, 90, 40, 15, 6, 3, 1, 0.4, 0.1, 0.0])
-    s = coupling.representative_sample(x, n, max_classes=4, min_particles_per_class=20, max_particles=10_000)
+    s = coupling.representative_sample(x, n, rule(max_classes=4))
     assert len(s.diameters) <= 4
     assert all(c >= 20 for c in s.counts)
     assert sorted(sum(s.bins, [])) == [k for k in range(12) if n[k] > 0]  # every occupied bin, once
@@ -21,7 +29,7 @@ def test_sample_conserves_number_and_volume_up_to_rounding():
     exact = np.array([n[g].sum() for g in s.bins])
     # solid volume conserved, but for the rounding of the diameters to whole nanometres
     d_min = min(s.diameters)
-    assert np.dot(exact, vol) == pytest.approx(np.dot(n, x), rel=1.5 * coupling.DIAMETER_RESOLUTION / d_min)
+    assert np.dot(exact, vol) == pytest.approx(np.dot(n, x), rel=1.5 * DIAMETER_RESOLUTION / d_min)
     assert sum(s.counts) == pytest.approx(n.sum(), abs=len(s.counts))  # rounding only
     assert s.diameters == sorted(s.diameters)
 
@@ -31,39 +39,38 @@ def test_sample_does_not_see_round_off():
     # PBM state that differs by round-off only must give the very same DEM input
     x = 1e-9 * 2.0 ** np.arange(12)
     n = np.array([400, 300, 200, 90, 40, 15, 6, 3, 1, 0.4, 0.3, 0.0])   # no class count at a .5 tie
-    ref = coupling.representative_sample(x, n, max_particles=10_000)
+    ref = coupling.representative_sample(x, n, rule())
     rng = np.random.default_rng(3)
     for _ in range(20):
-        other = coupling.representative_sample(x, n * (1 + 1e-14 * rng.standard_normal(12)), max_particles=10_000)
+        other = coupling.representative_sample(x, n * (1 + 1e-14 * rng.standard_normal(12)), rule())
         assert other.diameters == ref.diameters and other.counts == ref.counts
-    nm = np.asarray(ref.diameters) / coupling.DIAMETER_RESOLUTION
+    nm = np.asarray(ref.diameters) / DIAMETER_RESOLUTION
     np.testing.assert_allclose(nm, np.round(nm), rtol=0, atol=1e-6)
 
 
 def test_sample_merges_sparse_large_bins_into_the_last_class():
     x = 1e-9 * 2.0 ** np.arange(6)
-    s = coupling.representative_sample(x, np.array([100, 50, 2, 1, 1, 1]), max_classes=5,
-                                       min_particles_per_class=20, max_particles=10_000)
+    s = coupling.representative_sample(x, np.array([100, 50, 2, 1, 1, 1]), rule())
     assert s.bins == [[0], [1, 2, 3, 4, 5]]
 
 
 def test_sample_is_capped_with_a_warning():
     x = 1e-9 * 2.0 ** np.arange(3)
-    with pytest.warns(UserWarning, match="capped at max_particles = 100"):
-        s = coupling.representative_sample(x, np.array([300.0, 200.0, 100.0]), max_particles=100)
+    with pytest.warns(UserWarning, match="capped at dem.max_particles = 100"):
+        s = coupling.representative_sample(x, np.array([300.0, 200.0, 100.0]), rule(max_particles=100))
     assert sum(s.counts) == pytest.approx(100, abs=2)
     assert s.scaled_down == pytest.approx(100 / 600)
 
 
 def test_sample_refuses_an_empty_bed():
     with pytest.raises(ValueError, match="fewer than min_particles_per_class = 20"):
-        coupling.representative_sample([1e-9, 2e-9], [3.0, 2.0])
+        coupling.representative_sample([1e-9, 2e-9], [3.0, 2.0], rule())
 
 
 def test_class_frequency_source_interpolates_and_clamps():
     d = [0.002, 0.004]
     c = np.array([[1.0, 2.0], [2.0, 4.0]])
-    src = coupling.ClassFrequencySource(d, c, "test")
+    src = ClassFrequencySource(d, c, "test")
     out = src(np.array([0.002, 0.004, 0.008]), np.ones(3), 600.0)
     assert out.shape == (3, 3)
     np.testing.assert_allclose(out[:2, :2], c, rtol=1e-12)
@@ -72,7 +79,7 @@ def test_class_frequency_source_interpolates_and_clamps():
 
 
 def _failing_for_interval(tmp_path, interval: int):
-    real = liggghts.executable()
+    real = engine.executable()
     script = tmp_path / "liggghts-fails"
     script.write_text(
         f"#!{sys.executable}\n"
@@ -88,13 +95,13 @@ def _failing_for_interval(tmp_path, interval: int):
 
 @pytest.mark.liggghts
 def test_pbm_dem_loop_stops_keeps_finished_intervals_and_resumes(tiny_config, tmp_path, monkeypatch):
-    cfg = tiny_config
-    v = coupling.settings_from_config(cfg)
-    assert v["coupling_intervals"] >= 2
+    loop = tiny_config.coupled_loop()
+    execution = tiny_config.dem_execution
+    assert loop.coupling_intervals >= 2
     out = tmp_path / "pbm_dem"
     monkeypatch.setenv("PBMDEM_LIGGGHTS", str(_failing_for_interval(tmp_path, 1)))
     with pytest.raises(coupling.CouplingError, match=r"(?s)interval 1 .*failed.*simulated node failure.*rerun to resume"):
-        coupling.run_method("dem", cfg, 600.0, out)
+        coupling.pbm_dem(loop, 600.0, out, execution, replicate=0)
     assert (out / "interval_00" / "interval.json").exists()
     assert (out / "interval_00" / "dem" / "collisions.csv").exists()
     assert not (out / "interval_01" / "interval.json").exists()
@@ -103,12 +110,12 @@ def test_pbm_dem_loop_stops_keeps_finished_intervals_and_resumes(tiny_config, tm
     first_dem = (out / "interval_00" / "dem" / "summary.json").stat().st_mtime_ns
 
     monkeypatch.delenv("PBMDEM_LIGGGHTS")
-    timing = coupling.run_method("dem", cfg, 600.0, out)
+    timing = coupling.pbm_dem(loop, 600.0, out, execution, replicate=0).totals
     # interval 0 was resumed from disk, not re-run
     assert (out / "interval_00" / "interval.json").read_text() == first
     assert (out / "interval_00" / "dem" / "summary.json").stat().st_mtime_ns == first_dem
     intervals = pd.read_csv(out / "intervals.csv")
-    assert intervals.interval.tolist() == list(range(v["coupling_intervals"]))
+    assert intervals.interval.tolist() == list(range(loop.coupling_intervals))
     assert (intervals.dem_collisions > 0).all()
     summary = pd.read_csv(out / "summary.csv")
     assert summary.time.is_monotonic_increasing
@@ -141,9 +148,11 @@ class _FixedProvider:
 
 
 def test_finished_intervals_are_reused_only_for_the_same_inputs(tiny_config, tmp_path):
-    samples = coupling.sample_settings(coupling.settings_from_config(tiny_config))
-    run = lambda p: coupling.run_loop(tiny_config, p, 600.0, "small", tmp_path, intervals=2,  # noqa: E731
-                                      sample_settings=samples)
+    loop = tiny_config.coupled_loop().replace(coupling_intervals=2)
+
+    def run(provider):
+        return coupling.run_loop(loop, provider, 600.0, tmp_path)
+
     first = _FixedProvider(2.0)
     run(first)
     assert first.calls == 2
@@ -158,7 +167,7 @@ def test_finished_intervals_are_reused_only_for_the_same_inputs(tiny_config, tmp
 
 
 def test_velocity_fractions_of_a_dem_interval_reach_the_pbm_bins():
-    from pbmdem.coupling import ClassFrequencySource, fractions_from_table
+    from pbmdem.frequency import velocity_fractions_from_table
     from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, EncounterRates
 
     rows = []
@@ -166,7 +175,7 @@ def test_velocity_fractions_of_a_dem_interval_reach_the_pbm_bins():
         for b in range(N_VELOCITY_BINS):
             rows.append({"class_i": i, "class_j": j, "v_lo": VELOCITY_EDGES[b], "v_hi": VELOCITY_EDGES[b + 1],
                          "encounters": counts.get(b, 0.0)})
-    frac = fractions_from_table(pd.DataFrame(rows), 2)
+    frac = velocity_fractions_from_table(pd.DataFrame(rows), 2)
     assert frac.shape == (2, 2, N_VELOCITY_BINS)
     np.testing.assert_allclose(frac.sum(axis=2), 1.0)
     assert frac[0, 0, 3] == pytest.approx(0.5) and frac[0, 1, 5] == 1.0 and frac[1, 0, 5] == 1.0

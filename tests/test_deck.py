@@ -4,8 +4,9 @@ import math
 
 import pytest
 
-from pbmdem import deck, dem
-from pbmdem.deck import DeckValueError
+from pbmdem.dem import deck
+from pbmdem.dem.deck import DeckValueError
+from pbmdem.dem.plan import plan_point
 
 
 @pytest.mark.parametrize("value", ["1\nshell rm -rf /", "0.1", None, True, math.nan, math.inf, [1]])
@@ -41,8 +42,9 @@ def test_render_refuses_unvalidated_text():
 
 
 def test_rendered_deck_is_complete_and_has_no_shell(tiny_config):
-    plan = dem.plan_point(tiny_config, 600, "small")
-    text = deck.render("granulator.in", dem.deck_values(tiny_config, plan))
+    point = tiny_config.dem_point("small")
+    plan = plan_point(point, 600)
+    text = deck.render_granulator(point, plan, ranks=1)
     assert "${" not in text
     assert "shell" not in text
     assert f"timestep        {plan.timestep!r}" in text
@@ -53,31 +55,33 @@ def test_rendered_deck_is_complete_and_has_no_shell(tiny_config):
 
 
 def test_injected_distribution_name_never_reaches_a_deck(tiny_config):
+    # the schema refuses such a name (tests/test_config.py); the deck refuses it too
     evil = "small\nshell touch /tmp/pwned"
-    tiny_config["size_distributions"][evil] = tiny_config["size_distributions"]["small"]
-    plan = dem.plan_point(tiny_config, 600, evil)
+    point = tiny_config.dem_point("small").replace(distribution=evil)
+    plan = plan_point(point, 600)
     with pytest.raises(DeckValueError, match="name must start"):
-        dem.deck_values(tiny_config, plan)
+        deck.render_granulator(point, plan, ranks=1)
 
 
 def test_timestep_from_rayleigh_time(tiny_config):
-    plan = dem.plan_point(tiny_config, 600, "small")
-    mat = tiny_config["material"]
-    g = mat["youngs_modulus"] / (2 * (1 + mat["poisson_ratio"]))
+    plan = plan_point(tiny_config.dem_point("small"), 600)
+    mat = tiny_config.material
+    g = mat.youngs_modulus / (2 * (1 + mat.poisson_ratio))
     r = 0.001
-    t_r = math.pi * r * math.sqrt(mat["density"] / g) / (0.1631 * mat["poisson_ratio"] + 0.8766)
+    t_r = math.pi * r * math.sqrt(mat.density / g) / (0.1631 * mat.poisson_ratio + 0.8766)
     assert plan.rayleigh_time == pytest.approx(t_r)
-    assert plan.timestep == pytest.approx(tiny_config["dem"]["timestep_fraction"] * t_r)
+    assert plan.timestep == pytest.approx(tiny_config.dem.timestep_fraction * t_r)
     # snapshots at least twice per Hertz contact of the smallest particles at tip speed
     assert plan.collision_interval * plan.timestep <= plan.contact_time / 2
 
 
 def test_particle_count_fills_the_bed(default_config):
-    for name in default_config["grid"]["size_distributions"]:
-        plan = dem.plan_point(default_config, 600, name)
+    for name in default_config.grid.size_distributions:
+        plan = plan_point(default_config.dem_point(name), 600)
         d = plan.diameters
         solids = sum(c * math.pi / 6 * x**3 for c, x in zip(plan.counts, d))
-        r = default_config["granulator"]["bowl"]["diameter"] / 2
-        bed = solids / (default_config["dem"]["packing_fraction"] * math.pi * r * r)
-        assert bed == pytest.approx(default_config["dem"]["bed_height"], rel=0.01)
+        r = default_config.granulator.bowl.radius
+        bed = solids / (default_config.granulator.bed.packing_fraction * math.pi * r * r)
+        assert bed == pytest.approx(default_config.granulator.bed.height, rel=0.01)
+        assert solids == pytest.approx(default_config.granulator.bed_solid_volume, rel=0.01)
         assert sum(plan.counts) == plan.n_particles

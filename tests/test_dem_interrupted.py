@@ -115,15 +115,16 @@ def test_a_run_cut_short_without_a_forced_restart_is_a_failure(tiny_run, tmp_pat
     """The plan check alone (no restart line, exit code 0): a log and dumps that stop early fail."""
     import shutil
 
-    from pbmdem import dem, liggghts
+    from pbmdem.dem import engine
+    from pbmdem.dem.run import check_finished
 
     run = tmp_path / "cut"
     shutil.copytree(tiny_run["dir"], run)
     plan = tiny_run["plan"]
-    dem.check_finished(plan, run)  # the finished run passes
+    check_finished(plan, run)  # the finished run passes
     pairs = run / "post" / "pairs.dump"
     frames = pairs.read_bytes().split(b"ITEM: TIMESTEP\n")
     pairs.write_bytes(b"ITEM: TIMESTEP\n".join(frames[:-1]))
-    with pytest.raises(liggghts.LiggghtsError, match="pairs.dump holds"):
-        dem.check_finished(plan, run)
+    with pytest.raises(engine.LiggghtsError, match="pairs.dump holds"):
+        check_finished(plan, run)
     assert "pairs.dump" in json.loads((run / "crash.json").read_text())["problems"][0]

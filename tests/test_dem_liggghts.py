@@ -1,6 +1,5 @@
 """The DEM stage with the real LIGGGHTS engine on the tiny granulator (no mocks)."""
 
-import copy
 import dataclasses
 import json
 import stat
@@ -11,7 +10,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pbmdem import collisions, dem, geometry, liggghts
+from pbmdem.dem import collisions, deck, engine
+from pbmdem.dem.dumps import DumpFormatError
+from pbmdem.dem.grid_tables import aggregate
+from pbmdem.dem.plan import plan_point
+from pbmdem.dem.run import run_point
 
 pytestmark = pytest.mark.liggghts
 
@@ -42,7 +45,7 @@ def test_tiny_run_summary_and_timestep_check(tiny_run):
     assert summary["total_collisions"] > 0
     # LIGGGHTS' own check (fix check/timestep/gran) finds dt at the planned fraction of the
     # Rayleigh time of the smallest particle, and well below the Hertz time at the speeds reached
-    frac = tiny_run["config"]["dem"]["timestep_fraction"]
+    frac = tiny_run["config"].dem.timestep_fraction
     assert summary["dt_over_rayleigh_time"] == pytest.approx(frac, rel=0.01)
     assert 0 < summary["dt_over_hertz_time_max"] < 0.2
 
@@ -53,14 +56,13 @@ def test_halving_the_snapshot_interval_changes_encounters_by_less_than_5_percent
     on one trajectory."""
     auto = tiny_run["plan"].collision_interval
     assert auto >= 2
-    cfg = copy.deepcopy(tiny_config)
-    cfg["dem"]["collision_interval"] = auto // 2
-    cfg["dem"]["keep_contact_dumps"] = True
-    cfg["dem"]["sampling_time"] = 0.03
-    plan = dem.plan_point(cfg, 1200, "small")
-    dem.run_point(cfg, plan, tmp_path, timeout=600)
-    analysis = collisions.RunAnalysis(tmp_path / "post", plan, geometry.bowl_from_config(cfg),
-                                      geometry.impeller_from_config(cfg))
+    point = tiny_config.dem_point("small")
+    point = point.replace(dem=point.dem.replace(collision_interval=auto // 2, keep_contact_dumps=True,
+                                                sampling_time=0.03))
+    plan = plan_point(point, 1200)
+    run_point(point, plan, tmp_path, tiny_config.dem_execution)
+    analysis = collisions.RunAnalysis(tmp_path / "post", plan, tiny_config.granulator.bowl,
+                                      tiny_config.granulator.impeller)
     fine = analysis.pair_events(stride=1)[0].encounter.sum()
     coarse = analysis.pair_events(stride=2)[0].encounter.sum()
     assert fine > 200
@@ -81,24 +83,24 @@ def test_encounters_are_fewer_than_new_contacts_and_have_impact_velocities(tiny_
 
 
 def test_replicates_differ_only_by_seed_and_aggregate_to_mean_and_se(tiny_run, tiny_config, tmp_path):
-    cfg = copy.deepcopy(tiny_config)
-    plans = [dem.plan_point(cfg, 600, "small", replicate=r) for r in range(3)]
+    point = tiny_config.dem_point("small")
+    plans = [plan_point(point, 600, replicate=r) for r in range(3)]
     base = dataclasses.asdict(plans[0])
     for plan in plans[1:]:
         other = dataclasses.asdict(plan)
         assert {k for k in base if base[k] != other[k]} == {"seed", "replicate"}
-    decks = [dem.deck_values(cfg, p) for p in plans]
+    decks = [deck.granulator_values(point, p, ranks=1) for p in plans]
     assert {k for k in decks[0] if decks[0][k] != decks[1][k]} <= {
         "seed_dist", "seed_insert", "particle_templates_block"}
     tables = [tiny_run["dir"] / "collisions.csv"]
     for plan in plans[1:]:
         run_dir = tmp_path / f"rep{plan.replicate}"
-        dem.run_point(cfg, plan, run_dir, timeout=600)
+        run_point(point, plan, run_dir, tiny_config.dem_execution)
         tables.append(run_dir / "collisions.csv")
     runs = [pd.read_csv(t) for t in tables]
     assert [int(r["replicate"].iloc[0]) for r in runs] == [0, 1, 2]
     assert not runs[0]["encounters"].equals(runs[1]["encounters"])  # other seeds, other realisation
-    grid = collisions.aggregate(tables, tmp_path / "grid.csv")
+    grid = aggregate(tables, tmp_path / "grid.csv")
     f = np.stack([r["encounter_frequency_per_pair"].to_numpy() for r in runs])
     np.testing.assert_allclose(grid["encounter_frequency_per_pair"], f.mean(axis=0), rtol=1e-12)
     np.testing.assert_allclose(grid["encounter_frequency_per_pair_se"], f.std(axis=0, ddof=1) / np.sqrt(3),
@@ -126,7 +128,7 @@ def _failing_liggghts(tmp_path):
     """A wrapper around the real engine that cuts the sampling phase short with an unknown fix
     style, so that the real LIGGGHTS fails in the middle of sampling (after writing part of its
     contact dumps)."""
-    real = liggghts.executable()
+    real = engine.executable()
     script = tmp_path / "liggghts-broken"
     script.write_text(textwrap.dedent(f"""\
         #!{sys.executable}
@@ -146,10 +148,11 @@ def _failing_liggghts(tmp_path):
 
 def test_a_failing_run_reports_the_log_and_leaves_no_table(tiny_config, tmp_path, monkeypatch):
     monkeypatch.setenv("PBMDEM_LIGGGHTS", str(_failing_liggghts(tmp_path)))
-    plan = dem.plan_point(tiny_config, 600, "large")
+    point = tiny_config.dem_point("large")
+    plan = plan_point(point, 600)
     run_dir = tmp_path / "run"
-    with pytest.raises(liggghts.LiggghtsError) as info:
-        dem.run_point(tiny_config, plan, run_dir, timeout=600)
+    with pytest.raises(engine.LiggghtsError) as info:
+        run_point(point, plan, run_dir, tiny_config.dem_execution)
     msg = str(info.value)
     assert "ERROR" in msg and "no/such/style" in msg  # the tail of the log is in the message
     assert not (run_dir / "collisions.csv").exists()
@@ -161,17 +164,17 @@ def test_a_failing_run_reports_the_log_and_leaves_no_table(tiny_config, tmp_path
 
 def test_missing_engine_gives_install_hint(monkeypatch):
     monkeypatch.setenv("PBMDEM_LIGGGHTS", "liggghts-that-does-not-exist")
-    with pytest.raises(liggghts.LiggghtsError, match="apt-get install --no-install-recommends liggghts"):
-        liggghts.executable()
+    with pytest.raises(engine.LiggghtsError, match="apt-get install --no-install-recommends liggghts"):
+        engine.executable()
 
 
 def test_insertion_shortfall_is_an_error(tiny_config, tmp_path):
     """A bed that cannot be inserted in the settling time must not yield a table with a wrong PSD."""
-    cfg = copy.deepcopy(tiny_config)
-    cfg["dem"]["settle_time"] = 0.004  # far too short to drop ~400 particles into the bowl
-    plan = dem.plan_point(cfg, 600, "small")
-    with pytest.raises(collisions.DumpFormatError, match="insertion did not place them all"):
-        dem.run_point(cfg, plan, tmp_path, timeout=600)
+    point = tiny_config.dem_point("small")
+    point = point.replace(dem=point.dem.replace(settle_time=0.004))  # far too short to drop ~400 particles
+    plan = plan_point(point, 600)
+    with pytest.raises(DumpFormatError, match="insertion did not place them all"):
+        run_point(point, plan, tmp_path, tiny_config.dem_execution)
     assert not (tmp_path / "collisions.csv").exists()
 
 
@@ -189,11 +192,11 @@ def test_dem_cli_plan_only(root, capsys):
 
 def test_two_mpi_ranks(tiny_config, tmp_path):
     """The same deck under `mpirun -np 2` (as on a cluster): domain split along x, same bed."""
-    tiny_config["dem"]["mpi_ranks"] = 2
-    plan = dem.plan_point(tiny_config, 600, "small")
-    summary = dem.run_point(tiny_config, plan, tmp_path, timeout=600)
+    point = tiny_config.dem_point("small")
+    plan = plan_point(point, 600)
+    summary = run_point(point, plan, tmp_path, tiny_config.dem_execution.replace(mpi_ranks=2))
     assert "processors      2 1 1" in (tmp_path / "in.granulator").read_text()
     assert "2 by 1 by 1 MPI processor grid" in (tmp_path / "log.liggghts").read_text()
     table = pd.read_csv(tmp_path / "collisions.csv")
-    assert summary["n_particles"] == plan.n_particles
+    assert summary["n_particles"] == plan.n_particles and summary["mpi_ranks"] == 2
     assert (table.collisions > 0).all()

@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pbmdem.encounter_study import flow_development, speed_response
+from pbmdem.dem.speed_response import flow_development, speed_response
 
 
 def replicate_rows(rpm, rep, enc):

@@ -7,9 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pbmdem.collisions import Snapshots, window_starts
-from pbmdem.encounters import Trajectories, bowl_gap, impeller_gap, pair_events, wall_events
-from pbmdem.geometry import Bowl, Impeller
+from pbmdem.config import Bowl, Impeller
+from pbmdem.dem.collisions import window_starts
+from pbmdem.dem.dumps import Snapshots
+from pbmdem.dem.encounters import Trajectories, bowl_gap, impeller_gap, pair_events, wall_events
 
 R = 1.0e-3  # particle radius (m): diameter 2 mm, encounter gap 0.25 x 2 mm = 0.5 mm
 DT = 1.0e-5  # s per step
@@ -103,13 +104,13 @@ def test_coarser_position_snapshots_keep_the_count():
 
 
 def test_wall_gaps_and_impeller_velocity():
-    bowl = Bowl(diameter=0.06, height=0.05)
+    bowl = Bowl(diameter=0.06, height=0.05, segments=48)
     pos = np.array([[0.029, 0.0, 0.02], [0.0, 0.01, 0.0015], [0.0, 0.0, 0.0485]])
     gap, normal = bowl_gap(pos, np.full(3, 1e-3), bowl)
     np.testing.assert_allclose(gap, [0.0, 0.0005, 0.0005], atol=1e-12)
     np.testing.assert_allclose(normal, [[1, 0, 0], [0, 0, -1], [0, 0, 1]], atol=1e-12)
     imp = Impeller(blades=1, blade_length=0.02, blade_height=0.01, blade_thickness=0.002, clearance=0.001,
-                   hub_diameter=0.004)
+                   pitch_deg=0.0, hub_diameter=0.004)
     # a particle 1 mm in front of the blade (turned by 90 degrees, so it lies along +y)
     p = np.array([[-0.0030, 0.015, 0.006]])  # blade face at x = -0.001 after the turn
     g, towards = impeller_gap(p, np.array([5e-4]), imp, np.array([np.pi / 2]))

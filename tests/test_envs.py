@@ -24,12 +24,13 @@ IMPLIED = {"jsonschema": ["referencing", "jsonschema_specifications", "rpds", "a
 
 # what each stage's rules load, including imports made inside functions on the rule's path
 STAGE_MODULES = {
-    "dem": ["pbmdem.dem", "pbmdem.collisions", "pbmdem.vtk_series", "pbmdem.geometry", "pbmdem.deck",
-            "pbmdem.liggghts"],
-    "pbm": ["pbmdem.pbm", "pbmdem.pbm.settings", "pbmdem.pbm.results", "pbmdem.pbm.kernels"],
+    "dem": ["pbmdem.dem", "pbmdem.dem.run", "pbmdem.dem.collisions", "pbmdem.dem.vtk_series",
+            "pbmdem.dem.geometry", "pbmdem.dem.deck", "pbmdem.dem.engine", "pbmdem.dem.grid_tables",
+            "pbmdem.dem.speed_response"],
+    "pbm": ["pbmdem.pbm", "pbmdem.pbm.setup", "pbmdem.pbm.results", "pbmdem.pbm.kernels"],
     "surrogate": ["pbmdem.surrogate", "pbmdem.surrogate.train", "pbmdem.surrogate.plots"],
-    "validation": ["pbmdem.coupling", "pbmdem.report", "pbmdem.surrogate", "pbmdem.pbm.settings",
-                   "pbmdem.dem", "pbmdem.collisions", "pbmdem.vtk_series"],
+    "validation": ["pbmdem.coupling", "pbmdem.coupling.sweep", "pbmdem.report", "pbmdem.surrogate",
+                   "pbmdem.pbm.setup", "pbmdem.dem", "pbmdem.dem.collisions", "pbmdem.dem.vtk_series"],
 }
 
 BLOCKER = """
@@ -79,7 +80,7 @@ def test_env_is_sufficient_for_its_rules(root, stage):
 
 
 def test_the_blocker_really_blocks(root):
-    code = BLOCKER.format(allowed=["numpy"], guarded=["numpy", "pandas"], modules=["pbmdem.collisions"])
+    code = BLOCKER.format(allowed=["numpy"], guarded=["numpy", "pandas"], modules=["pbmdem.dem.collisions"])
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
                           env={"PYTHONPATH": str(root / "src"), "PATH": "/usr/bin:/bin"})
     assert proc.returncode != 0 and "pandas is not in the environment" in proc.stderr

@@ -6,11 +6,12 @@ import meshio
 import numpy as np
 import pytest
 
-from pbmdem import geometry
+from pbmdem.config import Impeller
+from pbmdem.dem import geometry
 
 
 def test_bowl_is_a_closed_cylinder(default_config):
-    bowl = geometry.bowl_from_config(default_config)
+    bowl = default_config.granulator.bowl
     pts, tris = geometry.bowl_mesh(bowl)
     volume = geometry.check_closed_surface(pts, tris)
     n = bowl.segments
@@ -19,8 +20,8 @@ def test_bowl_is_a_closed_cylinder(default_config):
 
 
 def test_impeller_parts_are_closed_and_inside(default_config):
-    bowl = geometry.bowl_from_config(default_config)
-    imp = geometry.impeller_from_config(default_config)
+    bowl = default_config.granulator.bowl
+    imp = default_config.granulator.impeller
     pts, tris = geometry.impeller_mesh(imp, bowl)
     volume = geometry.check_closed_surface(pts, tris)
     blades = imp.blades * imp.blade_length * imp.blade_height * imp.blade_thickness
@@ -31,29 +32,29 @@ def test_impeller_parts_are_closed_and_inside(default_config):
 
 
 def test_pitched_blades_stay_closed(default_config):
-    imp = geometry.impeller_from_config(default_config)
-    imp = geometry.Impeller(**{**imp.__dict__, "pitch_deg": 30.0})
+    imp = default_config.granulator.impeller
+    imp = imp.replace(pitch_deg=30.0)
     pts, tris = geometry.impeller_mesh(imp)
     assert geometry.check_closed_surface(pts, tris) > 0
     assert pts[:, 2].max() == pytest.approx(imp.top)
 
 
 def test_open_surface_is_detected(default_config):
-    pts, tris = geometry.bowl_mesh(geometry.bowl_from_config(default_config))
+    pts, tris = geometry.bowl_mesh(default_config.granulator.bowl)
     with pytest.raises(ValueError, match="not closed"):
         geometry.check_closed_surface(pts, tris[:-1])
 
 
 def test_blade_reaching_the_wall_is_rejected(default_config):
-    bowl = geometry.bowl_from_config(default_config)
-    imp = geometry.Impeller(blades=3, blade_length=bowl.radius, blade_height=0.01, blade_thickness=0.002,
-                            clearance=0.001)
+    bowl = default_config.granulator.bowl
+    imp = Impeller(blades=3, blade_length=bowl.radius, blade_height=0.01, blade_thickness=0.002,
+                   clearance=0.001, pitch_deg=0.0, hub_diameter=0.01)
     with pytest.raises(ValueError, match="reaches the bowl wall"):
         geometry.impeller_mesh(imp, bowl)
 
 
 def test_stl_files_round_trip(tmp_path, default_config):
-    paths = geometry.write_granulator(default_config, tmp_path)
+    paths = geometry.write_granulator(default_config.granulator, tmp_path)
     for name, path in paths.items():
         mesh = meshio.read(path)
         assert path.read_text().startswith("solid")  # ASCII STL, as LIGGGHTS reads it

@@ -3,7 +3,6 @@ before anything is deleted; finished runs are never lost or silently rewritten."
 
 from __future__ import annotations
 
-import copy
 import json
 import os
 import re
@@ -16,8 +15,13 @@ import numpy as np
 import pytest
 import yaml
 
-from pbmdem import collisions, dem, geometry
-from pbmdem.config import ConfigError, load_config, validate
+from conftest import config_of
+
+from pbmdem.config import ConfigError, load_config, point_id, rpm_text
+from pbmdem.dem import collisions, dumps, engine
+from pbmdem.dem.grid_tables import aggregate, run_table
+from pbmdem.dem.plan import plan_point
+from pbmdem.dem.run import FinishedRunError, is_finished, prepare_run, run_point
 
 
 def _write(path: Path, text: str) -> Path:
@@ -61,11 +65,10 @@ def test_non_finite_config_values_name_key_and_value(root, tmp_path, text, key):
     assert key in msg and repr(float(text.replace(".", ""))) in msg and str(path) in msg
 
 
-def test_nan_speed_in_the_grid_is_refused(tiny_config):
-    cfg = copy.deepcopy(tiny_config)
-    cfg["grid"]["impeller_rpm"] = [600, float("nan")]
+def test_nan_speed_in_the_grid_is_refused(tiny_mapping):
+    tiny_mapping["grid"]["impeller_rpm"] = [600, float("nan")]
     with pytest.raises(ConfigError, match=r"grid\.impeller_rpm\[1\] = nan"):
-        validate(cfg)
+        config_of(tiny_mapping)
 
 
 @pytest.mark.parametrize("rpm", ["0", "inf", "nan", "-5", "1e9", "fast"])
@@ -103,8 +106,8 @@ def _dump(path: Path, rows: list[str]) -> Path:
                                        (["1 2 inf", "2 3 0.002"], 3)])
 def test_non_finite_value_in_a_dump_names_file_and_column(tmp_path, rows, col):
     path = _dump(tmp_path / "pairs.dump", rows)
-    with pytest.raises(collisions.DumpFormatError) as info:
-        collisions.read_dump(path, 3)
+    with pytest.raises(dumps.DumpFormatError) as info:
+        dumps.read_dump(path, 3)
     msg = str(info.value)
     assert str(path) in msg and f"column {col}" in msg and "step 100" in msg
     assert "nan" in msg or "inf" in msg
@@ -119,9 +122,9 @@ def test_nan_in_a_real_contact_dump_fails_the_tabulation(tiny_run, tmp_path):
     parts = lines[k].split()
     lines[k] = f"{parts[0]} {parts[1]} nan"
     (post / "pairs.dump").write_text("\n".join(lines) + "\n")
-    with pytest.raises(collisions.DumpFormatError, match="pairs.dump: non-finite value nan in column 3"):
-        collisions.tabulate_run(post, tiny_run["plan"], geometry.bowl_from_config(tiny_run["config"]),
-                                geometry.impeller_from_config(tiny_run["config"]))
+    granulator = tiny_run["config"].granulator
+    with pytest.raises(dumps.DumpFormatError, match="pairs.dump: non-finite value nan in column 3"):
+        collisions.tabulate_run(post, tiny_run["plan"], granulator.bowl, granulator.impeller)
 
 
 # ----------------------------------------------------------------------------- defect 5: operating-point ids
@@ -134,16 +137,16 @@ def test_every_allowed_speed_gives_an_id_the_rule_wildcard_accepts(root):
     speeds = [1e-9, 1.5e-7, 0.1 + 0.2, 0.5, 1, 600, 1234.567, 1234.5678901, 19999.999999, limits["maximum"]]
     ids = set()
     for rpm in speeds:
-        text = dem.rpm_text(rpm)
+        text = rpm_text(rpm)
         assert re.fullmatch(wildcard, text), (rpm, text)
         assert float(text) == float(rpm)  # the rule reads the speed back from the wildcard
-        ids.add(dem.point_id(rpm, "fine"))
+        ids.add(point_id(rpm, "fine"))
     assert len(ids) == len(speeds)  # close speeds never share a run folder
-    assert dem.point_id(600.0, "fine") == "rpm600_fine"
+    assert point_id(600.0, "fine") == "rpm600_fine"
 
 
-def test_snakemake_plans_a_tiny_speed(root, tmp_path, tiny_config):
-    cfg = copy.deepcopy(tiny_config)
+def test_snakemake_plans_a_tiny_speed(root, tmp_path, tiny_mapping):
+    cfg = tiny_mapping
     cfg["grid"]["impeller_rpm"] = [1e-9, 1234.567]
     path = _write(tmp_path / "c.yaml", yaml.safe_dump(cfg))
     proc = _snakemake(root, tmp_path, "--configfile", str(path), "-n", "--cores", "1",
@@ -154,8 +157,8 @@ def test_snakemake_plans_a_tiny_speed(root, tmp_path, tiny_config):
 
 
 # ----------------------------------------------------------------------------- defect 10: tidy errors
-def test_snakemake_lists_every_config_error_tidily(root, tmp_path, tiny_config):
-    cfg = copy.deepcopy(tiny_config)
+def test_snakemake_lists_every_config_error_tidily(root, tmp_path, tiny_mapping):
+    cfg = tiny_mapping
     cfg["material"]["restitution"] = 7.0
     cfg["material"]["density"] = "heavy"
     cfg["grid"]["impeller_rpm"] = [600, -3]
@@ -212,15 +215,17 @@ def test_forced_run_that_fails_leaves_the_finished_run_untouched(tiny_run, tmp_p
 
 def test_forced_run_replaces_a_finished_point(tiny_config, tmp_path):
     """Real LIGGGHTS: --force swaps the new run in; stale products of the old one go, nothing else does."""
-    plan = dem.plan_point(tiny_config, 1200, "large")
+    point = tiny_config.dem_point("large")
+    plan = plan_point(point, 1200)
+    execution = tiny_config.dem_execution
     run = tmp_path / "run"
     run.mkdir()
     _write(run / "notes.txt", "the user's own file")
     _write(run / "crash.json", "{}")  # a stale crash of an earlier attempt
     _write(run / "summary.json", json.dumps({"old": True}))
-    with pytest.raises(dem.FinishedRunError):
-        dem.run_point(tiny_config, plan, run, timeout=600)
-    summary = dem.run_point(tiny_config, plan, run, timeout=600, force=True)
+    with pytest.raises(FinishedRunError):
+        run_point(point, plan, run, execution)
+    summary = run_point(point, plan, run, execution, force=True)
     assert json.loads((run / "summary.json").read_text()) == json.loads(json.dumps(summary))
     assert (run / "collisions.csv").exists() and not (run / "crash.json").exists()
     assert (run / "notes.txt").read_text() == "the user's own file"
@@ -256,9 +261,12 @@ def test_pbm_cli_with_the_ann_kernel_reports_out_of_domain_use(small_surrogate, 
     assert code == 0
     err = capsys.readouterr().err
     assert "outside its training domain" in err and "tip_speed" in err  # 5000 rpm: tip speed far out
-    domain = json.loads((out / "run.json").read_text())["surrogate_domain"]
-    assert domain["out_of_domain_evaluations"] == domain["surrogate_evaluations"] > 0
-    assert any("rpm" in feature or "tip" in feature for feature in domain["out_of_domain_by_feature"])
+    info = json.loads((out / "run.json").read_text())
+    n = info["coupling_intervals"]
+    assert info["surrogate_domain"] == {"out_of_domain_intervals": n, "out_of_domain_count": info["surrogate_domain"][
+        "out_of_domain_count"]} and info["surrogate_domain"]["out_of_domain_count"] >= n > 0
+    intervals = __import__("pandas").read_csv(out / "intervals.csv")
+    assert len(intervals) == n and intervals.out_of_domain.str.contains("tip_speed").all()
 
 
 def test_validation_loops_log_count_and_report_out_of_domain_use(small_surrogate, tiny_config, tmp_path, caplog):
@@ -267,12 +275,12 @@ def test_validation_loops_log_count_and_report_out_of_domain_use(small_surrogate
     from pbmdem import coupling, report
 
     vdir = tmp_path / "validation"
-    caplog.set_level(logging.INFO, logger="pbmdem.coupling")
-    for method in ("ann", "constant"):
-        coupling.run_method(method, tiny_config, 5000.0, vdir / "rpm5000" / f"pbm_{method}",
-                            model_path=small_surrogate)
+    caplog.set_level(logging.INFO, logger="pbmdem")
+    loop = tiny_config.coupled_loop()
+    coupling.pbm_ann(loop, small_surrogate, 5000.0, vdir / "rpm5000" / "pbm_ann")
+    coupling.pbm_constant(loop, small_surrogate, 5000.0, vdir / "rpm5000" / "pbm_constant")
     intervals = __import__("pandas").read_csv(vdir / "rpm5000" / "pbm_ann" / "intervals.csv")
-    n = tiny_config["validation"]["coupling_intervals"]
+    n = tiny_config.validation.coupling_intervals
     assert len(intervals) == n and (intervals.out_of_domain_count > 0).all()
     assert intervals.out_of_domain.str.contains("outside the training range").all()
     timing = json.loads((vdir / "rpm5000" / "pbm_ann" / "timing.json").read_text())
@@ -290,23 +298,21 @@ def test_validation_loops_log_count_and_report_out_of_domain_use(small_surrogate
 
 
 # ----------------------------------------------------------------------------- defect 9: resume after kill -9
-def test_the_readme_resume_command_works_after_kill_9_of_snakemake(root, tmp_path, tiny_config):
+def test_the_readme_resume_command_works_after_kill_9_of_snakemake(root, tmp_path, tiny_mapping):
     """kill -9 Snakemake while a (real) LIGGGHTS job runs; the README's exact command resumes."""
     import signal
     import stat
     import textwrap
     import time
 
-    from pbmdem import liggghts
-
     readme = (root / "README.md").read_text()
     assert "`.venv/bin/snakemake --unlock && .venv/bin/snakemake --cores 2`" in readme
-    cfg = copy.deepcopy(tiny_config)
+    cfg = tiny_mapping
     cfg["grid"]["impeller_rpm"] = [600]
     config = _write(tmp_path / "c.yaml", yaml.safe_dump(cfg))
     started = tmp_path / "started"
     slow = tmp_path / "liggghts-slow"
-    real = liggghts.executable()
+    real = engine.executable()
     slow.write_text(textwrap.dedent(f"""\
         #!{sys.executable}
         import os, sys, time
@@ -350,12 +356,12 @@ def test_dem_progress_is_read_from_liggghts_thermo_while_it_runs(tiny_config, tm
     """Real LIGGGHTS: the progress reader sees the run move through its phases while it runs."""
     import logging
 
-    from pbmdem import liggghts
-    from pbmdem.progress import ThermoProgress
+    from pbmdem.dem.progress import ThermoProgress
 
-    tiny_config["dem"]["vtk_interval"] = 0.002  # ~60 thermo lines of ~60 bytes: less than one stdio buffer
-    plan = dem.plan_point(tiny_config, 600, "small")
-    deck = dem.prepare_run(tiny_config, plan, tmp_path)
+    point = tiny_config.dem_point("small")
+    point = point.replace(dem=point.dem.replace(vtk_interval=0.002))  # ~60 thermo lines: less than a stdio buffer
+    plan = plan_point(point, 600)
+    deck = prepare_run(point, plan, tmp_path, ranks=1)
     seen = []
 
     class Recording(ThermoProgress):
@@ -364,9 +370,9 @@ def test_dem_progress_is_read_from_liggghts_thermo_while_it_runs(tiny_config, tm
             seen.append((self.step, self.phase(), self.atoms))
 
     phases = [("settling", plan.settle_steps), ("spin-up", plan.spinup_steps), ("sampling", plan.sampling_steps)]
-    caplog.set_level(logging.INFO, logger="pbmdem.progress")
+    caplog.set_level(logging.INFO, logger="pbmdem.dem.progress")
     progress = Recording(tmp_path / "log.liggghts", phases, label="DEM test", bar=True, log_every=0.0)
-    liggghts.run(deck, tmp_path, timeout=600, progress=progress, poll=0.02)
+    engine.run(deck, tmp_path, timeout=600, progress=progress, poll=0.02)
     total = plan.settle_steps + plan.spinup_steps + plan.sampling_steps
     steps = [s for s, _, _ in seen]
     assert steps == sorted(steps) and steps[-1] == total  # the last thermo line is the last step
@@ -374,7 +380,7 @@ def test_dem_progress_is_read_from_liggghts_thermo_while_it_runs(tiny_config, tm
     assert len(running) >= 5, steps  # seen moving while running (the deck flushes each thermo line)
     assert {p for _, p, _ in seen} >= {"settling", "sampling"}
     assert seen[-1][2] == plan.n_particles
-    lines = [r.getMessage() for r in caplog.records if r.name == "pbmdem.progress"]
+    lines = [r.getMessage() for r in caplog.records if r.name == "pbmdem.dem.progress"]
     assert any(re.search(r"DEM test: (settling|spin-up|sampling), step \d+ of %d \(\d+ %%\), \d+ particles, "
                          r"elapsed \d+:\d\d, remaining ~" % total, line) for line in lines), lines
     assert f"step {total} of {total}" in lines[-1]
@@ -386,7 +392,7 @@ def test_dem_cli_logs_progress_lines_when_not_on_a_terminal(root, tmp_path):
                            "--rpm", "600", "--distribution", "small", "--out", str(tmp_path / "run")],
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert re.search(r"pbmdem.progress: DEM rpm600_small: (settling|spin-up|sampling), step \d+ of \d+ "
+    assert re.search(r"pbmdem.dem.progress: DEM rpm600_small: (settling|spin-up|sampling), step \d+ of \d+ "
                      r"\(\d+ %\), \d+ particles, elapsed", proc.stderr), proc.stderr
     assert "engine stopped at step" in proc.stderr
 
@@ -411,12 +417,12 @@ def test_bad_tables_and_summaries_name_the_file(tmp_path):
 
     bad = _write(tmp_path / "bad.csv", "x,y\n1,2\n")
     with pytest.raises(InputFileError, match=re.escape(str(bad)) + ".*point_id"):
-        collisions.aggregate([bad], tmp_path / "grid.csv")
+        aggregate([bad], tmp_path / "grid.csv")
     with pytest.raises(InputFileError, match=re.escape(str(bad))):
-        train_and_report(bad, tmp_path / "model.skops")
+        train_and_report(bad, tmp_path / "model.skops", settings={}, impeller_radius=0.0265)
     empty = _write(tmp_path / "summary.json", "{not json")
     with pytest.raises(InputFileError, match=re.escape(str(empty))):
-        dem.run_table([empty], tmp_path / "runs.csv")
+        run_table([empty], tmp_path / "runs.csv")
     folder = tmp_path / "v" / "rpm600" / "pbm_ann"
     folder.mkdir(parents=True)
     _write(folder / "summary.csv", "time,d50\n0,0.001\n1,nan\n")
@@ -501,12 +507,11 @@ def test_surrogate_train_config_with_duplicate_or_nan_is_refused(root, tmp_path,
 def test_a_failed_first_run_is_kept_in_and_named_by_its_run_folder(tiny_config, tmp_path, monkeypatch):
     from test_dem_liggghts import _failing_liggghts
 
-    from pbmdem import liggghts
-
     monkeypatch.setenv("PBMDEM_LIGGGHTS", str(_failing_liggghts(tmp_path)))
     run = tmp_path / "run"
-    with pytest.raises(liggghts.LiggghtsError) as info:
-        dem.run_point(tiny_config, dem.plan_point(tiny_config, 600, "small"), run, timeout=600)
+    point = tiny_config.dem_point("small")
+    with pytest.raises(engine.LiggghtsError) as info:
+        run_point(point, plan_point(point, 600), run, tiny_config.dem_execution)
     assert str(run) in str(info.value) and "staging" not in str(info.value)
-    assert (run / "crash.json").exists() and (run / "log.liggghts").exists() and not dem.is_finished(run)
+    assert (run / "crash.json").exists() and (run / "log.liggghts").exists() and not is_finished(run)
     assert not list(tmp_path.glob(".*staging"))

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 import pytest
+from conftest import config_of
+
+from pbmdem.config import ConfigError
 
 from pbmdem.pbm import (
     CollisionKernel,
@@ -24,7 +25,7 @@ from pbmdem.pbm import (
     State,
     SuccessProbability,
     SumKernel,
-    run_pbm,
+    run_batch,
 )
 from pbmdem.pbm import analytical as an
 
@@ -66,11 +67,11 @@ def test_initial_distribution_outside_the_grid():
         model.initial_state(np.pi / 6 * np.array([0.5]) ** 3, [10])
 
 
-def test_initial_distribution_outside_the_configured_grid(default_config):
-    cfg = copy.deepcopy(default_config)
+def test_initial_distribution_outside_the_configured_grid(default_mapping):
+    cfg = default_mapping
     cfg["pbm"] = {"grid": {"min_diameter": 2.5e-3}}
     with pytest.raises(GridRangeError, match=r"size distribution 'fine': diameters \[0\.002\] m"):
-        run_pbm(cfg, None, 600, "fine")
+        run_batch(config_of(cfg).pbm_batch("fine"), None, 600)
 
 
 def test_initial_porosity_below_minimum():
@@ -183,15 +184,15 @@ def test_run_state_time_mismatch():
         model.run(1.0, 0.5, s)
 
 
-def test_bad_config_section(default_config):
-    cfg = copy.deepcopy(default_config)
+def test_bad_config_section(default_mapping):
+    cfg = default_mapping
     cfg["pbm"] = {"liquid_addition": {"rate": 0.0}}
-    with pytest.raises(PBMInputError, match=r"pbm\.liquid_addition\.rate = 0\.0: 0\.0 is less than or equal to "
-                                            r"the minimum of 0"):
-        run_pbm(cfg, None, 600, "fine")
+    with pytest.raises(ConfigError, match=r"pbm\.liquid_addition\.rate = 0\.0: 0\.0 is less than or equal to "
+                                          r"the minimum of 0"):
+        config_of(cfg)
     cfg["pbm"] = {"consolidation": {"rate": 1.0, "speed": 2}}
-    with pytest.raises(PBMInputError, match=r"'speed' was unexpected"):
-        run_pbm(cfg, None, 600, "fine")
+    with pytest.raises(ConfigError, match=r"'speed' was unexpected"):
+        config_of(cfg)
     cfg["pbm"] = {}
-    with pytest.raises(PBMInputError, match=r"size distribution 'huge' is not in the config; defined: "):
-        run_pbm(cfg, None, 600, "huge")
+    with pytest.raises(ConfigError, match=r"size distribution 'huge' is not defined; defined names: "):
+        config_of(cfg).pbm_batch("huge")

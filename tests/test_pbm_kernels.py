@@ -3,8 +3,6 @@ operators, config defaults/schema and the command line."""
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 import pandas as pd
 import pytest
@@ -21,7 +19,6 @@ from pbmdem.pbm import (
     SuccessProbability,
     TableFrequency,
 )
-from pbmdem.pbm.settings import DEFAULTS, DEFAULTS_PATH, SCHEMA_PATH, resolve_settings
 
 D = np.array([0.002, 0.003, 0.004])
 
@@ -169,61 +166,53 @@ def test_fixed_pivot_splits_each_aggregate_between_its_two_pivots():
     assert dN_ca.sum() == pytest.approx(dN.sum()) and abs(dN_ca @ g.x) < 1e-13
 
 
-def test_unknown_aggregation_scheme_is_refused():
+def test_unknown_aggregation_scheme_is_refused(default_mapping):
+    from conftest import config_of
+
+    from pbmdem.config import ConfigError
+
     with pytest.raises(PBMInputError, match=r"aggregation scheme = 'pivot'; allowed: \['cell_average', 'fixed_pivot'\]"):
         GranulationPBM(Grid(5, 2.0, v0=1.0), ConstantKernel(1.0), scheme="pivot")
-    with pytest.raises(PBMInputError, match=r"pbm.aggregation.scheme = 'pivot'"):
-        resolve_settings({"pbm": {"aggregation": {"scheme": "pivot"}}})
+    default_mapping["pbm"]["aggregation"]["scheme"] = "pivot"
+    with pytest.raises(ConfigError, match=r"pbm.aggregation.scheme = 'pivot'"):
+        config_of(default_mapping)
 
 
-def test_defaults_file_matches_code_and_schema():
-    data = yaml.safe_load(DEFAULTS_PATH.read_text())
-    assert data["pbm"] == DEFAULTS
-    import jsonschema
+def test_main_config_schema_checks_the_pbm_section(default_mapping):
+    from conftest import config_of
 
-    jsonschema.Draft202012Validator.check_schema(yaml.safe_load(SCHEMA_PATH.read_text()))
-    assert resolve_settings({"pbm": data["pbm"]}) == DEFAULTS
+    from pbmdem.config import ConfigError
 
-
-def test_main_config_schema_accepts_pbm_section(default_config):
-    from pbmdem.config import validate_schema
-
-    cfg = dict(default_config)
-    cfg["pbm"] = DEFAULTS
-    validate_schema(cfg)
-    cfg["pbm"] = {"grid": {"bins": 1}}
-    with pytest.raises(ValueError, match=r"pbm.grid.bins = 1"):
-        validate_schema(cfg)
+    default_mapping["pbm"] = {"grid": {"bins": 1}}
+    with pytest.raises(ConfigError, match=r"pbm.grid.bins = 1"):
+        config_of(default_mapping)
 
 
 def test_cli_constant_run(tmp_path, root):
-    from pbmdem.pbm import cli
+    from pbmdem.cli import main
 
-    parser = argparse.ArgumentParser()
-    sub = parser.add_subparsers(dest="command")
-    cli.add_cli(sub)
     out = tmp_path / "rpm600_fine"
-    args = parser.parse_args(["pbm", "--config", str(root / "config" / "config.yaml"), "--kernel", "constant",
-                              "--rpm", "600", "--distribution", "fine", "--out", str(out)])
-    assert args.func(args) == 0
+    assert main(["pbm", "--config", str(root / "config" / "config.yaml"), "--kernel", "constant",
+                 "--rpm", "600", "--distribution", "fine", "--out", str(out)]) == 0
     for name in ("summary.csv", "bins.csv", "run.json", "psd.png", "d50.png"):
         assert (out / name).is_file()
-    args = parser.parse_args(["pbm", "--config", str(root / "config" / "config.yaml"), "--kernel", "table",
-                              "--rpm", "600", "--out", str(out)])
-    with pytest.raises(PBMInputError, match="--kernel table needs --table PATH"):
-        args.func(args)
+
+
+def test_cli_table_needs_a_table(tmp_path, root, capsys):
+    from pbmdem.cli import main
+
+    assert main(["pbm", "--config", str(root / "config" / "config.yaml"), "--kernel", "table",
+                 "--rpm", "600", "--out", str(tmp_path / "t")]) == 2
+    assert "--kernel table needs --table PATH" in capsys.readouterr().err
 
 
 def test_cli_table_run(tmp_path, root):
-    from pbmdem.pbm import cli
+    from pbmdem.cli import main
 
     table = tmp_path / "collisions.csv"
     make_table().to_csv(table, index=False)
-    parser = argparse.ArgumentParser()
-    cli.add_cli(parser.add_subparsers(dest="command"))
     out = tmp_path / "table"
-    args = parser.parse_args(["pbm", "--config", str(root / "config" / "config.yaml"), "--kernel", "table",
-                              "--table", str(table), "--rpm", "600", "--distribution", "fine", "--out", str(out)])
-    assert args.func(args) == 0
+    assert main(["pbm", "--config", str(root / "config" / "config.yaml"), "--kernel", "table",
+                 "--table", str(table), "--rpm", "600", "--distribution", "fine", "--out", str(out)]) == 0
     s = pd.read_csv(out / "summary.csv")
     assert s["number_mean_diameter"].iloc[-1] > s["number_mean_diameter"].iloc[0]

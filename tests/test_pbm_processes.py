@@ -3,10 +3,9 @@ resumable runs, and the default granulation run from the config."""
 
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 import pytest
+from conftest import config_of
 
 from pbmdem.pbm import (
     CollisionKernel,
@@ -19,25 +18,26 @@ from pbmdem.pbm import (
     Result,
     SolverSettings,
     SuccessProbability,
-    run_pbm,
+    run_batch,
 )
-from pbmdem.pbm.settings import bed_solid_volume, process_times, resolve_settings
+from pbmdem.pbm.setup import build_model, initial_state
 
 
 @pytest.mark.parametrize("scheme", ["cell_average", "fixed_pivot"])
-def test_default_run_conserves_solid_and_liquid(default_config, scheme):
-    cfg = copy.deepcopy(default_config)
+def test_default_run_conserves_solid_and_liquid(default_mapping, scheme):
+    cfg = default_mapping
     cfg["pbm"]["aggregation"]["scheme"] = scheme
-    res = run_pbm(cfg, None, 600, "fine")
+    config = config_of(cfg)
+    res = run_batch(config.pbm_batch("fine"), None, 600)
     assert res.info["aggregation_scheme"] == scheme
-    settings = resolve_settings(cfg)
-    t0, t1, t_end = process_times(settings)
+    process = config.pbm.process
+    t0, t1, t_end = process.spray_start, process.spray_end, process.end
     S = res.moments()[:, 1]
-    assert S[0] == pytest.approx(bed_solid_volume(default_config), rel=1e-12)
+    assert S[0] == pytest.approx(config.granulator.bed_solid_volume, rel=1e-12)
     rel = np.abs(S / S[0] - 1).max()
     print(f"default run ({scheme}): max relative solid-volume change {rel:.2e}")
     assert rel < 1e-10
-    rate = settings["liquid_addition"]["rate"]
+    rate = config.pbm.liquid_addition.rate
     L = res.liquid.sum(axis=1)
     expected = rate * np.clip(np.minimum(res.times, t1) - t0, 0, None)
     print(f"default run: max liquid error relative to the sprayed total {np.abs(L - expected).max() / expected[-1]:.2e}")
@@ -123,13 +123,10 @@ def test_consolidation_squeezes_liquid_to_the_surface():
 
 
 def test_run_is_resumable_and_source_swappable(default_config):
-    cfg = copy.deepcopy(default_config)
-    whole = run_pbm(cfg, None, 600, "fine", t_end=400.0, output_times=[200.0, 400.0])
-    settings = resolve_settings(cfg)
-    from pbmdem.pbm.settings import build_model, initial_state_from_config
-
-    model = build_model(settings, None, 600)
-    state = initial_state_from_config(cfg, model, "fine", settings)
+    batch = default_config.pbm_batch("fine")
+    whole = run_batch(batch, None, 600, t_end=400.0, times=[200.0, 400.0])
+    model = build_model(batch.pbm, None, 600)
+    state = initial_state(batch, model)
     parts = []
     for a, b in ((0.0, 100.0), (100.0, 200.0), (200.0, 300.0), (300.0, 400.0)):
         r = model.run(a, b, state)
@@ -142,14 +139,14 @@ def test_run_is_resumable_and_source_swappable(default_config):
     np.testing.assert_allclose(state.number, whole.state.number, rtol=2e-3, atol=1e-6 * state.number.sum())
     assert state.liquid.sum() == pytest.approx(whole.state.liquid.sum(), rel=1e-12)
     # swapping the source between intervals takes effect: a 10x larger c_ij aggregates faster
-    fast = build_model(settings, None, 600)
-    fast.kernel.set_source(ConstantFrequency(10 * settings["aggregation"]["constant_frequency"]))
+    fast = build_model(batch.pbm, None, 600)
+    fast.kernel.set_source(ConstantFrequency(10 * batch.pbm.aggregation.constant_frequency))
     r_fast = fast.run(300.0, 400.0, parts[2].state)
     assert r_fast.state.number.sum() < 0.8 * parts[3].state.number.sum()
 
 
 def test_result_tables_and_files(tmp_path, default_config):
-    res = run_pbm(default_config, None, 300, "coarse")
+    res = run_batch(default_config.pbm_batch("coarse"), None, 300)
     frames = res.to_frames()
     s, b = frames["summary"], frames["bins"]
     K = res.grid.bins

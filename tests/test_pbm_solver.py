@@ -20,12 +20,14 @@ from pbmdem.pbm import (
     State,
     SuccessProbability,
     SumKernel,
-    resolve_settings,
 )
 from pbmdem.pbm import analytical as an
 from pbmdem.pbm.errors import PBMInputError, SolverLimitError
 from pbmdem.pbm.kernels import Kernel
-from pbmdem.pbm.settings import DEFAULTS, build_model
+from pbmdem.config import Pbm, Solver
+from pbmdem.pbm.setup import build_grid, build_model, run_batch
+
+DEFAULT_RATIO = Pbm.defaults().grid.ratio
 
 D_CLASSES = np.array([2e-3, 3e-3, 4e-3])
 
@@ -137,27 +139,27 @@ def test_wall_time_guard_stops_with_a_clear_error():
 
 def test_solver_settings_defaults_are_the_config_defaults():
     d = SolverSettings()
-    for key, value in DEFAULTS["solver"].items():
+    for key, value in Solver.defaults().to_dict().items():
         assert getattr(d, key) == value, key
     with pytest.raises(PBMInputError, match=r"solver max_steps = 0; allowed: an integer >= 1"):
         SolverSettings(max_steps=0)
     with pytest.raises(PBMInputError, match=r"solver method = 'rk4'; allowed: \['ssp3', 'heun', 'euler'\]"):
         SolverSettings(method="rk4")
-    assert {f.name for f in dataclasses.fields(SolverSettings)} >= set(DEFAULTS["solver"])
+    assert {f.name for f in dataclasses.fields(SolverSettings)} >= set(Solver.defaults().to_dict())
 
 
 def test_default_grid_runs_from_the_smallest_feed_class_to_max_diameter(default_config):
-    s = resolve_settings(default_config)
-    smallest = min(min(v["diameters"]) for v in default_config["size_distributions"].values())
-    assert s["grid"]["min_diameter"] == smallest
-    grid = build_model(s).grid
+    s = default_config.pbm
+    smallest = min(min(v.diameters) for v in default_config.size_distributions.values())
+    assert s.grid.min_diameter == smallest
+    grid = build_grid(s)
     assert grid.d[0] == pytest.approx(smallest, rel=1e-12)
-    assert grid.d[-1] >= s["grid"]["max_diameter"] > grid.d[-2]
-    # bins overrides max_diameter; no size distributions and no min_diameter: a clear error
-    s2 = resolve_settings({"pbm": {"grid": {"bins": 7}}, "size_distributions": default_config["size_distributions"]})
-    assert build_model(s2).grid.bins == 7
-    with pytest.raises(PBMInputError, match=r"pbm.grid.min_diameter = null .* no size_distributions"):
-        build_model(resolve_settings({}))
+    # the last pivot is the first at or above max_diameter (to round-off: 2 mm x 2^4 = 32 mm)
+    assert grid.d[-1] >= s.grid.max_diameter * (1 - 1e-12) and grid.d[-2] < s.grid.max_diameter
+    # bins overrides max_diameter; an unresolved min_diameter is a clear error
+    assert build_grid(s.replace(grid=s.grid.replace(bins=7))).bins == 7
+    with pytest.raises(PBMInputError, match=r"pbm.grid.min_diameter = null"):
+        build_model(Pbm.defaults())
     g = Grid.spanning(1e-3, 8e-3, 2.0)
     assert g.bins == 10 and g.d[-1] == pytest.approx(8e-3)
 
@@ -168,16 +170,11 @@ def test_default_grid_is_converged_in_d10_d50_d90(default_config):
     sharing and the step success probability, the lumped liquid of a bin mixes wet aggregates
     with the drier initial granules that share the bin, and the batch itself does not converge
     with the grid (docs/pbm.md, "Grid"; benchmarks/bench_pbm_accuracy.py prints both)."""
-    import copy
-
-    from pbmdem.pbm import run_pbm
-
     out = {}
-    ratio = DEFAULTS["grid"]["ratio"]
-    for label, r in (("default", ratio), ("4x finer", ratio ** 0.25)):
-        cfg = copy.deepcopy(default_config)
-        cfg["pbm"] = {"grid": {"ratio": r}, "liquid_addition": {"distribution": "solid_volume"}}
-        res = run_pbm(cfg, None, 600, "fine")
+    batch = default_config.pbm_batch("fine")
+    pbm = batch.pbm.replace(liquid_addition=batch.pbm.liquid_addition.replace(distribution="solid_volume"))
+    for label, r in (("default", DEFAULT_RATIO), ("4x finer", DEFAULT_RATIO ** 0.25)):
+        res = run_batch(batch.replace(pbm=pbm.replace(grid=pbm.grid.replace(ratio=r))), None, 600)
         s = res.summary()
         assert s.d50.iloc[-1] > 1.5 * s.d50.iloc[0]
         out[label] = s[["d10", "d50", "d90"]].iloc[-1].to_numpy()
@@ -185,7 +182,7 @@ def test_default_grid_is_converged_in_d10_d50_d90(default_config):
     np.testing.assert_allclose(out["default"], out["4x finer"], rtol=0.01)
 
 
-def _monodisperse_run(kernel, t_end, ratio=DEFAULTS["grid"]["ratio"], top=1e5):
+def _monodisperse_run(kernel, t_end, ratio=DEFAULT_RATIO, top=1e5):
     grid = Grid(int(np.ceil(np.log(top) / np.log(ratio))) + 1, ratio, v0=1.0)
     N = np.zeros(grid.bins)
     N[0] = 1.0

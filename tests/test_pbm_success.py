@@ -12,7 +12,8 @@ import pytest
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, EncounterRates, representative_velocities, velocity_bin
 from pbmdem.pbm import CollisionKernel, GranulationPBM, Grid, KernelInput, SuccessProbability, TableFrequency
 from pbmdem.pbm.errors import KernelShapeError, PBMInputError
-from pbmdem.pbm.settings import build_success, resolve_settings, run_pbm
+from pbmdem.config import ConfigError, Pbm
+from pbmdem.pbm.setup import build_success, run_batch
 from pbmdem.pbm.success import (
     StokesCriterion,
     critical_stokes_number,
@@ -21,6 +22,14 @@ from pbmdem.pbm.success import (
 )
 
 V = representative_velocities()
+STOKES = {"aggregation": {"success": {"velocity_model": "stokes"}}}
+
+
+def batch_with(config, section: dict, distribution: str = "fine"):
+    """The default batch with its pbm settings replaced by a (partial) pbm section (schema defaults)."""
+    pbm = Pbm.from_section(section)
+    pbm = pbm.replace(grid=pbm.grid.replace(min_diameter=config.pbm.grid.min_diameter))
+    return config.pbm_batch(distribution).replace(pbm=pbm)
 
 
 # ----------------------------------------------------------------------------- Stokes numbers
@@ -111,10 +120,10 @@ def test_bad_stokes_parameters_are_refused():
         StokesCriterion(0.1, 1.5, 5e-6, 1000.0)
     with pytest.raises(PBMInputError, match="binder_viscosity"):
         StokesCriterion(0.0, 0.4, 5e-6, 1000.0)
-    with pytest.raises(PBMInputError, match=r"pbm.aggregation.success.stokes.binder_viscosity = -1"):
-        resolve_settings({"pbm": {"aggregation": {"success": {"stokes": {"binder_viscosity": -1}}}}})
-    with pytest.raises(PBMInputError, match=r"pbm.aggregation.success.velocity_model = 'fast'"):
-        resolve_settings({"pbm": {"aggregation": {"success": {"velocity_model": "fast"}}}})
+    with pytest.raises(ConfigError, match=r"pbm.aggregation.success.stokes.binder_viscosity = -1"):
+        Pbm.from_section({"aggregation": {"success": {"stokes": {"binder_viscosity": -1}}}})
+    with pytest.raises(ConfigError, match=r"pbm.aggregation.success.velocity_model = 'fast'"):
+        Pbm.from_section({"aggregation": {"success": {"velocity_model": "fast"}}})
 
 
 # ----------------------------------------------------------------------------- combination with the liquid
@@ -139,10 +148,8 @@ def test_success_combines_liquid_condition_and_stokes_criterion():
 
 
 def test_build_success_from_config():
-    settings = resolve_settings({})
-    assert not build_success(settings["aggregation"]["success"]).velocity_dependent  # default: seed study
-    settings = resolve_settings({"pbm": {"aggregation": {"success": {"velocity_model": "stokes"}}}})
-    psi = build_success(settings["aggregation"]["success"])
+    assert not build_success(Pbm.defaults()).velocity_dependent  # default: seed study
+    psi = build_success(Pbm.from_section(STOKES))
     assert psi.velocity_dependent
     assert (psi.velocity.viscosity, psi.velocity.restitution, psi.velocity.asperity_height,
             psi.velocity.density) == (0.1, 0.4, 5e-6, 1000.0)
@@ -150,8 +157,7 @@ def test_build_success_from_config():
 
 def test_default_parameters_put_the_critical_speed_inside_the_bins():
     # documented in config.yaml: two 3 mm granules at phi = 0.02 are held below about 0.36 m/s
-    settings = resolve_settings({"pbm": {"aggregation": {"success": {"velocity_model": "stokes"}}}})
-    w = build_success(settings["aggregation"]["success"]).velocity.critical_velocity(
+    w = build_success(Pbm.from_section(STOKES)).velocity.critical_velocity(
         np.array([3e-3]), np.array([0.02]))[0, 0]
     assert 0.3 < w < 0.4
     assert VELOCITY_EDGES[1] < w < VELOCITY_EDGES[-1]
@@ -257,14 +263,12 @@ def test_bad_velocity_fractions_are_refused(bad, match):
 
 
 def test_pbm_with_velocity_resolved_frequencies_conserves_solid_volume(default_config):
-    cfg = dict(default_config)
-    cfg["pbm"] = {"aggregation": {"success": {"velocity_model": "stokes"}}}
-    res = run_pbm(cfg, FakeEncounters(), 600.0, "fine")
+    res = run_batch(batch_with(default_config, STOKES), FakeEncounters(), 600.0)
     s = res.summary()
     solid = s["total_solid_volume"].to_numpy()
     assert abs(solid[-1] - solid[0]) <= 1e-13 * solid[0]
     # the Stokes criterion holds part of the wet encounters: growth, but less than without it
-    plain = run_pbm(dict(default_config, pbm={}), FakeEncounters(), 600.0, "fine").summary()
+    plain = run_batch(batch_with(default_config, {}), FakeEncounters(), 600.0).summary()
     assert s["d50"].iloc[-1] > 1.05 * s["d50"].iloc[0]
     assert s["d50"].iloc[-1] < plain["d50"].iloc[-1]
     assert res.info["frequency_evaluations"] > 1
@@ -423,25 +427,22 @@ def test_constant_frequency_with_one_impact_velocity():
 
 
 def test_constant_baseline_with_stokes_needs_an_impact_velocity(default_config):
-    stokes = {"aggregation": {"success": {"velocity_model": "stokes"}}}
     with pytest.raises(PBMInputError, match=r"constant_impact_velocity = a speed in m/s \(now null\)"):
-        run_pbm(dict(default_config, pbm=stokes), None, 600.0, "fine", t_end=10.0)
+        run_batch(batch_with(default_config, STOKES), None, 600.0, t_end=10.0)
     slow = {"aggregation": {"constant_impact_velocity": 0.05, "success": {"velocity_model": "stokes"}}}
     fast = {"aggregation": {"constant_impact_velocity": 5.0, "success": {"velocity_model": "stokes"}}}
-    d_slow = run_pbm(dict(default_config, pbm=slow), None, 600.0, "fine").summary()["d50"]
-    d_plain = run_pbm(dict(default_config, pbm={}), None, 600.0, "fine").summary()["d50"]
-    d_fast = run_pbm(dict(default_config, pbm=fast), None, 600.0, "fine").summary()["d50"]
+    d_slow = run_batch(batch_with(default_config, slow), None, 600.0).summary()["d50"]
+    d_plain = run_batch(batch_with(default_config, {}), None, 600.0).summary()["d50"]
+    d_fast = run_batch(batch_with(default_config, fast), None, 600.0).summary()["d50"]
     # slow impacts are all held once wet (same as velocity-independent), 5 m/s impacts never are
     assert d_slow.iloc[-1] == pytest.approx(d_plain.iloc[-1], rel=1e-12)
     assert d_fast.iloc[-1] == pytest.approx(d_fast.iloc[0], rel=1e-12)
 
 
-def test_cli_table_run_with_velocity_table(tmp_path, root):
-    import argparse
-
+def test_cli_table_run_with_velocity_table(tmp_path, root, capsys):
     import yaml
 
-    from pbmdem.pbm import cli
+    from pbmdem.cli import main
 
     pc, pv = tmp_path / "collisions.csv", tmp_path / "impact_velocity.csv"
     pair_table().to_csv(pc, index=False)
@@ -450,22 +451,18 @@ def test_cli_table_run_with_velocity_table(tmp_path, root):
     cfg["pbm"]["aggregation"]["success"]["velocity_model"] = "stokes"
     cfg_path = tmp_path / "config.yaml"
     cfg_path.write_text(yaml.safe_dump(cfg))
-    parser = argparse.ArgumentParser()
-    cli.add_cli(parser.add_subparsers(dest="command"))
     base = ["pbm", "--config", str(cfg_path), "--kernel", "table", "--table", str(pc), "--rpm", "600",
             "--distribution", "fine", "--out", str(tmp_path / "out")]
-    args = parser.parse_args(base)
-    with pytest.raises(PBMInputError, match="needs --velocity-table PATH"):
-        args.func(args)
-    args = parser.parse_args(base + ["--velocity-table", str(pv)])
-    assert args.func(args) == 0
+    assert main(base) == 2
+    assert "needs --velocity-table PATH" in capsys.readouterr().err
+    assert main(base + ["--velocity-table", str(pv)]) == 0
     s = pd.read_csv(tmp_path / "out" / "summary.csv")
     assert s["total_solid_volume"].iloc[-1] == pytest.approx(s["total_solid_volume"].iloc[0], rel=1e-13)
     assert s["number_mean_diameter"].iloc[-1] > s["number_mean_diameter"].iloc[0]
-    args = parser.parse_args(["pbm", "--config", str(cfg_path), "--kernel", "constant", "--velocity-table", str(pv),
-                              "--rpm", "600", "--out", str(tmp_path / "o2")])
-    with pytest.raises(PBMInputError, match="read with --kernel table only"):
-        args.func(args)
+    capsys.readouterr()
+    assert main(["pbm", "--config", str(cfg_path), "--kernel", "constant", "--velocity-table", str(pv),
+                 "--rpm", "600", "--out", str(tmp_path / "o2")]) == 2
+    assert "read with --kernel table only" in capsys.readouterr().err
 
 
 def test_velocity_rows_of_other_points_are_left_out():

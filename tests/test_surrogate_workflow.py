@@ -12,15 +12,8 @@ import yaml
 
 from pbmdem.surrogate import load_surrogate
 from pbmdem.surrogate.cli import add_cli, main
-from pbmdem.surrogate.settings import (
-    DEFAULTS,
-    DEFAULTS_PATH,
-    SCHEMA_PATH,
-    SurrogateConfigError,
-    build_surrogate,
-    impeller_radius_from,
-    resolve_settings,
-)
+from pbmdem.config import ConfigError, Surrogate, load_config, section_defaults
+from pbmdem.surrogate.settings import build_surrogate
 from pbmdem.impact import N_VELOCITY_BINS
 from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables
 from pbmdem.surrogate.train import train_and_report
@@ -30,37 +23,39 @@ TINY = {"hidden_layer_sizes": [[4]], "alpha": [0.01, 0.1], "ensemble_size": 2, "
         "max_iter": 300, "cv": {"strategy": "group_kfold", "n_splits": 3}}
 
 
-def test_default_file_matches_code_and_schema():
-    with open(DEFAULTS_PATH) as fh:
-        section = yaml.safe_load(fh)["surrogate"]
-    assert section == DEFAULTS
-    assert resolve_settings({"surrogate": section}) == DEFAULTS
-    schema = yaml.safe_load(SCHEMA_PATH.read_text())
+def tiny_settings() -> dict:
+    return Surrogate.from_section(TINY).to_dict()
+
+
+def test_schema_holds_the_defaults():
+    schema = yaml.safe_load((REPO / "workflow" / "schemas" / "surrogate.schema.yaml").read_text())
     assert schema["$schema"].endswith("draft/2020-12/schema")
     assert schema["additionalProperties"] is False
-    assert set(schema["properties"]) == set(DEFAULTS)
+    assert set(section_defaults("surrogate")) == set(schema["properties"])
+    # the project config states every default again (with its reasons), except the explicit seeds
+    section = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["surrogate"]
+    assert Surrogate.from_section(section).member_seeds == Surrogate.from_section({}).member_seeds
 
 
-def test_settings_merge_and_validation():
-    s = resolve_settings({"surrogate": {"cv": {"strategy": "group_kfold"}, "ensemble_size": 3}})
-    assert s["cv"] == {"strategy": "group_kfold", "n_splits": 5}
-    assert s["seeds"] is None and s["ensemble_size"] == 3
-    assert resolve_settings({"granulator": {}}) == DEFAULTS  # full config without a section
-    with pytest.raises(SurrogateConfigError, match="hiden_layer_sizes"):
-        resolve_settings({"surrogate": {"hiden_layer_sizes": [[4]]}})
-    with pytest.raises(SurrogateConfigError, match="cv.strategy"):
-        resolve_settings({"surrogate": {"cv": {"strategy": "kfold"}}})
-    with pytest.raises(SurrogateConfigError, match="alpha"):
-        resolve_settings({"surrogate": {"alpha": [-1.0]}})
-    with pytest.raises(SurrogateConfigError, match="seeds has 2 entries"):
-        resolve_settings({"surrogate": {"ensemble_size": 3, "seeds": [1, 2]}})
+def test_settings_completion_and_validation():
+    s = Surrogate.from_section({"cv": {"strategy": "group_kfold"}, "ensemble_size": 3})
+    assert s.cv.strategy == "group_kfold" and s.cv.n_splits == 5
+    assert s.seeds is None and s.member_seeds == (0, 1, 2)
+    with pytest.raises(ConfigError, match="hiden_layer_sizes"):
+        Surrogate.from_section({"hiden_layer_sizes": [[4]]})
+    with pytest.raises(ConfigError, match=r"surrogate.cv.strategy = 'kfold'"):
+        Surrogate.from_section({"cv": {"strategy": "kfold"}})
+    with pytest.raises(ConfigError, match=r"surrogate.alpha\[0\] = -1.0"):
+        Surrogate.from_section({"alpha": [-1.0]})
+    with pytest.raises(ConfigError, match="2 seeds but ensemble_size = 3"):
+        Surrogate.from_section({"ensemble_size": 3, "seeds": [1, 2]})
 
 
 def test_build_surrogate_from_settings():
-    cfg = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
-    radius = impeller_radius_from(cfg)
-    assert radius == cfg["granulator"]["impeller"]["blade_length"]
-    est = build_surrogate(resolve_settings(TINY), radius)
+    cfg = load_config(REPO / "config" / "config.yaml")
+    radius = cfg.granulator.impeller.tip_radius
+    assert radius == cfg.granulator.impeller.blade_length
+    est = build_surrogate(tiny_settings(), radius)
     assert est.hidden_layer_sizes == ((4,),) and est.seeds == (3, 4) and est.impeller_radius == radius
     assert est.cv == "group_kfold" and est.n_splits == 3
 
@@ -77,7 +72,8 @@ def test_train_and_report_writes_outputs(tmp_path):
     out = tmp_path / "surrogate"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        meta = train_and_report(csv, out / "model.skops", settings={"surrogate": TINY}, velocity_table=vcsv)
+        meta = train_and_report(csv, out / "model.skops", settings=tiny_settings(), impeller_radius=0.0265,
+                                velocity_table=vcsv)
     for name in ("model.skops", "model.json", "metrics.csv", "parity.png"):
         assert (out / name).stat().st_size > 0
     metrics = pd.read_csv(out / "metrics.csv", dtype={"fold": str})
@@ -105,7 +101,9 @@ def test_cli_train_and_predict(tmp_path, capsys):
     vcsv = tmp_path / "impact_velocity.csv"
     table.to_csv(csv, index=False)
     velocity.to_csv(vcsv, index=False)
-    cfg = {"granulator": {"impeller": {"blade_length": 0.03}}, "surrogate": TINY}
+    cfg = yaml.safe_load((REPO / "config" / "test.yaml").read_text())
+    cfg["granulator"]["impeller"]["blade_length"] = 0.012
+    cfg["surrogate"] = TINY
     cfg_path = tmp_path / "config.yaml"
     cfg_path.write_text(yaml.safe_dump(cfg))
     out = tmp_path / "out"
@@ -115,7 +113,7 @@ def test_cli_train_and_predict(tmp_path, capsys):
                      "--config", str(cfg_path), "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "replicate noise floor" in printed and "median impact speed" in printed
-    assert json.loads((out / "model.json").read_text())["params"]["impeller_radius"] == 0.03
+    assert json.loads((out / "model.json").read_text())["params"]["impeller_radius"] == 0.012
     assert main(["surrogate", "predict", "--model", str(out / "model.skops"), "--diameters", "0.002", "0.004",
                  "--numbers", "1500", "500", "--rpm", "600"]) == 0
     printed = capsys.readouterr().out
@@ -136,8 +134,8 @@ def test_cli_train_and_predict(tmp_path, capsys):
 def test_add_cli_registers_subcommands():
     parser = argparse.ArgumentParser()
     add_cli(parser.add_subparsers(dest="command"))
-    args = parser.parse_args(["surrogate", "train", "--table", "t.csv", "--out", "o"])
-    assert args.surrogate_command == "train" and args.table == Path("t.csv") and args.config is None
+    args = parser.parse_args(["surrogate", "train", "--table", "t.csv", "--config", "c.yaml", "--out", "o"])
+    assert args.surrogate_command == "train" and args.table == Path("t.csv") and args.config == Path("c.yaml")
     args = parser.parse_args(["surrogate", "predict", "--model", "m.skops", "--table", "t.csv"])
     assert args.surrogate_command == "predict"
 
@@ -145,9 +143,8 @@ def test_add_cli_registers_subcommands():
 def test_rule_declares_contract_paths():
     text = (REPO / "rules" / "surrogate.smk").read_text()
     assert "rule train_surrogate" in text
-    for path in ("results/dem/collisions.csv", "results/dem/impact_velocity.csv", "results/surrogate/model.skops", "results/surrogate/model.json",
-                 "results/surrogate/metrics.csv", "results/surrogate/parity.png",
-                 "../workflow/scripts/train_surrogate.py"):
+    for path in ("/dem/collisions.csv", "/dem/impact_velocity.csv", "/surrogate/model.json",
+                 "/surrogate/metrics.csv", "/surrogate/parity.png", "../workflow/scripts/train_surrogate.py"):
         assert path in text
     script = (REPO / "workflow" / "scripts" / "train_surrogate.py").read_text()
     assert "velocity_table=snakemake.input.velocity" in script
@@ -158,6 +155,6 @@ def test_single_run_table_still_trains(tmp_path):
     out = tmp_path / "s"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        meta = train_and_report(table, out / "model.skops", settings=TINY)
+        meta = train_and_report(table, out / "model.skops", settings=tiny_settings(), impeller_radius=0.0265)
     assert meta["training_point_ids"] == ["rpm600_mixed"]
     assert len(pd.read_csv(out / "metrics.csv")) == 0 and (out / "parity.png").exists()

@@ -3,7 +3,7 @@
 
 import pytest
 
-from pbmdem import vtk_series, viewer
+from pbmdem.dem import viewer, vtk_series
 from pbmdem.cli import main
 
 pytestmark = pytest.mark.liggghts

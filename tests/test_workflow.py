@@ -153,7 +153,7 @@ def test_lint_is_clean(root, tiny_workflow):
 def test_a_failed_point_keeps_the_finished_ones(root, tmp_path):
     """One operating point's LIGGGHTS fails (a real engine run whose deck is broken mid-sampling):
     the job fails with the log's last lines, leaves crash.json and no table; the other point is kept."""
-    from pbmdem import liggghts
+    from pbmdem.dem import engine as liggghts
 
     real = liggghts.executable()
     wrapper = tmp_path / "liggghts-fails-for-large"
@@ -273,12 +273,12 @@ def test_job_logs_show_progress(tiny_workflow):
     workdir, _ = tiny_workflow
     logs = workdir / "results" / "logs"
     dem_log = (logs / "dem" / "rpm600_small_rep0.log").read_text()
-    assert re.search(r"pbmdem.progress: DEM rpm600_small: \w[\w-]*, step \d+ of \d+ \(\d+ %\), \d+ particles", dem_log)
+    assert re.search(r"pbmdem.dem.progress: DEM rpm600_small: \w[\w-]*, step \d+ of \d+ \(\d+ %\), \d+ particles", dem_log)
     assert "CV fold 1 of" in (logs / "train_surrogate.log").read_text()
     loop = (logs / "validation" / "pbm_dem_rpm600.log").read_text()
     assert re.search(r"pbm_dem at rpm 600: interval 1 of \d+ .* DEM wall time [\d.]+ s, PBM wall time [\d.]+ s, "
                      r"\d+ surrogate out-of-domain", loop), loop[-2000:]
-    assert "pbmdem.progress: DEM" in loop  # the loop's LIGGGHTS calls report progress too
+    assert "pbmdem.dem.progress: DEM" in loop  # the loop's LIGGGHTS calls report progress too
     ann = (logs / "validation" / "pbm_ann_rpm600.log").read_text()
     assert "pbm_ann at rpm 600: interval 1 of" in ann
     assert "rpm sweep: 600 rpm done" in (logs / "validation" / "rpm_sweep.log").read_text()
@@ -296,3 +296,38 @@ def test_a_manual_dem_run_on_a_finished_point_changes_nothing(tiny_workflow, roo
     assert {p: p.stat().st_mtime_ns for p in point.rglob("*")} == before
     dry = snakemake(root, workdir, configfile, "-n", "--cores", "2")
     assert "Nothing to be done" in dry.stdout + dry.stderr, dry.stdout[-3000:]
+
+
+def test_deck_template_edit_reruns_every_dem_job_and_execution_settings_none(root, tmp_path):
+    """Rule inputs are complete and params are exact: in a copy of the project, a finished DEM point
+    and PBM-DEM loop are redone when the deck template changes, and not when dem.timeout or
+    dem.mpi_ranks change."""
+    project = tmp_path / "project"
+    project.mkdir()
+    for name in ("Snakefile", "rules", "workflow", "liggghts_templates", "src", "profiles", "envs"):
+        src = root / name
+        (shutil.copytree if src.is_dir() else shutil.copy2)(src, project / name)
+    workdir = tmp_path / "wd"
+    workdir.mkdir()
+    cfg = yaml.safe_load((root / "config" / "test.yaml").read_text())
+    cfg["grid"]["impeller_rpm"] = [600]
+    cfg["validation"]["rpm"] = [600]
+    configfile = workdir / "config.yaml"
+    configfile.write_text(yaml.safe_dump(cfg))
+    targets = ["results/dem/rpm600_small/rep0/collisions.csv", "results/validation/rpm600/pbm_dem/summary.csv"]
+    snakemake(project, workdir, configfile, "--cores", "2", *targets)
+
+    def planned(config: Path) -> dict[str, int]:
+        out = snakemake(project, workdir, config, "-n", "--cores", "2", *targets, "--quiet", "rules")
+        text = out.stdout + out.stderr
+        return {line.split()[0]: int(line.split()[1]) for line in text.splitlines()
+                if len(line.split()) == 2 and line.split()[1].isdigit() and line.split()[0] != "total"}
+
+    assert planned(configfile) == {}
+    cfg["dem"]["timeout"], cfg["dem"]["mpi_ranks"] = 99.0, 2
+    execution = workdir / "execution.yaml"
+    execution.write_text(yaml.safe_dump(cfg))
+    assert planned(execution) == {}
+    template = project / "liggghts_templates" / "granulator.in"
+    template.write_text(template.read_text() + "# an edited deck\n")
+    assert planned(configfile) == {"dem_point": 1, "pbm_dem_coupled": 1}

@@ -1,11 +1,13 @@
 """The `pbmdem` command line.
 
-    pbmdem dem --config config/config.yaml --rpm 600 --distribution fine --out results/dem/rpm600_fine/rep0
+    pbmdem dem --config config/config.yaml --rpm 600 --distribution fine [--replicate K] [--out DIR]
     pbmdem view RUN_DIR [--step N] [--screenshot out.png]
-    pbmdem pbm --config ... --kernel constant|table|ann ...
+    pbmdem pbm --config ... --kernel constant|table|ann --rpm 600 [--distribution fine] --out DIR
     pbmdem surrogate train|predict ...
 
-Each stage registers its own subcommand (`add_cli(subparsers)` in its module).
+Every subcommand reads its configuration through `pbmdem.config.load_config` (validated once,
+defaults filled in), the same path the workflow takes. Bad input gets one line naming the file,
+key or flag, the value and what is allowed, and exit status 2.
 """
 
 from __future__ import annotations
@@ -14,25 +16,86 @@ import argparse
 import json
 import logging
 import sys
+from pathlib import Path
 
 
 def _dem(args: argparse.Namespace) -> int:
-    from pbmdem.config import check_rpm, load_config
+    from pbmdem.config import check_rpm, load_config, point_id
     from pbmdem.dem import plan_point, run_point
 
     rpm = check_rpm(args.rpm, "--rpm")
     cfg = load_config(args.config)
-    plan = plan_point(cfg, rpm, args.distribution, replicate=args.replicate)
+    point = cfg.dem_point(args.distribution)
+    if not 0 <= args.replicate < cfg.dem_replicates:
+        raise ValueError(f"--replicate {args.replicate}: allowed 0 .. dem.replicates - 1 = {cfg.dem_replicates - 1}")
+    plan = plan_point(point, rpm, replicate=args.replicate)
     if args.plan_only:
-        print(json.dumps(plan.__dict__, indent=2))
+        print(json.dumps(plan.to_dict(), indent=2))
         return 0
+    out = args.out or f"results/dem/{point_id(rpm, args.distribution)}/rep{args.replicate}"
     # progress: a bar on a terminal, plain log lines (at least every ~10 s) otherwise
     bar = sys.stderr.isatty()
     if not bar:
         logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stderr)
-    summary = run_point(cfg, plan, args.out, timeout=cfg["dem"].get("timeout"), force=args.force, progress_bar=bar)
+    summary = run_point(point, plan, out, cfg.dem_execution, force=args.force, progress_bar=bar)
     print(json.dumps(summary, indent=2))
     return 0
+
+
+def _pbm(args: argparse.Namespace) -> int:
+    from pbmdem.config import check_rpm, load_config
+
+    rpm = check_rpm(args.rpm, "--rpm")
+    cfg = load_config(args.config)
+    distribution = args.distribution or cfg.grid.size_distributions[0]
+    batch = cfg.pbm_batch(distribution)
+    for flag, value, kernels in (("--table", args.table, ("table",)), ("--velocity-table", args.velocity_table, ("table",)),
+                                 ("--model", args.model, ("ann",))):
+        if value is not None and args.kernel not in kernels:
+            raise ValueError(f"{flag} {value} is read with --kernel {' or '.join(kernels)} only, not --kernel {args.kernel}")
+    info: dict = {"kernel_source": args.kernel}
+    if args.kernel == "ann":
+        from pbmdem.coupling import pbm_ann
+
+        if args.model is None:
+            raise ValueError("--kernel ann needs --model PATH (a saved surrogate, results/surrogate/model.skops)")
+        outcome = pbm_ann(cfg.coupled_loop().replace(batch=batch), args.model, rpm, args.out)
+        result = outcome.result
+        totals = outcome.totals
+        info["coupling_intervals"] = totals["intervals"]
+        if totals.get("out_of_domain_count"):
+            messages = sorted({r["out_of_domain"] for r in outcome.intervals if r.get("out_of_domain")})
+            print(f"warning: the surrogate was evaluated outside its training domain in "
+                  f"{totals['out_of_domain_intervals']} of {totals['intervals']} coupling intervals "
+                  f"({totals['out_of_domain_count']} warnings); " + "; ".join(messages), file=sys.stderr)
+        info["surrogate_domain"] = {k: totals.get(k, 0) for k in ("out_of_domain_count", "out_of_domain_intervals")}
+    else:
+        from pbmdem.pbm.setup import run_batch
+
+        source = _table_source(batch, args) if args.kernel == "table" else None
+        result = run_batch(batch, source, rpm)
+    result.info.update(info)
+    paths = result.save(args.out)
+    last = result.summary().iloc[-1]
+    print(json.dumps({"out": str(args.out), "files": sorted(p.name for p in paths.values()),
+                      "d50_final_m": float(last["d50"]), "number_mean_diameter_final_m": float(last["number_mean_diameter"]),
+                      "steps": int(result.info["steps"]), "wall_time_s": round(result.info["wall_time_s"], 3)}, indent=2))
+    return 0
+
+
+def _table_source(batch, args):
+    from pbmdem.pbm.errors import PBMInputError
+    from pbmdem.pbm.kernels import TableFrequency
+
+    success = batch.pbm.aggregation.success
+    if args.table is None:
+        raise PBMInputError("--kernel table needs --table PATH (a DEM collision table CSV)")
+    if args.velocity_table is None and success.velocity_resolved:
+        raise PBMInputError(f"pbm.aggregation.success.velocity_model = {success.velocity_model!r} needs impact "
+                            "velocities: --kernel table needs --velocity-table PATH (results/dem/impact_velocity.csv)")
+    # one distribution's rows: the grid's distributions have different class sizes
+    return TableFrequency.from_csv(args.table, distribution=batch.distribution, velocity_path=args.velocity_table,
+                                   extrapolation=batch.pbm.aggregation.table_extrapolation)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -51,14 +114,26 @@ def build_parser() -> argparse.ArgumentParser:
                           "Snakemake redo everything downstream of that point)")
     dem.set_defaults(func=_dem)
 
-    from pbmdem import viewer
+    pbm = sub.add_parser("pbm", help="run the population balance model of the batch granulator",
+                         description="Run the PBM for one impeller speed and size distribution.")
+    pbm.add_argument("--config", required=True, type=Path, help="workflow config (YAML)")
+    pbm.add_argument("--kernel", choices=["constant", "table", "ann"], default="constant",
+                     help="collision-frequency source: constant c_ij, the DEM collision table, or PBM-ANN (the "
+                          "surrogate, refreshed at each of validation.coupling_intervals, as in the validation)")
+    pbm.add_argument("--table", type=Path, help="collision table CSV (with --kernel table)")
+    pbm.add_argument("--velocity-table", type=Path, default=None,
+                     help="impact-velocity table CSV (results/dem/impact_velocity.csv; with --kernel table); "
+                          "needed when pbm.aggregation.success.velocity_model is not 'none'")
+    pbm.add_argument("--model", type=Path, help="surrogate model file (with --kernel ann)")
+    pbm.add_argument("--rpm", required=True, help="impeller speed (1/min), 0 < rpm <= 20000")
+    pbm.add_argument("--distribution", default=None, help="size distribution name (default: first of the grid)")
+    pbm.add_argument("--out", required=True, type=Path, help="output folder (tables, plots, run.json)")
+    pbm.set_defaults(func=_pbm)
 
-    viewer.add_cli(sub)
-    from pbmdem.pbm import cli as pbm_cli
-
-    pbm_cli.add_cli(sub)
+    from pbmdem.dem import viewer
     from pbmdem.surrogate import cli as surrogate_cli
 
+    viewer.add_cli(sub)
     surrogate_cli.add_cli(sub)
     return parser
 
@@ -67,11 +142,6 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        if getattr(args, "command", None) == "dem" and args.out is None:
-            from pbmdem.config import check_rpm
-            from pbmdem.dem import point_id
-
-            args.out = f"results/dem/{point_id(check_rpm(args.rpm, '--rpm'), args.distribution)}/rep{args.replicate}"
         return int(args.func(args) or 0)
     except (ValueError, FileNotFoundError, RuntimeError, OSError) as exc:
         print(f"pbmdem: error: {exc}", file=sys.stderr)

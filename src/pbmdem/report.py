@@ -160,7 +160,7 @@ def figures(validation_dir: str | Path, rpm: str, model: str | Path | None = Non
     dem_c, ann_c = [], []
     outside = 0
     if model is not None:
-        from pbmdem.coupling import out_of_domain_recorded
+        from pbmdem.surrogate.domain import out_of_domain_recorded
         from pbmdem.surrogate import load_surrogate
 
         surrogate = load_surrogate(model)

@@ -3,24 +3,25 @@
 import logging
 from pathlib import Path
 
-from pbmdem.pbm import run_pbm
-from pbmdem.pbm.cli import make_source
+from pbmdem.config import PbmBatch
+from pbmdem.pbm.kernels import TableFrequency
+from pbmdem.pbm.setup import run_batch
 
 logging.basicConfig(filename=snakemake.log[0], filemode="w", level=logging.INFO,  # noqa: F821
                     format="%(asctime)s %(levelname)s %(name)s: %(message)s")
 logging.captureWarnings(True)
 
+batch = PbmBatch.from_dict(snakemake.params.batch)  # noqa: F821
 kernel = snakemake.params.kernel  # noqa: F821
-config = snakemake.params.config  # noqa: F821
-dist = snakemake.params.dist  # noqa: F821
+rpm = float(snakemake.wildcards.rpm)  # noqa: F821
+source = None  # the constant kernel of pbm.aggregation
 if kernel == "table":
-    # DEM collision table (encounter frequencies) and its impact-velocity table
-    source = make_source("table", config, snakemake.input.table, distribution=dist,  # noqa: F821
-                         velocity_table=snakemake.input.velocities)  # noqa: F821
-else:
-    source = None  # ConstantFrequency(pbm.aggregation.constant_frequency)
-result = run_pbm(config, source, snakemake.params.rpm, dist)  # noqa: F821
+    # DEM collision table (encounter frequencies) and its impact-velocity table, this feed's rows
+    source = TableFrequency.from_csv(snakemake.input.table, distribution=batch.distribution,  # noqa: F821
+                                     velocity_path=snakemake.input.velocities,  # noqa: F821
+                                     extrapolation=batch.pbm.aggregation.table_extrapolation)
+result = run_batch(batch, source, rpm)
 result.info["kernel_source"] = kernel
 paths = result.save(Path(snakemake.output.summary).parent)  # noqa: F821
-logging.info("PBM %s kernel rpm %s %s: %d steps, %.3f s; wrote %s", kernel, snakemake.params.rpm,  # noqa: F821
-             dist, result.info["steps"], result.info["wall_time_s"], sorted(str(p) for p in paths.values()))
+logging.info("PBM %s kernel rpm %g %s: %d steps, %.3f s; wrote %s", kernel, rpm, batch.distribution,
+             result.info["steps"], result.info["wall_time_s"], sorted(str(p) for p in paths.values()))

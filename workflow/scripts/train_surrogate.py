@@ -2,6 +2,7 @@
 
 import logging
 
+from pbmdem.config import SurrogateTraining
 from pbmdem.surrogate.train import train_and_report
 
 # each CV fold and hyperparameter candidate is logged as it finishes: job log and terminal
@@ -9,14 +10,15 @@ logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name
                     handlers=[logging.FileHandler(snakemake.log[0], mode="w"), logging.StreamHandler()])  # noqa: F821
 logging.captureWarnings(True)
 
+training = SurrogateTraining.from_dict(snakemake.params.training)  # noqa: F821
 train_and_report(
     snakemake.input.table,  # noqa: F821
     model_path=snakemake.output.model,  # noqa: F821
     metadata_path=snakemake.output.metadata,  # noqa: F821
     metrics_path=snakemake.output.metrics,  # noqa: F821
     parity_path=snakemake.output.parity,  # noqa: F821
-    settings=snakemake.params.settings,  # noqa: F821
-    impeller_radius=float(snakemake.params.impeller_radius),  # noqa: F821
+    settings=training.surrogate.to_dict(),
+    impeller_radius=training.granulator.impeller.tip_radius,
     n_jobs=snakemake.threads,  # noqa: F821
     velocity_table=snakemake.input.velocity,  # noqa: F821
 )

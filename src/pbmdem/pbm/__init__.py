@@ -29,14 +29,14 @@ from .model import GranulationPBM, SolverSettings, State, surface_fraction
 from .processes import Consolidation, LiquidAddition
 from .results import Result, mass_quantiles
 from .success import StokesCriterion
-from .settings import DEFAULTS, build_model, initial_state_from_config, resolve_settings, run_pbm
+from .setup import build_model, initial_state, run_batch
 
 __all__ = [
     "SCHEMES", "CellAverageAggregation", "FixedPivotAggregation", "Grid", "diameter_of", "volume_of",
     "ConstantKernel", "SumKernel", "CollisionKernel", "ConstantFrequency", "TableFrequency",
     "SuccessProbability", "StokesCriterion", "KernelInput", "GranulationPBM", "SolverSettings", "State", "surface_fraction",
     "LiquidAddition", "Consolidation", "Result", "mass_quantiles",
-    "DEFAULTS", "resolve_settings", "build_model", "initial_state_from_config", "run_pbm",
+    "build_model", "initial_state", "run_batch",
     "PBMError", "PBMInputError", "GridRangeError", "GridOverflowError", "KernelShapeError",
     "NegativePopulationError",
 ]

@@ -24,9 +24,9 @@ def add_cli(subparsers) -> argparse.ArgumentParser:
     train.add_argument("--velocity-table", type=Path, default=None,
                        help="impact-velocity table (results/dem/impact_velocity.csv); without it only the "
                             "encounter frequency is learned")
-    train.add_argument("--config", type=Path, default=None,
-                       help="workflow config YAML (uses its surrogate: section and "
-                            "granulator.impeller.blade_length) or a bare surrogate section")
+    train.add_argument("--config", type=Path, required=True,
+                       help="workflow config YAML (its surrogate: section and the impeller radius "
+                            "granulator.impeller.blade_length of the tip-speed feature)")
     train.add_argument("--out", required=True, type=Path,
                        help="output folder: model.skops, model.json, metrics.csv, parity.png")
     train.add_argument("--jobs", type=int, default=None, help="parallel jobs of the grid search")
@@ -46,22 +46,14 @@ def add_cli(subparsers) -> argparse.ArgumentParser:
 
 
 def _train(args) -> int:
-    from .settings import impeller_radius_from, resolve_settings
+    from pbmdem.config import load_config
+
     from .train import train_and_report
 
-    from pbmdem.config import ConfigError, load_yaml, non_finite_values
-
-    config = {}
-    if args.config is not None:
-        config = load_yaml(args.config, "config file") or {}  # duplicate keys refused, file named
-        if not isinstance(config, dict):
-            raise ConfigError(f"config file {args.config}: the top level must be a mapping of sections")
-        bad = non_finite_values(config)
-        if bad:
-            raise ConfigError(f"config file {args.config}:\n  " + "\n  ".join(bad))
+    cfg = load_config(args.config)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    meta = train_and_report(args.table, args.out / "model.skops", settings=resolve_settings(config),
-                            impeller_radius=impeller_radius_from(config), n_jobs=args.jobs,
+    meta = train_and_report(args.table, args.out / "model.skops", settings=cfg.surrogate.to_dict(),
+                            impeller_radius=cfg.granulator.impeller.tip_radius, n_jobs=args.jobs,
                             velocity_table=args.velocity_table)
     summary = meta["cv_scores"]["outer_summary"]
     for name, s in summary.items():

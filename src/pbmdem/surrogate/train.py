@@ -11,11 +11,10 @@ from pathlib import Path
 import pandas as pd
 
 from .evaluation import METRIC_COLUMNS, cross_validate_models, summarise
-from .features import DEFAULT_IMPELLER_RADIUS
 from ._io import atomic_write
 from .persistence import save_surrogate
 from .plots import empty_plot, parity_plot
-from .settings import build_surrogate, resolve_settings
+from .settings import build_surrogate
 from .velocity import attach_velocity_bins
 
 log = logging.getLogger(__name__)
@@ -37,7 +36,7 @@ def _read_table(table, what: str, columns=()) -> tuple[pd.DataFrame, str]:
 def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | os.PathLike,
                      metadata_path: str | os.PathLike | None = None, metrics_path: str | os.PathLike | None = None,
                      parity_path: str | os.PathLike | None = None, settings: dict | None = None,
-                     impeller_radius: float = DEFAULT_IMPELLER_RADIUS, n_jobs: int | None = None,
+                     impeller_radius: float | None = None, n_jobs: int | None = None,
                      velocity_table: str | os.PathLike | pd.DataFrame | None = None) -> dict:
     """Grouped CV of MLP and baselines, final fit on every run, then write the outputs.
 
@@ -52,7 +51,9 @@ def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | 
     metadata_path = Path(metadata_path) if metadata_path else model_path.with_suffix(".json")
     metrics_path = Path(metrics_path) if metrics_path else out / "metrics.csv"
     parity_path = Path(parity_path) if parity_path else out / "parity.png"
-    settings = resolve_settings(settings)
+    if settings is None or impeller_radius is None:
+        raise ValueError("train_and_report needs the complete surrogate: settings and the impeller radius "
+                         "(pbmdem.config: cfg.surrogate.to_dict(), cfg.granulator.impeller.tip_radius)")
     frame, source = _read_table(table, "collision table", columns=("point_id",))
     if "point_id" not in frame:
         raise ValueError(f"collision table {source} lacks column 'point_id'")

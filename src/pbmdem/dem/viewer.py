@@ -10,7 +10,7 @@ import argparse
 from pathlib import Path
 
 from pbmdem.atomic import atomic_path
-from pbmdem.vtk_series import snapshots
+from .vtk_series import snapshots
 
 
 class ViewError(ValueError):

@@ -1,70 +1,19 @@
 """Granulator geometry: a closed cylindrical bowl and a bladed impeller as STL triangle meshes.
 
-The bowl's axis is the z axis, its bottom at z = 0. The impeller turns about the same axis. Both
+The bowl's axis is the z axis, its bottom at z = 0 (dimensions: `pbmdem.config.Granulator`). The impeller turns about the same axis. Both
 meshes are written with meshio; every closed part is watertight with outward normals (triangles
 ordered counter-clockwise seen from outside), which `check_closed_surface` verifies.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 import meshio
 import numpy as np
 
 from pbmdem.atomic import atomic_path
-
-
-@dataclass(frozen=True)
-class Bowl:
-    diameter: float
-    height: float
-    segments: int = 48
-
-    @property
-    def radius(self) -> float:
-        return 0.5 * self.diameter
-
-
-@dataclass(frozen=True)
-class Impeller:
-    blades: int
-    blade_length: float
-    blade_height: float
-    blade_thickness: float
-    clearance: float
-    pitch_deg: float = 0.0
-    hub_diameter: float = 0.01
-
-    @property
-    def tip_radius(self) -> float:
-        return self.blade_length
-
-    @property
-    def top(self) -> float:
-        """Highest z reached by the blades (m), accounting for pitch."""
-        pitch = np.radians(self.pitch_deg)
-        half_extent = 0.5 * (self.blade_height * abs(np.cos(pitch)) + self.blade_thickness * abs(np.sin(pitch)))
-        return self.clearance + 0.5 * self.blade_height + half_extent
-
-
-def bowl_from_config(cfg: dict) -> Bowl:
-    b = cfg["granulator"]["bowl"]
-    return Bowl(diameter=float(b["diameter"]), height=float(b["height"]), segments=int(b.get("segments", 48)))
-
-
-def impeller_from_config(cfg: dict) -> Impeller:
-    i = cfg["granulator"]["impeller"]
-    return Impeller(
-        blades=int(i["blades"]),
-        blade_length=float(i["blade_length"]),
-        blade_height=float(i["blade_height"]),
-        blade_thickness=float(i["blade_thickness"]),
-        clearance=float(i["clearance"]),
-        pitch_deg=float(i.get("pitch_deg", 0.0)),
-        hub_diameter=float(i.get("hub_diameter", 0.01)),
-    )
+from pbmdem.config import Bowl, Granulator, Impeller
 
 
 def _disc_fan(center: np.ndarray, ring: np.ndarray, upward: bool) -> np.ndarray:
@@ -195,11 +144,11 @@ def write_stl(path: str | Path, points: np.ndarray, triangles: np.ndarray) -> Pa
     return path
 
 
-def write_granulator(cfg: dict, outdir: str | Path) -> dict[str, Path]:
-    """Write bowl.stl and impeller.stl for the config's granulator into `outdir`."""
+def write_granulator(granulator: Granulator, outdir: str | Path) -> dict[str, Path]:
+    """Write bowl.stl and impeller.stl of the granulator into `outdir`."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
-    bowl, imp = bowl_from_config(cfg), impeller_from_config(cfg)
+    bowl, imp = granulator.bowl, granulator.impeller
     return {
         "bowl": write_stl(outdir / "bowl.stl", *bowl_mesh(bowl)),
         "impeller": write_stl(outdir / "impeller.stl", *impeller_mesh(imp, bowl)),

@@ -1,21 +1,17 @@
-"""Collision-frequency tables from LIGGGHTS contact snapshots.
+"""Collision and encounter tables of one DEM run, from its contact and position snapshots.
 
 The DEM deck dumps, every `collision_interval` steps of the sampling window, all particle-particle
 contacts (`compute pair/gran/local id delta`: id1, id2, overlap) and all particle-mesh contacts
-(`compute wall/gran/local id delta`: mesh id, particle id, overlap). A **collision is a contact
-that begins**: a pair with positive overlap at one snapshot that was not in contact at the
-previous snapshot. Pairs already touching at the first snapshot are not counted; rows with
-overlap <= 0 (liquid-bridge models list separated pairs too) are not contacts.
-
-Parsing is vectorised: the file is read once as bytes, frame headers are located with one
-regular-expression scan, all entry rows are handed in one piece to pandas' C reader, and new
-contacts are found for all frames at once by sorting (pair, frame) keys.
+(`compute wall/gran/local id delta`: mesh id, particle id, overlap). A **contact that begins** is a
+pair with positive overlap at one snapshot that was not in contact at the previous snapshot (pairs
+already touching at the first snapshot are not counted; rows with overlap <= 0, which liquid-bridge
+models list too, are not contacts); an **encounter** is a contact that begins between particles
+that were apart (`pbmdem.dem.encounters`). New contacts are found for all frames at once by
+sorting (pair, frame) keys.
 """
 
 from __future__ import annotations
 
-import io
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,86 +19,12 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.atomic import write_csv
+from pbmdem.frequency import pair_counts
+
+from .dumps import DumpFormatError, Snapshots, read_classes, read_dump, read_trajectories
+from .dumps import class_lookup as _class_lookup
 
 WALL_NAMES = ("bowl", "impeller")  # mesh ids 0 and 1, in the order of the deck's fix wall/gran
-
-_HEADER = re.compile(
-    rb"ITEM: TIMESTEP\n(\d+)\nITEM: NUMBER OF (?:ENTRIES|ATOMS)\n(\d+)\n"
-    rb"ITEM: BOX BOUNDS[^\n]*\n[^\n]*\n[^\n]*\n[^\n]*\nITEM: (?:ENTRIES|ATOMS)[^\n]*\n"
-)
-
-
-class DumpFormatError(ValueError):
-    """A dump file is malformed or truncated."""
-
-
-@dataclass
-class Snapshots:
-    """All frames of a local dump: `steps[k]` and the rows `data[offsets[k]:offsets[k+1]]`."""
-
-    steps: np.ndarray
-    offsets: np.ndarray
-    data: np.ndarray  # (rows, columns) float64
-
-    @property
-    def frames(self) -> int:
-        return len(self.steps)
-
-    def frame_index(self) -> np.ndarray:
-        """Frame number of every row."""
-        return np.repeat(np.arange(self.frames), np.diff(self.offsets))
-
-
-def read_dump(path: str | Path, columns: int) -> Snapshots:
-    """Read a LIGGGHTS `dump local` (or `dump custom`) text file with `columns` values per row."""
-    path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise DumpFormatError(f"dump file {path} does not exist (did LIGGGHTS reach the sampling phase?)") from None
-    if not raw.strip():
-        return Snapshots(np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros((0, columns)))
-    headers = list(_HEADER.finditer(raw))
-    if not headers or headers[0].start() != 0:
-        raise DumpFormatError(f"{path}: does not start with a LIGGGHTS dump header ('ITEM: TIMESTEP')")
-    steps = np.array([int(m.group(1)) for m in headers], dtype=np.int64)
-    counts = np.array([int(m.group(2)) for m in headers], dtype=np.int64)
-    bodies = [raw[m.end(): (headers[k + 1].start() if k + 1 < len(headers) else len(raw))]
-              for k, m in enumerate(headers)]
-    body = b"".join(bodies)
-    total = int(counts.sum())
-    if total == 0:
-        data = np.zeros((0, columns))
-    else:
-        try:
-            frame = pd.read_csv(io.BytesIO(body), sep=" ", header=None, usecols=range(columns),
-                                dtype=np.float64, engine="c", skip_blank_lines=True)
-        except (ValueError, pd.errors.ParserError) as exc:
-            raise DumpFormatError(f"{path}: malformed entry rows ({exc})") from None
-        data = frame.to_numpy()
-    # a short last row (fewer fields than columns) is truncation; a literal 'nan' is caught below
-    short_last = bool(total) and len(body.rstrip().rsplit(b"\n", 1)[-1].split()) < columns
-    if len(data) != total or short_last:
-        raise DumpFormatError(
-            f"{path}: truncated or inconsistent: headers announce {total} rows in {len(steps)} frames, "
-            f"found {len(data)} complete rows (the run was probably interrupted)"
-        )
-    offsets = np.concatenate([[0], np.cumsum(counts)])
-    # 'nan' or 'inf' in any column (ids, overlaps, positions) would silently change the counts
-    bad = ~np.isfinite(data)
-    if bad.any():
-        row, col = (int(x) for x in np.argwhere(bad)[0])
-        frame = int(np.searchsorted(offsets, row, side="right") - 1)
-        raise DumpFormatError(
-            f"{path}: non-finite value {float(data[row, col])!r} in column {col + 1} of entry row {row - offsets[frame] + 1} "
-            f"of the frame at step {steps[frame]} ({int(bad.sum())} non-finite value(s) in all); every value of a "
-            "dump must be a finite number")
-    # each frame's rows must be as many as its header says; a short last frame is truncation
-    last_lines = bodies[-1].count(b"\n")
-    if last_lines < counts[-1]:
-        raise DumpFormatError(f"{path}: last frame (step {steps[-1]}) is truncated: "
-                              f"{last_lines} of {counts[-1]} rows")
-    return Snapshots(steps=steps, offsets=offsets, data=data)
 
 
 def contact_starts(frame: np.ndarray, key: np.ndarray, stride: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -134,38 +56,6 @@ def contact_starts(frame: np.ndarray, key: np.ndarray, stride: int = 1) -> tuple
     prev = np.full(len(frame), -1, np.int64)
     prev[rows] = prev_u
     return begins, prev
-
-
-def read_classes(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """Particle ids and 0-based size classes (atom type - 1) from the class-map dump's first frame."""
-    snaps = read_dump(path, 3)
-    if snaps.frames == 0:
-        raise DumpFormatError(f"{path}: no particle frame (no particles inserted?)")
-    rows = snaps.data[snaps.offsets[0]:snaps.offsets[1]]
-    return rows[:, 0].astype(np.int64), rows[:, 1].astype(np.int64) - 1
-
-
-def _class_lookup(ids: np.ndarray, classes: np.ndarray) -> np.ndarray:
-    lookup = np.full(int(ids.max()) + 1, -1, np.int64)
-    lookup[ids] = classes
-    return lookup
-
-
-def read_trajectories(path: str | Path, n_particles: int):
-    """Position snapshots (`dump custom ... id x y z vx vy vz`, sorted by id) as Trajectories."""
-    from pbmdem.encounters import Trajectories
-
-    snaps = read_dump(path, 7)
-    counts = np.diff(snaps.offsets)
-    if snaps.frames == 0 or (counts != n_particles).any():
-        raise DumpFormatError(f"{path}: every position snapshot must list the {n_particles} particles; "
-                              f"found {sorted(set(counts.tolist()))} rows per snapshot")
-    data = snaps.data.reshape(snaps.frames, n_particles, 7)
-    ids = data[0, :, 0].astype(np.int64)
-    if (np.diff(ids) <= 0).any() or not (data[:, :, 0] == data[0:1, :, 0]).all():
-        raise DumpFormatError(f"{path}: particle ids are not sorted identically in every snapshot "
-                              "(the deck must use dump_modify sort id)")
-    return Trajectories(steps=snaps.steps, ids=ids, pos=data[:, :, 1:4], vel=data[:, :, 4:7])
 
 
 @dataclass
@@ -249,22 +139,6 @@ def pair_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, met
     })
 
 
-def pair_counts(n: np.ndarray) -> np.ndarray:
-    """(K, K) number of distinct particle pairs: n_i n_j, and n_i (n_i - 1) / 2 on the diagonal."""
-    n = np.asarray(n, float)
-    pairs = np.outer(n, n)
-    np.fill_diagonal(pairs, n * (n - 1) / 2.0)
-    return pairs
-
-
-def pair_weighted_mean(matrix: np.ndarray, n: np.ndarray) -> float:
-    """Mean of a symmetric (K, K) per-pair frequency over all distinct particle pairs of a bed
-    with n particles per class (the bed's mean frequency per pair)."""
-    pairs = pair_counts(n)
-    iu = np.triu_indices(len(pairs))
-    return float((np.asarray(matrix, float)[iu] * pairs[iu]).sum() / pairs[iu].sum())
-
-
 def velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
     """Encounters per class pair and impact-velocity bin (long format, docs/architecture.md)."""
     from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES
@@ -312,7 +186,7 @@ class RunAnalysis:
     """Contact starts and encounters of one finished run (`plan`: its pbmdem.dem.DemPlan)."""
 
     def __init__(self, post_dir: str | Path, plan, bowl, impeller):
-        from pbmdem import encounters
+        from . import encounters
 
         post_dir = Path(post_dir)
         self.plan, self.bowl, self.impeller = plan, bowl, impeller
@@ -416,54 +290,3 @@ def write_tables(tables: RunTables, run_dir: str | Path) -> None:
     write_csv(run_dir / "collisions.csv", tables.pairs)  # last: its presence marks a finished run
 
 
-POINT_KEYS = ["point_id", "rpm", "distribution"]
-# per key: columns averaged over replicates; the ones listed in SE_COLUMNS also get a standard error
-REPLICATE_KEYS = {
-    "pairs": POINT_KEYS + ["class_i", "class_j", "d_i", "d_j"],
-    "walls": POINT_KEYS + ["wall", "class_i", "d_i"],
-    "velocities": POINT_KEYS + ["class_i", "class_j", "v_lo", "v_hi"],
-}
-SE_COLUMNS = ("encounter_frequency_per_pair", "frequency_per_pair", "encounter_frequency_per_particle")
-
-
-def replicate_mean(frame: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
-    """Mean over the replicates of every numeric column, with `n_replicates` and the standard
-    error `<column>_se` (sample standard deviation / sqrt(n), NaN for one replicate) of the
-    frequencies in SE_COLUMNS."""
-    values = [c for c in frame.columns if c not in keys and c != "replicate"]
-    grouped = frame.groupby(keys, sort=True, dropna=False)
-    out = grouped[values].mean()
-    out["n_replicates"] = grouped["replicate"].nunique()
-    for col in SE_COLUMNS:
-        if col in values:
-            out[f"{col}_se"] = grouped[col].std(ddof=1) / np.sqrt(out["n_replicates"])
-    out = out.reset_index()
-    first = [c for c in frame.columns if c in out.columns]
-    return out[first + [c for c in out.columns if c not in first]]
-
-
-def read_tables(tables: list[str | Path]) -> pd.DataFrame:
-    """The per-run tables stacked into one frame (every replicate a row of its own)."""
-    from pbmdem.readers import read_table
-
-    frames = [read_table(p, "collision table", columns=("point_id", "replicate")) for p in tables]
-    if not frames:
-        raise ValueError("no collision tables to aggregate")
-    runs = pd.concat(frames, ignore_index=True)
-    sort = [c for c in ("rpm", "distribution", "replicate", "wall", "class_i", "class_j", "v_lo") if c in runs.columns]
-    return runs.sort_values(sort, kind="stable").reset_index(drop=True)
-
-
-def aggregate(tables: list[str | Path], out: str | Path, kind: str = "pairs") -> pd.DataFrame:
-    """Replicate means of per-run tables (`kind`: pairs, walls or velocities), one row per point
-    and class pair (or wall, or velocity bin), sorted and written atomically."""
-    runs = read_tables(tables)
-    keys = REPLICATE_KEYS[kind]
-    missing = [c for c in keys + ["replicate"] if c not in runs.columns]
-    if missing:
-        raise DumpFormatError(f"collision tables {[str(t) for t in tables[:3]]}...: missing columns {missing}")
-    grid = replicate_mean(runs, keys)
-    sort = [c for c in ("rpm", "distribution", "wall", "class_i", "class_j", "v_lo") if c in grid.columns]
-    grid = grid.sort_values(sort, kind="stable").reset_index(drop=True)
-    write_csv(out, grid)
-    return grid

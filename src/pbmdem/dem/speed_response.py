@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from pbmdem.collisions import pair_counts
+from pbmdem.frequency import pair_counts
 
 
 def _mean_se(frame: pd.DataFrame, keys: list[str], columns: list[str]) -> pd.DataFrame:

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pbmdem.geometry import Bowl, Impeller
+from pbmdem.config import Bowl, Impeller
 
 
 @dataclass

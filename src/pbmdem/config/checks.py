@@ -1,0 +1,69 @@
+"""Checks of a configuration that a JSON schema cannot express.
+
+Number fractions that sum to 1, ascending diameters, particles that fit the bowl, a bed that
+covers the impeller, names that exist, one seed per ensemble member. Every message names the key,
+the offending value and what is allowed; all problems are reported at once.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .errors import ConfigError
+
+FRACTION_TOLERANCE = 1e-6
+
+
+def check(cfg) -> None:
+    """Raise ConfigError listing every problem of the typed configuration `cfg` (a Config)."""
+    problems: list[str] = []
+    bowl, imp, bed = cfg.granulator.bowl, cfg.granulator.impeller, cfg.granulator.bed
+    radius = bowl.radius
+    if imp.blade_length >= radius:
+        problems.append(f"granulator.impeller.blade_length = {imp.blade_length}: must be smaller than the "
+                        f"bowl radius {radius}")
+    if imp.hub_diameter / 2 >= imp.blade_length:
+        problems.append(f"granulator.impeller.hub_diameter = {imp.hub_diameter}: must be smaller than "
+                        f"twice the blade length {2 * imp.blade_length}")
+    top = imp.top
+    if top >= bowl.height:
+        problems.append(f"granulator.impeller: the blades reach z = {top:.6g} m (clearance, blade height and "
+                        f"pitch), which must be below the bowl height {bowl.height}")
+    if bed.height <= top:
+        problems.append(f"dem.bed_height = {bed.height}: the bed must cover the impeller, i.e. exceed the "
+                        f"blade top at {top:.6g} m (clearance + blade height, with the pitch)")
+    if bed.height >= bowl.height:
+        problems.append(f"dem.bed_height = {bed.height}: must be below the bowl height {bowl.height}")
+    for name, dist in cfg.size_distributions.items():
+        d, w = dist.diameters, dist.number_fractions
+        key = f"size_distributions.{name}"
+        if len(d) != len(w):
+            problems.append(f"{key}: {len(d)} diameters but {len(w)} number_fractions; one fraction per class")
+            continue
+        if any(b <= a for a, b in zip(d, d[1:])):
+            problems.append(f"{key}.diameters = {list(d)}: must be strictly ascending (class k is the k-th size)")
+        total = math.fsum(w)
+        if abs(total - 1.0) > FRACTION_TOLERANCE:
+            problems.append(f"{key}.number_fractions = {list(w)}: sum to {total:.6g}, must sum to 1 "
+                            f"(within {FRACTION_TOLERANCE})")
+        d_max = max(d)
+        free_height = bowl.height - top
+        if 3 * d_max >= free_height:
+            problems.append(f"{key}.diameters: largest {d_max} m does not fit the bowl: the space above the "
+                            f"impeller ({free_height:.4g} m) must exceed 3 particle diameters")
+        if 2 * d_max >= radius:
+            problems.append(f"{key}.diameters: largest {d_max} m does not fit the bowl: it must be below "
+                            f"half the bowl radius ({radius / 2:.4g} m)")
+    defined = sorted(cfg.size_distributions)
+    for name in cfg.grid.size_distributions:
+        if name not in cfg.size_distributions:
+            problems.append(f"grid.size_distributions: {name!r} is not defined; defined names: {defined}")
+    if cfg.validation.distribution not in cfg.size_distributions:
+        problems.append(f"validation.distribution: {cfg.validation.distribution!r} is not defined; defined names: "
+                        f"{defined}")
+    sweep = cfg.validation.sweep
+    if not sweep.stop > sweep.start:
+        problems.append(f"validation.sweep: stop = {sweep.stop:g} must be greater than start = {sweep.start:g}")
+    problems += cfg.surrogate.problems()
+    if problems:
+        raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))

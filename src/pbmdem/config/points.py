@@ -1,0 +1,46 @@
+"""Operating points: the grid of impeller speeds x size distributions, and their ids."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .typed import Settings
+
+
+def rpm_text(rpm: float) -> str:
+    """The impeller speed as it appears in ids and paths: the shortest decimal that reads back as
+    the same float, never in exponent form (so the rules' rpm wildcard `[0-9]+(\\.[0-9]+)?`
+    accepts every speed the schema allows, and two different speeds never share an id)."""
+    import numpy as np
+
+    return np.format_float_positional(float(rpm), trim="-")
+
+
+def point_id(rpm: float, distribution: str) -> str:
+    """Id of an operating point, e.g. rpm300_fine."""
+    return f"rpm{rpm_text(rpm)}_{distribution}"
+
+
+@dataclass(frozen=True)
+class SizeDistribution(Settings):
+    """A discrete size distribution: class diameters (m, ascending) and number fractions (sum 1)."""
+
+    diameters: tuple[float, ...]
+    number_fractions: tuple[float, ...]
+
+    @property
+    def mean_particle_volume(self) -> float:
+        """Number-weighted mean particle volume sum_k f_k pi d_k^3 / 6 (m3)."""
+        return math.fsum(f * math.pi / 6.0 * d ** 3 for d, f in zip(self.diameters, self.number_fractions))
+
+
+@dataclass(frozen=True)
+class OperatingGrid(Settings):
+    """The DEM grid: every impeller speed (rpm) with every named size distribution."""
+
+    impeller_rpm: tuple[float, ...]
+    size_distributions: tuple[str, ...]
+
+    def points(self) -> list[tuple[float, str]]:
+        return [(rpm, dist) for rpm in self.impeller_rpm for dist in self.size_distributions]

@@ -1,0 +1,72 @@
+"""Class frequencies of one coupling interval, interpolated onto the PBM bins.
+
+The DEM (or the surrogate) gives per-pair encounter frequencies between the K classes of the
+representative sample. `ClassFrequencySource` holds them for one interval and interpolates them
+onto any PBM bins: a power law in size (bilinear in log d_i, log d_j of log c), constant beyond the
+smallest and largest class (`pbmdem.pbm.kernels.TableFrequency` with clamping); with impact-velocity
+fractions, a bin takes those of the class nearest to it in log diameter.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from pbmdem.frequency import upper_pairs
+from pbmdem.impact import EncounterRates
+
+
+def class_table(diameters, matrix) -> pd.DataFrame:
+    """Upper-triangular class-pair frame with d_i, d_j, frequency_per_pair (TableFrequency input)."""
+    d = np.asarray(diameters, float)
+    i, j = upper_pairs(len(d))
+    return pd.DataFrame({"d_i": d[i], "d_j": d[j], "frequency_per_pair": np.asarray(matrix, float)[i, j]})
+
+
+class ClassFrequencySource:
+    """Hold class frequencies for an interval and interpolate them onto any PBM bins.
+
+    `rates` is the (K, K) encounter frequency per class pair, or an EncounterRates whose velocity
+    fractions then make the source velocity-resolved (:meth:`encounters`)."""
+
+    def __init__(self, diameters, rates, label: str):
+        from pbmdem.pbm.kernels import TableFrequency
+
+        self.diameters = list(map(float, diameters))
+        self.fractions = None
+        if isinstance(rates, EncounterRates):
+            self.fractions = np.asarray(rates.velocity_fractions, float)
+            rates = rates.frequency
+        self.matrix = np.asarray(rates, float)
+        self.label = label
+        self._cache_key = None
+        if len(self.diameters) == 1:
+            self._value = float(self.matrix[0, 0])
+            self._table = None
+        else:
+            self._table = TableFrequency(class_table(self.diameters, self.matrix), extrapolation="clamp",
+                                         column="frequency_per_pair")
+
+    def __repr__(self) -> str:
+        return f"ClassFrequencySource({self.label}, classes={len(self.diameters)})"
+
+    def encounters(self, diameters, numbers, rpm) -> EncounterRates:
+        if self.fractions is None:
+            raise ValueError(f"{self.label}: no impact-velocity distribution for a velocity-dependent success model")
+        d = np.log(np.atleast_1d(np.asarray(diameters, float)))
+        nearest = np.abs(d[:, None] - np.log(np.asarray(self.diameters))[None, :]).argmin(axis=1)
+        return EncounterRates(self(diameters, numbers, rpm), self.fractions[np.ix_(nearest, nearest)])
+
+    def __call__(self, diameters, numbers, rpm) -> np.ndarray:
+        # within an interval the class frequencies are fixed and the PBM bins do not move, so the
+        # interpolated matrix is computed once per set of bin diameters
+        key = np.asarray(diameters, float).tobytes()
+        if self._cache_key == key:
+            return self._cache
+        if self._table is None:
+            k = np.atleast_1d(diameters).size
+            out = np.full((k, k), self._value)
+        else:
+            out = self._table(diameters, numbers, rpm)
+        self._cache_key, self._cache = key, out
+        return out

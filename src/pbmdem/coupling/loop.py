@@ -1,0 +1,138 @@
+"""The coupled loop: the PBM over equal coupling intervals of the batch, with the collision
+frequencies of each interval from a provider (LIGGGHTS for PBM-DEM, the surrogate for PBM-ANN).
+
+At the start of each interval the PBM's size distribution becomes the representative DEM sample
+(`sample.representative_sample`); the provider gives its class frequencies, which are
+interpolated onto the PBM bins (`class_source.ClassFrequencySource`) and held for the interval.
+Every finished interval is written to disk before the next begins (`intervals`); a rerun resumes
+after the last finished interval.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pbmdem.atomic import write_csv, write_json
+from pbmdem.config import CoupledLoop
+from pbmdem.frequency import pair_weighted_mean, pairs_of
+from pbmdem.impact import EncounterRates
+
+from . import intervals
+from .class_source import ClassFrequencySource
+from .sample import representative_sample
+
+log = logging.getLogger(__name__)
+
+
+class CouplingError(RuntimeError):
+    """The coupled loop stopped; finished intervals are kept on disk."""
+
+
+@dataclass
+class LoopOutcome:
+    """A finished loop: the PBM result of the whole batch, the per-interval records and the totals
+    of timing.json (wall times, out-of-domain counts)."""
+
+    result: object
+    intervals: list[dict]
+    totals: dict
+
+
+def interval_bounds(loop: CoupledLoop) -> np.ndarray:
+    """Start and end times (s) of the coupling intervals: equal parts of the whole batch."""
+    return np.linspace(0.0, loop.batch.pbm.process.end, loop.coupling_intervals + 1)
+
+
+def write_outputs(outdir: Path, result, rows: list[dict], totals: dict) -> None:
+    """summary.csv (PBM time series), final_bins.csv, intervals.csv (if any) and timing.json."""
+    write_csv(outdir / "summary.csv", result.summary())
+    bins = result.bins()
+    write_csv(outdir / "final_bins.csv", bins[bins.time == bins.time.max()])
+    if rows:
+        write_csv(outdir / "intervals.csv", pd.DataFrame(rows))
+    write_json(outdir / "timing.json", totals)
+
+
+def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> LoopOutcome:
+    """Run the PBM of `loop` at `rpm` over its coupling intervals, asking
+    `provider(sample, interval_dir, index) -> (rates, info)` for the frequencies of each.
+
+    Writes `outdir/interval_NN/` per interval, then `summary.csv`, `intervals.csv` (per interval:
+    classes, frequencies, wall times, out-of-domain warnings), `final_bins.csv` and `timing.json`.
+    """
+    from pbmdem.pbm.kernels import ConstantFrequency
+    from pbmdem.pbm.results import Result
+    from pbmdem.pbm.setup import build_model, initial_state, output_times
+
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    n_intervals = loop.coupling_intervals
+    intervals.discard_stale(outdir, {"loop": loop.to_dict(), "rpm": float(rpm), "provider": provider.fingerprint()})
+    pbm = loop.batch.pbm
+    model = build_model(pbm, ConstantFrequency(1.0), rpm=rpm)  # the source is set per interval
+    state = initial_state(loop.batch, model)
+    bounds = interval_bounds(loop)
+    results, rows = [], []
+    for k in range(n_intervals):
+        folder = outdir / f"interval_{k:02d}"
+        if intervals.is_finished(folder):
+            result, info, _ = intervals.load(folder, model.grid)
+            log.info("interval %d of %s: resumed from %s", k, provider.name, folder)
+            results.append(result)
+            rows.append({key: v for key, v in info.items() if key != "sample"})
+            state = result.state
+            continue
+        t0, t1 = bounds[k], bounds[k + 1]
+        sample = representative_sample(model.grid.x, state.number, loop.sample)
+        t_provider = time.perf_counter()
+        try:
+            rates, extra = provider(sample, folder, k)
+        except Exception as exc:
+            raise CouplingError(f"{provider.name} at rpm {rpm:g}: interval {k} ({t0:g}-{t1:g} s) failed: {exc}. "
+                                f"Intervals 0..{k - 1} are kept in {outdir}; rerun to resume.") from exc
+        provider_wall = time.perf_counter() - t_provider
+        model.kernel.set_source(ClassFrequencySource(sample.diameters, rates, f"{provider.name} interval {k}"))
+        matrix = rates.frequency if isinstance(rates, EncounterRates) else np.asarray(rates, float)
+        t_pbm = time.perf_counter()
+        result = model.run(t0, t1, state, output_times=output_times(pbm, t0, t1))
+        pbm_wall = time.perf_counter() - t_pbm
+        info = {
+            "interval": k, "t_start": t0, "t_end": t1, "rpm": rpm, "method": provider.name,
+            "classes": len(sample.counts), "class_diameters": json.dumps(sample.diameters),
+            "class_counts": json.dumps(sample.counts), "sample_particles": sample.n_particles,
+            "class_frequencies": json.dumps(pairs_of(matrix).tolist()),
+            "mean_frequency_per_pair": pair_weighted_mean(matrix, sample.counts),
+            "provider_wall_time_s": provider_wall, "pbm_wall_time_s": pbm_wall, **extra,
+        }
+        intervals.save(folder, result, sample, matrix, info)
+        log.info("%s at rpm %g: interval %d of %d (%.4g-%.4g s) done: %s wall time %.2f s, PBM wall time %.3f s, "
+                 "%d surrogate out-of-domain warning(s)", provider.name, rpm, k + 1, n_intervals, t0, t1,
+                 "DEM" if provider.name == "pbm_dem" else "provider", provider_wall, pbm_wall,
+                 int(extra.get("out_of_domain_count", 0)))
+        results.append(result)
+        rows.append(info)
+        state = result.state
+    totals = {
+        "method": provider.name, "rpm": rpm, "distribution": loop.batch.distribution, "intervals": n_intervals,
+        "provider_wall_time_s": float(sum(r["provider_wall_time_s"] for r in rows)),
+        "pbm_wall_time_s": float(sum(r["pbm_wall_time_s"] for r in rows)),
+    }
+    if any("out_of_domain_count" in r for r in rows):
+        per_interval = [int(r.get("out_of_domain_count", 0) or 0) for r in rows]
+        totals["out_of_domain_count"] = int(sum(per_interval))
+        totals["out_of_domain_intervals"] = int(sum(c > 0 for c in per_interval))
+        if totals["out_of_domain_count"]:
+            log.warning("%s at rpm %g: the surrogate was outside its training domain in %d of %d intervals "
+                        "(%d warnings; see intervals.csv)", provider.name, rpm, totals["out_of_domain_intervals"],
+                        len(rows), totals["out_of_domain_count"])
+    totals["total_wall_time_s"] = totals["provider_wall_time_s"] + totals["pbm_wall_time_s"]
+    full = Result.concat(results)
+    write_outputs(outdir, full, rows, totals)
+    return LoopOutcome(full, rows, totals)

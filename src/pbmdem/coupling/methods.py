@@ -1,0 +1,72 @@
+"""The three models of the validation study, one function each (docs/validation.md).
+
+* `pbm_dem`: the fully coupled PBM-DEM loop (LIGGGHTS at every coupling interval);
+* `pbm_ann`: the same loop with the surrogate instead of LIGGGHTS. This is the one definition of
+  PBM-ANN: the validation rules and `pbmdem pbm --kernel ann` both run it, with the frequencies
+  refreshed at the start of each of `validation.coupling_intervals` intervals;
+* `pbm_constant`: one constant c for every pair all along, calibrated to the surrogate's
+  pair-weighted mean frequency of the initial sample (the same initial collision rate).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from pbmdem.config import CoupledLoop, DemExecution
+
+from .loop import LoopOutcome, interval_bounds, run_loop, write_outputs
+from .providers import DemProvider, SurrogateProvider
+from .sample import representative_sample
+
+
+def pbm_dem(loop: CoupledLoop, rpm: float, outdir: str | Path, execution: DemExecution, replicate: int) -> LoopOutcome:
+    """PBM-DEM at `rpm`: LIGGGHTS runs the representative sample of every interval (insertion
+    seeds of `replicate`)."""
+    return run_loop(loop, DemProvider(loop, rpm, execution, replicate), rpm, outdir)
+
+
+def pbm_ann(loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: str | Path) -> LoopOutcome:
+    """PBM-ANN at `rpm`: the surrogate in `model_path` gives the frequencies of every interval."""
+    return run_loop(loop, SurrogateProvider(model_path, rpm), rpm, outdir)
+
+
+def calibrated_frequency(loop: CoupledLoop, model_path: str | Path, rpm: float) -> tuple[float, list[str]]:
+    """The surrogate's pair-weighted mean per-pair frequency of the initial sample (1/s), and its
+    out-of-domain warnings (logged)."""
+    import numpy as np
+
+    from pbmdem.frequency import pair_weighted_mean
+    from pbmdem.pbm.kernels import ConstantFrequency
+    from pbmdem.pbm.setup import build_model, initial_state
+    from pbmdem.surrogate import load_surrogate
+    from pbmdem.surrogate.domain import out_of_domain_recorded
+
+    model = build_model(loop.batch.pbm, ConstantFrequency(1.0), rpm=rpm)
+    state = initial_state(loop.batch, model)
+    sample = representative_sample(model.grid.x, state.number, loop.sample)
+    surrogate = load_surrogate(model_path)
+    with out_of_domain_recorded(f"constant-kernel calibration at rpm {rpm:g}") as found:
+        c = surrogate.frequency_matrix(np.asarray(sample.diameters), np.asarray(sample.counts, float), rpm)
+    return pair_weighted_mean(c, sample.counts), found
+
+
+def pbm_constant(loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: str | Path) -> LoopOutcome:
+    """PBM-constant at `rpm`: c for every pair = the calibrated frequency, for the whole batch."""
+    from pbmdem.pbm.kernels import ConstantFrequency
+    from pbmdem.pbm.setup import run_batch
+
+    frequency, found = calibrated_frequency(loop, model_path, rpm)
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    result = run_batch(loop.batch, ConstantFrequency(frequency), rpm)
+    wall = time.perf_counter() - t0
+    totals = {"method": "pbm_constant", "rpm": rpm, "distribution": loop.batch.distribution, "frequency": frequency,
+              "total_wall_time_s": wall, "pbm_wall_time_s": wall, "provider_wall_time_s": 0.0,
+              "out_of_domain": "; ".join(sorted(set(found))), "out_of_domain_count": len(found)}
+    write_outputs(outdir, result, [], totals)
+    return LoopOutcome(result, [], totals)
+
+
+__all__ = ["pbm_dem", "pbm_ann", "pbm_constant", "calibrated_frequency", "interval_bounds"]

@@ -1,0 +1,92 @@
+"""Collision frequencies of a coupling interval's representative sample: from LIGGGHTS (PBM-DEM)
+or from the trained surrogate (PBM-ANN).
+
+A provider is called as `provider(sample, interval_dir, index) -> (rates, info)`: `rates` is the
+(K, K) encounter frequency per class pair or an `EncounterRates` with impact-velocity fractions,
+`info` the figures recorded for the interval (wall times, DEM particle and encounter counts,
+out-of-domain warnings). `fingerprint()` names what its rates depend on, so that finished
+intervals of a changed provider are not reused.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from pathlib import Path
+
+import numpy as np
+
+from pbmdem.config import CoupledLoop, DemExecution
+from pbmdem.frequency import matrix_from_table, velocity_fractions_from_table
+from pbmdem.impact import EncounterRates
+from pbmdem.readers import read_table
+
+from .sample import DemSample
+
+
+class DemProvider:
+    """Class encounter frequencies from a LIGGGHTS run of the representative sample."""
+
+    name = "pbm_dem"
+
+    def __init__(self, loop: CoupledLoop, rpm: float, execution: DemExecution, replicate: int):
+        self.point = loop.dem_point()
+        self.rpm = float(rpm)
+        self.execution = execution
+        self.replicate = int(replicate)
+
+    def fingerprint(self) -> dict:
+        return {"name": self.name, "dem": self.point.dem.to_dict(), "rpm": self.rpm, "replicate": self.replicate}
+
+    def __call__(self, sample: DemSample, interval_dir: Path, index: int):
+        from pbmdem.dem import plan_point, run_point
+
+        point = self.point.replace(distribution=f"interval{index:02d}", sizes=sample.sizes())
+        plan = plan_point(point, self.rpm, replicate=self.replicate, counts=sample.counts)
+        # an interval without interval.json is unfinished, whatever its DEM folder holds
+        summary = run_point(point, plan, interval_dir / "dem", self.execution, force=True)
+        table = read_table(interval_dir / "dem" / "collisions.csv", "collision table of a coupling interval",
+                           columns=("class_i", "class_j", "encounter_frequency_per_pair"),
+                           finite=("encounter_frequency_per_pair",))
+        velocities = read_table(interval_dir / "dem" / "impact_velocity.csv",
+                                "impact-velocity table of a coupling interval",
+                                columns=("class_i", "class_j", "v_lo", "encounters"), finite=("encounters",))
+        k = len(sample.diameters)
+        rates = EncounterRates(matrix_from_table(table, k), velocity_fractions_from_table(velocities, k))
+        return rates, {
+            "dem_wall_time_s": summary["liggghts_wall_time_s"] + summary["parse_time_s"],
+            "dem_particles": summary["n_particles"], "dem_collisions": summary["total_collisions"],
+            "dem_encounters": summary["total_encounters"],
+        }
+
+
+class SurrogateProvider:
+    """Class encounter frequencies from the trained surrogate (one vectorised call per interval)."""
+
+    name = "pbm_ann"
+
+    def __init__(self, model_path: str | Path, rpm: float):
+        from pbmdem.surrogate import load_surrogate
+
+        self.model = load_surrogate(model_path)
+        self.model_path = Path(model_path)
+        self.rpm = float(rpm)
+        # with a velocity model the provider also hands over impact-velocity fractions (one call)
+        self.velocity_resolved = bool(self.model.has_velocity_model())
+
+    def fingerprint(self) -> dict:
+        return {"name": self.name, "rpm": self.rpm,
+                "model_sha256": hashlib.sha256(self.model_path.read_bytes()).hexdigest()}
+
+    def __call__(self, sample: DemSample, interval_dir: Path, index: int):
+        from pbmdem.surrogate.domain import out_of_domain_recorded
+
+        t0 = time.perf_counter()
+        d, n = np.asarray(sample.diameters), np.asarray(sample.counts, float)
+        with out_of_domain_recorded(f"{self.name} at rpm {self.rpm:g}, interval {index}") as found:
+            if self.velocity_resolved:
+                rates = self.model.encounters(d, n, self.rpm)
+            else:
+                rates = np.asarray(self.model.frequency_matrix(d, n, self.rpm), float)
+        return rates, {"ann_wall_time_s": time.perf_counter() - t0,
+                       "out_of_domain": "; ".join(sorted(set(found))), "out_of_domain_count": len(found)}

@@ -1,0 +1,97 @@
+"""The representative DEM sample of a PBM size distribution (docs/validation.md).
+
+1. The DEM bed holds the PBM's solid volume (the PBM models the DEM bed), so the particle number
+   of bin k is the PBM number N_k.
+2. Neighbouring bins are merged, from small to large, until a class holds at least
+   `min_particles_per_class` particles; a remainder at the large end joins the previous class;
+   then the two neighbouring classes with the fewest particles are merged until at most
+   `max_classes` remain. A class's diameter is the volume-equivalent diameter of its mean solid
+   volume, so merging conserves number and solid volume. Diameters are rounded to whole
+   nanometres (`DIAMETER_RESOLUTION`): the DEM is chaotic, and an input changed by round-off
+   alone (a diameter one unit in the last place apart) changes its collision counts and a loop's
+   final d50 by about 2 %. Rounding keeps the reference reproducible when the PBM's arithmetic is
+   reordered.
+3. Class numbers are rounded; if they exceed `max_particles` (dem.max_particles) all are scaled
+   down (a smaller bed, with a warning).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from pbmdem.config import SampleRule, SizeDistribution
+
+#: class diameters handed to LIGGGHTS are rounded to this (m); see the module docstring, rule 2
+DIAMETER_RESOLUTION = 1e-9
+
+
+@dataclass
+class DemSample:
+    diameters: list[float]
+    counts: list[int]
+    bins: list[list[int]]  # PBM bins merged into each class
+    scaled_down: float = 1.0  # < 1 when the sample was capped at max_particles
+
+    @property
+    def n_particles(self) -> int:
+        return int(sum(self.counts))
+
+    @property
+    def number_fractions(self) -> list[float]:
+        n = np.asarray(self.counts, float)
+        return (n / n.sum()).tolist()
+
+    def sizes(self) -> SizeDistribution:
+        return SizeDistribution(tuple(self.diameters), tuple(self.number_fractions))
+
+
+def representative_sample(volumes, numbers, rule: SampleRule) -> DemSample:
+    """DEM classes for a PBM distribution (bin solid volumes `volumes`, numbers `numbers`)."""
+    x = np.asarray(volumes, float)
+    n = np.asarray(numbers, float)
+    if x.shape != n.shape or x.ndim != 1:
+        raise ValueError(f"volumes {x.shape} and numbers {n.shape} must be 1-D of the same length")
+    max_classes, min_per_class = rule.max_classes, rule.min_particles_per_class
+    if max_classes < 1 or min_per_class < 1:
+        raise ValueError(f"max_classes = {max_classes}, min_particles_per_class = {min_per_class}: "
+                         "both must be at least 1")
+    total = n.sum()
+    if not total >= min_per_class:
+        raise ValueError(f"the PBM holds {total:.3g} particles, fewer than min_particles_per_class = "
+                         f"{min_per_class}: no representative DEM bed can be formed")
+    groups: list[list[int]] = []
+    current: list[int] = []
+    acc = 0.0
+    for k in np.flatnonzero(n > 0):
+        current.append(int(k))
+        acc += n[k]
+        if acc >= min_per_class:
+            groups.append(current)
+            current, acc = [], 0.0
+    if current:
+        if groups:
+            groups[-1].extend(current)
+        else:
+            groups.append(current)
+
+    def count(g) -> float:
+        return float(n[g].sum())
+
+    while len(groups) > max_classes:
+        neighbours = [count(a) + count(b) for a, b in zip(groups, groups[1:])]
+        j = int(np.argmin(neighbours))
+        groups[j: j + 2] = [groups[j] + groups[j + 1]]
+    diam = [round(float((6.0 / math.pi * float((n[g] * x[g]).sum() / n[g].sum())) ** (1.0 / 3.0))
+                  / DIAMETER_RESOLUTION) * DIAMETER_RESOLUTION for g in groups]
+    counts = np.array([count(g) for g in groups])
+    scale = 1.0
+    if counts.sum() > rule.max_particles:
+        scale = rule.max_particles / counts.sum()
+        warnings.warn(f"representative DEM sample of {counts.sum():.0f} particles capped at dem.max_particles = "
+                      f"{rule.max_particles}: the DEM bed is scaled down by {scale:.3f}", stacklevel=2)
+    rounded = np.maximum(1, np.round(counts * scale)).astype(int)
+    return DemSample(diameters=diam, counts=rounded.tolist(), bins=groups, scaled_down=scale)

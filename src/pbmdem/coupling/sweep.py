@@ -1,0 +1,75 @@
+"""The PBM-ANN impeller-speed sweep: final sizes against speed, grid speeds and speeds between."""
+
+from __future__ import annotations
+
+import logging
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pbmdem.atomic import atomic_path, write_csv
+from pbmdem.config import CoupledLoop, Sweep
+
+from .methods import pbm_ann
+
+log = logging.getLogger(__name__)
+
+
+def rpm_sweep(loop: CoupledLoop, sweep: Sweep, model_path: str | Path, table_path: str | Path,
+              plot_path: str | Path) -> pd.DataFrame:
+    """PBM-ANN at every speed of `sweep`: final d10/d50/d90 and mean diameters (table), and the
+    d50(t) curves and final sizes against speed (plot)."""
+    speeds = sweep.speeds()
+    rows, curves = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for rpm in speeds:
+            folder = Path(tmp) / f"rpm{rpm:g}"
+            t0 = time.perf_counter()
+            pbm_ann(loop, model_path, rpm, folder)
+            wall = time.perf_counter() - t0
+            summary = pd.read_csv(folder / "summary.csv")
+            ood = pd.read_csv(folder / "intervals.csv").get("out_of_domain_count", pd.Series([0]))
+            last = summary.iloc[-1]
+            rows.append({"rpm": float(rpm), "d10": last.d10, "d50": last.d50, "d90": last.d90,
+                         "number_mean_diameter": last.number_mean_diameter,
+                         "mass_mean_diameter": last.mass_mean_diameter, "total_number": last.total_number,
+                         "wall_time_s": wall, "out_of_domain_intervals": int((ood.fillna(0) > 0).sum()),
+                         "out_of_domain_count": int(ood.fillna(0).sum())})
+            curves.append((rpm, summary.time.to_numpy(), summary.d50.to_numpy()))
+            log.info("rpm sweep: %g rpm done (%d of %d) in %.2f s; final d50 %.4g m; surrogate out of its "
+                     "training domain in %d interval(s)", rpm, len(rows), len(speeds), wall, last.d50,
+                     rows[-1]["out_of_domain_intervals"])
+    table = pd.DataFrame(rows)
+    write_csv(table_path, table)
+    plot_sweep(table, curves, plot_path)
+    return table
+
+
+def plot_sweep(table: pd.DataFrame, curves: list, path: str | Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    cmap = plt.get_cmap("viridis")
+    for k, (rpm, t, d50) in enumerate(curves):
+        ax1.plot(t, 1e3 * np.asarray(d50), color=cmap(k / max(1, len(curves) - 1)), label=f"{rpm:g} rpm")
+    ax1.set_xlabel("time (s)")
+    ax1.set_ylabel("d50 (mm)")
+    ax1.set_title("PBM-ANN: d50 over the batch")
+    ax1.legend(fontsize=7, ncol=2)
+    ax2.plot(table.rpm, 1e3 * table.d50, "o-", label="d50")
+    ax2.plot(table.rpm, 1e3 * table.d90, "s--", label="d90")
+    ax2.plot(table.rpm, 1e3 * table.d10, "^--", label="d10")
+    ax2.set_xlabel("impeller speed (rpm)")
+    ax2.set_ylabel("final size (mm)")
+    ax2.set_title("PBM-ANN: final sizes vs impeller speed")
+    ax2.legend()
+    fig.tight_layout()
+    with atomic_path(path) as tmp_png:
+        fig.savefig(tmp_png, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,23 @@
+"""The DEM stage: LIGGGHTS runs of the granulator and their collision and encounter tables.
+
+| module | concept |
+| --- | --- |
+| `geometry` | bowl and impeller STL meshes |
+| `plan` | the plan of one run (particles, time step, phases, snapshot intervals, seeds) |
+| `deck` | the LIGGGHTS deck, every substituted value validated |
+| `engine` | running LIGGGHTS, judging a run against its plan, recording crashes |
+| `progress` | progress of a running job from its thermo output |
+| `run` | one run end to end in a staging folder |
+| `dumps` | reading LIGGGHTS dump files |
+| `encounters` | impacts of granules that were apart, and their impact velocities |
+| `collisions` | the collision and encounter tables of one run |
+| `grid_tables` | the grid's tables: replicate means and standard errors, the run table |
+| `speed_response` | encounter rate against impeller speed, flow development |
+| `vtk_series` | `.pvd` index of the VTK snapshots |
+| `viewer` | pyvista view / screenshot of a run |
+"""
+
+from .plan import DemPlan, plan_point
+from .run import run_operating_point, run_point
+
+__all__ = ["DemPlan", "plan_point", "run_point", "run_operating_point"]

@@ -1,0 +1,76 @@
+"""The grid's tables: per-run tables of every point and replicate stacked, and their replicate
+means with standard errors (docs/architecture.md, "Collision tables")."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pbmdem.atomic import write_csv
+
+from .dumps import DumpFormatError
+
+POINT_KEYS = ["point_id", "rpm", "distribution"]
+# per key: columns averaged over replicates; the ones listed in SE_COLUMNS also get a standard error
+REPLICATE_KEYS = {
+    "pairs": POINT_KEYS + ["class_i", "class_j", "d_i", "d_j"],
+    "walls": POINT_KEYS + ["wall", "class_i", "d_i"],
+    "velocities": POINT_KEYS + ["class_i", "class_j", "v_lo", "v_hi"],
+}
+SE_COLUMNS = ("encounter_frequency_per_pair", "frequency_per_pair", "encounter_frequency_per_particle")
+
+
+def replicate_mean(frame: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
+    """Mean over the replicates of every numeric column, with `n_replicates` and the standard
+    error `<column>_se` (sample standard deviation / sqrt(n), NaN for one replicate) of the
+    frequencies in SE_COLUMNS."""
+    values = [c for c in frame.columns if c not in keys and c != "replicate"]
+    grouped = frame.groupby(keys, sort=True, dropna=False)
+    out = grouped[values].mean()
+    out["n_replicates"] = grouped["replicate"].nunique()
+    for col in SE_COLUMNS:
+        if col in values:
+            out[f"{col}_se"] = grouped[col].std(ddof=1) / np.sqrt(out["n_replicates"])
+    out = out.reset_index()
+    first = [c for c in frame.columns if c in out.columns]
+    return out[first + [c for c in out.columns if c not in first]]
+
+
+def read_tables(tables: list[str | Path]) -> pd.DataFrame:
+    """The per-run tables stacked into one frame (every replicate a row of its own)."""
+    from pbmdem.readers import read_table
+
+    frames = [read_table(p, "collision table", columns=("point_id", "replicate")) for p in tables]
+    if not frames:
+        raise ValueError("no collision tables to aggregate")
+    runs = pd.concat(frames, ignore_index=True)
+    sort = [c for c in ("rpm", "distribution", "replicate", "wall", "class_i", "class_j", "v_lo") if c in runs.columns]
+    return runs.sort_values(sort, kind="stable").reset_index(drop=True)
+
+
+def aggregate(tables: list[str | Path], out: str | Path, kind: str = "pairs") -> pd.DataFrame:
+    """Replicate means of per-run tables (`kind`: pairs, walls or velocities), one row per point
+    and class pair (or wall, or velocity bin), sorted and written atomically."""
+    runs = read_tables(tables)
+    keys = REPLICATE_KEYS[kind]
+    missing = [c for c in keys + ["replicate"] if c not in runs.columns]
+    if missing:
+        raise DumpFormatError(f"collision tables {[str(t) for t in tables[:3]]}...: missing columns {missing}")
+    grid = replicate_mean(runs, keys)
+    sort = [c for c in ("rpm", "distribution", "wall", "class_i", "class_j", "v_lo") if c in grid.columns]
+    grid = grid.sort_values(sort, kind="stable").reset_index(drop=True)
+    write_csv(out, grid)
+    return grid
+
+
+def run_table(summaries: list[str | Path], out: str | Path):
+    """One row per run with its size, cost and convergence figures (atomically written CSV)."""
+    from pbmdem.readers import read_json
+
+    rows = [read_json(p, "DEM run summary") for p in summaries]
+    frame = pd.DataFrame(rows).drop(columns=[c for c in ("particles_per_class",) if c in rows[0]], errors="ignore")
+    frame = frame.sort_values(["rpm", "distribution"]).reset_index(drop=True)
+    write_csv(out, frame)
+    return frame

@@ -1,0 +1,194 @@
+"""Run one DEM point: geometry, deck, LIGGGHTS, tables, VTK index, in a staging folder.
+
+`run_point` writes the geometry and deck of a `DemPlan` into a staging folder beside the run
+folder, runs LIGGGHTS, judges the run against its plan (the exit code proves nothing), parses the
+contact snapshots into collision tables and writes the VTK series index; only then is the run
+moved into place, its finished markers last. A failure never removes a finished run.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from pathlib import Path
+
+from pbmdem.atomic import write_json, write_text
+from pbmdem.config import DemExecution, DemPoint
+
+from . import engine, geometry
+from .deck import render_granulator
+from .plan import DemPlan, plan_point
+
+
+def prepare_run(point: DemPoint, plan: DemPlan, run_dir: str | Path, ranks: int) -> Path:
+    """Write geometry, deck and plan into `run_dir` (emptied of any earlier attempt's output)."""
+    run_dir = Path(run_dir)
+    post = run_dir / "post"
+    if post.exists():
+        shutil.rmtree(post)
+    post.mkdir(parents=True)
+    for stale in ("crash.json", "log.liggghts"):
+        (run_dir / stale).unlink(missing_ok=True)
+    geometry.write_granulator(point.granulator, run_dir)
+    write_text(run_dir / "in.granulator", render_granulator(point, plan, ranks))
+    write_json(run_dir / "plan.json", plan.to_dict() | {"mpi_ranks": ranks})
+    return run_dir / "in.granulator"
+
+
+class FinishedRunError(ValueError):
+    """The run folder holds a finished run; it is only replaced when asked to (force)."""
+
+
+FINISHED_MARKERS = ("collisions.csv", "summary.json")
+
+
+def is_finished(run_dir: str | Path) -> bool:
+    """A run folder holds a finished run once its collision table or summary exists."""
+    return any((Path(run_dir) / name).exists() for name in FINISHED_MARKERS)
+
+
+# what a run writes into its folder (besides whatever LIGGGHTS itself adds)
+RUN_PRODUCTS = ("bowl.stl", "impeller.stl", "in.granulator", "plan.json", "log.liggghts", "screen.liggghts",
+                "crash.json", "post", "wall_collisions.csv", "impact_velocity.csv", *FINISHED_MARKERS)
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    else:
+        path.unlink(missing_ok=True)
+
+
+def _move_into(stage: Path, run_dir: Path) -> None:
+    """Move a finished (or crashed) attempt from `stage` into `run_dir`: the old run's finished
+    markers go first (so a half-replaced folder never looks finished), products of the old run
+    that the new one lacks (e.g. a stale crash.json) are removed, the new markers come last.
+    Anything else in `run_dir` is left alone."""
+    run_dir.mkdir(parents=True, exist_ok=True)
+    for name in FINISHED_MARKERS:
+        (run_dir / name).unlink(missing_ok=True)
+    for name in RUN_PRODUCTS:
+        if not (stage / name).exists() and (run_dir / name).exists():
+            _remove(run_dir / name)
+    last = [stage / n for n in ("wall_collisions.csv", "impact_velocity.csv", *FINISHED_MARKERS)
+            if (stage / n).exists()]
+    for item in [p for p in sorted(stage.iterdir()) if p not in last] + last:
+        target = run_dir / item.name
+        if target.is_dir() and not target.is_symlink():
+            shutil.rmtree(target)
+        os.replace(item, target)
+    stage.rmdir()
+
+
+def planned_dumps(plan: DemPlan) -> dict[str, tuple[int, int]]:
+    """Frames and last step each dump of a finished run holds: one at the start of the recording
+    (`dump_modify first yes`, the position history before the sampling window), then one at every
+    multiple of its interval up to the end."""
+    start = plan.window_start_step - plan.history_steps
+    end = plan.window_start_step + plan.sampling_steps
+
+    def frames_and_last(every: int) -> tuple[int, int]:
+        multiples = end // every - (start + every - 1) // every + 1
+        return multiples + (1 if start % every else 0), (end // every * every if multiples > 0 else start)
+
+    contacts = frames_and_last(plan.collision_interval)
+    return {"post/pairs.dump": contacts, "post/walls.dump": contacts,
+            "post/positions.dump": frames_and_last(plan.position_interval)}
+
+
+def check_finished(plan: DemPlan, run_dir: str | Path) -> None:
+    """Raise LiggghtsError (and write crash.json) unless the run reached every planned step and
+    contact snapshot. LIGGGHTS exits 0 when interrupted, so the exit code proves nothing."""
+    engine.check_finished(run_dir, plan.total_steps, planned_dumps(plan))
+
+
+def run_point(point: DemPoint, plan: DemPlan, run_dir: str | Path, execution: DemExecution, *,
+              force: bool = False, progress_bar: bool = False) -> dict:
+    """Run LIGGGHTS for `plan` in `run_dir`, then tabulate collisions and index the VTK files.
+
+    Everything is validated before any file is touched: the speed and the whole deck, and a
+    finished run in `run_dir` is refused unless `force`. The run is made in a staging folder
+    beside `run_dir` and moved into place only after it succeeded, so a failure (or a signal)
+    never removes a finished run. Returns a summary dict (also `run_dir/summary.json`). Raises
+    LiggghtsError on failure, leaving `crash.json` and the log in `run_dir` (or, when `run_dir`
+    holds a finished run, in the staging folder named in the message) and no collision table.
+    `execution`: MPI ranks and wall-time limit (s).
+    """
+    from pbmdem.config import check_rpm
+
+    run_dir = Path(run_dir)
+    check_rpm(plan.rpm, f"operating point {plan.point_id}: impeller rpm")
+    render_granulator(point, plan, execution.mpi_ranks)  # raises on any bad value, before any I/O
+    finished = is_finished(run_dir)
+    if finished and not force:
+        raise FinishedRunError(
+            f"{run_dir} already holds a finished run ({', '.join(n for n in FINISHED_MARKERS if (run_dir / n).exists())}); "
+            "refusing to overwrite it (rerunning would give it new time stamps, so Snakemake would redo "
+            "everything downstream). Use --force to replace it, or --out to write elsewhere.")
+    where = run_dir.resolve()
+    stage = where.parent / f".{where.name}.staging"
+    if stage.exists():
+        shutil.rmtree(stage)
+    stage.mkdir(parents=True)
+    try:
+        summary = _run_in(point, plan, stage, run_dir, execution, progress_bar)
+    except BaseException as exc:
+        if not finished:  # nothing to protect: keep the crash and the logs in the run folder
+            _move_into(stage, run_dir)
+            if len(exc.args) == 1 and isinstance(exc.args[0], str):
+                exc.args = (exc.args[0].replace(str(stage), str(run_dir)),)
+        elif len(exc.args) == 1 and isinstance(exc.args[0], str):
+            exc.args = (f"{exc.args[0]}\n(the finished run in {run_dir} is untouched; this attempt is in {stage})",)
+        raise
+    _move_into(stage, run_dir)
+    return summary
+
+
+def _run_in(point: DemPoint, plan: DemPlan, run_dir: Path, final_dir: Path, execution: DemExecution,
+            progress_bar: bool = False) -> dict:
+    """run_point's work in the (staging) folder `run_dir`; paths in the summary name `final_dir`."""
+    from . import collisions, vtk_series  # local: keep this module light to import
+    from .progress import ThermoProgress
+
+    deck_path = prepare_run(point, plan, run_dir, execution.mpi_ranks)
+    watcher = ThermoProgress(run_dir / "log.liggghts", [("settling", plan.settle_steps), ("spin-up", plan.spinup_steps),
+                                                        ("sampling", plan.sampling_steps)],
+                             label=f"DEM {plan.point_id}", bar=progress_bar)
+    result = engine.run(deck_path, run_dir, ranks=execution.mpi_ranks, timeout=execution.timeout, progress=watcher)
+    check_finished(plan, run_dir)
+    t0 = time.perf_counter()
+    tables = collisions.tabulate_run(run_dir / "post", plan, point.granulator.bowl, point.granulator.impeller)
+    parse_time = time.perf_counter() - t0
+    collisions.write_tables(tables, run_dir)
+    series = vtk_series.write_series(run_dir / "post", plan.timestep)
+    if not point.dem.keep_contact_dumps:
+        for dump in ("pairs.dump", "walls.dump", "positions.dump"):
+            (run_dir / "post" / dump).unlink(missing_ok=True)
+    thermo = engine.thermo_table(result.log)
+    # fix check/timestep/gran: ts[1] = dt / Rayleigh time, ts[2] = dt / Hertz time (LIGGGHTS' own)
+    checks = {"dt_over_rayleigh_time": max(thermo.get("ts[1]", [float("nan")])),
+              "dt_over_hertz_time_max": max(thermo.get("ts[2]", [float("nan")]))}
+    summary = {
+        **checks,
+        "point_id": plan.point_id, "rpm": plan.rpm, "distribution": plan.distribution,
+        "n_particles": plan.n_particles, "timestep": plan.timestep,
+        "steps": plan.total_steps, "mpi_ranks": execution.mpi_ranks,
+        "particle_steps": plan.particle_steps, "liggghts_wall_time_s": result.wall_time,
+        "particle_steps_per_s": plan.particle_steps / result.wall_time,
+        "parse_time_s": parse_time, "parse_cost_ratio": parse_time / result.wall_time,
+        "collision_interval": plan.collision_interval,
+        "replicate": plan.replicate, "seed": plan.seed,
+        "total_collisions": int(tables.pairs["collisions"].sum()),
+        "total_encounters": int(tables.pairs["encounters"].sum()),
+        "sampling_time": float(tables.pairs["sampling_time"].iloc[0]),
+        **tables.diagnostics, **{f"series_{k}": str(final_dir / "post" / Path(v).name) for k, v in series.items()},
+    }
+    write_json(run_dir / "summary.json", summary)
+    return summary
+
+
+def run_operating_point(point: DemPoint, rpm: float, run_dir: str | Path, execution: DemExecution,
+                        replicate: int = 0) -> dict:
+    """Plan and run one replicate of a grid point (the Snakemake rule's entry point)."""
+    return run_point(point, plan_point(point, rpm, replicate=replicate), run_dir, execution)

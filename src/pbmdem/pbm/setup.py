@@ -1,0 +1,112 @@
+"""A PBM batch from the typed settings: model, initial state, run (docs/pbm.md).
+
+`build_model(pbm, source, rpm)` builds a GranulationPBM from the `pbm:` settings
+(`pbmdem.config.Pbm`); `initial_state(batch, model)` puts the batch's feed on the grid, scaled to
+the bed's solid volume (owned by `pbmdem.config.Granulator.bed_solid_volume`: the PBM models the
+DEM bed); `run_batch(batch, source, rpm)` runs the whole batch.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pbmdem.config import Pbm, PbmBatch
+
+from .errors import PBMInputError
+from .grid import Grid, volume_of
+from .kernels import CollisionKernel, ConstantFrequency, SuccessProbability
+from .model import GranulationPBM, SolverSettings, State
+from .processes import Consolidation, LiquidAddition
+from .success import StokesCriterion
+
+
+def build_success(pbm: Pbm) -> SuccessProbability:
+    """The success probability of `pbm.aggregation.success`: the surface-liquid condition, times
+    the Stokes criterion if `velocity_model: stokes`."""
+    succ = pbm.aggregation.success
+    velocity = None
+    if succ.velocity_model == "stokes":
+        st = succ.stokes
+        velocity = StokesCriterion(st.binder_viscosity, st.restitution, st.asperity_height, st.granule_density)
+    elif succ.velocity_model != "none":
+        raise PBMInputError(f"pbm.aggregation.success.velocity_model = {succ.velocity_model!r}; "
+                            "allowed: 'none', 'stokes'")
+    return SuccessProbability(succ.model, succ.threshold, succ.width, velocity=velocity)
+
+
+def build_grid(pbm: Pbm) -> Grid:
+    g = pbm.grid
+    if g.min_diameter is None:
+        raise PBMInputError("pbm.grid.min_diameter = null (the smallest class of size_distributions) but no "
+                            "configuration resolved it; allowed: a diameter (m), or settings from "
+                            "pbmdem.config.load_config")
+    if g.bins is not None:
+        return Grid(g.bins, g.ratio, min_diameter=g.min_diameter)
+    return Grid.spanning(g.min_diameter, g.max_diameter, g.ratio)
+
+
+def constant_source(pbm: Pbm) -> ConstantFrequency:
+    """The constant collision-frequency source of `pbm.aggregation` (constant_frequency, and
+    constant_impact_velocity for a velocity-dependent success)."""
+    agg = pbm.aggregation
+    if agg.success.velocity_resolved and agg.constant_impact_velocity is None:
+        raise PBMInputError("pbm.aggregation.success.velocity_model = "
+                            f"{agg.success.velocity_model!r} needs impact velocities; the constant "
+                            "collision-frequency kernel has them only with pbm.aggregation."
+                            "constant_impact_velocity = a speed in m/s (now null)")
+    return ConstantFrequency(agg.constant_frequency, agg.constant_impact_velocity)
+
+
+def build_model(pbm: Pbm, source=None, rpm: float = 0.0) -> GranulationPBM:
+    """GranulationPBM of the `pbm:` settings; `source` (collision-frequency source) defaults to
+    the constant one of `pbm.aggregation`."""
+    grid = build_grid(pbm)
+    agg = pbm.aggregation
+    if source is None:
+        source = constant_source(pbm)
+    kernel = CollisionKernel(source, agg.beta0, build_success(pbm), update_interval=agg.frequency_update_interval)
+    process = pbm.process
+    liquid = LiquidAddition(pbm.liquid_addition.rate, process.spray_start, process.spray_end,
+                            pbm.liquid_addition.distribution)
+    cons = Consolidation(pbm.consolidation.rate, pbm.consolidation.min_porosity)
+    solver = SolverSettings(**pbm.solver.to_dict())
+    return GranulationPBM(grid, kernel, liquid, cons, solver, rpm=rpm, scheme=agg.scheme)
+
+
+def initial_state(batch: PbmBatch, model: GranulationPBM) -> State:
+    """The feed of `batch` on the model's grid: number fractions scaled so that the population
+    holds the bed's solid volume, with the initial liquid content and porosity."""
+    d = np.asarray(batch.sizes.diameters, float)
+    f = np.asarray(batch.sizes.number_fractions, float)
+    if d.shape != f.shape or f.sum() <= 0:
+        raise PBMInputError(f"size_distributions.{batch.distribution}: {d.size} diameters, {f.size} fractions "
+                            f"summing to {f.sum():g}; need one fraction per diameter and a positive sum")
+    u = volume_of(d)
+    f = f / f.sum()
+    numbers = batch.bed_solid_volume / float(np.sum(f * u)) * f
+    ini = batch.pbm.initial
+    return model.initial_state(u, numbers, liquid_content=ini.liquid_content, porosity=ini.porosity,
+                               what=f"size distribution {batch.distribution!r}")
+
+
+def output_times(pbm: Pbm, t_start: float, t_end: float) -> np.ndarray:
+    """The recorded times of a run from t_start to t_end: every pbm.output.interval."""
+    step = pbm.output.interval
+    times = np.arange(t_start, t_end + 0.5 * step, step)
+    return times[(times >= t_start) & (times <= t_end)]
+
+
+def run_batch(batch: PbmBatch, source=None, rpm: float = 0.0, *, t_end: float | None = None, times=None):
+    """Run the batch granulation of `batch` at impeller speed `rpm` (the source's input) with the
+    collision-frequency source `source` (default: the constant one) until `t_end` (default: the
+    end of the batch), recording at `times` (default: every pbm.output.interval). Returns a Result."""
+    model = build_model(batch.pbm, source, rpm)
+    state = initial_state(batch, model)
+    t_end = batch.pbm.process.end if t_end is None else float(t_end)
+    times = output_times(batch.pbm, 0.0, t_end) if times is None else times
+    res = model.run(0.0, t_end, state, output_times=times)
+    res.info.update({"distribution": batch.distribution, "source": repr(model.kernel.source),
+                     "frequency_evaluations": model.kernel.evaluations,
+                     "bed_solid_volume": batch.bed_solid_volume, "settings": batch.pbm.to_dict(),
+                     "spray_window": [batch.pbm.process.spray_start, batch.pbm.process.spray_end]})
+    return res

@@ -292,7 +292,7 @@ class SurrogateProvider:
         self.model_path = Path(model_path)
         self.rpm = float(rpm)
         # with a velocity model the provider also hands over impact-velocity fractions (one call)
-        self.velocity_resolved = bool(getattr(self.model, "velocity_estimators_", None))
+        self.velocity_resolved = self.model.has_velocity_model()
 
     def fingerprint(self) -> dict:
         import hashlib

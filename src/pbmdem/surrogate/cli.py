@@ -25,8 +25,8 @@ def add_cli(subparsers) -> argparse.ArgumentParser:
                        help="impact-velocity table (results/dem/impact_velocity.csv); without it only the "
                             "encounter frequency is learned")
     train.add_argument("--config", type=Path, default=None,
-                       help="workflow config YAML (uses its surrogate: section and "
-                            "granulator.impeller.blade_length) or a bare surrogate section")
+                       help="workflow config YAML: its surrogate: section and granulator.impeller.blade_length "
+                            "(the impeller radius, required)")
     train.add_argument("--out", required=True, type=Path,
                        help="output folder: model.skops, model.json, metrics.csv, parity.png")
     train.add_argument("--jobs", type=int, default=None, help="parallel jobs of the grid search")
@@ -60,8 +60,9 @@ def _train(args) -> int:
         if bad:
             raise ConfigError(f"config file {args.config}:\n  " + "\n  ".join(bad))
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    radius = impeller_radius_from(config, f"config file {args.config}" if args.config else "pbmdem surrogate train without --config")
     meta = train_and_report(args.table, args.out / "model.skops", settings=resolve_settings(config),
-                            impeller_radius=impeller_radius_from(config), n_jobs=args.jobs,
+                            impeller_radius=radius, n_jobs=args.jobs,
                             velocity_table=args.velocity_table)
     summary = meta["cv_scores"]["outer_summary"]
     for name, s in summary.items():
@@ -91,8 +92,8 @@ def _predict(args) -> int:
             from pbmdem.readers import read_table
 
             table = read_table(args.table, "collision table")
-            value, std = model.predict(table, return_std=True)
-            out = table.assign(predicted_encounter_frequency_per_pair=value, predicted_std_log10=std)
+            log_c, std = model.predict_log10(table, return_std=True)
+            out = table.assign(predicted_encounter_frequency_per_pair=10.0 ** log_c, predicted_std_log10=std)
             if model.has_velocity_model():
                 mu, sigma = model.predict_velocity(table, check_domain=False)
                 out = out.assign(predicted_impact_velocity_median=10.0 ** mu, predicted_impact_velocity_sigma_log10=sigma)

@@ -1,4 +1,4 @@
-"""The ``surrogate:`` config section: defaults, validation, estimator construction."""
+"""The ``surrogate:`` config section: defaults, validation, estimator construction (``build_surrogate``)."""
 
 from __future__ import annotations
 
@@ -6,10 +6,13 @@ import copy
 from pathlib import Path
 
 import yaml
+from sklearn.base import clone
 
 from pbmdem.config import merge_defaults
 
-from .features import DEFAULT_IMPELLER_RADIUS
+from .baselines import HGBBaseline, PhysicalScaling
+from .ensemble import EnsembleMLPRegressorCV
+from .features import check_impeller_radius
 from .model import CollisionSurrogate
 
 _REPO = Path(__file__).resolve().parents[3]
@@ -75,31 +78,66 @@ def resolve_settings(config: dict | None = None, schema_path: str | Path = SCHEM
     return merged
 
 
-def impeller_radius_from(config: dict | None) -> float:
-    """``granulator.impeller.blade_length`` of a full workflow config, else the default."""
+def impeller_radius_from(config: dict | None, source: str = "the config") -> float:
+    """``granulator.impeller.blade_length`` (m) of a full workflow config.
+
+    The impeller radius has one owner, the config's granulator; there is no default: a config
+    without it is an error naming the key (the surrogate's tip-speed feature needs it).
+    """
     try:
-        return float(config["granulator"]["impeller"]["blade_length"])
+        value = config["granulator"]["impeller"]["blade_length"]
     except (TypeError, KeyError):
-        return DEFAULT_IMPELLER_RADIUS
+        raise SurrogateConfigError(
+            f"{source} has no granulator.impeller.blade_length: the surrogate's tip-speed feature needs the "
+            f"impeller radius (pass the full workflow config, e.g. config/config.yaml)") from None
+    try:
+        return check_impeller_radius(value)
+    except ValueError:
+        raise SurrogateConfigError(f"{source}: granulator.impeller.blade_length = {value!r}; allowed: a number "
+                                   f"> 0 (m)") from None
 
 
-def build_surrogate(settings: dict, impeller_radius: float = DEFAULT_IMPELLER_RADIUS,
-                    n_jobs: int | None = None) -> CollisionSurrogate:
-    """A :class:`CollisionSurrogate` configured from resolved settings."""
-    return CollisionSurrogate(
-        hidden_layer_sizes=tuple(tuple(h) for h in settings["hidden_layer_sizes"]),
+def member_seeds(settings: dict) -> tuple[int, ...]:
+    """The ensemble members' seeds: ``seeds``, or ``random_state, random_state + 1, ...``
+    (``ensemble_size`` of them) when ``seeds`` is null."""
+    size = int(settings["ensemble_size"])
+    if size < 1:
+        raise SurrogateConfigError(f"surrogate.ensemble_size = {size}; allowed: an integer >= 1")
+    if settings["seeds"] is None:
+        return tuple(int(settings["random_state"]) + k for k in range(size))
+    seeds = tuple(int(s) for s in settings["seeds"])
+    if len(seeds) != size:
+        raise SurrogateConfigError(f"surrogate.seeds has {len(seeds)} entries but surrogate.ensemble_size is {size}")
+    return seeds
+
+
+def build_surrogate(settings: dict, impeller_radius: float, n_jobs: int | None = None) -> CollisionSurrogate:
+    """A :class:`CollisionSurrogate` configured from a complete ``surrogate:`` section.
+
+    Every estimator parameter comes from ``settings`` (none from the estimators' defaults);
+    ``impeller_radius`` (m) is ``granulator.impeller.blade_length``. The frequency and the
+    impact-velocity model share the settings.
+    """
+    ensemble = EnsembleMLPRegressorCV(
+        hidden_layer_sizes=tuple(tuple(int(u) for u in h) for h in settings["hidden_layer_sizes"]),
         alpha=tuple(float(a) for a in settings["alpha"]),
-        ensemble_size=int(settings["ensemble_size"]),
-        seeds=None if settings["seeds"] is None else tuple(int(s) for s in settings["seeds"]),
-        random_state=int(settings["random_state"]),
+        seeds=member_seeds(settings),
         max_iter=int(settings["max_iter"]),
         activation=settings["activation"],
         solver=settings["solver"],
         cv=settings["cv"]["strategy"],
         n_splits=int(settings["cv"]["n_splits"]),
-        impeller_radius=float(impeller_radius),
-        zero_policy=settings["zero_collisions"],
-        domain_margin=float(settings["domain_margin"]),
         n_jobs=n_jobs,
-        physics_offset=settings["physics_offset"],
     )
+    return CollisionSurrogate(
+        frequency_model=ensemble,
+        velocity_model=clone(ensemble),
+        impeller_radius=check_impeller_radius(impeller_radius),
+        physics_offset=settings["physics_offset"],
+        domain_margin=float(settings["domain_margin"]),
+    )
+
+
+def build_baselines(settings: dict) -> dict:
+    """The baselines of the evaluation (``hgb`` seeded with ``random_state``, ``physical``)."""
+    return {"hgb": HGBBaseline(random_state=int(settings["random_state"])), "physical": PhysicalScaling()}

@@ -239,14 +239,18 @@ def small_surrogate(tmp_path_factory):
     """A surrogate trained on synthetic tables at 300-900 rpm (so 5000 rpm is outside its domain)."""
     import warnings
 
-    from pbmdem.surrogate import CollisionSurrogate, save_surrogate
+    from pbmdem.surrogate import CollisionSurrogate, EnsembleMLPRegressorCV, save_surrogate, training_data
     from pbmdem.surrogate.synthetic import make_synthetic_table
 
-    table = make_synthetic_table(rpms=(300, 600, 900), diameters=(0.002, 0.0025, 0.003), seed=4)
+    radius = 0.0265
+    table = make_synthetic_table(radius, rpms=(300, 600, 900), diameters=(0.002, 0.0025, 0.003), seed=4)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # convergence of this deliberately tiny fit is not the point
-        model = CollisionSurrogate(hidden_layer_sizes=((4,),), alpha=(0.1,), ensemble_size=2,
-                                   max_iter=300).fit(table)
+        data = training_data(table, radius)
+        model = CollisionSurrogate(EnsembleMLPRegressorCV(hidden_layer_sizes=((4,),), alpha=(0.1,), seeds=(0, 1),
+                                                          max_iter=300, activation="tanh", solver="lbfgs"),
+                                   impeller_radius=radius, physics_offset="cross_section")
+        model.fit(data.X, data.y, groups=data.groups)
     path = tmp_path_factory.mktemp("surrogate") / "model.skops"
     save_surrogate(model, path)
     return path
@@ -448,7 +452,7 @@ def test_model_metadata_with_unknown_or_missing_fields_is_a_version_error(small_
     elif edit == "missing_field":
         del meta["feature_ranges"]
     else:
-        del meta["params"]["alpha"]
+        del meta["params"]["frequency_model"]["alpha"]
     metadata_path_for(model).write_text(json.dumps(meta))
     with pytest.raises(IncompatibleVersionError) as info:
         load_surrogate(model)
@@ -460,15 +464,17 @@ def test_surrogate_cross_validation_logs_each_fold_and_candidate(caplog):
     import logging
     import warnings
 
-    from pbmdem.surrogate import CollisionSurrogate, cross_validate_models
+    from pbmdem.surrogate import CollisionSurrogate, EnsembleMLPRegressorCV, cross_validate_models, training_data
     from pbmdem.surrogate.synthetic import make_synthetic_table
 
-    table = make_synthetic_table(rpms=(300, 600, 900), seed=4)
-    model = CollisionSurrogate(hidden_layer_sizes=((4,), (6,)), alpha=(0.1,), ensemble_size=1, max_iter=200)
+    table = make_synthetic_table(0.0265, rpms=(300, 600, 900), seed=4)
+    model = CollisionSurrogate(EnsembleMLPRegressorCV(hidden_layer_sizes=((4,), (6,)), alpha=(0.1,), seeds=(0,),
+                                                      max_iter=200, activation="tanh", solver="lbfgs"),
+                               impeller_radius=0.0265, physics_offset="cross_section")
     caplog.set_level(logging.INFO, logger="pbmdem.surrogate")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        metrics, _ = cross_validate_models(table, model, cv="group_kfold", n_splits=3)
+        metrics, _ = cross_validate_models(training_data(table, 0.0265), model, cv="group_kfold", n_splits=3)
     folds = [r.getMessage() for r in caplog.records if r.getMessage().startswith("CV fold")]
     assert len(folds) == 3 and folds[-1].startswith("CV fold 3 of 3 done") and "mlp R2" in folds[0]
     assert "remaining ~" in folds[0]

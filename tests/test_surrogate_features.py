@@ -2,9 +2,6 @@
 
 import math
 import warnings
-from pathlib import Path
-
-import yaml
 
 import numpy as np
 import pandas as pd
@@ -12,7 +9,6 @@ import pytest
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES
 from pbmdem.surrogate.features import (
-    DEFAULT_IMPELLER_RADIUS,
     FEATURE_NAMES,
     TABLE_COLUMNS,
     TARGET_NAME,
@@ -24,6 +20,7 @@ from pbmdem.surrogate.features import (
     prepare_training_table,
     run_descriptors,
     tip_speed,
+    training_data,
 )
 from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables, velocity_law
 from pbmdem.surrogate.velocity import (
@@ -34,7 +31,7 @@ from pbmdem.surrogate.velocity import (
     total_variation,
 )
 
-REPO = Path(__file__).resolve().parents[1]
+R = 0.0265  # impeller radius (m) of the synthetic tables and of their features
 
 
 def one_run(diameters=(0.002, 0.003, 0.004), numbers=(600, 300, 100), rpm=600, pid="rpm600_x"):
@@ -70,20 +67,25 @@ def test_feature_columns_and_values():
     assert len(set(FEATURE_NAMES)) == len(FEATURE_NAMES)
 
 
-def test_default_radius_is_the_configured_blade_length():
-    cfg = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
-    assert DEFAULT_IMPELLER_RADIUS == cfg["granulator"]["impeller"]["blade_length"]
-    with pytest.raises(ValueError, match="blade_length"):
-        tip_speed(600, None)
+def test_impeller_radius_is_always_explicit():
+    # no default radius anywhere: the caller passes granulator.impeller.blade_length
+    with pytest.raises(TypeError, match="impeller_radius"):
+        make_features(one_run())
+    with pytest.raises(TypeError, match="impeller_radius"):
+        tip_speed(600)
+    for bad in (None, 0.0, -0.01, float("nan"), float("inf"), "x", True):
+        with pytest.raises(ValueError, match=r"impeller_radius \(granulator.impeller.blade_length\).*> 0 m"):
+            tip_speed(600, bad)
+    assert np.allclose(make_features(one_run(), 0.03)["tip_speed"], 2 * math.pi * 0.03 * 600 / 60)
 
 
 def test_no_feature_duplicates_another():
     # synthetic runs over several speeds and random distributions: no pair of features is a duplicate
-    f = make_features(make_synthetic_table(seed=3, noise_log10=0.0))
+    f = make_features(make_synthetic_table(R, seed=3, noise_log10=0.0), R)
     assert duplicated_features(f) == []
     # rpm and d_mean would be: tip speed is proportional to rpm, and with a fixed bed volume
     # log n_total follows log d_mean
-    t = make_synthetic_table(seed=3, noise_log10=0.0)
+    t = make_synthetic_table(R, seed=3, noise_log10=0.0)
     desc = run_descriptors(t)
     extra = f.assign(rpm=t["rpm"].to_numpy(float), d_mean=desc["d_mean"].reindex(t["point_id"]).to_numpy())
     found = {(a, b) for a, b, _ in duplicated_features(extra)}
@@ -96,20 +98,20 @@ def test_features_are_order_independent():
     rev = one_run(diameters=(0.004, 0.003, 0.002), numbers=(100, 300, 600))
     assert (rev["d_i"] >= rev["d_j"]).all()
     key = ["d_small", "d_large"]
-    a = make_features(t).sort_values(key).reset_index(drop=True)
-    b = make_features(rev).sort_values(key).reset_index(drop=True)
+    a = make_features(t, R).sort_values(key).reset_index(drop=True)
+    b = make_features(rev, R).sort_values(key).reset_index(drop=True)
     pd.testing.assert_frame_equal(a, b)
 
 
 def test_any_number_of_classes():
     t = one_run(diameters=(0.001, 0.002, 0.003, 0.004, 0.005), numbers=(50, 40, 30, 20, 10))
     assert len(t) == 15
-    f = make_features(t)
+    f = make_features(t, R)
     assert f.notna().all().all()
     desc = run_descriptors(t)
     assert desc.loc["rpm600_x", "n_classes"] == 5
     single = one_run(diameters=(0.003,), numbers=(500,))
-    assert len(make_features(single)) == 1
+    assert len(make_features(single, R)) == 1
 
 
 def test_target_is_the_encounter_frequency_with_delta_method_noise():
@@ -144,28 +146,28 @@ def test_zero_encounters_drop_and_floor():
 def test_invalid_tables_rejected():
     t = one_run()
     with pytest.raises(CollisionTableError, match="lacks column"):
-        make_features(t.drop(columns=["n_total"]))
+        make_features(t.drop(columns=["n_total"]), R)
     bad = t.copy()
     bad.loc[0, "class_i"] = 2
     with pytest.raises(CollisionTableError, match="class_i <= class_j"):
-        make_features(bad)
+        make_features(bad, R)
     bad = t.copy()
     bad.loc[0, "rpm"] = 900
     with pytest.raises(CollisionTableError, match="not constant"):
-        make_features(bad)
+        make_features(bad, R)
 
 
 def test_pair_table_matches_training_features():
     t = one_run()
     frame, iu, ju = pair_table([0.002, 0.003, 0.004], [600, 300, 100], 600)
     assert len(frame) == 6 and (iu <= ju).all()
-    a = make_features(frame).reset_index(drop=True)
-    b = make_features(t).reset_index(drop=True)
+    a = make_features(frame, R).reset_index(drop=True)
+    b = make_features(t, R).reset_index(drop=True)
     pd.testing.assert_frame_equal(a, b)
 
 
 def test_synthetic_tables_follow_contract():
-    t, v = make_synthetic_tables(rpms=(300, 900), seed=2, noise_log10=0.02, n_replicates=4)
+    t, v = make_synthetic_tables(R, rpms=(300, 900), seed=2, noise_log10=0.02, n_replicates=4)
     assert list(t.columns) == list(TABLE_COLUMNS)
     assert t["point_id"].nunique() == 8 and len(t) == 48
     assert (t.groupby("point_id")["n_total"].nunique() == 1).all()
@@ -178,12 +180,12 @@ def test_synthetic_tables_follow_contract():
     total = v.groupby(["point_id", "class_i", "class_j"])["encounters"].sum()
     assert np.allclose(total.to_numpy(), t.set_index(["point_id", "class_i", "class_j"])["encounters"]
                        .reindex(total.index).to_numpy())
-    one = make_synthetic_table(rpms=(600,), seed=2, n_replicates=1)
+    one = make_synthetic_table(R, rpms=(600,), seed=2, n_replicates=1)
     assert one["encounter_frequency_per_pair_se"].isna().all()
 
 
 def test_attach_velocity_bins():
-    t, v = make_synthetic_tables(rpms=(300, 900), seed=2)
+    t, v = make_synthetic_tables(R, rpms=(300, 900), seed=2)
     merged = attach_velocity_bins(t, v.sample(frac=1.0, random_state=0))  # row order does not matter
     assert len(merged) == len(t) and all(c in merged for c in VELOCITY_COUNT_COLUMNS)
     assert np.allclose(merged[list(VELOCITY_COUNT_COLUMNS)].sum(axis=1), t["encounters"])
@@ -217,8 +219,8 @@ def test_lognormal_fit_recovers_known_law():
     assert np.allclose(total_variation(lognormal_fractions(mu_fit, sigma_fit), frac), 0.0, atol=1e-3)
     # the open last bin takes the fast tail: a median at 20 m/s puts most encounters there
     assert lognormal_fractions(np.log10(20.0), 0.2)[0, -1] > 0.9
-    m, s = velocity_law(0.002, 0.004, 600)
-    assert 10 ** m == pytest.approx(0.12 * 2 * math.pi * DEFAULT_IMPELLER_RADIUS * 600 / 60 * 0.5 ** 0.5)
+    m, s = velocity_law(0.002, 0.004, 600, R)
+    assert 10 ** m == pytest.approx(0.12 * 2 * math.pi * R * 600 / 60 * 0.5 ** 0.5)
     assert s == pytest.approx(0.30)
 
 
@@ -237,3 +239,32 @@ def test_rows_without_pairs_or_finite_frequency_are_dropped_with_a_warning():
         prepare_training_table(one_run().drop(columns=["encounter_frequency_per_pair"]))
     with pytest.raises(CollisionTableError, match="n_replicates"):
         prepare_training_table(one_run().assign(n_replicates=0))
+
+
+def test_training_data_is_the_one_table_to_model_inputs_path():
+    t, v = make_synthetic_tables(R, rpms=(300, 900), seed=2, sample_velocities=True)
+    t.loc[3, ["encounters", "encounter_frequency_per_pair", "encounter_frequency_per_pair_se"]] = 0.0
+    with pytest.warns(UserWarning, match="dropping 1 row"):
+        data = training_data(t, R, "drop", velocity_table=v)
+    kept = t.drop(index=3).reset_index(drop=True)
+    assert data.n_dropped == 1 and data.n_floored == 0 and len(data.y) == len(kept) == len(data.table)
+    pd.testing.assert_frame_equal(data.X, make_features(kept, R))
+    assert np.array_equal(data.y, np.log10(kept["encounter_frequency_per_pair"].to_numpy()))
+    assert list(data.groups) == list(kept["point_id"].astype(str))
+    assert np.allclose(data.noise_var, (kept["encounter_frequency_per_pair_se"]
+                                        / (kept["encounter_frequency_per_pair"] * math.log(10))) ** 2)
+    # impact-speed targets: the log-normal fit of every row's bins
+    bins = attach_velocity_bins(t, v).drop(index=3)[list(VELOCITY_COUNT_COLUMNS)].to_numpy()
+    mu, sigma = fit_lognormal(bins)
+    assert np.array_equal(data.velocity, np.column_stack([mu, sigma]))
+    # bins attached beforehand give the same; floored rows are counted
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        again = training_data(attach_velocity_bins(t, v), R, "drop")
+        floored = training_data(t, R, "floor", velocity_table=v)
+    assert np.array_equal(again.velocity, data.velocity)
+    assert floored.n_dropped == 0 and floored.n_floored == 1 and bool(floored.table.loc[3, "floored"])
+    # without bins: frequency targets only, with a warning
+    with pytest.warns(UserWarning, match="no impact-velocity bins"):
+        bare = training_data(t.drop(index=3), R)
+    assert np.isnan(bare.velocity).all() and bare.velocity.shape == (len(kept), 2)

@@ -1,4 +1,4 @@
-"""CollisionSurrogate: law recovery, grouped CV, domain warnings, PBM interface, baselines."""
+"""CollisionSurrogate and EnsembleMLPRegressorCV: law recovery, grouped CV, domain warnings, PBM interface, baselines."""
 
 import warnings
 
@@ -8,37 +8,54 @@ from sklearn.base import clone
 from sklearn.ensemble import HistGradientBoostingRegressor
 from sklearn.exceptions import NotFittedError
 from sklearn.metrics import mean_absolute_error, r2_score
-from sklearn.model_selection import KFold
+from sklearn.model_selection import GridSearchCV, KFold
+from sklearn.neural_network import MLPRegressor
+from sklearn.pipeline import Pipeline
+from sklearn.preprocessing import StandardScaler
 
 from pbmdem.surrogate import (
     FEATURE_NAMES,
     CollisionSurrogate,
+    EnsembleMLPRegressorCV,
+    HGBBaseline,
     OutOfDomainWarning,
     PhysicalScaling,
     cross_validate_models,
     grouped_splits,
+    training_data,
 )
 from pbmdem.surrogate._threads import single_threaded
-from pbmdem.surrogate.features import TARGET_NAME, make_features, prepare_training_table
+from pbmdem.surrogate.features import make_features, pair_table
 from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables, power_law
 from pbmdem.surrogate.velocity import attach_velocity_bins
 
-SMALL = dict(hidden_layer_sizes=((6,), (8,)), alpha=(0.01, 0.1), ensemble_size=3, max_iter=800,
-             cv="group_kfold", n_splits=3)
+R = 0.0265  # impeller radius (m) of the synthetic tables and models
+SMALL = dict(hidden_layer_sizes=((6,), (8,)), alpha=(0.01, 0.1), seeds=(0, 1, 2), max_iter=800,
+             activation="tanh", solver="lbfgs", cv="group_kfold", n_splits=3)
+
+
+def surrogate(**ensemble) -> CollisionSurrogate:
+    return CollisionSurrogate(frequency_model=EnsembleMLPRegressorCV(**{**SMALL, **ensemble}), impeller_radius=R,
+                              physics_offset="cross_section")
 
 
 @pytest.fixture(scope="module")
 def table():
     # 5 rpm x 4 size distributions = 20 DEM runs, 6 class pairs each, 3 replicates with lognormal
     # noise 0.03 decades each, impact-velocity bins attached
-    return attach_velocity_bins(*make_synthetic_tables(seed=1, noise_log10=0.03))
+    return attach_velocity_bins(*make_synthetic_tables(R, seed=1, noise_log10=0.03))
 
 
 @pytest.fixture(scope="module")
-def fitted(table):
+def data(table):
+    return training_data(table, R)
+
+
+@pytest.fixture(scope="module")
+def fitted(data):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return CollisionSurrogate(**SMALL).fit(table)
+        return surrogate().fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
 
 
 def run_disjoint(splits, groups):
@@ -46,10 +63,10 @@ def run_disjoint(splits, groups):
     return all(not (set(groups[tr]) & set(groups[te])) for tr, te in splits)
 
 
-def test_recovers_known_law_on_held_out_runs(table):
+def test_recovers_known_law_on_held_out_runs(table, data):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        metrics, pred = cross_validate_models(table, CollisionSurrogate(**SMALL), cv="group_kfold", n_splits=5)
+        metrics, pred = cross_validate_models(data, surrogate(), cv="group_kfold", n_splits=5)
     pooled = metrics[(metrics["model"] == "mlp") & (metrics["fold"] == "pooled")
                      & (metrics["target"] == "encounter_frequency")].iloc[0]
     print(f"held-out grouped R2(log10) mlp = {pooled['r2_log10']:.4f}, MAE = {pooled['mae_log10']:.4f}")
@@ -68,35 +85,44 @@ def test_recovers_known_law_on_held_out_runs(table):
     assert r2_score(law, pred["mlp_log10"]) > 0.95
 
 
-def test_fitted_attributes_and_conventions(fitted, table):
+def test_fitted_attributes_and_conventions(fitted, data, table):
     params = fitted.get_params()
-    assert params["ensemble_size"] == 3 and "alpha" in params
-    assert clone(fitted).get_params() == params
-    assert len(fitted.estimators_) == 3 and fitted.seeds_ == [0, 1, 2]
-    assert fitted.feature_names_ == FEATURE_NAMES and fitted.n_features_in_ == len(FEATURE_NAMES)
-    assert set(fitted.best_params_) == {"hidden_layer_sizes", "alpha"}
-    assert len(fitted.search_results_) == 4
-    pipe = fitted.estimators_[0]
-    assert [name for name, _ in pipe.steps] == ["scale", "mlp"]
+    assert params["frequency_model__seeds"] == (0, 1, 2) and params["impeller_radius"] == R
+    assert clone(fitted).get_params(deep=False).keys() == params.keys() - {k for k in params if "__" in k}
+    freq = fitted.frequency_model_
+    assert freq is not fitted.frequency_model and not hasattr(fitted.frequency_model, "estimators_")  # cloned
+    assert len(freq.estimators_) == 3 and list(freq.n_iter_ >= 1) == [True] * 3
+    assert list(fitted.feature_names_in_) == list(FEATURE_NAMES) and fitted.n_features_in_ == len(FEATURE_NAMES)
+    assert set(freq.best_params_) == {"hidden_layer_sizes", "alpha"}
+    assert len(freq.cv_results_["params"]) == 4 and freq.best_score_ == freq.cv_results_["mean_test_score"].max()
+    assert [name for name, _ in freq.estimators_[0].steps] == ["scale", "mlp"]
+    assert fitted.has_velocity_model() and fitted.velocity_model_.n_outputs_ == 2
+    assert fitted.n_training_rows_ == fitted.n_velocity_rows_ == len(data.y)
+    assert fitted.training_point_ids_ == sorted(table["point_id"].unique())
     with pytest.raises(NotFittedError):
-        CollisionSurrogate().predict(table)
-    p = fitted.predict(table, check_domain=False)
-    assert p.shape == (len(table),) and (p > 0).all()
-    # physical units: the geometric ensemble mean of the log10 predictions
-    assert np.allclose(np.log10(p), fitted.predict_log10(table, check_domain=False))
-    assert fitted.score(table) > 0.95
+        surrogate().predict(data.X)
+    # sklearn conventions: predict is in the units of y (log10 1/s), score is R2 on y
+    p = fitted.predict(data.X, check_domain=False)
+    assert p.shape == (len(data.y),)
+    assert r2_score(data.y, p) == pytest.approx(fitted.score(data.X, data.y)) and fitted.score(data.X, data.y) > 0.95
+    # a collision table gives the same as its feature frame
+    np.testing.assert_array_equal(fitted.predict_log10(table, check_domain=False),
+                                  fitted.predict(make_features(table, R), check_domain=False))
 
 
-def test_ensemble_spread_returned(fitted, table):
-    value, std = fitted.predict(table, return_std=True)
-    assert value.shape == std.shape == (len(table),)
+def test_ensemble_spread_returned(fitted, data):
+    value, std = fitted.predict(data.X, return_std=True)
+    assert value.shape == std.shape == (len(data.y),)
     assert (std >= 0).all() and (std > 0).any()
-    members = np.stack([m.predict(make_features(table).to_numpy()) for m in fitted.estimators_])
+    members = np.stack([m.predict(data.X.to_numpy()) for m in fitted.frequency_model_.estimators_])
     assert np.allclose(std, members.std(axis=0, ddof=1))
+    # the physics offset is added back: members learn log10 c - 2 log10(d_small + d_large in mm)
+    offset = 2 * np.log10(1e3 * (data.X["d_small"] + data.X["d_large"])).to_numpy()
+    assert np.allclose(value, members.mean(axis=0) + offset)
 
 
 def test_search_folds_hold_out_whole_runs(fitted, table):
-    folds = fitted.cv_folds_
+    folds = fitted.frequency_model_.cv_folds_
     assert len(folds) == 3
     held = [pid for fold in folds for pid in fold]
     assert sorted(held) == sorted(table["point_id"].unique())  # every run tested exactly once
@@ -114,12 +140,12 @@ def test_leaked_cv_is_over_optimistic_grouped_cv_is_not():
     # a per-run random offset (0.3 decades) that no feature explains: a model can only learn it
     # from rows of the same run, i.e. when runs leak between train and test (6 classes: 21 rows
     # per run, so a leaked fold has seen most of every run)
-    t = make_synthetic_table(seed=5, noise_log10=0.01, run_noise_log10=0.3,
+    t = make_synthetic_table(R, seed=5, noise_log10=0.01, run_noise_log10=0.3,
                              diameters=(0.0015, 0.002, 0.0025, 0.003, 0.0035, 0.004))
-    data = prepare_training_table(t)
-    X = make_features(data).to_numpy()
-    y = data[TARGET_NAME].to_numpy()
-    groups = data["point_id"].to_numpy()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # frequency-only table
+        d = training_data(t, R)
+    X, y, groups = d.X.to_numpy(), d.y, d.groups
 
     def cv_mae(splits):  # features from the complete runs, then split rows
         err = []
@@ -137,14 +163,14 @@ def test_leaked_cv_is_over_optimistic_grouped_cv_is_not():
 def test_out_of_domain_warning(fitted, table):
     with warnings.catch_warnings():
         warnings.simplefilter("error", OutOfDomainWarning)
-        fitted.predict(table)  # training rows are in domain
+        fitted.predict_log10(table)  # training rows are in domain
         frame = table[table["point_id"] == table["point_id"].iloc[0]]
-        fitted.predict(frame)
+        fitted.predict_log10(frame)
     fast = table.copy()
     fast["rpm"] = 2000
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
-        fitted.predict(fast)
+        fitted.predict_log10(fast)
     messages = [str(w.message) for w in rec if issubclass(w.category, OutOfDomainWarning)]
     # rpm is not a feature (it duplicates tip speed); tip speed carries the warning
     v_lo, v_hi = fitted.feature_ranges()["tip_speed"]
@@ -157,11 +183,14 @@ def test_out_of_domain_warning(fitted, table):
     messages = [str(w.message) for w in rec if issubclass(w.category, OutOfDomainWarning)]
     assert any(m.startswith("d_large = 0.008") and f"[{lo:.6g}, {hi:.6g}]" in m for m in messages)
     assert issubclass(OutOfDomainWarning, UserWarning)
+    # sklearn's predict on the feature matrix warns the same way
+    with pytest.warns(OutOfDomainWarning, match="tip_speed = 5.5"):
+        fitted.predict(make_features(fast, R))
     # a relative margin widens the domain
     lenient = clone(fitted).set_params(domain_margin=0.5)
-    for attr in ("estimators_", "feature_min_", "feature_max_", "feature_names_"):
-        setattr(lenient, attr, getattr(fitted, attr))
-    assert not lenient.out_of_domain(make_features(table.assign(rpm=1000))).any().any()
+    lenient.__dict__.update({k: v for k, v in vars(fitted).items() if k.endswith("_")})
+    assert fitted.out_of_domain(make_features(table.assign(rpm=1000), R)).any().any()
+    assert not lenient.out_of_domain(make_features(table.assign(rpm=1000), R)).any().any()
 
 
 def test_frequency_matrix_shape_symmetry_positivity(fitted):
@@ -177,6 +206,9 @@ def test_frequency_matrix_shape_symmetry_positivity(fitted):
     assert (c > 0).all() and np.isfinite(c).all()
     assert np.allclose(c_rev, c[::-1, ::-1])  # class order does not matter
     assert np.allclose(c_call, c)
+    # the PBM kernel is 10 ** predict on the pairs' features (1/s per pair)
+    frame, iu, ju = pair_table(d, n, 600)
+    assert np.allclose(c[iu, ju], 10.0 ** fitted.predict(make_features(frame, R), check_domain=False))
     # bigger pairs collide more often at this law, faster impeller too
     assert c[2, 2] > c[0, 0]
     with warnings.catch_warnings():
@@ -190,7 +222,7 @@ def test_frequency_matrix_shape_symmetry_positivity(fitted):
 
 def test_frequency_matrix_is_one_vectorised_predict(fitted, monkeypatch):
     calls = []
-    for est in fitted.estimators_:
+    for est in fitted.frequency_model_.estimators_:
         original = est.predict
 
         def spy(X, _orig=original):
@@ -201,16 +233,91 @@ def test_frequency_matrix_is_one_vectorised_predict(fitted, monkeypatch):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OutOfDomainWarning)
         fitted.frequency_matrix(np.linspace(0.002, 0.004, 5), np.full(5, 400.0), 600)
-    assert calls == [15] * len(fitted.estimators_)  # K (K + 1) / 2 pairs, one call per member
+    assert calls == [15] * len(fitted.frequency_model_.estimators_)  # K (K + 1) / 2 pairs, one call per member
 
 
-def test_physical_scaling_constant(table):
-    clean = table.copy()
-    phys = PhysicalScaling().fit(clean)
-    resid = np.log10(clean["encounter_frequency_per_pair"]) - phys.predict_log10(clean)
+def test_invalid_fit_inputs_are_refused_before_fitting(data):
+    with pytest.raises(ValueError, match=r"named features \['d_small', 'd_large', 'tip_speed'\]"):
+        surrogate().fit(data.X.to_numpy(), data.y)
+    with pytest.raises(ValueError, match="physics_offset = 'kinetic'; allowed"):
+        surrogate().set_params(physics_offset="kinetic").fit(data.X, data.y)
+    with pytest.raises(ValueError, match=r"velocity must have shape \(n_samples, 2\)"):
+        surrogate().fit(data.X, data.y, velocity=data.velocity[:, :1])
+    with pytest.raises(ValueError, match="groups must be 1-d with one entry per sample"):
+        surrogate().fit(data.X, data.y, groups=data.groups[:-1])
+
+
+def test_physical_scaling_constant(data):
+    phys = PhysicalScaling().fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
+    resid = data.y - phys.predict(data.X)
     assert abs(resid.mean()) < 1e-12  # least squares in log space: mean residual zero
-    c = phys.frequency_matrix([0.002, 0.004], [1000, 500], 600)
-    assert np.allclose(c, c.T) and c[1, 1] > c[0, 0]
-    # c ~ (d_i + d_j)^2 v_tip / V_solid: ratio of the diagonal entries is ((4+4)/(2+2))^2
-    assert c[1, 1] / c[0, 0] == pytest.approx(4.0)
-    assert phys.frequency_matrix([0.002, 0.004], [1000, 500], 1200)[0, 0] / c[0, 0] == pytest.approx(2.0)
+    assert list(phys.feature_names_in_) == list(FEATURE_NAMES)
+    frame, iu, ju = pair_table([0.002, 0.004], [1000, 500], 600)
+    c = 10.0 ** phys.predict(make_features(frame, R))
+    # c ~ (d_i + d_j)^2 v_tip: ratio of the diagonal entries is ((4+4)/(2+2))^2, doubling the speed doubles c
+    assert c[2] / c[0] == pytest.approx(4.0)
+    faster = 10.0 ** phys.predict(make_features(pair_table([0.002, 0.004], [1000, 500], 1200)[0], R))
+    assert np.allclose(faster / c, 2.0)
+    # one log-normal speed law for all pairs: median proportional to the tip speed
+    mu, sigma = phys.predict_velocity(data.X)
+    assert np.allclose(mu - np.log10(data.X["tip_speed"]), phys.log10_speed_ratio_) and np.ptp(sigma) == 0
+    # an array is read as the columns FEATURE_NAMES; other arrays are refused, naming the features
+    np.testing.assert_array_equal(PhysicalScaling().fit(data.X.to_numpy(), data.y).predict(data.X.to_numpy()),
+                                  phys.predict(data.X))
+    with pytest.raises(ValueError, match=r"needs the features \['d_small', 'd_large', 'tip_speed'\]"):
+        PhysicalScaling().fit(data.X.to_numpy()[:, :3], data.y)
+    with pytest.raises(ValueError, match="lacks \\['tip_speed'\\]"):
+        PhysicalScaling().fit(data.X.drop(columns="tip_speed"), data.y)
+    with pytest.raises(ValueError, match="without impact-velocity targets"):
+        PhysicalScaling().fit(data.X, data.y).predict_velocity(data.X)
+
+
+def test_hgb_baseline_on_the_feature_matrix(data):
+    hgb = HGBBaseline(random_state=0).fit(data.X, data.y, groups=data.groups)
+    assert hgb.n_features_in_ == len(FEATURE_NAMES) and hgb.score(data.X, data.y) > 0.9
+    # the trees themselves, with the leaf size capped at half the rows
+    tiny = HGBBaseline().fit(data.X.iloc[:6], data.y[:6])
+    assert tiny.model_.min_samples_leaf == 3
+
+
+def test_ensemble_search_is_a_grouped_grid_search(data):
+    """EnsembleMLPRegressorCV: the same search as GridSearchCV on explicit grouped folds, then one
+    member per seed with the chosen values."""
+    est = EnsembleMLPRegressorCV(hidden_layer_sizes=((4,), (6,)), alpha=(0.01, 1.0), seeds=(7, 8), max_iter=300,
+                                 activation="tanh", solver="lbfgs", cv="group_kfold", n_splits=3)
+    X, y = data.X.to_numpy(), data.y
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        est.fit(X, y, groups=data.groups)
+        pipe = Pipeline([("scale", StandardScaler()),
+                         ("mlp", MLPRegressor(activation="tanh", solver="lbfgs", max_iter=300, random_state=7))])
+        ref = GridSearchCV(pipe, {"mlp__hidden_layer_sizes": [(4,), (6,)], "mlp__alpha": [0.01, 1.0]},
+                           cv=grouped_splits(data.groups, "group_kfold", 3), scoring="neg_mean_squared_error",
+                           refit=False).fit(X, y)
+        member = clone(pipe).set_params(mlp__hidden_layer_sizes=ref.best_params_["mlp__hidden_layer_sizes"],
+                                        mlp__alpha=ref.best_params_["mlp__alpha"], mlp__random_state=8).fit(X, y)
+    assert est.best_score_ == ref.best_score_
+    assert est.best_params_ == {"hidden_layer_sizes": ref.best_params_["mlp__hidden_layer_sizes"],
+                                "alpha": ref.best_params_["mlp__alpha"]}
+    np.testing.assert_array_equal(est.cv_results_["mean_test_score"], ref.cv_results_["mean_test_score"])
+    np.testing.assert_array_equal(est.estimators_[1].predict(X), member.predict(X))
+    assert not hasattr(est, "feature_names_in_") and est.n_features_in_ == X.shape[1]
+
+
+def test_ensemble_without_groups_uses_the_first_candidate_and_takes_2d_targets(data):
+    est = EnsembleMLPRegressorCV(hidden_layer_sizes=((4,), (6,)), alpha=(0.1, 1.0), seeds=(0, 1), max_iter=300,
+                                 activation="tanh", solver="lbfgs")
+    Y = np.column_stack([data.y, 2 * data.y])
+    with pytest.warns(UserWarning, match="no groups given: no grouped hyperparameter search"):
+        est.fit(data.X, Y)
+    assert est.best_params_ == {"hidden_layer_sizes": (4,), "alpha": 0.1} and est.cv_results_ is None
+    assert np.isnan(est.best_score_) and est.cv_folds_ == [] and est.n_outputs_ == 2
+    mean, std = est.predict(data.X, return_std=True)
+    assert mean.shape == std.shape == Y.shape and (std > 0).any()
+    assert list(est.feature_names_in_) == list(FEATURE_NAMES)
+    with pytest.warns(UserWarning, match="only one group"):
+        clone(est).fit(data.X, Y, groups=np.full(len(Y), "rpm600_a"))
+    with pytest.raises(ValueError, match="cv must be one of"):
+        clone(est).set_params(cv="kfold").fit(data.X, Y)
+    with pytest.raises(ValueError, match="seeds needs at least one seed"):
+        clone(est).set_params(seeds=()).fit(data.X, Y)

@@ -10,11 +10,13 @@ from sklearn.linear_model import LinearRegression
 
 from pbmdem.surrogate import (
     CollisionSurrogate,
+    EnsembleMLPRegressorCV,
     IncompatibleVersionError,
     TamperedModelError,
     UntrustedTypesError,
     load_surrogate,
     save_surrogate,
+    training_data,
 )
 from pbmdem.surrogate.persistence import ALLOWED_TYPES, schema_types, sha256_file
 from pbmdem.surrogate.persistence import FORMAT_VERSION
@@ -22,17 +24,30 @@ from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tabl
 from pbmdem.surrogate.velocity import attach_velocity_bins
 
 
+R = 0.0265  # impeller radius (m) of the synthetic tables and models
+
+
+def tiny_surrogate(**kwargs) -> CollisionSurrogate:
+    ensemble = EnsembleMLPRegressorCV(hidden_layer_sizes=((4,), (5,)), alpha=(0.1,), seeds=(0, 1), max_iter=300,
+                                      activation="tanh", solver="lbfgs", cv="group_kfold", n_splits=3)
+    return CollisionSurrogate(frequency_model=ensemble, impeller_radius=R, physics_offset="cross_section", **kwargs)
+
+
+def fit(model, table):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        d = training_data(table, R)
+        return model.fit(d.X, d.y, groups=d.groups, velocity=d.velocity)
+
+
 @pytest.fixture(scope="module")
 def table():
-    return attach_velocity_bins(*make_synthetic_tables(rpms=(300, 600, 900), seed=4))
+    return attach_velocity_bins(*make_synthetic_tables(R, rpms=(300, 600, 900), seed=4))
 
 
 @pytest.fixture(scope="module")
 def fitted(table):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return CollisionSurrogate(hidden_layer_sizes=((4,),), alpha=(0.1,), ensemble_size=2,
-                                  max_iter=300).fit(table)
+    return fit(tiny_surrogate(), table)
 
 
 @pytest.fixture()
@@ -45,47 +60,61 @@ def saved(fitted, tmp_path):
 def test_round_trip_identical_predictions(fitted, saved, table):
     model, meta_path = saved
     loaded = load_surrogate(model)
-    a, sa = fitted.predict(table, return_std=True)
-    b, sb = loaded.predict(table, return_std=True)
+    a, sa = fitted.predict_log10(table, return_std=True)
+    b, sb = loaded.predict_log10(table, return_std=True)
     np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(sa, sb)
     d, n = [0.002, 0.003, 0.004], [1200, 700, 300]
     np.testing.assert_array_equal(fitted.frequency_matrix(d, n, 600, check_domain=False),
                                   loaded.frequency_matrix(d, n, 600, check_domain=False))
-    assert loaded.get_params() == fitted.get_params()
+    plain = lambda m: {k: v for k, v in m.get_params().items() if k not in ("frequency_model", "velocity_model")}
+    assert plain(loaded) == plain(fitted) and loaded.velocity_model is None
     assert loaded.feature_ranges() == fitted.feature_ranges()
+    assert list(loaded.feature_names_in_) == list(fitted.feature_names_in_) and loaded.n_features_in_ == 6
+    for attr in ("training_point_ids_", "n_training_rows_", "n_velocity_rows_", "duplicated_features_"):
+        assert getattr(loaded, attr) == getattr(fitted, attr), attr
+    for attr in ("best_params_", "cv_folds_", "n_outputs_"):
+        assert getattr(loaded.frequency_model_, attr) == getattr(fitted.frequency_model_, attr), attr
+    assert loaded.frequency_model_.best_score_ == pytest.approx(fitted.frequency_model_.best_score_, rel=1e-12)
+    np.testing.assert_allclose(loaded.frequency_model_.cv_results_["mean_test_score"],
+                               fitted.frequency_model_.cv_results_["mean_test_score"], rtol=1e-12)
+    assert loaded.frequency_model_.cv_results_["params"] == fitted.frequency_model_.cv_results_["params"]
+    np.testing.assert_array_equal(loaded.frequency_model_.n_iter_, fitted.frequency_model_.n_iter_)
     # the impact-velocity model round-trips too
-    assert loaded.has_velocity_model() and len(loaded.velocity_estimators_) == len(fitted.velocity_estimators_)
+    assert loaded.has_velocity_model()
+    assert len(loaded.velocity_model_.estimators_) == len(fitted.velocity_model_.estimators_)
     for x, y in zip(fitted.predict_velocity(table, return_std=True), loaded.predict_velocity(table, return_std=True)):
         np.testing.assert_array_equal(x, y)
     ea = fitted.encounters(d, n, 600, check_domain=False)
     eb = loaded.encounters(d, n, 600, check_domain=False)
     np.testing.assert_array_equal(ea.frequency, eb.frequency)
     np.testing.assert_array_equal(ea.velocity_fractions, eb.velocity_fractions)
-    assert loaded.velocity_best_params_ == fitted.velocity_best_params_
+    assert loaded.velocity_model_.best_params_ == fitted.velocity_model_.best_params_
 
     meta = json.loads(meta_path.read_text())
     assert meta["model_sha256"] == sha256_file(model)
-    assert meta["feature_names"] == list(fitted.feature_names_)
-    assert set(meta["feature_ranges"]) == set(fitted.feature_names_)
+    assert meta["feature_names"] == list(fitted.feature_names_in_)
+    assert set(meta["feature_ranges"]) == set(fitted.feature_names_in_)
     assert meta["training_point_ids"] == sorted(table["point_id"].unique())
     assert {"sklearn", "numpy", "skops"} <= set(meta["versions"])
     assert meta["cv_scores"]["mlp"]["pooled_r2_log10"] == 0.9
     assert meta["cv_scores"]["mlp"]["nan_value"] is None  # strict JSON, no NaN
-    assert meta["format_version"] == FORMAT_VERSION == 2
+    assert meta["format_version"] == FORMAT_VERSION == 3
+    # the impeller radius the model was trained with, and every estimator parameter
+    assert meta["params"]["impeller_radius"] == R
+    assert meta["params"]["frequency_model"] == json.loads(json.dumps(fitted.frequency_model.get_params()))
     assert meta["target"].startswith("log10_encounter_frequency_per_pair")
     assert meta["n_velocity_rows"] == len(table) and len(meta["velocity_edges"]) == 18
 
 
 def test_frequency_only_model_round_trips(tmp_path):
-    t = make_synthetic_table(rpms=(300, 600, 900), seed=4)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        m = CollisionSurrogate(hidden_layer_sizes=((4,),), alpha=(0.1,), ensemble_size=2, max_iter=300).fit(t)
+    t = make_synthetic_table(R, rpms=(300, 600, 900), seed=4)
+    m = fit(tiny_surrogate(velocity_model=EnsembleMLPRegressorCV(seeds=(3,))), t)
     save_surrogate(m, tmp_path / "model.skops")
     loaded = load_surrogate(tmp_path / "model.skops")
     assert not loaded.has_velocity_model()
-    np.testing.assert_array_equal(m.predict(t), loaded.predict(t))
+    assert loaded.get_params()["velocity_model__seeds"] == (3,)
+    np.testing.assert_array_equal(m.predict_log10(t), loaded.predict_log10(t))
 
 
 def test_other_velocity_bins_rejected(saved):
@@ -115,7 +144,7 @@ def test_tampered_file_rejected(saved):
 def test_swapped_model_file_rejected(fitted, saved, tmp_path):
     model, _ = saved
     other = tmp_path / "other.skops"
-    sio.dump([fitted.estimators_[0]], other)
+    sio.dump([fitted.frequency_model_.estimators_[0]], other)
     model.write_bytes(other.read_bytes())
     with pytest.raises(TamperedModelError):
         load_surrogate(model)
@@ -138,7 +167,7 @@ def test_patch_version_difference_accepted(saved, monkeypatch):
     meta = json.loads(meta_path.read_text())
     meta["versions"]["sklearn"] = f"{major}.{minor}.999"
     meta_path.write_text(json.dumps(meta))
-    assert load_surrogate(model).estimators_
+    assert load_surrogate(model).frequency_model_.estimators_
 
 
 def test_format_version_mismatch_rejected(saved):
@@ -164,6 +193,24 @@ def test_types_outside_allow_list_rejected(saved):
 def test_unfitted_cannot_be_saved(tmp_path):
     with pytest.raises(ValueError, match="fitted"):
         save_surrogate(CollisionSurrogate(), tmp_path / "m.skops")
+    # nor one fitted on other features than FEATURE_NAMES (the loader rebuilds the feature frame)
+    rng = np.random.default_rng(0)
+    generic = CollisionSurrogate(EnsembleMLPRegressorCV(hidden_layer_sizes=((3,),), max_iter=50, solver="lbfgs"),
+                                 impeller_radius=R)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        generic.fit(rng.normal(size=(20, 3)), rng.normal(size=20))
+    with pytest.raises(ValueError, match="fitted on the feature frame"):
+        save_surrogate(generic, tmp_path / "m.skops")
+
+
+def test_format_2_files_are_refused_with_retrain(saved):
+    model, meta_path = saved
+    meta = json.loads(meta_path.read_text())
+    meta["format_version"] = 2
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(IncompatibleVersionError, match="format version 2 .*reads version 3.*retrain"):
+        load_surrogate(model)
 
 
 def test_version_1_layout_rejected(fitted, saved):
@@ -171,7 +218,7 @@ def test_version_1_layout_rejected(fitted, saved):
     from pbmdem.surrogate import SurrogateLoadError
 
     model, meta_path = saved
-    sio.dump(list(fitted.estimators_), model)
+    sio.dump(list(fitted.frequency_model_.estimators_), model)
     meta = json.loads(meta_path.read_text())
     meta["model_sha256"] = sha256_file(model)
     meta_path.write_text(json.dumps(meta))

@@ -10,37 +10,55 @@ import pytest
 from pbmdem.impact import N_VELOCITY_BINS, EncounterRates
 from pbmdem.surrogate import (
     CollisionSurrogate,
+    EnsembleMLPRegressorCV,
     OutOfDomainWarning,
     VelocityModelMissingError,
     cross_validate_models,
     noise_floor_r2,
     summarise,
+    training_data,
 )
-from pbmdem.surrogate.features import TARGET_NAME, make_features, pair_table
+from pbmdem.surrogate.features import TARGET_NAME, pair_table
 from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables, velocity_law
 from pbmdem.surrogate.velocity import attach_velocity_bins, lognormal_fractions
 
-SMALL = dict(hidden_layer_sizes=((6,), (8,)), alpha=(0.001, 0.01), ensemble_size=3, max_iter=1500,
-             cv="group_kfold", n_splits=3)
+R = 0.0265  # impeller radius (m) of the synthetic tables and models
+SMALL = dict(hidden_layer_sizes=((6,), (8,)), alpha=(0.001, 0.01), seeds=(0, 1, 2), max_iter=1500,
+             activation="tanh", solver="lbfgs", cv="group_kfold", n_splits=3)
+TINY = dict(hidden_layer_sizes=((4,),), alpha=(0.01,), seeds=(0, 1), max_iter=2000, activation="tanh", solver="lbfgs")
+
+
+def surrogate(**ensemble) -> CollisionSurrogate:
+    return CollisionSurrogate(frequency_model=EnsembleMLPRegressorCV(**ensemble), impeller_radius=R,
+                              physics_offset="cross_section")
+
+
+def fit(model, data):
+    return model.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
 
 
 @pytest.fixture(scope="module")
 def table():
     # 20 runs x 6 pairs; velocity bins are multinomial samples of every replicate's encounters
-    return attach_velocity_bins(*make_synthetic_tables(seed=11, noise_log10=0.03, sample_velocities=True))
+    return attach_velocity_bins(*make_synthetic_tables(R, seed=11, noise_log10=0.03, sample_velocities=True))
 
 
 @pytest.fixture(scope="module")
-def fitted(table):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return CollisionSurrogate(**SMALL).fit(table)
+def data(table):
+    return training_data(table, R)
 
 
-def test_held_out_velocity_distribution_recovers_known_law(table):
+@pytest.fixture(scope="module")
+def fitted(data):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        metrics, pred = cross_validate_models(table, CollisionSurrogate(**SMALL), cv="group_kfold", n_splits=5)
+        return fit(surrogate(**SMALL), data)
+
+
+def test_held_out_velocity_distribution_recovers_known_law(data):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        metrics, pred = cross_validate_models(data, surrogate(**SMALL), cv="group_kfold", n_splits=5)
     vel = summarise(metrics, "impact_velocity")
     assert set(vel) == {"mlp", "physical"}
     mlp, phys = vel["mlp"], vel["physical"]
@@ -54,7 +72,7 @@ def test_held_out_velocity_distribution_recovers_known_law(table):
     # held-out predictions against the noise-free law itself: closer to it than the sampled DEM
     # bins are (the ensemble averages the sampling noise out), and the size-ratio and rpm
     # dependence is learned, which one tip-speed ratio (physical baseline) cannot do
-    mu_law, sigma_law = velocity_law(pred["d_i"], pred["d_j"], pred["rpm"])
+    mu_law, sigma_law = velocity_law(pred["d_i"], pred["d_j"], pred["rpm"], R)
     err_mlp = np.abs(pred["mlp_velocity_mu_log10"] - mu_law).mean()
     err_obs = np.abs(pred["velocity_mu_log10"] - mu_law).mean()
     err_phys = np.abs(pred["physical_velocity_mu_log10"] - mu_law).mean()
@@ -93,13 +111,14 @@ def test_encounters_one_call_consistent(fitted):
         warnings.simplefilter("ignore", OutOfDomainWarning)
         mu_fast, _ = fitted.predict_velocity(pair_table(d, n, 900)[0])
     assert (mu_fast > mu).all()
-    mu_law, _ = velocity_law(frame["d_i"], frame["d_j"], 600)
+    mu_law, _ = velocity_law(frame["d_i"], frame["d_j"], 600, R)
     assert np.abs(mu - mu_law).max() < 0.06
 
 
 def test_encounters_is_one_vectorised_predict_per_member(fitted, monkeypatch):
     calls = []
-    for est in list(fitted.estimators_) + list(fitted.velocity_estimators_):
+    members = list(fitted.frequency_model_.estimators_) + list(fitted.velocity_model_.estimators_)
+    for est in members:
         original = est.predict
 
         def spy(X, _orig=original):
@@ -110,7 +129,7 @@ def test_encounters_is_one_vectorised_predict_per_member(fitted, monkeypatch):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OutOfDomainWarning)
         fitted.encounters(np.linspace(0.002, 0.004, 5), np.full(5, 400.0), 600)
-    assert calls == [15] * (len(fitted.estimators_) + len(fitted.velocity_estimators_))
+    assert calls == [15] * len(members)
 
 
 def test_encounters_warns_out_of_domain_once_per_feature(fitted):
@@ -122,14 +141,19 @@ def test_encounters_warns_out_of_domain_once_per_feature(fitted):
 
 
 def test_without_velocity_bins_frequency_only():
-    t = make_synthetic_table(rpms=(300, 600, 900), seed=3)
+    t = make_synthetic_table(R, rpms=(300, 600, 900), seed=3)
     with pytest.warns(UserWarning, match="no impact-velocity bins"):
-        model = CollisionSurrogate(hidden_layer_sizes=((4,),), alpha=(0.01,), ensemble_size=2).fit(t)
-    assert not model.has_velocity_model()
+        d = training_data(t, R)
+    model = fit(surrogate(**TINY), d)
+    assert not model.has_velocity_model() and model.velocity_model_ is None and model.n_velocity_rows_ == 0
+    # no velocity targets at all: the same frequency model
+    np.testing.assert_array_equal(surrogate(**TINY).fit(d.X, d.y, groups=d.groups).predict(d.X), model.predict(d.X))
     c = model.frequency_matrix([0.002, 0.003], [900, 700], 600, check_domain=False)
     assert c.shape == (2, 2)
     with pytest.raises(VelocityModelMissingError, match="impact_velocity.csv"):
         model.encounters([0.002, 0.003], [900, 700], 600)
+    with pytest.raises(VelocityModelMissingError, match="impact_velocity.csv"):
+        model.predict_velocity(d.X)
 
 
 def test_noise_floor_hand_made():
@@ -143,16 +167,15 @@ def test_noise_floor_hand_made():
 
 
 def test_noise_floor_from_replicate_se_in_metrics():
-    t, v = make_synthetic_tables(rpms=(300, 600, 900), seed=4, n_replicates=3, noise_log10=0.05)
+    t, v = make_synthetic_tables(R, rpms=(300, 600, 900), seed=4, n_replicates=3, noise_log10=0.05)
     # delta method by hand: var(log10 c) = (SE / (c ln 10))^2
     c, se = t["encounter_frequency_per_pair"], t["encounter_frequency_per_pair_se"]
     y = np.log10(c)
     expected = 1.0 - np.mean((se / (c * np.log(10))) ** 2) / np.var(y)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        metrics, pred = cross_validate_models(attach_velocity_bins(t, v),
-                                              CollisionSurrogate(hidden_layer_sizes=((4,),), alpha=(0.01,),
-                                                                 ensemble_size=2), cv="group_kfold", n_splits=3)
+        metrics, pred = cross_validate_models(training_data(t, R, velocity_table=v), surrogate(**TINY),
+                                              cv="group_kfold", n_splits=3)
     freq = metrics[metrics["target"] == "encounter_frequency"]
     pooled = freq[freq["fold"] == "pooled"]
     assert np.allclose(pooled["noise_floor_r2_log10"], expected)  # same value beside every model
@@ -164,10 +187,9 @@ def test_noise_floor_from_replicate_se_in_metrics():
     exp0 = 1.0 - np.mean(((se / (c * np.log(10))) ** 2)[sel]) / np.var(y[sel])
     assert fold0["noise_floor_r2_log10"] == pytest.approx(exp0)
     # one replicate: no SE, no floor
-    one = make_synthetic_table(rpms=(300, 600, 900), seed=4, n_replicates=1)
+    one = make_synthetic_table(R, rpms=(300, 600, 900), seed=4, n_replicates=1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        m1, _ = cross_validate_models(one, CollisionSurrogate(hidden_layer_sizes=((4,),), alpha=(0.01,),
-                                                              ensemble_size=2), cv="group_kfold", n_splits=3)
+        m1, _ = cross_validate_models(training_data(one, R), surrogate(**TINY), cv="group_kfold", n_splits=3)
     assert m1["noise_floor_r2_log10"].isna().all()
     assert (m1["target"] == "encounter_frequency").all()  # no velocity bins, no velocity rows

@@ -13,12 +13,14 @@ import yaml
 from pbmdem.surrogate import load_surrogate
 from pbmdem.surrogate.cli import add_cli, main
 from pbmdem.config import ConfigError, Surrogate, load_config, section_defaults
-from pbmdem.surrogate.settings import build_surrogate
+from pbmdem.surrogate.features import check_impeller_radius
+from pbmdem.surrogate.settings import build_baselines, build_surrogate
 from pbmdem.impact import N_VELOCITY_BINS
 from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables
 from pbmdem.surrogate.train import train_and_report
 
 REPO = Path(__file__).resolve().parents[1]
+R = 0.0265  # impeller radius (m) of the synthetic tables
 TINY = {"hidden_layer_sizes": [[4]], "alpha": [0.01, 0.1], "ensemble_size": 2, "seeds": [3, 4],
         "max_iter": 300, "cv": {"strategy": "group_kfold", "n_splits": 3}}
 
@@ -56,12 +58,38 @@ def test_build_surrogate_from_settings():
     radius = cfg.granulator.impeller.tip_radius
     assert radius == cfg.granulator.impeller.blade_length
     est = build_surrogate(tiny_settings(), radius)
-    assert est.hidden_layer_sizes == ((4,),) and est.seeds == (3, 4) and est.impeller_radius == radius
-    assert est.cv == "group_kfold" and est.n_splits == 3
+    freq = est.frequency_model
+    assert freq.hidden_layer_sizes == ((4,),) and freq.seeds == (3, 4) and est.impeller_radius == radius
+    assert freq.cv == "group_kfold" and freq.n_splits == 3
+    assert est.velocity_model.get_params() == freq.get_params() and est.velocity_model is not freq
+    # every value of the section reaches the estimators (none comes from a constructor default)
+    s = cfg.surrogate.to_dict()
+    est = build_surrogate(s, radius, n_jobs=2)
+    params = est.get_params(deep=False)
+    assert sorted(params) == ["domain_margin", "frequency_model", "impeller_radius", "physics_offset", "velocity_model"]
+    assert (params["impeller_radius"], params["physics_offset"], params["domain_margin"]) == (
+        radius, s["physics_offset"], s["domain_margin"])
+    assert est.frequency_model.get_params() == {
+        "hidden_layer_sizes": tuple(tuple(h) for h in s["hidden_layer_sizes"]), "alpha": tuple(s["alpha"]),
+        "seeds": tuple(s["seeds"]), "max_iter": s["max_iter"], "activation": s["activation"], "solver": s["solver"],
+        "cv": s["cv"]["strategy"], "n_splits": s["cv"]["n_splits"], "n_jobs": 2}
+    assert build_baselines(s)["hgb"].random_state == s["random_state"]
+    # seeds: null -> random_state, random_state + 1, ...
+    assert build_surrogate({**s, "seeds": None, "random_state": 7}, radius).frequency_model.seeds == \
+        tuple(range(7, 7 + s["ensemble_size"]))
+
+
+def test_the_impeller_radius_comes_only_from_the_granulator():
+    with pytest.raises(ValueError, match="impeller_radius"):
+        check_impeller_radius(-1.0)
+    with pytest.raises(ValueError, match="impeller_radius"):
+        build_surrogate(tiny_settings(), None)
+    with pytest.raises(TypeError, match="impeller_radius"):
+        train_and_report(make_synthetic_table(R, rpms=(300, 600)), "unused/model.skops", settings=tiny_settings())
 
 
 def test_train_and_report_writes_outputs(tmp_path):
-    table, velocity = make_synthetic_tables(rpms=(300, 600, 900), seed=7)
+    table, velocity = make_synthetic_tables(R, rpms=(300, 600, 900), seed=7)
     table.loc[3, ["encounters", "encounter_frequency_per_pair"]] = 0.0  # dropped with a warning
     velocity.loc[(velocity["point_id"] == table.loc[3, "point_id"]) & (velocity["class_i"] == table.loc[3, "class_i"])
                  & (velocity["class_j"] == table.loc[3, "class_j"]), "encounters"] = 0.0
@@ -72,7 +100,7 @@ def test_train_and_report_writes_outputs(tmp_path):
     out = tmp_path / "surrogate"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        meta = train_and_report(csv, out / "model.skops", settings=tiny_settings(), impeller_radius=0.0265,
+        meta = train_and_report(csv, out / "model.skops", settings=tiny_settings(), impeller_radius=R,
                                 velocity_table=vcsv)
     for name in ("model.skops", "model.json", "metrics.csv", "parity.png"):
         assert (out / name).stat().st_size > 0
@@ -96,7 +124,7 @@ def test_train_and_report_writes_outputs(tmp_path):
 
 
 def test_cli_train_and_predict(tmp_path, capsys):
-    table, velocity = make_synthetic_tables(rpms=(300, 600, 900), seed=8)
+    table, velocity = make_synthetic_tables(R, rpms=(300, 600, 900), seed=8)
     csv = tmp_path / "collisions.csv"
     vcsv = tmp_path / "impact_velocity.csv"
     table.to_csv(csv, index=False)
@@ -129,6 +157,11 @@ def test_cli_train_and_predict(tmp_path, capsys):
     pred = pd.read_csv(pred_csv)
     assert (pred["predicted_encounter_frequency_per_pair"] > 0).all()
     assert (pred["predicted_impact_velocity_median"] > 0).all()
+    # a config without the granulator has no impeller radius: refused, naming the key
+    bare = tmp_path / "bare.yaml"
+    bare.write_text(yaml.safe_dump({"surrogate": TINY}))
+    with pytest.raises(ConfigError, match=f"(?s)config file {bare}: .*'granulator' is a required property"):
+        main(["surrogate", "train", "--table", str(csv), "--config", str(bare), "--out", str(out)])
 
 
 def test_add_cli_registers_subcommands():
@@ -151,10 +184,10 @@ def test_rule_declares_contract_paths():
 
 
 def test_single_run_table_still_trains(tmp_path):
-    table = make_synthetic_table(rpms=(600,), distributions={"mixed": [0.4, 0.35, 0.25]}, seed=9)
+    table = make_synthetic_table(R, rpms=(600,), distributions={"mixed": [0.4, 0.35, 0.25]}, seed=9)
     out = tmp_path / "s"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        meta = train_and_report(table, out / "model.skops", settings=tiny_settings(), impeller_radius=0.0265)
+        meta = train_and_report(table, out / "model.skops", settings=tiny_settings(), impeller_radius=R)
     assert meta["training_point_ids"] == ["rpm600_mixed"]
     assert len(pd.read_csv(out / "metrics.csv")) == 0 and (out / "parity.png").exists()

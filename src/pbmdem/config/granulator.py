@@ -17,6 +17,12 @@ from .typed import Settings
 GRAVITY = 9.80665
 
 
+def tip_speed(rpm, tip_radius: float):
+    """Tip speed 2 pi R rpm / 60 (m/s) of an impeller of radius `tip_radius` (m) at `rpm` (a number
+    or an array): the one formula, used by `Granulator.tip_speed` and the surrogate's features."""
+    return 2.0 * math.pi * tip_radius * rpm / 60.0
+
+
 @dataclass(frozen=True)
 class Bowl(Settings):
     """Closed cylindrical bowl: inner diameter and height up to the lid (m), facets of its STL."""
@@ -83,7 +89,7 @@ class Granulator(Settings):
 
     def tip_speed(self, rpm):
         """Impeller tip speed omega R = 2 pi R rpm / 60 (m/s) at `rpm` (a number or a numpy array)."""
-        return 2.0 * math.pi * self.impeller.tip_radius * rpm / 60.0
+        return tip_speed(rpm, self.impeller.tip_radius)
 
     def froude_number(self, rpm):
         """Fr = omega^2 R / g at the blade tip: centrifugal over gravitational acceleration."""

@@ -1,9 +1,10 @@
 """MLP encounter surrogate trained on the DEM collision and impact-velocity tables (docs/surrogate.md)."""
 
 from .baselines import HGBBaseline, PhysicalScaling
+from .ensemble import EnsembleMLPRegressorCV, grouped_splits, make_group_cv
 from .evaluation import cross_validate_models, noise_floor_r2, summarise
-from .features import DEFAULT_IMPELLER_RADIUS, FEATURE_NAMES, TARGET_NAME, make_features
-from .model import CollisionSurrogate, OutOfDomainWarning, VelocityModelMissingError, grouped_splits, make_group_cv
+from .features import FEATURE_NAMES, TARGET_NAME, TrainingData, make_features, training_data
+from .model import CollisionSurrogate, OutOfDomainWarning, VelocityModelMissingError
 from .persistence import (
     IncompatibleVersionError,
     SurrogateLoadError,
@@ -15,8 +16,8 @@ from .persistence import (
 from .velocity import attach_velocity_bins, fit_lognormal, lognormal_fractions
 
 __all__ = [
-    "CollisionSurrogate", "OutOfDomainWarning", "HGBBaseline", "PhysicalScaling",
-    "FEATURE_NAMES", "TARGET_NAME", "DEFAULT_IMPELLER_RADIUS", "make_features",
+    "CollisionSurrogate", "EnsembleMLPRegressorCV", "OutOfDomainWarning", "HGBBaseline", "PhysicalScaling",
+    "FEATURE_NAMES", "TARGET_NAME", "TrainingData", "make_features", "training_data",
     "grouped_splits", "make_group_cv", "cross_validate_models", "summarise",
     "save_surrogate", "load_surrogate", "SurrogateLoadError", "TamperedModelError",
     "IncompatibleVersionError", "UntrustedTypesError", "VelocityModelMissingError", "noise_floor_r2",

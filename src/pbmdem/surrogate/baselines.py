@@ -1,139 +1,139 @@
 """Baselines for the encounter surrogate, evaluated on the same grouped folds.
 
-* :class:`HGBBaseline`: ``HistGradientBoostingRegressor`` on the surrogate's features and target
-  (log10 frequency per pair).
+Both are scikit-learn regressors on the surrogate's feature matrix with ``y`` = log10 of the
+encounter frequency per pair (:func:`pbmdem.surrogate.features.training_data`):
+``fit(X, y, groups=None)``, ``predict(X)`` in the units of ``y``.
+
+* :class:`HGBBaseline`: ``HistGradientBoostingRegressor`` on the features.
 * :class:`PhysicalScaling`: a one-constant kinetic-theory scaling
 
-  .. math:: c_{ij} = K \\, (d_i + d_j)^2 \\, v_{tip} / V_{bed},
+  .. math:: c_{ij} = K' \\, (d_i + d_j)^2 \\, v_{tip},   K' = K / V_{bed},
 
   collision cross-section ~ (d_i + d_j)^2, relative velocity ~ impeller tip speed, and the
-  probability that a given pair meets ~ 1 / bed volume. The bed volume is taken as the run's
-  solid volume ``sum_k n_k pi d_k^3 / 6`` (the packing fraction, a constant, is absorbed in K).
-  K is fitted by least squares in log space: ``log10 K`` = mean residual. Its impact-speed law
-  (when the table carries velocity bins) is one log-normal for all pairs with the median
-  proportional to the tip speed: ``log10(median / v_tip)`` and ``sigma`` are the means of the
-  per-pair log-normal fits.
+  probability that a given pair meets ~ 1 / bed volume. Every DEM bed of the grid has the same
+  solid volume (``dem.bed_height``, ``dem.packing_fraction``: the counts are chosen for it, the
+  default grid's beds agree within 1e-4 decades), so ``1 / V_bed`` is a constant absorbed in
+  ``K'`` (it cannot come from the features: a row sees two of a run's classes, not all).
+  ``log10 K'`` is fitted by least squares in log space (the mean residual). Its impact-speed law
+  (``fit(..., velocity=...)``) is one log-normal for all pairs with the median proportional to
+  the tip speed: ``log10(median / v_tip)`` and ``log10 sigma`` are the means over the rows.
 """
 
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.ensemble import HistGradientBoostingRegressor
-from sklearn.metrics import r2_score
-from sklearn.utils.validation import check_is_fitted
+from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._threads import single_threaded
-from .velocity import bin_counts, fit_lognormal, lognormal_fractions, velocity_rows
-from .features import (
-    DEFAULT_IMPELLER_RADIUS,
-    TARGET_NAME,
-    make_features,
-    pair_table,
-    prepare_training_table,
-    run_descriptors,
-    tip_speed,
-)
+from .features import FEATURE_NAMES
+from .velocity import lognormal_fractions
+
+#: Features the physical scaling is a law of.
+LAW_FEATURES = ("d_small", "d_large", "tip_speed")
 
 
-class _LogTableRegressor(RegressorMixin, BaseEstimator):
-    """Shared predict/score: models fit on a collision table and predict in physical units."""
+class HGBBaseline(RegressorMixin, BaseEstimator):
+    """Gradient-boosted trees on the surrogate features (``y``: log10 encounter frequency per pair).
 
-    def predict(self, table):
-        return 10.0 ** self.predict_log10(table)
-
-    def score(self, X, y=None, sample_weight=None):
-        data = prepare_training_table(X, self.zero_policy)
-        return float(r2_score(data[TARGET_NAME], self.predict_log10(data), sample_weight=sample_weight))
-
-
-class HGBBaseline(_LogTableRegressor):
-    """Gradient-boosted trees on the surrogate features, fitted to log10(encounter_frequency_per_pair)."""
+    ``min_samples_leaf`` is capped at half the training rows, so tiny tables still split.
+    """
 
     def __init__(self, max_iter: int = 200, learning_rate: float = 0.1, min_samples_leaf: int = 5,
-                 random_state: int = 0, impeller_radius: float = DEFAULT_IMPELLER_RADIUS,
-                 zero_policy: str = "drop"):
+                 random_state: int | None = 0):
         self.max_iter = max_iter
         self.learning_rate = learning_rate
         self.min_samples_leaf = min_samples_leaf
         self.random_state = random_state
-        self.impeller_radius = impeller_radius
-        self.zero_policy = zero_policy
 
-    def fit(self, table: pd.DataFrame, y=None):
-        data = prepare_training_table(table, self.zero_policy)
-        X = make_features(data, self.impeller_radius).to_numpy(float)
+    def fit(self, X, y, groups=None):
+        """Fit on the feature matrix; ``groups`` is accepted for a uniform interface and not used."""
+        X, y = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
         with single_threaded():
-            self.model_ = self._fit_model(X, data[TARGET_NAME].to_numpy(float), len(data))
+            self.model_ = HistGradientBoostingRegressor(
+                max_iter=self.max_iter, learning_rate=self.learning_rate,
+                min_samples_leaf=min(self.min_samples_leaf, max(1, len(y) // 2)),
+                random_state=self.random_state,
+            ).fit(X, y)
+        self.n_iter_ = self.model_.n_iter_
         return self
 
-    def _fit_model(self, X, y, n_rows):
-        return HistGradientBoostingRegressor(
-            max_iter=self.max_iter, learning_rate=self.learning_rate,
-            min_samples_leaf=min(self.min_samples_leaf, max(1, n_rows // 2)),
-            random_state=self.random_state,
-        ).fit(X, y)
-
-    def predict_log10(self, table: pd.DataFrame) -> np.ndarray:
-        check_is_fitted(self, "model_")
-        X = make_features(table, self.impeller_radius).to_numpy(float)
+    def predict(self, X):
+        check_is_fitted(self)
+        X = validate_data(self, X, reset=False, dtype=np.float64)
         with single_threaded():
             return self.model_.predict(X)
 
 
-class PhysicalScaling(_LogTableRegressor):
-    """c_ij = K (d_i + d_j)^2 v_tip / V_bed with one constant K fitted in log space."""
+class PhysicalScaling(RegressorMixin, BaseEstimator):
+    """log10 c_ij = log10 K' + log10((d_small + d_large)^2 tip_speed), one constant K' fitted in log space.
 
-    def __init__(self, impeller_radius: float = DEFAULT_IMPELLER_RADIUS, zero_policy: str = "drop"):
-        self.impeller_radius = impeller_radius
-        self.zero_policy = zero_policy
+    ``X`` must carry the named features ``d_small``, ``d_large`` (m) and ``tip_speed`` (m/s): a
+    feature frame with those columns, or an array whose columns are :data:`FEATURE_NAMES` in
+    that order.
+    """
 
-    def _log10_shape(self, table: pd.DataFrame) -> np.ndarray:
-        """log10 of (d_i + d_j)^2 v_tip / V_bed for every row (V_bed = solid volume of the run)."""
-        desc = run_descriptors(table)
-        volume = desc["solid_volume"].reindex(table["point_id"]).to_numpy(float)
-        dsum = table["d_i"].to_numpy(float) + table["d_j"].to_numpy(float)
-        v_tip = tip_speed(table["rpm"].to_numpy(float), self.impeller_radius)
-        return np.log10(dsum ** 2 * v_tip / volume)
+    def _columns(self) -> list[int]:
+        names = getattr(self, "feature_names_in_", None)
+        if names is not None:
+            names = [str(n) for n in names]
+            missing = [n for n in LAW_FEATURES if n not in names]
+            if missing:
+                raise ValueError(f"PhysicalScaling needs the features {list(LAW_FEATURES)}; X lacks {missing} "
+                                 f"(columns {names})")
+            return [names.index(n) for n in LAW_FEATURES]
+        if self.n_features_in_ != len(FEATURE_NAMES):
+            raise ValueError(f"PhysicalScaling needs the features {list(LAW_FEATURES)}: pass a feature frame with "
+                             f"these columns or an array with the {len(FEATURE_NAMES)} columns {list(FEATURE_NAMES)}; "
+                             f"got an array with {self.n_features_in_} column(s) and no feature names")
+        return [list(FEATURE_NAMES).index(n) for n in LAW_FEATURES]
 
-    def fit(self, table: pd.DataFrame, y=None):
-        data = prepare_training_table(table, self.zero_policy)
-        self.log10_K_ = float(np.mean(data[TARGET_NAME].to_numpy(float) - self._log10_shape(data)))
+    def _law_inputs(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(d_small + d_large, tip_speed) of every row, both checked > 0."""
+        i, j, k = self._columns()
+        dsum, v_tip = X[:, i] + X[:, j], X[:, k]
+        if not ((dsum > 0).all() and (v_tip > 0).all()):
+            raise ValueError("PhysicalScaling: d_small + d_large and tip_speed must be > 0 in every row")
+        return dsum, v_tip
+
+    def _log10_shape(self, X: np.ndarray) -> np.ndarray:
+        dsum, v_tip = self._law_inputs(X)
+        return np.log10(dsum ** 2 * v_tip)
+
+    def fit(self, X, y, groups=None, velocity=None):
+        """Fit ``log10 K'`` to ``y`` (log10 frequency); with ``velocity`` ((n, 2): mu = log10
+        median speed, sigma; NaN rows skipped) also the speed ratio and spread. ``groups`` is not used."""
+        X, y = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
+        self.log10_K_ = float(np.mean(y - self._log10_shape(X)))
         self.K_ = 10.0 ** self.log10_K_
-        vmask = velocity_rows(data)
-        if vmask.any():
-            mu, sigma = fit_lognormal(bin_counts(data.loc[vmask]))
-            v_tip = tip_speed(data.loc[vmask, "rpm"].to_numpy(float), self.impeller_radius)
-            self.log10_speed_ratio_ = float(np.mean(mu - np.log10(v_tip)))
-            self.log10_sigma_ = float(np.mean(np.log10(sigma)))
-        else:
-            self.log10_speed_ratio_ = self.log10_sigma_ = None
+        self.log10_speed_ratio_ = self.log10_sigma_ = None
+        if velocity is not None:
+            V = np.asarray(velocity, dtype=float)
+            if V.shape != (len(y), 2):
+                raise ValueError(f"velocity must have shape (n_samples, 2) = ({len(y)}, 2), got {V.shape}")
+            vmask = np.isfinite(V).all(axis=1)
+            if vmask.any():
+                _, v_tip = self._law_inputs(X[vmask])
+                self.log10_speed_ratio_ = float(np.mean(V[vmask, 0] - np.log10(v_tip)))
+                self.log10_sigma_ = float(np.mean(np.log10(V[vmask, 1])))
         return self
 
-    def predict_velocity(self, table: pd.DataFrame):
+    def predict(self, X):
+        """log10 c_ij per row (the units of ``y``)."""
+        check_is_fitted(self)
+        X = validate_data(self, X, reset=False, dtype=np.float64)
+        return self.log10_K_ + self._log10_shape(X)
+
+    def predict_velocity(self, X):
         """``(mu, sigma)`` per row: log10 median = log10 v_tip + constant, sigma constant."""
-        check_is_fitted(self, "log10_K_")
+        check_is_fitted(self)
         if self.log10_speed_ratio_ is None:
-            raise ValueError("PhysicalScaling was fitted without impact-velocity bins")
-        v_tip = tip_speed(table["rpm"].to_numpy(float), self.impeller_radius)
+            raise ValueError("PhysicalScaling was fitted without impact-velocity targets (fit(..., velocity=...))")
+        X = validate_data(self, X, reset=False, dtype=np.float64)
+        _, v_tip = self._law_inputs(X)
         mu = self.log10_speed_ratio_ + np.log10(v_tip)
         return mu, np.full(len(mu), 10.0 ** self.log10_sigma_)
 
-    def velocity_fractions(self, table: pd.DataFrame) -> np.ndarray:
-        return lognormal_fractions(*self.predict_velocity(table))
-
-    def predict_log10(self, table: pd.DataFrame) -> np.ndarray:
-        check_is_fitted(self, "log10_K_")
-        make_features(table, self.impeller_radius)  # validates the table
-        return self.log10_K_ + self._log10_shape(table)
-
-    def frequency_matrix(self, diameters, numbers, rpm: float) -> np.ndarray:
-        """(K, K) symmetric per-pair frequencies (1/s), same interface as the surrogate."""
-        frame, iu, ju = pair_table(diameters, numbers, rpm)
-        k = len(np.atleast_1d(diameters))
-        c = np.empty((k, k))
-        values = 10.0 ** self.predict_log10(frame)
-        c[iu, ju] = values
-        c[ju, iu] = values
-        return c
+    def velocity_fractions(self, X) -> np.ndarray:
+        return lognormal_fractions(*self.predict_velocity(X))

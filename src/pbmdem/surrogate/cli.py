@@ -83,8 +83,8 @@ def _predict(args) -> int:
             from pbmdem.readers import read_table
 
             table = read_table(args.table, "collision table")
-            value, std = model.predict(table, return_std=True)
-            out = table.assign(predicted_encounter_frequency_per_pair=value, predicted_std_log10=std)
+            log_c, std = model.predict_log10(table, return_std=True)
+            out = table.assign(predicted_encounter_frequency_per_pair=10.0 ** log_c, predicted_std_log10=std)
             if model.has_velocity_model():
                 mu, sigma = model.predict_velocity(table, check_domain=False)
                 out = out.assign(predicted_impact_velocity_median=10.0 ** mu, predicted_impact_velocity_sigma_log10=sigma)

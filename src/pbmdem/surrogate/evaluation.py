@@ -27,9 +27,10 @@ from sklearn.base import clone
 from sklearn.metrics import mean_absolute_error, r2_score
 
 from .baselines import HGBBaseline, PhysicalScaling
-from .features import TARGET_COLUMN, TARGET_NAME, TARGET_NOISE_VAR, prepare_training_table
-from .model import CollisionSurrogate, grouped_splits
-from .velocity import bin_counts, empirical_fractions, fit_lognormal, total_variation, velocity_rows
+from .ensemble import EnsembleMLPRegressorCV, grouped_splits
+from .features import TARGET_COLUMN, TARGET_NAME, TARGET_NOISE_VAR, TrainingData
+from .model import CollisionSurrogate
+from .velocity import bin_counts, empirical_fractions, total_variation
 
 log = logging.getLogger(__name__)
 
@@ -72,84 +73,88 @@ def _row(target, model, fold, ids, n_train, n_test, r2, mae, floor=np.nan, tv=np
             "n_test": n_test, "r2_log10": r2, "mae_log10": mae, "noise_floor_r2_log10": floor, "tv_distance": tv}
 
 
-def default_baselines(surrogate: CollisionSurrogate) -> dict:
-    """HGB and physical-scaling baselines sharing the surrogate's radius and zero policy."""
-    return {
-        "hgb": HGBBaseline(impeller_radius=surrogate.impeller_radius, zero_policy=surrogate.zero_policy,
-                           random_state=surrogate.random_state),
-        "physical": PhysicalScaling(impeller_radius=surrogate.impeller_radius, zero_policy=surrogate.zero_policy),
-    }
+def default_baselines(random_state: int | None = 0) -> dict:
+    """HGB (seeded with ``random_state``) and physical-scaling baselines."""
+    return {"hgb": HGBBaseline(random_state=random_state), "physical": PhysicalScaling()}
 
 
-def cross_validate_models(table: pd.DataFrame, surrogate: CollisionSurrogate, baselines: dict | None = None,
+def _fit(model, data: TrainingData, rows: np.ndarray):
+    """Clone of ``model`` fitted on ``rows`` of ``data`` (with velocity targets if it learns them)."""
+    kwargs = {"groups": data.groups[rows]}
+    if hasattr(model, "predict_velocity"):
+        kwargs["velocity"] = data.velocity[rows]
+    return clone(model).fit(data.X.iloc[rows], data.y[rows], **kwargs)
+
+
+def cross_validate_models(data: TrainingData, surrogate: CollisionSurrogate, baselines: dict | None = None,
                           cv: str | None = None, n_splits: int | None = None):
     """Evaluate the surrogate (``mlp``) and the baselines on the same grouped outer folds.
 
+    ``data`` comes from :func:`~pbmdem.surrogate.features.training_data`. The outer folds hold out
+    whole DEM runs (``data.groups``); ``cv`` and ``n_splits`` default to those of the surrogate's
+    frequency model, whose grid search then runs inside every outer training set (nested).
     Returns ``(metrics, predictions)``: ``metrics`` has one row per (model, fold) plus, per model,
     a ``pooled`` row (all held-out predictions together) and a ``mean`` row (average over folds;
     ``r2_log10`` of the mean row averages the per-fold R2). ``predictions`` holds every held-out
     row with the DEM value and each model's prediction (log10), the MLP's ensemble spread and the
     fold number.
     """
-    baselines = default_baselines(surrogate) if baselines is None else baselines
+    baselines = default_baselines() if baselines is None else baselines
     models = {"mlp": surrogate, **baselines}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # reported once by the final fit
-        data = prepare_training_table(table, surrogate.zero_policy).reset_index(drop=True)
-    groups = data["point_id"].astype(str).to_numpy()
-    splits = grouped_splits(groups, cv or surrogate.cv, n_splits or surrogate.n_splits)
+    inner = surrogate.frequency_model if surrogate.frequency_model is not None else EnsembleMLPRegressorCV()
+    groups = data.groups
+    splits = grouped_splits(groups, cv or inner.cv, n_splits or inner.n_splits)
+    table = data.table
 
     keep = [c for c in ("point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j", TARGET_COLUMN,
-                        TARGET_NAME, TARGET_NOISE_VAR) if c in data]
-    pred = data[keep].copy()
+                        TARGET_NAME, TARGET_NOISE_VAR) if c in table]
+    pred = table[keep].copy()
     pred["fold"] = -1
     for name in models:
         pred[f"{name}_log10"] = np.nan
     pred["mlp_std_log10"] = np.nan
 
     # impact-velocity distribution: DEM fractions and log-normal fit of every row with bins
-    vmask = velocity_rows(data)
+    vmask = np.isfinite(data.velocity).all(axis=1)
     vel_models = [m for m in VELOCITY_MODEL_NAMES if m in models] if vmask.any() else []
     if vmask.any():
-        counts = bin_counts(data.loc[vmask])
-        obs_frac = empirical_fractions(counts)
-        mu_obs, sigma_obs = fit_lognormal(counts)
+        obs_frac = empirical_fractions(bin_counts(table.loc[vmask]))
         pred["velocity_mu_log10"] = np.nan
         pred["velocity_sigma"] = np.nan
-        pred.loc[vmask, "velocity_mu_log10"] = mu_obs
-        pred.loc[vmask, "velocity_sigma"] = sigma_obs
+        pred.loc[vmask, "velocity_mu_log10"] = data.velocity[vmask, 0]
+        pred.loc[vmask, "velocity_sigma"] = data.velocity[vmask, 1]
         for name in vel_models:
             pred[f"{name}_velocity_mu_log10"] = np.nan
             pred[f"{name}_velocity_sigma"] = np.nan
             pred[f"{name}_velocity_tv"] = np.nan
-        obs_frac_full = np.full((len(data), obs_frac.shape[1]), np.nan)
+        obs_frac_full = np.full((len(table), obs_frac.shape[1]), np.nan)
         obs_frac_full[vmask] = obs_frac
 
     rows = []
     t_start = time.perf_counter()
     for k, (train, test) in enumerate(splits):
         t_fold = time.perf_counter()
-        tr, te = data.iloc[train], data.iloc[test]
-        y = te[TARGET_NAME].to_numpy(float)
+        y = data.y[test]
         ids = ";".join(sorted(set(groups[test])))
         n_train = len(set(groups[train]))
-        floor = noise_floor_r2(y, te[TARGET_NOISE_VAR].to_numpy(float))
+        floor = noise_floor_r2(y, data.noise_var[test])
         pred.loc[pred.index[test], "fold"] = k
+        X_test = data.X.iloc[test]
         for name, model in models.items():
-            fitted = clone(model).fit(tr)
+            fitted = _fit(model, data, train)
             if name == "mlp":
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", UserWarning)  # held-out runs may lie at the edges
-                    p, s = fitted.predict_log10(te, return_std=True)
+                    p, s = fitted.predict(X_test, return_std=True)
                 pred.loc[pred.index[test], "mlp_std_log10"] = s
             else:
-                p = fitted.predict_log10(te)
+                p = fitted.predict(X_test)
             pred.loc[pred.index[test], f"{name}_log10"] = p
             r2, mae = _metrics(y, p)
             rows.append(_row("encounter_frequency", name, str(k), ids, n_train, len(test), r2, mae, floor))
             vt = test[vmask[test]]
             if name in vel_models and len(vt):
-                te_v = data.iloc[vt]
+                te_v = data.X.iloc[vt]
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", UserWarning)
                     mu, sigma = fitted.predict_velocity(te_v)

@@ -7,6 +7,11 @@ frequency per pair of *encounters* (impacts of granules that were apart), averag
 replicates (insertion seeds) of the run. The raw new-contact columns ``collisions`` and
 ``frequency_per_pair`` are diagnostics and are not learned.
 
+:func:`training_data` is the one place that turns a collision table (and its impact-velocity
+table) into what every model is fitted on: ``X``, ``y``, ``groups`` (DEM runs), the replicate
+noise variance and the impact-speed targets. The impeller radius for the tip-speed feature is
+always passed in (``granulator.impeller.blade_length``); nothing here reads the config.
+
 The same code path builds features for the PBM (:func:`pair_table`): a size distribution given as
 class diameters and particle numbers is turned into a collision-table-like frame of all unordered
 class pairs, so training and prediction can never disagree about a feature's definition.
@@ -16,28 +21,10 @@ from __future__ import annotations
 
 import math
 import warnings
-
-from pathlib import Path
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-import yaml
-
-_CONFIG_PATH = Path(__file__).resolve().parents[3] / "config" / "config.yaml"
-
-
-def _configured_impeller_radius(path: Path = _CONFIG_PATH) -> float | None:
-    """``granulator.impeller.blade_length`` (m) of the project config, None if it cannot be read."""
-    try:
-        with open(path, encoding="utf-8") as fh:
-            return float(yaml.safe_load(fh)["granulator"]["impeller"]["blade_length"])
-    except (OSError, KeyError, TypeError, ValueError, yaml.YAMLError):
-        return None
-
-
-#: Impeller radius (m) used for the tip speed when none is given: ``granulator.impeller.blade_length``
-#: of ``config/config.yaml`` (axis to blade tip), read from that file, not repeated here.
-DEFAULT_IMPELLER_RADIUS = _configured_impeller_radius()
 
 #: Columns of the collision-table contract (docs/architecture.md).
 TABLE_COLUMNS = (
@@ -87,12 +74,23 @@ class CollisionTableError(ValueError):
     """The collision table violates the contract of docs/architecture.md."""
 
 
-def tip_speed(rpm, impeller_radius: float = DEFAULT_IMPELLER_RADIUS):
-    """Impeller tip speed (m/s) for a speed in rpm and a radius in m."""
-    if impeller_radius is None or not impeller_radius > 0:
-        raise ValueError(f"impeller_radius must be > 0 m (granulator.impeller.blade_length), "
+def check_impeller_radius(impeller_radius) -> float:
+    """The impeller radius (m) as a float; ValueError unless it is a finite number > 0."""
+    try:
+        value = float(impeller_radius)
+    except (TypeError, ValueError):
+        value = float("nan")
+    if isinstance(impeller_radius, bool) or not (math.isfinite(value) and value > 0):
+        raise ValueError(f"impeller_radius (granulator.impeller.blade_length) must be a finite number > 0 m, "
                          f"got {impeller_radius!r}")
-    return 2.0 * math.pi * impeller_radius * np.asarray(rpm, dtype=float) / 60.0
+    return value
+
+
+def tip_speed(rpm, impeller_radius: float):
+    """Impeller tip speed (m/s) for a speed in rpm and a radius in m (pbmdem.config's formula)."""
+    from pbmdem.config.granulator import tip_speed as granulator_tip_speed
+
+    return granulator_tip_speed(np.asarray(rpm, dtype=float), check_impeller_radius(impeller_radius))
 
 
 def check_table(table: pd.DataFrame, columns=FEATURE_SOURCE_COLUMNS) -> None:
@@ -162,7 +160,7 @@ def run_descriptors(table: pd.DataFrame) -> pd.DataFrame:
     return agg[["n_total", "n_classes", "d_mean", "solid_volume"]]
 
 
-def make_features(table: pd.DataFrame, impeller_radius: float = DEFAULT_IMPELLER_RADIUS) -> pd.DataFrame:
+def make_features(table: pd.DataFrame, impeller_radius: float) -> pd.DataFrame:
     """Feature frame (columns :data:`FEATURE_NAMES`, same index as ``table``) of a collision table."""
     check_table(table)
     run_descriptors(table)  # checks the classes of every run are consistent
@@ -310,3 +308,66 @@ def pair_table(diameters, numbers, rpm: float) -> tuple[pd.DataFrame, np.ndarray
         "d_i": d[iu], "d_j": d[ju], "n_i": n[iu], "n_j": n[ju], "n_total": n.sum(),
     })
     return frame, iu, ju
+
+
+@dataclass(frozen=True)
+class TrainingData:
+    """Model inputs and targets of a collision table, one row per usable class pair and run.
+
+    Every surrogate model (the MLP surrogate and its baselines) is fitted as
+    ``model.fit(X, y, groups=groups)`` (plus ``velocity=velocity`` for the models that learn the
+    impact speeds); the rows are those of ``table``, in the same order (index 0..n-1).
+    """
+
+    X: pd.DataFrame
+    """Features, columns :data:`FEATURE_NAMES`."""
+    y: np.ndarray
+    """Target :data:`TARGET_NAME`: log10 of the encounter frequency per pair (1/s)."""
+    groups: np.ndarray
+    """``point_id`` (str) of every row: one group per DEM run."""
+    noise_var: np.ndarray
+    """:data:`TARGET_NOISE_VAR`: replicate noise variance of ``y`` (decades^2, NaN if unknown)."""
+    velocity: np.ndarray
+    """(n, 2) log-normal impact-speed law of every row: ``mu`` (log10 median speed, m/s) and
+    ``sigma`` (std of log10 v, decades), fitted to the row's velocity bins; NaN rows without bins."""
+    table: pd.DataFrame
+    """The rows used (:func:`prepare_training_table`), with the target columns and ``floored``."""
+    n_dropped: int
+    """Rows of the input table left out (no pairs, zero encounters with ``drop``, non-finite)."""
+    n_floored: int
+    """Rows whose zero count was floored (``zero_policy="floor"``)."""
+
+
+def training_data(table: pd.DataFrame, impeller_radius: float, zero_policy: str = "drop",
+                  velocity_table: pd.DataFrame | None = None,
+                  velocity_source: str = "impact-velocity table") -> TrainingData:
+    """Features, target, groups, replicate noise and impact-speed targets of a collision table.
+
+    ``table`` is the collision table (``results/dem/collisions.csv``); ``velocity_table`` the
+    impact-velocity table (``results/dem/impact_velocity.csv``, long format), attached with
+    :func:`~pbmdem.surrogate.velocity.attach_velocity_bins` (named ``velocity_source`` in errors);
+    a table whose bins are already attached needs none. Without bins only the encounter frequency
+    can be learned (a warning says so). ``impeller_radius`` (m) is
+    ``granulator.impeller.blade_length``, for the tip-speed feature.
+    """
+    # imported here: velocity.py imports CollisionTableError from this module
+    from .velocity import attach_velocity_bins, bin_counts, fit_lognormal, velocity_rows
+
+    if velocity_table is not None:
+        table = attach_velocity_bins(table, velocity_table, source=velocity_source)
+    data = prepare_training_table(table, zero_policy).reset_index(drop=True)
+    X = make_features(data, impeller_radius)
+    velocity = np.full((len(data), 2), np.nan)
+    vmask = velocity_rows(data)
+    if vmask.any():
+        mu, sigma = fit_lognormal(bin_counts(data.loc[vmask]))
+        velocity[vmask] = np.column_stack([mu, sigma])
+    else:
+        warnings.warn("the collision table carries no impact-velocity bins (results/dem/impact_velocity.csv "
+                      "not attached): the surrogate predicts encounter frequencies only", UserWarning,
+                      stacklevel=2)
+    return TrainingData(
+        X=X, y=data[TARGET_NAME].to_numpy(float), groups=data["point_id"].astype(str).to_numpy(),
+        noise_var=data[TARGET_NOISE_VAR].to_numpy(float), velocity=velocity, table=data,
+        n_dropped=int(len(table) - len(data)), n_floored=int(data["floored"].sum()),
+    )

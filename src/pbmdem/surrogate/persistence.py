@@ -6,8 +6,8 @@ Two files:
   ``Pipeline(StandardScaler, MLPRegressor)``; ``velocity`` is empty for a surrogate trained
   without impact-velocity bins) written with :func:`skops.io.dump`. Only scikit-learn/numpy objects are stored; the wrapper
   class itself is rebuilt from the metadata, so no project class has to be trusted.
-* ``model.json`` - metadata: estimator parameters, feature names and training ranges, training
-  runs, CV scores, library versions and the SHA-256 of ``model.skops``.
+* ``model.json`` - metadata: estimator parameters (the impeller radius among them), feature names
+  and training ranges, training runs, CV scores, library versions and the SHA-256 of ``model.skops``.
 
 :func:`load_surrogate` checks, before deserialising anything, that the metadata format is known,
 the SHA-256 matches (else :class:`TamperedModelError`) and the scikit-learn major.minor equals the
@@ -34,16 +34,19 @@ import scipy
 import skops
 import skops.io as sio
 import sklearn
+from sklearn.base import clone
 
 from pbmdem.impact import VELOCITY_EDGES
 
 from ._io import atomic_write
+from .ensemble import EnsembleMLPRegressorCV, _object_array, search_table
 from .features import FEATURE_NAMES, TARGET_NAME
 from .model import CollisionSurrogate
 
 FORMAT = "pbmdem-surrogate"
-#: 2: encounter target, velocity ensemble, features without rpm (version 1: raw collision target).
-FORMAT_VERSION = 2
+#: 3: parameters of CollisionSurrogate(frequency_model=EnsembleMLPRegressorCV, velocity_model=...)
+#: (2: the former single-class parameters; 1: raw collision target). The skops layout is unchanged.
+FORMAT_VERSION = 3
 
 #: Every type that may appear in a surrogate model file (module.qualname).
 ALLOWED_TYPES = frozenset({
@@ -112,18 +115,37 @@ def metadata_path_for(model_path: str | os.PathLike) -> Path:
     return Path(model_path).with_suffix(".json")
 
 
+def _surrogate_params(surrogate: CollisionSurrogate) -> dict:
+    """JSON form of the surrogate's parameters: the nested estimators as their own parameter dicts."""
+    params = surrogate.get_params(deep=False)
+    for key in ("frequency_model", "velocity_model"):
+        if params[key] is not None:
+            params[key] = params[key].get_params(deep=False)
+    return params
+
+
+def _search_meta(est: EnsembleMLPRegressorCV | None) -> dict:
+    if est is None:
+        return {"best_rmse_log10": None, "results": []}
+    return {"best_rmse_log10": float(np.sqrt(-est.best_score_)),
+            "results": search_table(est).to_dict(orient="records")}
+
+
 def save_surrogate(surrogate: CollisionSurrogate, model_path: str | os.PathLike,
                    metadata_path: str | os.PathLike | None = None, cv_scores: dict | None = None,
                    extra: dict | None = None) -> dict:
     """Write ``model.skops`` and its JSON metadata (atomically); return the metadata dict."""
-    if not hasattr(surrogate, "estimators_"):
+    if not hasattr(surrogate, "frequency_model_"):
         raise ValueError("only a fitted CollisionSurrogate can be saved")
+    names = [str(n) for n in getattr(surrogate, "feature_names_in_", [])]
+    if names != list(FEATURE_NAMES):
+        raise ValueError(f"only a surrogate fitted on the feature frame {list(FEATURE_NAMES)} can be saved, "
+                         f"this one was fitted on {names or 'an array without feature names'}")
     model_path = Path(model_path)
     metadata_path = metadata_path_for(model_path) if metadata_path is None else Path(metadata_path)
-    velocity = list(getattr(surrogate, "velocity_estimators_", None) or [])
-    atomic_write(model_path, lambda tmp: sio.dump({"frequency": list(surrogate.estimators_), "velocity": velocity},
-                                                  tmp))
-    params = surrogate.get_params()
+    freq, vel = surrogate.frequency_model_, surrogate.velocity_model_
+    velocity = [] if vel is None else list(vel.estimators_)
+    atomic_write(model_path, lambda tmp: sio.dump({"frequency": list(freq.estimators_), "velocity": velocity}, tmp))
     meta = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -131,29 +153,26 @@ def save_surrogate(surrogate: CollisionSurrogate, model_path: str | os.PathLike,
         "model_file": model_path.name,
         "model_sha256": sha256_file(model_path),
         "estimator": "pbmdem.surrogate.CollisionSurrogate",
-        "params": params,
-        "target": f"{TARGET_NAME} (fitted in log10 space; predict returns 1/s per particle pair)",
+        "params": _surrogate_params(surrogate),
+        "target": f"{TARGET_NAME} (fitted in log10 space; frequency_matrix returns 1/s per particle pair)",
         "velocity_target": ("log-normal impact-speed law per pair: [log10 median speed (m/s) minus the "
                             "physics offset, log10 sigma (decades)], fitted by ML to the bins of "
-                            "pbmdem.impact.VELOCITY_EDGES" if velocity else None),
+                            "pbmdem.impact.VELOCITY_EDGES" if vel is not None else None),
         "velocity_edges": [float(e) for e in VELOCITY_EDGES],
-        "velocity_best_params": getattr(surrogate, "velocity_best_params_", None),
-        "velocity_search": {"best_rmse_log10": getattr(surrogate, "velocity_best_score_", None),
-                            "results": (surrogate.velocity_search_results_.to_dict(orient="records")
-                                        if getattr(surrogate, "velocity_search_results_", None) is not None else [])},
-        "n_velocity_rows": getattr(surrogate, "n_velocity_rows_", 0),
-        "duplicated_features": [list(p) for p in getattr(surrogate, "duplicated_features_", [])],
-        "feature_names": list(surrogate.feature_names_),
+        "velocity_best_params": None if vel is None else vel.best_params_,
+        "velocity_seeds": None if vel is None else [int(s) for s in np.atleast_1d(vel.seeds)],
+        "velocity_search": _search_meta(vel),
+        "velocity_search_cv_folds": [] if vel is None else vel.cv_folds_,
+        "n_velocity_rows": surrogate.n_velocity_rows_,
+        "duplicated_features": [list(p) for p in surrogate.duplicated_features_],
+        "feature_names": names,
         "feature_ranges": {k: list(v) for k, v in surrogate.feature_ranges().items()},
-        "best_params": surrogate.best_params_,
-        "seeds": surrogate.seeds_,
+        "best_params": freq.best_params_,
+        "seeds": [int(s) for s in np.atleast_1d(freq.seeds)],
         "training_point_ids": list(surrogate.training_point_ids_),
         "n_training_rows": surrogate.n_training_rows_,
-        "n_dropped_rows": surrogate.n_dropped_rows_,
-        "n_floored_rows": surrogate.n_floored_rows_,
-        "search_cv_folds": surrogate.cv_folds_,
-        "search": {"best_rmse_log10": surrogate.best_score_,
-                   "results": surrogate.search_results_.to_dict(orient="records")},
+        "search_cv_folds": freq.cv_folds_,
+        "search": _search_meta(freq),
         "cv_scores": cv_scores or {},
         "versions": library_versions(),
     }
@@ -247,45 +266,84 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
             "it was written by another version or edited; retrain the surrogate") from None
 
 
+def _build(cls, params: dict, what: str):
+    """``cls(**params)`` with exactly the parameters ``cls`` has (a missing one would silently
+    take its default: refused like an unknown one)."""
+    expected = set(cls().get_params(deep=False))
+    if set(params) != expected:
+        raise ValueError(f"{what} parameters differ from this version's: missing {sorted(expected - set(params))}, "
+                         f"unknown {sorted(set(params) - expected)}")
+    return cls(**params)
+
+
+def _ensemble(params: dict, what: str) -> EnsembleMLPRegressorCV:
+    params = dict(params)
+    params["hidden_layer_sizes"] = tuple(tuple(h) for h in params["hidden_layer_sizes"])
+    params["alpha"] = tuple(params["alpha"])
+    params["seeds"] = tuple(params["seeds"])
+    return _build(EnsembleMLPRegressorCV, params, what)
+
+
+def _restore_ensemble(est: EnsembleMLPRegressorCV, members: list, best: dict, search: dict, folds: list,
+                      names: list[str], n_outputs: int) -> EnsembleMLPRegressorCV:
+    """The fitted state of an :class:`EnsembleMLPRegressorCV` from its pipelines and metadata."""
+    est.estimators_ = members
+    est.best_params_ = {"hidden_layer_sizes": tuple(best["hidden_layer_sizes"]), "alpha": float(best["alpha"])}
+    rmse = search["best_rmse_log10"]
+    est.best_score_ = float("nan") if rmse is None else -float(rmse) ** 2
+    rows = [r for r in search["results"] if r.get("rmse_log10") is not None]
+    est.cv_results_ = None
+    if rows:
+        params = [{"hidden_layer_sizes": tuple(int(u) for u in r["hidden_layer_sizes"]), "alpha": float(r["alpha"])}
+                  for r in rows]
+        est.cv_results_ = {
+            "params": params,
+            "param_hidden_layer_sizes": _object_array([p["hidden_layer_sizes"] for p in params]),
+            "param_alpha": np.array([p["alpha"] for p in params], dtype=float),
+            "mean_test_score": -np.array([r["rmse_log10"] for r in rows], dtype=float) ** 2,
+            "std_test_score": np.array([np.nan if r["fold_mse_log10_std"] is None else r["fold_mse_log10_std"]
+                                        for r in rows], dtype=float),
+            "rank_test_score": np.array([r["rank"] for r in rows], dtype=int),
+        }
+    est.cv_folds_ = [list(f) for f in folds]
+    est.n_features_in_ = len(names)
+    est.feature_names_in_ = np.asarray(names, dtype=object)
+    est.n_outputs_ = n_outputs
+    est.n_iter_ = np.array([m[-1].n_iter_ for m in members], dtype=int)
+    return est
+
+
 def _from_metadata(stored: dict, meta: dict, metadata_path) -> CollisionSurrogate:
     """The surrogate object from its fitted estimators (`stored`: the skops file's frequency and
-    velocity lists) and metadata (KeyError/TypeError when the metadata has missing or unknown
-    fields)."""
-    estimators = stored["frequency"]
-    if list(meta["feature_names"]) != list(FEATURE_NAMES):
+    velocity lists) and metadata (KeyError/TypeError/ValueError when the metadata has missing or
+    unknown fields)."""
+    names = list(meta["feature_names"])
+    if names != list(FEATURE_NAMES):
         raise IncompatibleVersionError(
             f"{metadata_path}: features {meta['feature_names']} differ from this version's {list(FEATURE_NAMES)}")
     params = dict(meta["params"])
-    params["hidden_layer_sizes"] = tuple(tuple(h) for h in params["hidden_layer_sizes"])
-    params["alpha"] = tuple(params["alpha"])
-    if params.get("seeds") is not None:
-        params["seeds"] = tuple(params["seeds"])
-    surrogate = CollisionSurrogate(**params)
+    params["frequency_model"] = _ensemble(params["frequency_model"], "frequency_model")
+    if params["velocity_model"] is not None:
+        params["velocity_model"] = _ensemble(params["velocity_model"], "velocity_model")
+    surrogate = _build(CollisionSurrogate, params, "surrogate")
+    freq_template = surrogate.frequency_model
+    vel_template = freq_template if surrogate.velocity_model is None else surrogate.velocity_model
+    surrogate.frequency_model_ = _restore_ensemble(
+        clone(freq_template), stored["frequency"], meta["best_params"], meta["search"], meta["search_cv_folds"],
+        names, 1)
+    surrogate.velocity_model_ = None
+    if stored["velocity"]:
+        surrogate.velocity_model_ = _restore_ensemble(
+            clone(vel_template), stored["velocity"], meta["velocity_best_params"], meta["velocity_search"],
+            meta["velocity_search_cv_folds"], names, 2)
     ranges = meta["feature_ranges"]
-    surrogate.estimators_ = estimators
-    surrogate.seeds_ = list(meta["seeds"])
-    surrogate.feature_names_ = tuple(meta["feature_names"])
-    surrogate.n_features_in_ = len(surrogate.feature_names_)
-    surrogate.feature_min_ = np.array([ranges[n][0] for n in surrogate.feature_names_], dtype=float)
-    surrogate.feature_max_ = np.array([ranges[n][1] for n in surrogate.feature_names_], dtype=float)
-    surrogate.best_params_ = {"hidden_layer_sizes": tuple(meta["best_params"]["hidden_layer_sizes"]),
-                              "alpha": float(meta["best_params"]["alpha"])}
-    surrogate.best_score_ = meta["search"]["best_rmse_log10"]
-    surrogate.search_results_ = pd.DataFrame(meta["search"]["results"])
+    surrogate.n_features_in_ = len(names)
+    surrogate.feature_names_in_ = np.asarray(names, dtype=object)
+    surrogate.feature_min_ = np.array([ranges[n][0] for n in names], dtype=float)
+    surrogate.feature_max_ = np.array([ranges[n][1] for n in names], dtype=float)
+    surrogate.duplicated_features_ = [tuple(p) for p in meta["duplicated_features"]]
     surrogate.training_point_ids_ = list(meta["training_point_ids"])
-    surrogate.cv_folds_ = meta["search_cv_folds"]
-    surrogate.n_training_rows_ = meta["n_training_rows"]
-    surrogate.n_dropped_rows_ = meta["n_dropped_rows"]
-    surrogate.n_floored_rows_ = meta["n_floored_rows"]
-    surrogate.velocity_estimators_ = stored["velocity"]
-    vbest = meta.get("velocity_best_params")
-    surrogate.velocity_best_params_ = (None if vbest is None else
-                                       {"hidden_layer_sizes": tuple(vbest["hidden_layer_sizes"]),
-                                        "alpha": float(vbest["alpha"])})
-    surrogate.velocity_best_score_ = meta["velocity_search"]["best_rmse_log10"]
-    vres = meta["velocity_search"]["results"]
-    surrogate.velocity_search_results_ = pd.DataFrame(vres) if vres else None
-    surrogate.n_velocity_rows_ = meta["n_velocity_rows"]
-    surrogate.duplicated_features_ = [tuple(p) for p in meta.get("duplicated_features", [])]
+    surrogate.n_training_rows_ = int(meta["n_training_rows"])
+    surrogate.n_velocity_rows_ = int(meta["n_velocity_rows"])
     surrogate.metadata_ = meta
     return surrogate

@@ -17,7 +17,7 @@ import pandas as pd
 
 from pbmdem.impact import VELOCITY_EDGES
 
-from .features import DEFAULT_IMPELLER_RADIUS, TABLE_COLUMNS
+from .features import TABLE_COLUMNS, tip_speed
 from .velocity import VELOCITY_TABLE_COLUMNS, lognormal_fractions
 
 #: Raw new contacts per encounter in the synthetic tables (re-contacts of a pair that bounces).
@@ -30,15 +30,16 @@ def power_law(d_i, d_j, rpm, n_total, c0: float = 1e-3):
     return c0 * ((d_i + d_j) / 0.006) ** 2 * (np.asarray(rpm, float) / 600.0) * (2000.0 / np.asarray(n_total, float))
 
 
-def velocity_law(d_i, d_j, rpm, impeller_radius: float = DEFAULT_IMPELLER_RADIUS):
+def velocity_law(d_i, d_j, rpm, impeller_radius: float):
     """Reference impact-speed law: ``(mu, sigma)`` of log10 v (m/s, decades).
 
     median = 0.12 v_tip (d_small / d_large)^0.5 (unequal pairs meet more gently in this toy law),
-    sigma = 0.30 (600 / rpm)^0.25 decades (a slower impeller gives a broader spread).
+    sigma = 0.30 (600 / rpm)^0.25 decades (a slower impeller gives a broader spread); v_tip is the
+    tip speed of an impeller of radius ``impeller_radius`` (m).
     """
     d_i, d_j = np.asarray(d_i, float), np.asarray(d_j, float)
     rpm = np.asarray(rpm, float)
-    v_tip = 2.0 * math.pi * impeller_radius * rpm / 60.0
+    v_tip = tip_speed(rpm, impeller_radius)
     ratio = np.minimum(d_i, d_j) / np.maximum(d_i, d_j)
     mu = np.log10(0.12 * v_tip * ratio ** 0.5)
     sigma = 0.30 * (600.0 / rpm) ** 0.25
@@ -46,6 +47,7 @@ def velocity_law(d_i, d_j, rpm, impeller_radius: float = DEFAULT_IMPELLER_RADIUS
 
 
 def make_synthetic_tables(
+    impeller_radius: float,
     rpms=(300, 450, 600, 750, 900),
     distributions: dict | None = None,
     diameters=(0.002, 0.003, 0.004),
@@ -60,6 +62,9 @@ def make_synthetic_tables(
     seed: int = 0,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """``(collisions, impact_velocity)`` tables for every rpm x distribution.
+
+    ``impeller_radius`` (m) sets the tip speed of the velocity law (``vlaw(d_i, d_j, rpm,
+    impeller_radius)``); train on the tables with the same radius.
 
     ``distributions`` maps names to number fractions over ``diameters``; by default a handful of
     random ones. ``n_total`` of a distribution decreases with its mean size (fixed bed volume).
@@ -97,7 +102,7 @@ def make_synthetic_tables(
                     efpp = float(reps.mean()) if pairs > 0 else np.nan
                     se = float(reps.std(ddof=1) / math.sqrt(R)) if (R > 1 and pairs > 0) else np.nan
                     encounters = efpp * pairs * sampling_time if pairs > 0 else 0.0
-                    mu, sigma = vlaw(d[i], d[j], rpm)
+                    mu, sigma = vlaw(d[i], d[j], rpm, impeller_radius)
                     frac = lognormal_fractions(mu, sigma)[0]
                     if sample_velocities and pairs > 0:
                         counts = np.mean([rng.multinomial(int(round(r * pairs * sampling_time)), frac)
@@ -128,6 +133,6 @@ def make_synthetic_tables(
             pd.DataFrame(vrows, columns=list(VELOCITY_TABLE_COLUMNS)))
 
 
-def make_synthetic_table(*args, **kwargs) -> pd.DataFrame:
+def make_synthetic_table(impeller_radius: float, *args, **kwargs) -> pd.DataFrame:
     """The collision table of :func:`make_synthetic_tables` (same arguments)."""
-    return make_synthetic_tables(*args, **kwargs)[0]
+    return make_synthetic_tables(impeller_radius, *args, **kwargs)[0]

@@ -10,12 +10,14 @@ from pathlib import Path
 
 import pandas as pd
 
+import numpy as np
+
 from .evaluation import METRIC_COLUMNS, cross_validate_models, summarise
+from .features import training_data
 from ._io import atomic_write
 from .persistence import save_surrogate
 from .plots import empty_plot, parity_plot
-from .settings import build_surrogate
-from .velocity import attach_velocity_bins
+from .settings import build_baselines, build_surrogate
 
 log = logging.getLogger(__name__)
 
@@ -35,14 +37,16 @@ def _read_table(table, what: str, columns=()) -> tuple[pd.DataFrame, str]:
 
 def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | os.PathLike,
                      metadata_path: str | os.PathLike | None = None, metrics_path: str | os.PathLike | None = None,
-                     parity_path: str | os.PathLike | None = None, settings: dict | None = None,
-                     impeller_radius: float | None = None, n_jobs: int | None = None,
+                     parity_path: str | os.PathLike | None = None, *, settings: dict,
+                     impeller_radius: float, n_jobs: int | None = None,
                      velocity_table: str | os.PathLike | pd.DataFrame | None = None) -> dict:
     """Grouped CV of MLP and baselines, final fit on every run, then write the outputs.
 
     ``table`` is the collision table (``results/dem/collisions.csv``), ``velocity_table`` the
     impact-velocity table (``results/dem/impact_velocity.csv``); without it the surrogate learns
-    the encounter frequency only (with a warning). Output paths default to siblings of
+    the encounter frequency only (with a warning). ``settings`` is the complete ``surrogate:``
+    section (``pbmdem.config``: ``cfg.surrogate.to_dict()``); ``impeller_radius`` (m, required) is
+    ``granulator.impeller.blade_length``, for the tip-speed feature. Output paths default to siblings of
     ``model_path``: ``model.json``, ``metrics.csv``, ``parity.png``.
     Returns the metadata written to ``model.json``.
     """
@@ -51,23 +55,25 @@ def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | 
     metadata_path = Path(metadata_path) if metadata_path else model_path.with_suffix(".json")
     metrics_path = Path(metrics_path) if metrics_path else out / "metrics.csv"
     parity_path = Path(parity_path) if parity_path else out / "parity.png"
-    if settings is None or impeller_radius is None:
-        raise ValueError("train_and_report needs the complete surrogate: settings and the impeller radius "
-                         "(pbmdem.config: cfg.surrogate.to_dict(), cfg.granulator.impeller.tip_radius)")
     frame, source = _read_table(table, "collision table", columns=("point_id",))
     if "point_id" not in frame:
         raise ValueError(f"collision table {source} lacks column 'point_id'")
     log.info("collision table %s: %d rows, %d runs", source, len(frame), frame["point_id"].nunique())
-    velocity_source = None
+    vframe, velocity_source = None, None
     if velocity_table is not None:
         vframe, velocity_source = _read_table(velocity_table, "impact-velocity table")
-        frame = attach_velocity_bins(frame, vframe, source=f"impact-velocity table {velocity_source}")
         log.info("impact-velocity table %s: %d rows", velocity_source, len(vframe))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        data = training_data(frame, impeller_radius, settings["zero_collisions"], velocity_table=vframe,
+                             velocity_source=f"impact-velocity table {velocity_source}")
+    for w in caught:
+        log.warning("%s: %s", w.category.__name__, w.message)
 
     surrogate = build_surrogate(settings, impeller_radius, n_jobs=n_jobs)
     t0 = time.perf_counter()
-    if frame["point_id"].nunique() >= 2:
-        metrics, predictions = cross_validate_models(frame, surrogate)
+    if len(np.unique(data.groups)) >= 2:
+        metrics, predictions = cross_validate_models(data, surrogate, build_baselines(settings))
     else:
         log.warning("a single DEM run: no held-out evaluation possible (metrics and parity plot are empty)")
         metrics, predictions = pd.DataFrame(columns=METRIC_COLUMNS), None
@@ -85,23 +91,25 @@ def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | 
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        surrogate.fit(frame)
+        surrogate.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
     for w in caught:
         log.warning("%s: %s", w.category.__name__, w.message)
     t_fit = time.perf_counter() - t0
-    log.info("final fit: %s, %d members, %.1f s (cross-validation %.1f s)", surrogate.best_params_,
-             len(surrogate.estimators_), t_fit, t_cv)
+    freq = surrogate.frequency_model_
+    log.info("final fit: %s, %d members, %.1f s (cross-validation %.1f s)", freq.best_params_,
+             len(freq.estimators_), t_fit, t_cv)
 
     cv_scores = {
-        "strategy": surrogate.cv,
+        "strategy": freq.cv,
         "outer_summary": summary,
         "noise_floor_r2_log10": (next(iter(summary.values()))["noise_floor_r2_log10"] if summary else None),
         "velocity_summary": velocity_summary,
         "outer_folds": metrics[~metrics["fold"].isin(["pooled", "mean"])].to_dict(orient="records"),
-        "search_best_rmse_log10": surrogate.best_score_,
+        "search_best_rmse_log10": float(np.sqrt(-freq.best_score_)),
     }
     meta = save_surrogate(surrogate, model_path, metadata_path, cv_scores=cv_scores,
                           extra={"training_table": source, "velocity_table": velocity_source, "settings": settings,
+                                 "n_dropped_rows": data.n_dropped, "n_floored_rows": data.n_floored,
                                  "timing_s": {"cross_validation": t_cv, "final_fit": t_fit}})
     _write_csv(metrics, metrics_path)
     if predictions is not None:

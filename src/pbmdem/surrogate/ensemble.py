@@ -1,0 +1,278 @@
+"""Self-tuning MLP ensemble regressor with grouped hyperparameter search (a scikit-learn estimator).
+
+:class:`EnsembleMLPRegressorCV` knows nothing about collisions: it regresses any numeric ``y``
+(1-D or 2-D) on any numeric ``X``. When ``groups`` are given, the hyperparameters are chosen by a
+grid search whose folds hold out whole groups (for the surrogate: whole DEM runs, ``point_id``),
+then one ``Pipeline(StandardScaler, MLPRegressor)`` is fitted per seed with the chosen values;
+the members' mean is the prediction, their spread the uncertainty estimate.
+"""
+
+from __future__ import annotations
+
+import logging
+import numbers
+import warnings
+
+import numpy as np
+import pandas as pd
+from sklearn.base import BaseEstimator, RegressorMixin, clone
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.model_selection import GridSearchCV, GroupKFold, LeaveOneGroupOut
+from sklearn.neural_network import MLPRegressor
+from sklearn.pipeline import Pipeline
+from sklearn.preprocessing import StandardScaler
+from sklearn.utils.validation import check_is_fitted, validate_data
+
+from ._threads import single_threaded
+
+log = logging.getLogger(__name__)
+
+CV_STRATEGIES = ("leave_one_group_out", "group_kfold")
+
+
+def make_group_cv(strategy: str = "leave_one_group_out", n_splits: int = 5, n_groups: int | None = None):
+    """Grouped cross-validation splitter: whole groups (DEM runs) are held out together."""
+    if strategy == "leave_one_group_out":
+        return LeaveOneGroupOut()
+    if strategy == "group_kfold":
+        k = int(n_splits) if n_groups is None else min(int(n_splits), int(n_groups))
+        if k < 2:
+            raise ValueError(f"group_kfold needs at least 2 groups, got {n_groups}")
+        return GroupKFold(n_splits=k)
+    raise ValueError(f"cv strategy must be one of {CV_STRATEGIES}, got {strategy!r}")
+
+
+def grouped_splits(groups, strategy: str = "leave_one_group_out", n_splits: int = 5) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Explicit (train, test) index arrays of a grouped split; checked to be group-disjoint."""
+    groups = np.asarray(groups)
+    n_groups = len(np.unique(groups))
+    if n_groups < 2:
+        raise ValueError(f"grouped cross-validation needs at least 2 DEM runs, got {n_groups}")
+    cv = make_group_cv(strategy, n_splits, n_groups)
+    splits = []
+    for train, test in cv.split(np.zeros((len(groups), 1)), groups=groups):
+        leaked = set(groups[train]) & set(groups[test])
+        if leaked:  # cannot happen with the splitters above; kept as a hard guarantee
+            raise RuntimeError(f"run(s) {sorted(leaked)} in both train and test")
+        splits.append((train, test))
+    return splits
+
+
+def _object_array(values) -> np.ndarray:
+    """1-d object array of the given values (tuples stay tuples, not a 2-d array)."""
+    out = np.empty(len(values), dtype=object)
+    for k, v in enumerate(values):
+        out[k] = v
+    return out
+
+
+class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
+    """Ensemble of ``Pipeline(StandardScaler, MLPRegressor)`` with a grouped grid search.
+
+    Parameters
+    ----------
+    hidden_layer_sizes : sequence of tuples of int
+        Candidate architectures; each entry is one ``MLPRegressor.hidden_layer_sizes`` (an int
+        ``h`` stands for ``(h,)``).
+    alpha : float or sequence of float
+        Candidate L2 penalties.
+    seeds : int or sequence of int
+        ``random_state`` of every ensemble member (one member per seed). The grid search fits its
+        candidates with the first seed.
+    max_iter, activation, solver
+        Passed to every :class:`~sklearn.neural_network.MLPRegressor`.
+    cv : {"leave_one_group_out", "group_kfold"}
+        Grouped splitter of the search.
+    n_splits : int
+        Folds of ``group_kfold`` (capped at the number of groups).
+    n_jobs : int or None
+        Parallel jobs of the grid search.
+
+    The defaults are scikit-learn's ``MLPRegressor`` defaults with one member; the workflow
+    passes every value from the config (:func:`pbmdem.surrogate.settings.build_surrogate`).
+
+    Attributes
+    ----------
+    estimators_ : list of Pipeline
+        The fitted members, one per seed.
+    best_params_ : dict
+        ``{"hidden_layer_sizes": tuple, "alpha": float}`` used by the members.
+    best_score_ : float
+        Mean grouped-CV score (negative MSE, averaged over outputs) of the best candidate; NaN if
+        no search ran.
+    cv_results_ : dict or None
+        Search results in the layout of ``GridSearchCV.cv_results_`` (keys ``params``,
+        ``param_hidden_layer_sizes``, ``param_alpha``, ``mean_test_score``, ``std_test_score``,
+        ``rank_test_score``, ``split<k>_test_score``); None if no search ran.
+    cv_folds_ : list of list of str
+        The groups held out by each search fold (empty if no search ran).
+    n_iter_ : ndarray of int
+        Iterations run by each member.
+    n_outputs_ : int
+        Number of targets.
+    n_features_in_, feature_names_in_
+        As in scikit-learn (``feature_names_in_`` only for X with string column names).
+    """
+
+    def __init__(self, hidden_layer_sizes=((100,),), alpha=(1e-4,), seeds=(0,), max_iter=200,
+                 activation="relu", solver="adam", cv="leave_one_group_out", n_splits=5, n_jobs=None):
+        self.hidden_layer_sizes = hidden_layer_sizes
+        self.alpha = alpha
+        self.seeds = seeds
+        self.max_iter = max_iter
+        self.activation = activation
+        self.solver = solver
+        self.cv = cv
+        self.n_splits = n_splits
+        self.n_jobs = n_jobs
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.target_tags.multi_output = True
+        return tags
+
+    # ------------------------------------------------------------------ parameters
+    def _candidates(self) -> tuple[list[tuple[int, ...]], list[float]]:
+        sizes = self.hidden_layer_sizes
+        if isinstance(sizes, numbers.Integral):
+            sizes = [sizes]
+        sizes = [tuple(int(u) for u in np.atleast_1d(h)) for h in sizes]
+        alphas = [float(a) for a in np.atleast_1d(self.alpha)]
+        if not sizes or not alphas:
+            raise ValueError("hidden_layer_sizes and alpha need at least one candidate each, "
+                             f"got hidden_layer_sizes={self.hidden_layer_sizes!r}, alpha={self.alpha!r}")
+        if any(not h or min(h) < 1 for h in sizes):
+            raise ValueError(f"hidden_layer_sizes: every layer needs >= 1 unit, got {self.hidden_layer_sizes!r}")
+        if any(not (np.isfinite(a) and a >= 0) for a in alphas):
+            raise ValueError(f"alpha: every candidate must be finite and >= 0, got {self.alpha!r}")
+        return sizes, alphas
+
+    def _seed_list(self) -> list[int]:
+        seeds = [int(s) for s in np.atleast_1d(self.seeds)]
+        if not seeds:
+            raise ValueError(f"seeds needs at least one seed (one ensemble member each), got {self.seeds!r}")
+        return seeds
+
+    def _pipeline(self) -> Pipeline:
+        return Pipeline([
+            ("scale", StandardScaler()),
+            ("mlp", MLPRegressor(activation=self.activation, solver=self.solver, max_iter=int(self.max_iter))),
+        ])
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, X, y, groups=None):
+        """Grouped grid search (with ``groups`` of >= 2 distinct values and more than one
+        candidate; otherwise the first candidate), then one member per seed. Returns ``self``."""
+        if self.cv not in CV_STRATEGIES:
+            raise ValueError(f"cv must be one of {CV_STRATEGIES}, got {self.cv!r}")
+        sizes, alphas = self._candidates()
+        seeds = self._seed_list()
+        X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=[np.float64, np.float32])
+        if groups is not None:
+            groups = np.asarray(groups)
+            if groups.shape != (X.shape[0],):
+                raise ValueError(f"groups must be 1-d with one entry per sample ({X.shape[0]}), got shape {groups.shape}")
+        with single_threaded():
+            self._fit(X, y, groups, sizes, alphas, seeds)
+        return self
+
+    def _fit(self, X, y, groups, sizes, alphas, seeds) -> None:
+        n_candidates = len(sizes) * len(alphas)
+        n_groups = 0 if groups is None else len(np.unique(groups))
+        if n_candidates > 1 and n_groups < 2:
+            why = "no groups given" if groups is None else "only one group (DEM run)"
+            warnings.warn(f"{why}: no grouped hyperparameter search possible, using the first candidate of "
+                          f"hidden_layer_sizes and alpha", UserWarning, stacklevel=3)
+        grid = {"mlp__hidden_layer_sizes": sizes, "mlp__alpha": alphas}
+        n_conv = 0
+        self.cv_results_ = None
+        self.cv_folds_ = []
+        self.best_score_ = float("nan")
+        best = {"mlp__hidden_layer_sizes": sizes[0], "mlp__alpha": alphas[0]}
+        if n_candidates > 1 and n_groups >= 2:
+            splits = grouped_splits(groups, self.cv, self.n_splits)
+            search = GridSearchCV(
+                self._pipeline().set_params(mlp__random_state=seeds[0]), grid, cv=splits,
+                scoring="neg_mean_squared_error", refit=False, n_jobs=self.n_jobs, error_score="raise",
+            )
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", ConvergenceWarning)
+                search.fit(X, y)
+            n_conv += sum(issubclass(w.category, ConvergenceWarning) for w in caught)
+            best = dict(search.best_params_)
+            self.best_score_ = float(search.best_score_)
+            self.cv_results_ = self._results(search.cv_results_, len(splits))
+            self.cv_folds_ = [sorted({str(g) for g in groups[test]}) for _, test in splits]
+            rmse = np.sqrt(-self.cv_results_["mean_test_score"])
+            for k, params in enumerate(self.cv_results_["params"]):
+                log.info("hyperparameter candidate hidden_layer_sizes=%s alpha=%g: RMSE %.4f (log10) over %d grouped "
+                         "folds, rank %d", str(params["hidden_layer_sizes"]), params["alpha"], rmse[k], len(splits),
+                         self.cv_results_["rank_test_score"][k])
+        self.best_params_ = {"hidden_layer_sizes": tuple(best["mlp__hidden_layer_sizes"]),
+                             "alpha": float(best["mlp__alpha"])}
+        members = []
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ConvergenceWarning)
+            for seed in seeds:
+                est = clone(self._pipeline()).set_params(
+                    mlp__hidden_layer_sizes=self.best_params_["hidden_layer_sizes"],
+                    mlp__alpha=self.best_params_["alpha"], mlp__random_state=seed)
+                members.append(est.fit(X, y))
+        n_conv += sum(issubclass(w.category, ConvergenceWarning) for w in caught)
+        if n_conv:
+            warnings.warn(f"{n_conv} MLP fit(s) stopped at max_iter={self.max_iter} before converging",
+                          ConvergenceWarning, stacklevel=3)
+        self.estimators_ = members
+        self.n_outputs_ = 1 if y.ndim == 1 else int(y.shape[1])
+        self.n_iter_ = np.array([m[-1].n_iter_ for m in members], dtype=int)
+
+    @staticmethod
+    def _results(res: dict, n_splits: int) -> dict:
+        """GridSearchCV results with the pipeline prefix dropped from the parameter names."""
+        params = [{"hidden_layer_sizes": tuple(p["mlp__hidden_layer_sizes"]), "alpha": float(p["mlp__alpha"])}
+                  for p in res["params"]]
+        out = {
+            "params": params,
+            "param_hidden_layer_sizes": _object_array([p["hidden_layer_sizes"] for p in params]),
+            "param_alpha": np.array([p["alpha"] for p in params], dtype=float),
+            "mean_test_score": np.asarray(res["mean_test_score"], dtype=float),
+            "std_test_score": np.asarray(res["std_test_score"], dtype=float),
+            "rank_test_score": np.asarray(res["rank_test_score"], dtype=int),
+        }
+        for k in range(n_splits):
+            out[f"split{k}_test_score"] = np.asarray(res[f"split{k}_test_score"], dtype=float)
+        return out
+
+    # ------------------------------------------------------------------ predict
+    def predict(self, X, return_std: bool = False):
+        """Members' mean prediction (units of ``y``); with ``return_std`` also their standard
+        deviation (ddof 1; zeros for a single member)."""
+        check_is_fitted(self)
+        X = validate_data(self, X, reset=False, dtype=[np.float64, np.float32])
+        with single_threaded():
+            preds = np.stack([m.predict(X) for m in self.estimators_])
+        mean = preds.mean(axis=0)
+        if not return_std:
+            return mean
+        std = preds.std(axis=0, ddof=1) if len(self.estimators_) > 1 else np.zeros_like(mean)
+        return mean, std
+
+
+def search_table(estimator: EnsembleMLPRegressorCV) -> pd.DataFrame:
+    """One row per search candidate: hidden_layer_sizes (tuple), alpha, rmse_log10 (RMSE of the
+    grouped search, in the units of y), fold_mse_log10_std (std of the fold MSEs), rank. Without a
+    search, one row with the candidate used and NaN scores."""
+    check_is_fitted(estimator)
+    res = estimator.cv_results_
+    if res is None:
+        best = estimator.best_params_
+        return pd.DataFrame({"hidden_layer_sizes": _object_array([tuple(best["hidden_layer_sizes"])]),
+                             "alpha": [float(best["alpha"])], "rmse_log10": [np.nan],
+                             "fold_mse_log10_std": [np.nan], "rank": [1]})
+    return pd.DataFrame({
+        "hidden_layer_sizes": _object_array([tuple(p["hidden_layer_sizes"]) for p in res["params"]]),
+        "alpha": np.asarray(res["param_alpha"], dtype=float),
+        "rmse_log10": np.sqrt(-np.asarray(res["mean_test_score"], dtype=float)),
+        "fold_mse_log10_std": np.asarray(res["std_test_score"], dtype=float),
+        "rank": np.asarray(res["rank_test_score"], dtype=int),
+    })

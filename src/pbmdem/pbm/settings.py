@@ -27,7 +27,8 @@ DEFAULTS_PATH = _REPO / "config" / "config.yaml"  # its pbm: section holds the d
 
 #: Same values as the pbm: section of config/config.yaml (a test keeps them equal).
 DEFAULTS: dict = {
-    "grid": {"ratio": 1.2599210498948732, "min_diameter": None, "max_diameter": 0.032, "bins": None},
+    "grid": {"ratio": 1.2599210498948732, "min_diameter": None, "max_diameter": 0.032, "bins": None,
+             "separate_feed": True},
     "process": {"premixing_time": 60.0, "liquid_addition_time": 180.0, "wet_massing_time": 240.0},
     "initial": {"porosity": 0.5, "liquid_content": 0.0},
     "liquid_addition": {"rate": 5.8e-8, "distribution": "surface_area"},
@@ -149,7 +150,8 @@ def build_model(settings: dict, source=None, rpm: float = 0.0) -> GranulationPBM
     solver = SolverSettings(method=s["method"], safety=s["safety"], max_step=s["max_step"], rtol=s["rtol"],
                             atol=s["atol"], max_overflow_fraction=s["max_overflow_fraction"],
                             max_steps=s["max_steps"], max_wall_time=s["max_wall_time"])
-    return GranulationPBM(grid, kernel, liquid, cons, solver, rpm=rpm, scheme=agg["scheme"])
+    return GranulationPBM(grid, kernel, liquid, cons, solver, rpm=rpm, scheme=agg["scheme"],
+                          separate_feed=g["separate_feed"])
 
 
 def initial_state_from_config(config: dict, model: GranulationPBM, distribution: str,

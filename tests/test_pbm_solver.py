@@ -164,10 +164,9 @@ def test_default_grid_runs_from_the_smallest_feed_class_to_max_diameter(default_
 
 def test_default_grid_is_converged_in_d10_d50_d90(default_config):
     """The default batch on the default grid against a 4x finer grid (ratio^(1/4)): d10, d50 and
-    d90 within 1 %. The spray is shared by solid volume here: with the default surface-area
-    sharing and the step success probability, the lumped liquid of a bin mixes wet aggregates
-    with the drier initial granules that share the bin, and the batch itself does not converge
-    with the grid (docs/pbm.md, "Grid"; benchmarks/bench_pbm_accuracy.py prints both)."""
+    d90 within 1 %, here with the spray shared by solid volume (the defaults, surface-area
+    sharing: tests/test_pbm_grid.py; docs/pbm.md, "Grid"; benchmarks/bench_pbm_accuracy.py
+    --grid prints both)."""
     import copy
 
     from pbmdem.pbm import run_pbm

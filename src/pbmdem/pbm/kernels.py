@@ -333,16 +333,17 @@ class CollisionKernel(Kernel):
         W = inp.feed_weights
         if W is None:
             self._class_c, self._class_cumulative = self._c, getattr(self, "_cumulative", None)
-        elif self._classes is None or not np.array_equal(self._classes, W):
-            # a feed class between two pivots meets its partners with the lever-rule blend of the
-            # pivots' c_ij (and velocity fractions): E c E^T, E = [I; W] (K + P, K)
-            E = np.vstack([np.eye(W.shape[1]), W])
-            self._classes = W.copy()
-            c = E @ self._c @ E.T
-            self._class_c = 0.5 * (c + c.T)                 # symmetric to the last digit
-            if self.success.velocity_dependent:
-                cum = np.einsum("jl,ilv->ijv", E, np.einsum("ik,klv->ilv", E, self._cumulative))
-                self._class_cumulative = 0.5 * (cum + cum.transpose(1, 0, 2))
+        elif self._classes is not W:
+            if self._classes is None or not np.array_equal(self._classes, W):
+                # a feed class between two pivots meets its partners with the lever-rule blend of
+                # the pivots' c_ij (and velocity fractions): E c E^T, E = [I; W] (K + P, K)
+                E = np.vstack([np.eye(W.shape[1]), W])
+                c = E @ self._c @ E.T
+                self._class_c = 0.5 * (c + c.T)                 # symmetric to the last digit
+                if self.success.velocity_dependent:
+                    cum = np.einsum("jl,ilv->ijv", E, np.einsum("ik,klv->ilv", E, self._cumulative))
+                    self._class_cumulative = 0.5 * (cum + cum.transpose(1, 0, 2))
+            self._classes = W                   # the model hands the same array at every step
 
     def __call__(self, inp: KernelInput) -> np.ndarray:
         if self._c is None or self._class_c is None or self._class_c.shape[0] != inp.volumes.size:

@@ -4,7 +4,8 @@
 * the default batch: ``run_pbm`` of config/config.yaml (all processes, whole process time,
   constant c_ij, 600 rpm, 'fine'), wall time of the whole call (settings, grid, run), with the
   number of steps and what limited them;
-* the same on a 4x finer grid and with the fixed pivot scheme;
+* the same on a 4x finer grid, with the fixed pivot scheme, with the feed granules sharing their
+  bins' liquid (``separate_feed: false``, the model before) and with Heun's method;
 * the time of one aggregation-rate evaluation of both schemes.
 
 ``--before REF`` (default ``bdf2171``, the solver before the speed-up) also measures the import
@@ -134,6 +135,7 @@ def main():
     g = resolve_settings(cfg)["grid"]
     for label, pbm in (("fixed pivot", {"aggregation": {"scheme": "fixed_pivot"}}),
                        ("4x finer grid", {"grid": {"ratio": float(g["ratio"]) ** 0.25}}),
+                       ("feed shares bins", {"grid": {"separate_feed": False}}),
                        ("heun (SSP-RK2)", {"solver": {"method": "heun"}})):
         c = copy.deepcopy(cfg)
         c["pbm"] = pbm

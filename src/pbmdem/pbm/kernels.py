@@ -319,6 +319,7 @@ class CollisionKernel(Kernel):
         # the source sees the grid's pivots and the bins' total numbers, with or without feed classes
         K = inp.pivots
         if self._c is None or self._c.shape != (K, K) or inp.t >= self._t_eval + self.update_interval:
+            previous = self._c
             d, n = inp.per_bin()
             if self.success.velocity_dependent:
                 rates = self.source.encounters(d, n, inp.rpm)
@@ -329,7 +330,9 @@ class CollisionKernel(Kernel):
                 self._c = check_frequency_matrix(c, K, repr(self.source))
             self._t_eval = inp.t
             self.evaluations += 1
-            self._classes = None
+            if self.success.velocity_dependent or previous is None or previous.shape != self._c.shape \
+                    or not np.array_equal(previous, self._c):
+                self._classes = None                # the feed classes' c_ij must be blended again
         W = inp.feed_weights
         if W is None:
             self._class_c, self._class_cumulative = self._c, getattr(self, "_cumulative", None)

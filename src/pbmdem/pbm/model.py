@@ -61,7 +61,7 @@ class FeedGranules:
     liquid: np.ndarray
     gas: np.ndarray
 
-    def copy(self) -> "FeedGranules":
+    def copy(self) -> FeedGranules:
         return FeedGranules(np.array(self.volumes, float), np.array(self.number, float),
                             np.array(self.liquid, float), np.array(self.gas, float))
 

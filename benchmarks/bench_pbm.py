@@ -1,10 +1,11 @@
 """PBM speed benchmark (prints figures, no assertions).
 
 * ``import pbmdem.pbm`` (fresh interpreter, in-process import time);
-* the default batch: ``run_pbm`` of config/config.yaml (all processes, whole process time,
+* the default batch: ``run_batch`` of config/config.yaml (all processes, whole process time,
   constant c_ij, 600 rpm, 'fine'), wall time of the whole call (settings, grid, run), with the
   number of steps and what limited them;
-* the same on a 4x finer grid and with the fixed pivot scheme;
+* the same on a 4x finer grid, with the fixed pivot scheme, with the feed granules sharing their
+  bins' liquid (``separate_feed: false``, the model before) and with Heun's method;
 * the time of one aggregation-rate evaluation of both schemes.
 
 ``--before REF`` (default ``bdf2171``, the solver before the speed-up) also measures the import
@@ -40,12 +41,18 @@ t0 = time.perf_counter()
 import pbmdem.pbm
 t_import = time.perf_counter() - t0
 from pbmdem.config import load_config
-from pbmdem.pbm import run_pbm
 cfg = load_config(sys.argv[1])
+try:                                       # this tree: typed settings
+    from pbmdem.pbm.setup import run_batch
+    batch = cfg.pbm_batch("fine")
+    run = lambda: run_batch(batch, None, 600)
+except ImportError:                        # trees before the settings layer
+    from pbmdem.pbm import run_pbm
+    run = lambda: run_pbm(cfg, None, 600, "fine")
 walls = []
 for _ in range(int(sys.argv[2])):
     t0 = time.perf_counter()
-    res = run_pbm(cfg, None, 600, "fine")
+    res = run()
     walls.append(time.perf_counter() - t0)
 s = res.summary()
 print(json.dumps({"import_s": t_import, "walls": walls, "steps": int(res.info["steps"]),
@@ -94,6 +101,17 @@ def _checkout(ref: str, dest: Path) -> Path:
     return dest / "src"
 
 
+def batch_with(cfg, section: dict, distribution: str = "fine"):
+    """The config's batch with its pbm settings replaced by a (partial) pbm section over the
+    schema's defaults (the first pivot stays the config's)."""
+    from pbmdem.config import Pbm
+
+    pbm = Pbm.from_section(section)
+    if section.get("grid", {}).get("min_diameter") is None:
+        pbm = pbm.replace(grid=pbm.grid.replace(min_diameter=cfg.pbm.grid.min_diameter))
+    return cfg.pbm_batch(distribution).replace(pbm=pbm)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--before", default="bdf2171", help="git revision to compare with (default bdf2171)")
@@ -109,7 +127,7 @@ def main():
         src = _checkout(args.before, Path(tmp.name))
         rows.append((f"before ({args.before})", src, Path(tmp.name) / "config" / "config.yaml"))
     print(f"\n`import pbmdem.pbm` (fresh interpreter, {args.repeat} times) and the default batch "
-          f"(run_pbm, 480 s of process, {args.repeat} times):")
+          f"(480 s of process, {args.repeat} times):")
     for name, src, cfg in rows:
         imp, whole = _imports(src, args.repeat)
         r = _probe(src, cfg, args.repeat)
@@ -122,26 +140,23 @@ def main():
     if tmp is not None:
         tmp.cleanup()
 
-    import copy
-
     from pbmdem.config import load_config
-    from pbmdem.pbm import SCHEMES, Grid, run_pbm
+    from pbmdem.pbm import SCHEMES, Grid
+    from pbmdem.pbm.setup import run_batch
 
     cfg = load_config(ROOT / "config" / "config.yaml")
     print("\nvariants of the default batch (this tree):")
-    from pbmdem.pbm.settings import resolve_settings
-
-    g = resolve_settings(cfg)["grid"]
+    ratio = cfg.pbm.grid.ratio
     for label, pbm in (("fixed pivot", {"aggregation": {"scheme": "fixed_pivot"}}),
-                       ("4x finer grid", {"grid": {"ratio": float(g["ratio"]) ** 0.25}}),
+                       ("4x finer grid", {"grid": {"ratio": ratio ** 0.25}}),
+                       ("feed shares bins", {"grid": {"separate_feed": False}}),
                        ("heun (SSP-RK2)", {"solver": {"method": "heun"}})):
-        c = copy.deepcopy(cfg)
-        c["pbm"] = pbm
-        run_pbm(c, None, 600, "fine")
+        batch = batch_with(cfg, pbm)
+        run_batch(batch, None, 600)
         walls = []
         for _ in range(args.repeat):
             t0 = time.perf_counter()
-            res = run_pbm(c, None, 600, "fine")
+            res = run_batch(batch, None, 600)
             walls.append(time.perf_counter() - t0)
         s = res.summary()
         print(f"  {label:16s} {_fmt(walls)} | {res.info['steps']} steps, {res.grid.bins} bins, "

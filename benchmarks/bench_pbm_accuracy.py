@@ -15,7 +15,17 @@ numbers (relative to the total number) and the largest error of the cumulative m
 (PSD), and the observed orders of |M2 error| and L1 per halving of ln r. The product kernel from
 the exponential has no closed-form density here: moments only.
 
-Run: .venv/bin/python benchmarks/bench_pbm_accuracy.py [--quick] [--fixed-pivot]   (about 1-2 min)
+Grid convergence of the default batch (``--grid``, also printed after the analytical cases):
+``run_batch`` of config/config.yaml (feed ``fine``, constant c_ij, 600 rpm, 480 s) with the grid
+ratio 2^(1/q), q = 1, 2, 3, 4, 6, 8, 12, 16, 24 (the default is q = 3; the criterion compares it
+with the 4x finer q = 12), for the defaults and for the variants that locate the cause of the
+non-convergence of the lumped model: feed granules sharing their bins' liquid (``separate_feed:
+false``, the model before), spraying by solid volume, the logistic success probability. Printed:
+d10 / d50 / d90 at 480 s, their deviation from the 4x finer grid and from q = 24, and the liquid
+content and surface-liquid fraction of the 4 mm feed granules at the end.
+
+Run: .venv/bin/python benchmarks/bench_pbm_accuracy.py [--quick] [--fixed-pivot] [--grid]
+(about 2-3 min; --grid alone about 1 min)
 """
 
 from __future__ import annotations
@@ -27,8 +37,11 @@ import warnings
 import numpy as np
 from scipy.integrate import IntegrationWarning
 
-from pbmdem.pbm import ConstantKernel, GranulationPBM, Grid, GridOverflowError, SolverSettings, State, SumKernel
+from pbmdem.config import Solver
+from pbmdem.pbm import ConstantKernel, GranulationPBM, Grid, GridOverflowError, State, SumKernel
+from pbmdem.pbm import surface_fraction
 from pbmdem.pbm import analytical as an
+from pbmdem.pbm import verification as ver
 from pbmdem.pbm.kernels import Kernel
 
 
@@ -99,7 +112,7 @@ def grid_for(q: int, start: str, top: float) -> Grid:
 
 def initial_numbers(grid: Grid, start: str) -> np.ndarray:
     if start == "exponential":
-        return an.discretise_exponential(grid, 1.0, 1.0)
+        return ver.discretise_exponential(grid, 1.0, 1.0)
     N = np.zeros(grid.bins)
     N[0] = 1.0
     return N
@@ -110,7 +123,7 @@ def psd_errors(kernel: str, start: str, grid: Grid, number: np.ndarray, t: float
     if start == "exponential":
         if kernel == "product":
             return np.nan, np.nan
-        return an.cell_errors(KERNELS[kernel], grid, number, t)
+        return ver.cell_errors(KERNELS[kernel], grid, number, t)
     k = np.arange(1.0, 1.0 + _kmax(kernel, start, t))
     c = an.monodisperse_numbers(kernel, t, k)
     cell = np.searchsorted(grid.edges[1:-1], k, side="right")
@@ -125,7 +138,7 @@ def run_case(kernel: str, start: str, growth: float, q: int, scheme: str):
     t_end = end_time(kernel, start, growth)
     grid = grid_for(q, start, _top(kernel, start, t_end))
     model = GranulationPBM(grid, KERNELS[kernel], scheme=scheme,
-                           solver=SolverSettings(rtol=1e-5, atol=1e-12, max_step=np.inf, max_overflow_fraction=1.0))
+                           solver=Solver.defaults().replace(rtol=1e-5, atol=1e-12, max_step=np.inf, max_overflow_fraction=1.0))
     N = initial_numbers(grid, start)
     t0 = time.perf_counter()
     res = model.run(0.0, t_end, State(0.0, N, np.zeros(grid.bins), np.zeros(grid.bins)))
@@ -143,12 +156,77 @@ def _orders(qs, errs):
     return ", ".join("  -  " if np.isnan(o) else f"{o:5.2f}" for o in out)
 
 
+#: variants of the default batch in the grid-convergence table: (label, pbm section over the config's)
+GRID_VARIANTS = (
+    ("defaults (surface_area, step, separate feed)", {}),
+    ("feed shares its bins (separate_feed: false)", {"grid": {"separate_feed": False}}),
+    ("solid_volume spraying, separate feed", {"liquid_addition": {"distribution": "solid_volume"}}),
+    ("logistic success (width 0.005), separate feed", {"aggregation": {"success": {"model": "logistic"}}}),
+)
+GRID_QS = (1, 2, 3, 4, 6, 8, 12, 16, 24)
+
+
+def _feed_4mm(res) -> tuple[float, float]:
+    """(liquid / solid, surface-liquid fraction) of the 4 mm feed granules at the end: their own
+    class with separate feed, else the 4 mm bin they share with aggregates (it is on a pivot)."""
+    st, g = res.state, res.grid
+    if st.feed is not None:
+        k = int(np.argmin(np.abs(st.feed.volumes - np.pi / 6 * 4e-3 ** 3)))
+        S, L, G = st.feed.number[k] * st.feed.volumes[k], st.feed.liquid[k], st.feed.gas[k]
+    else:
+        k = int(np.argmin(np.abs(g.d - 4e-3)))
+        S, L, G = st.number[k] * g.x[k], st.liquid[k], st.gas[k]
+    return L / S, float(surface_fraction(S, L, G))
+
+
+def grid_convergence(qs=GRID_QS):
+    """Print the grid-convergence table of the default batch (module docstring)."""
+    import copy
+    from pathlib import Path
+
+    from bench_pbm import batch_with
+
+    from pbmdem.config import load_config
+    from pbmdem.pbm.setup import run_batch
+
+    cfg0 = load_config(Path(__file__).resolve().parents[1] / "config" / "config.yaml")
+    q_default = 3
+    print("\ngrid convergence of the default batch ('fine', constant c_ij, 600 rpm, 480 s): ratio 2^(1/q)")
+    for label, pbm in GRID_VARIANTS:
+        print(f"\n{label}")
+        print("    q  bins   d10 / d50 / d90 (mm)        vs 4x finer (%)         vs q = 24 (%)       "
+              "4 mm feed: l/s, phi   steps  wall")
+        rows = {}
+        for q in qs:
+            section = copy.deepcopy(pbm)
+            section.setdefault("grid", {})["ratio"] = 2.0 ** (1.0 / q)
+            t0 = time.perf_counter()
+            res = run_batch(batch_with(cfg0, section), None, 600)
+            wall = time.perf_counter() - t0
+            rows[q] = (res, res.summary()[["d10", "d50", "d90"]].iloc[-1].to_numpy() * 1e3, wall)
+        ref = rows.get(max(qs))[1]
+        for q in qs:
+            res, d, wall = rows[q]
+            fine = rows.get(4 * q)
+            vs4 = "        -        " if fine is None else " ".join(f"{x:+5.2f}" for x in 100 * (d / fine[1] - 1))
+            vsr = " ".join(f"{x:+5.2f}" for x in 100 * (d / ref - 1))
+            ls, phi = _feed_4mm(res)
+            mark = "*" if q == q_default else " "
+            print(f"  {mark}{q:3d} {res.grid.bins:5d}   {d[0]:.3f} / {d[1]:.3f} / {d[2]:.3f}   {vs4:17s}   {vsr:17s}"
+                  f"    {ls:.4f}, {phi:.4f}    {res.info['steps']:4d} {wall:5.2f} s")
+    print("(* the default ratio 2^(1/3); criterion: d10, d50 and d90 within 1 % of the 4x finer grid)")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="q = 1, 2, 4 only")
     ap.add_argument("--fixed-pivot", action="store_true", help="also the fixed pivot scheme")
+    ap.add_argument("--grid", action="store_true", help="only the grid convergence of the default batch")
     args = ap.parse_args()
     warnings.simplefilter("ignore", IntegrationWarning)
+    if args.grid:
+        grid_convergence()
+        return
     qs = (1, 2, 4) if args.quick else (1, 2, 3, 4, 8)
     schemes = ("cell_average", "fixed_pivot") if args.fixed_pivot else ("cell_average",)
     t_all = time.perf_counter()
@@ -178,6 +256,7 @@ def main():
                         print(f"  {grid.ratio:6.4f} {grid.bins:5d}  {err[0]:+.2e}  {err[1]:+.2e}  {err[2]:+.2e} |"
                               f"  {l1s_}  | {psd_} | {res.info['steps']:5d} {wall:5.2f} s{note}")
                     print(f"  observed order per halving of ln r: |M2 err| {_orders(qs, m2s)}; L1 {_orders(qs, l1s)}")
+    grid_convergence((1, 2, 3, 4, 8, 12, 16) if args.quick else GRID_QS)
     print(f"\ntotal {time.perf_counter() - t_all:.0f} s")
 
 

@@ -8,6 +8,7 @@ import pytest
 
 from pbmdem.pbm import ConstantKernel, SumKernel
 from pbmdem.pbm import analytical as an
+from pbmdem.pbm import verification as ver
 
 N0, M = 1.0, 1.0        # initial number and mean volume (dimensionless units)
 T_CONST = 18.0          # beta N0 t = 18: mean volume grows 10x
@@ -16,13 +17,13 @@ T_SUM = np.log(10.0)    # b N0 m t = ln 10: tau = 0.9, mean volume grows 10x
 
 def simulate(kernel, t_end, q=1, x0=1e-3, x_max=1.6e7):
     """Run the cell average on a grid of ratio 2^(1/q) from x0 to at least x_max; return grid, result."""
-    g = an.geometric_grid(q, x0, x_max)
-    res, _ = an.simulate_exponential(kernel, t_end, g, "cell_average", N0, M)
+    g = ver.geometric_grid(q, x0, x_max)
+    res, _ = ver.simulate_exponential(kernel, t_end, g, "cell_average", N0, M)
     return g, res
 
 
 def errors(kernel, g, res, t):
-    return an.cell_errors(kernel, g, res.number[-1], t, N0, M)
+    return ver.cell_errors(kernel, g, res.number[-1], t, N0, M)
 
 
 def test_analytical_solutions_are_consistent():
@@ -125,8 +126,8 @@ def test_fixed_pivot_constant_kernel_converges_at_second_order():
     kernel = ConstantKernel(1.0)
     m2, l1 = [], []
     for q, x0, x_max in ((1, 1e-3, 1.6e7), (2, 1e-2, 1e5), (4, 1e-2, 1e5)):
-        g = an.geometric_grid(q, x0, x_max)
-        res, err = an.simulate_exponential(kernel, T_CONST, g, "fixed_pivot", N0, M)
+        g = ver.geometric_grid(q, x0, x_max)
+        res, err = ver.simulate_exponential(kernel, T_CONST, g, "fixed_pivot", N0, M)
         assert abs(err[0]) < 1e-4 and abs(err[1]) < 1e-4
         m2.append(err[2])
         l1.append(errors(kernel, g, res, T_CONST)[0])
@@ -143,7 +144,7 @@ def test_fixed_pivot_sum_kernel_overpredicts_m2_and_converges():
     m2 = []
     for q in (2, 4, 8):
         # its numerical diffusion spreads mass far up: the grid reaches 1e6 mean initial volumes
-        _, err = an.simulate_exponential(kernel, T_SUM, an.geometric_grid(q, 1e-2, 1e6), "fixed_pivot", N0, M)
+        _, err = ver.simulate_exponential(kernel, T_SUM, ver.geometric_grid(q, 1e-2, 1e6), "fixed_pivot", N0, M)
         assert abs(err[0]) < 1e-3 and abs(err[1]) < 1e-4
         m2.append(err[2])
     m2 = np.array(m2)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from conftest import config_of
 
-from pbmdem.config import ConfigError
+from pbmdem.config import Solver, ConfigError
 
 from pbmdem.pbm import (
     CollisionKernel,
@@ -28,6 +28,7 @@ from pbmdem.pbm import (
     run_batch,
 )
 from pbmdem.pbm import analytical as an
+from pbmdem.pbm import verification as ver
 
 
 def test_errors_are_value_errors():
@@ -83,7 +84,7 @@ def test_initial_porosity_below_minimum():
 
 def test_overflow_beyond_the_last_bin_is_reported():
     g = Grid(8, 2.0, v0=1e-2)
-    N = an.discretise_exponential(g, 1.0, 0.1)
+    N = ver.discretise_exponential(g, 1.0, 0.1)
     model = GranulationPBM(g, ConstantKernel(1.0))
     s = State(0.0, N, np.zeros(8), np.zeros(8))
     with pytest.raises(GridOverflowError, match=r"beyond the last bin .* by t = [0-9.e+-]+ s aggregates carrying "
@@ -94,10 +95,9 @@ def test_overflow_beyond_the_last_bin_is_reported():
 
 def test_overflow_below_the_allowed_fraction_is_refused_and_conserves_solid():
     g = Grid(8, 2.0, v0=1e-2)
-    N = an.discretise_exponential(g, 1.0, 0.1)
-    from pbmdem.pbm import SolverSettings
+    N = ver.discretise_exponential(g, 1.0, 0.1)
 
-    model = GranulationPBM(g, ConstantKernel(1.0), solver=SolverSettings(max_overflow_fraction=1.0))
+    model = GranulationPBM(g, ConstantKernel(1.0), solver=Solver.defaults().replace(max_overflow_fraction=1.0))
     res = model.run(0.0, 2.0, State(0.0, N, np.zeros(8), np.zeros(8)))
     assert res.state.refused_volume > 0
     M1 = res.moments()[:, 1]
@@ -164,9 +164,8 @@ def test_nan_during_the_run_names_time_and_bin():
             pass
 
     g = Grid(10, 2.0, min_diameter=1e-3)
-    from pbmdem.pbm import SolverSettings
 
-    model = GranulationPBM(g, NaNLater(), solver=SolverSettings(max_step=0.2, max_overflow_fraction=1.0))
+    model = GranulationPBM(g, NaNLater(), solver=Solver.defaults().replace(max_step=0.2, max_overflow_fraction=1.0))
     N = np.zeros(10)
     N[:6] = 1.0
     s = State(0.0, N, np.zeros(10), np.zeros(10))

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from conftest import config_of
 
+from pbmdem.config import Solver
 from pbmdem.pbm import (
     CollisionKernel,
     Consolidation,
@@ -16,7 +17,6 @@ from pbmdem.pbm import (
     Grid,
     LiquidAddition,
     Result,
-    SolverSettings,
     SuccessProbability,
     run_batch,
 )
@@ -70,10 +70,11 @@ def _no_aggregation():
     return CollisionKernel(ConstantFrequency(1e-3), 1e-3, SuccessProbability("step", threshold=0.999))
 
 
+@pytest.mark.parametrize("separate_feed", [False, True])
 @pytest.mark.parametrize("rule", ["surface_area", "solid_volume"])
-def test_liquid_addition_alone_is_linear(rule):
+def test_liquid_addition_alone_is_linear(rule, separate_feed):
     rate, t0, t1 = 2e-9, 5.0, 25.0
-    g, model, state = _grid_and_state({"kernel": _no_aggregation(),
+    g, model, state = _grid_and_state({"kernel": _no_aggregation(), "separate_feed": separate_feed,
                                        "liquid": LiquidAddition(rate, t0, t1, rule)})
     times = np.linspace(0, 30, 31)
     res = model.run(0.0, 30.0, state, output_times=times)
@@ -83,8 +84,19 @@ def test_liquid_addition_alone_is_linear(rule):
     np.testing.assert_allclose(L, expected, rtol=1e-12, atol=1e-15 * expected[-1])
     np.testing.assert_array_equal(res.number, np.broadcast_to(res.number[0], res.number.shape))
     # distribution rule: share per bin proportional to N d^2 (or N v), constant without aggregation
-    w = state.number * (g.d ** 2 if rule == "surface_area" else g.x)
-    np.testing.assert_allclose(res.liquid[-1], rate * (t1 - t0) * w / w.sum(), rtol=1e-10, atol=1e-25)
+    if not separate_feed:
+        w = state.number * (g.d ** 2 if rule == "surface_area" else g.x)
+        np.testing.assert_allclose(res.liquid[-1], rate * (t1 - t0) * w / w.sum(), rtol=1e-10, atol=1e-25)
+        return
+    # feed granules at their own sizes (2, 3, 4 mm; 3 mm is between pivots): share per class
+    # N d^2 (or N v) with the class's own diameter, put on the bins with the solid (lever rule)
+    f = state.feed
+    assert res.state.feed is not None
+    d_f = np.cbrt(6 / np.pi * f.volumes)
+    w = f.number * (d_f ** 2 if rule == "surface_area" else f.volumes)
+    np.testing.assert_allclose(res.state.feed.liquid, rate * (t1 - t0) * w / w.sum(), rtol=1e-10, atol=1e-25)
+    _, solid_share = g.lever_weights(f.volumes)
+    np.testing.assert_allclose(res.liquid[-1], res.state.feed.liquid @ solid_share, rtol=1e-10, atol=1e-25)
 
 
 def test_consolidation_alone_is_exponential():
@@ -94,7 +106,7 @@ def test_consolidation_alone_is_exponential():
     errs = []
     for rtol in (1e-3, 1e-5):
         g, model, state = _grid_and_state({"kernel": _no_aggregation(), "consolidation": cons,
-                                           "solver": SolverSettings(rtol=rtol)}, porosity=0.5)
+                                           "solver": Solver.defaults().replace(rtol=rtol)}, porosity=0.5)
         res = model.run(0.0, 60.0, state, output_times=times)
         S = state.number * g.x
         G_exact = np.array([cons.gas(t, S, state.gas) for t in times])
@@ -179,10 +191,10 @@ def test_mass_quantiles_interpolate_in_log_d():
 
 def test_constant_frequency_equals_constant_kernel():
     g = Grid(25, 2.0, v0=1e-3)
-    from pbmdem.pbm import analytical as an
     from pbmdem.pbm import State
+    from pbmdem.pbm import verification as ver
 
-    N = an.discretise_exponential(g, 1.0, 1.0)
+    N = ver.discretise_exponential(g, 1.0, 1.0)
     s = State(0.0, N, np.zeros(g.bins), np.zeros(g.bins))
     a = GranulationPBM(g, ConstantKernel(0.5)).run(0.0, 4.0, s)
     b = GranulationPBM(g, CollisionKernel(ConstantFrequency(0.25), 2.0,

@@ -3,8 +3,6 @@ solver defaults, the grid fitted to the process."""
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
@@ -16,12 +14,12 @@ from pbmdem.pbm import (
     GranulationPBM,
     Grid,
     LiquidAddition,
-    SolverSettings,
     State,
     SuccessProbability,
     SumKernel,
 )
 from pbmdem.pbm import analytical as an
+from pbmdem.pbm import verification as ver
 from pbmdem.pbm.errors import PBMInputError, SolverLimitError
 from pbmdem.pbm.kernels import Kernel
 from pbmdem.config import Pbm, Solver
@@ -52,8 +50,8 @@ def _pure_aggregation_run(kernel_of_unit, unit: float, bins: int = 60, t_end: fl
     particles) on a wide grid of ratio 2 (60 bins: 18 decades of volume), for a long time."""
     m = 1e-9 * unit
     grid = Grid(bins, 2.0, v0=1e-3 * m)
-    N = an.discretise_exponential(grid, 1000.0, m)
-    model = GranulationPBM(grid, kernel_of_unit(unit), solver=SolverSettings(max_overflow_fraction=1.0))
+    N = ver.discretise_exponential(grid, 1000.0, m)
+    model = GranulationPBM(grid, kernel_of_unit(unit), solver=Solver.defaults().replace(max_overflow_fraction=1.0))
     K = grid.bins
     return model.run(0.0, t_end, State(0.0, N, np.zeros(K), np.zeros(K)))
 
@@ -113,7 +111,7 @@ def test_pure_aggregation_in_si_volumes_on_a_wide_grid(name):
 def test_step_limits_are_recorded_and_add_up():
     res = _process_run(1.0, bins=20)
     lim = res.info["step_limits"]
-    assert set(SolverSettings.__dataclass_fields__) >= {"max_steps", "max_wall_time"}
+    assert set(Solver.__dataclass_fields__) >= {"max_steps", "max_wall_time"}
     accepted = sum(lim[k] for k in ("positivity", "error", "max_step", "event"))
     assert accepted == res.info["steps"]
     assert lim["event"] + lim["max_step"] >= 48                 # at least one step per 10 s output
@@ -122,30 +120,32 @@ def test_step_limits_are_recorded_and_add_up():
 
 def test_step_guard_stops_with_a_clear_error():
     g = Grid(12, 2.0, v0=1.0)
-    N = an.discretise_exponential(g, 1.0, 1.0)
-    model = GranulationPBM(g, ConstantKernel(1.0), solver=SolverSettings(max_steps=5, max_overflow_fraction=1.0))
+    N = ver.discretise_exponential(g, 1.0, 1.0)
+    model = GranulationPBM(g, ConstantKernel(1.0), solver=Solver.defaults().replace(max_steps=5, max_overflow_fraction=1.0))
     with pytest.raises(SolverLimitError, match=r"run stopped at t = .* after 5 steps \(solver max_steps = 5\)"):
         model.run(0.0, 50.0, State(0.0, N, np.zeros(12), np.zeros(12)))
 
 
 def test_wall_time_guard_stops_with_a_clear_error():
     g = Grid(12, 2.0, v0=1.0)
-    N = an.discretise_exponential(g, 1.0, 1.0)
-    model = GranulationPBM(g, ConstantKernel(1.0), solver=SolverSettings(max_step=0.01, max_wall_time=1e-9,
+    N = ver.discretise_exponential(g, 1.0, 1.0)
+    model = GranulationPBM(g, ConstantKernel(1.0), solver=Solver.defaults().replace(max_step=0.01, max_wall_time=1e-9,
                                                                          max_overflow_fraction=1.0))
     with pytest.raises(SolverLimitError, match=r"solver max_wall_time = 1e-09 s"):
         model.run(0.0, 50.0, State(0.0, N, np.zeros(12), np.zeros(12)))
 
 
 def test_solver_settings_defaults_are_the_config_defaults():
-    d = SolverSettings()
-    for key, value in Solver.defaults().to_dict().items():
-        assert getattr(d, key) == value, key
+    """A model made without solver settings uses the schema's pbm.solver defaults (the config's,
+    where it sets none); settings made in code are checked by the model."""
+    from pbmdem.config import section_defaults
+
+    model = GranulationPBM(Grid(5, 2.0, v0=1.0), ConstantKernel(1.0))
+    assert model.solver == Solver.defaults() and model.solver.to_dict() == section_defaults("pbm")["solver"]
     with pytest.raises(PBMInputError, match=r"solver max_steps = 0; allowed: an integer >= 1"):
-        SolverSettings(max_steps=0)
+        GranulationPBM(Grid(5, 2.0, v0=1.0), ConstantKernel(1.0), solver=Solver.defaults().replace(max_steps=0))
     with pytest.raises(PBMInputError, match=r"solver method = 'rk4'; allowed: \['ssp3', 'heun', 'euler'\]"):
-        SolverSettings(method="rk4")
-    assert {f.name for f in dataclasses.fields(SolverSettings)} >= set(Solver.defaults().to_dict())
+        GranulationPBM(Grid(5, 2.0, v0=1.0), ConstantKernel(1.0), solver=Solver.defaults().replace(method="rk4"))
 
 
 def test_default_grid_runs_from_the_smallest_feed_class_to_max_diameter(default_config):
@@ -166,10 +166,9 @@ def test_default_grid_runs_from_the_smallest_feed_class_to_max_diameter(default_
 
 def test_default_grid_is_converged_in_d10_d50_d90(default_config):
     """The default batch on the default grid against a 4x finer grid (ratio^(1/4)): d10, d50 and
-    d90 within 1 %. The spray is shared by solid volume here: with the default surface-area
-    sharing and the step success probability, the lumped liquid of a bin mixes wet aggregates
-    with the drier initial granules that share the bin, and the batch itself does not converge
-    with the grid (docs/pbm.md, "Grid"; benchmarks/bench_pbm_accuracy.py prints both)."""
+    d90 within 1 %, here with the spray shared by solid volume (the defaults, surface-area
+    sharing: tests/test_pbm_grid.py; docs/pbm.md, "Grid"; benchmarks/bench_pbm_accuracy.py
+    --grid prints both)."""
     out = {}
     batch = default_config.pbm_batch("fine")
     pbm = batch.pbm.replace(liquid_addition=batch.pbm.liquid_addition.replace(distribution="solid_volume"))
@@ -186,7 +185,7 @@ def _monodisperse_run(kernel, t_end, ratio=DEFAULT_RATIO, top=1e5):
     grid = Grid(int(np.ceil(np.log(top) / np.log(ratio))) + 1, ratio, v0=1.0)
     N = np.zeros(grid.bins)
     N[0] = 1.0
-    model = GranulationPBM(grid, kernel, solver=SolverSettings(rtol=1e-5, atol=1e-12, max_step=np.inf))
+    model = GranulationPBM(grid, kernel, solver=Solver.defaults().replace(rtol=1e-5, atol=1e-12, max_step=np.inf))
     return grid, model.run(0.0, t_end, State(0.0, N, np.zeros(grid.bins), np.zeros(grid.bins)))
 
 

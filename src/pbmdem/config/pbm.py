@@ -11,12 +11,13 @@ from .typed import Settings
 class GridSettings(Settings):
     """Geometric solid-volume grid: ratio of neighbouring pivots, first pivot diameter (m; resolved
     to the smallest feed class when the config says null), largest diameter reached (m), or a
-    fixed number of bins."""
+    fixed number of bins; whether the feed granules are classes of their own (docs/pbm.md)."""
 
     bins: int | None
     ratio: float
     min_diameter: float | None
     max_diameter: float
+    separate_feed: bool
 
 
 @dataclass(frozen=True)

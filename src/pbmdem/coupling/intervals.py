@@ -49,27 +49,37 @@ def is_finished(folder: Path) -> bool:
 
 
 def save(folder: Path, result, sample: DemSample, matrix: np.ndarray, info: dict) -> None:
+    """Write one finished interval: its PBM records, its final state (with the feed granules not
+    yet aggregated, so that a resumed loop continues exactly) and, last, interval.json."""
     folder.mkdir(parents=True, exist_ok=True)
+    state = result.state
+    feed = {}
+    if state.feed is not None:
+        feed = {"feed_volumes": state.feed.volumes, "feed_number": state.feed.number,
+                "feed_liquid": state.feed.liquid, "feed_gas": state.feed.gas}
     with atomic_path(folder / "records.npz") as tmp:
         with open(tmp, "wb") as fh:
             np.savez(fh, times=result.times, number=result.number, liquid=result.liquid, gas=result.gas,
                      liquid_added=result.liquid_added, refused=result.refused_volume, steps=result.steps,
-                     state_t=result.state.t, state_number=result.state.number, state_liquid=result.state.liquid,
-                     state_gas=result.state.gas, state_refused=result.state.refused_volume,
-                     state_liquid_added=result.state.liquid_added, state_steps=result.state.steps,
-                     class_matrix=matrix)
+                     state_t=state.t, state_number=state.number, state_liquid=state.liquid,
+                     state_gas=state.gas, state_refused=state.refused_volume,
+                     state_liquid_added=state.liquid_added, state_steps=state.steps,
+                     class_matrix=matrix, **feed)
     # interval.json is written last: its presence marks the interval as finished
     write_json(folder / "interval.json", {**info, "sample": asdict(sample)})
 
 
 def load(folder: Path, grid):
     """(Result, interval info, class matrix) of a finished interval."""
-    from pbmdem.pbm.model import State
     from pbmdem.pbm.results import Result
+    from pbmdem.pbm.state import FeedGranules, State
 
     data = np.load(folder / "records.npz")
     records = SimpleNamespace(**{name: data[name] for name in RECORD_NAMES})
+    feed = None
+    if "feed_volumes" in data:
+        feed = FeedGranules(data["feed_volumes"], data["feed_number"], data["feed_liquid"], data["feed_gas"])
     state = State(float(data["state_t"]), data["state_number"], data["state_liquid"], data["state_gas"],
-                  float(data["state_refused"]), float(data["state_liquid_added"]), int(data["state_steps"]))
+                  float(data["state_refused"]), float(data["state_liquid_added"]), int(data["state_steps"]), feed)
     info = read_json(folder / "interval.json", "coupling interval record")
     return Result(grid, records, state, {"wall_time_s": info.get("pbm_wall_time_s", 0.0)}), info, data["class_matrix"]

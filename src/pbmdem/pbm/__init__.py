@@ -1,9 +1,27 @@
 """Population balance model of a batch high-shear wet granulator (see docs/pbm.md).
 
-Solid volume on a geometric grid, liquid and gas lumped per bin; aggregation by the cell-average
-(default) or fixed pivot technique with kernel beta0 * c_ij * psi_ij (c_ij from a pluggable collision-frequency source),
-binder addition during a spray window, consolidation toward a minimum porosity, adaptive
-positivity-preserving explicit integration.
+Solid volume on a geometric grid, liquid and gas lumped per bin (the feed granules as classes of
+their own); aggregation by the cell-average (default) or fixed pivot technique with kernel
+beta0 * c_ij * psi_ij (c_ij from a pluggable collision-frequency source), binder addition during a
+spray window, consolidation toward a minimum porosity, adaptive positivity-preserving explicit
+integration.
+
+| module | concept |
+| --- | --- |
+| `grid` | the geometric solid-volume grid and the lever rule |
+| `aggregation` | the cell-average and fixed-pivot aggregation operators |
+| `kernels` | aggregation kernels and collision-frequency sources (with their analytical solutions) |
+| `success` | the Stokes criterion of velocity-dependent success |
+| `processes` | liquid addition and consolidation |
+| `state` | the resumable state of a run |
+| `model` | the population balance and its time integration |
+| `results` | time series, size statistics, tables, plots |
+| `setup` | a model and a batch from the typed settings (pbmdem.config) |
+| `analytical` | closed-form solutions of pure aggregation |
+| `verification` | the harness that checks the model against them |
+| `errors` | the PBM's exceptions |
+
+`setup` (and with it the settings layer) is imported on first use, so `import pbmdem.pbm` stays light.
 """
 
 from .aggregation import SCHEMES, CellAverageAggregation, FixedPivotAggregation
@@ -25,18 +43,27 @@ from .kernels import (
     SumKernel,
     TableFrequency,
 )
-from .model import GranulationPBM, SolverSettings, State, surface_fraction
+from .model import GranulationPBM
 from .processes import Consolidation, LiquidAddition
 from .results import Result, mass_quantiles
+from .state import FeedGranules, State, surface_fraction
 from .success import StokesCriterion
-from .setup import build_model, initial_state, run_batch
 
 __all__ = [
     "SCHEMES", "CellAverageAggregation", "FixedPivotAggregation", "Grid", "diameter_of", "volume_of",
     "ConstantKernel", "SumKernel", "CollisionKernel", "ConstantFrequency", "TableFrequency",
-    "SuccessProbability", "StokesCriterion", "KernelInput", "GranulationPBM", "SolverSettings", "State", "surface_fraction",
+    "SuccessProbability", "StokesCriterion", "KernelInput", "GranulationPBM", "State", "FeedGranules", "surface_fraction",
     "LiquidAddition", "Consolidation", "Result", "mass_quantiles",
     "build_model", "initial_state", "run_batch",
     "PBMError", "PBMInputError", "GridRangeError", "GridOverflowError", "KernelShapeError",
     "NegativePopulationError",
 ]
+
+
+def __getattr__(name):
+    # the settings-driven entry points, imported when first used
+    if name in ("build_model", "initial_state", "run_batch"):
+        from . import setup
+
+        return getattr(setup, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -31,6 +31,13 @@ mean volume a_c = V_c/B_c is ever formed (that ratio of two underflowing sums is
 m3 could produce negative births). Liquid and gas born in a cell follow the solid volume each
 pivot receives.
 
+Feed classes (``extra``): besides the K pivot classes, a map can hold P further classes of any
+volume in [x_0, x_(K-1)] that never receive births: the feed granules that have not aggregated
+yet, at their own sizes and apart from the aggregates, so that the two do not share liquid and
+gas (docs/pbm.md, "Feed granules"). They die like any class; an aggregate of volume s (of any
+two classes) is born on the pivots like every other. The classes are ordered [pivots 0..K-1,
+extra 0..P-1] in ``beta`` (K+P, K+P) and in the (3, K+P) totals.
+
 Pairs whose aggregate exceeds the last pivot x_(K-1) are refused: no birth and no death, so solid
 volume is conserved to round-off. The solid-volume rate of refused aggregates is returned, so
 the solver can account for it and stop (GridOverflowError) once it exceeds the allowed fraction.
@@ -48,20 +55,29 @@ import numpy as np
 
 
 class PivotAggregation:
-    """Shared pair bookkeeping of the pivot schemes: grid ``x`` (ascending, (K,)) and the K-1 inner
-    cell ``bounds`` (default: x_k 2r/(1+r), pivots at the centres of geometric cells)."""
+    """Shared pair bookkeeping of the pivot schemes: grid ``x`` (ascending, (K,)), the K-1 inner
+    cell ``bounds`` (default: x_k 2r/(1+r), pivots at the centres of geometric cells) and the
+    volumes ``extra`` (P,) of further classes that receive no births (feed granules, in the unit
+    of ``x``; default none). ``M`` = K + P classes."""
 
     #: name used in the config (``pbm.aggregation.scheme``)
     name = ""
 
-    def __init__(self, x: np.ndarray, bounds: np.ndarray | None = None):
+    def __init__(self, x: np.ndarray, bounds: np.ndarray | None = None, extra=None):
         x = np.asarray(x, float)
         self.x = x
         K = self.K = x.size
-        iu, ju = np.triu_indices(K)
+        extra = np.asarray([] if extra is None else extra, dtype=float).reshape(-1)
+        if extra.size and not (np.all(extra >= x[0] * (1 - 1e-12)) and np.all(extra <= x[-1] * (1 + 1e-12))):
+            raise ValueError(f"extra class volumes must lie in [x_0, x_(K-1)], got {extra.tolist()}")
+        self.extra = extra
+        M = self.M = K + extra.size
+        iu, ju = np.triu_indices(M)
         # work in units of the first pivot: every volume of the maps is O(1) .. O(r^K)
         xr = x / x[0]
-        s = xr[iu] + xr[ju]
+        #: class volumes in units of x_0: [pivots, extra]
+        vc = self.class_volumes = np.concatenate([xr, extra / x[0]])
+        s = vc[iu] + vc[ju]
         if bounds is None:
             r = x[1] / x[0]
             bounds = x[:-1] * 2.0 * r / (1.0 + r)
@@ -71,21 +87,22 @@ class PivotAggregation:
         valid = s <= xr[-1] * (1.0 + 1e-12)
         self.xr = xr
         target = np.searchsorted(bounds / x[0], s, side="right")
-        #: (K, K) target cell of each pair's aggregate (-1 = beyond the grid), for inspection
-        tm = np.full((K, K), -1, dtype=int)
+        #: (M, M) target cell of each pair's aggregate (-1 = beyond the grid), for inspection
+        tm = np.full((M, M), -1, dtype=int)
         tm[iu[valid], ju[valid]] = target[valid]
         tm[ju[valid], iu[valid]] = target[valid]
         self.target_matrix = tm
         # ordered pairs (i, j), flattened row-major: column i * K + j of the maps
-        I, J = np.divmod(np.arange(K * K), K)
-        S = xr[I] + xr[J]
+        I, J = np.divmod(np.arange(M * M), M)
+        S = vc[I] + vc[J]
         ok = tm.ravel() >= 0
         self._I, self._J, self._S, self._ok = I, J, S, ok
         self._T = tm.ravel()
         self._build()
 
     def __repr__(self) -> str:
-        return f"{type(self).__name__}(K={self.K})"
+        extra = f", extra={np.round(self.extra / self.x[0], 6).tolist()} x_0" if self.extra.size else ""
+        return f"{type(self).__name__}(K={self.K}{extra})"
 
     # ----------------------------------------------------------------- sparse maps
     def _number_rows(self):
@@ -99,32 +116,33 @@ class PivotAggregation:
     def _build(self):
         from scipy import sparse
 
-        K, I, ok = self.K, self._I, self._ok
-        cols = np.arange(K * K)
-        # every block (R, RL, RG) has 3K + 1 rows: [0, K) the scheme's first K rows (births),
-        # [K, 2K) its second K rows (cell average: D_c, R block only), [2K, 3K) the deaths (row i
-        # collects beta_ij N_j x (N_i, L_i or G_i) over valid j; the pair (i, i) removes two
-        # particles at the event rate R_ii / 2), 3K the refused solid (R block only, x_0 units)
-        R = self.R = 3 * K + 1
+        K, M, I, ok = self.K, self.M, self._I, self._ok
+        cols = np.arange(M * M)
+        # every block (R, RL, RG) has 2K + M + 1 rows: [0, K) the scheme's first K rows (births),
+        # [K, 2K) its second K rows (cell average: D_c, R block only), [2K, 2K + M) the deaths of
+        # the M classes (row i collects beta_ij N_j x (N_i, L_i or G_i) over valid j; the pair
+        # (i, i) removes two particles at the event rate R_ii / 2), 2K + M the refused solid (R
+        # block only, x_0 units)
+        R = self.R = 2 * K + M + 1
         dr, dc = 2 * K + I[ok], cols[ok]
         refused = ~ok
         blocks = []
         for rows, cc, vals in (self._number_rows(), self._liquid_rows(), self._liquid_rows()):
             if len(blocks) == 0:
-                extra_r = np.concatenate([dr, np.full(int(refused.sum()), 3 * K)])
+                extra_r = np.concatenate([dr, np.full(int(refused.sum()), 2 * K + M)])
                 extra_c = np.concatenate([dc, cols[refused]])
                 extra_v = np.concatenate([np.ones(dr.size), 0.5 * self._S[refused]])
             else:
                 extra_r, extra_c, extra_v = dr, dc, np.ones(dr.size)
             blocks.append(sparse.csr_matrix((np.concatenate([vals, extra_v]),
                                              (np.concatenate([rows, extra_r]), np.concatenate([cc, extra_c]))),
-                                            shape=(R, K * K)))
+                                            shape=(R, M * M)))
         m = sparse.block_diag(blocks, format="csr")
         m.sum_duplicates()
         m.sort_indices()
         self._map = m
         self._y = np.zeros(3 * R)
-        self._U = np.empty((3, K, K))
+        self._U = np.empty((3, M, M))
         try:                                   # the bare CSR kernel skips scipy's dispatch (~5 us)
             from scipy.sparse import _sparsetools
             self._matvec = _sparsetools.csr_matvec
@@ -133,14 +151,15 @@ class PivotAggregation:
 
     # ----------------------------------------------------------------- evaluation
     def totals(self, beta: np.ndarray, N: np.ndarray, L: np.ndarray, G: np.ndarray):
-        """Aggregation rates from bin totals: ``beta`` (K, K) symmetric, numbers ``N``, liquid ``L``
-        and gas ``G`` totals per bin (K,) in any unit of volume. Returns ``(d, refused)``: ``d``
-        (3, K) the rates of N, L and G (in the units of L and G) and the refused solid-volume
-        rate in units of the first pivot x_0 (multiply by x_0)."""
+        """Aggregation rates from class totals: ``beta`` (M, M) symmetric, numbers ``N``, liquid
+        ``L`` and gas ``G`` totals per class (M,) in any unit of volume (M = K without extra
+        classes). Returns ``(d, refused)``: ``d`` (3, M) the rates of N, L and G (in the units of
+        L and G) and the refused solid-volume rate in units of the first pivot x_0 (multiply by
+        x_0)."""
         return self.totals_stacked(beta, np.stack((N, L, G)))
 
     def totals_stacked(self, beta: np.ndarray, nlg: np.ndarray):
-        """:meth:`totals` with N, L, G given as one (3, K) array."""
+        """:meth:`totals` with N, L, G given as one (3, M) array."""
         U = np.multiply(nlg[:, :, None], beta * nlg[0], out=self._U)     # R, RL, RG
         m, y = self._map, self._y
         if self._matvec is not None:
@@ -149,8 +168,10 @@ class PivotAggregation:
         else:
             y = m @ U.reshape(-1)
         Y = y.reshape(3, self.R)
-        K = self.K
-        return self._births(Y) - Y[:, 2 * K:3 * K], float(Y[0, 3 * K])
+        K, M = self.K, self.M
+        d = -Y[:, 2 * K:2 * K + M]
+        d[:, :K] += self._births(Y)
+        return d, float(Y[0, 2 * K + M])
 
     def rates(self, beta: np.ndarray, N: np.ndarray, l: np.ndarray, g: np.ndarray):
         """Aggregation rates of change from per-particle liquid ``l`` and gas ``g`` (K,).
@@ -163,7 +184,7 @@ class PivotAggregation:
         return d[0], d[1], d[2], refused * self.x[0]
 
     def _births(self, Y: np.ndarray) -> np.ndarray:
-        """(3, K) birth rates of number, liquid and gas from the mapped sums ``Y`` (3, 3K + 1)."""
+        """(3, K) birth rates of number, liquid and gas from the mapped sums ``Y`` (3, 2K + M + 1)."""
         raise NotImplementedError
 
 
@@ -180,7 +201,7 @@ class CellAverageAggregation(PivotAggregation):
 
     def _number_rows(self):
         K, T, ok, S, xr = self.K, self._T, self._ok, self._S, self.xr
-        cols = np.arange(K * K)[ok]
+        cols = np.arange(self.M ** 2)[ok]
         t = T[ok]
         # rows 0..K-1: B_c (weight 1/2 per ordered pair); rows K..2K-1: D_c = sum R (s/x_c - 1)
         rows = np.concatenate([t, K + t])
@@ -188,8 +209,8 @@ class CellAverageAggregation(PivotAggregation):
         return rows, np.concatenate([cols, cols]), vals
 
     def _liquid_rows(self):
-        K, ok = self.K, self._ok
-        cols = np.arange(K * K)[ok]
+        ok = self._ok
+        cols = np.arange(self.M ** 2)[ok]
         return self._T[ok], cols, np.ones(cols.size)
 
     def _build(self):
@@ -238,7 +259,7 @@ class FixedPivotAggregation(PivotAggregation):
         lo = np.clip(np.searchsorted(xr, s, side="right") - 1, 0, K - 2)
         up_number = (s - xr[lo]) / (xr[lo + 1] - xr[lo])
         up_solid = up_number * xr[lo + 1] / s
-        return np.arange(K * K)[ok], lo, up_number, up_solid
+        return np.arange(self.M ** 2)[ok], lo, up_number, up_solid
 
     def _number_rows(self):
         cols, lo, up, _ = self._split()

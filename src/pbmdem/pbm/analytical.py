@@ -76,55 +76,6 @@ def exponential_cells(edges, N0, m):
     return num, vol
 
 
-def discretise_exponential(grid, N0, m):
-    """Numbers per bin of ``grid`` for the exponential density: number and volume of each cell
-    (first cell from 0, last to infinity) are put on the pivots with the lever rule. Number and
-    volume are exact except for mass below x_0 or above x_(K-1) (choose the grid so that it is
-    negligible)."""
-    edges = np.concatenate([[0.0], grid.edges[1:-1], [np.inf]])
-    num, vol = exponential_cells(edges, N0, m)
-    mean = np.clip(vol / np.where(num > 0, num, 1.0), grid.x[0], grid.x[-1])
-    N, _ = grid.map_particles(mean, num, what="exponential initial distribution")
-    return N
-
-
-def geometric_grid(q: int = 1, x0: float = 1e-3, x_max: float = 1.6e7):
-    """Grid of ratio 2^(1/q) from the first pivot ``x0`` to at least ``x_max`` (in units of the
-    initial mean volume): the verification grids of tests and benchmarks."""
-    from .grid import Grid
-
-    r = 2.0 ** (1.0 / q)
-    return Grid(int(np.ceil(np.log(x_max / x0) / np.log(r))) + 1, r, v0=x0)
-
-
-def simulate_exponential(kernel, t_end, grid, scheme: str = "cell_average", N0: float = 1.0, m: float = 1.0,
-                         rtol: float = 1e-3, atol: float = 1e-9, max_overflow_fraction: float = 1e-6):
-    """Pure aggregation with ``kernel`` from the discretised exponential n(v, 0) = N0/m e^(-v/m) to
-    ``t_end``. Returns ``(result, errors)``: the Result and the relative errors of the moments
-    M0, M1, M2 at ``t_end`` against ``kernel.analytical_moments`` (M_k = sum N x^k)."""
-    from .model import GranulationPBM, SolverSettings, State
-
-    N = discretise_exponential(grid, N0, m)
-    K = grid.bins
-    model = GranulationPBM(grid, kernel, scheme=scheme,
-                           solver=SolverSettings(rtol=rtol, atol=atol, max_overflow_fraction=max_overflow_fraction))
-    res = model.run(0.0, t_end, State(0.0, N, np.zeros(K), np.zeros(K)))
-    return res, res.moments()[-1] / np.array(kernel.analytical_moments(t_end, N0, m)) - 1.0
-
-
-def cell_errors(kernel, grid, number, t, N0: float = 1.0, m: float = 1.0):
-    """Errors of the numbers per bin ``number`` at time ``t`` against the kernel's analytical
-    solution integrated over the cells (first cell from 0, last to infinity): the L1 error of the
-    cell numbers relative to the total number, and the largest error of the cumulative mass
-    (solid-volume) fraction over the bins."""
-    edges = np.concatenate([[0.0], grid.edges[1:-1], [np.inf]])
-    num, vol = cell_integrals(lambda v: kernel.analytical_solution(v, t, N0, m), edges)
-    number = np.asarray(number, float)
-    l1 = np.abs(number - num).sum() / num.sum()
-    Q = np.cumsum(number * grid.x) / np.sum(number * grid.x)
-    return float(l1), float(np.abs(Q - np.cumsum(vol) / vol.sum()).max())
-
-
 def product_moments(t, b, M0, M1, M2):
     """(M0, M1, M2) of the product kernel beta = b u v before gelation, from the initial moments
     (any initial distribution): dM0/dt = -b M1^2 / 2, M1 constant, dM2/dt = b M2^2, so

@@ -45,7 +45,11 @@ class Grid:
         self.ratio = ratio
         self.v0 = v0
         self.x = v0 * ratio ** np.arange(self.bins, dtype=float)
-        self.d = diameter_of(self.x)
+        # diameters relative to the first pivot's (min_diameter exactly, when given): d_k = d_0
+        # (x_k / x_0)^(1/3), so that a pivot at a round diameter (32 mm = 16 x 2 mm) is that diameter
+        # to the last digit rather than one rounding below it
+        d0 = float(min_diameter) if min_diameter is not None else float(diameter_of(v0))
+        self.d = d0 * np.cbrt(self.x / self.x[0])
         #: cell edges in volume (K + 1): cell k is [x_k 2/(1+r), x_k 2r/(1+r)], pivot at its centre
         self.edges = np.concatenate([[self.x[0] * 2.0 / (1.0 + ratio)], self.x * 2.0 * ratio / (1.0 + ratio)])
         #: diameter edges (K + 1), geometric midpoints of neighbouring pivot diameters (for PSDs)
@@ -74,7 +78,7 @@ class Grid:
         """Put particles of solid ``volumes`` on the grid, conserving number and solid volume.
 
         A class of volume u with x_i <= u <= x_(i+1) is split between the two pivots by the lever
-        rule. Returns ``(N, fraction)`` where ``N`` is the number per bin and ``fraction`` a
+        rule (a class within 1e-12 of a pivot goes to that pivot alone). Returns ``(N, fraction)`` where ``N`` is the number per bin and ``fraction`` a
         (n_classes, K) matrix: the share of each class's solid volume sent to each bin (use it to
         carry liquid and gas with the solid). Raises GridRangeError outside [x_0, x_(K-1)].
         """
@@ -93,16 +97,40 @@ class Grid:
                 f"{[float(f'{v:.4g}') for v in u[bad]]} m3) lie outside the grid; allowed: "
                 f"{self.d[0]:.4g} .. {self.d[-1]:.4g} m (pivots x_0 = {self.x[0]:.4g} .. "
                 f"x_{self.bins - 1} = {self.x[-1]:.4g} m3); change pbm.grid.min_diameter, bins or ratio")
-        u = np.clip(u, self.x[0], self.x[-1])
-        i = np.clip(np.searchsorted(self.x, u, side="right") - 1, 0, self.bins - 2)
-        w_hi = (u - self.x[i]) / (self.x[i + 1] - self.x[i])      # number fraction to i+1
-        frac = np.zeros((u.size, self.bins))
+        i, w_hi, f_hi = self._lever(u)
         rows = np.arange(u.size)
         n_hi = w_hi * n
         n_lo = n - n_hi
         N = np.zeros(self.bins)
         np.add.at(N, i, n_lo)
         np.add.at(N, i + 1, n_hi)
-        frac[rows, i + 1] = w_hi * self.x[i + 1] / u                # solid-volume fraction to i+1
-        frac[rows, i] = 1.0 - frac[rows, i + 1]
+        frac = np.zeros((u.size, self.bins))
+        frac[rows, i + 1] = f_hi
+        frac[rows, i] = 1.0 - f_hi
         return N, frac
+
+    def _lever(self, volumes):
+        """(lower pivot i, number fraction to i+1, solid fraction to i+1) of each volume; a volume
+        within 1e-12 (relative) of a pivot goes to that pivot alone (no round-off fragment)."""
+        u = np.clip(np.atleast_1d(np.asarray(volumes, float)), self.x[0], self.x[-1])
+        i = np.clip(np.searchsorted(self.x, u, side="right") - 1, 0, self.bins - 2)
+        w_hi = (u - self.x[i]) / (self.x[i + 1] - self.x[i])      # number fraction to i+1
+        f_hi = w_hi * self.x[i + 1] / u                             # solid-volume fraction to i+1
+        lo, hi = np.abs(u / self.x[i] - 1.0) <= 1e-12, np.abs(u / self.x[i + 1] - 1.0) <= 1e-12
+        w_hi[lo], f_hi[lo] = 0.0, 0.0
+        w_hi[hi], f_hi[hi] = 1.0, 1.0
+        return i, w_hi, f_hi
+
+    def lever_weights(self, volumes) -> tuple[np.ndarray, np.ndarray]:
+        """Lever rule of particles of solid ``volumes`` (n,) in [x_0, x_(K-1)]: (n, K) matrices of
+        the number fraction and of the solid-volume fraction each pivot receives (rows sum to 1;
+        at most two pivots per row), as :meth:`map_particles` splits them."""
+        i, w_hi, f_hi = self._lever(volumes)
+        rows = np.arange(i.size)
+        number = np.zeros((i.size, self.bins))
+        number[rows, i + 1] = w_hi
+        number[rows, i] = 1.0 - w_hi
+        frac = np.zeros((i.size, self.bins))
+        frac[rows, i + 1] = f_hi
+        frac[rows, i] = 1.0 - f_hi
+        return number, frac

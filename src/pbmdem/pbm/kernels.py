@@ -29,8 +29,14 @@ SYMMETRY_RTOL = 1e-8
 
 @dataclass
 class KernelInput:
-    """What a kernel may depend on at time ``t``: pivot volumes (m3) and diameters (m), numbers
-    per bin, surface-liquid volume fraction per bin and impeller speed (rpm)."""
+    """What a kernel may depend on at time ``t``: volumes (m3) and diameters (m), numbers and
+    surface-liquid volume fraction of every class, and impeller speed (rpm).
+
+    The classes are the grid's K pivots (``feed_weights`` None), or, with feed granules kept
+    apart (docs/pbm.md, "Feed granules"), the K pivots followed by P feed classes at their own
+    volumes; ``feed_weights`` (P, K) is then the lever rule of the feed classes onto the pivots
+    (number fractions). A kernel returns the (K + P, K + P) matrix of the classes.
+    """
 
     t: float
     volumes: np.ndarray
@@ -38,6 +44,20 @@ class KernelInput:
     numbers: np.ndarray
     surface_fraction: np.ndarray
     rpm: float
+    feed_weights: np.ndarray | None = None
+
+    @property
+    def pivots(self) -> int:
+        """Number of grid pivots K."""
+        return self.volumes.size if self.feed_weights is None else self.feed_weights.shape[1]
+
+    def per_bin(self) -> tuple[np.ndarray, np.ndarray]:
+        """(diameters, numbers) of the K pivots; the numbers are the bin totals (aggregates and
+        the feed classes put on the pivots by the lever rule)."""
+        if self.feed_weights is None:
+            return self.diameters, self.numbers
+        K = self.pivots
+        return self.diameters[:K], self.numbers[:K] + self.numbers[K:] @ self.feed_weights
 
 
 class Kernel:
@@ -91,8 +111,8 @@ class SumKernel(Kernel):
 
     def __call__(self, inp: KernelInput) -> np.ndarray:
         v = inp.volumes
-        if self._cache is None or self._cache[0] != v.size:
-            self._cache = (v.size, self.b * (v[:, None] + v[None, :]))
+        if self._cache is None or not np.array_equal(self._cache[0], v):
+            self._cache = (v.copy(), self.b * (v[:, None] + v[None, :]))
         return self._cache[1]
 
     def analytical_solution(self, v, t, N0, mean_volume):
@@ -275,6 +295,8 @@ class CollisionKernel(Kernel):
     def reset(self) -> None:
         self._c: np.ndarray | None = None
         self._fractions: np.ndarray | None = None
+        self._classes: np.ndarray | None = None
+        self._class_c = self._class_cumulative = None
         self._t_eval = -np.inf
 
     def set_source(self, source) -> None:
@@ -294,32 +316,53 @@ class CollisionKernel(Kernel):
         return self._c
 
     def prepare(self, inp: KernelInput) -> None:
-        K = inp.volumes.size
+        # the source sees the grid's pivots and the bins' total numbers, with or without feed classes
+        K = inp.pivots
         if self._c is None or self._c.shape != (K, K) or inp.t >= self._t_eval + self.update_interval:
+            previous = self._c
+            d, n = inp.per_bin()
             if self.success.velocity_dependent:
-                rates = self.source.encounters(inp.diameters, inp.numbers, inp.rpm)
+                rates = self.source.encounters(d, n, inp.rpm)
                 self._c, self._fractions = check_encounter_rates(rates, K, repr(self.source))
                 self._cumulative = np.concatenate([np.zeros((K, K, 1)), np.cumsum(self._fractions, axis=2)], axis=2)
             else:
-                c = self.source(inp.diameters, inp.numbers, inp.rpm)
+                c = self.source(d, n, inp.rpm)
                 self._c = check_frequency_matrix(c, K, repr(self.source))
             self._t_eval = inp.t
             self.evaluations += 1
+            if self.success.velocity_dependent or previous is None or previous.shape != self._c.shape \
+                    or not np.array_equal(previous, self._c):
+                self._classes = None                # the feed classes' c_ij must be blended again
+        W = inp.feed_weights
+        if W is None:
+            self._class_c, self._class_cumulative = self._c, getattr(self, "_cumulative", None)
+        elif self._classes is not W:
+            if self._classes is None or not np.array_equal(self._classes, W):
+                # a feed class between two pivots meets its partners with the lever-rule blend of
+                # the pivots' c_ij (and velocity fractions): E c E^T, E = [I; W] (K + P, K)
+                E = np.vstack([np.eye(W.shape[1]), W])
+                c = E @ self._c @ E.T
+                self._class_c = 0.5 * (c + c.T)                 # symmetric to the last digit
+                if self.success.velocity_dependent:
+                    cum = np.einsum("jl,ilv->ijv", E, np.einsum("ik,klv->ilv", E, self._cumulative))
+                    self._class_cumulative = 0.5 * (cum + cum.transpose(1, 0, 2))
+            self._classes = W                   # the model hands the same array at every step
 
     def __call__(self, inp: KernelInput) -> np.ndarray:
-        if self._c is None:
+        if self._c is None or self._class_c is None or self._class_c.shape[0] != inp.volumes.size:
             self.prepare(inp)
+        c = self._class_c
         if self.success.velocity_dependent:
             # the criterion holds an impact iff its speed is below the pair's critical speed w*, and
             # the representative speeds rise with the bin: sum_b f_b [v_b < w*] is the cumulative
             # fraction up to the last bin below w* (same as summing success.resolved(...) * f)
             w_star = self.success.velocity.critical_velocity(inp.diameters, inp.surface_fraction)
             n = np.searchsorted(self._speeds, w_star, side="left")
-            held = np.take_along_axis(self._cumulative, n[:, :, None], axis=2)[:, :, 0]
-            return self.beta0 * self._c * self.success(inp.surface_fraction) * held
+            held = np.take_along_axis(self._class_cumulative, n[:, :, None], axis=2)[:, :, 0]
+            return self.beta0 * c * self.success(inp.surface_fraction) * held
         if self.success.model == "always":
-            return self.beta0 * self._c
-        return self.beta0 * self._c * self.success(inp.surface_fraction)
+            return self.beta0 * c
+        return self.beta0 * c * self.success(inp.surface_fraction)
 
 
 class ConstantFrequency:

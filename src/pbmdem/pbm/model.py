@@ -13,12 +13,18 @@ an embedded Heun estimate, default), ``"heun"`` (SSP-RK2 with an embedded Euler 
 ``"euler"``; dt = min(safety x min over depleting entries (rate < 0) of value / |rate|, the
 error-controlled step, ``max_step``, the next output time or spray-window edge) (so every step
 sees a constant spray rate). What limited each step is counted in ``result.info["step_limits"]``.
-A step that would leave a negative entry is repeated with half the step; after ``max_halvings``
+A step that would leave a negative entry is repeated with half the step; after ``MAX_HALVINGS``
 the run stops with NegativePopulationError naming the time and bin. A NaN stops the run at once;
 ``max_steps`` / ``max_wall_time`` stop it with SolverLimitError. Internally volumes are in units
 of the first pivot (unit independence; docs/pbm.md, "Time integration"). ``run(t_start, t_end,
 state)`` resumes from any :class:`State`, so a coupled
 loop can swap the collision-frequency source between intervals.
+
+Feed granules (``separate_feed=True``, default): the feed granules that have not aggregated yet
+are classes of their own (:class:`FeedGranules`): at their own solid volume (not split onto the
+pivots), with their own number, liquid and gas, so that aggregates born near a feed size do not
+share their liquid with the feed granules (docs/pbm.md, "Feed granules"). The State's per-bin
+totals include them, put on the pivots by the lever rule as the initial distribution is.
 """
 
 from __future__ import annotations
@@ -28,92 +34,43 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pbmdem.config import Solver
+
 from .aggregation import SCHEMES
 from .errors import GridOverflowError, NegativePopulationError, PBMInputError, SolverLimitError, positive
-from .grid import Grid
+from .grid import Grid, diameter_of
 from .kernels import Kernel, KernelInput
 from .processes import Consolidation, LiquidAddition
+from .results import Result
+from .state import FeedGranules, State, surface_fraction
 
 TIME_EPS = 1e-12
 #: time integrators (strong-stability-preserving explicit Runge-Kutta with an embedded lower order)
 METHODS = ("ssp3", "heun", "euler")
 #: relative size below which state entries are flushed to zero (see GranulationPBM.run)
 FLUSH = 1e-100
-_FREEZE = False
+#: step reductions of one step (halvings after a negative entry) before a run gives up
+MAX_HALVINGS = 60
 
 
-@dataclass
-class State:
-    """Resumable PBM state at time ``t``: per-bin number, liquid and gas (pore) volume (m3).
-
-    ``refused_volume``: solid volume of aggregates refused beyond the last bin so far (m3);
-    ``liquid_added``: binder sprayed so far (m3); ``steps``: time steps taken so far.
-    """
-
-    t: float
-    number: np.ndarray
-    liquid: np.ndarray
-    gas: np.ndarray
-    refused_volume: float = 0.0
-    liquid_added: float = 0.0
-    steps: int = 0
-
-    def copy(self) -> "State":
-        return State(self.t, self.number.copy(), self.liquid.copy(), self.gas.copy(),
-                     self.refused_volume, self.liquid_added, self.steps)
-
-
-@dataclass
-class SolverSettings:
-    """Time-integration settings; the defaults equal ``pbm.solver`` of config/config.yaml.
-
-    ``safety``: fraction of the fastest depletion time value/|rate| a step may take (positivity);
-    ``rtol``/``atol``: local error per step of the embedded Euler-Heun pair, relative to each entry
-    and as a floor in units of the total solid volume; ``max_step`` (s); ``max_overflow_fraction``:
-    largest solid volume refused beyond the last bin, as a fraction of the total solid volume;
-    ``max_steps``/``max_wall_time`` (s): guards of one ``run`` (a clear error instead of a run that
-    never ends); ``max_halvings``: step reductions of one step before giving up.
-    """
-
-    method: str = "ssp3"
-    safety: float = 0.5
-    max_step: float = 10.0
-    max_overflow_fraction: float = 1e-6
-    max_halvings: int = 60
-    rtol: float = 1e-3
-    atol: float = 1e-6
-    max_steps: int = 1_000_000
-    max_wall_time: float = 3600.0
-
-    def __post_init__(self):
-        if self.method not in METHODS:
-            raise PBMInputError(f"solver method = {self.method!r}; allowed: {list(METHODS)}")
-        self.safety = positive("solver safety", self.safety)
-        if self.safety > 1:
-            raise PBMInputError(f"solver safety = {self.safety!r}; allowed: 0 < safety <= 1 (fraction of the "
-                                "fastest depletion time)")
-        if self.max_step != np.inf:
-            self.max_step = positive("solver max_step (s)", self.max_step)
-        self.rtol = positive("solver rtol", self.rtol)
-        self.atol = positive("solver atol", self.atol)
-        self.max_overflow_fraction = positive("solver max_overflow_fraction", self.max_overflow_fraction,
-                                              allow_zero=True)
-        if isinstance(self.max_steps, bool) or int(self.max_steps) != self.max_steps or self.max_steps < 1:
-            raise PBMInputError(f"solver max_steps = {self.max_steps!r}; allowed: an integer >= 1")
-        self.max_steps = int(self.max_steps)
-        self.max_wall_time = positive("solver max_wall_time (s)", self.max_wall_time)
-
-
-def surface_fraction(S: np.ndarray, L: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """Surface-liquid volume fraction of the granules of each bin.
-
-    Liquid fills the pores first; the excess is surface liquid: l_surf = max(l - g, 0). The granule
-    volume is s + max(l, g) (pores, wet or dry, plus the surface layer). Ratios of bin totals
-    equal ratios of per-particle values, so no division by N is needed.
-    """
-    S, L, G = np.broadcast_arrays(*(np.asarray(a, float) for a in (S, L, G)))
-    V = S + np.maximum(L, G)
-    return np.divide(np.maximum(L - G, 0.0), V, out=np.zeros(V.shape), where=V > 0)
+def check_solver(opt: Solver) -> Solver:
+    """The solver settings `opt` if every value is allowed, else PBMInputError naming it (the
+    schema checks a configuration; this checks settings made in code, e.g. Solver.replace)."""
+    if opt.method not in METHODS:
+        raise PBMInputError(f"solver method = {opt.method!r}; allowed: {list(METHODS)}")
+    safety = positive("solver safety", opt.safety)
+    if safety > 1:
+        raise PBMInputError(f"solver safety = {opt.safety!r}; allowed: 0 < safety <= 1 (fraction of the "
+                            "fastest depletion time)")
+    if opt.max_step != np.inf:
+        positive("solver max_step (s)", opt.max_step)
+    positive("solver rtol", opt.rtol)
+    positive("solver atol", opt.atol)
+    positive("solver max_overflow_fraction", opt.max_overflow_fraction, allow_zero=True)
+    if isinstance(opt.max_steps, bool) or int(opt.max_steps) != opt.max_steps or opt.max_steps < 1:
+        raise PBMInputError(f"solver max_steps = {opt.max_steps!r}; allowed: an integer >= 1")
+    positive("solver max_wall_time (s)", opt.max_wall_time)
+    return opt
 
 
 def _flushed(u: np.ndarray, K: int, flush_n: float, flush_v: float) -> np.ndarray:
@@ -151,32 +108,71 @@ class GranulationPBM:
 
     ``kernel``: any :class:`Kernel`; ``liquid``/``consolidation``: the processes or None (off);
     ``rpm``: impeller speed handed to the kernel's collision-frequency source; ``scheme``: the
-    aggregation discretisation, ``"cell_average"`` (default) or ``"fixed_pivot"``.
+    aggregation discretisation, ``"cell_average"`` (default) or ``"fixed_pivot"``;
+    ``separate_feed``: :meth:`initial_state` keeps the feed granules apart from the aggregates
+    of their bins (:class:`FeedGranules`; default True), False: they share the bin's liquid and gas.
     """
 
     def __init__(self, grid: Grid, kernel: Kernel, liquid: LiquidAddition | None = None,
-                 consolidation: Consolidation | None = None, solver: SolverSettings | None = None,
-                 rpm: float = 0.0, scheme: str = "cell_average"):
+                 consolidation: Consolidation | None = None, solver: Solver | None = None,
+                 rpm: float = 0.0, scheme: str = "cell_average", separate_feed: bool = True):
         self.grid = grid
         self.kernel = kernel
         self.liquid = liquid
         self.consolidation = consolidation
-        self.solver = solver or SolverSettings()
+        self.solver = check_solver(solver if solver is not None else Solver.defaults())
         self.rpm = positive("impeller speed (rpm)", rpm, allow_zero=True)
         if scheme not in SCHEMES:
             raise PBMInputError(f"aggregation scheme = {scheme!r}; allowed: {sorted(SCHEMES)}")
+        if not isinstance(separate_feed, (bool, np.bool_)):
+            raise PBMInputError(f"separate_feed = {separate_feed!r}; allowed: true or false")
+        self.separate_feed = bool(separate_feed)
         self.aggregation = SCHEMES[scheme](grid.x, grid.edges[1:-1])
+        self._operators = {(): self.aggregation}
         # internal unit of volume: the first pivot x_0 (pivots 1, r, r^2, ...)
         self._flush_n = self._flush_v = 0.0
         self._xr = grid.x / grid.x[0]
         if liquid is not None:
-            self._spray_weight = (grid.d / grid.d[0]) ** 2 if liquid.rule == "surface_area" else self._xr
             self._spray_rate = liquid.rate / grid.x[0]
-        self._gas_min = consolidation.gas_per_solid * self._xr if consolidation is not None else None
+        self._use_classes(np.zeros(0))
 
     def __repr__(self) -> str:
         return (f"GranulationPBM({self.grid!r}, {self.kernel!r}, liquid={self.liquid!r}, "
-                f"consolidation={self.consolidation!r}, rpm={self.rpm:g}, scheme={self.aggregation.name!r})")
+                f"consolidation={self.consolidation!r}, rpm={self.rpm:g}, scheme={self.aggregation.name!r}, "
+                f"separate_feed={self.separate_feed})")
+
+    def _use_classes(self, feed_volumes: np.ndarray) -> None:
+        """Set up the classes of a run: the K pivots (aggregates, or everything without feed
+        classes) followed by one class per feed volume (m3)."""
+        key = tuple(float(v) for v in feed_volumes)
+        op = self._operators.get(key)
+        if op is None:
+            op = self._operators[key] = type(self.aggregation)(self.grid.x, self.grid.edges[1:-1], extra=key)
+        self._op = op
+        self._M = op.M
+        g = self.grid
+        self._xc = op.class_volumes                                     # class volumes in units of x_0
+        self._vc = np.concatenate([g.x, op.extra])                      # class volumes (m3)
+        self._dc = np.concatenate([g.d, diameter_of(op.extra)])         # class diameters (m)
+        if key:
+            # lever rule of the feed classes onto the pivots: numbers, and solid (liquid, gas)
+            self._feed_number_w, self._feed_solid_w = g.lever_weights(op.extra)
+        else:
+            self._feed_number_w = self._feed_solid_w = None
+        if self.liquid is not None:
+            self._spray_weight = (self._dc / g.d[0]) ** 2 if self.liquid.rule == "surface_area" else self._xc
+        self._gas_min = self.consolidation.gas_per_solid * self._xc if self.consolidation is not None else None
+
+    def _pivot_totals(self, u: np.ndarray) -> np.ndarray:
+        """(3, K) per-bin totals of the class state u = [N, L, G] (3M,): the aggregates of each bin
+        plus the feed classes put on the pivots by the lever rule."""
+        K, M = self.grid.bins, self._M
+        v = u.reshape(3, M)
+        tot = v[:, :K].copy()
+        if M > K:
+            tot[0] += v[0, K:] @ self._feed_number_w
+            tot[1:] += v[1:, K:] @ self._feed_solid_w
+        return tot
 
     # ----------------------------------------------------------------- state helpers
     def initial_state(self, volumes, numbers, liquid_content: float = 0.0, porosity: float = 0.0,
@@ -193,7 +189,20 @@ class GranulationPBM:
         N, frac = self.grid.map_particles(volumes, numbers, what=what)
         solid = np.asarray(volumes, float) * np.asarray(numbers, float)
         S_bins = solid @ frac
-        return State(float(t), N, lc * S_bins, eps / (1.0 - eps) * S_bins)
+        state = State(float(t), N, lc * S_bins, eps / (1.0 - eps) * S_bins)
+        if self.separate_feed:
+            # every particle of the initial distribution is a feed granule, at its own size; classes
+            # of equal volume are one feed class
+            u, inverse = np.unique(np.asarray(volumes, float), return_inverse=True)
+            n = np.bincount(inverse, np.asarray(numbers, float), minlength=u.size)
+            keep = n > 0
+            s_f = u[keep] * n[keep]
+            state.feed = FeedGranules(u[keep], n[keep], lc * s_f, eps / (1.0 - eps) * s_f)
+            # the bin totals exactly as a run writes them (aggregates 0 + the feed's lever rule)
+            wn, ws = self.grid.lever_weights(u[keep])
+            f = state.feed
+            state.number, state.liquid, state.gas = f.number @ wn, f.liquid @ ws, f.gas @ ws
+        return state
 
     def kernel_input(self, t: float, N, L, G) -> KernelInput:
         """Kernel input at (t, N, L, G); L and G in m3 or in any unit (only ratios are used)."""
@@ -202,7 +211,9 @@ class GranulationPBM:
                            surface_fraction=surface_fraction(S, L, G), rpm=self.rpm)
 
     def rates(self, t: float, N, L, G, spraying: bool):
-        """Rates (dN, dL, dG) in m3 and the refused solid-volume rate (m3/s) at (t, N, L, G)."""
+        """Rates (dN, dL, dG) in m3 and the refused solid-volume rate (m3/s) at (t, N, L, G)
+        (per-bin totals, no feed classes)."""
+        self._use_classes(np.zeros(0))
         x0 = self.grid.x[0]
         u = np.concatenate([N, np.asarray(L, float) / x0, np.asarray(G, float) / x0])
         self.kernel.prepare(self.kernel_input(t, N, L, G))
@@ -211,22 +222,23 @@ class GranulationPBM:
         return d[:K], d[K:2 * K] * x0, d[2 * K:] * x0, refused * x0
 
     def _rates(self, t: float, u: np.ndarray, spraying: bool, beta: np.ndarray | None = None):
-        """Rates (3K,) of the scaled state u = [N, L/x_0, G/x_0] and the refused solid rate (x_0 units).
+        """Rates (3M,) of the scaled class state u = [N, L/x_0, G/x_0] (M classes: the K pivots and the
+        feed classes of the run, :meth:`_use_classes`) and the refused solid rate (x_0 units).
 
         Volumes enter only as ratios to the first pivot x_0, so the same problem in m3, mm3 or
         units of x_0 gives the same numbers (up to the rounding of the unit conversion).
         ``beta``: the kernel matrix if the caller has it for this state.
         """
-        K = self.grid.bins
+        M = self._M
         if self._flush_n > 0 and ((u > 0) & (u < self._flush_vec)).any():
             # entries below the flush level count as zero (they are zeroed after every step; here
             # also inside a step, so no event rate can underflow)
-            u = _flushed(u.copy(), K, self._flush_n, self._flush_v)
+            u = _flushed(u.copy(), M, self._flush_n, self._flush_v)
             beta = None
-        nlg = u.reshape(3, K)
+        nlg = u.reshape(3, M)
         if beta is None:
             beta = self.kernel(self._input(t, nlg))
-        d, refused = self.aggregation.totals_stacked(beta, nlg)
+        d, refused = self._op.totals_stacked(beta, nlg)
         if spraying:
             w = nlg[0] * self._spray_weight
             total = w.sum()
@@ -237,37 +249,70 @@ class GranulationPBM:
         return d.reshape(-1), refused
 
     def _input(self, t: float, nlg: np.ndarray) -> KernelInput:
-        """KernelInput of the scaled state (3, K): surface-liquid fraction from bin totals."""
-        S = nlg[0] * self._xr
+        """KernelInput of the scaled class state (3, M): surface-liquid fraction from class totals."""
+        S = nlg[0] * self._xc
         L, G = nlg[1], nlg[2]
         V = S + np.maximum(L, G)
         phi = np.divide(np.maximum(L - G, 0.0), V, out=np.zeros(V.size), where=V > 0)
-        return KernelInput(t=t, volumes=self.grid.x, diameters=self.grid.d, numbers=nlg[0],
-                           surface_fraction=phi, rpm=self.rpm)
+        return KernelInput(t=t, volumes=self._vc, diameters=self._dc, numbers=nlg[0],
+                           surface_fraction=phi, rpm=self.rpm, feed_weights=self._feed_number_w)
 
     def check_state(self, s: State, where: str = "") -> None:
-        for name, arr in (("number", s.number), ("liquid", s.liquid), ("gas", s.gas)):
+        arrays = [("number", s.number, None), ("liquid", s.liquid, None), ("gas", s.gas, None)]
+        if s.feed is not None:
+            d = diameter_of(s.feed.volumes)
+            arrays += [("feed number", s.feed.number, d), ("feed liquid", s.feed.liquid, d),
+                       ("feed gas", s.feed.gas, d)]
+        for name, arr, d in arrays:
             bad = ~np.isfinite(arr) | (arr < 0)
             if bad.any():
                 k = int(np.argmax(bad))
-                raise NegativePopulationError(
-                    f"{name} of bin {k} (diameter {self.grid.d[k]:.4g} m) is {float(arr[k])!r} at t = {s.t:.6g} s"
-                    f"{where}; allowed: finite values >= 0")
+                where_k = f"bin {k} (diameter {self.grid.d[k]:.4g} m)" if d is None else \
+                    f"the feed class of diameter {d[k]:.4g} m"
+                raise NegativePopulationError(f"{name} of {where_k} is {float(arr[k])!r} at t = {s.t:.6g} s"
+                                              f"{where}; allowed: finite values >= 0")
+
+    def _check_feed(self, s: State) -> np.ndarray:
+        """Volumes of the state's feed classes (checked: distinct, on the grid, shapes; their
+        share of every bin at most the bin's total)."""
+        f = s.feed
+        if f is None:
+            return np.zeros(0)
+        g = self.grid
+        v = np.asarray(f.volumes, float)
+        P = v.size
+        if v.ndim != 1 or np.unique(v).size != P or not np.all(np.isfinite(v)) \
+                or (P and (v.min() < g.x[0] * (1 - 1e-12) or v.max() > g.x[-1] * (1 + 1e-12))):
+            raise PBMInputError(f"state.feed.volumes = {v.tolist()}; allowed: distinct solid volumes within the "
+                                f"grid, {g.x[0]:.4g} .. {g.x[-1]:.4g} (x_0 .. x_(K-1))")
+        for name in ("number", "liquid", "gas"):
+            if np.shape(getattr(f, name)) != (P,):
+                raise PBMInputError(f"state.feed.{name} has shape {np.shape(getattr(f, name))}; expected ({P},)")
+        wn, ws = g.lever_weights(v)
+        for name, w in (("number", wn), ("liquid", ws), ("gas", ws)):
+            part, total = np.asarray(getattr(f, name), float) @ w, getattr(s, name)
+            over = part > total * (1.0 + 1e-9) + 1e-300
+            if over.any():
+                k = int(np.argmax(over))
+                raise PBMInputError(f"state.feed.{name} puts {part[k]!r} into bin {k}, more than the bin's total "
+                                    f"{total[k]!r}; the feed granules are part of the bin totals")
+        return v
 
     # ----------------------------------------------------------------- integration
     #: what can limit a step (``result.info["step_limits"]`` counts them; ``rejected_*`` count retries)
     STEP_LIMITS = ("positivity", "error", "max_step", "event", "rejected_negative", "rejected_error")
 
     def _raise_bad(self, t: float, arr: np.ndarray, why: str, scale: float = 1.0):
-        K = self.grid.bins
+        K, M = self.grid.bins, self._M
         bad = ~np.isfinite(arr) | (arr < 0)
         idx = int(np.argmax(bad))
-        name = ("number", "liquid", "gas")[idx // K]
-        k = idx % K
-        value = float(arr[idx]) * (scale if idx >= K else 1.0)
+        name = ("number", "liquid", "gas")[idx // M]
+        c = idx % M
+        what = f"bin {c} (diameter {self.grid.d[c]:.4g} m)" if c < K else \
+            f"the feed class of diameter {self._dc[c]:.4g} m"
+        value = float(arr[idx]) * (scale if idx >= M else 1.0)
         raise NegativePopulationError(
-            f"{name} of bin {k} (diameter {self.grid.d[k]:.4g} m) became {value!r} at t = {t:.6g} s "
-            f"({why}); populations must stay finite and >= 0")
+            f"{name} of {what} became {value!r} at t = {t:.6g} s ({why}); populations must stay finite and >= 0")
 
     def run(self, t_start: float, t_end: float, state: State, output_times=None):
         """Integrate from ``t_start`` (= ``state.t``) to ``t_end``; returns a :class:`Result`.
@@ -281,8 +326,6 @@ class GranulationPBM:
         set to zero after every step: they cannot matter, and keeping them would let event rates
         of far-tail bins underflow to subnormal floats.
         """
-        from .results import Result
-
         t_start, t_end = float(t_start), float(t_end)
         if not t_end > t_start:
             raise PBMInputError(f"run: t_end = {t_end} must be > t_start = {t_start}")
@@ -294,7 +337,10 @@ class GranulationPBM:
                 raise PBMInputError(f"state.{name} has shape {np.shape(arr)}; expected ({K},) for this grid")
         s = state.copy()
         s.t = t_start
+        feed_volumes = self._check_feed(s)
         self.check_state(s, " (start of run)")
+        self._use_classes(feed_volumes)
+        M = self._M
         self.kernel.reset()
         wall0 = _time.perf_counter()
         opt = self.solver
@@ -311,18 +357,28 @@ class GranulationPBM:
         rec.add(s)
 
         x0 = float(self.grid.x[0])
-        xr = self._xr
-        u = np.concatenate([s.number, s.liquid / x0, s.gas / x0])
-        total_solid = float(np.sum(s.number * xr))            # x_0 units
+        xr = self._xc
+        if feed_volumes.size:
+            # classes [aggregates of the K bins, feed classes]: aggregates = bin totals - feed
+            parts = []
+            for total, part, scale, w in ((s.number, s.feed.number, 1.0, self._feed_number_w),
+                                          (s.liquid, s.feed.liquid, x0, self._feed_solid_w),
+                                          (s.gas, s.feed.gas, x0, self._feed_solid_w)):
+                feed = np.asarray(part, float) / scale
+                parts += [np.maximum(total / scale - feed @ w, 0.0), feed]
+            u = np.concatenate(parts)
+        else:
+            u = np.concatenate([s.number, s.liquid / x0, s.gas / x0])
+        total_solid = float(np.sum(u[:M] * xr))               # x_0 units
         allowed_refused = opt.max_overflow_fraction * total_solid
         refused = s.refused_volume / x0
         # error scale of entry k: rtol |u_k| + atol x total solid / w_k, where number entries count
         # by their solid volume (w = x_k / x_0) and liquid and gas as volumes (w = 1)
-        err_floor = opt.atol * max(total_solid, 1e-300) / np.concatenate([xr, np.ones(2 * K)])
+        err_floor = opt.atol * max(total_solid, 1e-300) / np.concatenate([xr, np.ones(2 * M)])
         flush_n = self._flush_n = FLUSH * float(np.sum(s.number))
         flush_v = self._flush_v = FLUSH * total_solid
-        self._flush_vec = np.concatenate([np.full(K, flush_n), np.full(2 * K, flush_v)])
-        u = _flushed(u, K, flush_n, flush_v)
+        self._flush_vec = np.concatenate([np.full(M, flush_n), np.full(2 * M, flush_v)])
+        u = _flushed(u, M, flush_n, flush_v)
         rtol = opt.rtol
         order = {"euler": 1, "heun": 2, "ssp3": 3}[opt.method]
         expo = 1.0 / order
@@ -339,7 +395,7 @@ class GranulationPBM:
                 ev += 1
             t_next = events[ev]
             spraying = self.liquid is not None and self.liquid.active(t)
-            inp = self._input(t, u.reshape(3, K))
+            inp = self._input(t, u.reshape(3, M))
             self.kernel.prepare(inp)
             k1, r1 = self._rates(t, u, spraying, self.kernel(inp))
             if not np.isfinite(k1).all():
@@ -350,7 +406,7 @@ class GranulationPBM:
             dt = min(cands)
             why = cands.index(dt)
             rejected = 0
-            for _ in range(opt.max_halvings + 1):
+            for _ in range(MAX_HALVINGS + 1):
                 u1 = u + dt * k1
                 refused_rate = r1
                 err = 0.0
@@ -392,14 +448,14 @@ class GranulationPBM:
                         continue
                 break
             else:
-                self._raise_bad(t, u_new, f"negative even after {opt.max_halvings} step reductions", x0)
+                self._raise_bad(t, u_new, f"negative even after {MAX_HALVINGS} step reductions", x0)
             limits[("positivity", "error", "max_step", "event")[why]] += 1
             if order > 1:
                 # no growth right after a rejection (Hairer, Norsett & Wanner, Solving ODE I, II.4)
                 dt_prop = dt * min(1.0 if rejected else 5.0, 0.9 * max(err, 1e-300) ** -expo)
             capped = dt == t_next - t
             t = t_next if capped else t + dt
-            u = _flushed(u_new, K, flush_n, flush_v)
+            u = _flushed(u_new, M, flush_n, flush_v)
             steps += 1
             taken += 1
             refused += refused_rate * dt
@@ -423,16 +479,26 @@ class GranulationPBM:
                     f"{opt.max_wall_time:g} s); step limits so far: {limits}")
             if capped and t in record_at:
                 s.t, s.steps = t, steps
-                s.number, s.liquid, s.gas = u[:K].copy(), u[K:2 * K] * x0, u[2 * K:] * x0
+                self._store(s, u, x0)
                 s.refused_volume = refused * x0
                 rec.add(s)
         s.t, s.steps = t_end, steps
-        s.number, s.liquid, s.gas = u[:K].copy(), u[K:2 * K] * x0, u[2 * K:] * x0
+        self._store(s, u, x0)
         s.refused_volume = refused * x0
         if refresh0 is not None:
             limits["kernel_refreshes"] = int(self.kernel.evaluations - refresh0)
         info = {"kernel": repr(self.kernel), "liquid_addition": repr(self.liquid),
                 "consolidation": repr(self.consolidation), "rpm": self.rpm, "steps": taken,
                 "wall_time_s": _time.perf_counter() - wall0, "method": opt.method,
-                "aggregation_scheme": self.aggregation.name, "safety": opt.safety, "step_limits": limits}
+                "aggregation_scheme": self.aggregation.name, "safety": opt.safety, "step_limits": limits,
+                "feed_volumes": feed_volumes.tolist()}
         return Result(self.grid, rec, s, info)
+
+    def _store(self, s: State, u: np.ndarray, x0: float) -> None:
+        """Write the class state u (x_0 units) into ``s``: per-bin totals and the feed classes."""
+        tot = self._pivot_totals(u)
+        s.number, s.liquid, s.gas = tot[0], tot[1] * x0, tot[2] * x0
+        if self._M > self.grid.bins:
+            K, M = self.grid.bins, self._M
+            v = u.reshape(3, M)[:, K:]
+            s.feed = FeedGranules(self._op.extra.copy(), v[0].copy(), v[1] * x0, v[2] * x0)

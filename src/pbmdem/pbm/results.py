@@ -19,7 +19,7 @@ import numpy as np
 from pbmdem.atomic import atomic_path
 
 from .grid import Grid
-from .model import State, surface_fraction
+from .state import State, surface_fraction
 
 if TYPE_CHECKING:
     import pandas as pd

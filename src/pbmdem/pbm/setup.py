@@ -15,7 +15,8 @@ from pbmdem.config import Pbm, PbmBatch
 from .errors import PBMInputError
 from .grid import Grid, volume_of
 from .kernels import CollisionKernel, ConstantFrequency, SuccessProbability
-from .model import GranulationPBM, SolverSettings, State
+from .model import GranulationPBM
+from .state import State
 from .processes import Consolidation, LiquidAddition
 from .success import StokesCriterion
 
@@ -69,8 +70,8 @@ def build_model(pbm: Pbm, source=None, rpm: float = 0.0) -> GranulationPBM:
     liquid = LiquidAddition(pbm.liquid_addition.rate, process.spray_start, process.spray_end,
                             pbm.liquid_addition.distribution)
     cons = Consolidation(pbm.consolidation.rate, pbm.consolidation.min_porosity)
-    solver = SolverSettings(**pbm.solver.to_dict())
-    return GranulationPBM(grid, kernel, liquid, cons, solver, rpm=rpm, scheme=agg.scheme)
+    return GranulationPBM(grid, kernel, liquid, cons, pbm.solver, rpm=rpm, scheme=agg.scheme,
+                          separate_feed=pbm.grid.separate_feed)
 
 
 def initial_state(batch: PbmBatch, model: GranulationPBM) -> State:

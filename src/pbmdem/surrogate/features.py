@@ -26,6 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from .errors import CollisionTableError
+
 #: Columns of the collision-table contract (docs/architecture.md).
 TABLE_COLUMNS = (
     "point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j", "n_i", "n_j",
@@ -68,10 +70,6 @@ TARGET_NOISE_VAR = "log10_noise_var"
 
 #: How rows with zero collisions are treated when building the target.
 ZERO_POLICIES = ("drop", "floor")
-
-
-class CollisionTableError(ValueError):
-    """The collision table violates the contract of docs/architecture.md."""
 
 
 def check_impeller_radius(impeller_radius) -> float:
@@ -350,7 +348,6 @@ def training_data(table: pd.DataFrame, impeller_radius: float, zero_policy: str 
     can be learned (a warning says so). ``impeller_radius`` (m) is
     ``granulator.impeller.blade_length``, for the tip-speed feature.
     """
-    # imported here: velocity.py imports CollisionTableError from this module
     from .velocity import attach_velocity_bins, bin_counts, fit_lognormal, velocity_rows
 
     if velocity_table is not None:

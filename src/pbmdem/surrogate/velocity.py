@@ -23,7 +23,7 @@ from scipy.special import log_ndtr, ndtr
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, representative_velocities
 
-from .features import CollisionTableError
+from .errors import CollisionTableError
 
 #: Columns of the impact-velocity table contract (docs/architecture.md).
 VELOCITY_TABLE_COLUMNS = ("point_id", "rpm", "distribution", "class_i", "class_j", "v_lo", "v_hi", "encounters")

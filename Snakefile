@@ -53,6 +53,7 @@ include: "rules/dem.smk"
 include: "rules/surrogate.smk"
 include: "rules/pbm.smk"
 include: "rules/validation.smk"
+include: "rules/report.smk"
 
 
 rule all:

@@ -50,23 +50,34 @@ def pbm_outputs(kernel):
 # --- job resources: how DEM runs execute (not params: changing them reruns nothing)
 DEM_RANKS = CFG.dem_execution.mpi_ranks
 
-# --- validation speeds
+# --- validation speeds and runs
 VAL_RPMS = [rpm_text(r) for r in CFG.validation.rpm]
-VALIDATION_METHODS = ["pbm_dem", "pbm_ann", "pbm_constant"]
+VAL_REPS = list(range(CFG.validation.dem_replicates))
+RUN_FILES = ("summary.csv", "bins.csv", "final_bins.csv", "timing.json")
 
 
-def method_outputs(method):
-    return {
-        "summary": f"{RESULTS}/validation/rpm{{rpm}}/{method}/summary.csv",
-        "bins": f"{RESULTS}/validation/rpm{{rpm}}/{method}/final_bins.csv",
-        "timing": f"{RESULTS}/validation/rpm{{rpm}}/{method}/timing.json",
-    }
+def run_outputs(folder, loop=True):
+    """The files a validation run writes into `folder` (a coupled loop also intervals.csv)."""
+    names = RUN_FILES + (("intervals.csv",) if loop else ())
+    return {name.split(".")[0]: f"{folder}/{name}" for name in names}
 
 
-def validation_files(name, methods=VALIDATION_METHODS):
-    return expand(
-        f"{RESULTS}/validation/rpm{{rpm}}/{{method}}/{name}", rpm=VAL_RPMS, method=methods
-    )
+def dem_replicate_files(name, rpm="{rpm}"):
+    """One file of every PBM-DEM replicate of a validation speed."""
+    return [f"{RESULTS}/validation/rpm{rpm}/pbm_dem/rep{rep}/{name}" for rep in VAL_REPS]
+
+
+def speed_files(rpm="{rpm}"):
+    """Every run file of one validation speed (all replicates, PBM-ANN with its members, PBM-constant)."""
+    folder = f"{RESULTS}/validation/rpm{rpm}"
+    files = [f for name in RUN_FILES + ("intervals.csv",) for f in dem_replicate_files(name, rpm)]
+    files += list(run_outputs(f"{folder}/pbm_ann").values()) + [f"{folder}/pbm_ann/members.csv"]
+    files += list(run_outputs(f"{folder}/pbm_constant", loop=False).values())
+    return files
+
+
+def all_speed_files():
+    return [f for rpm in VAL_RPMS for f in speed_files(rpm)]
 
 
 def all_targets():

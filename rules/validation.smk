@@ -1,14 +1,15 @@
-# Validation: PBM-DEM (LIGGGHTS at every coupling interval) vs PBM-ANN vs PBM-constant, the
-# PBM-ANN impeller-speed sweep, and the report. The params of the loops are what one speed's loop
-# uses (CFG.coupled_loop()): neither the list of validation speeds nor the sweep.
+# Validation: PBM-DEM (LIGGGHTS at every coupling interval, validation.dem_replicates loops per
+# speed that differ only by their DEM insertion seeds) vs PBM-ANN (and once per ensemble member of
+# the surrogate) vs PBM-constant; the replicate bands, the comparison table, the proposals of the
+# active learning and the PBM-ANN impeller-speed sweep. The params of the loops are what one
+# speed's loop uses (CFG.coupled_loop()): neither the list of speeds nor the number of replicates.
 
 
 rule pbm_dem_coupled:
     input:
         template=TEMPLATE,
     output:
-        **method_outputs("pbm_dem"),
-        intervals=f"{RESULTS}/validation/rpm{{rpm}}/pbm_dem/intervals.csv",
+        **run_outputs(f"{RESULTS}/validation/rpm{{rpm}}/pbm_dem/rep{{rep}}"),
     params:
         loop=loop_params,
         method="dem",
@@ -17,7 +18,7 @@ rule pbm_dem_coupled:
     resources:
         tasks=DEM_RANKS,
     log:
-        f"{RESULTS}/logs/validation/pbm_dem_rpm{{rpm}}.log",
+        f"{RESULTS}/logs/validation/pbm_dem_rpm{{rpm}}_rep{{rep}}.log",
     conda:
         "../envs/validation.yaml"
     script:
@@ -28,8 +29,8 @@ rule pbm_ann_coupled:
     input:
         model=MODEL,
     output:
-        **method_outputs("pbm_ann"),
-        intervals=f"{RESULTS}/validation/rpm{{rpm}}/pbm_ann/intervals.csv",
+        **run_outputs(f"{RESULTS}/validation/rpm{{rpm}}/pbm_ann"),
+        members=f"{RESULTS}/validation/rpm{{rpm}}/pbm_ann/members.csv",
     params:
         loop=loop_params,
         method="ann",
@@ -46,7 +47,7 @@ rule pbm_constant_calibrated:
     input:
         model=MODEL,
     output:
-        **method_outputs("pbm_constant"),
+        **run_outputs(f"{RESULTS}/validation/rpm{{rpm}}/pbm_constant", loop=False),
     params:
         loop=loop_params,
         method="constant",
@@ -59,12 +60,79 @@ rule pbm_constant_calibrated:
         "../workflow/scripts/validation_loop.py"
 
 
+rule validation_bands:
+    input:
+        lambda wc: speed_files(wc.rpm),
+    output:
+        bands=f"{RESULTS}/validation/rpm{{rpm}}/bands.csv",
+    params:
+        validation_dir=f"{RESULTS}/validation",
+        replicates=CFG.validation.dem_replicates,
+    log:
+        f"{RESULTS}/logs/validation/bands_rpm{{rpm}}.log",
+    conda:
+        "../envs/validation.yaml"
+    script:
+        "../workflow/scripts/validation_bands.py"
+
+
+rule comparison:
+    input:
+        all_speed_files(),
+    output:
+        table=report(
+            f"{RESULTS}/report/comparison.csv",
+            caption="../workflow/report/comparison.rst",
+            category="Validation",
+        ),
+    params:
+        validation_dir=f"{RESULTS}/validation",
+        rpms=VAL_RPMS,
+        grid_rpm=list(CFG.grid.impeller_rpm),
+        replicates=CFG.validation.dem_replicates,
+    log:
+        f"{RESULTS}/logs/validation/comparison.log",
+    conda:
+        "../envs/validation.yaml"
+    script:
+        "../workflow/scripts/comparison.py"
+
+
+rule propose_points:
+    input:
+        model=MODEL,
+        intervals=expand(f"{RESULTS}/validation/rpm{{rpm}}/pbm_ann/intervals.csv", rpm=VAL_RPMS),
+    output:
+        fragment=f"{RESULTS}/validation/proposals.yaml",
+        table=report(
+            f"{RESULTS}/validation/proposals.csv",
+            caption="../workflow/report/proposals.rst",
+            category="Validation",
+        ),
+    params:
+        grid=CFG.grid.to_dict(),
+        distributions={n: CFG.size_distributions[n].to_dict() for n in CFG.grid.size_distributions},
+        granulator=CFG.granulator.to_dict(),
+        max_points=CFG.validation.proposals.max_points,
+        rpms=VAL_RPMS,
+    log:
+        f"{RESULTS}/logs/validation/propose_points.log",
+    conda:
+        "../envs/validation.yaml"
+    script:
+        "../workflow/scripts/propose_points.py"
+
+
 rule rpm_sweep:
     input:
         model=MODEL,
     output:
         table=f"{RESULTS}/validation/rpm_sweep.csv",
-        plot=f"{RESULTS}/validation/rpm_sweep.png",
+        plot=report(
+            f"{RESULTS}/validation/rpm_sweep.png",
+            caption="../workflow/report/rpm_sweep.rst",
+            category="Validation",
+        ),
     params:
         loop=loop_params,
         sweep=lambda wc: CFG.validation.sweep.to_dict(),
@@ -76,37 +144,5 @@ rule rpm_sweep:
         "../workflow/scripts/rpm_sweep.py"
 
 
-rule report:
-    input:
-        runs=f"{RESULTS}/dem/runs.csv",
-        collisions=f"{RESULTS}/dem/collisions.csv",
-        speed_response=f"{RESULTS}/dem/speed_response.csv",
-        flow_development=f"{RESULTS}/dem/flow_development.csv",
-        speed_plot=f"{RESULTS}/dem/speed_response.png",
-        velocity_plot=f"{RESULTS}/dem/impact_velocity.png",
-        metrics=f"{RESULTS}/surrogate/metrics.csv",
-        parity=f"{RESULTS}/surrogate/parity.png",
-        metadata=f"{RESULTS}/surrogate/model.json",
-        model=MODEL,
-        sweep=f"{RESULTS}/validation/rpm_sweep.csv",
-        sweep_plot=f"{RESULTS}/validation/rpm_sweep.png",
-        summaries=validation_files("summary.csv"),
-        bins=validation_files("final_bins.csv"),
-        timings=validation_files("timing.json"),
-        intervals=validation_files("intervals.csv", ["pbm_dem", "pbm_ann"]),
-    output:
-        html=f"{RESULTS}/report/report.html",
-        comparison=f"{RESULTS}/report/comparison.csv",
-    params:
-        validation_dir=lambda wc, input: os.path.dirname(input.sweep),
-        rpms=VAL_RPMS,
-        grid_rpm=list(CFG.grid.impeller_rpm),
-    log:
-        f"{RESULTS}/logs/report.log",
-    conda:
-        "../envs/validation.yaml"
-    script:
-        "../workflow/scripts/report.py"
-
-
-extra_targets.append(f"{RESULTS}/report/report.html")
+extra_targets += [f"{RESULTS}/validation/rpm{rpm}/bands.csv" for rpm in VAL_RPMS]
+extra_targets += [f"{RESULTS}/report/comparison.csv", f"{RESULTS}/validation/proposals.yaml"]

@@ -4,7 +4,8 @@ The import graph is read from the source (every `import`, also those inside func
 are dependencies all the same). Layers, lowest first: the shared helpers (atomic files, readers),
 the settings layer (`pbmdem.config`), the contracts (`pbmdem.impact`, then `pbmdem.frequency`), the
 stages (`pbmdem.dem`, `pbmdem.pbm`, `pbmdem.surrogate`, independent of each other), the coupling
-of the stages (`pbmdem.coupling`), the report, the command line. A module imports only from its
+of the stages (`pbmdem.coupling`), the validation study (`pbmdem.validation`), the report, the
+command line. A module imports only from its
 own unit or from lower layers.
 """
 
@@ -23,6 +24,7 @@ LAYERS = [
     {"frequency"},
     {"dem", "pbm", "surrogate"},
     {"coupling"},
+    {"validation"},
     {"report"},
     {"cli"},
 ]
@@ -109,7 +111,7 @@ def test_no_import_circles():
     assert not cycles, "import circles: " + "; ".join(" -> ".join(c) for c in cycles)
 
 
-@pytest.mark.parametrize("package", ["dem", "pbm", "surrogate", "coupling", "config"])
+@pytest.mark.parametrize("package", ["dem", "pbm", "surrogate", "coupling", "validation", "config"])
 def test_stages_are_packages_with_one_concept_per_module(package):
     folder = SRC / "pbmdem" / package
     assert (folder / "__init__.py").exists()

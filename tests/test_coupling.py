@@ -166,6 +166,22 @@ def test_finished_intervals_are_reused_only_for_the_same_inputs(tiny_config, tmp
     assert (intervals.mean_frequency_per_pair == 5.0).all()
 
 
+def test_the_first_sample_is_the_feed_itself(tiny_config, default_config):
+    """The feed granules keep their sizes in the PBM, so the first interval's DEM bed is exactly
+    the grid point of the feed (same classes, the bed's particle count): the surrogate is asked
+    about what it was trained on."""
+    from pbmdem.dem.plan import plan_point
+    from pbmdem.pbm.setup import build_model, initial_state
+
+    for cfg in (tiny_config, default_config):
+        loop = cfg.coupled_loop()
+        model = build_model(loop.batch.pbm, None, 600.0)
+        sample = coupling.representative_sample(*model.particle_classes(initial_state(loop.batch, model)), loop.sample)
+        feed = cfg.distribution(cfg.validation.distribution)
+        np.testing.assert_allclose(sample.diameters, feed.diameters, rtol=1e-9)
+        assert sample.counts == plan_point(cfg.dem_point(cfg.validation.distribution), 600.0).counts
+
+
 def test_a_resumed_loop_continues_exactly(tiny_config, tmp_path):
     """Resuming from the finished intervals on disk gives the very same batch as an uninterrupted
     loop (the saved state holds the feed granules not yet aggregated)."""

@@ -1,10 +1,11 @@
-"""Snakemake rule report: comparison table and self-contained HTML report (thin)."""
+"""Snakemake rule report: the self-contained HTML report (thin)."""
+
 from pbmdem import report
 
 report.build_report(
     validation_dir=snakemake.params.validation_dir,  # noqa: F821
     rpms=snakemake.params.rpms,  # noqa: F821
-    grid_rpm=snakemake.params.grid_rpm,  # noqa: F821
+    replicates=snakemake.params.replicates,  # noqa: F821
     runs=snakemake.input.runs,  # noqa: F821
     collisions=snakemake.input.collisions,  # noqa: F821
     metrics=snakemake.input.metrics,  # noqa: F821
@@ -13,8 +14,8 @@ report.build_report(
     model=snakemake.input.model,  # noqa: F821
     sweep=snakemake.input.sweep,  # noqa: F821
     sweep_plot=snakemake.input.sweep_plot,  # noqa: F821
+    comparison=snakemake.input.comparison,  # noqa: F821
     html=snakemake.output.html,  # noqa: F821
-    comparison=snakemake.output.comparison,  # noqa: F821
     speed_study={
         "table": snakemake.input.speed_response,  # noqa: F821
         "flow": snakemake.input.flow_development,  # noqa: F821

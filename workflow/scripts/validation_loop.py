@@ -4,6 +4,7 @@ import logging
 import os
 
 from pbmdem import coupling
+from pbmdem.atomic import write_csv
 from pbmdem.config import CoupledLoop, DemExecution
 
 # interval lines (DEM and PBM wall time, out-of-domain count) and DEM progress: job log and terminal
@@ -18,8 +19,10 @@ if method == "dem":
     if snakemake.resources.get("mpi"):  # noqa: F821
         os.environ["PBMDEM_MPI_LAUNCHER"] = str(snakemake.resources.mpi)  # noqa: F821
     execution = DemExecution.of_job(snakemake.config, snakemake.resources)  # noqa: F821
-    coupling.pbm_dem(loop, rpm, outdir, execution, replicate=0)
+    coupling.pbm_dem(loop, rpm, outdir, execution, replicate=int(snakemake.wildcards.rep))  # noqa: F821
 elif method == "ann":
     coupling.pbm_ann(loop, snakemake.input.model, rpm, outdir)  # noqa: F821
+    # the PBM-ANN band: once per ensemble member of the surrogate (not part of PBM-ANN's timing)
+    write_csv(snakemake.output.members, coupling.pbm_ann_members(loop, snakemake.input.model, rpm))  # noqa: F821
 else:
     coupling.pbm_constant(loop, snakemake.input.model, rpm, outdir)  # noqa: F821

@@ -33,20 +33,22 @@ class SampleRule(Settings):
 
 
 @dataclass(frozen=True)
+class Proposals(Settings):
+    """Active learning: how many operating points (new size distributions or speeds) to propose at most."""
+
+    max_points: int
+
+
+@dataclass(frozen=True)
 class Validation(Settings):
     """Speeds, feed, coupling intervals and DEM sampling window of the validation loops."""
 
     rpm: tuple[float, ...]
     distribution: str
     coupling_intervals: int
+    dem_replicates: int
     dem_sampling_time: float
     max_classes: int
     min_particles_per_class: int
     sweep: Sweep
-
-    def loop(self) -> dict:
-        """What one speed's coupled loop depends on (not the list of speeds, not the sweep)."""
-        out = self.to_dict()
-        for key in ("rpm", "sweep"):
-            out.pop(key)
-        return out
+    proposals: Proposals

@@ -51,9 +51,11 @@ def interval_bounds(loop: CoupledLoop) -> np.ndarray:
 
 
 def write_outputs(outdir: Path, result, rows: list[dict], totals: dict) -> None:
-    """summary.csv (PBM time series), final_bins.csv, intervals.csv (if any) and timing.json."""
+    """summary.csv (PBM time series), bins.csv (the size distribution at every recorded time),
+    final_bins.csv (at the end), intervals.csv (if any) and timing.json."""
     write_csv(outdir / "summary.csv", result.summary())
     bins = result.bins()
+    write_csv(outdir / "bins.csv", bins)
     write_csv(outdir / "final_bins.csv", bins[bins.time == bins.time.max()])
     if rows:
         write_csv(outdir / "intervals.csv", pd.DataFrame(rows))
@@ -90,7 +92,7 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
             state = result.state
             continue
         t0, t1 = bounds[k], bounds[k + 1]
-        sample = representative_sample(model.grid.x, state.number, loop.sample)
+        sample = representative_sample(*model.particle_classes(state), loop.sample)
         t_provider = time.perf_counter()
         try:
             rates, extra = provider(sample, folder, k)

@@ -26,9 +26,36 @@ def pbm_dem(loop: CoupledLoop, rpm: float, outdir: str | Path, execution: DemExe
     return run_loop(loop, DemProvider(loop, rpm, execution, replicate), rpm, outdir)
 
 
-def pbm_ann(loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: str | Path) -> LoopOutcome:
-    """PBM-ANN at `rpm`: the surrogate in `model_path` gives the frequencies of every interval."""
-    return run_loop(loop, SurrogateProvider(model_path, rpm), rpm, outdir)
+def pbm_ann(loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: str | Path,
+            member: int | None = None) -> LoopOutcome:
+    """PBM-ANN at `rpm`: the surrogate in `model_path` (its ensemble mean, or member `member`
+    alone) gives the frequencies of every interval."""
+    return run_loop(loop, SurrogateProvider(model_path, rpm, member), rpm, outdir)
+
+
+def pbm_ann_members(loop: CoupledLoop, model_path: str | Path, rpm: float):
+    """PBM-ANN once per ensemble member of the surrogate: one row per (member, recorded time)
+    with d10, d50, d90 (m), mean liquid content and porosity, and the member's wall time (s).
+    The members' spread is PBM-ANN's uncertainty band (docs/validation.md)."""
+    import tempfile
+
+    import pandas as pd
+
+    from pbmdem.surrogate import load_surrogate
+
+    n = load_surrogate(model_path).n_members
+    frames = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in range(n):
+            t0 = time.perf_counter()
+            outcome = pbm_ann(loop, model_path, rpm, Path(tmp) / f"member{k}", member=k)
+            s = outcome.result.summary()
+            frames.append(pd.DataFrame({
+                "member": k, "time": s.time, "d10": s.d10, "d50": s.d50, "d90": s.d90,
+                "mean_liquid_content": s.mean_liquid_content, "mean_porosity": s.mean_porosity,
+                "out_of_domain_intervals": outcome.totals.get("out_of_domain_intervals", 0),
+                "wall_time_s": time.perf_counter() - t0}))
+    return pd.concat(frames, ignore_index=True)
 
 
 def calibrated_frequency(loop: CoupledLoop, model_path: str | Path, rpm: float) -> tuple[float, list[str]]:
@@ -44,7 +71,7 @@ def calibrated_frequency(loop: CoupledLoop, model_path: str | Path, rpm: float) 
 
     model = build_model(loop.batch.pbm, ConstantFrequency(1.0), rpm=rpm)
     state = initial_state(loop.batch, model)
-    sample = representative_sample(model.grid.x, state.number, loop.sample)
+    sample = representative_sample(*model.particle_classes(state), loop.sample)
     surrogate = load_surrogate(model_path)
     with out_of_domain_recorded(f"constant-kernel calibration at rpm {rpm:g}") as found:
         c = surrogate.frequency_matrix(np.asarray(sample.diameters), np.asarray(sample.counts, float), rpm)
@@ -69,4 +96,4 @@ def pbm_constant(loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: 
     return LoopOutcome(result, [], totals)
 
 
-__all__ = ["pbm_dem", "pbm_ann", "pbm_constant", "calibrated_frequency", "interval_bounds"]
+__all__ = ["pbm_dem", "pbm_ann", "pbm_ann_members", "pbm_constant", "calibrated_frequency", "interval_bounds"]

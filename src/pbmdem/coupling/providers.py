@@ -61,21 +61,24 @@ class DemProvider:
 
 
 class SurrogateProvider:
-    """Class encounter frequencies from the trained surrogate (one vectorised call per interval)."""
+    """Class encounter frequencies from the trained surrogate (one vectorised call per interval):
+    its ensemble mean, or ensemble member `member` alone."""
 
     name = "pbm_ann"
 
-    def __init__(self, model_path: str | Path, rpm: float):
+    def __init__(self, model_path: str | Path, rpm: float, member: int | None = None):
         from pbmdem.surrogate import load_surrogate
 
-        self.model = load_surrogate(model_path)
+        model = load_surrogate(model_path)
+        self.model = model if member is None else model.member(member)
+        self.member = member
         self.model_path = Path(model_path)
         self.rpm = float(rpm)
         # with a velocity model the provider also hands over impact-velocity fractions (one call)
         self.velocity_resolved = bool(self.model.has_velocity_model())
 
     def fingerprint(self) -> dict:
-        return {"name": self.name, "rpm": self.rpm,
+        return {"name": self.name, "rpm": self.rpm, "member": self.member,
                 "model_sha256": hashlib.sha256(self.model_path.read_bytes()).hexdigest()}
 
     def __call__(self, sample: DemSample, interval_dir: Path, index: int):

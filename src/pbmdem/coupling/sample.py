@@ -1,7 +1,8 @@
 """The representative DEM sample of a PBM size distribution (docs/validation.md).
 
 1. The DEM bed holds the PBM's solid volume (the PBM models the DEM bed), so the particle number
-   of bin k is the PBM number N_k.
+   of a PBM class is its PBM number. The classes are the aggregates at the pivots and the feed
+   granules not yet aggregated at their own sizes, so that the first sample is the feed itself.
 2. Neighbouring bins are merged, from small to large, until a class holds at least
    `min_particles_per_class` particles; a remainder at the large end joins the previous class;
    then the two neighbouring classes with the fewest particles are merged until at most
@@ -33,7 +34,7 @@ DIAMETER_RESOLUTION = 1e-9
 class DemSample:
     diameters: list[float]
     counts: list[int]
-    bins: list[list[int]]  # PBM bins merged into each class
+    bins: list[list[int]]  # the PBM's particle classes merged into each DEM class
     scaled_down: float = 1.0  # < 1 when the sample was capped at max_particles
 
     @property
@@ -50,7 +51,8 @@ class DemSample:
 
 
 def representative_sample(volumes, numbers, rule: SampleRule) -> DemSample:
-    """DEM classes for a PBM distribution (bin solid volumes `volumes`, numbers `numbers`)."""
+    """DEM classes for a PBM distribution: its particle classes' solid `volumes` (ascending; the
+    pivots' aggregates and the feed granules, `GranulationPBM.particle_classes`) and `numbers`."""
     x = np.asarray(volumes, float)
     n = np.asarray(numbers, float)
     if x.shape != n.shape or x.ndim != 1:

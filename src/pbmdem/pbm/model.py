@@ -175,6 +175,21 @@ class GranulationPBM:
         return tot
 
     # ----------------------------------------------------------------- state helpers
+    def particle_classes(self, state: State) -> tuple[np.ndarray, np.ndarray]:
+        """(solid volumes (m3), numbers) of the particle classes of `state`, in ascending volume:
+        the aggregates of every bin at its pivot and the feed granules not yet aggregated at their
+        own sizes (without separate feed: the bins). The representative DEM sample of a coupled
+        loop is made from these, so that at the start it is the feed itself."""
+        if state.feed is None:
+            return self.grid.x.copy(), np.asarray(state.number, float).copy()
+        feed = state.feed
+        wn, _ = self.grid.lever_weights(feed.volumes)
+        aggregates = np.maximum(np.asarray(state.number, float) - feed.number @ wn, 0.0)
+        volumes = np.concatenate([self.grid.x, feed.volumes])
+        numbers = np.concatenate([aggregates, feed.number])
+        order = np.argsort(volumes, kind="stable")
+        return volumes[order], numbers[order]
+
     def initial_state(self, volumes, numbers, liquid_content: float = 0.0, porosity: float = 0.0,
                       t: float = 0.0, what: str = "initial distribution") -> State:
         """State from particle classes of solid ``volumes`` (m3) and ``numbers``, each with liquid

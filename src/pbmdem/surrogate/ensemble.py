@@ -257,6 +257,18 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         std = preds.std(axis=0, ddof=1) if len(self.estimators_) > 1 else np.zeros_like(mean)
         return mean, std
 
+    def member(self, k: int) -> "EnsembleMLPRegressorCV":
+        """A copy of the fitted ensemble that predicts with member `k` alone (0 .. n - 1)."""
+        import copy
+
+        check_is_fitted(self)
+        n = len(self.estimators_)
+        if not 0 <= int(k) < n:
+            raise ValueError(f"ensemble member {k!r}: allowed 0 .. {n - 1}")
+        out = copy.copy(self)
+        out.estimators_ = [self.estimators_[int(k)]]
+        return out
+
 
 def search_table(estimator: EnsembleMLPRegressorCV) -> pd.DataFrame:
     """One row per search candidate: hidden_layer_sizes (tuple), alpha, rmse_log10 (RMSE of the

@@ -326,3 +326,21 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
     def __call__(self, diameters, numbers, rpm: float):
         """Collision-frequency source interface of ``pbmdem.pbm`` (docs/architecture.md)."""
         return self.frequency_matrix(diameters, numbers, rpm)
+
+    @property
+    def n_members(self) -> int:
+        """Members of the ensembles (frequency and impact-velocity models have as many)."""
+        check_is_fitted(self)
+        return len(self.frequency_model_.estimators_)
+
+    def member(self, k: int) -> "CollisionSurrogate":
+        """A copy of the fitted surrogate that predicts with ensemble member `k` alone (its
+        frequency and impact-velocity networks): running the PBM once per member gives the
+        spread of PBM-ANN that the ensemble's uncertainty implies."""
+        import copy
+
+        out = copy.copy(self)
+        out.frequency_model_ = self.frequency_model_.member(k)
+        if self.velocity_model_ is not None:
+            out.velocity_model_ = self.velocity_model_.member(k)
+        return out

@@ -1,0 +1,86 @@
+"""The comparison table: PBM-ANN and PBM-constant against the replicated PBM-DEM reference.
+
+One row per validation speed (`results/report/comparison.csv`, contract in docs/validation.md):
+the d50 at the start and the end of the batch of every model (the PBM-DEM figures are the
+replicates' mean, with their spread), the relative error of d50(t) against the replicates' mean
+(largest over the batch and at its end), the largest distance of PBM-ANN's d50(t) outside the
+PBM-DEM band (`ann_d50_outside_band_max`, a fraction of d50; 0 when always inside), the wall
+times (PBM-DEM: the mean of one loop, LIGGGHTS plus PBM; PBM-ANN: its loop with the ensemble
+mean, surrogate plus PBM) and their ratio, and how often the surrogate left its training domain.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .bands import band_table, largest_outside
+from .results import SpeedResults, load_speed
+
+
+def relative_error(reference: pd.DataFrame, other: pd.DataFrame, column: str = "d50") -> tuple[float, float]:
+    """(max over time, at the end) of |other - reference| / reference on the reference's times."""
+    values = np.interp(reference.time, other.time, other[column])
+    err = np.abs(values - reference[column].to_numpy()) / reference[column].to_numpy()
+    return float(err.max()), float(err[-1])
+
+
+def bands_of(speed: SpeedResults) -> pd.DataFrame:
+    return band_table([r.summary for r in speed.dem], speed.ann.summary, speed.members, speed.constant.summary)
+
+
+def domain_counts(speed: SpeedResults) -> dict:
+    """PBM-ANN intervals with out-of-domain warnings (of all its intervals) and the constant
+    kernel's calibration warnings."""
+    ann = speed.ann.intervals
+    counts = ann["out_of_domain_count"].fillna(0) if ann is not None and "out_of_domain_count" in ann else None
+    return {
+        "ann_out_of_domain_intervals": int((counts > 0).sum()) if counts is not None else float("nan"),
+        "ann_intervals": int(len(ann)) if ann is not None else 0,
+        "ann_out_of_domain_warnings": int(counts.sum()) if counts is not None else float("nan"),
+        "constant_calibration_out_of_domain_warnings": speed.constant.timing.get("out_of_domain_count", float("nan")),
+    }
+
+
+def comparison_row(speed: SpeedResults, in_grid: bool) -> dict:
+    band = bands_of(speed)
+    mean = band.pivot(index="time", columns="statistic", values="dem_mean").reset_index()
+    ann, con = speed.ann.summary, speed.constant.summary
+    ann_max, ann_end = relative_error(mean, ann)
+    con_max, con_end = relative_error(mean, con)
+    ends = np.array([r.summary.d50.iloc[-1] for r in speed.dem])
+    dem_wall = np.array([r.timing["total_wall_time_s"] for r in speed.dem])
+    dem_liggghts = np.array([r.timing["provider_wall_time_s"] for r in speed.dem])
+    t_ann = float(speed.ann.timing["total_wall_time_s"])
+    row = {
+        "rpm": float(speed.rpm), "in_training_grid": bool(in_grid), "n_dem_replicates": len(speed.dem),
+        "d50_start_mm": 1e3 * mean.d50.iloc[0], "d50_end_dem_mm": 1e3 * ends.mean(),
+        "d50_end_dem_sd_mm": 1e3 * ends.std(ddof=1) if len(ends) > 1 else float("nan"),
+        "d50_end_dem_min_mm": 1e3 * ends.min(), "d50_end_dem_max_mm": 1e3 * ends.max(),
+        "d50_end_ann_mm": 1e3 * ann.d50.iloc[-1], "d50_end_constant_mm": 1e3 * con.d50.iloc[-1],
+        "ann_d50_rel_error_max": ann_max, "ann_d50_rel_error_end": ann_end,
+        "ann_d50_outside_band_max": largest_outside(band, "ann", "d50"),
+        "constant_d50_rel_error_max": con_max, "constant_d50_rel_error_end": con_end,
+        "constant_d50_outside_band_max": largest_outside(band, "constant", "d50"),
+        "dem_calls": int(len(speed.dem[0].intervals)) if speed.dem[0].intervals is not None else 0,
+        "pbm_dem_wall_s": float(dem_wall.mean()), "pbm_dem_liggghts_wall_s": float(dem_liggghts.mean()),
+        "pbm_ann_wall_s": t_ann, "pbm_ann_surrogate_wall_s": float(speed.ann.timing["provider_wall_time_s"]),
+        "pbm_ann_pbm_wall_s": float(speed.ann.timing["pbm_wall_time_s"]),
+        "pbm_constant_wall_s": float(speed.constant.timing["total_wall_time_s"]),
+        "wall_time_ratio_dem_over_ann": float(dem_wall.mean()) / t_ann if t_ann > 0 else float("nan"),
+        **domain_counts(speed),
+    }
+    if speed.members is not None and len(speed.members):
+        last = speed.members[speed.members.time == speed.members.time.max()]
+        row["ann_member_d50_end_min_mm"] = 1e3 * last.d50.min()
+        row["ann_member_d50_end_max_mm"] = 1e3 * last.d50.max()
+    return row
+
+
+def compare(validation_dir: str | Path, rpms, grid_rpm, replicates: int) -> pd.DataFrame:
+    """The comparison table of every validation speed (`rpms` as in the result folders)."""
+    grid = {float(r) for r in grid_rpm}
+    return pd.DataFrame([comparison_row(load_speed(validation_dir, rpm, replicates), float(rpm) in grid)
+                         for rpm in rpms])

@@ -1,0 +1,69 @@
+"""Reading the validation's results of one speed: the PBM-DEM replicates, PBM-ANN (and its
+ensemble members), PBM-constant, with errors that name the file.
+
+Layout (docs/architecture.md, "Validation"): `results/validation/rpm<rpm>/pbm_dem/rep<k>/`,
+`.../pbm_ann/` (with `members.csv`), `.../pbm_constant/`; each run folder holds summary.csv,
+bins.csv, final_bins.csv, timing.json and, for the loops, intervals.csv.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from pbmdem.readers import read_json, read_table
+
+LABELS = {"pbm_dem": "PBM-DEM", "pbm_ann": "PBM-ANN", "pbm_constant": "PBM-constant"}
+
+
+def speed_folder(validation_dir: str | Path, rpm: str) -> Path:
+    return Path(validation_dir) / f"rpm{rpm}"
+
+
+def run_folder(validation_dir: str | Path, rpm: str, method: str, replicate: int | None = None) -> Path:
+    folder = speed_folder(validation_dir, rpm) / method
+    return folder if replicate is None else folder / f"rep{replicate}"
+
+
+@dataclass
+class Run:
+    """One run of a validation model: its PBM time series, final size distribution, timing and
+    (for the coupled loops) the record of its intervals."""
+
+    summary: pd.DataFrame
+    final_bins: pd.DataFrame
+    timing: dict
+    intervals: pd.DataFrame | None
+
+
+def load_run(folder: Path, what: str) -> Run:
+    summary = read_table(folder / "summary.csv", what, columns=("time", "d10", "d50", "d90"),
+                         finite=("time", "d10", "d50", "d90"))
+    intervals = read_table(folder / "intervals.csv", what) if (folder / "intervals.csv").exists() else None
+    return Run(summary, read_table(folder / "final_bins.csv", what),
+               read_json(folder / "timing.json", what, keys=("total_wall_time_s",)), intervals)
+
+
+@dataclass
+class SpeedResults:
+    """Everything the validation computed at one speed."""
+
+    rpm: str
+    dem: list[Run]
+    ann: Run
+    constant: Run
+    members: pd.DataFrame | None
+
+
+def load_speed(validation_dir: str | Path, rpm: str, replicates: int) -> SpeedResults:
+    dem = [load_run(run_folder(validation_dir, rpm, "pbm_dem", k), f"PBM-DEM replicate {k} result")
+           for k in range(replicates)]
+    ann_dir = run_folder(validation_dir, rpm, "pbm_ann")
+    members = None
+    if (ann_dir / "members.csv").exists():
+        members = read_table(ann_dir / "members.csv", "PBM-ANN ensemble-member table",
+                             columns=("member", "time", "d10", "d50", "d90"), finite=("time", "d50"))
+    return SpeedResults(rpm, dem, load_run(ann_dir, "PBM-ANN result"),
+                        load_run(run_folder(validation_dir, rpm, "pbm_constant"), "PBM-constant result"), members)

@@ -1,6 +1,7 @@
 # Shared helpers: the operating grid, the params of the rules (the settings each stage uses, from
 # the typed config CFG) and the list of final targets.
 import os
+from pathlib import Path
 
 from pbmdem.config import rpm_text
 
@@ -78,6 +79,11 @@ def speed_files(rpm="{rpm}"):
 
 def all_speed_files():
     return [f for rpm in VAL_RPMS for f in speed_files(rpm)]
+
+
+def validation_dir_of(files):
+    """results/validation, from the first file of speed_files() (.../rpm<rpm>/pbm_dem/rep0/summary.csv)."""
+    return str(Path(files[0]).parents[3])
 
 
 def all_targets():

@@ -20,7 +20,7 @@ rule report:
     output:
         html=f"{RESULTS}/report/report.html",
     params:
-        validation_dir=f"{RESULTS}/validation",
+        validation_dir=lambda wc, input: validation_dir_of(input.runs_of_speeds),
         rpms=VAL_RPMS,
         replicates=CFG.validation.dem_replicates,
     log:

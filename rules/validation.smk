@@ -66,7 +66,7 @@ rule validation_bands:
     output:
         bands=f"{RESULTS}/validation/rpm{{rpm}}/bands.csv",
     params:
-        validation_dir=f"{RESULTS}/validation",
+        validation_dir=lambda wc, input: validation_dir_of(input),
         replicates=CFG.validation.dem_replicates,
     log:
         f"{RESULTS}/logs/validation/bands_rpm{{rpm}}.log",
@@ -86,7 +86,7 @@ rule comparison:
             category="Validation",
         ),
     params:
-        validation_dir=f"{RESULTS}/validation",
+        validation_dir=lambda wc, input: validation_dir_of(input),
         rpms=VAL_RPMS,
         grid_rpm=list(CFG.grid.impeller_rpm),
         replicates=CFG.validation.dem_replicates,

@@ -314,7 +314,7 @@ def test_deck_template_edit_reruns_every_dem_job_and_execution_settings_none(roo
     cfg["validation"]["rpm"] = [600]
     configfile = workdir / "config.yaml"
     configfile.write_text(yaml.safe_dump(cfg))
-    targets = ["results/dem/rpm600_small/rep0/collisions.csv", "results/validation/rpm600/pbm_dem/summary.csv"]
+    targets = ["results/dem/rpm600_small/rep0/collisions.csv", "results/validation/rpm600/pbm_dem/rep0/summary.csv"]
     snakemake(project, workdir, configfile, "--cores", "2", *targets)
 
     def planned(config: Path) -> dict[str, int]:
@@ -331,3 +331,46 @@ def test_deck_template_edit_reruns_every_dem_job_and_execution_settings_none(roo
     template = project / "liggghts_templates" / "granulator.in"
     template.write_text(template.read_text() + "# an edited deck\n")
     assert planned(configfile) == {"dem_point": 1, "pbm_dem_coupled": 1}
+
+
+def test_adding_the_proposed_points_removes_the_out_of_domain_intervals(tiny_workflow, root, tmp_path):
+    """Active learning end to end, on a copy of the finished tiny workflow validated at 1500 rpm,
+    beyond the grid's 600-1200 rpm: PBM-ANN is outside the surrogate's training domain (tip speed)
+    in every interval; the proposals name that speed; adding them with the fragment the workflow
+    wrote runs only the new DEM points and retrains the surrogate, and PBM-ANN at 1500 rpm is then
+    inside the domain."""
+    import json
+
+    workdir, configfile = tiny_workflow
+    copy = tmp_path / "wd"
+    shutil.copytree(workdir, copy)  # copy2: the time stamps (Snakemake's view of what is done) are kept
+    cfg = yaml.safe_load(configfile.read_text())
+    cfg["validation"]["rpm"] = [1500]
+    config = copy / "beyond.yaml"
+    config.write_text(yaml.safe_dump(cfg))
+    targets = ["results/validation/proposals.yaml", "results/validation/rpm1500/pbm_ann/intervals.csv"]
+    snakemake(root, copy, config, "--cores", "2", *targets)
+    intervals = copy / "results" / "validation" / "rpm1500" / "pbm_ann" / "intervals.csv"
+    before = pd.read_csv(intervals)
+    assert (before.out_of_domain_count > 0).all() and before.out_of_domain.str.contains("tip_speed").all()
+    table = pd.read_csv(copy / "results" / "validation" / "proposals.csv")
+    assert table.propose_speed.any() and 1500.0 in set(table.rpm)
+    fragment = copy / "results" / "validation" / "proposals.yaml"
+    grid = yaml.safe_load(fragment.read_text())["grid"]
+    assert 1500.0 in grid["impeller_rpm"]
+    planned = snakemake(root, copy, config, str(fragment), "-n", "--cores", "2", *targets, "--quiet", "rules")
+    counts = {line.split()[0]: int(line.split()[1]) for line in (planned.stdout + planned.stderr).splitlines()
+              if len(line.split()) == 2 and line.split()[1].isdigit()}
+    new_dists = yaml.safe_load(fragment.read_text()).get("size_distributions", {})
+    reps = cfg["dem"]["replicates"]
+    expected = reps * (len(grid["impeller_rpm"]) * len(grid["size_distributions"])
+                       - len(cfg["grid"]["impeller_rpm"]) * len(cfg["grid"]["size_distributions"]))
+    assert counts.get("dem_point") == expected, counts  # only the new operating points run
+    assert counts.get("pbm_dem_coupled", 0) == 0  # the reference does not depend on the grid
+    snakemake(root, copy, config, str(fragment), "--cores", "2", *targets)
+    after = pd.read_csv(intervals)
+    assert (after.out_of_domain_count == 0).all(), after.out_of_domain.tolist()
+    meta = json.loads((copy / "results" / "surrogate" / "model.json").read_text())
+    assert any(pid.startswith("rpm1500_") for pid in meta["training_point_ids"])
+    print(f"active learning: {len(new_dists)} new distribution(s), speeds {grid['impeller_rpm']}; out-of-domain "
+          f"intervals {int((before.out_of_domain_count > 0).sum())} -> {int((after.out_of_domain_count > 0).sum())}")

@@ -119,3 +119,14 @@ def test_the_fragment_is_a_valid_addition_to_the_config(tiny_config, tmp_path):
     cfg = config_of(merged)
     assert "al_rpm900_i1" in cfg.grid.size_distributions
     assert cfg.dem_point("al_rpm900_i1").sizes.diameters == (0.002, 0.0031, 0.0049)
+
+
+def test_a_failed_ensemble_member_is_reported_not_banded():
+    t = np.array([0.0, 10.0])
+    ok = summary(t, [2.0, 3.0]).assign(member=0, failed="")
+    failed = pd.DataFrame({"member": [1], "time": [np.nan], "failed": ["aggregation beyond the last bin"]})
+    members = pd.concat([ok, failed], ignore_index=True)
+    table = bands.band_table([summary(t, [2.0, 3.1])], summary(t, [2.0, 3.0]), members)
+    d50 = table[table.statistic == "d50"]
+    np.testing.assert_allclose(d50.ann_member_min, [2.0, 3.0])  # the failed member is not in the band
+    assert bands.finished_members(members).member.unique().tolist() == [0]

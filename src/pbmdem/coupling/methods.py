@@ -15,7 +15,7 @@ from pathlib import Path
 
 from pbmdem.config import CoupledLoop, DemExecution
 
-from .loop import LoopOutcome, interval_bounds, run_loop, write_outputs
+from .loop import CouplingError, LoopOutcome, interval_bounds, run_loop, write_outputs
 from .providers import DemProvider, SurrogateProvider
 from .sample import representative_sample
 
@@ -36,11 +36,16 @@ def pbm_ann(loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: str |
 def pbm_ann_members(loop: CoupledLoop, model_path: str | Path, rpm: float):
     """PBM-ANN once per ensemble member of the surrogate: one row per (member, recorded time)
     with d10, d50, d90 (m), mean liquid content and porosity, and the member's wall time (s).
-    The members' spread is PBM-ANN's uncertainty band (docs/validation.md)."""
+    The members' spread is PBM-ANN's uncertainty band (docs/validation.md). A member whose PBM
+    fails (e.g. its extrapolated frequencies grow granules beyond the grid) is kept as one row
+    with its error in `failed` and no sizes, and logged: it is reported, not dropped."""
+    import logging
     import tempfile
 
+    import numpy as np
     import pandas as pd
 
+    from pbmdem.pbm.errors import PBMError
     from pbmdem.surrogate import load_surrogate
 
     n = load_surrogate(model_path).n_members
@@ -48,12 +53,18 @@ def pbm_ann_members(loop: CoupledLoop, model_path: str | Path, rpm: float):
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(n):
             t0 = time.perf_counter()
-            outcome = pbm_ann(loop, model_path, rpm, Path(tmp) / f"member{k}", member=k)
+            try:
+                outcome = pbm_ann(loop, model_path, rpm, Path(tmp) / f"member{k}", member=k)
+            except (PBMError, CouplingError) as exc:
+                logging.getLogger(__name__).warning("PBM-ANN at rpm %g with ensemble member %d failed: %s", rpm, k, exc)
+                frames.append(pd.DataFrame({"member": [k], "time": [np.nan], "failed": [str(exc)],
+                                            "wall_time_s": [time.perf_counter() - t0]}))
+                continue
             s = outcome.result.summary()
             frames.append(pd.DataFrame({
                 "member": k, "time": s.time, "d10": s.d10, "d50": s.d50, "d90": s.d90,
                 "mean_liquid_content": s.mean_liquid_content, "mean_porosity": s.mean_porosity,
-                "out_of_domain_intervals": outcome.totals.get("out_of_domain_intervals", 0),
+                "out_of_domain_intervals": outcome.totals.get("out_of_domain_intervals", 0), "failed": "",
                 "wall_time_s": time.perf_counter() - t0}))
     return pd.concat(frames, ignore_index=True)
 

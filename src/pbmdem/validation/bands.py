@@ -49,14 +49,23 @@ def band_table(dem: list[pd.DataFrame], ann: pd.DataFrame, members: pd.DataFrame
             "dem_min": values.min(axis=0), "dem_max": values.max(axis=0),
             "ann": _on_times(ann, stat, times),
         })
-        if members is not None and len(members):
-            per = np.stack([_on_times(g, stat, times) for _, g in members.groupby("member")])
+        ok = finished_members(members)
+        if ok is not None and len(ok):
+            per = np.stack([_on_times(g, stat, times) for _, g in ok.groupby("member")])
             frame["ann_member_min"], frame["ann_member_max"] = per.min(axis=0), per.max(axis=0)
         if constant is not None:
             frame["constant"] = _on_times(constant, stat, times)
         frame["ann_outside"] = outside(frame, "ann")
         rows.append(frame)
     return pd.concat(rows, ignore_index=True)
+
+
+def finished_members(members: pd.DataFrame | None) -> pd.DataFrame | None:
+    """The rows of the ensemble members whose PBM finished (members.csv: `failed` empty)."""
+    if members is None or "failed" not in members:
+        return members
+    failed = members["failed"].fillna("").astype(str) != ""
+    return members[~failed & members["time"].notna()]
 
 
 def outside(band: pd.DataFrame, column: str) -> np.ndarray:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .bands import band_table, largest_outside
+from .bands import band_table, finished_members, largest_outside
 from .results import SpeedResults, load_speed
 
 
@@ -73,9 +73,13 @@ def comparison_row(speed: SpeedResults, in_grid: bool) -> dict:
         **domain_counts(speed),
     }
     if speed.members is not None and len(speed.members):
-        last = speed.members[speed.members.time == speed.members.time.max()]
-        row["ann_member_d50_end_min_mm"] = 1e3 * last.d50.min()
-        row["ann_member_d50_end_max_mm"] = 1e3 * last.d50.max()
+        ok = finished_members(speed.members)
+        row["ann_members"] = int(speed.members.member.nunique())
+        row["ann_members_failed"] = row["ann_members"] - int(ok.member.nunique())
+        if len(ok):
+            last = ok[ok.time == ok.time.max()]
+            row["ann_member_d50_end_min_mm"] = 1e3 * last.d50.min()
+            row["ann_member_d50_end_max_mm"] = 1e3 * last.d50.max()
     return row
 
 

@@ -37,6 +37,9 @@ from pbmdem.frequency import pair_counts, pairs_of
 #: rounding of proposed class diameters (m) and number fractions
 DIAMETER_STEP = 1e-4
 FRACTION_STEP = 1e-3
+#: two samples with the same (rounded) class diameters whose number fractions differ by less than
+#: this in every class teach the surrogate the same thing: only the first is proposed
+SIMILAR_FRACTIONS = 0.02
 
 
 @dataclass
@@ -135,7 +138,7 @@ def propose(grid: OperatingGrid, granulator: Granulator, distributions: dict, as
                 continue  # that very point is in the grid already
             seen.add(("speed", a.rpm))
         else:
-            if key in seen:
+            if any(similar(key, other) for other in seen if isinstance(other[0], tuple)):
                 continue
             seen.add(key)
             name, kind = f"al_rpm{rpm_text(a.rpm).replace('.', 'p')}_i{a.interval}", "distribution"
@@ -149,6 +152,12 @@ def propose(grid: OperatingGrid, granulator: Granulator, distributions: dict, as
     return pd.DataFrame(rows, columns=["name", "kind", "rpm", "interval", "reason", "out_of_domain_features",
                                        "ensemble_spread_log10", "diameters", "number_fractions", "propose_speed",
                                        "capped_at_granulator_limit"])
+
+
+def similar(a: tuple, b: tuple) -> bool:
+    """Two rounded distributions (diameters, fractions) with the same diameters and fractions
+    within SIMILAR_FRACTIONS of each other."""
+    return a[0] == b[0] and bool(np.all(np.abs(np.subtract(a[1], b[1])) < SIMILAR_FRACTIONS))
 
 
 def fragment(grid: OperatingGrid, proposals: pd.DataFrame) -> dict:

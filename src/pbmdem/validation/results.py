@@ -64,6 +64,6 @@ def load_speed(validation_dir: str | Path, rpm: str, replicates: int) -> SpeedRe
     members = None
     if (ann_dir / "members.csv").exists():
         members = read_table(ann_dir / "members.csv", "PBM-ANN ensemble-member table",
-                             columns=("member", "time", "d10", "d50", "d90"), finite=("time", "d50"))
+                             columns=("member", "time", "d50"))
     return SpeedResults(rpm, dem, load_run(ann_dir, "PBM-ANN result"),
                         load_run(run_folder(validation_dir, rpm, "pbm_constant"), "PBM-constant result"), members)

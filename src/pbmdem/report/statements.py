@@ -115,7 +115,7 @@ def out_of_domain(speed) -> pd.DataFrame:
             "model": "PBM-ANN (ensemble mean)", "interval": str(int(r["interval"])),
             "start (s)": number(r["t_start"], ".4g"), "end (s)": number(r["t_end"], ".4g"),
             "sample classes (mm)": _classes(r.get("class_diameters")),
-            "sample particles": number(r.get("sample_particles", float("nan")), ".0f"),
+            "sample particles (count)": number(r.get("sample_particles", float("nan")), ".0f"),
             "outside the training domain": ("yes" if count > 0 else "no") if known else "not recorded",
             "warnings (count)": number(count, ".0f") if known else "not recorded",
             "what lay outside": _messages(r.get("out_of_domain")),
@@ -127,7 +127,7 @@ def out_of_domain(speed) -> pd.DataFrame:
             k = int(g.out_of_domain_intervals.max())
             rows.append({"model": f"PBM-ANN member {int(member)}", "interval": f"all {n_intervals}",
                          "start (s)": number(g.time.min(), ".4g"), "end (s)": number(g.time.max(), ".4g"),
-                         "sample classes (mm)": "as above", "sample particles": "as above",
+                         "sample classes (mm)": "as above", "sample particles (count)": "as above",
                          "outside the training domain": f"{k} of {n_intervals} intervals",
                          "warnings (count)": "not recorded per member", "what lay outside": ""})
     timing = speed.constant.timing
@@ -137,7 +137,7 @@ def out_of_domain(speed) -> pd.DataFrame:
     rows.append({"model": "PBM-constant calibration", "interval": "initial sample",
                  "start (s)": "0", "end (s)": "0",
                  "sample classes (mm)": _classes(first.get("class_diameters")) if len(first) else "n/a",
-                 "sample particles": number(first.get("sample_particles", float("nan")), ".0f") if len(first)
+                 "sample particles (count)": number(first.get("sample_particles", float("nan")), ".0f") if len(first)
                  else "n/a",
                  "outside the training domain": ("yes" if count > 0 else "no") if known else "not recorded",
                  "warnings (count)": number(count, ".0f") if known else "not recorded",

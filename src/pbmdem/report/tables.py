@@ -141,7 +141,7 @@ def comparison_tables(table: pd.DataFrame) -> dict[str, pd.DataFrame]:
         members = (value_range(r.ann_member_d50_end_min_mm, r.ann_member_d50_end_max_mm)
                    if hasattr(r, "ann_member_d50_end_min_mm") else "n/a")
         out["d50"].append({
-            "speed (rpm)": speed, "in DEM training grid": yes_no(r.in_training_grid),
+            "speed (rpm)": speed, "in DEM training grid (yes/no)": yes_no(r.in_training_grid),
             "d50 at start (mm)": number(r.d50_start_mm, ".3f"),
             "PBM-DEM d50 at end, mean +- SD (mm)": _mean_sd(r.d50_end_dem_mm, r.d50_end_dem_sd_mm, r.n_dem_replicates),
             "PBM-DEM replicates' range (mm)": value_range(r.d50_end_dem_min_mm, r.d50_end_dem_max_mm),
@@ -159,7 +159,7 @@ def comparison_tables(table: pd.DataFrame) -> dict[str, pd.DataFrame]:
             "PBM-constant d50 outside the band, largest (%)": percent(r.constant_d50_outside_band_max),
         })
         out["cost"].append({
-            "speed (rpm)": speed, "DEM calls per PBM-DEM loop": str(int(r.dem_calls)),
+            "speed (rpm)": speed, "DEM calls per PBM-DEM loop (count)": str(int(r.dem_calls)),
             "PBM-DEM wall time, mean of a loop (s)": number(r.pbm_dem_wall_s, ".4g"),
             "of it LIGGGHTS (s)": number(r.pbm_dem_liggghts_wall_s, ".4g"),
             "PBM-ANN wall time (s)": number(r.pbm_ann_wall_s, ".3g"),

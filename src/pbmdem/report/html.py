@@ -187,7 +187,8 @@ def build_report(*, html_path, tables: dict, speeds: dict, comparison, sweep, sw
         "Sizes in mm; wall times measured in this run on this machine.</p>",
         "<h2>Targets</h2>", _verdicts(target_sentences(table)), table_html(shown["targets"], 3),
         "<h2>Surrogate training domain</h2>",
-        "<p><b>Where PBM-ANN's frequencies are extrapolations.</b></p><ul>"
+        "<p>Where PBM-ANN used the surrogate outside its training domain its frequencies are extrapolations; "
+        "every coupling interval is accounted for:</p><ul>"
         + "".join(f"<li>{escape(out_of_domain_sentence(rpm, frame))}</li>" for rpm, frame in domain.items())
         + "</ul>",
         "<h2>Process settings</h2>", table_html(shown["settings"]), table_html(shown["speeds"]),

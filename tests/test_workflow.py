@@ -220,8 +220,8 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
     assert sorted(comparison.rpm) == sorted(float(r) for r in cfg["validation"]["rpm"])
     assert (comparison.dem_calls == cfg["validation"]["coupling_intervals"]).all()
     assert (comparison.wall_time_ratio_dem_over_ann > 1).all()
-    replicates = sorted((res / "validation" / f"rpm{rpm}" / "pbm_dem").glob("rep*")
-                        for rpm in cfg["validation"]["rpm"])
+    replicates = [sorted((res / "validation" / f"rpm{rpm}" / "pbm_dem").glob("rep*"))
+                  for rpm in cfg["validation"]["rpm"]]
     n_replicates = load_config(configfile).validation.dem_replicates
     assert [len(r) for r in replicates] == [n_replicates] * len(cfg["validation"]["rpm"])
     for rep in (r for speed in replicates for r in speed):

@@ -104,3 +104,109 @@ def all_targets():
 
 # stages append their final outputs here
 extra_targets = []
+
+
+# --- the report (rules/report.smk): its files, and registering them with Snakemake's report()
+from pbmdem.report.provenance import settings_mapping
+
+REPORT = f"{RESULTS}/report"
+
+
+def speed_report_files(rpm="{rpm}"):
+    """The report files of one validation speed: name -> path."""
+    folder = f"{REPORT}/rpm{rpm}"
+    return {
+        "sizes": f"{folder}/size_statistics.png",
+        "psd": f"{folder}/psd_evolution.png",
+        "liquid": f"{folder}/liquid_porosity.png",
+        "frequency": f"{folder}/collision_frequency.png",
+        "domain_csv": f"{folder}/out_of_domain.csv",
+        "domain_html": f"{folder}/out_of_domain.html",
+    }
+
+
+def table_files(*names):
+    """<name>_csv and <name>_html of display tables in results/report/tables/."""
+    return {
+        f"{name}_{kind}": f"{REPORT}/tables/{name}.{kind}"
+        for name in names
+        for kind in ("csv", "html")
+    }
+
+
+def registered(path, caption, category, subcategory=None, **labels):
+    """`path` registered with Snakemake's report (caption workflow/report/<caption>.rst)."""
+    return report(
+        path,
+        caption=f"../workflow/report/{caption}.rst",
+        category=category,
+        subcategory=subcategory,
+        labels=labels or None,
+    )
+
+
+def registered_tables(names, category, subcategory=None):
+    """table_files(*names), each CSV and HTML registered (caption <name>.rst)."""
+    return {
+        key: registered(
+            path,
+            key.rsplit("_", 1)[0],
+            category,
+            subcategory,
+            table=key.rsplit("_", 1)[0].replace("_", " "),
+            format=key.rsplit("_", 1)[1].upper(),
+        )
+        for key, path in table_files(*names).items()
+    }
+
+
+SPEED_CAPTIONS = {
+    "sizes": ("size_statistics", "d10, d50, d90 vs time"),
+    "psd": ("psd_evolution", "mass size distribution over the batch"),
+    "liquid": ("liquid_porosity", "liquid content and porosity vs time"),
+    "frequency": ("collision_frequency", "collision frequency per interval"),
+    "domain_csv": ("out_of_domain", "surrogate domain, interval by interval (CSV)"),
+    "domain_html": ("out_of_domain", "surrogate domain, interval by interval"),
+}
+
+
+def validation_dir_of_bands(wildcards, input):
+    """results/validation, from .../rpm<rpm>/bands.csv."""
+    return os.path.dirname(os.path.dirname(input.bands))
+
+
+REPORT_TABLES = (
+    "settings",
+    "speeds",
+    "provenance",
+    "targets",
+    "comparison_d50",
+    "comparison_accuracy",
+    "comparison_cost",
+    "comparison_domain",
+)
+
+
+def report_inputs(wildcards):
+    """Every file the page shows: the display tables (table_<name>), the files of each validation
+    speed (speed<k>_<name>, k in the order of validation.rpm) and the workflow's own tables and
+    figures."""
+    files = {
+        "runs": f"{RESULTS}/dem/runs.csv",
+        "collisions": f"{RESULTS}/dem/collisions.csv",
+        "speed_response": f"{RESULTS}/dem/speed_response.csv",
+        "flow_development": f"{RESULTS}/dem/flow_development.csv",
+        "speed_plot": f"{RESULTS}/dem/speed_response.png",
+        "velocity_plot": f"{RESULTS}/dem/impact_velocity.png",
+        "metrics": f"{RESULTS}/surrogate/metrics.csv",
+        "parity": f"{RESULTS}/surrogate/parity.png",
+        "metadata": f"{RESULTS}/surrogate/model.json",
+        "sweep": f"{RESULTS}/validation/rpm_sweep.csv",
+        "sweep_plot": f"{RESULTS}/validation/rpm_sweep.png",
+        "proposals": f"{RESULTS}/validation/proposals.csv",
+        "comparison": f"{REPORT}/comparison.csv",
+    }
+    files.update({f"table_{name}": f"{REPORT}/tables/{name}.csv" for name in REPORT_TABLES})
+    for k, rpm in enumerate(VAL_RPMS):
+        files.update({f"speed{k}_{name}": path for name, path in speed_report_files(rpm).items()})
+    return files

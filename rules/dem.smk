@@ -38,7 +38,11 @@ rule collision_tables:
         walls=f"{RESULTS}/dem/wall_collisions.csv",
         velocities=f"{RESULTS}/dem/impact_velocity.csv",
         replicates=f"{RESULTS}/dem/collisions_replicates.csv",
-        runs=f"{RESULTS}/dem/runs.csv",
+        runs=report(
+            f"{RESULTS}/dem/runs.csv",
+            caption="../workflow/report/runs.rst",
+            category="DEM",
+        ),
     log:
         f"{RESULTS}/logs/dem/collision_tables.log",
     conda:

@@ -1,34 +1,135 @@
-# The report of the study: results/report/report.html, made from the workflow's tables and figures.
+# The report of the study. Every figure and table is registered with report() (captions in
+# workflow/report/*.rst), so that `snakemake --report report.zip` holds the whole study;
+# results/report/report.html is the same content as one self-contained page, assembled from the
+# same files. Rules: report_speed (figures and out-of-domain table of one validation speed),
+# report_settings (process settings, impeller speeds), report_tables (comparison in display
+# form, targets), report_provenance (config hashes, git commit, versions) and report (the page).
+report: "../workflow/report/workflow.rst"
+
+
+rule report_speed:
+    input:
+        runs=lambda wc: speed_files(wc.rpm),
+        bands=f"{RESULTS}/validation/rpm{{rpm}}/bands.csv",
+        model=MODEL,
+    output:
+        **{
+            key: registered(
+                path,
+                SPEED_CAPTIONS[key][0],
+                "Validation",
+                "{rpm} rpm",
+                result=SPEED_CAPTIONS[key][1],
+            )
+            for key, path in speed_report_files().items()
+        },
+    log:
+        f"{RESULTS}/logs/report/speed_rpm{{rpm}}.log",
+    conda:
+        "../envs/validation.yaml"
+    params:
+        validation_dir=validation_dir_of_bands,
+        replicates=CFG.validation.dem_replicates,
+        process=CFG.pbm.process.to_dict(),
+    script:
+        "../workflow/scripts/report_speed.py"
+
+
+rule report_settings:
+    output:
+        **registered_tables(("settings", "speeds"), "Settings and provenance"),
+    log:
+        f"{RESULTS}/logs/report/settings.log",
+    conda:
+        "../envs/validation.yaml"
+    params:
+        settings={
+            "pbm": CFG.pbm.to_dict(),
+            "granulator": CFG.granulator.to_dict(),
+            "feed_name": CFG.validation.distribution,
+            "feed": CFG.distribution(CFG.validation.distribution).to_dict(),
+            "coupling_intervals": CFG.validation.coupling_intervals,
+            "dem_replicates": CFG.validation.dem_replicates,
+            "dem_sampling_time": CFG.validation.dem_sampling_time,
+            "validation_rpm": list(CFG.validation.rpm),
+            "grid_rpm": list(CFG.grid.impeller_rpm),
+        },
+    script:
+        "../workflow/scripts/report_settings.py"
+
+
+rule report_tables:
+    input:
+        comparison=f"{REPORT}/comparison.csv",
+    output:
+        **registered_tables(("targets",), "Report"),
+        **registered_tables(
+            ("comparison_d50", "comparison_accuracy", "comparison_cost", "comparison_domain"),
+            "Validation",
+            "comparison",
+        ),
+    log:
+        f"{RESULTS}/logs/report/tables.log",
+    conda:
+        "../envs/validation.yaml"
+    script:
+        "../workflow/scripts/report_tables.py"
+
+
+# The configuration hash is read from the job's completed config (like the execution settings of a
+# DEM job); the params are the settings without the execution settings, which rerun nothing. The
+# results are inputs, so that the table (git commit, versions) is rewritten whenever they are.
+rule report_provenance:
+    input:
+        runs=f"{RESULTS}/dem/runs.csv",
+        metadata=f"{RESULTS}/surrogate/model.json",
+        results=[
+            f"{REPORT}/comparison.csv",
+            f"{RESULTS}/surrogate/metrics.csv",
+            f"{RESULTS}/validation/rpm_sweep.csv",
+            f"{RESULTS}/validation/proposals.csv",
+        ],
+    output:
+        csv=registered(
+            f"{REPORT}/tables/provenance.csv",
+            "provenance",
+            "Settings and provenance",
+            table="provenance",
+            format="CSV",
+        ),
+        html=registered(
+            f"{REPORT}/tables/provenance.html",
+            "provenance",
+            "Settings and provenance",
+            table="provenance",
+            format="HTML",
+        ),
+    log:
+        f"{RESULTS}/logs/report/provenance.log",
+    conda:
+        "../envs/validation.yaml"
+    params:
+        settings=settings_mapping(CFG.to_dict()),
+        basedir=workflow.basedir,
+    script:
+        "../workflow/scripts/report_provenance.py"
 
 
 rule report:
     input:
-        runs=f"{RESULTS}/dem/runs.csv",
-        collisions=f"{RESULTS}/dem/collisions.csv",
-        speed_response=f"{RESULTS}/dem/speed_response.csv",
-        flow_development=f"{RESULTS}/dem/flow_development.csv",
-        speed_plot=f"{RESULTS}/dem/speed_response.png",
-        velocity_plot=f"{RESULTS}/dem/impact_velocity.png",
-        metrics=f"{RESULTS}/surrogate/metrics.csv",
-        parity=f"{RESULTS}/surrogate/parity.png",
-        metadata=f"{RESULTS}/surrogate/model.json",
-        model=MODEL,
-        sweep=f"{RESULTS}/validation/rpm_sweep.csv",
-        sweep_plot=f"{RESULTS}/validation/rpm_sweep.png",
-        comparison=f"{RESULTS}/report/comparison.csv",
-        runs_of_speeds=all_speed_files(),
+        unpack(report_inputs),
     output:
-        html=f"{RESULTS}/report/report.html",
-    params:
-        validation_dir=lambda wc, input: validation_dir_of(input.runs_of_speeds),
-        rpms=VAL_RPMS,
-        replicates=CFG.validation.dem_replicates,
+        html=registered(
+            f"{REPORT}/report.html", "report", "Report", result="the whole report as one page"
+        ),
     log:
         f"{RESULTS}/logs/report.log",
     conda:
         "../envs/validation.yaml"
+    params:
+        rpms=VAL_RPMS,
     script:
         "../workflow/scripts/report.py"
 
 
-extra_targets.append(f"{RESULTS}/report/report.html")
+extra_targets.append(f"{REPORT}/report.html")

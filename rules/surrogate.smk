@@ -10,8 +10,16 @@ rule train_surrogate:
     output:
         model=MODEL,
         metadata=f"{RESULTS}/surrogate/model.json",
-        metrics=f"{RESULTS}/surrogate/metrics.csv",
-        parity=f"{RESULTS}/surrogate/parity.png",
+        metrics=report(
+            f"{RESULTS}/surrogate/metrics.csv",
+            caption="../workflow/report/surrogate_metrics.rst",
+            category="Surrogate",
+        ),
+        parity=report(
+            f"{RESULTS}/surrogate/parity.png",
+            caption="../workflow/report/parity.rst",
+            category="Surrogate",
+        ),
     params:
         training=lambda wildcards: CFG.surrogate_training().to_dict(),
     log:

@@ -111,7 +111,7 @@ def test_no_import_circles():
     assert not cycles, "import circles: " + "; ".join(" -> ".join(c) for c in cycles)
 
 
-@pytest.mark.parametrize("package", ["dem", "pbm", "surrogate", "coupling", "validation", "config"])
+@pytest.mark.parametrize("package", ["dem", "pbm", "surrogate", "coupling", "validation", "config", "report"])
 def test_stages_are_packages_with_one_concept_per_module(package):
     folder = SRC / "pbmdem" / package
     assert (folder / "__init__.py").exists()

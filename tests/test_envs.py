@@ -29,7 +29,10 @@ STAGE_MODULES = {
             "pbmdem.dem.speed_response"],
     "pbm": ["pbmdem.pbm", "pbmdem.pbm.setup", "pbmdem.pbm.results", "pbmdem.pbm.kernels"],
     "surrogate": ["pbmdem.surrogate", "pbmdem.surrogate.train", "pbmdem.surrogate.plots"],
-    "validation": ["pbmdem.coupling", "pbmdem.coupling.sweep", "pbmdem.report", "pbmdem.surrogate",
+    "validation": ["pbmdem.coupling", "pbmdem.coupling.sweep", "pbmdem.report", "pbmdem.report.outputs",
+                   "pbmdem.report.figures", "pbmdem.report.frequencies", "pbmdem.report.html",
+                   "pbmdem.report.provenance", "pbmdem.report.statements", "pbmdem.report.tables",
+                   "pbmdem.validation.results", "pbmdem.surrogate",
                    "pbmdem.pbm.setup", "pbmdem.dem", "pbmdem.dem.collisions", "pbmdem.dem.vtk_series"],
 }
 

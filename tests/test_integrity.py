@@ -276,7 +276,10 @@ def test_pbm_cli_with_the_ann_kernel_reports_out_of_domain_use(small_surrogate, 
 def test_validation_loops_log_count_and_report_out_of_domain_use(small_surrogate, tiny_config, tmp_path, caplog):
     import logging
 
-    from pbmdem import coupling, report
+    from pbmdem import coupling
+    from pbmdem.report.statements import out_of_domain, out_of_domain_sentence
+    from pbmdem.validation.comparison import domain_counts
+    from pbmdem.validation.results import SpeedResults, load_run
 
     vdir = tmp_path / "validation"
     caplog.set_level(logging.INFO, logger="pbmdem")
@@ -294,11 +297,13 @@ def test_validation_loops_log_count_and_report_out_of_domain_use(small_surrogate
     text = caplog.text
     assert "surrogate out of its training domain" in text  # logged as they happen
     assert f"interval {n} of {n}" in text and "PBM wall time" in text and "out-of-domain" in text
-    data = {m: report.load_method(vdir, "5000", m) for m in ("pbm_ann", "pbm_constant")}
-    counts = report.domain_counts(data)
+    speed = SpeedResults("5000", [], load_run(vdir / "rpm5000" / "pbm_ann", "PBM-ANN result"),
+                         load_run(vdir / "rpm5000" / "pbm_constant", "PBM-constant result"), None)
+    counts = domain_counts(speed)
     assert counts["ann_out_of_domain_intervals"] == n and counts["constant_calibration_out_of_domain_warnings"] > 0
-    statement = report.domain_statement(__import__("pandas").DataFrame([counts]), vdir, ["5000"])
-    assert "outside its training domain" in statement and f"in {n} of {n} intervals" in statement
+    statement = out_of_domain_sentence("5000", out_of_domain(speed))
+    assert "outside its training domain" in statement and f"in {n} of {n} coupling intervals" in statement
+    assert "calibration sample was outside it" in statement
 
 
 # ----------------------------------------------------------------------------- defect 9: resume after kill -9
@@ -415,9 +420,9 @@ def test_bad_collision_table_for_the_pbm_names_the_file(tmp_path, text):
 
 
 def test_bad_tables_and_summaries_name_the_file(tmp_path):
-    from pbmdem import report
     from pbmdem.readers import InputFileError
     from pbmdem.surrogate.train import train_and_report
+    from pbmdem.validation.results import load_run
 
     bad = _write(tmp_path / "bad.csv", "x,y\n1,2\n")
     with pytest.raises(InputFileError, match=re.escape(str(bad)) + ".*point_id"):
@@ -429,14 +434,14 @@ def test_bad_tables_and_summaries_name_the_file(tmp_path):
         run_table([empty], tmp_path / "runs.csv")
     folder = tmp_path / "v" / "rpm600" / "pbm_ann"
     folder.mkdir(parents=True)
-    _write(folder / "summary.csv", "time,d50\n0,0.001\n1,nan\n")
+    _write(folder / "summary.csv", "time,d10,d50,d90\n0,0.001,0.001,0.001\n1,0.001,nan,0.002\n")
     _write(folder / "final_bins.csv", "diameter,mass_fraction\n0.001,1\n")
     _write(folder / "timing.json", "{}")
     with pytest.raises(InputFileError, match=re.escape(str(folder / "summary.csv")) + ".*d50.*row 2"):
-        report.load_method(tmp_path / "v", "600", "pbm_ann")
-    _write(folder / "summary.csv", "time,d50\n0,0.001\n1,0.002\n")
+        load_run(folder, "PBM-ANN result")
+    _write(folder / "summary.csv", "time,d10,d50,d90\n0,0.001,0.001,0.001\n1,0.001,0.002,0.002\n")
     with pytest.raises(InputFileError, match=re.escape(str(folder / "timing.json")) + ".*total_wall_time_s"):
-        report.load_method(tmp_path / "v", "600", "pbm_ann")
+        load_run(folder, "PBM-ANN result")
 
 
 @pytest.mark.parametrize("edit", ["unknown_param", "missing_field", "missing_param"])

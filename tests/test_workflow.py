@@ -195,6 +195,7 @@ def test_a_failed_point_keeps_the_finished_ones(root, tmp_path):
 def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
     """Downstream of the real DEM tables: the surrogate is trained and evaluated on held-out runs,
     the PBM runs per grid point, the coupled loops ran LIGGGHTS, and the report has its numbers."""
+    from pbmdem.config import load_config
     from pbmdem.surrogate import load_surrogate
 
     workdir, configfile = tiny_workflow
@@ -219,11 +220,15 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
     assert sorted(comparison.rpm) == sorted(float(r) for r in cfg["validation"]["rpm"])
     assert (comparison.dem_calls == cfg["validation"]["coupling_intervals"]).all()
     assert (comparison.wall_time_ratio_dem_over_ann > 1).all()
-    for rpm in cfg["validation"]["rpm"]:
-        intervals = pd.read_csv(res / "validation" / f"rpm{rpm}" / "pbm_dem" / "intervals.csv")
-        assert (intervals.dem_collisions > 0).all()
+    replicates = [sorted((res / "validation" / f"rpm{rpm}" / "pbm_dem").glob("rep*"))
+                  for rpm in cfg["validation"]["rpm"]]
+    n_replicates = load_config(configfile).validation.dem_replicates
+    assert [len(r) for r in replicates] == [n_replicates] * len(cfg["validation"]["rpm"])
+    for rep in (r for speed in replicates for r in speed):
+        assert (pd.read_csv(rep / "intervals.csv").dem_collisions > 0).all(), rep
     html = (res / "report" / "report.html").read_text()
-    assert "PBM-ANN vs coupled PBM-DEM" in html and html.count("data:image/png;base64,") >= 6
+    assert "PBM-ANN against the coupled PBM-DEM model" in html
+    assert html.count("data:image/png;base64,") == 4 * len(cfg["validation"]["rpm"]) + 4  # + sweep, parity, DEM x2
     assert "encounter rate against impeller speed" in html
     response = pd.read_csv(res / "dem" / "speed_response.csv")
     assert len(response) == len(cfg["grid"]["impeller_rpm"]) * len(cfg["grid"]["size_distributions"])
@@ -232,6 +237,79 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
     assert (response.encounters_per_particle_per_s_se > 0).all()
     flow = pd.read_csv(res / "dem" / "flow_development.csv")
     assert set(flow.columns) >= {"half_difference", "half_difference_se", "within_error"}
+
+
+REPORT_FIGURES = ("size_statistics.png", "psd_evolution.png", "liquid_porosity.png", "collision_frequency.png")
+REPORT_TABLES = ("settings", "speeds", "provenance", "targets", "comparison_d50", "comparison_accuracy",
+                 "comparison_cost", "comparison_domain")
+
+
+def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
+    """`snakemake --report report.zip` of the finished tiny workflow holds every figure and table of
+    the study (each validation speed's figures and out-of-domain table, the settings, provenance,
+    targets and comparison tables, the DEM and surrogate results, the page report.html), with their
+    captions rendered."""
+    import zipfile
+    from collections import Counter
+
+    from pbmdem.config import load_config
+
+    workdir, configfile = tiny_workflow
+    cfg = yaml.safe_load(configfile.read_text())
+    archive = tmp_path / "report.zip"
+    snakemake(root, workdir, configfile, "--report", str(archive))
+    with zipfile.ZipFile(archive) as z:
+        raw = {Path(n).name: n for n in z.namelist() if "/data/raw/" in n}
+        files = Counter(Path(n).name for n in z.namelist() if "/data/raw/" in n)
+        index = z.read("report/report.html").decode()
+        settings = z.read(raw["settings.html"]).decode()
+        page = z.read(raw["report.html"])
+    speeds = len(cfg["validation"]["rpm"])
+    for name in (*REPORT_FIGURES, "out_of_domain.csv", "out_of_domain.html"):
+        assert files[name] == speeds, (name, files)
+    for name in REPORT_TABLES:
+        assert files[f"{name}.csv"] == 1 and files[f"{name}.html"] == 1, (name, files)
+    for name in ("comparison.csv", "proposals.csv", "rpm_sweep.png", "speed_response.png", "impact_velocity.png",
+                 "parity.png", "metrics.csv", "runs.csv", "report.html"):
+        assert files[name] == 1, (name, files)
+    assert page == (workdir / "results" / "report" / "report.html").read_bytes()
+    assert "aggregation rate constant beta0" in settings and "<table" in settings
+    # the captions, with their wildcards and params filled in, and the workflow description
+    flat = re.sub(r"(\\n|\s)+", " ", index)
+    replicates = load_config(configfile).validation.dem_replicates
+    for rpm in cfg["validation"]["rpm"]:
+        assert f"against time (s) at {rpm:g} rpm. Grey: the PBM-DEM band, the envelope (min-max) of {replicates} " \
+               "coupled PBM-DEM loops" in flat, rpm
+        assert f"Where PBM-ANN used the surrogate outside its training domain at {rpm:g} rpm" in flat
+    for phrase in ("Every impeller speed of the DEM training grid", "Where the results come from.",
+                   "The targets of the validation at every speed", "PBM-ANN against the coupled PBM-DEM model of",
+                   "The surrogate on DEM runs it never saw", "The whole report as one self-contained page"):
+        assert phrase in flat, phrase
+
+
+def test_report_provenance_of_the_tiny_workflow(tiny_workflow, root):
+    """The provenance table: the config hash is Config.sha256() of the run's config, the settings
+    hash that without the execution settings, the git commit of the workflow (or its stated
+    absence), and the LIGGGHTS version of the DEM runs' logs."""
+    from pbmdem.config import load_config
+    from pbmdem.report.provenance import NOT_GIT, settings_mapping, sha256_of
+
+    workdir, configfile = tiny_workflow
+    table = pd.read_csv(workdir / "results" / "report" / "tables" / "provenance.csv").set_index("quantity")["value"]
+    cfg = load_config(configfile)
+    assert table["config sha256"] == cfg.sha256()
+    assert table["settings sha256"] == sha256_of(settings_mapping(cfg.to_dict()))
+    head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True)
+    if head.returncode == 0:
+        assert table["git commit"] == head.stdout.strip()
+        assert table["git working tree"] in ("clean", "uncommitted changes to tracked files")
+    else:
+        assert table["git commit"] == NOT_GIT
+    logs = sorted((workdir / "results" / "dem").glob("*/rep*/log.liggghts"))
+    header = re.fullmatch(r"LIGGGHTS \(Version (.+)\)", logs[0].read_text().splitlines()[0].strip())
+    assert header, logs[0]
+    assert table["LIGGGHTS"] == f"{header.group(1)} ({len(logs)} of {len(logs)} runs)"
+    assert table["snakemake"] == __import__("importlib.metadata").metadata.version("snakemake")
 
 
 @pytest.mark.parametrize("kernel", ["constant", "table", "table_stokes", "ann"])

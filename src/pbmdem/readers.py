@@ -18,11 +18,12 @@ class InputFileError(ValueError):
     """A file read by pbmdem is missing or malformed; the message names the file."""
 
 
-def read_table(path: str | Path, what: str = "table", *, columns=(), finite=()) -> pd.DataFrame:
-    """A CSV table; `columns` must be present, the numeric `finite` columns must hold finite numbers."""
+def read_table(path: str | Path, what: str = "table", *, columns=(), finite=(), **options) -> pd.DataFrame:
+    """A CSV table; `columns` must be present, the numeric `finite` columns must hold finite numbers.
+    `options` go to `pandas.read_csv` (e.g. dtype=str, keep_default_na=False for a table of text)."""
     path = Path(path)
     try:
-        frame = pd.read_csv(path)
+        frame = pd.read_csv(path, **options)
     except FileNotFoundError:
         raise InputFileError(f"{what} {path} does not exist") from None
     except pd.errors.EmptyDataError:

@@ -1,25 +1,21 @@
-"""Snakemake rule report: the self-contained HTML report (thin)."""
+"""Snakemake rule report: the self-contained results/report/report.html from the registered files (thin)."""
 
-from pbmdem import report
+import logging
 
-report.build_report(
-    validation_dir=snakemake.params.validation_dir,  # noqa: F821
-    rpms=snakemake.params.rpms,  # noqa: F821
-    replicates=snakemake.params.replicates,  # noqa: F821
-    runs=snakemake.input.runs,  # noqa: F821
-    collisions=snakemake.input.collisions,  # noqa: F821
-    metrics=snakemake.input.metrics,  # noqa: F821
-    parity=snakemake.input.parity,  # noqa: F821
-    metadata=snakemake.input.metadata,  # noqa: F821
-    model=snakemake.input.model,  # noqa: F821
-    sweep=snakemake.input.sweep,  # noqa: F821
-    sweep_plot=snakemake.input.sweep_plot,  # noqa: F821
-    comparison=snakemake.input.comparison,  # noqa: F821
-    html=snakemake.output.html,  # noqa: F821
-    speed_study={
-        "table": snakemake.input.speed_response,  # noqa: F821
-        "flow": snakemake.input.flow_development,  # noqa: F821
-        "plot": snakemake.input.speed_plot,  # noqa: F821
-        "velocity_plot": snakemake.input.velocity_plot,  # noqa: F821
-    },
-)
+from pbmdem.report.html import SPEED_FIGURES, build_report
+
+sm = snakemake  # noqa: F821
+logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+                    handlers=[logging.FileHandler(sm.log[0]), logging.StreamHandler()])
+logging.captureWarnings(True)
+tables = ("settings", "speeds", "provenance", "targets", "comparison_d50", "comparison_accuracy", "comparison_cost",
+          "comparison_domain")
+speeds = {rpm: {**{key: sm.input[f"speed{k}_{key}"] for key in SPEED_FIGURES},
+                "out_of_domain": sm.input[f"speed{k}_domain_csv"]}
+          for k, rpm in enumerate(sm.params.rpms)}
+build_report(html_path=sm.output.html, tables={name: sm.input[f"table_{name}"] for name in tables}, speeds=speeds,
+             comparison=sm.input.comparison, sweep=sm.input.sweep, sweep_plot=sm.input.sweep_plot,
+             metrics=sm.input.metrics, parity=sm.input.parity, metadata=sm.input.metadata, runs=sm.input.runs,
+             collisions=sm.input.collisions, proposals=sm.input.proposals,
+             speed_study={"table": sm.input.speed_response, "flow": sm.input.flow_development,
+                          "plot": sm.input.speed_plot, "velocity_plot": sm.input.velocity_plot})

@@ -34,6 +34,8 @@ _ERROR_LINE = re.compile(r"^(ERROR|ERROR on proc \d+).*$", re.MULTILINE)
 _LOST = re.compile(r"Lost atoms|lost atoms", re.IGNORECASE)
 _FORCED_RESTART = re.compile(r"Forced restart written")
 _DUMP_FRAME = re.compile(rb"^ITEM: TIMESTEP\n(\d+)\n", re.MULTILINE)
+#: the header line of a LIGGGHTS log, e.g. "LIGGGHTS (Version LIGGGHTS-PUBLIC 3.8.0, compiled ...)"
+_VERSION_LINE = re.compile(r"^LIGGGHTS \(Version (?P<version>.+)\)\s*$")
 
 
 class LiggghtsError(RuntimeError):
@@ -238,6 +240,23 @@ def check_finished(workdir: str | Path, total_steps: int, dumps: dict[str, tuple
                             f"{found[-1] if found else None}, the plan has {frames} up to step {last_step}")
     if problems:
         record_crash(workdir, problems, last_thermo_step=last, planned_steps=total_steps)
+
+
+def version_of_log(log: str | Path) -> str:
+    """The engine version from the header line "LIGGGHTS (Version ...)" of a LIGGGHTS log
+    (InputFileError naming the log if it has no such line in its first lines)."""
+    from pbmdem.readers import InputFileError
+
+    path = Path(log)
+    try:
+        with path.open(encoding="utf-8", errors="replace") as f:
+            for _, line in zip(range(50), f):
+                match = _VERSION_LINE.match(line.strip())
+                if match:
+                    return match.group("version").strip()
+    except OSError as exc:
+        raise InputFileError(f"LIGGGHTS log {path} cannot be read: {exc}") from None
+    raise InputFileError(f"LIGGGHTS log {path}: no header line 'LIGGGHTS (Version ...)' in its first 50 lines")
 
 
 def thermo_table(log: str | Path) -> dict[str, list[float]]:

@@ -174,6 +174,7 @@ def _run_in(point: DemPoint, plan: DemPlan, run_dir: Path, final_dir: Path, exec
         "point_id": plan.point_id, "rpm": plan.rpm, "distribution": plan.distribution,
         "n_particles": plan.n_particles, "timestep": plan.timestep,
         "steps": plan.total_steps, "mpi_ranks": execution.mpi_ranks,
+        "liggghts_version": engine.version_of_log(result.log),
         "particle_steps": plan.particle_steps, "liggghts_wall_time_s": result.wall_time,
         "particle_steps_per_s": plan.particle_steps / result.wall_time,
         "parse_time_s": parse_time, "parse_cost_ratio": parse_time / result.wall_time,

@@ -1,0 +1,242 @@
+"""The figures of one validation speed (matplotlib, Agg backend; sizes in mm, times in s).
+
+* `size_bands`: d10, d50 and d90 against time: the PBM-DEM replicate band (envelope of the
+  `validation.dem_replicates` loops) with its mean, the PBM-ANN ensemble-member band with the
+  ensemble-mean PBM-ANN, and PBM-constant (from the speed's `bands.csv`);
+* `psd_evolution`: the mass density per ln d at the start, the start, middle and end of the liquid
+  addition and the end of the batch, for PBM-DEM replicate 0, PBM-ANN and PBM-constant;
+* `liquid_porosity`: the mean liquid content L/S and the mean porosity against time (bands as above);
+* `collision_frequency`: the pair-weighted mean collision frequency of every coupling interval, and
+  the surrogate's c_ij against the DEM's on PBM-DEM's own samples.
+
+The liquid-addition window is shaded in every time plot. `save` writes a figure atomically.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pbmdem.atomic import atomic_path
+from pbmdem.readers import InputFileError
+
+from .display import MM, PERCENT
+
+STYLES = {
+    "PBM-DEM": dict(color="black", lw=2.0),
+    "PBM-ANN": dict(color="tab:orange", ls="--", lw=2.0),
+    "PBM-constant": dict(color="tab:blue", ls=":", lw=2.0),
+}
+BAND = {"PBM-DEM": dict(color="0.75", alpha=0.8), "PBM-ANN": dict(color="tab:orange", alpha=0.25)}
+SPRAY = dict(color="tab:cyan", alpha=0.10, lw=0)
+STATISTICS = ("d10", "d50", "d90")
+DPI = 110
+
+
+def pyplot():
+    """matplotlib.pyplot on the Agg backend (no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save(fig, path: str | Path) -> Path:
+    """Write `fig` to `path` (format from the suffix) atomically and close it."""
+    plt = pyplot()
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=DPI)
+    finally:
+        plt.close(fig)
+    return Path(path)
+
+
+def _spray(ax, process) -> None:
+    ax.axvspan(process.spray_start, process.spray_end, **SPRAY, label="liquid addition")
+
+
+def _column(frame: pd.DataFrame, name: str, what: str) -> np.ndarray:
+    if name not in frame.columns:
+        raise InputFileError(f"{what}: missing column {name!r}; present: {list(frame.columns)}")
+    return frame[name].to_numpy(float)
+
+
+def _plain_log(ax, axes: str = "x") -> None:
+    """Tick labels of log axes as plain numbers (2, 3, 4 rather than 2 x 10^0)."""
+    from matplotlib.ticker import FuncFormatter
+
+    plain = FuncFormatter(lambda v, _: f"{v:g}")
+    for name in axes:
+        axis = getattr(ax, f"{name}axis")
+        axis.set_major_formatter(plain)
+        axis.set_minor_formatter(plain)
+
+
+def _figure_legend(fig, ax, ncol: int = 4) -> None:
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
+
+
+def size_bands(bands: pd.DataFrame, process, rpm: str, what: str = "bands table"):
+    """d10/d50/d90 (mm) against time (s), one panel each, from a speed's bands.csv."""
+    plt = pyplot()
+    for name in ("statistic", "time", "n_dem_replicates", "dem_mean", "dem_min", "dem_max", "ann"):
+        if name not in bands.columns:
+            raise InputFileError(f"{what}: missing column {name!r}; present: {list(bands.columns)}")
+    fig, axes = plt.subplots(1, 3, figsize=(12, 4.2))
+    for ax, stat in zip(axes, STATISTICS):
+        b = bands[bands["statistic"] == stat].sort_values("time")
+        if b.empty:
+            raise InputFileError(f"{what}: no rows of statistic {stat!r}")
+        n = int(b["n_dem_replicates"].iloc[0])
+        _spray(ax, process)
+        ax.fill_between(b.time, MM * b.dem_min, MM * b.dem_max, **BAND["PBM-DEM"],
+                        label=f"PBM-DEM band (min-max of {n} replicates)")
+        ax.plot(b.time, MM * b.dem_mean, **STYLES["PBM-DEM"], label="PBM-DEM mean")
+        if {"ann_member_min", "ann_member_max"} <= set(b.columns):
+            ax.fill_between(b.time, MM * b.ann_member_min, MM * b.ann_member_max, **BAND["PBM-ANN"],
+                            label="PBM-ANN band (min-max of the ensemble members)")
+        ax.plot(b.time, MM * b.ann, **STYLES["PBM-ANN"], label="PBM-ANN (ensemble mean)")
+        if "constant" in b.columns:
+            ax.plot(b.time, MM * b.constant, **STYLES["PBM-constant"], label="PBM-constant")
+        ax.set(xlabel="time (s)", ylabel=f"{stat} (mm)", title=f"{stat}, {rpm} rpm")
+        ax.grid(alpha=0.3)
+    _figure_legend(fig, axes[0], ncol=3)
+    fig.tight_layout(rect=(0, 0.12, 1, 1))
+    return fig
+
+
+def snapshot_times(recorded, process) -> list[float]:
+    """The recorded times nearest to the start, the start, middle and end of the liquid addition and
+    the end of the batch (duplicates dropped, ascending)."""
+    recorded = np.unique(np.asarray(recorded, float))
+    wanted = [0.0, process.spray_start, 0.5 * (process.spray_start + process.spray_end), process.spray_end,
+              process.end]
+    return sorted({float(recorded[np.argmin(np.abs(recorded - t))]) for t in wanted})
+
+
+def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str, what: dict[str, str] | None = None):
+    """Mass density per ln d against diameter (mm) at `snapshot_times`, one panel per model.
+    `bins`: panel title -> that run's bins.csv (time, diameter, mass_density_lnd)."""
+    plt = pyplot()
+    what = what or {}
+    fig, axes = plt.subplots(1, len(bins), figsize=(4.2 * len(bins), 4.0), sharex=True, sharey=True,
+                             squeeze=False)
+    axes = axes[0]
+    first = next(iter(bins.values()))
+    times = snapshot_times(_column(first, "time", what.get(next(iter(bins)), "bins table")), process)
+    colors = plt.get_cmap("viridis")(np.linspace(0.0, 0.9, len(times)))
+    shown = []  # diameters (m) that carry mass at some time, for the common x range
+    for ax, (title, frame) in zip(axes, bins.items()):
+        label = what.get(title, f"{title} bins table")
+        t = _column(frame, "time", label)
+        d = _column(frame, "diameter", label)
+        q = _column(frame, "mass_density_lnd", label)
+        for color, time in zip(colors, times):
+            at = np.isclose(t, time, rtol=0.0, atol=1e-9 * max(1.0, abs(time)))
+            if not at.any():
+                continue  # a run that ended early shows what it has
+            order = np.argsort(d[at])
+            ax.semilogx(MM * d[at][order], q[at][order], color=color, lw=1.8, label=f"t = {time:g} s")
+            carrying = q[at] > 1e-3 * max(float(q[at].max()), 1e-300)
+            shown += list(d[at][carrying])
+        ax.set(xlabel="diameter (mm)", title=f"{title}, {rpm} rpm")
+        ax.grid(alpha=0.3, which="both")
+        _plain_log(ax, "x")
+    if shown:  # the grid runs far beyond the granules: show where the mass is
+        axes[0].set_xlim(MM * min(shown) / 1.5, MM * max(shown) * 1.5)
+    axes[0].set_ylabel("mass fraction per unit ln d (-)")
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def _band_lines(ax, times: list[np.ndarray], values: list[np.ndarray], model: str, band_label: str,
+                line_label: str, scale: float) -> None:
+    grid = times[0]
+    stack = np.stack([np.interp(grid, t, v) for t, v in zip(times, values)]) * scale
+    if len(values) > 1:
+        ax.fill_between(grid, stack.min(axis=0), stack.max(axis=0), **BAND[model], label=band_label)
+    ax.plot(grid, stack.mean(axis=0), **STYLES[model], label=line_label)
+
+
+def liquid_porosity(speed, process, rpm: str):
+    """Mean liquid content L/S (-) and mean porosity (%) against time (s): PBM-DEM replicates
+    (band and mean), PBM-ANN ensemble members (band) and ensemble mean, PBM-constant."""
+    plt = pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2))
+    quantities = (("mean_liquid_content", 1.0, "mean liquid content L/S (m3 liquid / m3 solid)"),
+                  ("mean_porosity", PERCENT, "mean porosity (%)"))
+    members = speed.members
+    for ax, (column, scale, ylabel) in zip(axes, quantities):
+        _spray(ax, process)
+        dem = [r.summary for r in speed.dem]
+        _band_lines(ax, [_column(s, "time", f"PBM-DEM replicate {k} summary") for k, s in enumerate(dem)],
+                    [_column(s, column, f"PBM-DEM replicate {k} summary") for k, s in enumerate(dem)], "PBM-DEM",
+                    f"PBM-DEM band (min-max of {len(dem)} replicates)", "PBM-DEM mean", scale)
+        ann = speed.ann.summary
+        t_ann = _column(ann, "time", "PBM-ANN summary")
+        if members is not None and len(members) and column in members.columns:
+            per = [g.sort_values("time") for _, g in members.groupby("member")]
+            lo = np.min([np.interp(t_ann, g.time, g[column]) for g in per], axis=0) * scale
+            hi = np.max([np.interp(t_ann, g.time, g[column]) for g in per], axis=0) * scale
+            ax.fill_between(t_ann, lo, hi, **BAND["PBM-ANN"], label="PBM-ANN band (min-max of the ensemble members)")
+        ax.plot(t_ann, scale * _column(ann, column, "PBM-ANN summary"), **STYLES["PBM-ANN"],
+                label="PBM-ANN (ensemble mean)")
+        con = speed.constant.summary
+        ax.plot(_column(con, "time", "PBM-constant summary"), scale * _column(con, column, "PBM-constant summary"),
+                **STYLES["PBM-constant"], label="PBM-constant")
+        ax.set(xlabel="time (s)", ylabel=ylabel, title=f"{ylabel.split(' (')[0]}, {rpm} rpm")
+        ax.grid(alpha=0.3)
+    _figure_legend(fig, axes[0], ncol=3)
+    fig.tight_layout(rect=(0, 0.12, 1, 1))
+    return fig
+
+
+def collision_frequency(frequencies: pd.DataFrame, pairs: pd.DataFrame, rpm: str):
+    """Left: the pair-weighted mean collision frequency (1/s per pair) of every coupling interval
+    of each PBM-DEM replicate, of PBM-ANN, and PBM-constant's calibrated value. Right: the
+    surrogate's c_ij against the DEM's for the class pairs of PBM-DEM's samples (`pairs`, from
+    `frequencies.surrogate_on_dem_samples`), samples outside its training domain marked."""
+    plt = pyplot()
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
+    groups = list(frequencies.groupby(["model", "run"], sort=False))
+    n_dem = sum(model == "PBM-DEM" for (model, _), _ in groups)
+    greys = iter(np.linspace(0.0, 0.6, max(n_dem, 1)))
+    for (model, run), g in groups:
+        g = g.sort_values("t_start")
+        style = dict(STYLES[model])
+        if model == "PBM-DEM":
+            style.update(lw=1.3, color=str(next(greys)))
+        edges = np.append(g.t_start.to_numpy(float), g.t_end.to_numpy(float)[-1])
+        values = g.mean_frequency_per_pair.to_numpy(float)
+        left.stairs(values, edges, baseline=None, **style, label=f"{model}, {run}")
+    left.set(xlabel="time (s)", ylabel="pair-weighted mean c (1/s per pair)",
+             title=f"collision frequency per coupling interval, {rpm} rpm")
+    left.grid(alpha=0.3)
+    left.legend(fontsize=7, loc="best")
+    outside = pairs[pairs.out_of_domain] if len(pairs) else pairs
+    inside = pairs[~pairs.out_of_domain] if len(pairs) else pairs
+    right.loglog(inside.dem, inside.surrogate, "o", color="tab:orange", alpha=0.7, label="inside training domain")
+    if len(outside):
+        right.loglog(outside.dem, outside.surrogate, "x", color="tab:red", label="outside training domain")
+    positive = pairs[(pairs.dem > 0) & (pairs.surrogate > 0)] if len(pairs) else pairs
+    if len(positive):
+        lo = float(min(positive.dem.min(), positive.surrogate.min()))
+        hi = float(max(positive.dem.max(), positive.surrogate.max()))
+        right.plot([lo / 1.2, hi * 1.2], [lo / 1.2, hi * 1.2], "k:", lw=1, label="equal")
+    samples = pairs.groupby(["replicate", "interval"]).out_of_domain.first() if len(pairs) else pd.Series(dtype=bool)
+    right.set(xlabel="DEM c_ij (1/s per pair)", ylabel="surrogate c_ij, same sample (1/s per pair)",
+              title=f"class pairs of the PBM-DEM samples, {rpm} rpm")
+    right.text(0.02, 0.98, f"surrogate outside its training domain on {int(samples.sum())} of {len(samples)} "
+               "PBM-DEM samples", transform=right.transAxes, va="top", fontsize=8)
+    right.grid(alpha=0.3, which="both")
+    _plain_log(right, "xy")
+    right.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,82 @@
+"""The collision frequencies the three models used, coupling interval by coupling interval.
+
+* `interval_frequencies`: the bed's pair-weighted mean frequency per pair (1/s per pair) of every
+  interval of every PBM-DEM replicate (LIGGGHTS) and of the PBM-ANN loop (the surrogate's ensemble
+  mean), as recorded in their `intervals.csv`, and PBM-constant's one calibrated value for the
+  whole batch (`timing.json`, key `frequency`).
+* `surrogate_on_dem_samples`: every class pair of every PBM-DEM interval, with the DEM's c_ij and
+  the surrogate's c_ij for the very same representative sample, and whether the surrogate was
+  outside its training domain on that sample (its warnings are recorded, never silenced).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pbmdem.frequency import upper_pairs
+from pbmdem.readers import InputFileError
+
+#: the interval columns these tables read
+INTERVAL_COLUMNS = ("interval", "t_start", "t_end", "class_diameters", "class_counts", "class_frequencies",
+                    "mean_frequency_per_pair")
+
+
+def _intervals(run, what: str) -> pd.DataFrame:
+    frame = run.intervals
+    if frame is None:
+        raise InputFileError(f"{what}: no intervals.csv (a coupled loop writes one)")
+    missing = [c for c in INTERVAL_COLUMNS if c not in frame.columns]
+    if missing:
+        raise InputFileError(f"{what} intervals.csv: missing column(s) {missing}; present: {list(frame.columns)}")
+    return frame
+
+
+def interval_frequencies(speed, constant_timing_path: str | Path | None = None) -> pd.DataFrame:
+    """Long table: model, run, interval, t_start, t_end (s), mean_frequency_per_pair (1/s per pair).
+    PBM-constant is one row over the whole batch (`interval` -1) unless its timing has no
+    `frequency` (then an InputFileError naming `constant_timing_path`)."""
+    rows = []
+    for k, rep in enumerate(speed.dem):
+        frame = _intervals(rep, f"PBM-DEM replicate {k} result")
+        rows += [{"model": "PBM-DEM", "run": f"replicate {k}", "interval": int(r.interval), "t_start": r.t_start,
+                  "t_end": r.t_end, "mean_frequency_per_pair": r.mean_frequency_per_pair} for r in frame.itertuples()]
+    ann = _intervals(speed.ann, "PBM-ANN result")
+    rows += [{"model": "PBM-ANN", "run": "ensemble mean", "interval": int(r.interval), "t_start": r.t_start,
+              "t_end": r.t_end, "mean_frequency_per_pair": r.mean_frequency_per_pair} for r in ann.itertuples()]
+    if "frequency" not in speed.constant.timing:
+        raise InputFileError(f"PBM-constant timing {constant_timing_path}: missing field(s) ['frequency']")
+    rows.append({"model": "PBM-constant", "run": "calibrated", "interval": -1, "t_start": float(ann.t_start.min()),
+                 "t_end": float(ann.t_end.max()), "mean_frequency_per_pair": float(speed.constant.timing["frequency"])})
+    return pd.DataFrame(rows)
+
+
+def surrogate_on_dem_samples(speed, surrogate) -> pd.DataFrame:
+    """One row per class pair of every PBM-DEM interval sample: replicate, interval, class_i,
+    class_j, d_i, d_j (m), dem and surrogate c_ij (1/s per pair), out_of_domain (the surrogate
+    warned on this sample) and warnings (their messages)."""
+    from pbmdem.surrogate.domain import out_of_domain_recorded
+
+    rows = []
+    for k, rep in enumerate(speed.dem):
+        for r in _intervals(rep, f"PBM-DEM replicate {k} result").itertuples():
+            d = np.asarray(json.loads(r.class_diameters), float)
+            n = np.asarray(json.loads(r.class_counts), float)
+            dem = np.asarray(json.loads(r.class_frequencies), float)
+            with out_of_domain_recorded(f"report, {speed.rpm} rpm, PBM-DEM replicate {k} interval {r.interval}",
+                                        log_each=False) as found:
+                c = surrogate.frequency_matrix(d, n, float(speed.rpm))
+            iu, ju = upper_pairs(len(d))
+            if dem.shape != iu.shape:
+                raise InputFileError(f"PBM-DEM replicate {k} intervals.csv, interval {r.interval}: "
+                                     f"{dem.size} class-pair frequencies for {len(d)} classes "
+                                     f"({iu.size} pairs expected)")
+            rows += [{"replicate": k, "interval": int(r.interval), "class_i": int(i), "class_j": int(j),
+                      "d_i": d[i], "d_j": d[j], "dem": float(dem[p]), "surrogate": float(c[i, j]),
+                      "out_of_domain": bool(found), "warnings": "; ".join(found)}
+                     for p, (i, j) in enumerate(zip(iu, ju))]
+    return pd.DataFrame(rows, columns=["replicate", "interval", "class_i", "class_j", "d_i", "d_j", "dem",
+                                       "surrogate", "out_of_domain", "warnings"])

@@ -1,0 +1,129 @@
+"""Where the results come from: configuration hashes, the workflow's git commit, and the versions
+of LIGGGHTS, Python and the libraries.
+
+* `config_sha256`: `Config.sha256()` of the configuration the provenance job ran under (the
+  completed configuration, every default filled in, execution settings included);
+* `settings_sha256`: the same hash without the execution settings (`dem.mpi_ranks`,
+  `dem.timeout`), which change how jobs run but not their results and rerun nothing: two runs
+  with equal settings hashes computed the same thing;
+* the git commit of the workflow's base directory (and whether tracked files had uncommitted
+  changes), or "not a git checkout";
+* the LIGGGHTS version of the DEM runs: each run reads it from the header line "LIGGGHTS (Version
+  ...)" of its log.liggghts into its summary, and so into the run table `results/dem/runs.csv`
+  (the logs themselves are not rule outputs: Snakemake would delete them with a failed job);
+* the versions of Python, pbmdem and the libraries in the environment of the job, and the
+  surrogate's own record (its sha256, when and with which versions it was trained).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.metadata
+import json
+import platform
+import subprocess
+from collections import Counter
+from datetime import UTC, datetime
+from pathlib import Path
+
+from pbmdem.config.dem import EXECUTION_KEYS
+
+#: distributions whose versions are recorded (PyPI names)
+LIBRARIES = ("numpy", "scipy", "pandas", "scikit-learn", "matplotlib", "skops", "pyyaml", "jsonschema", "snakemake")
+NOT_GIT = "not a git checkout"
+COLUMNS = ["quantity", "value", "source"]
+
+
+def settings_mapping(mapping: dict) -> dict:
+    """The completed configuration mapping without the execution settings (dem.mpi_ranks, dem.timeout)."""
+    out = json.loads(json.dumps(mapping))
+    for key in EXECUTION_KEYS:
+        out.get("dem", {}).pop(key, None)
+    return out
+
+
+def sha256_of(mapping: dict) -> str:
+    """sha256 of a mapping, key order and formatting ignored (the formula of `Config.sha256`)."""
+    return hashlib.sha256(json.dumps(mapping, sort_keys=True).encode()).hexdigest()
+
+
+def liggghts_versions(runs_table: str | Path) -> str:
+    """The LIGGGHTS version(s) of the DEM runs, each with its number of runs: the DEM run table's
+    column `liggghts_version`, which every DEM run reads from the header line "LIGGGHTS (Version
+    ...)" of its log.liggghts (`pbmdem.dem.engine.version_of_log`)."""
+    from pbmdem.readers import read_table
+
+    runs = read_table(runs_table, "DEM run table", columns=("point_id",))
+    if "liggghts_version" not in runs.columns:
+        return (f"not recorded in {runs_table} (DEM runs made before pbmdem recorded it; the first line of "
+                "each run's log.liggghts names it)")
+    counts = Counter(runs["liggghts_version"].fillna("not recorded").astype(str))
+    if not counts:
+        return "no DEM run"
+    return "; ".join(f"{version} ({n} of {sum(counts.values())} runs)" for version, n in counts.most_common())
+
+
+def _git(basedir: Path, *args: str) -> str | None:
+    try:
+        proc = subprocess.run(["git", "-C", str(basedir), *args], capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return proc.stdout.strip() if proc.returncode == 0 else None
+
+
+def git_commit(basedir: str | Path) -> tuple[str, str]:
+    """(commit, state) of the git checkout holding `basedir`: state "clean" or "uncommitted changes
+    to tracked files"; (NOT_GIT, "") if `basedir` is not in a git checkout (or git is missing)."""
+    basedir = Path(basedir)
+    commit = _git(basedir, "rev-parse", "HEAD")
+    if not commit:
+        return NOT_GIT, ""
+    status = _git(basedir, "status", "--porcelain", "--untracked-files=no")
+    state = "clean" if status == "" else ("uncommitted changes to tracked files" if status else "unknown")
+    return commit, state
+
+
+def library_versions() -> dict[str, str]:
+    """Python, pbmdem (with the folder it was imported from) and the LIBRARIES installed in this environment."""
+    import pbmdem
+
+    out = {"Python": platform.python_version(),
+           "pbmdem": f"{pbmdem.__version__} (imported from {Path(pbmdem.__file__).parent})"}
+    for name in LIBRARIES:
+        try:
+            out[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            out[name] = "not installed in this environment"
+    return out
+
+
+def provenance(config_sha256: str, settings: dict, basedir: str | Path, runs_table: str | Path,
+               surrogate_metadata: str | Path | None = None):
+    """The provenance table (a DataFrame): quantity, value, source. `settings`: the completed
+    configuration without the execution settings (`settings_mapping`)."""
+    import pandas as pd
+
+    from pbmdem.readers import read_json
+    commit, state = git_commit(basedir)
+    rows = [
+        ("config sha256", config_sha256, "Config.sha256() of the configuration this table was written under"),
+        ("settings sha256", sha256_of(settings),
+         "the same without the execution settings " + ", ".join(f"dem.{k}" for k in EXECUTION_KEYS)),
+        ("git commit", commit, f"git rev-parse HEAD in {basedir}"),
+    ]
+    if commit != NOT_GIT:
+        rows.append(("git working tree", state, "git status --porcelain --untracked-files=no"))
+    rows.append(("LIGGGHTS", liggghts_versions(runs_table),
+                 f"{runs_table}, column liggghts_version (the header line of each run's log.liggghts)"))
+    rows += [(name, version, "this job's environment") for name, version in library_versions().items()]
+    rows.append(("platform", platform.platform(), "this job's machine"))
+    if surrogate_metadata is not None:
+        meta = read_json(surrogate_metadata, "surrogate metadata", keys=("model_sha256",))
+        rows.append(("surrogate model sha256", str(meta["model_sha256"]), str(surrogate_metadata)))
+        if "created_utc" in meta:
+            rows.append(("surrogate trained (UTC)", str(meta["created_utc"]), str(surrogate_metadata)))
+        if isinstance(meta.get("versions"), dict):
+            rows.append(("surrogate trained with", ", ".join(f"{k} {v}" for k, v in sorted(meta["versions"].items())),
+                         str(surrogate_metadata)))
+    rows.append(("table written (UTC)", datetime.now(UTC).strftime("%Y-%m-%d %H:%M:%S"), "clock"))
+    return pd.DataFrame(rows, columns=COLUMNS)

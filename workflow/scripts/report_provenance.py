@@ -1,0 +1,18 @@
+"""Snakemake rule report_provenance: configuration hashes, git commit and software versions (thin).
+
+The configuration hash is that of the job's completed configuration (`snakemake.config`, which
+the Snakefile completes from the typed config), like the execution settings a DEM job reads; the
+rule's params are the settings without the execution settings, so that changing only those
+reruns nothing (docs/validation.md, "Report")."""
+
+import logging
+
+from pbmdem.report.outputs import write_provenance
+
+sm = snakemake  # noqa: F821
+logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+                    handlers=[logging.FileHandler(sm.log[0]), logging.StreamHandler()])
+logging.captureWarnings(True)
+write_provenance(config=sm.config, settings=sm.params.settings, basedir=sm.params.basedir,
+                 runs=sm.input.runs, metadata=sm.input.metadata,
+                 out={"csv": sm.output.csv, "html": sm.output.html})

@@ -18,19 +18,21 @@ import yaml
 # conda package name -> import name, for the packages pbmdem uses
 IMPORT_NAME = {"numpy": "numpy", "scipy": "scipy", "pandas": "pandas", "scikit-learn": "sklearn",
                "skops": "skops", "matplotlib-base": "matplotlib", "pyyaml": "yaml",
-               "jsonschema": "jsonschema", "meshio": "meshio", "pyvista": "pyvista"}
+               "jsonschema": "jsonschema", "meshio": "meshio", "pyvista": "pyvista", "numba": "numba"}
 # packages that come with the ones listed (conda installs their dependencies too)
-IMPLIED = {"jsonschema": ["referencing", "jsonschema_specifications", "rpds", "attrs"]}
+IMPLIED = {"jsonschema": ["referencing", "jsonschema_specifications", "rpds", "attrs"], "numba": ["llvmlite"]}
 
 # what each stage's rules load, including imports made inside functions on the rule's path
 STAGE_MODULES = {
     "dem": ["pbmdem.dem", "pbmdem.dem.run", "pbmdem.dem.collisions", "pbmdem.dem.vtk_series",
             "pbmdem.dem.geometry", "pbmdem.dem.deck", "pbmdem.dem.engine", "pbmdem.dem.grid_tables",
             "pbmdem.dem.speed_response"],
-    "pbm": ["pbmdem.pbm", "pbmdem.pbm.setup", "pbmdem.pbm.results", "pbmdem.pbm.kernels"],
+    "pbm": ["pbmdem.pbm", "pbmdem.pbm.setup", "pbmdem.pbm.results", "pbmdem.pbm.kernels",
+            "pbmdem.pbm._compiled"],  # imported when a model is built (numba)
     "surrogate": ["pbmdem.surrogate", "pbmdem.surrogate.train", "pbmdem.surrogate.plots"],
     "validation": ["pbmdem.coupling", "pbmdem.coupling.sweep", "pbmdem.report", "pbmdem.surrogate",
-                   "pbmdem.pbm.setup", "pbmdem.dem", "pbmdem.dem.collisions", "pbmdem.dem.vtk_series"],
+                   "pbmdem.pbm.setup", "pbmdem.pbm._compiled", "pbmdem.dem", "pbmdem.dem.collisions",
+                   "pbmdem.dem.vtk_series"],
 }
 
 BLOCKER = """

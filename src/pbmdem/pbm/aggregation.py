@@ -62,6 +62,8 @@ class PivotAggregation:
 
     #: name used in the config (``pbm.aggregation.scheme``)
     name = ""
+    #: births by the cell-average split (else the map's first K rows are the births)
+    _cell_average = False
 
     def __init__(self, x: np.ndarray, bounds: np.ndarray | None = None, extra=None):
         x = np.asarray(x, float)
@@ -148,6 +150,14 @@ class PivotAggregation:
             self._matvec = _sparsetools.csr_matvec
         except ImportError:                    # pragma: no cover - other scipy layouts
             self._matvec = None
+        # the compiled evaluation (numba, imported here: building an operator loads or compiles it)
+        from . import _compiled
+
+        self._totals = _compiled.aggregation_totals
+        self._csr = (np.ascontiguousarray(m.indptr, dtype=np.int64), np.ascontiguousarray(m.indices, dtype=np.int64),
+                     np.ascontiguousarray(m.data, dtype=float))
+        self._split = np.empty((6, K))
+        self._factors = (np.zeros(K),) * 4
 
     # ----------------------------------------------------------------- evaluation
     def totals(self, beta: np.ndarray, N: np.ndarray, L: np.ndarray, G: np.ndarray):
@@ -159,7 +169,16 @@ class PivotAggregation:
         return self.totals_stacked(beta, np.stack((N, L, G)))
 
     def totals_stacked(self, beta: np.ndarray, nlg: np.ndarray):
-        """:meth:`totals` with N, L, G given as one (3, M) array."""
+        """:meth:`totals` with N, L, G given as one (3, M) array (compiled: one call; the same
+        arithmetic in the same order as :meth:`totals_numpy`)."""
+        d = np.empty((3, self.M))
+        refused = self._totals(np.ascontiguousarray(beta, dtype=float), np.ascontiguousarray(nlg, dtype=float),
+                               *self._csr, self.K, self._cell_average, *self._factors, self._U.reshape(-1),
+                               self._y, self._split, d)
+        return d, refused
+
+    def totals_numpy(self, beta: np.ndarray, nlg: np.ndarray):
+        """:meth:`totals_stacked` in numpy (the reference of the compiled evaluation)."""
         U = np.multiply(nlg[:, :, None], beta * nlg[0], out=self._U)     # R, RL, RG
         m, y = self._map, self._y
         if self._matvec is not None:
@@ -198,6 +217,7 @@ class CellAverageAggregation(PivotAggregation):
     """
 
     name = "cell_average"
+    _cell_average = True
 
     def _number_rows(self):
         K, T, ok, S, xr = self.K, self._T, self._ok, self._S, self.xr
@@ -222,6 +242,7 @@ class CellAverageAggregation(PivotAggregation):
         self._ncd = -xr / dx_down        # n_down = -D_c x_c / (x_c - x_(c-1)); 0 for the first cell
         self._ru = np.append(xr[1:] / xr[:-1], 0.0)     # x_(c+1) / x_c
         self._rd = np.insert(xr[:-1] / xr[1:], 0, 0.0)  # x_(c-1) / x_c
+        self._factors = (self._cu, self._ncd, self._ru, self._rd)
 
     def _births(self, Y):
         K = self.K

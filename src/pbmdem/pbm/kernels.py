@@ -62,7 +62,8 @@ class KernelInput:
 
 class Kernel:
     """Base class: ``kernel(inp) -> (K, K)``; ``prepare(inp)`` is called once at the start of every
-    time step (a kernel may refresh cached data there), ``reset()`` at the start of every run."""
+    time step (a kernel may refresh cached data there), ``reset()`` at the start of every run.
+    A kernel may return the same (cached) array from several calls: callers read it, never write it."""
 
     def prepare(self, inp: KernelInput) -> None:
         pass
@@ -298,6 +299,9 @@ class CollisionKernel(Kernel):
         self._classes: np.ndarray | None = None
         self._class_c = self._class_cumulative = None
         self._t_eval = -np.inf
+        self._raw: np.ndarray | None = None     # the source's last matrix as returned (before the check)
+        self._beta_of = None                    # the class matrix the cached products below belong to
+        self._scaled = self._beta = self._beta_key = None
 
     def set_source(self, source) -> None:
         self._check_source(source)
@@ -327,7 +331,12 @@ class CollisionKernel(Kernel):
                 self._cumulative = np.concatenate([np.zeros((K, K, 1)), np.cumsum(self._fractions, axis=2)], axis=2)
             else:
                 c = self.source(d, n, inp.rpm)
-                self._c = check_frequency_matrix(c, K, repr(self.source))
+                raw = self._raw
+                # a source that returns what it returned last time (the usual case between two
+                # refreshes: a table or a coupling interval's classes on fixed bins) was checked then
+                if raw is None or previous is None or not (np.shape(c) == raw.shape and np.array_equal(c, raw)):
+                    self._c = check_frequency_matrix(c, K, repr(self.source))
+                    self._raw = np.array(c, dtype=float)
             self._t_eval = inp.t
             self.evaluations += 1
             if self.success.velocity_dependent or previous is None or previous.shape != self._c.shape \
@@ -360,9 +369,20 @@ class CollisionKernel(Kernel):
             n = np.searchsorted(self._speeds, w_star, side="left")
             held = np.take_along_axis(self._class_cumulative, n[:, :, None], axis=2)[:, :, 0]
             return self.beta0 * c * self.success(inp.surface_fraction) * held
+        if self._beta_of is not c:
+            # beta0 c_ij of the classes, and the last kernel, are kept until c_ij changes
+            self._scaled = self.beta0 * c
+            self._beta_of, self._beta_key = c, None
         if self.success.model == "always":
-            return self.beta0 * c
-        return self.beta0 * c * self.success(inp.surface_fraction)
+            return self._scaled
+        # psi_ij = p_i p_j: with the step success p is 0 or 1 and changes only when a class crosses
+        # the threshold, so the same kernel serves most evaluations (the caller must not modify it)
+        p = self.success.per_particle(inp.surface_fraction)
+        key = p.tobytes()
+        if key != self._beta_key:
+            self._beta = self._scaled * np.outer(p, p)       # = beta0 c_ij psi_ij, as before, to the bit
+            self._beta_key = key
+        return self._beta
 
 
 class ConstantFrequency:

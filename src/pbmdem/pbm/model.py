@@ -73,16 +73,6 @@ def check_solver(opt: Solver) -> Solver:
     return opt
 
 
-def _flushed(u: np.ndarray, K: int, flush_n: float, flush_v: float) -> np.ndarray:
-    """Zero (in place) the entries of u = [N, L, G] below their flush level; a bin whose number
-    is flushed loses its liquid and gas with it."""
-    tiny = u[:K] < flush_n
-    if tiny.any():
-        u.reshape(3, K)[:, tiny] = 0.0
-    u[K:][u[K:] < flush_v] = 0.0
-    return u
-
-
 @dataclass
 class _Records:
     times: list = field(default_factory=list)
@@ -127,7 +117,12 @@ class GranulationPBM:
         if not isinstance(separate_feed, (bool, np.bool_)):
             raise PBMInputError(f"separate_feed = {separate_feed!r}; allowed: true or false")
         self.separate_feed = bool(separate_feed)
+        # building the operator imports the compiled evaluation (numba, ``_compiled``): it is loaded
+        # from numba's cache, or compiled, here and not in a run
         self.aggregation = SCHEMES[scheme](grid.x, grid.edges[1:-1])
+        from . import _compiled
+
+        self._jit = _compiled
         self._operators = {(): self.aggregation}
         # internal unit of volume: the first pivot x_0 (pivots 1, r, r^2, ...)
         self._flush_n = self._flush_v = 0.0
@@ -230,10 +225,11 @@ class GranulationPBM:
         ``beta``: the kernel matrix if the caller has it for this state.
         """
         M = self._M
-        if self._flush_n > 0 and ((u > 0) & (u < self._flush_vec)).any():
+        if self._flush_n > 0 and self._jit.below_flush(u, self._flush_vec):
             # entries below the flush level count as zero (they are zeroed after every step; here
             # also inside a step, so no event rate can underflow)
-            u = _flushed(u.copy(), M, self._flush_n, self._flush_v)
+            u = u.copy()
+            self._jit.flush(u, M, self._flush_n, self._flush_v)   # a class flushed loses L, G too
             beta = None
         nlg = u.reshape(3, M)
         if beta is None:
@@ -250,10 +246,8 @@ class GranulationPBM:
 
     def _input(self, t: float, nlg: np.ndarray) -> KernelInput:
         """KernelInput of the scaled class state (3, M): surface-liquid fraction from class totals."""
-        S = nlg[0] * self._xc
-        L, G = nlg[1], nlg[2]
-        V = S + np.maximum(L, G)
-        phi = np.divide(np.maximum(L - G, 0.0), V, out=np.zeros(V.size), where=V > 0)
+        phi = np.empty(nlg.shape[1])
+        self._jit.surface_fraction(nlg, self._xc, phi)    # max(L - G, 0) / (S + max(L, G)), 0 if empty
         return KernelInput(t=t, volumes=self._vc, diameters=self._dc, numbers=nlg[0],
                            surface_fraction=phi, rpm=self.rpm, feed_weights=self._feed_number_w)
 
@@ -378,7 +372,8 @@ class GranulationPBM:
         flush_n = self._flush_n = FLUSH * float(np.sum(s.number))
         flush_v = self._flush_v = FLUSH * total_solid
         self._flush_vec = np.concatenate([np.full(M, flush_n), np.full(2 * M, flush_v)])
-        u = _flushed(u, M, flush_n, flush_v)
+        jit = self._jit
+        jit.flush(u, M, flush_n, flush_v)
         rtol = opt.rtol
         order = {"euler": 1, "heun": 2, "ssp3": 3}[opt.method]
         expo = 1.0 / order
@@ -400,8 +395,7 @@ class GranulationPBM:
             k1, r1 = self._rates(t, u, spraying, self.kernel(inp))
             if not np.isfinite(k1).all():
                 self._raise_bad(t, np.where(np.isfinite(k1), u, np.nan), "non-finite rate", x0)
-            neg = k1 < 0
-            dt_pos = opt.safety * float(np.min(u[neg] / -k1[neg])) if neg.any() else np.inf
+            dt_pos = opt.safety * jit.depletion_time(u, k1)     # min u / -rate over rate < 0
             cands = (dt_pos, dt_prop, opt.max_step, t_next - t)
             dt = min(cands)
             why = cands.index(dt)
@@ -411,23 +405,24 @@ class GranulationPBM:
                 refused_rate = r1
                 err = 0.0
                 u_new = u1
-                if order > 1 and not (u1 < 0).any():
+                if order > 1 and not jit.any_negative(u1):
                     k2, r2 = self._rates(t + dt, u1, spraying)
                     # increment forms of the Shu-Osher stages: zero rates leave u exactly unchanged
-                    u_h = u + (0.5 * dt) * (k1 + k2)               # Heun (SSP-RK2)
+                    k12 = k1 + k2
+                    u_h = u + (0.5 * dt) * k12                     # Heun (SSP-RK2)
                     if order == 2:
                         u_new, u_low = u_h, u1
                         refused_rate = 0.5 * (r1 + r2)
                     else:
-                        u2 = u + (0.25 * dt) * (k1 + k2)           # SSP-RK3 (Shu & Osher 1988)
+                        u2 = u + (0.25 * dt) * k12                 # SSP-RK3 (Shu & Osher 1988)
                         u_low = u_h
-                        if (u2 < 0).any():
+                        if jit.any_negative(u2):
                             u_new = u2
                         else:
                             k3, r3 = self._rates(t + 0.5 * dt, u2, spraying)
                             u_new = u + (dt / 6.0) * (k1 + k2 + 4.0 * k3)
                             refused_rate = (r1 + r2 + 4.0 * r3) / 6.0
-                if not (u_new >= 0).all():
+                if not jit.all_nonnegative(u_new):
                     if np.isnan(u_new).any():
                         self._raise_bad(t, u_new, "NaN after a step", x0)
                     dt *= 0.5
@@ -436,7 +431,7 @@ class GranulationPBM:
                     continue
                 if order > 1:
                     # embedded error estimate, relative to each entry (floor: atol x total solid)
-                    err = float(np.max(np.abs(u_new - u_low) / (rtol * u_new + err_floor)))
+                    err = jit.error_norm(u_new, u_low, rtol, err_floor)
                     if err > 1.0:
                         # a second rejection in a row: the error did not fall as dt^order (a
                         # switch of the success probability inside the step): shrink as for a
@@ -455,7 +450,8 @@ class GranulationPBM:
                 dt_prop = dt * min(1.0 if rejected else 5.0, 0.9 * max(err, 1e-300) ** -expo)
             capped = dt == t_next - t
             t = t_next if capped else t + dt
-            u = _flushed(u_new, M, flush_n, flush_v)
+            u = u_new
+            jit.flush(u, M, flush_n, flush_v)
             steps += 1
             taken += 1
             refused += refused_rate * dt

@@ -1,0 +1,144 @@
+"""The compiled (numba) rate evaluation and the kernel caches of the fast PBM path: the same
+numbers as the numpy reference, to the bit, and no numba on `import pbmdem.pbm`."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from pbmdem.config import Solver
+from pbmdem.pbm import (
+    SCHEMES,
+    CollisionKernel,
+    GranulationPBM,
+    Grid,
+    KernelInput,
+    SuccessProbability,
+)
+from pbmdem.pbm.errors import KernelShapeError
+
+
+def random_totals(rng, M, empty=5):
+    """(3, M) class totals spanning 30 decades, with empty top classes (as a run's state)."""
+    nlg = rng.random((3, M)) * 10.0 ** rng.uniform(-30, 3, (3, M))
+    nlg[:, M - empty:] = 0.0
+    return nlg
+
+
+@pytest.mark.parametrize("scheme", sorted(SCHEMES))
+@pytest.mark.parametrize("K,extra", [(37, (2.0, 3.375, 8.0)), (20, ()), (60, (1.7,))])
+def test_compiled_totals_equal_the_numpy_reference_to_the_bit(scheme, K, extra):
+    rng = np.random.default_rng(K)
+    g = Grid(K, 2.0 ** (1 / 3), v0=1.0)
+    op = SCHEMES[scheme](g.x, g.edges[1:-1], extra=extra)
+    for _ in range(5):
+        beta = rng.random((op.M, op.M))
+        beta = beta + beta.T
+        nlg = random_totals(rng, op.M)
+        d, refused = op.totals_stacked(beta, nlg)
+        d_ref, refused_ref = op.totals_numpy(beta, nlg)
+        np.testing.assert_array_equal(d, d_ref)
+        assert refused == refused_ref
+        # the totals are a fresh array each time (the integrator keeps the stages' rates)
+        assert op.totals_stacked(beta, nlg)[0] is not d
+
+
+def test_compiled_totals_take_any_layout_of_the_kernel():
+    rng = np.random.default_rng(1)
+    g = Grid(12, 2.0, v0=1.0)
+    op = SCHEMES["cell_average"](g.x, g.edges[1:-1])
+    beta = np.asfortranarray(rng.random((12, 12)))
+    beta = beta + beta.T
+    nlg = random_totals(rng, 12, empty=2)
+    np.testing.assert_array_equal(op.totals_stacked(beta, nlg)[0], op.totals_numpy(np.ascontiguousarray(beta), nlg)[0])
+
+
+class _Counting:
+    """A collision-frequency source that counts its calls and can change its answer."""
+
+    def __init__(self, K, value=0.1):
+        self.calls = 0
+        self.c = np.full((K, K), value)
+
+    def __call__(self, d, n, rpm):
+        self.calls += 1
+        return self.c
+
+    def __repr__(self):
+        return "CountingSource"
+
+
+def _input(K, phi, t=0.0):
+    x = 1e-9 * 2.0 ** np.arange(K)
+    return KernelInput(t=t, volumes=x, diameters=(6 * x / np.pi) ** (1 / 3), numbers=np.ones(K),
+                       surface_fraction=np.asarray(phi, float), rpm=600.0)
+
+
+@pytest.mark.parametrize("model", ["step", "logistic", "always"])
+def test_cached_kernel_equals_the_formula(model):
+    K = 6
+    src = _Counting(K)
+    kern = CollisionKernel(src, 2e-4, SuccessProbability(model, threshold=0.02, width=0.005))
+    rng = np.random.default_rng(0)
+    for step in range(8):
+        phi = rng.uniform(0.0, 0.04, K)
+        inp = _input(K, phi, t=float(step))
+        kern.prepare(inp)
+        beta = kern(inp)
+        expected = 2e-4 * src.c * kern.success(phi)
+        np.testing.assert_array_equal(beta, expected)
+        # the same input again: the same matrix (cached), still equal to the formula
+        np.testing.assert_array_equal(kern(inp), expected)
+
+
+def test_kernel_follows_a_changed_success_pattern_and_a_changed_source():
+    K = 4
+    src = _Counting(K)
+    kern = CollisionKernel(src, 1.0, SuccessProbability("step", threshold=0.02), update_interval=0.0)
+    wet = _input(K, [0.03, 0.03, 0.0, 0.0])
+    kern.prepare(wet)
+    first = kern(wet).copy()
+    assert first[0, 1] == pytest.approx(0.1) and first[0, 2] == 0 and first[2, 3] == 0
+    wetter = _input(K, [0.03, 0.03, 0.03, 0.0])
+    assert kern(wetter)[0, 2] == pytest.approx(0.1) and kern(wetter)[2, 3] == 0
+    # the source changes its answer at the next refresh: the kernel follows
+    src.c = np.full((K, K), 0.3)
+    later = _input(K, [0.03, 0.03, 0.03, 0.0], t=1.0)
+    kern.prepare(later)
+    assert kern(later)[0, 2] == pytest.approx(0.3)
+    assert src.calls == 2
+
+
+def test_a_source_that_turns_bad_between_refreshes_is_refused():
+    # an unchanged matrix is not checked again, a changed one is
+    g = Grid(12, 2.0, min_diameter=1e-3)
+    src = _Counting(12)
+    model = GranulationPBM(g, CollisionKernel(src, 1e-4, SuccessProbability("always"), update_interval=0.5),
+                           solver=Solver.defaults().replace(max_step=0.25))
+    state = model.initial_state(np.pi / 6 * np.array([2e-3]) ** 3, [100])
+    res = model.run(0.0, 2.0, state)
+    assert res.info["step_limits"]["kernel_refreshes"] == src.calls >= 2
+
+    class Turning(_Counting):
+        def __call__(self, d, n, rpm):
+            c = super().__call__(d, n, rpm)
+            if self.calls >= 3:
+                c = np.triu(c)
+            return c
+
+    model.kernel.set_source(Turning(12))
+    with pytest.raises(KernelShapeError, match="non-symmetric"):
+        model.run(0.0, 2.0, state)
+
+
+def test_import_pbmdem_pbm_does_not_import_numba():
+    code = "import sys, pbmdem.pbm; print('numba' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+    code = ("import sys, numpy as np, pbmdem.pbm as p; p.GranulationPBM(p.Grid(5, 2.0, v0=1.0), "
+            "p.ConstantKernel(1.0)); print('numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "True"

@@ -1,5 +1,6 @@
 """The compiled (numba) rate evaluation and the kernel caches of the fast PBM path: the same
-numbers as the numpy reference, to the bit, and no numba on `import pbmdem.pbm`."""
+numbers as the numpy reference (the sparse map) and the same kernels as the formula, to the bit;
+spraying and consolidation as before to round-off; no numba on `import pbmdem.pbm`."""
 
 from __future__ import annotations
 
@@ -13,9 +14,12 @@ from pbmdem.config import Solver
 from pbmdem.pbm import (
     SCHEMES,
     CollisionKernel,
+    Consolidation,
+    ConstantKernel,
     GranulationPBM,
     Grid,
     KernelInput,
+    LiquidAddition,
     SuccessProbability,
 )
 from pbmdem.pbm.errors import KernelShapeError
@@ -30,7 +34,7 @@ def random_totals(rng, M, empty=5):
 
 @pytest.mark.parametrize("scheme", sorted(SCHEMES))
 @pytest.mark.parametrize("K,extra", [(37, (2.0, 3.375, 8.0)), (20, ()), (60, (1.7,))])
-def test_compiled_totals_equal_the_numpy_reference_to_the_bit(scheme, K, extra):
+def test_compiled_totals_equal_the_sparse_map_to_the_bit(scheme, K, extra):
     rng = np.random.default_rng(K)
     g = Grid(K, 2.0 ** (1 / 3), v0=1.0)
     op = SCHEMES[scheme](g.x, g.edges[1:-1], extra=extra)
@@ -40,6 +44,7 @@ def test_compiled_totals_equal_the_numpy_reference_to_the_bit(scheme, K, extra):
         nlg = random_totals(rng, op.M)
         d, refused = op.totals_stacked(beta, nlg)
         d_ref, refused_ref = op.totals_numpy(beta, nlg)
+        # the same products summed in the same order: equal to the bit
         np.testing.assert_array_equal(d, d_ref)
         assert refused == refused_ref
         # the totals are a fresh array each time (the integrator keeps the stages' rates)
@@ -53,7 +58,7 @@ def test_compiled_totals_take_any_layout_of_the_kernel():
     beta = np.asfortranarray(rng.random((12, 12)))
     beta = beta + beta.T
     nlg = random_totals(rng, 12, empty=2)
-    np.testing.assert_array_equal(op.totals_stacked(beta, nlg)[0], op.totals_numpy(np.ascontiguousarray(beta), nlg)[0])
+    np.testing.assert_array_equal(op.totals_stacked(beta, nlg)[0], op.totals_stacked(np.ascontiguousarray(beta), nlg)[0])
 
 
 class _Counting:
@@ -142,3 +147,27 @@ def test_import_pbmdem_pbm_does_not_import_numba():
             "p.ConstantKernel(1.0)); print('numba' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "True"
+
+
+def test_spraying_and_consolidation_rates_follow_their_formulas():
+    g = Grid(12, 2.0, min_diameter=1e-3)
+    rng = np.random.default_rng(4)
+    N = rng.uniform(1.0, 100.0, 12)
+    L, G = N * g.x * rng.uniform(0.1, 0.5, 12), N * g.x * rng.uniform(0.2, 0.6, 12)
+    Q, c, eps = 5e-8, 0.02, 0.2
+
+    def rates(liquid, consolidation, spraying):
+        model = GranulationPBM(g, ConstantKernel(1e-4), liquid, consolidation)
+        return model.rates(1.0, N, L, G, spraying)
+
+    plain = rates(None, None, False)
+    for rule, w in (("surface_area", N * g.d ** 2), ("solid_volume", N * g.x)):
+        sprayed = rates(LiquidAddition(Q, 0.0, 10.0, rule), None, True)
+        np.testing.assert_allclose(sprayed[1] - plain[1], Q * w / w.sum(), rtol=1e-12, atol=1e-12 * Q)
+        assert np.sum(sprayed[1] - plain[1]) == pytest.approx(Q, rel=1e-12)
+        np.testing.assert_array_equal(sprayed[0], plain[0])
+        not_spraying = rates(LiquidAddition(Q, 0.0, 10.0, rule), None, False)
+        np.testing.assert_array_equal(not_spraying[1], plain[1])
+    consolidated = rates(None, Consolidation(c, eps), False)
+    np.testing.assert_allclose(consolidated[2] - plain[2], -c * (G - eps / (1 - eps) * N * g.x),
+                               rtol=1e-12, atol=1e-12 * np.abs(G).max() * c)

@@ -1,11 +1,11 @@
-"""Compiled (numba) aggregation rates: the sparse-map evaluation of ``aggregation.PivotAggregation``
-in one call instead of about 25 numpy operations.
+"""Compiled (numba) rates of the PBM: aggregation over the ordered class pairs, spraying and
+consolidation, and the small vector operations of the step control.
 
-At the default grid (37 pivots + 3 feed classes) one evaluation is 4800 ordered-pair rates and a
-sparse product of about 11000 entries: a few microseconds of arithmetic, but about 25 numpy
-calls of 1-2 us each. This module does the same arithmetic, in the same order (so the result is
-bit-for-bit that of the numpy path: ``tests/test_pbm_solver.py`` compares them), in one compiled
-function.
+At the default grid (37 pivots + 3 feed classes) an aggregation evaluation is 1600 ordered
+pairs: a few microseconds of arithmetic, but about 25 numpy calls of 1-2 us each on the sparse
+map of ``aggregation.PivotAggregation`` (kept as the reference, ``totals_numpy``;
+``tests/test_pbm_compiled.py`` compares the two). Every sum adds the same products in the same
+order as the sparse map's rows, so the two agree to the bit.
 
 It is imported by ``aggregation`` when an operator is built (so ``import pbmdem.pbm`` does not
 import numba), and its functions have explicit signatures: they are compiled, or loaded from
@@ -18,70 +18,126 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-_SIGNATURE = ("f8(f8[:, ::1], f8[:, ::1], i8[::1], i8[::1], f8[::1], i8, b1, "
-              "f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[:, ::1])")
+_SIGNATURE = "f8(f8[:, ::1], f8[:, ::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1])"
 
 
 @njit(_SIGNATURE, cache=True, nogil=True)
-def aggregation_totals(beta, nlg, indptr, indices, data, K, cell_average, cu, ncd, ru, rd, U, y, split, d):
+def aggregation_totals(beta, nlg, K, cell_average, target, weight, factors, work, d):
     """Rates of change ``d`` (3, M) of number, liquid and gas of the M classes, and the refused
     solid rate (returned, x_0 units), from the kernel ``beta`` (M, M) and the class totals ``nlg``
-    (3, M). ``indptr``, ``indices``, ``data``: the CSR map of ``aggregation.PivotAggregation``
-    (3 (2K + M + 1) rows, 3 M^2 columns); ``cu``, ``ncd``, ``ru``, ``rd`` (K,): the cell-average
-    split factors; ``U`` (3 M^2,), ``y`` (3 (2K + M + 1),) and ``split`` (6, K): work arrays."""
+    (3, M) = (N, L, G); loops over the M^2 ordered pairs, without a sparse map.
+
+    Ordered pair (i, j), flat index i M + j: ``target`` the cell (cell average) or the lower pivot
+    (fixed pivot) of its aggregate, -1 if beyond the grid; ``weight[0]`` s/x_c - 1 (cell
+    average) or the upper pivot's number share (fixed pivot), or the aggregate volume s for a
+    refused pair; ``weight[1]`` the upper pivot's solid share (fixed pivot). ``factors`` (4, K):
+    the cell-average split factors x_c/(x_(c+1) - x_c), -x_c/(x_c - x_(c-1)), x_(c+1)/x_c,
+    x_(c-1)/x_c. ``work`` (10, K): work array.
+
+    The rates: an event of the pair (i, j) occurs at R_ij = beta_ij N_i N_j (i < j; R_ii / 2 for
+    i = i, so every ordered pair counts half), removes one particle of each partner with its
+    liquid and gas (class i loses N_i, L_i, G_i x sum_j beta_ij N_j over the pairs within the
+    grid) and gives birth to an aggregate carrying l_i + l_j and g_i + g_j (sum over both orders
+    of beta_ij L_i N_j is the liquid born).
+    """
     M = nlg.shape[1]
-    MM = M * M
-    # ordered-pair rates R_ij = beta_ij N_i N_j, RL_ij = beta_ij L_i N_j, RG_ij = beta_ij G_i N_j,
-    # formed as nlg_bi * (beta_ij * N_j) like the numpy path
-    for b in range(3):
-        for i in range(M):
-            a = nlg[b, i]
-            off = b * MM + i * M
-            for j in range(M):
-                U[off + j] = a * (beta[i, j] * nlg[0, j])
-    # the sparse map, row by row and in the order of the row's entries (scipy's csr_matvec)
-    n_rows = indptr.size - 1
-    for r in range(n_rows):
-        s = 0.0
-        for k in range(indptr[r], indptr[r + 1]):
-            s += data[k] * U[indices[k]]
-        y[r] = s
-    R = n_rows // 3
-    for b in range(3):
-        for i in range(M):
-            d[b, i] = -y[b * R + 2 * K + i]          # deaths
+    born = work[:4]                 # rows: number, liquid, gas born per cell, first moment D_c
+    split = work[4:]
+    for r in range(4):
+        for c in range(K):
+            born[r, c] = 0.0
+    refused = 0.0
+    for i in range(M):
+        Ni = nlg[0, i]
+        Li = nlg[1, i]
+        Gi = nlg[2, i]
+        dN = 0.0                    # deaths: sum over the pairs within the grid of R_ij, RL_ij, RG_ij
+        dL = 0.0
+        dG = 0.0
+        row = i * M
+        for j in range(M):
+            q = beta[i, j] * nlg[0, j]
+            R = Ni * q              # R_ij; RL_ij = L_i q, RG_ij = G_i q
+            t = target[row + j]
+            if t < 0:
+                refused += 0.5 * weight[0, row + j] * R
+                continue
+            RL = Li * q
+            RG = Gi * q
+            dN += R
+            dL += RL
+            dG += RG
+            if cell_average:
+                h = 0.5 * R         # every ordered pair counts half an event
+                born[0, t] += h
+                born[3, t] += h * weight[0, row + j]
+                born[1, t] += RL
+                born[2, t] += RG
+            else:
+                h = 0.5 * R
+                up = weight[0, row + j]
+                us = weight[1, row + j]
+                born[0, t] += h * (1.0 - up)
+                born[0, t + 1] += h * up
+                born[1, t] += RL * (1.0 - us)
+                born[1, t + 1] += RL * us
+                born[2, t] += RG * (1.0 - us)
+                born[2, t + 1] += RG * us
+        d[0, i] = -dN
+        d[1, i] = -dL
+        d[2, i] = -dG
     if not cell_average:
-        # fixed pivot: the map's first K rows are the births
         for b in range(3):
             for c in range(K):
-                d[b, c] += y[b * R + c]
-        return y[2 * K + M]
-    # cell average: the births B_c of cell c, with first moment D_c about its pivot, move up
-    # (D_c > 0) or down (D_c < 0); liquid and gas follow the solid each pivot receives.
-    # split[b] / split[3 + b]: what moves up / down of quantity b
+                d[b, c] += born[b, c]
+        return refused
+    # cell average: the births B_c of cell c, with first moment D_c about its pivot (in units of
+    # x_c), move up (D_c > 0) or down (D_c < 0) so that number and solid are exact; liquid and gas
+    # follow the solid each pivot receives. split[b] / split[3 + b]: what moves up / down of b.
+    cu = factors[0]
+    ncd = factors[1]
+    ru = factors[2]
+    rd = factors[3]
     for c in range(K):
-        D = y[K + c]
+        D = born[3, c]
         up = max(D, 0.0) * cu[c]
         down = min(D, 0.0) * ncd[c]
-        V = y[c] + D
+        V = born[0, c] + D          # solid born, units of x_c
         inv = 1.0 / V if V > 0 else 0.0
         split[0, c] = up
         split[3, c] = down
         fu = up * ru[c] * inv
         fd = down * rd[c] * inv
         for b in (1, 2):
-            A = y[b * R + c]
-            split[b, c] = A * fu
-            split[3 + b, c] = A * fd
+            split[b, c] = born[b, c] * fu
+            split[3 + b, c] = born[b, c] * fd
     for b in range(3):
         for c in range(K):
-            o = (y[b * R + c] - split[b, c]) - split[3 + b, c]
+            o = (born[b, c] - split[b, c]) - split[3 + b, c]
             if c > 0:
                 o += split[b, c - 1]
             if c < K - 1:
                 o += split[3 + b, c + 1]
             d[b, c] += o
-    return y[2 * K + M]
+    return refused
+
+
+@njit("void(f8[:, ::1], f8[:, ::1], f8, f8[::1], f8, f8[::1])", cache=True, nogil=True)
+def add_processes(d, nlg, spray_rate, spray_weight, consolidation_rate, gas_min):
+    """Add to the rates ``d`` (3, M) the binder spraying (``spray_rate`` shared in proportion to
+    N_k w_k; 0: not spraying) and the consolidation -c (G_k - gas_min_k N_k) (c = 0: none)."""
+    M = nlg.shape[1]
+    if spray_rate > 0:
+        total = 0.0
+        for k in range(M):
+            total += nlg[0, k] * spray_weight[k]
+        if total > 0:
+            f = spray_rate / total
+            for k in range(M):
+                d[1, k] += f * (nlg[0, k] * spray_weight[k])
+    if consolidation_rate > 0:
+        for k in range(M):
+            d[2, k] -= consolidation_rate * (nlg[2, k] - gas_min[k] * nlg[0, k])
 
 
 # ----------------------------------------------------------------- helpers of the time integration

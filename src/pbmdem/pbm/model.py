@@ -127,8 +127,8 @@ class GranulationPBM:
         # internal unit of volume: the first pivot x_0 (pivots 1, r, r^2, ...)
         self._flush_n = self._flush_v = 0.0
         self._xr = grid.x / grid.x[0]
-        if liquid is not None:
-            self._spray_rate = liquid.rate / grid.x[0]
+        self._spray_rate = liquid.rate / grid.x[0] if liquid is not None else 0.0
+        self._consolidation_rate = consolidation.rate if consolidation is not None else 0.0
         self._use_classes(np.zeros(0))
 
     def __repr__(self) -> str:
@@ -154,9 +154,11 @@ class GranulationPBM:
             self._feed_number_w, self._feed_solid_w = g.lever_weights(op.extra)
         else:
             self._feed_number_w = self._feed_solid_w = None
-        if self.liquid is not None:
-            self._spray_weight = (self._dc / g.d[0]) ** 2 if self.liquid.rule == "surface_area" else self._xc
-        self._gas_min = self.consolidation.gas_per_solid * self._xc if self.consolidation is not None else None
+        self._spray_weight = self._xc
+        if self.liquid is not None and self.liquid.rule == "surface_area":
+            self._spray_weight = (self._dc / g.d[0]) ** 2
+        self._gas_min = self.consolidation.gas_per_solid * self._xc if self.consolidation is not None else \
+            np.zeros(self._M)
 
     def _pivot_totals(self, u: np.ndarray) -> np.ndarray:
         """(3, K) per-bin totals of the class state u = [N, L, G] (3M,): the aggregates of each bin
@@ -235,13 +237,9 @@ class GranulationPBM:
         if beta is None:
             beta = self.kernel(self._input(t, nlg))
         d, refused = self._op.totals_stacked(beta, nlg)
-        if spraying:
-            w = nlg[0] * self._spray_weight
-            total = w.sum()
-            if total > 0:
-                d[1] += (self._spray_rate / total) * w
-        if self.consolidation is not None:
-            d[2] -= self.consolidation.rate * (nlg[2] - self._gas_min * nlg[0])
+        # spraying (Q shared in proportion to N_k w_k) and consolidation -c (G_k - G_min,k)
+        self._jit.add_processes(d, nlg, self._spray_rate if spraying else 0.0, self._spray_weight,
+                                self._consolidation_rate, self._gas_min)
         return d.reshape(-1), refused
 
     def _input(self, t: float, nlg: np.ndarray) -> KernelInput:

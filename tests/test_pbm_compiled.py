@@ -20,7 +20,9 @@ from pbmdem.pbm import (
     Grid,
     KernelInput,
     LiquidAddition,
+    PBMInputError,
     SuccessProbability,
+    TableFrequency,
 )
 from pbmdem.pbm.errors import KernelShapeError
 
@@ -171,3 +173,28 @@ def test_spraying_and_consolidation_rates_follow_their_formulas():
     consolidated = rates(None, Consolidation(c, eps), False)
     np.testing.assert_allclose(consolidated[2] - plain[2], -c * (G - eps / (1 - eps) * N * g.x),
                                rtol=1e-12, atol=1e-12 * np.abs(G).max() * c)
+
+
+def test_table_frequency_from_matrix_is_the_table_of_the_matrix():
+    import pandas as pd
+
+    rng = np.random.default_rng(5)
+    x = np.geomspace(1.5e-3, 1.5e-2, 30)
+    for k in (2, 3, 6):
+        d = np.geomspace(2e-3, 8e-3, k) * rng.uniform(0.97, 1.03, k)
+        c = rng.uniform(0.0, 0.2, (k, k))
+        c = 0.5 * (c + c.T)
+        c[0, -1] = c[-1, 0] = 0.0                      # a zero is floored as in the table
+        iu, ju = np.triu_indices(k)
+        table = pd.DataFrame({"d_i": d[iu], "d_j": d[ju], "frequency_per_pair": c[iu, ju]})
+        for extrapolation in ("clamp", "linear"):
+            ref = TableFrequency(table, extrapolation=extrapolation, column="frequency_per_pair")
+            new = TableFrequency.from_matrix(d, c, extrapolation=extrapolation)
+            np.testing.assert_array_equal(new(x, None, 600.0), ref(x, None, 600.0))
+            assert new.ranges == ref.ranges and repr(new) == repr(ref)
+    # diameters out of order go through the table
+    d = np.array([4e-3, 2e-3])
+    c = np.array([[0.1, 0.2], [0.2, 0.3]])
+    np.testing.assert_allclose(TableFrequency.from_matrix(d, c)(d, None, 600.0), c, rtol=1e-12)
+    with pytest.raises(PBMInputError, match="no positive frequency_per_pair"):
+        TableFrequency.from_matrix([2e-3, 3e-3], np.zeros((2, 2)))

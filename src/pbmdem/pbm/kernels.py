@@ -516,6 +516,52 @@ class TableFrequency:
                 self._frac_interp.append(self._interpolator(RegularGridInterpolator, lu, fr))
         self.rpms = np.array(self.rpms)
 
+    @classmethod
+    def from_matrix(cls, diameters, matrix, extrapolation: str = "clamp", zero_floor: float = 1e-3,
+                    column: str = "frequency_per_pair") -> TableFrequency:
+        """The source of one speed's table of K classes given as their ascending ``diameters``
+        (K,) and the symmetric (K, K) per-pair frequency ``matrix``: what the constructor makes
+        of the upper-triangle table (d_i, d_j, ``column``), without DataFrames (a coupling
+        interval's classes). Diameters that are not strictly ascending go through the table."""
+        import pandas as pd
+
+        d = np.asarray(diameters, float)
+        m = np.asarray(matrix, float)
+        if d.ndim != 1 or d.size < 2 or m.shape != (d.size, d.size) or not np.all(np.diff(d) > 0):
+            iu, ju = np.triu_indices(d.size) if d.ndim == 1 else (np.zeros(0, int),) * 2
+            m2 = np.atleast_2d(m)
+            table = pd.DataFrame({"d_i": d[iu], "d_j": d[ju], column: m2[iu, ju]})
+            return cls(table, extrapolation=extrapolation, zero_floor=zero_floor, column=column)
+        from scipy.interpolate import RegularGridInterpolator
+
+        self = cls.__new__(cls)
+        if extrapolation not in ("clamp", "linear"):
+            raise PBMInputError(f"table extrapolation = {extrapolation!r}; allowed: 'clamp', 'linear'")
+        self.extrapolation = extrapolation
+        self.zero_floor = positive("table zero_floor", zero_floor)
+        self.column = column
+        if not np.all(np.isfinite(d) & (d > 0)):
+            raise PBMInputError(f"collision table column d_i has values {d[~(np.isfinite(d) & (d > 0))][:5]}; "
+                                "allowed: finite diameters > 0 (m)")
+        iu, ju = np.triu_indices(d.size)
+        f = m[iu, ju]
+        if not np.all(np.isfinite(f) & (f >= 0)):
+            raise PBMInputError(f"collision table {column} has values {f[~(np.isfinite(f) & (f >= 0))][:5]}; "
+                                "allowed: finite values >= 0 (1/s per pair)")
+        if not (f > 0).any():
+            raise PBMInputError(f"collision table has no positive {column}; cannot interpolate in log space")
+        # the table's symmetric mean: each off-diagonal pair once per order, the diagonal twice
+        F = np.empty((d.size, d.size))
+        F[iu, ju] = f
+        F[ju, iu] = f
+        floor = self.zero_floor * f[f > 0].min()
+        lu = np.log(d)
+        self.rpms = np.array([np.nan])
+        self._interp = [self._interpolator(RegularGridInterpolator, lu, np.log(np.maximum(F, floor)))]
+        self._frac_interp = []
+        self.ranges = [(float(d[0]), float(d[-1]))]
+        return self
+
     @staticmethod
     def _interpolator(rgi, lu: np.ndarray, values: np.ndarray):
         if lu.size == 1:

@@ -103,7 +103,7 @@ for r in range(int(sys.argv[4])):
     s = out.result.summary()
     runs.append({"wall": wall, "surrogate": out.totals["provider_wall_time_s"], "pbm": out.totals["pbm_wall_time_s"],
                  "out_of_domain": out.totals.get("out_of_domain_count"), "intervals": out.totals["intervals"],
-                 "final": [float(s[q].iloc[-1]) for q in ("d10", "d50", "d90")]})
+                 "final": [float(s[q].iloc[-1]) for q in ("d10", "d50", "d90")], "steps": int(out.result.state.steps)})
 print(json.dumps({"first_build_s": t_build, "load_s": t_load, "runs": runs}))
 """
 
@@ -247,7 +247,8 @@ def main():
         both = [x["surrogate"] + x["pbm"] for x in runs]
         rest = [x["wall"] - x["surrogate"] - x["pbm"] for x in runs]
         n = runs[0]["intervals"]
-        print(f"  {'':22s} PBM-ANN surrogate + PBM {_fmt(both)} (surrogate {_fmt(sur)}, {n} calls; PBM {_fmt(pbm)})")
+        print(f"  {'':22s} PBM-ANN surrogate + PBM {_fmt(both)} (surrogate {_fmt(sur)}, {n} calls; PBM {_fmt(pbm)}, "
+              f"{runs[0]['steps']} steps)")
         print(f"  {'':22s}         rest of the loop (sample, class source, files) {_fmt(rest)}; whole run_loop "
               f"{_fmt([x['wall'] for x in runs])}")
         print(f"  {'':22s}         {runs[0]['out_of_domain']} out-of-domain warnings per loop; final d10 / d50 / d90 "

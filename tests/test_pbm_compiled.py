@@ -15,6 +15,7 @@ from pbmdem.pbm import (
     SCHEMES,
     CollisionKernel,
     Consolidation,
+    ConstantFrequency,
     ConstantKernel,
     GranulationPBM,
     Grid,
@@ -198,3 +199,64 @@ def test_table_frequency_from_matrix_is_the_table_of_the_matrix():
     np.testing.assert_allclose(TableFrequency.from_matrix(d, c)(d, None, 600.0), c, rtol=1e-12)
     with pytest.raises(PBMInputError, match="no positive frequency_per_pair"):
         TableFrequency.from_matrix([2e-3, 3e-3], np.zeros((2, 2)))
+
+
+class _Unfactored:
+    """The same kernel without its factors: the model calls it at every evaluation."""
+
+    def __init__(self, kernel):
+        self.kernel = kernel
+
+    def __call__(self, inp):
+        return self.kernel(inp)
+
+    def prepare(self, inp):
+        self.kernel.prepare(inp)
+
+    def reset(self):
+        self.kernel.reset()
+
+    def __getattr__(self, name):              # evaluations, ... but no factors
+        if name == "factors":
+            raise AttributeError(name)
+        return getattr(self.kernel, name)
+
+
+@pytest.mark.parametrize("kernel", [
+    lambda: CollisionKernel(ConstantFrequency(0.12), 2e-4, SuccessProbability("step", 0.02), update_interval=1.0),
+    lambda: CollisionKernel(ConstantFrequency(0.12), 2e-4, SuccessProbability("logistic", 0.02, 0.005)),
+    lambda: CollisionKernel(ConstantFrequency(0.12), 2e-4, SuccessProbability("always")),
+    lambda: ConstantKernel(2e-5),
+], ids=["step", "logistic", "always", "constant"])
+def test_factored_kernel_in_the_compiled_rates_equals_calling_the_kernel(kernel):
+    # the default process with feed classes: the compiled path (factors) and the generic one
+    g = Grid.spanning(2e-3, 32e-3, 2.0 ** (1 / 3))
+    runs = []
+    for k in (kernel(), _Unfactored(kernel())):
+        model = GranulationPBM(g, k, LiquidAddition(5.8e-8, 60.0, 240.0), Consolidation(0.02, 0.2), rpm=600.0)
+        state = model.initial_state(np.pi / 6 * np.array([2e-3, 3e-3, 4e-3]) ** 3, [900.0, 540.0, 360.0],
+                                    porosity=0.5)
+        runs.append(model.run(0.0, 480.0, state, output_times=np.arange(0.0, 481.0, 10.0)))
+        runs[-1].compiled_kernel = model._factored is not None
+    fast, generic = runs
+    assert fast.compiled_kernel and not generic.compiled_kernel
+    assert fast.info["steps"] == generic.info["steps"]
+    assert fast.info["step_limits"] == generic.info["step_limits"]
+    for a, b in ((fast.number, generic.number), (fast.liquid, generic.liquid), (fast.gas, generic.gas)):
+        if kernel().__class__ is CollisionKernel and kernel().success.model == "logistic":
+            # numba's exp and numpy's may differ in the last digit
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12 * np.abs(b).max())
+        else:
+            np.testing.assert_array_equal(a, b)
+    assert fast.summary().d50.iloc[-1] > 1.2 * fast.summary().d50.iloc[0]      # it did granulate
+
+
+def test_a_velocity_dependent_success_is_not_factored():
+    from pbmdem.pbm import StokesCriterion
+
+    kern = CollisionKernel(ConstantFrequency(0.12, impact_velocity=0.1), 2e-4,
+                           SuccessProbability("step", 0.02, velocity=StokesCriterion(0.1, 0.4, 5e-6, 1000.0)))
+    inp = _input(4, [0.03, 0.03, 0.0, 0.0])
+    kern.prepare(inp)
+    assert kern.factors(inp) is None
+    assert CollisionKernel(_Counting(4), 1.0).factors(inp)[1:] == ("step", 0.02, 0.005)

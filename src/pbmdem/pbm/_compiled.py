@@ -18,14 +18,20 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-_SIGNATURE = "f8(f8[:, ::1], f8[:, ::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1])"
+#: success models of a factored kernel (``Kernel.factors``): p = 1, the step, the logistic
+ALWAYS, STEP, LOGISTIC = 0, 1, 2
+
+_SIGNATURE = ("f8(f8[:, ::1], f8[::1], b1, f8[:, ::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], "
+              "f8[:, ::1])")
 
 
 @njit(_SIGNATURE, cache=True, nogil=True)
-def aggregation_totals(beta, nlg, K, cell_average, target, weight, factors, work, d):
+def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, factors, work, d):
     """Rates of change ``d`` (3, M) of number, liquid and gas of the M classes, and the refused
-    solid rate (returned, x_0 units), from the kernel ``beta`` (M, M) and the class totals ``nlg``
-    (3, M) = (N, L, G); loops over the M^2 ordered pairs, without a sparse map.
+    solid rate (returned, x_0 units), from the kernel and the class totals ``nlg`` (3, M) =
+    (N, L, G); loops over the M^2 ordered pairs, without a sparse map. The kernel is ``beta``
+    (M, M), or with ``use_p`` beta_ij p_i p_j (a factored kernel, ``Kernel.factors``; formed as
+    ``beta * outer(p, p)`` would be).
 
     Ordered pair (i, j), flat index i M + j: ``target`` the cell (cell average) or the lower pivot
     (fixed pivot) of its aggregate, -1 if beyond the grid; ``weight[0]`` s/x_c - 1 (cell
@@ -55,8 +61,12 @@ def aggregation_totals(beta, nlg, K, cell_average, target, weight, factors, work
         dL = 0.0
         dG = 0.0
         row = i * M
+        pi = p[i]
         for j in range(M):
-            q = beta[i, j] * nlg[0, j]
+            if use_p:
+                q = (beta[i, j] * (pi * p[j])) * nlg[0, j]
+            else:
+                q = beta[i, j] * nlg[0, j]
             R = Ni * q              # R_ij; RL_ij = L_i q, RG_ij = G_i q
             t = target[row + j]
             if t < 0:
@@ -211,3 +221,88 @@ def all_nonnegative(u):
         if not u[k] >= 0:
             return False
     return True
+
+
+@njit("f8(f8[::1], f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], "
+      "f8[:, ::1], f8[:, ::1])", cache=True, nogil=True)
+def class_rates(u, beta, model, vectors, params, K, cell_average, target, weight, factors, work, pw, d):
+    """All rates ``d`` (3, M) of the class state u = [N, L, G] (3M,) with a factored kernel
+    beta_ij p(phi_i) p(phi_j) (success ``model``: ALWAYS, STEP or LOGISTIC), and the refused solid
+    rate (returned): one call for what ``GranulationPBM._rates`` does with a generic kernel.
+
+    ``vectors`` (3, M): class volumes (x_0 units), spray weights, G_min per particle; ``params``:
+    number flush level, volume flush level (0: none), success threshold and width, spray rate (0:
+    not spraying), consolidation rate (0: none); ``pw`` (2, M): work (phi, p)."""
+    M = vectors.shape[1]
+    flush_n = params[0]
+    flush_v = params[1]
+    if flush_n > 0:
+        # entries below the flush level count as zero (as after every step)
+        tiny = False
+        for k in range(3 * M):
+            if 0.0 < u[k] < (flush_n if k < M else flush_v):
+                tiny = True
+                break
+        if tiny:
+            u = u.copy()
+            flush(u, M, flush_n, flush_v)
+    nlg = u.reshape((3, M))
+    phi = pw[0]
+    p = pw[1]
+    if model != ALWAYS:
+        surface_fraction(nlg, vectors[0], phi)
+        threshold = params[2]
+        width = params[3]
+        for k in range(M):
+            if model == STEP:
+                p[k] = 1.0 if phi[k] >= threshold else 0.0
+            else:
+                z = min(max((phi[k] - threshold) / width, -700.0), 700.0)
+                p[k] = 1.0 / (1.0 + np.exp(-z))
+    refused = aggregation_totals(beta, p, model != ALWAYS, nlg, K, cell_average, target, weight, factors, work, d)
+    add_processes(d, nlg, params[4], vectors[1], params[5], vectors[2])
+    return refused
+
+
+@njit("Tuple((f8, b1))(f8[::1], f8[::1], f8, f8, i8, f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], "
+      "f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[:, ::1])",
+      cache=True, nogil=True)
+def ssp_stages(u, k1, r1, dt, order, beta, model, vectors, params, K, cell_average, target, weight, factors,
+               work, pw, u_new, u_low, stage, k2, k3):
+    """The stages of one explicit SSP Runge-Kutta step of size ``dt`` from u with rates ``k1``
+    (refused rate ``r1``), with the compiled rates of a factored kernel (:func:`class_rates`):
+    what ``GranulationPBM._stages`` does in numpy, the same operations in the same order (increment
+    forms; zero rates leave u unchanged to the bit). Writes the new state ``u_new`` and, for
+    ``order`` > 1, the embedded lower-order state ``u_low``; returns (refused rate of the step,
+    whether ``u_low`` was written). An intermediate stage with a negative entry ends the step
+    with that stage as ``u_new`` (the caller then halves the step). ``stage``, ``k2``, ``k3``: work."""
+    n = u.size
+    for i in range(n):
+        stage[i] = u[i] + dt * k1[i]                               # u1 (Euler)
+    if order == 1 or any_negative(stage):
+        for i in range(n):
+            u_new[i] = stage[i]
+        return r1, False
+    r2 = class_rates(stage, beta, model, vectors, params, K, cell_average, target, weight, factors, work, pw, k2)
+    k2f = k2.reshape(n)
+    h = 0.5 * dt
+    if order == 2:
+        for i in range(n):
+            u_low[i] = stage[i]
+            u_new[i] = u[i] + h * (k1[i] + k2f[i])                # Heun (SSP-RK2)
+        return 0.5 * (r1 + r2), True
+    q = 0.25 * dt
+    for i in range(n):
+        k12 = k1[i] + k2f[i]
+        u_low[i] = u[i] + h * k12                                  # Heun: the embedded estimate
+        stage[i] = u[i] + q * k12                                  # u2 of SSP-RK3 (Shu & Osher 1988)
+    if any_negative(stage):
+        for i in range(n):
+            u_new[i] = stage[i]
+        return r1, True
+    r3 = class_rates(stage, beta, model, vectors, params, K, cell_average, target, weight, factors, work, pw, k3)
+    k3f = k3.reshape(n)
+    c = dt / 6.0
+    for i in range(n):
+        u_new[i] = u[i] + c * ((k1[i] + k2f[i]) + 4.0 * k3f[i])
+    return (r1 + r2 + 4.0 * r3) / 6.0, True

@@ -130,6 +130,7 @@ class PivotAggregation:
         self._weight = np.ascontiguousarray(weight, dtype=float)
         self._factors = np.zeros((4, self.K))
         self._work = np.empty((10, self.K))
+        self._no_p = np.ones(self.M)
         self._map = None
 
     def _build_map(self):
@@ -186,9 +187,15 @@ class PivotAggregation:
         """:meth:`totals` with N, L, G given as one (3, M) array: one compiled loop over the ordered
         pairs, equal to the bit to :meth:`totals_numpy` (the sparse map)."""
         d = np.empty((3, self.M))
-        refused = self._totals(np.ascontiguousarray(beta, dtype=float), np.ascontiguousarray(nlg, dtype=float),
-                               self.K, self._cell_average, self._target, self._weight, self._factors, self._work, d)
+        refused = self._totals(np.ascontiguousarray(beta, dtype=float), self._no_p, False,
+                               np.ascontiguousarray(nlg, dtype=float), self.K, self._cell_average, self._target,
+                               self._weight, self._factors, self._work, d)
         return d, refused
+
+    def compiled_arrays(self) -> tuple:
+        """(K, cell_average, target, weight, factors, work): the grid's arguments of the compiled
+        evaluations (``_compiled.aggregation_totals``, ``_compiled.class_rates``)."""
+        return self.K, self._cell_average, self._target, self._weight, self._factors, self._work
 
     def totals_numpy(self, beta: np.ndarray, nlg: np.ndarray):
         """:meth:`totals_stacked` in numpy: the ordered-pair rates mapped by one sparse product (the

@@ -74,6 +74,14 @@ class Kernel:
     def __call__(self, inp: KernelInput) -> np.ndarray:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def factors(self, inp: KernelInput):
+        """``(S, model, threshold, width)`` if this kernel is beta_ij = S_ij p(phi_i) p(phi_j) at
+        the step of ``inp`` (after ``prepare``), with S (M, M) fixed until the next ``prepare`` and
+        p the success model ``model`` of ``SuccessProbability`` ("always": p = 1) of the
+        surface-liquid fraction phi: the model then evaluates the kernel inside its compiled rates
+        instead of calling it. None (default): the model calls the kernel."""
+        return None
+
 
 class ConstantKernel(Kernel):
     """beta_ij = beta0 (1/s per pair)."""
@@ -90,6 +98,9 @@ class ConstantKernel(Kernel):
         if self._cache is None or self._cache[0] != K:
             self._cache = (K, np.full((K, K), self.beta0))
         return self._cache[1]
+
+    def factors(self, inp: KernelInput):
+        return self(inp), "always", 0.0, 1.0
 
     def analytical_solution(self, v, t, N0, mean_volume):
         """Number density n(v, t) (1/m3) for the exponential initial distribution (Scott 1968)."""
@@ -115,6 +126,9 @@ class SumKernel(Kernel):
         if self._cache is None or not np.array_equal(self._cache[0], v):
             self._cache = (v.copy(), self.b * (v[:, None] + v[None, :]))
         return self._cache[1]
+
+    def factors(self, inp: KernelInput):
+        return self(inp), "always", 0.0, 1.0
 
     def analytical_solution(self, v, t, N0, mean_volume):
         """Number density n(v, t) for the exponential initial distribution (Golovin; Scott 1968)."""
@@ -357,6 +371,24 @@ class CollisionKernel(Kernel):
                     self._class_cumulative = 0.5 * (cum + cum.transpose(1, 0, 2))
             self._classes = W                   # the model hands the same array at every step
 
+    def _scaled_classes(self, inp: KernelInput) -> np.ndarray:
+        """beta0 c_ij of the classes (kept until c_ij changes)."""
+        if self._c is None or self._class_c is None or self._class_c.shape[0] != inp.volumes.size:
+            self.prepare(inp)
+        c = self._class_c
+        if self._beta_of is not c:
+            self._scaled = self.beta0 * c
+            self._beta_of, self._beta_key = c, None
+        return self._scaled
+
+    def factors(self, inp: KernelInput):
+        """beta0 c_ij and the success model: beta_ij = beta0 c_ij p(phi_i) p(phi_j) (None with a
+        velocity-dependent success, which the model evaluates by calling the kernel)."""
+        if self.success.velocity_dependent:
+            return None
+        s = self.success
+        return self._scaled_classes(inp), s.model, s.threshold, s.width
+
     def __call__(self, inp: KernelInput) -> np.ndarray:
         if self._c is None or self._class_c is None or self._class_c.shape[0] != inp.volumes.size:
             self.prepare(inp)
@@ -369,12 +401,9 @@ class CollisionKernel(Kernel):
             n = np.searchsorted(self._speeds, w_star, side="left")
             held = np.take_along_axis(self._class_cumulative, n[:, :, None], axis=2)[:, :, 0]
             return self.beta0 * c * self.success(inp.surface_fraction) * held
-        if self._beta_of is not c:
-            # beta0 c_ij of the classes, and the last kernel, are kept until c_ij changes
-            self._scaled = self.beta0 * c
-            self._beta_of, self._beta_key = c, None
+        scaled = self._scaled_classes(inp)       # beta0 c_ij and the last kernel kept until c_ij changes
         if self.success.model == "always":
-            return self._scaled
+            return scaled
         # psi_ij = p_i p_j: with the step success p is 0 or 1 and changes only when a class crosses
         # the threshold, so the same kernel serves most evaluations (the caller must not modify it)
         p = self.success.per_particle(inp.surface_fraction)

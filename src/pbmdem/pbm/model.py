@@ -51,6 +51,8 @@ METHODS = ("ssp3", "heun", "euler")
 FLUSH = 1e-100
 #: step reductions of one step (halvings after a negative entry) before a run gives up
 MAX_HALVINGS = 60
+#: success models of a factored kernel, as ``_compiled`` numbers them (ALWAYS, STEP, LOGISTIC)
+_SUCCESS_CODES = {"always": 0, "step": 1, "logistic": 2}
 
 
 def check_solver(opt: Solver) -> Solver:
@@ -159,6 +161,13 @@ class GranulationPBM:
             self._spray_weight = (self._dc / g.d[0]) ** 2
         self._gas_min = self.consolidation.gas_per_solid * self._xc if self.consolidation is not None else \
             np.zeros(self._M)
+        # the compiled rates of a factored kernel (_use_factors)
+        self._factored = None
+        self._vectors = np.ascontiguousarray(np.stack([self._xc, self._spray_weight, self._gas_min]), dtype=float)
+        self._params = (np.zeros(6), np.zeros(6))
+        self._pw = np.zeros((2, self._M))
+        self._stage, self._k2, self._k3 = np.empty(3 * self._M), np.empty((3, self._M)), np.empty((3, self._M))
+        self._op_arrays = op.compiled_arrays()
 
     def _pivot_totals(self, u: np.ndarray) -> np.ndarray:
         """(3, K) per-bin totals of the class state u = [N, L, G] (3M,): the aggregates of each bin
@@ -213,7 +222,9 @@ class GranulationPBM:
         self._use_classes(np.zeros(0))
         x0 = self.grid.x[0]
         u = np.concatenate([N, np.asarray(L, float) / x0, np.asarray(G, float) / x0])
-        self.kernel.prepare(self.kernel_input(t, N, L, G))
+        inp = self.kernel_input(t, N, L, G)
+        self.kernel.prepare(inp)
+        self._use_factors(inp)
         d, refused = self._rates(t, u, spraying)
         K = self.grid.bins
         return d[:K], d[K:2 * K] * x0, d[2 * K:] * x0, refused * x0
@@ -227,6 +238,14 @@ class GranulationPBM:
         ``beta``: the kernel matrix if the caller has it for this state.
         """
         M = self._M
+        if self._factored is not None:
+            # a factored kernel (Kernel.factors): flush, kernel, aggregation, spraying and
+            # consolidation in one compiled call
+            d = np.empty((3, M))
+            refused = self._jit.class_rates(u, self._factored, self._success_code, self._vectors,
+                                            self._params[1] if spraying else self._params[0], *self._op_arrays,
+                                            self._pw, d)
+            return d.reshape(-1), refused
         if self._flush_n > 0 and self._jit.below_flush(u, self._flush_vec):
             # entries below the flush level count as zero (they are zeroed after every step; here
             # also inside a step, so no event rate can underflow)
@@ -241,6 +260,51 @@ class GranulationPBM:
         self._jit.add_processes(d, nlg, self._spray_rate if spraying else 0.0, self._spray_weight,
                                 self._consolidation_rate, self._gas_min)
         return d.reshape(-1), refused
+
+    def _stages(self, t: float, u: np.ndarray, k1: np.ndarray, r1: float, dt: float, order: int, spraying: bool):
+        """The stages of one step of size dt from u (rates k1, refused rate r1): (new state, the
+        embedded lower-order state or None, refused rate of the step). A stage with a negative
+        entry ends the step with that stage as the new state (the caller halves the step). With a
+        factored kernel one compiled call (``_compiled.ssp_stages``, the same operations)."""
+        if self._factored is not None:
+            n = u.size
+            u_new, u_low = np.empty(n), np.empty(n)
+            refused_rate, _ = self._jit.ssp_stages(
+                u, k1, r1, dt, order, self._factored, self._success_code, self._vectors,
+                self._params[1] if spraying else self._params[0], *self._op_arrays, self._pw, u_new, u_low,
+                self._stage, self._k2, self._k3)
+            return u_new, u_low, refused_rate
+        jit = self._jit
+        u1 = u + dt * k1
+        if order == 1 or jit.any_negative(u1):
+            return u1, None, r1
+        k2, r2 = self._rates(t + dt, u1, spraying)
+        # increment forms of the Shu-Osher stages: zero rates leave u exactly unchanged
+        k12 = k1 + k2
+        u_h = u + (0.5 * dt) * k12                                 # Heun (SSP-RK2)
+        if order == 2:
+            return u_h, u1, 0.5 * (r1 + r2)
+        u2 = u + (0.25 * dt) * k12                                 # SSP-RK3 (Shu & Osher 1988)
+        if jit.any_negative(u2):
+            return u2, u_h, r1
+        k3, r3 = self._rates(t + 0.5 * dt, u2, spraying)
+        return u + (dt / 6.0) * (k12 + 4.0 * k3), u_h, (r1 + r2 + 4.0 * r3) / 6.0
+
+    def _use_factors(self, inp: KernelInput) -> None:
+        """Ask the kernel for its factors at this step (after ``prepare``): the compiled rates use
+        them until the next step; None: :meth:`_rates` calls the kernel."""
+        factors = getattr(self.kernel, "factors", None)        # kernels need not derive from Kernel
+        f = factors(inp) if factors is not None else None
+        if f is None:
+            self._factored = None
+            return
+        S, model, threshold, width = f
+        self._factored = np.ascontiguousarray(S, dtype=float)
+        self._success_code = _SUCCESS_CODES[model]
+        base = [self._flush_n, self._flush_v, float(threshold), float(width), 0.0, self._consolidation_rate]
+        self._params[0][:] = base
+        self._params[1][:] = base
+        self._params[1][4] = self._spray_rate
 
     def _input(self, t: float, nlg: np.ndarray) -> KernelInput:
         """KernelInput of the scaled class state (3, M): surface-liquid fraction from class totals."""
@@ -390,7 +454,8 @@ class GranulationPBM:
             spraying = self.liquid is not None and self.liquid.active(t)
             inp = self._input(t, u.reshape(3, M))
             self.kernel.prepare(inp)
-            k1, r1 = self._rates(t, u, spraying, self.kernel(inp))
+            self._use_factors(inp)
+            k1, r1 = self._rates(t, u, spraying, None if self._factored is not None else self.kernel(inp))
             if not np.isfinite(k1).all():
                 self._raise_bad(t, np.where(np.isfinite(k1), u, np.nan), "non-finite rate", x0)
             dt_pos = opt.safety * jit.depletion_time(u, k1)     # min u / -rate over rate < 0
@@ -399,27 +464,8 @@ class GranulationPBM:
             why = cands.index(dt)
             rejected = 0
             for _ in range(MAX_HALVINGS + 1):
-                u1 = u + dt * k1
-                refused_rate = r1
+                u_new, u_low, refused_rate = self._stages(t, u, k1, r1, dt, order, spraying)
                 err = 0.0
-                u_new = u1
-                if order > 1 and not jit.any_negative(u1):
-                    k2, r2 = self._rates(t + dt, u1, spraying)
-                    # increment forms of the Shu-Osher stages: zero rates leave u exactly unchanged
-                    k12 = k1 + k2
-                    u_h = u + (0.5 * dt) * k12                     # Heun (SSP-RK2)
-                    if order == 2:
-                        u_new, u_low = u_h, u1
-                        refused_rate = 0.5 * (r1 + r2)
-                    else:
-                        u2 = u + (0.25 * dt) * k12                 # SSP-RK3 (Shu & Osher 1988)
-                        u_low = u_h
-                        if jit.any_negative(u2):
-                            u_new = u2
-                        else:
-                            k3, r3 = self._rates(t + 0.5 * dt, u2, spraying)
-                            u_new = u + (dt / 6.0) * (k1 + k2 + 4.0 * k3)
-                            refused_rate = (r1 + r2 + 4.0 * r3) / 6.0
                 if not jit.all_nonnegative(u_new):
                     if np.isnan(u_new).any():
                         self._raise_bad(t, u_new, "NaN after a step", x0)

@@ -110,7 +110,7 @@ print(json.dumps({"first_build_s": t_build, "load_s": t_load, "runs": runs}))
 
 def _run(code: str, src: Path, *args) -> dict:
     env = dict(os.environ, PYTHONPATH=str(src))
-    out = subprocess.run([sys.executable, "-c", code, *map(str, args)], env=env, cwd=src.parent,
+    out = subprocess.run([sys.executable, "-c", code, *map(str, args)], env=env, cwd=src.parent, check=False,
                          capture_output=True, text=True)
     if out.returncode != 0:
         raise RuntimeError(out.stderr.strip().splitlines()[-1] if out.stderr.strip() else f"exit {out.returncode}")
@@ -188,7 +188,8 @@ def cold_build(src: Path) -> float | None:
             "build_model(cfg.pbm_batch('fine').pbm, None, 600)\nprint(time.perf_counter() - t0)")
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, PYTHONPATH=str(src), NUMBA_CACHE_DIR=cache)
-        out = subprocess.run([sys.executable, "-c", code], env=env, cwd=src.parent, capture_output=True, text=True)
+        out = subprocess.run([sys.executable, "-c", code], env=env, cwd=src.parent, capture_output=True, text=True,
+                             check=False)
     return float(out.stdout.strip().splitlines()[-1]) if out.returncode == 0 else None
 
 

@@ -353,8 +353,8 @@ class CollisionKernel(Kernel):
                     self._raw = np.array(c, dtype=float)
             self._t_eval = inp.t
             self.evaluations += 1
-            if self.success.velocity_dependent or previous is None or previous.shape != self._c.shape \
-                    or not np.array_equal(previous, self._c):
+            if self.success.velocity_dependent or previous is None or (previous is not self._c and (
+                    previous.shape != self._c.shape or not np.array_equal(previous, self._c))):
                 self._classes = None                # the feed classes' c_ij must be blended again
         W = inp.feed_weights
         if W is None:

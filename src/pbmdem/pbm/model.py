@@ -162,7 +162,7 @@ class GranulationPBM:
         self._gas_min = self.consolidation.gas_per_solid * self._xc if self.consolidation is not None else \
             np.zeros(self._M)
         # the compiled rates of a factored kernel (_use_factors)
-        self._factored = None
+        self._factored = self._factors_of = self._factors_key = None
         self._vectors = np.ascontiguousarray(np.stack([self._xc, self._spray_weight, self._gas_min]), dtype=float)
         self._params = (np.zeros(6), np.zeros(6))
         self._pw = np.zeros((2, self._M))
@@ -296,9 +296,13 @@ class GranulationPBM:
         factors = getattr(self.kernel, "factors", None)        # kernels need not derive from Kernel
         f = factors(inp) if factors is not None else None
         if f is None:
-            self._factored = None
+            self._factored = self._factors_of = None
             return
         S, model, threshold, width = f
+        key = (model, threshold, width, self._flush_n, self._flush_v)
+        if S is self._factors_of and key == self._factors_key:
+            return                              # the kernel's factors of the last step
+        self._factors_of, self._factors_key = S, key
         self._factored = np.ascontiguousarray(S, dtype=float)
         self._success_code = _SUCCESS_CODES[model]
         base = [self._flush_n, self._flush_v, float(threshold), float(width), 0.0, self._consolidation_rate]

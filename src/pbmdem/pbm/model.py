@@ -535,6 +535,8 @@ class GranulationPBM:
                 "consolidation": repr(self.consolidation), "rpm": self.rpm, "steps": taken,
                 "wall_time_s": _time.perf_counter() - wall0, "method": opt.method,
                 "aggregation_scheme": self.aggregation.name, "safety": opt.safety, "step_limits": limits,
+                # the kernel evaluated inside the compiled rates (Kernel.factors), or called per evaluation
+                "kernel_evaluation": "compiled" if self._factored is not None else "called",
                 "feed_volumes": feed_volumes.tolist()}
         return Result(self.grid, rec, s, info)
 

@@ -142,6 +142,9 @@ class GranulationPBM:
         """Set up the classes of a run: the K pivots (aggregates, or everything without feed
         classes) followed by one class per feed volume (m3)."""
         key = tuple(float(v) for v in feed_volumes)
+        if key == getattr(self, "_classes_key", None):
+            return                              # the classes of the last run (a coupled loop's intervals)
+        self._classes_key = key
         op = self._operators.get(key)
         if op is None:
             op = self._operators[key] = type(self.aggregation)(self.grid.x, self.grid.edges[1:-1], extra=key)

@@ -259,3 +259,19 @@ def test_a_velocity_dependent_success_is_not_factored():
     kern.prepare(inp)
     assert kern.factors(inp) is None
     assert CollisionKernel(_Counting(4), 1.0).factors(inp)[1:] == ("step", 0.02, 0.005)
+
+
+def test_shapes_are_checked_before_the_compiled_code():
+    g = Grid(8, 2.0, v0=1.0)
+    op = SCHEMES["cell_average"](g.x, g.edges[1:-1])
+    with pytest.raises(ValueError, match=r"expected \(8, 8\) and \(3, 8\)"):
+        op.totals_stacked(np.ones((7, 7)), np.ones((3, 8)))
+
+    class WrongFactors(ConstantKernel):
+        def factors(self, inp):
+            return np.ones((2, 2)), "always", 0.0, 1.0
+
+    model = GranulationPBM(Grid(8, 2.0, min_diameter=1e-3), WrongFactors(1e-4))
+    state = model.initial_state(np.pi / 6 * np.array([2e-3]) ** 3, [100])
+    with pytest.raises(KernelShapeError, match=r"factors of shape \(2, 2\); expected \(9, 9\) for the 9 classes"):
+        model.run(0.0, 1.0, state)

@@ -186,7 +186,11 @@ class PivotAggregation:
     def totals_stacked(self, beta: np.ndarray, nlg: np.ndarray):
         """:meth:`totals` with N, L, G given as one (3, M) array: one compiled loop over the ordered
         pairs, equal to the bit to :meth:`totals_numpy` (the sparse map)."""
-        d = np.empty((3, self.M))
+        M = self.M
+        if np.shape(beta) != (M, M) or np.shape(nlg) != (3, M):
+            raise ValueError(f"aggregation totals: beta {np.shape(beta)} and N, L, G {np.shape(nlg)}; expected "
+                             f"({M}, {M}) and (3, {M}) for the {M} classes")
+        d = np.empty((3, M))
         refused = self._totals(np.ascontiguousarray(beta, dtype=float), self._no_p, False,
                                np.ascontiguousarray(nlg, dtype=float), self.K, self._cell_average, self._target,
                                self._weight, self._factors, self._work, d)

@@ -37,7 +37,8 @@ import numpy as np
 from pbmdem.config import Solver
 
 from .aggregation import SCHEMES
-from .errors import GridOverflowError, NegativePopulationError, PBMInputError, SolverLimitError, positive
+from .errors import (GridOverflowError, KernelShapeError, NegativePopulationError, PBMInputError, SolverLimitError,
+                     positive)
 from .grid import Grid, diameter_of
 from .kernels import Kernel, KernelInput
 from .processes import Consolidation, LiquidAddition
@@ -305,6 +306,9 @@ class GranulationPBM:
         key = (model, threshold, width, self._flush_n, self._flush_v)
         if S is self._factors_of and key == self._factors_key:
             return                              # the kernel's factors of the last step
+        if np.shape(S) != (self._M, self._M):
+            raise KernelShapeError(f"kernel {self.kernel!r} returned factors of shape {np.shape(S)}; expected "
+                                   f"({self._M}, {self._M}) for the {self._M} classes")
         self._factors_of, self._factors_key = S, key
         self._factored = np.ascontiguousarray(S, dtype=float)
         self._success_code = _SUCCESS_CODES[model]

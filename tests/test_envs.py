@@ -27,13 +27,15 @@ STAGE_MODULES = {
     "dem": ["pbmdem.dem", "pbmdem.dem.run", "pbmdem.dem.collisions", "pbmdem.dem.vtk_series",
             "pbmdem.dem.geometry", "pbmdem.dem.deck", "pbmdem.dem.engine", "pbmdem.dem.grid_tables",
             "pbmdem.dem.speed_response"],
-    "pbm": ["pbmdem.pbm", "pbmdem.pbm.setup", "pbmdem.pbm.results", "pbmdem.pbm.kernels",
-            "pbmdem.pbm._compiled"],  # imported when a model is built (numba)
+    "pbm": ["pbmdem.pbm", "pbmdem.pbm.setup", "pbmdem.pbm.results", "pbmdem.pbm.kernels"],
     "surrogate": ["pbmdem.surrogate", "pbmdem.surrogate.train", "pbmdem.surrogate.plots"],
     "validation": ["pbmdem.coupling", "pbmdem.coupling.sweep", "pbmdem.report", "pbmdem.surrogate",
-                   "pbmdem.pbm.setup", "pbmdem.pbm._compiled", "pbmdem.dem", "pbmdem.dem.collisions",
-                   "pbmdem.dem.vtk_series"],
+                   "pbmdem.pbm.setup", "pbmdem.dem", "pbmdem.dem.collisions", "pbmdem.dem.vtk_series"],
 }
+
+# building a PBM model imports its compiled rates (numba), in the stages that build models
+for _stage in ("pbm", "validation"):
+    STAGE_MODULES[_stage] = [*STAGE_MODULES[_stage], "pbmdem.pbm._compiled"]
 
 BLOCKER = """
 import importlib.abc, sys

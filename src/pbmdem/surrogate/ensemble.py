@@ -244,19 +244,6 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         return out
 
     # ------------------------------------------------------------------ predict
-    def predict(self, X, return_std: bool = False):
-        """Members' mean prediction (units of ``y``); with ``return_std`` also their standard
-        deviation (ddof 1; zeros for a single member)."""
-        check_is_fitted(self)
-        X = validate_data(self, X, reset=False, dtype=[np.float64, np.float32])
-        with single_threaded():
-            preds = np.stack([m.predict(X) for m in self.estimators_])
-        mean = preds.mean(axis=0)
-        if not return_std:
-            return mean
-        std = preds.std(axis=0, ddof=1) if len(self.estimators_) > 1 else np.zeros_like(mean)
-        return mean, std
-
     def predict_array(self, X: np.ndarray, return_std: bool = False):
         """:meth:`predict` on a float64 array with the training features in their order, without
         scikit-learn's per-call validation (the caller's array is trusted: finite, 2-d, the
@@ -272,6 +259,39 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
             return mean
         std = preds.std(axis=0, ddof=1) if len(self.estimators_) > 1 else np.zeros_like(mean)
         return mean, std
+
+    def predict(self, X, return_std: bool = False):
+        """Members' mean prediction (units of ``y``); with ``return_std`` also their standard
+        deviation (ddof 1; zeros for a single member)."""
+        check_is_fitted(self)
+        X = validate_data(self, X, reset=False, dtype=[np.float64, np.float32])
+        with single_threaded():
+            preds = np.stack([m.predict(X) for m in self.estimators_])
+        mean = preds.mean(axis=0)
+        if not return_std:
+            return mean
+        std = preds.std(axis=0, ddof=1) if len(self.estimators_) > 1 else np.zeros_like(mean)
+        return mean, std
+
+
+def search_table(estimator: EnsembleMLPRegressorCV) -> pd.DataFrame:
+    """One row per search candidate: hidden_layer_sizes (tuple), alpha, rmse_log10 (RMSE of the
+    grouped search, in the units of y), fold_mse_log10_std (std of the fold MSEs), rank. Without a
+    search, one row with the candidate used and NaN scores."""
+    check_is_fitted(estimator)
+    res = estimator.cv_results_
+    if res is None:
+        best = estimator.best_params_
+        return pd.DataFrame({"hidden_layer_sizes": _object_array([tuple(best["hidden_layer_sizes"])]),
+                             "alpha": [float(best["alpha"])], "rmse_log10": [np.nan],
+                             "fold_mse_log10_std": [np.nan], "rank": [1]})
+    return pd.DataFrame({
+        "hidden_layer_sizes": _object_array([tuple(p["hidden_layer_sizes"]) for p in res["params"]]),
+        "alpha": np.asarray(res["param_alpha"], dtype=float),
+        "rmse_log10": np.sqrt(-np.asarray(res["mean_test_score"], dtype=float)),
+        "fold_mse_log10_std": np.asarray(res["std_test_score"], dtype=float),
+        "rank": np.asarray(res["rank_test_score"], dtype=int),
+    })
 
 
 def _forward(member, X: np.ndarray) -> np.ndarray:
@@ -312,23 +332,3 @@ def _logistic(a):
 #: in-place activations, as scikit-learn's ``neural_network._base.ACTIVATIONS``
 _ACTIVATIONS = {"identity": lambda a: None, "tanh": lambda a: np.tanh(a, out=a),
                 "relu": lambda a: np.maximum(a, 0, out=a), "logistic": _logistic}
-
-
-def search_table(estimator: EnsembleMLPRegressorCV) -> pd.DataFrame:
-    """One row per search candidate: hidden_layer_sizes (tuple), alpha, rmse_log10 (RMSE of the
-    grouped search, in the units of y), fold_mse_log10_std (std of the fold MSEs), rank. Without a
-    search, one row with the candidate used and NaN scores."""
-    check_is_fitted(estimator)
-    res = estimator.cv_results_
-    if res is None:
-        best = estimator.best_params_
-        return pd.DataFrame({"hidden_layer_sizes": _object_array([tuple(best["hidden_layer_sizes"])]),
-                             "alpha": [float(best["alpha"])], "rmse_log10": [np.nan],
-                             "fold_mse_log10_std": [np.nan], "rank": [1]})
-    return pd.DataFrame({
-        "hidden_layer_sizes": _object_array([tuple(p["hidden_layer_sizes"]) for p in res["params"]]),
-        "alpha": np.asarray(res["param_alpha"], dtype=float),
-        "rmse_log10": np.sqrt(-np.asarray(res["mean_test_score"], dtype=float)),
-        "fold_mse_log10_std": np.asarray(res["std_test_score"], dtype=float),
-        "rank": np.asarray(res["rank_test_score"], dtype=int),
-    })

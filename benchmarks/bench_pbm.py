@@ -166,9 +166,11 @@ def train_surrogate(cfg, path: Path) -> float:
     from pbmdem.surrogate.synthetic import make_synthetic_tables, power_law
 
     radius = cfg.granulator.impeller.blade_length
-    # the DEM's level of encounter frequency (0.03-0.2 1/s per pair for the fine feed at 600 rpm)
+    # the lower end of the DEM's encounter frequencies (0.03-0.2 1/s per pair for the fine feed at
+    # 600 rpm): with the cross-section offset the surrogate's c_ij grows as (d_i + d_j)^2 beyond
+    # 12 mm, and at c0 = 0.1 the loop outgrows the grid (32 mm) with the config of 2026-12-01 21:50
     table, velocity = make_synthetic_tables(radius, diameters=(0.002, 0.003, 0.004, 0.006, 0.009, 0.012), seed=0,
-                                            law=partial(power_law, c0=0.1))
+                                            law=partial(power_law, c0=0.03))
     settings = cfg.surrogate.to_dict()
     settings.update(hidden_layer_sizes=[[8]], alpha=[0.1])
     t0 = time.perf_counter()

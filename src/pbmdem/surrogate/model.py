@@ -30,7 +30,14 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 from pbmdem.impact import EncounterRates
 
 from .ensemble import EnsembleMLPRegressorCV
-from .features import FEATURE_NAMES, check_impeller_radius, duplicated_features, make_features, pair_features, pair_table
+from .features import (
+    FEATURE_NAMES,
+    check_impeller_radius,
+    duplicated_features,
+    make_features,
+    pair_features,
+    pair_table,
+)
 from .velocity import lognormal_fractions
 
 PHYSICS_OFFSETS = ("cross_section", "none")

@@ -1,17 +1,26 @@
-"""PBM speed benchmark (prints figures, no assertions).
+"""PBM and PBM-ANN speed benchmark (prints figures, no assertions).
 
 * ``import pbmdem.pbm`` (fresh interpreter, in-process import time);
 * the default batch: ``run_batch`` of config/config.yaml (all processes, whole process time,
   constant c_ij, 600 rpm, 'fine'), wall time of the whole call (settings, grid, run), with the
-  number of steps and what limited them;
-* the same on a 4x finer grid, with the fixed pivot scheme, with the feed granules sharing their
-  bins' liquid (``separate_feed: false``, the model before) and with Heun's method;
-* the time of one aggregation-rate evaluation of both schemes.
+  number of steps and what limited them, and its d10 / d50 / d90;
+* PBM-ANN: the coupled loop of the config (``validation.coupling_intervals`` = 6 intervals) with
+  a small surrogate trained here on ``pbmdem.surrogate.synthetic.make_synthetic_tables`` (the
+  config's ``surrogate:`` settings with one hyperparameter candidate: 5 + 5 MLP members), split
+  into the surrogate's time (``provider_wall_time_s``: one ``encounters`` call per interval with
+  its out-of-domain check), the PBM's time (``pbm_wall_time_s``) and the rest of ``run_loop``
+  (representative sample, class-frequency source, writing the interval folders and tables);
+* the one-off cost of the first model build in a process (numba's import and the load of its
+  compiled functions from the on-disk cache), and of a build with an empty cache (compiling);
+* variants of the default batch (4x finer grid, fixed pivot, lumped feed, Heun's method);
+* the time of one aggregation-rate evaluation: the compiled loop and the sparse-map numpy
+  reference (``totals_numpy``).
 
-``--before REF`` (default ``bdf2171``, the solver before the speed-up) also measures the import
-and the default batch of that git revision, in the same way and right after, so before/after
-see the same machine load (this machine is shared: compare the two columns, not runs on
-different days). Every timing is repeated; min and median are printed.
+``--before REF`` (default ``1b77f4f``, the tree before the compiled PBM and the surrogate's array
+path) also measures the import, the default batch and the PBM-ANN loop of that git revision, in
+the same way and right after (the same surrogate file), so before/after see the same machine
+load (this machine is shared: compare the columns of one run, and read the load average it
+prints). Every timing is repeated; min and median are printed.
 
 Run: .venv/bin/python benchmarks/bench_pbm.py [--before REF | --no-before] [--repeat N]
 (accuracy against analytical solutions: benchmarks/bench_pbm_accuracy.py)
@@ -27,14 +36,17 @@ import sys
 import tarfile
 import tempfile
 import time
+import warnings
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+RPM = 600.0
 
-# measured in a fresh interpreter (PYTHONPATH selects the source tree): import time, then the
-# default batch `repeat` times
+# measured in a fresh interpreter (PYTHONPATH selects the source tree): import time, the first
+# model build (one-off costs), then the default batch `repeat` times
 _PROBE = r"""
 import json, sys, time
 t0 = time.perf_counter()
@@ -42,12 +54,16 @@ import pbmdem.pbm
 t_import = time.perf_counter() - t0
 from pbmdem.config import load_config
 cfg = load_config(sys.argv[1])
-try:                                       # this tree: typed settings
-    from pbmdem.pbm.setup import run_batch
+try:                                       # trees with typed settings
+    from pbmdem.pbm.setup import build_model, run_batch
     batch = cfg.pbm_batch("fine")
+    t0 = time.perf_counter()
+    build_model(batch.pbm, None, 600)
+    t_build = time.perf_counter() - t0
     run = lambda: run_batch(batch, None, 600)
 except ImportError:                        # trees before the settings layer
     from pbmdem.pbm import run_pbm
+    t_build = None
     run = lambda: run_pbm(cfg, None, 600, "fine")
 walls = []
 for _ in range(int(sys.argv[2])):
@@ -55,39 +71,67 @@ for _ in range(int(sys.argv[2])):
     res = run()
     walls.append(time.perf_counter() - t0)
 s = res.summary()
-print(json.dumps({"import_s": t_import, "walls": walls, "steps": int(res.info["steps"]),
-                  "d50": [float(s.d50.iloc[0]), float(s.d50.iloc[-1])], "bins": int(res.grid.bins),
+print(json.dumps({"import_s": t_import, "first_build_s": t_build, "walls": walls, "steps": int(res.info["steps"]),
+                  "d50": [float(s.d50.iloc[0]), float(s.d50.iloc[-1])],
+                  "final": [float(s[q].iloc[-1]) for q in ("d10", "d50", "d90")], "bins": int(res.grid.bins),
                   "step_limits": res.info.get("step_limits")}))
 """
 
+# the PBM-ANN loop of the config with the surrogate file argv[2], argv[4] times, in folders under argv[5]
+_ANN_PROBE = r"""
+import json, logging, sys, time
+from pathlib import Path
+logging.disable(logging.WARNING)            # the loop logs every out-of-domain warning; they are counted
+from pbmdem.config import load_config
+from pbmdem.coupling.loop import run_loop
+from pbmdem.coupling.providers import SurrogateProvider
+from pbmdem.pbm.setup import build_model
+cfg = load_config(sys.argv[1])
+loop = cfg.coupled_loop()
+rpm = float(sys.argv[3])
+t0 = time.perf_counter()
+build_model(loop.batch.pbm, None, rpm)      # the one-off costs of a first model build
+t_build = time.perf_counter() - t0
+t0 = time.perf_counter()
+provider = SurrogateProvider(sys.argv[2], rpm)
+t_load = time.perf_counter() - t0
+runs = []
+for r in range(int(sys.argv[4])):
+    t0 = time.perf_counter()
+    out = run_loop(loop, provider, rpm, Path(sys.argv[5]) / f"run{r}")
+    wall = time.perf_counter() - t0
+    s = out.result.summary()
+    runs.append({"wall": wall, "surrogate": out.totals["provider_wall_time_s"], "pbm": out.totals["pbm_wall_time_s"],
+                 "out_of_domain": out.totals.get("out_of_domain_count"), "intervals": out.totals["intervals"],
+                 "final": [float(s[q].iloc[-1]) for q in ("d10", "d50", "d90")], "steps": int(out.result.state.steps)})
+print(json.dumps({"first_build_s": t_build, "load_s": t_load, "runs": runs}))
+"""
 
-def _probe(src: Path, config: Path, repeat: int) -> dict:
+
+def _run(code: str, src: Path, *args) -> dict:
     env = dict(os.environ, PYTHONPATH=str(src))
-    out = subprocess.run([sys.executable, "-c", _PROBE, str(config), str(repeat)], env=env, cwd=src.parent,
-                         capture_output=True, text=True, check=True)
+    out = subprocess.run([sys.executable, "-c", code, *map(str, args)], env=env, cwd=src.parent, check=False,
+                         capture_output=True, text=True)
+    if out.returncode != 0:
+        raise RuntimeError(out.stderr.strip().splitlines()[-1] if out.stderr.strip() else f"exit {out.returncode}")
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def _imports(src: Path, repeat: int) -> tuple[list[float], list[float]]:
     """(in-process import times, wall times of `python -c "import pbmdem.pbm"`)."""
     inner, whole = [], []
+    env = dict(os.environ, PYTHONPATH=str(src))
+    code = "import time; t = time.perf_counter(); import pbmdem.pbm; print(time.perf_counter() - t)"
     for _ in range(repeat):
-        a, b = _probe_import(src)
-        inner.append(a)
-        whole.append(b)
+        t0 = time.perf_counter()
+        out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+        whole.append(time.perf_counter() - t0)
+        inner.append(float(out.stdout.strip()))
     return inner, whole
 
 
-def _probe_import(src: Path) -> tuple[float, float]:
-    env = dict(os.environ, PYTHONPATH=str(src))
-    code = "import time; t = time.perf_counter(); import pbmdem.pbm; print(time.perf_counter() - t)"
-    t0 = time.perf_counter()
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
-    return float(out.stdout.strip()), time.perf_counter() - t0
-
-
 def _fmt(values, scale=1e3, unit="ms") -> str:
-    v = np.asarray(values) * scale
+    v = np.asarray(values, float) * scale
     return f"min {v.min():7.1f} {unit}, median {np.median(v):7.1f} {unit}"
 
 
@@ -112,39 +156,126 @@ def batch_with(cfg, section: dict, distribution: str = "fine"):
     return cfg.pbm_batch(distribution).replace(pbm=pbm)
 
 
+def train_surrogate(cfg, path: Path) -> float:
+    """A small surrogate on synthetic tables (sizes 2-12 mm, 300-900 rpm, both targets; the power
+    law of ``synthetic.power_law`` at the DEM's level), with the config's settings but one
+    hyperparameter candidate, saved to ``path``; returns the fit time."""
+    from pbmdem.surrogate import training_data
+    from pbmdem.surrogate.persistence import save_surrogate
+    from pbmdem.surrogate.settings import build_surrogate
+    from pbmdem.surrogate.synthetic import make_synthetic_tables, power_law
+
+    radius = cfg.granulator.impeller.blade_length
+    # the lower end of the DEM's encounter frequencies (0.03-0.2 1/s per pair for the fine feed at
+    # 600 rpm): with the cross-section offset the surrogate's c_ij grows as (d_i + d_j)^2 beyond
+    # 12 mm, and at c0 = 0.1 the loop outgrows the grid (32 mm) with the config of 2026-12-01 21:50
+    table, velocity = make_synthetic_tables(radius, diameters=(0.002, 0.003, 0.004, 0.006, 0.009, 0.012), seed=0,
+                                            law=partial(power_law, c0=0.03))
+    settings = cfg.surrogate.to_dict()
+    settings.update(hidden_layer_sizes=[[8]], alpha=[0.1])
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        data = training_data(table, radius, velocity_table=velocity)
+        surrogate = build_surrogate(settings, radius).fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
+    fit = time.perf_counter() - t0
+    save_surrogate(surrogate, path)
+    return fit
+
+
+def cold_build(src: Path) -> float | None:
+    """Wall time of the first model build in a fresh interpreter with an empty numba cache."""
+    code = ("import time\nfrom pbmdem.config import load_config\nfrom pbmdem.pbm.setup import build_model\n"
+            "cfg = load_config('config/config.yaml')\nt0 = time.perf_counter()\n"
+            "build_model(cfg.pbm_batch('fine').pbm, None, 600)\nprint(time.perf_counter() - t0)")
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, PYTHONPATH=str(src), NUMBA_CACHE_DIR=cache)
+        out = subprocess.run([sys.executable, "-c", code], env=env, cwd=src.parent, capture_output=True, text=True,
+                             check=False)
+    return float(out.stdout.strip().splitlines()[-1]) if out.returncode == 0 else None
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--before", default="bdf2171", help="git revision to compare with (default bdf2171)")
+    ap.add_argument("--before", default="1b77f4f", help="git revision to compare with (default 1b77f4f)")
     ap.add_argument("--no-before", action="store_true", help="skip the comparison with --before")
     ap.add_argument("--repeat", type=int, default=7)
+    ap.add_argument("--ann-repeat", type=int, default=5, help="PBM-ANN loops per tree (the first is not counted)")
+    ap.add_argument("--quick", action="store_true", help="skip the variants and the per-evaluation timing")
     args = ap.parse_args()
-    print(f"load average (1, 5, 15 min): {', '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} cores")
-
-    rows = [("this tree", ROOT / "src", ROOT / "config" / "config.yaml")]
-    tmp = None
-    if not args.no_before:
-        tmp = tempfile.TemporaryDirectory()
-        src = _checkout(args.before, Path(tmp.name))
-        rows.append((f"before ({args.before})", src, Path(tmp.name) / "config" / "config.yaml"))
-    print(f"\n`import pbmdem.pbm` (fresh interpreter, {args.repeat} times) and the default batch "
-          f"(480 s of process, {args.repeat} times):")
-    for name, src, cfg in rows:
-        imp, whole = _imports(src, args.repeat)
-        r = _probe(src, cfg, args.repeat)
-        walls = r["walls"][1:] if len(r["walls"]) > 1 else r["walls"]    # the first call warms caches
-        print(f"  {name:22s} import {_fmt(imp)} (python -c 'import pbmdem.pbm': {_fmt(whole)})")
-        print(f"  {'':22s} batch  {_fmt(walls)} | {r['steps']} steps, "
-              f"{r['bins']} bins, d50 {r['d50'][0] * 1e3:.2f} -> {r['d50'][1] * 1e3:.2f} mm")
-        if r.get("step_limits"):
-            print(f"  {'':22s} step limits: {r['step_limits']}")
-    if tmp is not None:
-        tmp.cleanup()
+    load = os.getloadavg()
+    print(f"load average (1, 5, 15 min): {', '.join(f'{x:.2f}' for x in load)} on {os.cpu_count()} cores")
 
     from pbmdem.config import load_config
+
+    cfg = load_config(ROOT / "config" / "config.yaml")
+    tmp = tempfile.TemporaryDirectory()
+    model_path = Path(tmp.name) / "surrogate" / "model.skops"
+    model_path.parent.mkdir()
+    fit = train_surrogate(cfg, model_path)
+    loop = cfg.coupled_loop()
+    print(f"surrogate for PBM-ANN: trained in {fit:.1f} s on synthetic tables (5 + 5 MLP members); loop: "
+          f"{loop.coupling_intervals} intervals of {loop.batch.pbm.process.end / loop.coupling_intervals:g} s, "
+          f"'{loop.batch.distribution}', {RPM:g} rpm, at most {loop.sample.max_classes} classes")
+
+    rows = [("this tree", ROOT / "src", ROOT / "config" / "config.yaml")]
+    if not args.no_before:
+        dest = Path(tmp.name) / "before"
+        dest.mkdir()
+        src = _checkout(args.before, dest)
+        rows.append((f"before ({args.before})", src, dest / "config" / "config.yaml"))
+    print(f"\n`import pbmdem.pbm` (fresh interpreter, {args.repeat} times), the default batch (480 s of process, "
+          f"{args.repeat} times after a first call) and PBM-ANN ({args.ann_repeat} loops, the first not counted):")
+    results = {}
+    for name, src, config in rows:
+        imp, whole = _imports(src, args.repeat)
+        r = _run(_PROBE, src, config, args.repeat + 1)
+        walls = r["walls"][1:]                                     # the first call warms caches
+        print(f"  {name:22s} import {_fmt(imp)} (python -c 'import pbmdem.pbm': {_fmt(whole)})")
+        if r.get("first_build_s") is not None:
+            print(f"  {'':22s} first model build in the process: {r['first_build_s'] * 1e3:.0f} ms")
+        print(f"  {'':22s} batch  {_fmt(walls)} | {r['steps']} steps, {r['bins']} bins, d10 / d50 / d90 "
+              + " / ".join(f"{q * 1e3:.6f}" for q in r["final"]) + " mm")
+        if r.get("step_limits"):
+            print(f"  {'':22s} step limits: {r['step_limits']}")
+        try:
+            a = _run(_ANN_PROBE, src, config, model_path, RPM, args.ann_repeat, Path(tmp.name) / f"ann{len(results)}")
+        except RuntimeError as exc:
+            print(f"  {'':22s} PBM-ANN: not measured ({exc})")
+            results[name] = (r, None)
+            continue
+        runs = a["runs"][1:] if len(a["runs"]) > 1 else a["runs"]
+        sur = [x["surrogate"] for x in runs]
+        pbm = [x["pbm"] for x in runs]
+        both = [x["surrogate"] + x["pbm"] for x in runs]
+        rest = [x["wall"] - x["surrogate"] - x["pbm"] for x in runs]
+        n = runs[0]["intervals"]
+        print(f"  {'':22s} PBM-ANN surrogate + PBM {_fmt(both)} (surrogate {_fmt(sur)}, {n} calls; PBM {_fmt(pbm)}, "
+              f"{runs[0]['steps']} steps)")
+        print(f"  {'':22s}         rest of the loop (sample, class source, files) {_fmt(rest)}; whole run_loop "
+              f"{_fmt([x['wall'] for x in runs])}")
+        print(f"  {'':22s}         {runs[0]['out_of_domain']} out-of-domain warnings per loop; final d10 / d50 / d90 "
+              + " / ".join(f"{q * 1e3:.6f}" for q in runs[0]["final"]) + " mm; surrogate file load "
+              f"{a['load_s'] * 1e3:.0f} ms, first model build {a['first_build_s'] * 1e3:.0f} ms")
+        results[name] = (r, runs)
+    if len(rows) == 2:
+        (r_new, a_new), (r_old, a_old) = results[rows[0][0]], results[rows[1][0]]
+        rel = [abs(a / b - 1) for a, b in zip(r_new["final"], r_old["final"])]
+        print(f"  default batch, relative change of d10 / d50 / d90: {' / '.join(f'{x:.2e}' for x in rel)}")
+        if a_new and a_old:
+            rel = [abs(a / b - 1) for a, b in zip(a_new[0]["final"], a_old[0]["final"])]
+            print(f"  PBM-ANN, relative change of the final d10 / d50 / d90: {' / '.join(f'{x:.2e}' for x in rel)}")
+    cold = cold_build(ROOT / "src")
+    if cold is not None:
+        print(f"  this tree, first model build with an empty numba cache (compiling): {cold:.2f} s")
+    print(f"load average after: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    tmp.cleanup()
+    if args.quick:
+        return
+
     from pbmdem.pbm import SCHEMES, Grid
     from pbmdem.pbm.setup import run_batch
 
-    cfg = load_config(ROOT / "config" / "config.yaml")
     print("\nvariants of the default batch (this tree):")
     ratio = cfg.pbm.grid.ratio
     for label, pbm in (("fixed pivot", {"aggregation": {"scheme": "fixed_pivot"}}),
@@ -162,9 +293,9 @@ def main():
         print(f"  {label:16s} {_fmt(walls)} | {res.info['steps']} steps, {res.grid.bins} bins, "
               f"d50 {s.d50.iloc[0] * 1e3:.2f} -> {s.d50.iloc[-1] * 1e3:.2f} mm")
 
-    print("aggregation-rate evaluation (full (K,K) kernel, totals):")
+    print("aggregation-rate evaluation (full (K,K) kernel, totals; compiled loop / numpy sparse map):")
     rng = np.random.default_rng(0)
-    for scheme, K in ((s, K) for s in SCHEMES for K in (35, 100, 200)):
+    for scheme, K in ((s, K) for s in SCHEMES for K in (40, 100, 200)):
         grid = Grid(K, 2.0 ** (34 / (K - 1)), v0=1.0)
         t0 = time.perf_counter()
         op = SCHEMES[scheme](grid.x, grid.edges[1:-1])
@@ -173,14 +304,18 @@ def main():
         beta = beta + beta.T
         nlg = rng.random((3, K))
         n = 2000 if K < 150 else 300
-        per = []
-        for _ in range(3):
-            t0 = time.perf_counter()
-            for _ in range(n):
-                op.totals_stacked(beta, nlg)
-            per.append((time.perf_counter() - t0) / n)
-        print(f"  {scheme:12s} K = {K:3d}: {min(per) * 1e6:7.1f} us per evaluation (min of 3); "
-              f"map setup {setup * 1e3:.2f} ms")
+        per = {}
+        for label, fn in (("compiled", op.totals_stacked), ("numpy", op.totals_numpy)):
+            fn(beta, nlg)
+            best = []
+            for _ in range(3):
+                t0 = time.perf_counter()
+                for _ in range(n):
+                    fn(beta, nlg)
+                best.append((time.perf_counter() - t0) / n)
+            per[label] = min(best)
+        print(f"  {scheme:12s} K = {K:3d}: {per['compiled'] * 1e6:6.1f} / {per['numpy'] * 1e6:6.1f} us per evaluation "
+              f"(min of 3); setup {setup * 1e3:.2f} ms")
 
 
 if __name__ == "__main__":

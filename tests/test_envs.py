@@ -18,9 +18,9 @@ import yaml
 # conda package name -> import name, for the packages pbmdem uses
 IMPORT_NAME = {"numpy": "numpy", "scipy": "scipy", "pandas": "pandas", "scikit-learn": "sklearn",
                "skops": "skops", "matplotlib-base": "matplotlib", "pyyaml": "yaml",
-               "jsonschema": "jsonschema", "meshio": "meshio", "pyvista": "pyvista"}
+               "jsonschema": "jsonschema", "meshio": "meshio", "pyvista": "pyvista", "numba": "numba"}
 # packages that come with the ones listed (conda installs their dependencies too)
-IMPLIED = {"jsonschema": ["referencing", "jsonschema_specifications", "rpds", "attrs"]}
+IMPLIED = {"jsonschema": ["referencing", "jsonschema_specifications", "rpds", "attrs"], "numba": ["llvmlite"]}
 
 # what each stage's rules load, including imports made inside functions on the rule's path
 STAGE_MODULES = {
@@ -35,6 +35,10 @@ STAGE_MODULES = {
                    "pbmdem.validation.results", "pbmdem.surrogate",
                    "pbmdem.pbm.setup", "pbmdem.dem", "pbmdem.dem.collisions", "pbmdem.dem.vtk_series"],
 }
+
+# building a PBM model imports its compiled rates (numba), in the stages that build models
+for _stage in ("pbm", "validation"):
+    STAGE_MODULES[_stage] = [*STAGE_MODULES[_stage], "pbmdem.pbm._compiled"]
 
 BLOCKER = """
 import importlib.abc, sys

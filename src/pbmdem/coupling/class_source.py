@@ -44,8 +44,9 @@ class ClassFrequencySource:
             self._value = float(self.matrix[0, 0])
             self._table = None
         else:
-            self._table = TableFrequency(class_table(self.diameters, self.matrix), extrapolation="clamp",
-                                         column="frequency_per_pair")
+            # the TableFrequency of class_table(diameters, matrix), built without its DataFrames
+            self._table = TableFrequency.from_matrix(self.diameters, self.matrix, extrapolation="clamp",
+                                                     column="frequency_per_pair")
 
     def __repr__(self) -> str:
         return f"ClassFrequencySource({self.label}, classes={len(self.diameters)})"

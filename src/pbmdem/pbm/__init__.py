@@ -11,10 +11,12 @@ integration.
 | `grid` | the geometric solid-volume grid and the lever rule |
 | `aggregation` | the cell-average and fixed-pivot aggregation operators |
 | `kernels` | aggregation kernels and collision-frequency sources (with their analytical solutions) |
+| `table` | the DEM collision table as a collision-frequency source (`TableFrequency`, re-exported by `kernels`) |
 | `success` | the Stokes criterion of velocity-dependent success |
 | `processes` | liquid addition and consolidation |
 | `state` | the resumable state of a run |
 | `model` | the population balance and its time integration |
+| `_compiled` | its compiled (numba) rates and stages, imported when a model is built |
 | `results` | time series, size statistics, tables, plots |
 | `setup` | a model and a batch from the typed settings (pbmdem.config) |
 | `analytical` | closed-form solutions of pure aggregation |

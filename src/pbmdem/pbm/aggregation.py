@@ -17,10 +17,13 @@ divides by a number or a volume of the state:
 * ordered-pair rates R_ij = beta_ij N_i N_j, RL_ij = beta_ij L_i N_j, RG_ij = beta_ij G_i N_j
   (the event rate of the unordered pair i < j is R_ij, of i = i it is R_ii / 2; the liquid an
   event of (i, j) brings is l_i + l_j, so sum RL over both orders is the liquid born);
-* one precomputed sparse map (scipy.sparse, block-diagonal over R, RL, RG) turns these 3 K^2
-  rates into every per-bin total the scheme needs: deaths (N_i sum_j beta_ij N_j and the same
-  for L and G: each event removes one particle of each partner with its own liquid and gas),
-  births and the refused solid rate. One sparse product per evaluation, no Python loop.
+* every per-bin total the scheme needs is a sum of these 3 K^2 rates with weights fixed by the
+  grid: deaths (N_i sum_j beta_ij N_j and the same for L and G: each event removes one particle
+  of each partner with its own liquid and gas), births and the refused solid rate. One compiled
+  loop over the ordered pairs (numba, ``_compiled.aggregation_totals``) forms them, with the
+  target cell of every pair precomputed once per grid. The same sums as one precomputed sparse
+  map (scipy.sparse, block-diagonal over R, RL, RG) are kept as the numpy reference
+  (``totals_numpy``): the same products added in the same order, so the two agree to the bit.
 
 Cell average, volumes in units of the cell's pivot: with B_c = sum R (number born in cell c) and
 D_c = sum R (s/x_c - 1) (first moment of the births about the pivot, in units of x_c), the mean
@@ -62,6 +65,8 @@ class PivotAggregation:
 
     #: name used in the config (``pbm.aggregation.scheme``)
     name = ""
+    #: births by the cell-average split (else the map's first K rows are the births)
+    _cell_average = False
 
     def __init__(self, x: np.ndarray, bounds: np.ndarray | None = None, extra=None):
         x = np.asarray(x, float)
@@ -114,6 +119,22 @@ class PivotAggregation:
         raise NotImplementedError
 
     def _build(self):
+        """The arrays of the compiled evaluation (numba, imported here: building an operator loads
+        or compiles it, :mod:`._compiled`): the target cell or lower pivot of every ordered pair
+        (-1 beyond the grid) and its weights."""
+        from . import _compiled
+
+        self._totals = _compiled.aggregation_totals
+        target, weight = self._pair_weights()
+        self._target = np.ascontiguousarray(target, dtype=np.int64)
+        self._weight = np.ascontiguousarray(weight, dtype=float)
+        self._factors = np.zeros((4, self.K))
+        self._work = np.empty((10, self.K))
+        self._no_p = np.ones(self.M)
+        self._map = None
+
+    def _build_map(self):
+        """The sparse map of :meth:`totals_numpy` (built on first use)."""
         from scipy import sparse
 
         K, M, I, ok = self.K, self.M, self._I, self._ok
@@ -149,6 +170,10 @@ class PivotAggregation:
         except ImportError:                    # pragma: no cover - other scipy layouts
             self._matvec = None
 
+    def _pair_weights(self) -> tuple[np.ndarray, np.ndarray]:
+        """(M^2,) target and (2, M^2) weights of the ordered pairs for the compiled evaluation."""
+        raise NotImplementedError
+
     # ----------------------------------------------------------------- evaluation
     def totals(self, beta: np.ndarray, N: np.ndarray, L: np.ndarray, G: np.ndarray):
         """Aggregation rates from class totals: ``beta`` (M, M) symmetric, numbers ``N``, liquid
@@ -159,7 +184,28 @@ class PivotAggregation:
         return self.totals_stacked(beta, np.stack((N, L, G)))
 
     def totals_stacked(self, beta: np.ndarray, nlg: np.ndarray):
-        """:meth:`totals` with N, L, G given as one (3, M) array."""
+        """:meth:`totals` with N, L, G given as one (3, M) array: one compiled loop over the ordered
+        pairs, equal to the bit to :meth:`totals_numpy` (the sparse map)."""
+        M = self.M
+        if np.shape(beta) != (M, M) or np.shape(nlg) != (3, M):
+            raise ValueError(f"aggregation totals: beta {np.shape(beta)} and N, L, G {np.shape(nlg)}; expected "
+                             f"({M}, {M}) and (3, {M}) for the {M} classes")
+        d = np.empty((3, M))
+        refused = self._totals(np.ascontiguousarray(beta, dtype=float), self._no_p, False,
+                               np.ascontiguousarray(nlg, dtype=float), self.K, self._cell_average, self._target,
+                               self._weight, self._factors, self._work, d)
+        return d, refused
+
+    def compiled_arrays(self) -> tuple:
+        """(K, cell_average, target, weight, factors, work): the grid's arguments of the compiled
+        evaluations (``_compiled.aggregation_totals``, ``_compiled.class_rates``)."""
+        return self.K, self._cell_average, self._target, self._weight, self._factors, self._work
+
+    def totals_numpy(self, beta: np.ndarray, nlg: np.ndarray):
+        """:meth:`totals_stacked` in numpy: the ordered-pair rates mapped by one sparse product (the
+        reference of the compiled evaluation; about 25 numpy calls instead of one)."""
+        if self._map is None:
+            self._build_map()
         U = np.multiply(nlg[:, :, None], beta * nlg[0], out=self._U)     # R, RL, RG
         m, y = self._map, self._y
         if self._matvec is not None:
@@ -198,6 +244,7 @@ class CellAverageAggregation(PivotAggregation):
     """
 
     name = "cell_average"
+    _cell_average = True
 
     def _number_rows(self):
         K, T, ok, S, xr = self.K, self._T, self._ok, self._S, self.xr
@@ -213,6 +260,13 @@ class CellAverageAggregation(PivotAggregation):
         cols = np.arange(self.M ** 2)[ok]
         return self._T[ok], cols, np.ones(cols.size)
 
+    def _pair_weights(self):
+        T, ok, S = self._T, self._ok, self._S
+        w = np.zeros((2, T.size))
+        w[0, ok] = S[ok] / self.xr[T[ok]] - 1.0        # s/x_c - 1: the first moment about the pivot
+        w[0, ~ok] = S[~ok]                              # refused: the aggregate's volume
+        return np.where(ok, T, -1), w
+
     def _build(self):
         super()._build()
         xr = self.xr
@@ -222,6 +276,7 @@ class CellAverageAggregation(PivotAggregation):
         self._ncd = -xr / dx_down        # n_down = -D_c x_c / (x_c - x_(c-1)); 0 for the first cell
         self._ru = np.append(xr[1:] / xr[:-1], 0.0)     # x_(c+1) / x_c
         self._rd = np.insert(xr[:-1] / xr[1:], 0, 0.0)  # x_(c-1) / x_c
+        self._factors = np.ascontiguousarray(np.stack([self._cu, self._ncd, self._ru, self._rd]))
 
     def _births(self, Y):
         K = self.K
@@ -273,6 +328,16 @@ class FixedPivotAggregation(PivotAggregation):
 
     def _births(self, Y):
         return Y[:, :self.K]
+
+    def _pair_weights(self):
+        ok, S = self._ok, self._S
+        _, lo, up_number, up_solid = self._split()
+        target = np.full(S.size, -1)
+        target[ok] = lo
+        w = np.zeros((2, S.size))
+        w[0, ok], w[1, ok] = up_number, up_solid
+        w[0, ~ok] = S[~ok]
+        return target, w
 
 
 #: the aggregation schemes by config name

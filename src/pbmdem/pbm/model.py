@@ -37,7 +37,8 @@ import numpy as np
 from pbmdem.config import Solver
 
 from .aggregation import SCHEMES
-from .errors import GridOverflowError, NegativePopulationError, PBMInputError, SolverLimitError, positive
+from .errors import (GridOverflowError, KernelShapeError, NegativePopulationError, PBMInputError, SolverLimitError,
+                     positive)
 from .grid import Grid, diameter_of
 from .kernels import Kernel, KernelInput
 from .processes import Consolidation, LiquidAddition
@@ -51,6 +52,8 @@ METHODS = ("ssp3", "heun", "euler")
 FLUSH = 1e-100
 #: step reductions of one step (halvings after a negative entry) before a run gives up
 MAX_HALVINGS = 60
+#: success models of a factored kernel, as ``_compiled`` numbers them (ALWAYS, STEP, LOGISTIC)
+_SUCCESS_CODES = {"always": 0, "step": 1, "logistic": 2}
 
 
 def check_solver(opt: Solver) -> Solver:
@@ -71,16 +74,6 @@ def check_solver(opt: Solver) -> Solver:
         raise PBMInputError(f"solver max_steps = {opt.max_steps!r}; allowed: an integer >= 1")
     positive("solver max_wall_time (s)", opt.max_wall_time)
     return opt
-
-
-def _flushed(u: np.ndarray, K: int, flush_n: float, flush_v: float) -> np.ndarray:
-    """Zero (in place) the entries of u = [N, L, G] below their flush level; a bin whose number
-    is flushed loses its liquid and gas with it."""
-    tiny = u[:K] < flush_n
-    if tiny.any():
-        u.reshape(3, K)[:, tiny] = 0.0
-    u[K:][u[K:] < flush_v] = 0.0
-    return u
 
 
 @dataclass
@@ -127,13 +120,18 @@ class GranulationPBM:
         if not isinstance(separate_feed, (bool, np.bool_)):
             raise PBMInputError(f"separate_feed = {separate_feed!r}; allowed: true or false")
         self.separate_feed = bool(separate_feed)
+        # building the operator imports the compiled evaluation (numba, ``_compiled``): it is loaded
+        # from numba's cache, or compiled, here and not in a run
         self.aggregation = SCHEMES[scheme](grid.x, grid.edges[1:-1])
+        from . import _compiled
+
+        self._jit = _compiled
         self._operators = {(): self.aggregation}
         # internal unit of volume: the first pivot x_0 (pivots 1, r, r^2, ...)
         self._flush_n = self._flush_v = 0.0
         self._xr = grid.x / grid.x[0]
-        if liquid is not None:
-            self._spray_rate = liquid.rate / grid.x[0]
+        self._spray_rate = liquid.rate / grid.x[0] if liquid is not None else 0.0
+        self._consolidation_rate = consolidation.rate if consolidation is not None else 0.0
         self._use_classes(np.zeros(0))
 
     def __repr__(self) -> str:
@@ -145,6 +143,9 @@ class GranulationPBM:
         """Set up the classes of a run: the K pivots (aggregates, or everything without feed
         classes) followed by one class per feed volume (m3)."""
         key = tuple(float(v) for v in feed_volumes)
+        if key == getattr(self, "_classes_key", None):
+            return                              # the classes of the last run (a coupled loop's intervals)
+        self._classes_key = key
         op = self._operators.get(key)
         if op is None:
             op = self._operators[key] = type(self.aggregation)(self.grid.x, self.grid.edges[1:-1], extra=key)
@@ -159,9 +160,18 @@ class GranulationPBM:
             self._feed_number_w, self._feed_solid_w = g.lever_weights(op.extra)
         else:
             self._feed_number_w = self._feed_solid_w = None
-        if self.liquid is not None:
-            self._spray_weight = (self._dc / g.d[0]) ** 2 if self.liquid.rule == "surface_area" else self._xc
-        self._gas_min = self.consolidation.gas_per_solid * self._xc if self.consolidation is not None else None
+        self._spray_weight = self._xc
+        if self.liquid is not None and self.liquid.rule == "surface_area":
+            self._spray_weight = (self._dc / g.d[0]) ** 2
+        self._gas_min = self.consolidation.gas_per_solid * self._xc if self.consolidation is not None else \
+            np.zeros(self._M)
+        # the compiled rates of a factored kernel (_use_factors)
+        self._factored = self._factors_of = self._factors_key = None
+        self._vectors = np.ascontiguousarray(np.stack([self._xc, self._spray_weight, self._gas_min]), dtype=float)
+        self._params = (np.zeros(6), np.zeros(6))
+        self._pw = np.zeros((2, self._M))
+        self._stage, self._k2, self._k3 = np.empty(3 * self._M), np.empty((3, self._M)), np.empty((3, self._M))
+        self._op_arrays = op.compiled_arrays()
 
     def _pivot_totals(self, u: np.ndarray) -> np.ndarray:
         """(3, K) per-bin totals of the class state u = [N, L, G] (3M,): the aggregates of each bin
@@ -231,7 +241,9 @@ class GranulationPBM:
         self._use_classes(np.zeros(0))
         x0 = self.grid.x[0]
         u = np.concatenate([N, np.asarray(L, float) / x0, np.asarray(G, float) / x0])
-        self.kernel.prepare(self.kernel_input(t, N, L, G))
+        inp = self.kernel_input(t, N, L, G)
+        self.kernel.prepare(inp)
+        self._use_factors(inp)
         d, refused = self._rates(t, u, spraying)
         K = self.grid.bins
         return d[:K], d[K:2 * K] * x0, d[2 * K:] * x0, refused * x0
@@ -245,30 +257,85 @@ class GranulationPBM:
         ``beta``: the kernel matrix if the caller has it for this state.
         """
         M = self._M
-        if self._flush_n > 0 and ((u > 0) & (u < self._flush_vec)).any():
+        if self._factored is not None:
+            # a factored kernel (Kernel.factors): flush, kernel, aggregation, spraying and
+            # consolidation in one compiled call
+            d = np.empty((3, M))
+            refused = self._jit.class_rates(u, self._factored, self._success_code, self._vectors,
+                                            self._params[1] if spraying else self._params[0], *self._op_arrays,
+                                            self._pw, d)
+            return d.reshape(-1), refused
+        if self._flush_n > 0 and self._jit.below_flush(u, self._flush_vec):
             # entries below the flush level count as zero (they are zeroed after every step; here
             # also inside a step, so no event rate can underflow)
-            u = _flushed(u.copy(), M, self._flush_n, self._flush_v)
+            u = u.copy()
+            self._jit.flush(u, M, self._flush_n, self._flush_v)   # a class flushed loses L, G too
             beta = None
         nlg = u.reshape(3, M)
         if beta is None:
             beta = self.kernel(self._input(t, nlg))
         d, refused = self._op.totals_stacked(beta, nlg)
-        if spraying:
-            w = nlg[0] * self._spray_weight
-            total = w.sum()
-            if total > 0:
-                d[1] += (self._spray_rate / total) * w
-        if self.consolidation is not None:
-            d[2] -= self.consolidation.rate * (nlg[2] - self._gas_min * nlg[0])
+        # spraying (Q shared in proportion to N_k w_k) and consolidation -c (G_k - G_min,k)
+        self._jit.add_processes(d, nlg, self._spray_rate if spraying else 0.0, self._spray_weight,
+                                self._consolidation_rate, self._gas_min)
         return d.reshape(-1), refused
+
+    def _stages(self, t: float, u: np.ndarray, k1: np.ndarray, r1: float, dt: float, order: int, spraying: bool):
+        """The stages of one step of size dt from u (rates k1, refused rate r1): (new state, the
+        embedded lower-order state or None, refused rate of the step). A stage with a negative
+        entry ends the step with that stage as the new state (the caller halves the step). With a
+        factored kernel one compiled call (``_compiled.ssp_stages``, the same operations)."""
+        if self._factored is not None:
+            n = u.size
+            u_new, u_low = np.empty(n), np.empty(n)
+            refused_rate, _ = self._jit.ssp_stages(
+                u, k1, r1, dt, order, self._factored, self._success_code, self._vectors,
+                self._params[1] if spraying else self._params[0], *self._op_arrays, self._pw, u_new, u_low,
+                self._stage, self._k2, self._k3)
+            return u_new, u_low, refused_rate
+        jit = self._jit
+        u1 = u + dt * k1
+        if order == 1 or jit.any_negative(u1):
+            return u1, None, r1
+        k2, r2 = self._rates(t + dt, u1, spraying)
+        # increment forms of the Shu-Osher stages: zero rates leave u exactly unchanged
+        k12 = k1 + k2
+        u_h = u + (0.5 * dt) * k12                                 # Heun (SSP-RK2)
+        if order == 2:
+            return u_h, u1, 0.5 * (r1 + r2)
+        u2 = u + (0.25 * dt) * k12                                 # SSP-RK3 (Shu & Osher 1988)
+        if jit.any_negative(u2):
+            return u2, u_h, r1
+        k3, r3 = self._rates(t + 0.5 * dt, u2, spraying)
+        return u + (dt / 6.0) * (k12 + 4.0 * k3), u_h, (r1 + r2 + 4.0 * r3) / 6.0
+
+    def _use_factors(self, inp: KernelInput) -> None:
+        """Ask the kernel for its factors at this step (after ``prepare``): the compiled rates use
+        them until the next step; None: :meth:`_rates` calls the kernel."""
+        factors = getattr(self.kernel, "factors", None)        # kernels need not derive from Kernel
+        f = factors(inp) if factors is not None else None
+        if f is None:
+            self._factored = self._factors_of = None
+            return
+        S, model, threshold, width = f
+        key = (model, threshold, width, self._flush_n, self._flush_v)
+        if S is self._factors_of and key == self._factors_key:
+            return                              # the kernel's factors of the last step
+        if np.shape(S) != (self._M, self._M):
+            raise KernelShapeError(f"kernel {self.kernel!r} returned factors of shape {np.shape(S)}; expected "
+                                   f"({self._M}, {self._M}) for the {self._M} classes")
+        self._factors_of, self._factors_key = S, key
+        self._factored = np.ascontiguousarray(S, dtype=float)
+        self._success_code = _SUCCESS_CODES[model]
+        base = [self._flush_n, self._flush_v, float(threshold), float(width), 0.0, self._consolidation_rate]
+        self._params[0][:] = base
+        self._params[1][:] = base
+        self._params[1][4] = self._spray_rate
 
     def _input(self, t: float, nlg: np.ndarray) -> KernelInput:
         """KernelInput of the scaled class state (3, M): surface-liquid fraction from class totals."""
-        S = nlg[0] * self._xc
-        L, G = nlg[1], nlg[2]
-        V = S + np.maximum(L, G)
-        phi = np.divide(np.maximum(L - G, 0.0), V, out=np.zeros(V.size), where=V > 0)
+        phi = np.empty(nlg.shape[1])
+        self._jit.surface_fraction(nlg, self._xc, phi)    # max(L - G, 0) / (S + max(L, G)), 0 if empty
         return KernelInput(t=t, volumes=self._vc, diameters=self._dc, numbers=nlg[0],
                            surface_fraction=phi, rpm=self.rpm, feed_weights=self._feed_number_w)
 
@@ -393,7 +460,8 @@ class GranulationPBM:
         flush_n = self._flush_n = FLUSH * float(np.sum(s.number))
         flush_v = self._flush_v = FLUSH * total_solid
         self._flush_vec = np.concatenate([np.full(M, flush_n), np.full(2 * M, flush_v)])
-        u = _flushed(u, M, flush_n, flush_v)
+        jit = self._jit
+        jit.flush(u, M, flush_n, flush_v)
         rtol = opt.rtol
         order = {"euler": 1, "heun": 2, "ssp3": 3}[opt.method]
         expo = 1.0 / order
@@ -412,37 +480,19 @@ class GranulationPBM:
             spraying = self.liquid is not None and self.liquid.active(t)
             inp = self._input(t, u.reshape(3, M))
             self.kernel.prepare(inp)
-            k1, r1 = self._rates(t, u, spraying, self.kernel(inp))
+            self._use_factors(inp)
+            k1, r1 = self._rates(t, u, spraying, None if self._factored is not None else self.kernel(inp))
             if not np.isfinite(k1).all():
                 self._raise_bad(t, np.where(np.isfinite(k1), u, np.nan), "non-finite rate", x0)
-            neg = k1 < 0
-            dt_pos = opt.safety * float(np.min(u[neg] / -k1[neg])) if neg.any() else np.inf
+            dt_pos = opt.safety * jit.depletion_time(u, k1)     # min u / -rate over rate < 0
             cands = (dt_pos, dt_prop, opt.max_step, t_next - t)
             dt = min(cands)
             why = cands.index(dt)
             rejected = 0
             for _ in range(MAX_HALVINGS + 1):
-                u1 = u + dt * k1
-                refused_rate = r1
+                u_new, u_low, refused_rate = self._stages(t, u, k1, r1, dt, order, spraying)
                 err = 0.0
-                u_new = u1
-                if order > 1 and not (u1 < 0).any():
-                    k2, r2 = self._rates(t + dt, u1, spraying)
-                    # increment forms of the Shu-Osher stages: zero rates leave u exactly unchanged
-                    u_h = u + (0.5 * dt) * (k1 + k2)               # Heun (SSP-RK2)
-                    if order == 2:
-                        u_new, u_low = u_h, u1
-                        refused_rate = 0.5 * (r1 + r2)
-                    else:
-                        u2 = u + (0.25 * dt) * (k1 + k2)           # SSP-RK3 (Shu & Osher 1988)
-                        u_low = u_h
-                        if (u2 < 0).any():
-                            u_new = u2
-                        else:
-                            k3, r3 = self._rates(t + 0.5 * dt, u2, spraying)
-                            u_new = u + (dt / 6.0) * (k1 + k2 + 4.0 * k3)
-                            refused_rate = (r1 + r2 + 4.0 * r3) / 6.0
-                if not (u_new >= 0).all():
+                if not jit.all_nonnegative(u_new):
                     if np.isnan(u_new).any():
                         self._raise_bad(t, u_new, "NaN after a step", x0)
                     dt *= 0.5
@@ -451,7 +501,7 @@ class GranulationPBM:
                     continue
                 if order > 1:
                     # embedded error estimate, relative to each entry (floor: atol x total solid)
-                    err = float(np.max(np.abs(u_new - u_low) / (rtol * u_new + err_floor)))
+                    err = jit.error_norm(u_new, u_low, rtol, err_floor)
                     if err > 1.0:
                         # a second rejection in a row: the error did not fall as dt^order (a
                         # switch of the success probability inside the step): shrink as for a
@@ -470,7 +520,8 @@ class GranulationPBM:
                 dt_prop = dt * min(1.0 if rejected else 5.0, 0.9 * max(err, 1e-300) ** -expo)
             capped = dt == t_next - t
             t = t_next if capped else t + dt
-            u = _flushed(u_new, M, flush_n, flush_v)
+            u = u_new
+            jit.flush(u, M, flush_n, flush_v)
             steps += 1
             taken += 1
             refused += refused_rate * dt
@@ -506,6 +557,8 @@ class GranulationPBM:
                 "consolidation": repr(self.consolidation), "rpm": self.rpm, "steps": taken,
                 "wall_time_s": _time.perf_counter() - wall0, "method": opt.method,
                 "aggregation_scheme": self.aggregation.name, "safety": opt.safety, "step_limits": limits,
+                # the kernel evaluated inside the compiled rates (Kernel.factors), or called per evaluation
+                "kernel_evaluation": "compiled" if self._factored is not None else "called",
                 "feed_volumes": feed_volumes.tolist()}
         return Result(self.grid, rec, s, info)
 

@@ -244,6 +244,22 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         return out
 
     # ------------------------------------------------------------------ predict
+    def predict_array(self, X: np.ndarray, return_std: bool = False):
+        """:meth:`predict` on a float64 array with the training features in their order, without
+        scikit-learn's per-call validation (the caller's array is trusted: finite, 2-d, the
+        fitted number of features): the same members' predictions, mean and spread, for the
+        PBM's frequent calls with a few rows (``CollisionSurrogate.frequency_matrix``)."""
+        check_is_fitted(self)
+        X = np.asarray(X, dtype=np.float64)
+        if X.ndim != 2 or X.shape[1] != self.n_features_in_:
+            raise ValueError(f"predict_array: X must be (n, {self.n_features_in_}), got shape {X.shape}")
+        preds = np.stack([_forward(m, X) for m in self.estimators_])
+        mean = preds.mean(axis=0)
+        if not return_std:
+            return mean
+        std = preds.std(axis=0, ddof=1) if len(self.estimators_) > 1 else np.zeros_like(mean)
+        return mean, std
+
     def predict(self, X, return_std: bool = False):
         """Members' mean prediction (units of ``y``); with ``return_std`` also their standard
         deviation (ddof 1; zeros for a single member)."""
@@ -288,3 +304,43 @@ def search_table(estimator: EnsembleMLPRegressorCV) -> pd.DataFrame:
         "fold_mse_log10_std": np.asarray(res["std_test_score"], dtype=float),
         "rank": np.asarray(res["rank_test_score"], dtype=int),
     })
+
+
+def _forward(member, X: np.ndarray) -> np.ndarray:
+    """``member.predict(X)`` of a fitted ``Pipeline(StandardScaler, MLPRegressor)`` on a validated
+    float64 array, by the operations of scikit-learn's ``StandardScaler.transform`` and
+    ``MLPRegressor._forward_pass_fast`` (the same numpy calls in the same order) without their
+    per-call input validation (about 0.7 ms per member and call, against 20 us for the
+    arithmetic). Any other member, or one whose ``predict`` was replaced on the instance, is asked
+    for ``member.predict(X)``."""
+    steps = getattr(member, "steps", None)
+    if not (type(member) is Pipeline and "predict" not in vars(member) and len(steps) == 2
+            and type(steps[0][1]) is StandardScaler and type(steps[1][1]) is MLPRegressor
+            and steps[1][1].out_activation_ in _ACTIVATIONS and steps[1][1].activation in _ACTIVATIONS):
+        return member.predict(X)
+    scaler, mlp = steps[0][1], steps[1][1]
+    a = np.array(X, dtype=np.float64, copy=True)
+    if scaler.with_mean:
+        a -= scaler.mean_
+    if scaler.with_std:
+        a /= scaler.scale_
+    hidden = _ACTIVATIONS[mlp.activation]
+    last = mlp.n_layers_ - 2
+    for i in range(mlp.n_layers_ - 1):
+        a = a @ mlp.coefs_[i]
+        a += mlp.intercepts_[i]
+        if i != last:
+            hidden(a)
+    _ACTIVATIONS[mlp.out_activation_](a)
+    return a.ravel() if a.shape[1] == 1 else a
+
+
+def _logistic(a):
+    from scipy.special import expit
+
+    expit(a, out=a)
+
+
+#: in-place activations, as scikit-learn's ``neural_network._base.ACTIVATIONS``
+_ACTIVATIONS = {"identity": lambda a: None, "tanh": lambda a: np.tanh(a, out=a),
+                "relu": lambda a: np.maximum(a, 0, out=a), "logistic": _logistic}

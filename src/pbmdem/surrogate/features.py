@@ -15,6 +15,8 @@ always passed in (``granulator.impeller.blade_length``); nothing here reads the 
 The same code path builds features for the PBM (:func:`pair_table`): a size distribution given as
 class diameters and particle numbers is turned into a collision-table-like frame of all unordered
 class pairs, so training and prediction can never disagree about a feature's definition.
+:func:`pair_features` is its array twin for the PBM's frequent calls (the same values, without a
+DataFrame; a test holds them equal).
 """
 
 from __future__ import annotations
@@ -290,6 +292,17 @@ def pair_table(diameters, numbers, rpm: float) -> tuple[pd.DataFrame, np.ndarray
 
     Returns the frame and the row/column indices (``iu``, ``ju``) of each row in the (K, K) matrix.
     """
+    d, n = _distribution(diameters, numbers, rpm)
+    iu, ju = np.triu_indices(d.size)
+    frame = pd.DataFrame({
+        "point_id": "query", "rpm": float(rpm), "class_i": iu, "class_j": ju,
+        "d_i": d[iu], "d_j": d[ju], "n_i": n[iu], "n_j": n[ju], "n_total": n.sum(),
+    })
+    return frame, iu, ju
+
+
+def _distribution(diameters, numbers, rpm) -> tuple[np.ndarray, np.ndarray]:
+    """The class diameters and numbers of one size distribution, checked (ValueError)."""
     d = np.asarray(diameters, dtype=float)
     n = np.asarray(numbers, dtype=float)
     if d.ndim != 1 or n.shape != d.shape or d.size == 0:
@@ -300,12 +313,28 @@ def pair_table(diameters, numbers, rpm: float) -> tuple[pd.DataFrame, np.ndarray
         raise ValueError("numbers must be finite, >= 0 and not all zero")
     if not (np.isfinite(rpm) and rpm > 0):
         raise ValueError(f"rpm must be finite and > 0, got {rpm!r}")
+    return d, n
+
+
+def pair_features(diameters, numbers, rpm: float, impeller_radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The feature matrix (K (K + 1) / 2, len(FEATURE_NAMES)) of all unordered class pairs of one
+    size distribution, without DataFrames: the values of ``make_features(pair_table(...)[0])``
+    (the same operations), for the PBM's calls. Returns the matrix (C-ordered, columns
+    :data:`FEATURE_NAMES`) and the row/column indices ``iu``, ``ju`` of each row."""
+    d, n = _distribution(diameters, numbers, rpm)
     iu, ju = np.triu_indices(d.size)
-    frame = pd.DataFrame({
-        "point_id": "query", "rpm": float(rpm), "class_i": iu, "class_j": ju,
-        "d_i": d[iu], "d_j": d[ju], "n_i": n[iu], "n_j": n[ju], "n_total": n.sum(),
-    })
-    return frame, iu, ju
+    d_i, d_j = d[iu], d[ju]
+    n_total = n.sum()
+    f_i, f_j = n[iu] / n_total, n[ju] / n_total
+    i_small = d_i <= d_j
+    X = np.empty((iu.size, len(FEATURE_NAMES)))
+    X[:, 0] = np.where(i_small, d_i, d_j)
+    X[:, 1] = np.where(i_small, d_j, d_i)
+    X[:, 2] = np.where(i_small, f_i, f_j)
+    X[:, 3] = np.where(i_small, f_j, f_i)
+    X[:, 4] = n_total
+    X[:, 5] = tip_speed(np.full(iu.size, float(rpm)), impeller_radius)
+    return X, iu, ju
 
 
 @dataclass(frozen=True)

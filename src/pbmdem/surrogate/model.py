@@ -30,7 +30,14 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 from pbmdem.impact import EncounterRates
 
 from .ensemble import EnsembleMLPRegressorCV
-from .features import check_impeller_radius, duplicated_features, make_features, pair_table
+from .features import (
+    FEATURE_NAMES,
+    check_impeller_radius,
+    duplicated_features,
+    make_features,
+    pair_features,
+    pair_table,
+)
 from .velocity import lognormal_fractions
 
 PHYSICS_OFFSETS = ("cross_section", "none")
@@ -116,7 +123,12 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         """log10 of the physical part of c_ij that the frequency model does not have to learn."""
         if self.physics_offset == "none":
             return np.zeros(len(F))
-        return 2.0 * np.log10(1e3 * (F["d_small"].to_numpy(float) + F["d_large"].to_numpy(float)))
+        return self._offset_of(F["d_small"].to_numpy(float), F["d_large"].to_numpy(float))
+
+    def _offset_of(self, d_small: np.ndarray, d_large: np.ndarray) -> np.ndarray:
+        if self.physics_offset == "none":
+            return np.zeros(len(d_small))
+        return 2.0 * np.log10(1e3 * (d_small + d_large))
 
     def _velocity_offset(self, F: pd.DataFrame) -> np.ndarray:
         """log10 of the speed scale the velocity model does not have to learn (the tip speed)."""
@@ -276,12 +288,43 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         return lognormal_fractions(mu, sigma)
 
     # ------------------------------------------------------------------ PBM kernel
+    def _array_path(self) -> bool:
+        """True if the PBM-facing calls can skip DataFrames: fitted on the feature frame
+        (feature names :data:`FEATURE_NAMES`, in that order)."""
+        names = getattr(self, "feature_names_in_", None)
+        return names is not None and [str(n) for n in names] == list(FEATURE_NAMES)
+
     def _pairs(self, diameters, numbers, rpm: float, check_domain: bool):
+        """Features of the K (K + 1) / 2 class pairs (an array with :meth:`_array_path`, else the
+        feature frame), the pairs' indices, K."""
+        if self._array_path():
+            # the values of make_features(pair_table(...)), without DataFrames (pair_features)
+            X, iu, ju = pair_features(diameters, numbers, rpm, self.impeller_radius)
+            if check_domain:
+                self._warn_domain(X, stacklevel=4)
+            return X, iu, ju, len(np.atleast_1d(diameters))
         frame, iu, ju = pair_table(diameters, numbers, rpm)
         F = make_features(frame, self.impeller_radius)
         if check_domain:
             self._warn_domain(validate_data(self, F, reset=False, dtype=np.float64), stacklevel=4)
         return F, iu, ju, len(np.atleast_1d(diameters))
+
+    def _pair_log10(self, F, return_std: bool = False):
+        """:meth:`predict` of the pairs' features from :meth:`_pairs` (unchecked domain)."""
+        if not isinstance(F, np.ndarray):
+            return self.predict(F, return_std=return_std, check_domain=False)
+        out = self.frequency_model_.predict_array(F, return_std=return_std)
+        mean, std = out if return_std else (out, None)
+        mean = mean + self._offset_of(F[:, 0], F[:, 1])
+        return (mean, std) if return_std else mean
+
+    def _pair_velocity(self, F) -> np.ndarray:
+        """:meth:`velocity_fractions` of the pairs' features from :meth:`_pairs` (unchecked domain)."""
+        if not isinstance(F, np.ndarray):
+            return self.velocity_fractions(F, check_domain=False)
+        mean = self.velocity_model_.predict_array(F).reshape(len(F), 2)
+        velocity_offset = np.zeros(len(F)) if self.physics_offset == "none" else np.log10(F[:, 5])
+        return lognormal_fractions(mean[:, 0] + velocity_offset, 10.0 ** mean[:, 1])
 
     def frequency_matrix(self, diameters, numbers, rpm: float, return_std: bool = False,
                          check_domain: bool = True):
@@ -289,11 +332,14 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
 
         One vectorised predict over the K (K + 1) / 2 unordered class pairs. ``numbers`` are
         particle numbers on the DEM scale (the run's ``n_total`` is their sum). With
-        ``return_std`` also the (K, K) ensemble spread in decades.
+        ``return_std`` also the (K, K) ensemble spread in decades. A surrogate fitted on the
+        feature frame predicts from a feature array (:func:`~.features.pair_features`,
+        :meth:`EnsembleMLPRegressorCV.predict_array`): the same numbers as :meth:`predict_log10`
+        on the pairs' collision table, without its DataFrames.
         """
         check_is_fitted(self)
         F, iu, ju, k = self._pairs(diameters, numbers, rpm, check_domain)
-        mean, std = self.predict(F, return_std=True, check_domain=False)
+        mean, std = self._pair_log10(F, return_std=True)
         c = np.empty((k, k))
         c[iu, ju] = 10.0 ** mean
         c[ju, iu] = 10.0 ** mean
@@ -313,8 +359,8 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         """
         self._require_velocity_model()
         F, iu, ju, k = self._pairs(diameters, numbers, rpm, check_domain)
-        log_c = self.predict(F, check_domain=False)
-        fractions = self.velocity_fractions(F, check_domain=False)
+        log_c = self._pair_log10(F)
+        fractions = self._pair_velocity(F)
         c = np.empty((k, k))
         c[iu, ju] = 10.0 ** log_c
         c[ju, iu] = 10.0 ** log_c

@@ -1,0 +1,277 @@
+"""The compiled (numba) rate evaluation and the kernel caches of the fast PBM path: the same
+numbers as the numpy reference (the sparse map) and the same kernels as the formula, to the bit;
+spraying and consolidation as before to round-off; no numba on `import pbmdem.pbm`."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from pbmdem.config import Solver
+from pbmdem.pbm import (
+    SCHEMES,
+    CollisionKernel,
+    Consolidation,
+    ConstantFrequency,
+    ConstantKernel,
+    GranulationPBM,
+    Grid,
+    KernelInput,
+    LiquidAddition,
+    PBMInputError,
+    SuccessProbability,
+    TableFrequency,
+)
+from pbmdem.pbm.errors import KernelShapeError
+
+
+def random_totals(rng, M, empty=5):
+    """(3, M) class totals spanning 30 decades, with empty top classes (as a run's state)."""
+    nlg = rng.random((3, M)) * 10.0 ** rng.uniform(-30, 3, (3, M))
+    nlg[:, M - empty:] = 0.0
+    return nlg
+
+
+@pytest.mark.parametrize("scheme", sorted(SCHEMES))
+@pytest.mark.parametrize("K,extra", [(37, (2.0, 3.375, 8.0)), (20, ()), (60, (1.7,))])
+def test_compiled_totals_equal_the_sparse_map_to_the_bit(scheme, K, extra):
+    rng = np.random.default_rng(K)
+    g = Grid(K, 2.0 ** (1 / 3), v0=1.0)
+    op = SCHEMES[scheme](g.x, g.edges[1:-1], extra=extra)
+    for _ in range(5):
+        beta = rng.random((op.M, op.M))
+        beta = beta + beta.T
+        nlg = random_totals(rng, op.M)
+        d, refused = op.totals_stacked(beta, nlg)
+        d_ref, refused_ref = op.totals_numpy(beta, nlg)
+        # the same products summed in the same order: equal to the bit
+        np.testing.assert_array_equal(d, d_ref)
+        assert refused == refused_ref
+        # the totals are a fresh array each time (the integrator keeps the stages' rates)
+        assert op.totals_stacked(beta, nlg)[0] is not d
+
+
+def test_compiled_totals_take_any_layout_of_the_kernel():
+    rng = np.random.default_rng(1)
+    g = Grid(12, 2.0, v0=1.0)
+    op = SCHEMES["cell_average"](g.x, g.edges[1:-1])
+    beta = np.asfortranarray(rng.random((12, 12)))
+    beta = beta + beta.T
+    nlg = random_totals(rng, 12, empty=2)
+    np.testing.assert_array_equal(op.totals_stacked(beta, nlg)[0], op.totals_stacked(np.ascontiguousarray(beta), nlg)[0])
+
+
+class _Counting:
+    """A collision-frequency source that counts its calls and can change its answer."""
+
+    def __init__(self, K, value=0.1):
+        self.calls = 0
+        self.c = np.full((K, K), value)
+
+    def __call__(self, d, n, rpm):
+        self.calls += 1
+        return self.c
+
+    def __repr__(self):
+        return "CountingSource"
+
+
+def _input(K, phi, t=0.0):
+    x = 1e-9 * 2.0 ** np.arange(K)
+    return KernelInput(t=t, volumes=x, diameters=(6 * x / np.pi) ** (1 / 3), numbers=np.ones(K),
+                       surface_fraction=np.asarray(phi, float), rpm=600.0)
+
+
+@pytest.mark.parametrize("model", ["step", "logistic", "always"])
+def test_cached_kernel_equals_the_formula(model):
+    K = 6
+    src = _Counting(K)
+    kern = CollisionKernel(src, 2e-4, SuccessProbability(model, threshold=0.02, width=0.005))
+    rng = np.random.default_rng(0)
+    for step in range(8):
+        phi = rng.uniform(0.0, 0.04, K)
+        inp = _input(K, phi, t=float(step))
+        kern.prepare(inp)
+        beta = kern(inp)
+        expected = 2e-4 * src.c * kern.success(phi)
+        np.testing.assert_array_equal(beta, expected)
+        # the same input again: the same matrix (cached), still equal to the formula
+        np.testing.assert_array_equal(kern(inp), expected)
+
+
+def test_kernel_follows_a_changed_success_pattern_and_a_changed_source():
+    K = 4
+    src = _Counting(K)
+    kern = CollisionKernel(src, 1.0, SuccessProbability("step", threshold=0.02), update_interval=0.0)
+    wet = _input(K, [0.03, 0.03, 0.0, 0.0])
+    kern.prepare(wet)
+    first = kern(wet).copy()
+    assert first[0, 1] == pytest.approx(0.1) and first[0, 2] == 0 and first[2, 3] == 0
+    wetter = _input(K, [0.03, 0.03, 0.03, 0.0])
+    assert kern(wetter)[0, 2] == pytest.approx(0.1) and kern(wetter)[2, 3] == 0
+    # the source changes its answer at the next refresh: the kernel follows
+    src.c = np.full((K, K), 0.3)
+    later = _input(K, [0.03, 0.03, 0.03, 0.0], t=1.0)
+    kern.prepare(later)
+    assert kern(later)[0, 2] == pytest.approx(0.3)
+    assert src.calls == 2
+
+
+def test_a_source_that_turns_bad_between_refreshes_is_refused():
+    # an unchanged matrix is not checked again, a changed one is
+    g = Grid(12, 2.0, min_diameter=1e-3)
+    src = _Counting(12)
+    model = GranulationPBM(g, CollisionKernel(src, 1e-4, SuccessProbability("always"), update_interval=0.5),
+                           solver=Solver.defaults().replace(max_step=0.25))
+    state = model.initial_state(np.pi / 6 * np.array([2e-3]) ** 3, [100])
+    res = model.run(0.0, 2.0, state)
+    assert res.info["step_limits"]["kernel_refreshes"] == src.calls >= 2
+
+    class Turning(_Counting):
+        def __call__(self, d, n, rpm):
+            c = super().__call__(d, n, rpm)
+            if self.calls >= 3:
+                c = np.triu(c)
+            return c
+
+    model.kernel.set_source(Turning(12))
+    with pytest.raises(KernelShapeError, match="non-symmetric"):
+        model.run(0.0, 2.0, state)
+
+
+def test_import_pbmdem_pbm_does_not_import_numba():
+    code = "import sys, pbmdem.pbm; print('numba' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+    code = ("import sys, numpy as np, pbmdem.pbm as p; p.GranulationPBM(p.Grid(5, 2.0, v0=1.0), "
+            "p.ConstantKernel(1.0)); print('numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "True"
+
+
+def test_spraying_and_consolidation_rates_follow_their_formulas():
+    g = Grid(12, 2.0, min_diameter=1e-3)
+    rng = np.random.default_rng(4)
+    N = rng.uniform(1.0, 100.0, 12)
+    L, G = N * g.x * rng.uniform(0.1, 0.5, 12), N * g.x * rng.uniform(0.2, 0.6, 12)
+    Q, c, eps = 5e-8, 0.02, 0.2
+
+    def rates(liquid, consolidation, spraying):
+        model = GranulationPBM(g, ConstantKernel(1e-4), liquid, consolidation)
+        return model.rates(1.0, N, L, G, spraying)
+
+    plain = rates(None, None, False)
+    for rule, w in (("surface_area", N * g.d ** 2), ("solid_volume", N * g.x)):
+        sprayed = rates(LiquidAddition(Q, 0.0, 10.0, rule), None, True)
+        np.testing.assert_allclose(sprayed[1] - plain[1], Q * w / w.sum(), rtol=1e-12, atol=1e-12 * Q)
+        assert np.sum(sprayed[1] - plain[1]) == pytest.approx(Q, rel=1e-12)
+        np.testing.assert_array_equal(sprayed[0], plain[0])
+        not_spraying = rates(LiquidAddition(Q, 0.0, 10.0, rule), None, False)
+        np.testing.assert_array_equal(not_spraying[1], plain[1])
+    consolidated = rates(None, Consolidation(c, eps), False)
+    np.testing.assert_allclose(consolidated[2] - plain[2], -c * (G - eps / (1 - eps) * N * g.x),
+                               rtol=1e-12, atol=1e-12 * np.abs(G).max() * c)
+
+
+def test_table_frequency_from_matrix_is_the_table_of_the_matrix():
+    import pandas as pd
+
+    rng = np.random.default_rng(5)
+    x = np.geomspace(1.5e-3, 1.5e-2, 30)
+    for k in (2, 3, 6):
+        d = np.geomspace(2e-3, 8e-3, k) * rng.uniform(0.97, 1.03, k)
+        c = rng.uniform(0.0, 0.2, (k, k))
+        c = 0.5 * (c + c.T)
+        c[0, -1] = c[-1, 0] = 0.0                      # a zero is floored as in the table
+        iu, ju = np.triu_indices(k)
+        table = pd.DataFrame({"d_i": d[iu], "d_j": d[ju], "frequency_per_pair": c[iu, ju]})
+        for extrapolation in ("clamp", "linear"):
+            ref = TableFrequency(table, extrapolation=extrapolation, column="frequency_per_pair")
+            new = TableFrequency.from_matrix(d, c, extrapolation=extrapolation)
+            np.testing.assert_array_equal(new(x, None, 600.0), ref(x, None, 600.0))
+            assert new.ranges == ref.ranges and repr(new) == repr(ref)
+    # diameters out of order go through the table
+    d = np.array([4e-3, 2e-3])
+    c = np.array([[0.1, 0.2], [0.2, 0.3]])
+    np.testing.assert_allclose(TableFrequency.from_matrix(d, c)(d, None, 600.0), c, rtol=1e-12)
+    with pytest.raises(PBMInputError, match="no positive frequency_per_pair"):
+        TableFrequency.from_matrix([2e-3, 3e-3], np.zeros((2, 2)))
+
+
+class _Unfactored:
+    """The same kernel without its factors: the model calls it at every evaluation."""
+
+    def __init__(self, kernel):
+        self.kernel = kernel
+
+    def __call__(self, inp):
+        return self.kernel(inp)
+
+    def prepare(self, inp):
+        self.kernel.prepare(inp)
+
+    def reset(self):
+        self.kernel.reset()
+
+    def __getattr__(self, name):              # evaluations, ... but no factors
+        if name == "factors":
+            raise AttributeError(name)
+        return getattr(self.kernel, name)
+
+
+@pytest.mark.parametrize("kernel", [
+    lambda: CollisionKernel(ConstantFrequency(0.12), 2e-4, SuccessProbability("step", 0.02), update_interval=1.0),
+    lambda: CollisionKernel(ConstantFrequency(0.12), 2e-4, SuccessProbability("logistic", 0.02, 0.005)),
+    lambda: CollisionKernel(ConstantFrequency(0.12), 2e-4, SuccessProbability("always")),
+    lambda: ConstantKernel(2e-5),
+], ids=["step", "logistic", "always", "constant"])
+def test_factored_kernel_in_the_compiled_rates_equals_calling_the_kernel(kernel):
+    # the default process with feed classes: the compiled path (factors) and the generic one
+    g = Grid.spanning(2e-3, 32e-3, 2.0 ** (1 / 3))
+    runs = []
+    for k in (kernel(), _Unfactored(kernel())):
+        model = GranulationPBM(g, k, LiquidAddition(5.8e-8, 60.0, 240.0), Consolidation(0.02, 0.2), rpm=600.0)
+        state = model.initial_state(np.pi / 6 * np.array([2e-3, 3e-3, 4e-3]) ** 3, [900.0, 540.0, 360.0],
+                                    porosity=0.5)
+        runs.append(model.run(0.0, 480.0, state, output_times=np.arange(0.0, 481.0, 10.0)))
+    fast, generic = runs
+    assert fast.info["kernel_evaluation"] == "compiled" and generic.info["kernel_evaluation"] == "called"
+    assert fast.info["steps"] == generic.info["steps"]
+    assert fast.info["step_limits"] == generic.info["step_limits"]
+    for a, b in ((fast.number, generic.number), (fast.liquid, generic.liquid), (fast.gas, generic.gas)):
+        if kernel().__class__ is CollisionKernel and kernel().success.model == "logistic":
+            # numba's exp and numpy's may differ in the last digit
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12 * np.abs(b).max())
+        else:
+            np.testing.assert_array_equal(a, b)
+    assert fast.summary().d50.iloc[-1] > 1.2 * fast.summary().d50.iloc[0]      # it did granulate
+
+
+def test_a_velocity_dependent_success_is_not_factored():
+    from pbmdem.pbm import StokesCriterion
+
+    kern = CollisionKernel(ConstantFrequency(0.12, impact_velocity=0.1), 2e-4,
+                           SuccessProbability("step", 0.02, velocity=StokesCriterion(0.1, 0.4, 5e-6, 1000.0)))
+    inp = _input(4, [0.03, 0.03, 0.0, 0.0])
+    kern.prepare(inp)
+    assert kern.factors(inp) is None
+    assert CollisionKernel(_Counting(4), 1.0).factors(inp)[1:] == ("step", 0.02, 0.005)
+
+
+def test_shapes_are_checked_before_the_compiled_code():
+    g = Grid(8, 2.0, v0=1.0)
+    op = SCHEMES["cell_average"](g.x, g.edges[1:-1])
+    with pytest.raises(ValueError, match=r"expected \(8, 8\) and \(3, 8\)"):
+        op.totals_stacked(np.ones((7, 7)), np.ones((3, 8)))
+
+    class WrongFactors(ConstantKernel):
+        def factors(self, inp):
+            return np.ones((2, 2)), "always", 0.0, 1.0
+
+    model = GranulationPBM(Grid(8, 2.0, min_diameter=1e-3), WrongFactors(1e-4))
+    state = model.initial_state(np.pi / 6 * np.array([2e-3]) ** 3, [100])
+    with pytest.raises(KernelShapeError, match=r"factors of shape \(2, 2\); expected \(9, 9\) for the 9 classes"):
+        model.run(0.0, 1.0, state)

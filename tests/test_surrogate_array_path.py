@@ -1,0 +1,148 @@
+"""The surrogate's PBM-facing calls without DataFrames: `frequency_matrix` and `encounters` predict
+from a feature array (`pair_features`, `EnsembleMLPRegressorCV.predict_array`) and give what the
+DataFrame path (`pair_table` -> `make_features` -> `predict`) gives, with the same out-of-domain
+warnings."""
+
+import warnings
+from functools import partial
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pbmdem.surrogate import (
+    CollisionSurrogate,
+    EnsembleMLPRegressorCV,
+    OutOfDomainWarning,
+    training_data,
+)
+from pbmdem.surrogate import ensemble as ensemble_module
+from pbmdem.surrogate.features import (
+    FEATURE_NAMES,
+    make_features,
+    pair_features,
+    pair_table,
+)
+from pbmdem.surrogate.synthetic import make_synthetic_tables
+
+R = 0.0265
+
+
+@pytest.fixture(scope="module")
+def data():
+    table, velocity = make_synthetic_tables(R, diameters=(0.002, 0.003, 0.004, 0.006), seed=3)
+    return training_data(table, R, velocity_table=velocity)
+
+
+@pytest.fixture(scope="module", params=[((8,), "tanh", "cross_section"), ((6, 6), "relu", "none"),
+                                        ((5,), "logistic", "cross_section")], ids=["tanh", "relu", "logistic"])
+def fitted(request, data):
+    hidden, activation, offset = request.param
+    est = EnsembleMLPRegressorCV(hidden_layer_sizes=(hidden,), alpha=(0.1,), seeds=(0, 1), max_iter=200,
+                                 activation=activation, solver="lbfgs")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return CollisionSurrogate(frequency_model=est, impeller_radius=R, physics_offset=offset).fit(
+            data.X, data.y, groups=data.groups, velocity=data.velocity)
+
+
+def frame_path(model):
+    """The same fitted surrogate, forced onto the DataFrame path."""
+    out = CollisionSurrogate(**model.get_params(deep=False))
+    out.__dict__.update({k: v for k, v in vars(model).items() if k.endswith("_")})
+    out._array_path = lambda: False
+    return out
+
+
+def recorded(fn):
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        out = fn()
+    return out, [(w.category, str(w.message)) for w in rec]
+
+
+def distributions():
+    rng = np.random.default_rng(7)
+    for k in (1, 2, 5, 12):
+        # sizes and bed sizes inside and outside the training ranges (2-6 mm, 1200-3500 particles)
+        d = np.sort(rng.uniform(1.5e-3, 1.2e-2, k))
+        n = rng.uniform(0.0, 800.0, k)
+        n[0] += 1.0
+        yield d, n, float(rng.uniform(200.0, 1000.0))
+
+
+def test_pair_features_are_the_feature_frame_of_the_pair_table():
+    for d, n, rpm in distributions():
+        X, iu, ju = pair_features(d, n, rpm, R)
+        frame, iu2, ju2 = pair_table(d, n, rpm)
+        np.testing.assert_array_equal(X, make_features(frame, R).to_numpy())
+        np.testing.assert_array_equal(iu, iu2)
+        np.testing.assert_array_equal(ju, ju2)
+        assert X.flags.c_contiguous and X.shape[1] == len(FEATURE_NAMES)
+    for bad in (([0.002, -0.003], [1.0, 1.0], 600.0), ([0.002], [0.0], 600.0), ([0.002], [1.0], 0.0)):
+        with pytest.raises(ValueError):
+            pair_features(*bad, R)
+
+
+def test_frequency_matrix_and_encounters_equal_the_frame_path_with_the_same_warnings(fitted):
+    slow = frame_path(fitted)
+    for d, n, rpm in distributions():
+        (fast_c, fast_s), fast_warn = recorded(partial(fitted.frequency_matrix, d, n, rpm, return_std=True))
+        (slow_c, slow_s), slow_warn = recorded(partial(slow.frequency_matrix, d, n, rpm, return_std=True))
+        fast_e, fast_warn_e = recorded(partial(fitted.encounters, d, n, rpm))
+        slow_e, slow_warn_e = recorded(partial(slow.encounters, d, n, rpm))
+        assert fast_warn == slow_warn and fast_warn_e == slow_warn_e
+        for a, b in ((fast_c, slow_c), (fast_s, slow_s), (fast_e.frequency, slow_e.frequency),
+                     (fast_e.velocity_fractions, slow_e.velocity_fractions)):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=0.0)
+    # the distributions above include out-of-domain ones: the warnings were compared, not absent
+    _, messages = recorded(partial(fitted.encounters, np.array([0.002, 0.011]), np.array([10.0, 5.0]), 600.0))
+    assert any(c is OutOfDomainWarning and m.startswith("d_large = 0.011") for c, m in messages)
+
+
+def test_predict_array_equals_predict(fitted):
+    X, _, _ = pair_features(np.array([0.002, 0.003, 0.005]), np.array([900.0, 500.0, 200.0]), 600.0, R)
+    for est in (fitted.frequency_model_, fitted.velocity_model_):
+        mean, std = est.predict_array(X, return_std=True)
+        ref_mean, ref_std = est.predict(pd.DataFrame(X, columns=list(FEATURE_NAMES)), return_std=True)
+        np.testing.assert_allclose(mean, ref_mean, rtol=1e-12, atol=0.0)
+        np.testing.assert_allclose(std, ref_std, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(est.predict_array(X), ref_mean, rtol=1e-12, atol=0.0)
+    with pytest.raises(ValueError, match=r"X must be \(n, 6\)"):
+        fitted.frequency_model_.predict_array(X[:, :5])
+
+
+def test_array_path_is_one_forward_pass_per_member(fitted, monkeypatch):
+    rows = []
+    original = ensemble_module._forward
+
+    def spy(member, X):
+        rows.append(len(X))
+        return original(member, X)
+
+    monkeypatch.setattr(ensemble_module, "_forward", spy)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfDomainWarning)
+        fitted.encounters(np.linspace(0.002, 0.004, 5), np.full(5, 400.0), 600.0)
+    members = len(fitted.frequency_model_.estimators_) + len(fitted.velocity_model_.estimators_)
+    assert rows == [15] * members          # K (K + 1) / 2 pairs, one pass per member of both models
+
+
+def test_a_surrogate_fitted_on_an_array_keeps_the_frame_path(data):
+    est = EnsembleMLPRegressorCV(hidden_layer_sizes=((6,),), alpha=(0.1,), seeds=(0,), max_iter=200,
+                                 activation="tanh", solver="lbfgs")
+    plain = CollisionSurrogate(frequency_model=est, impeller_radius=R)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        plain.fit(data.X.to_numpy(), data.y, groups=data.groups)
+    assert not plain._array_path()
+    d, n = np.array([0.002, 0.003]), np.array([800.0, 600.0])
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        c = plain.frequency_matrix(d, n, 600.0)
+    # scikit-learn's feature-name warning of the frame path is still raised
+    assert any("feature names" in str(w.message) for w in rec)
+    frame, iu, ju = pair_table(d, n, 600.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        np.testing.assert_allclose(c[iu, ju], 10.0 ** plain.predict(make_features(frame, R).to_numpy()), rtol=1e-12)

@@ -12,9 +12,7 @@ min_version("8.0")
 # a conda environment from envs/, or a cluster job): src/ goes on the module path.
 _SRC = os.path.join(workflow.basedir, "src")
 sys.path.insert(0, _SRC)
-os.environ.update(
-    PYTHONPATH=os.pathsep.join(p for p in (_SRC, os.environ.get("PYTHONPATH")) if p)
-)
+os.environ.update(PYTHONPATH=os.pathsep.join(p for p in (_SRC, os.environ.get("PYTHONPATH")) if p))
 
 
 # The default configuration, unless one is given with --configfile/--config (Snakemake would

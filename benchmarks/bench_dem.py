@@ -69,17 +69,23 @@ def main() -> None:
         counts = {s: int(len(analysis.pair_events(stride=s)[0].encounter)) for s in (1, 2, 4)}
         size_mb = (post / "pairs.dump").stat().st_size / 1e6
     run = summary["liggghts_wall_time_s"]
-    print(f"operating point           {plan.point_id}: {plan.n_particles} particles, dt {plan.timestep:.3g} s, "
-          f"{plan.settle_steps + plan.spinup_steps + plan.sampling_steps} steps")
+    print(
+        f"operating point           {plan.point_id}: {plan.n_particles} particles, dt {plan.timestep:.3g} s, "
+        f"{plan.settle_steps + plan.spinup_steps + plan.sampling_steps} steps"
+    )
     print(f"LIGGGHTS wall time        {run:.1f} s  ({summary['particle_steps_per_s'] / 1e6:.2f} M particle-steps/s)")
     print(f"contact dump              {size_mb:.0f} MB, {pairs.frames} snapshots every {plan.collision_interval} steps")
     print(f"vectorised parse+count    {fast:.2f} s  = {100 * fast / run:.1f} % of the LIGGGHTS run (target < 10 %)")
     print(f"naive line-by-line        {naive:.2f} s  = {100 * naive / run:.1f} % of the LIGGGHTS run")
-    print(f"new contacts (naive)      {naive_total} (every contact present in the whole record) vs "
-          f"vectorised {counts[1]} (in the sampling window)")
+    print(
+        f"new contacts (naive)      {naive_total} (every contact present in the whole record) vs "
+        f"vectorised {counts[1]} (in the sampling window)"
+    )
     for s, c in counts.items():
-        print(f"interval {s * plan.collision_interval:4d} steps      {c} new contacts "
-              f"({100 * (c - counts[1]) / counts[1]:+.2f} %)")
+        print(
+            f"interval {s * plan.collision_interval:4d} steps      {c} new contacts "
+            f"({100 * (c - counts[1]) / counts[1]:+.2f} %)"
+        )
     print(f"total in table            {int(tables.pairs['collisions'].sum())}")
 
 

@@ -110,8 +110,14 @@ print(json.dumps({"first_build_s": t_build, "load_s": t_load, "runs": runs}))
 
 def _run(code: str, src: Path, *args) -> dict:
     env = dict(os.environ, PYTHONPATH=str(src))
-    out = subprocess.run([sys.executable, "-c", code, *map(str, args)], env=env, cwd=src.parent, check=False,
-                         capture_output=True, text=True)
+    out = subprocess.run(
+        [sys.executable, "-c", code, *map(str, args)],
+        env=env,
+        cwd=src.parent,
+        check=False,
+        capture_output=True,
+        text=True,
+    )
     if out.returncode != 0:
         raise RuntimeError(out.stderr.strip().splitlines()[-1] if out.stderr.strip() else f"exit {out.returncode}")
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -169,8 +175,9 @@ def train_surrogate(cfg, path: Path) -> float:
     # the lower end of the DEM's encounter frequencies (0.03-0.2 1/s per pair for the fine feed at
     # 600 rpm): with the cross-section offset the surrogate's c_ij grows as (d_i + d_j)^2 beyond
     # 12 mm, and at c0 = 0.1 the loop outgrows the grid (32 mm) with the config of 2026-12-01 21:50
-    table, velocity = make_synthetic_tables(radius, diameters=(0.002, 0.003, 0.004, 0.006, 0.009, 0.012), seed=0,
-                                            law=partial(power_law, c0=0.03))
+    table, velocity = make_synthetic_tables(
+        radius, diameters=(0.002, 0.003, 0.004, 0.006, 0.009, 0.012), seed=0, law=partial(power_law, c0=0.03)
+    )
     settings = cfg.surrogate.to_dict()
     settings.update(hidden_layer_sizes=[[8]], alpha=[0.1])
     t0 = time.perf_counter()
@@ -185,13 +192,16 @@ def train_surrogate(cfg, path: Path) -> float:
 
 def cold_build(src: Path) -> float | None:
     """Wall time of the first model build in a fresh interpreter with an empty numba cache."""
-    code = ("import time\nfrom pbmdem.config import load_config\nfrom pbmdem.pbm.setup import build_model\n"
-            "cfg = load_config('config/config.yaml')\nt0 = time.perf_counter()\n"
-            "build_model(cfg.pbm_batch('fine').pbm, None, 600)\nprint(time.perf_counter() - t0)")
+    code = (
+        "import time\nfrom pbmdem.config import load_config\nfrom pbmdem.pbm.setup import build_model\n"
+        "cfg = load_config('config/config.yaml')\nt0 = time.perf_counter()\n"
+        "build_model(cfg.pbm_batch('fine').pbm, None, 600)\nprint(time.perf_counter() - t0)"
+    )
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, PYTHONPATH=str(src), NUMBA_CACHE_DIR=cache)
-        out = subprocess.run([sys.executable, "-c", code], env=env, cwd=src.parent, capture_output=True, text=True,
-                             check=False)
+        out = subprocess.run(
+            [sys.executable, "-c", code], env=env, cwd=src.parent, capture_output=True, text=True, check=False
+        )
     return float(out.stdout.strip().splitlines()[-1]) if out.returncode == 0 else None
 
 
@@ -214,9 +224,11 @@ def main():
     model_path.parent.mkdir()
     fit = train_surrogate(cfg, model_path)
     loop = cfg.coupled_loop()
-    print(f"surrogate for PBM-ANN: trained in {fit:.1f} s on synthetic tables (5 + 5 MLP members); loop: "
-          f"{loop.coupling_intervals} intervals of {loop.batch.pbm.process.end / loop.coupling_intervals:g} s, "
-          f"'{loop.batch.distribution}', {RPM:g} rpm, at most {loop.sample.max_classes} classes")
+    print(
+        f"surrogate for PBM-ANN: trained in {fit:.1f} s on synthetic tables (5 + 5 MLP members); loop: "
+        f"{loop.coupling_intervals} intervals of {loop.batch.pbm.process.end / loop.coupling_intervals:g} s, "
+        f"'{loop.batch.distribution}', {RPM:g} rpm, at most {loop.sample.max_classes} classes"
+    )
 
     rows = [("this tree", ROOT / "src", ROOT / "config" / "config.yaml")]
     if not args.no_before:
@@ -224,18 +236,23 @@ def main():
         dest.mkdir()
         src = _checkout(args.before, dest)
         rows.append((f"before ({args.before})", src, dest / "config" / "config.yaml"))
-    print(f"\n`import pbmdem.pbm` (fresh interpreter, {args.repeat} times), the default batch (480 s of process, "
-          f"{args.repeat} times after a first call) and PBM-ANN ({args.ann_repeat} loops, the first not counted):")
+    print(
+        f"\n`import pbmdem.pbm` (fresh interpreter, {args.repeat} times), the default batch (480 s of process, "
+        f"{args.repeat} times after a first call) and PBM-ANN ({args.ann_repeat} loops, the first not counted):"
+    )
     results = {}
     for name, src, config in rows:
         imp, whole = _imports(src, args.repeat)
         r = _run(_PROBE, src, config, args.repeat + 1)
-        walls = r["walls"][1:]                                     # the first call warms caches
+        walls = r["walls"][1:]  # the first call warms caches
         print(f"  {name:22s} import {_fmt(imp)} (python -c 'import pbmdem.pbm': {_fmt(whole)})")
         if r.get("first_build_s") is not None:
             print(f"  {'':22s} first model build in the process: {r['first_build_s'] * 1e3:.0f} ms")
-        print(f"  {'':22s} batch  {_fmt(walls)} | {r['steps']} steps, {r['bins']} bins, d10 / d50 / d90 "
-              + " / ".join(f"{q * 1e3:.6f}" for q in r["final"]) + " mm")
+        print(
+            f"  {'':22s} batch  {_fmt(walls)} | {r['steps']} steps, {r['bins']} bins, d10 / d50 / d90 "
+            + " / ".join(f"{q * 1e3:.6f}" for q in r["final"])
+            + " mm"
+        )
         if r.get("step_limits"):
             print(f"  {'':22s} step limits: {r['step_limits']}")
         try:
@@ -250,13 +267,20 @@ def main():
         both = [x["surrogate"] + x["pbm"] for x in runs]
         rest = [x["wall"] - x["surrogate"] - x["pbm"] for x in runs]
         n = runs[0]["intervals"]
-        print(f"  {'':22s} PBM-ANN surrogate + PBM {_fmt(both)} (surrogate {_fmt(sur)}, {n} calls; PBM {_fmt(pbm)}, "
-              f"{runs[0]['steps']} steps)")
-        print(f"  {'':22s}         rest of the loop (sample, class source, files) {_fmt(rest)}; whole run_loop "
-              f"{_fmt([x['wall'] for x in runs])}")
-        print(f"  {'':22s}         {runs[0]['out_of_domain']} out-of-domain warnings per loop; final d10 / d50 / d90 "
-              + " / ".join(f"{q * 1e3:.6f}" for q in runs[0]["final"]) + " mm; surrogate file load "
-              f"{a['load_s'] * 1e3:.0f} ms, first model build {a['first_build_s'] * 1e3:.0f} ms")
+        print(
+            f"  {'':22s} PBM-ANN surrogate + PBM {_fmt(both)} (surrogate {_fmt(sur)}, {n} calls; PBM {_fmt(pbm)}, "
+            f"{runs[0]['steps']} steps)"
+        )
+        print(
+            f"  {'':22s}         rest of the loop (sample, class source, files) {_fmt(rest)}; whole run_loop "
+            f"{_fmt([x['wall'] for x in runs])}"
+        )
+        print(
+            f"  {'':22s}         {runs[0]['out_of_domain']} out-of-domain warnings per loop; final d10 / d50 / d90 "
+            + " / ".join(f"{q * 1e3:.6f}" for q in runs[0]["final"])
+            + " mm; surrogate file load "
+            f"{a['load_s'] * 1e3:.0f} ms, first model build {a['first_build_s'] * 1e3:.0f} ms"
+        )
         results[name] = (r, runs)
     if len(rows) == 2:
         (r_new, a_new), (r_old, a_old) = results[rows[0][0]], results[rows[1][0]]
@@ -278,10 +302,12 @@ def main():
 
     print("\nvariants of the default batch (this tree):")
     ratio = cfg.pbm.grid.ratio
-    for label, pbm in (("fixed pivot", {"aggregation": {"scheme": "fixed_pivot"}}),
-                       ("4x finer grid", {"grid": {"ratio": ratio ** 0.25}}),
-                       ("feed shares bins", {"grid": {"separate_feed": False}}),
-                       ("heun (SSP-RK2)", {"solver": {"method": "heun"}})):
+    for label, pbm in (
+        ("fixed pivot", {"aggregation": {"scheme": "fixed_pivot"}}),
+        ("4x finer grid", {"grid": {"ratio": ratio**0.25}}),
+        ("feed shares bins", {"grid": {"separate_feed": False}}),
+        ("heun (SSP-RK2)", {"solver": {"method": "heun"}}),
+    ):
         batch = batch_with(cfg, pbm)
         run_batch(batch, None, 600)
         walls = []
@@ -290,8 +316,10 @@ def main():
             res = run_batch(batch, None, 600)
             walls.append(time.perf_counter() - t0)
         s = res.summary()
-        print(f"  {label:16s} {_fmt(walls)} | {res.info['steps']} steps, {res.grid.bins} bins, "
-              f"d50 {s.d50.iloc[0] * 1e3:.2f} -> {s.d50.iloc[-1] * 1e3:.2f} mm")
+        print(
+            f"  {label:16s} {_fmt(walls)} | {res.info['steps']} steps, {res.grid.bins} bins, "
+            f"d50 {s.d50.iloc[0] * 1e3:.2f} -> {s.d50.iloc[-1] * 1e3:.2f} mm"
+        )
 
     print("aggregation-rate evaluation (full (K,K) kernel, totals; compiled loop / numpy sparse map):")
     rng = np.random.default_rng(0)
@@ -314,8 +342,10 @@ def main():
                     fn(beta, nlg)
                 best.append((time.perf_counter() - t0) / n)
             per[label] = min(best)
-        print(f"  {scheme:12s} K = {K:3d}: {per['compiled'] * 1e6:6.1f} / {per['numpy'] * 1e6:6.1f} us per evaluation "
-              f"(min of 3); setup {setup * 1e3:.2f} ms")
+        print(
+            f"  {scheme:12s} K = {K:3d}: {per['compiled'] * 1e6:6.1f} / {per['numpy'] * 1e6:6.1f} us per evaluation "
+            f"(min of 3); setup {setup * 1e3:.2f} ms"
+        )
 
 
 if __name__ == "__main__":

@@ -38,8 +38,7 @@ import numpy as np
 from scipy.integrate import IntegrationWarning
 
 from pbmdem.config import Solver
-from pbmdem.pbm import ConstantKernel, GranulationPBM, Grid, GridOverflowError, State, SumKernel
-from pbmdem.pbm import surface_fraction
+from pbmdem.pbm import ConstantKernel, GranulationPBM, Grid, GridOverflowError, State, SumKernel, surface_fraction
 from pbmdem.pbm import analytical as an
 from pbmdem.pbm import verification as ver
 from pbmdem.pbm.kernels import Kernel
@@ -71,7 +70,7 @@ def end_time(kernel: str, start: str, growth: float) -> float:
         return 2.0 * (growth - 1.0) if start == "exponential" else 2.0 * (growth - 1.0)
     if kernel == "sum":
         return float(np.log(growth))
-    m2 = 2.0 if start == "exponential" else 1.0        # M2(0); gelation at 1 / M2(0)
+    m2 = 2.0 if start == "exponential" else 1.0  # M2(0); gelation at 1 / M2(0)
     return (1.0 - 1.0 / growth) / m2
 
 
@@ -137,8 +136,12 @@ def psd_errors(kernel: str, start: str, grid: Grid, number: np.ndarray, t: float
 def run_case(kernel: str, start: str, growth: float, q: int, scheme: str):
     t_end = end_time(kernel, start, growth)
     grid = grid_for(q, start, _top(kernel, start, t_end))
-    model = GranulationPBM(grid, KERNELS[kernel], scheme=scheme,
-                           solver=Solver.defaults().replace(rtol=1e-5, atol=1e-12, max_step=np.inf, max_overflow_fraction=1.0))
+    model = GranulationPBM(
+        grid,
+        KERNELS[kernel],
+        scheme=scheme,
+        solver=Solver.defaults().replace(rtol=1e-5, atol=1e-12, max_step=np.inf, max_overflow_fraction=1.0),
+    )
     N = initial_numbers(grid, start)
     t0 = time.perf_counter()
     res = model.run(0.0, t_end, State(0.0, N, np.zeros(grid.bins), np.zeros(grid.bins)))
@@ -171,7 +174,7 @@ def _feed_4mm(res) -> tuple[float, float]:
     class with separate feed, else the 4 mm bin they share with aggregates (it is on a pivot)."""
     st, g = res.state, res.grid
     if st.feed is not None:
-        k = int(np.argmin(np.abs(st.feed.volumes - np.pi / 6 * 4e-3 ** 3)))
+        k = int(np.argmin(np.abs(st.feed.volumes - np.pi / 6 * 4e-3**3)))
         S, L, G = st.feed.number[k] * st.feed.volumes[k], st.feed.liquid[k], st.feed.gas[k]
     else:
         k = int(np.argmin(np.abs(g.d - 4e-3)))
@@ -194,8 +197,10 @@ def grid_convergence(qs=GRID_QS):
     print("\ngrid convergence of the default batch ('fine', constant c_ij, 600 rpm, 480 s): ratio 2^(1/q)")
     for label, pbm in GRID_VARIANTS:
         print(f"\n{label}")
-        print("    q  bins   d10 / d50 / d90 (mm)        vs 4x finer (%)         vs q = 24 (%)       "
-              "4 mm feed: l/s, phi   steps  wall")
+        print(
+            "    q  bins   d10 / d50 / d90 (mm)        vs 4x finer (%)         vs q = 24 (%)       "
+            "4 mm feed: l/s, phi   steps  wall"
+        )
         rows = {}
         for q in qs:
             section = copy.deepcopy(pbm)
@@ -212,8 +217,10 @@ def grid_convergence(qs=GRID_QS):
             vsr = " ".join(f"{x:+5.2f}" for x in 100 * (d / ref - 1))
             ls, phi = _feed_4mm(res)
             mark = "*" if q == q_default else " "
-            print(f"  {mark}{q:3d} {res.grid.bins:5d}   {d[0]:.3f} / {d[1]:.3f} / {d[2]:.3f}   {vs4:17s}   {vsr:17s}"
-                  f"    {ls:.4f}, {phi:.4f}    {res.info['steps']:4d} {wall:5.2f} s")
+            print(
+                f"  {mark}{q:3d} {res.grid.bins:5d}   {d[0]:.3f} / {d[1]:.3f} / {d[2]:.3f}   {vs4:17s}   {vsr:17s}"
+                f"    {ls:.4f}, {phi:.4f}    {res.info['steps']:4d} {wall:5.2f} s"
+            )
     print("(* the default ratio 2^(1/3); criterion: d10, d50 and d90 within 1 % of the 4x finer grid)")
 
 
@@ -235,8 +242,10 @@ def main():
             for start in ("exponential", "monodisperse"):
                 for growth in (10.0, 50.0):
                     what = "mass-mean volume" if kernel == "product" else "mean volume"
-                    print(f"\n{scheme}, {kernel} kernel, {start} start, {what} x{growth:g} "
-                          f"(t = {end_time(kernel, start, growth):.4g})")
+                    print(
+                        f"\n{scheme}, {kernel} kernel, {start} start, {what} x{growth:g} "
+                        f"(t = {end_time(kernel, start, growth):.4g})"
+                    )
                     print("   ratio  bins    M0 err     M1 err     M2 err   |  L1 cells  | PSD (Q3) | steps  wall")
                     m2s, l1s = [], []
                     for q in qs:
@@ -253,8 +262,10 @@ def main():
                         note = f"  ({lost:.1e} of the solid beyond the grid)" if lost > 1e-9 else ""
                         l1s_ = "    -   " if np.isnan(l1) else f"{l1:.2e}"
                         psd_ = "    -   " if np.isnan(psd) else f"{psd:.2e}"
-                        print(f"  {grid.ratio:6.4f} {grid.bins:5d}  {err[0]:+.2e}  {err[1]:+.2e}  {err[2]:+.2e} |"
-                              f"  {l1s_}  | {psd_} | {res.info['steps']:5d} {wall:5.2f} s{note}")
+                        print(
+                            f"  {grid.ratio:6.4f} {grid.bins:5d}  {err[0]:+.2e}  {err[1]:+.2e}  {err[2]:+.2e} |"
+                            f"  {l1s_}  | {psd_} | {res.info['steps']:5d} {wall:5.2f} s{note}"
+                        )
                     print(f"  observed order per halving of ln r: |M2 err| {_orders(qs, m2s)}; L1 {_orders(qs, l1s)}")
     grid_convergence((1, 2, 3, 4, 8, 12, 16) if args.quick else GRID_QS)
     print(f"\ntotal {time.perf_counter() - t_all:.0f} s")

@@ -43,16 +43,22 @@ def main() -> None:
                 summary = run_point(point, plan, tmp, execution)
                 wall = time.perf_counter() - t0
             results.setdefault(ranks, []).append((summary["liggghts_wall_time_s"], summary["total_collisions"]))
-            print(f"ranks {ranks} seed {seed}: {plan.n_particles} particles, LIGGGHTS {summary['liggghts_wall_time_s']:.1f} s "
-                  f"(point {wall:.1f} s), {summary['total_collisions']} collisions", flush=True)
+            print(
+                f"ranks {ranks} seed {seed}: {plan.n_particles} particles, "
+                f"LIGGGHTS {summary['liggghts_wall_time_s']:.1f} s "
+                f"(point {wall:.1f} s), {summary['total_collisions']} collisions",
+                flush=True,
+            )
     stats = {}
     for ranks, rows in results.items():
         walls, counts = [w for w, _ in rows], [c for _, c in rows]
         mean = statistics.mean(counts)
         se = statistics.stdev(counts) / math.sqrt(len(counts)) if len(counts) > 1 else float("nan")
         stats[ranks] = (mean, se)
-        print(f"ranks {ranks}: LIGGGHTS wall {statistics.mean(walls):.1f} s (mean of {len(walls)}), "
-              f"total collisions {mean:.0f} +- {se:.0f} (SE)")
+        print(
+            f"ranks {ranks}: LIGGGHTS wall {statistics.mean(walls):.1f} s (mean of {len(walls)}), "
+            f"total collisions {mean:.0f} +- {se:.0f} (SE)"
+        )
     if 1 in stats:
         for ranks, (mean, se) in stats.items():
             if ranks == 1:

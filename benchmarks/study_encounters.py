@@ -75,47 +75,72 @@ def main(argv=None):
                 base_enc.append(s["encounters_every_snapshot"])
                 halves.append((s["encounters_first_half"], s["encounters_second_half"]))
                 history.append([s[f"encounters_history_{f:g}"] for f in (0.125, 0.25, 0.5, 1.0)])
-                print(f"[{rpm:g} rpm rep {rep}] {plan.n_particles} particles, {s['study_wall_time_s']:.0f} s, "
-                      f"raw {base_raw[-1]}, encounters {base_enc[-1]}", flush=True)
+                print(
+                    f"[{rpm:g} rpm rep {rep}] {plan.n_particles} particles, {s['study_wall_time_s']:.0f} s, "
+                    f"raw {base_raw[-1]}, encounters {base_enc[-1]}",
+                    flush=True,
+                )
                 # half intervals on the same seed: every snapshot = h/2, every second = h
                 half = point.replace(dem=point.dem.replace(collision_interval=max(1, plan.collision_interval // 2)))
                 plan_h, _ = run(cfg, half, rpm, rep, Path(tmp) / f"half{rep}")
-                analysis = collisions.RunAnalysis(Path(tmp) / f"half{rep}" / "post", plan_h,
-                                                  cfg.granulator.bowl, cfg.granulator.impeller)
+                analysis = collisions.RunAnalysis(
+                    Path(tmp) / f"half{rep}" / "post", plan_h, cfg.granulator.bowl, cfg.granulator.impeller
+                )
                 fine.append(int(analysis.pair_events(stride=1)[0].encounter.sum()))
                 coarse.append(int(analysis.pair_events(stride=2)[0].encounter.sum()))
-                stiff = point.replace(material=point.material.replace(
-                    youngs_modulus=10.0 * point.material.youngs_modulus))
+                stiff = point.replace(
+                    material=point.material.replace(youngs_modulus=10.0 * point.material.youngs_modulus)
+                )
                 _, s10 = run(cfg, stiff, rpm, rep, Path(tmp) / f"stiff{rep}", keep=False)
                 stiff_raw.append(s10["collisions_every_snapshot"])
                 stiff_enc.append(s10["encounters_every_snapshot"])
         rel = lambda a, b: (np.mean(b) - np.mean(a)) / np.mean(a)  # noqa: E731
-        res.update({
-            "particles": plan.n_particles, "sampling_time_s": plan.sampling_time,
-            "raw": base_raw, "encounters": base_enc,
-            "interval_fine_h2": fine, "interval_coarse_h": coarse,
-            "interval_change_h_vs_h2": float(np.mean([(c - f) / f for f, c in zip(fine, coarse)])),
-            "stiff10_raw": stiff_raw, "stiff10_encounters": stiff_enc,
-            "stiffness_change_raw": rel(base_raw, stiff_raw), "stiffness_change_encounters": rel(base_enc, stiff_enc),
-            "history_fractions": [0.125, 0.25, 0.5, 1.0],
-            "history_counts_mean": np.mean(history, axis=0).tolist(),
-            "halves": halves,
-        })
+        res.update(
+            {
+                "particles": plan.n_particles,
+                "sampling_time_s": plan.sampling_time,
+                "raw": base_raw,
+                "encounters": base_enc,
+                "interval_fine_h2": fine,
+                "interval_coarse_h": coarse,
+                "interval_change_h_vs_h2": float(np.mean([(c - f) / f for f, c in zip(fine, coarse)])),
+                "stiff10_raw": stiff_raw,
+                "stiff10_encounters": stiff_enc,
+                "stiffness_change_raw": rel(base_raw, stiff_raw),
+                "stiffness_change_encounters": rel(base_enc, stiff_enc),
+                "history_fractions": [0.125, 0.25, 0.5, 1.0],
+                "history_counts_mean": np.mean(history, axis=0).tolist(),
+                "halves": halves,
+            }
+        )
         h = np.asarray(halves, float)
         diff = h[:, 1] / h[:, 0] - 1.0
         res["half_difference_mean"], res["half_difference_se"] = mean_se(diff)
-        print(f"\n== {args.distribution} at {rpm:g} rpm, {args.replicates} replicates, {plan.n_particles} particles, "
-              f"window {plan.sampling_time:.3f} s")
-        print(f"  raw new contacts          {fmt(base_raw)}   E x10: {fmt(stiff_raw)}  "
-              f"change {res['stiffness_change_raw']:+.1%}")
-        print(f"  encounters                {fmt(base_enc)}   E x10: {fmt(stiff_enc)}  "
-              f"change {res['stiffness_change_encounters']:+.1%}")
-        print(f"  snapshot interval h/2 -> h: encounters {fmt(fine)} -> {fmt(coarse)} "
-              f"(change {res['interval_change_h_vs_h2']:+.2%})")
-        print("  history (fraction of dem.history_time): "
-              + ", ".join(f"{f:g}: {c:.0f}" for f, c in zip(res["history_fractions"], res["history_counts_mean"])))
-        print(f"  second/first half of the window - 1: {res['half_difference_mean']:+.1%} "
-              f"+- {res['half_difference_se']:.1%}", flush=True)
+        print(
+            f"\n== {args.distribution} at {rpm:g} rpm, {args.replicates} replicates, {plan.n_particles} particles, "
+            f"window {plan.sampling_time:.3f} s"
+        )
+        print(
+            f"  raw new contacts          {fmt(base_raw)}   E x10: {fmt(stiff_raw)}  "
+            f"change {res['stiffness_change_raw']:+.1%}"
+        )
+        print(
+            f"  encounters                {fmt(base_enc)}   E x10: {fmt(stiff_enc)}  "
+            f"change {res['stiffness_change_encounters']:+.1%}"
+        )
+        print(
+            f"  snapshot interval h/2 -> h: encounters {fmt(fine)} -> {fmt(coarse)} "
+            f"(change {res['interval_change_h_vs_h2']:+.2%})"
+        )
+        print(
+            "  history (fraction of dem.history_time): "
+            + ", ".join(f"{f:g}: {c:.0f}" for f, c in zip(res["history_fractions"], res["history_counts_mean"]))
+        )
+        print(
+            f"  second/first half of the window - 1: {res['half_difference_mean']:+.1%} "
+            f"+- {res['half_difference_se']:.1%}",
+            flush=True,
+        )
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1, default=float))
 

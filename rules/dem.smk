@@ -10,19 +10,19 @@ rule dem_point:
         walls=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/wall_collisions.csv",
         velocities=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/impact_velocity.csv",
         summary=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/summary.json",
-    params:
-        point=dem_point_params,
-        run_dir=lambda wc, output: os.path.dirname(output.table),
+    log:
+        f"{RESULTS}/logs/dem/rpm{{rpm}}_{{dist}}_rep{{rep}}.log",
+    conda:
+        "../envs/dem.yaml"
     # MPI ranks of LIGGGHTS: dem.mpi_ranks (threads, for a local run), or the `tasks` resource a
     # cluster profile sets (with an `mpi` launcher such as "srun --mpi=pmix", and threads 1);
     # none of them is a param, so changing them reruns nothing that has finished
     threads: DEM_RANKS
     resources:
         tasks=DEM_RANKS,
-    log:
-        f"{RESULTS}/logs/dem/rpm{{rpm}}_{{dist}}_rep{{rep}}.log",
-    conda:
-        "../envs/dem.yaml"
+    params:
+        point=dem_point_params,
+        run_dir=lambda wc, output: os.path.dirname(output.table),
     script:
         "../workflow/scripts/dem_point.py"
 

@@ -13,13 +13,13 @@
 rule pbm_constant:
     output:
         **pbm_outputs("constant"),
-    params:
-        batch=pbm_batch_params,
-        kernel="constant",
     log:
         f"{RESULTS}/logs/pbm/constant/rpm{{rpm}}_{{dist}}.log",
     conda:
         "../envs/pbm.yaml"
+    params:
+        batch=pbm_batch_params,
+        kernel="constant",
     script:
         "../workflow/scripts/run_pbm.py"
 
@@ -35,12 +35,12 @@ rule pbm_table:
         velocities=f"{RESULTS}/dem/impact_velocity.csv",
     output:
         **pbm_outputs("table"),
-    params:
-        batch=pbm_batch_params,
-        kernel="table",
     log:
         f"{RESULTS}/logs/pbm/table/rpm{{rpm}}_{{dist}}.log",
     conda:
         "../envs/pbm.yaml"
+    params:
+        batch=pbm_batch_params,
+        kernel="table",
     script:
         "../workflow/scripts/run_pbm.py"

@@ -20,12 +20,12 @@ rule train_surrogate:
             caption="../workflow/report/parity.rst",
             category="Surrogate",
         ),
-    params:
-        training=lambda wildcards: CFG.surrogate_training().to_dict(),
     log:
         f"{RESULTS}/logs/train_surrogate.log",
-    threads: 2
     conda:
         "../envs/surrogate.yaml"
+    threads: 2
+    params:
+        training=lambda wildcards: CFG.surrogate_training().to_dict(),
     script:
         "../workflow/scripts/train_surrogate.py"

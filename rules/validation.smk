@@ -10,17 +10,17 @@ rule pbm_dem_coupled:
         template=TEMPLATE,
     output:
         **run_outputs(f"{RESULTS}/validation/rpm{{rpm}}/pbm_dem/rep{{rep}}"),
-    params:
-        loop=loop_params,
-        method="dem",
-        outdir=lambda wc, output: os.path.dirname(output.summary),
-    threads: DEM_RANKS
-    resources:
-        tasks=DEM_RANKS,
     log:
         f"{RESULTS}/logs/validation/pbm_dem_rpm{{rpm}}_rep{{rep}}.log",
     conda:
         "../envs/validation.yaml"
+    threads: DEM_RANKS
+    resources:
+        tasks=DEM_RANKS,
+    params:
+        loop=loop_params,
+        method="dem",
+        outdir=lambda wc, output: os.path.dirname(output.summary),
     script:
         "../workflow/scripts/validation_loop.py"
 
@@ -31,14 +31,14 @@ rule pbm_ann_coupled:
     output:
         **run_outputs(f"{RESULTS}/validation/rpm{{rpm}}/pbm_ann"),
         members=f"{RESULTS}/validation/rpm{{rpm}}/pbm_ann/members.csv",
-    params:
-        loop=loop_params,
-        method="ann",
-        outdir=lambda wc, output: os.path.dirname(output.summary),
     log:
         f"{RESULTS}/logs/validation/pbm_ann_rpm{{rpm}}.log",
     conda:
         "../envs/validation.yaml"
+    params:
+        loop=loop_params,
+        method="ann",
+        outdir=lambda wc, output: os.path.dirname(output.summary),
     script:
         "../workflow/scripts/validation_loop.py"
 
@@ -48,14 +48,14 @@ rule pbm_constant_calibrated:
         model=MODEL,
     output:
         **run_outputs(f"{RESULTS}/validation/rpm{{rpm}}/pbm_constant", loop=False),
-    params:
-        loop=loop_params,
-        method="constant",
-        outdir=lambda wc, output: os.path.dirname(output.summary),
     log:
         f"{RESULTS}/logs/validation/pbm_constant_rpm{{rpm}}.log",
     conda:
         "../envs/validation.yaml"
+    params:
+        loop=loop_params,
+        method="constant",
+        outdir=lambda wc, output: os.path.dirname(output.summary),
     script:
         "../workflow/scripts/validation_loop.py"
 
@@ -65,13 +65,13 @@ rule validation_bands:
         lambda wc: speed_files(wc.rpm),
     output:
         bands=f"{RESULTS}/validation/rpm{{rpm}}/bands.csv",
-    params:
-        validation_dir=lambda wc, input: validation_dir_of(input),
-        replicates=CFG.validation.dem_replicates,
     log:
         f"{RESULTS}/logs/validation/bands_rpm{{rpm}}.log",
     conda:
         "../envs/validation.yaml"
+    params:
+        validation_dir=lambda wc, input: validation_dir_of(input),
+        replicates=CFG.validation.dem_replicates,
     script:
         "../workflow/scripts/validation_bands.py"
 
@@ -85,15 +85,15 @@ rule comparison:
             caption="../workflow/report/comparison.rst",
             category="Validation",
         ),
+    log:
+        f"{RESULTS}/logs/validation/comparison.log",
+    conda:
+        "../envs/validation.yaml"
     params:
         validation_dir=lambda wc, input: validation_dir_of(input),
         rpms=VAL_RPMS,
         grid_rpm=list(CFG.grid.impeller_rpm),
         replicates=CFG.validation.dem_replicates,
-    log:
-        f"{RESULTS}/logs/validation/comparison.log",
-    conda:
-        "../envs/validation.yaml"
     script:
         "../workflow/scripts/comparison.py"
 
@@ -109,16 +109,16 @@ rule propose_points:
             caption="../workflow/report/proposals.rst",
             category="Validation",
         ),
+    log:
+        f"{RESULTS}/logs/validation/propose_points.log",
+    conda:
+        "../envs/validation.yaml"
     params:
         grid=CFG.grid.to_dict(),
         distributions={n: CFG.size_distributions[n].to_dict() for n in CFG.grid.size_distributions},
         granulator=CFG.granulator.to_dict(),
         max_points=CFG.validation.proposals.max_points,
         rpms=VAL_RPMS,
-    log:
-        f"{RESULTS}/logs/validation/propose_points.log",
-    conda:
-        "../envs/validation.yaml"
     script:
         "../workflow/scripts/propose_points.py"
 
@@ -133,13 +133,13 @@ rule rpm_sweep:
             caption="../workflow/report/rpm_sweep.rst",
             category="Validation",
         ),
-    params:
-        loop=loop_params,
-        sweep=lambda wc: CFG.validation.sweep.to_dict(),
     log:
         f"{RESULTS}/logs/validation/rpm_sweep.log",
     conda:
         "../envs/validation.yaml"
+    params:
+        loop=loop_params,
+        sweep=lambda wc: CFG.validation.sweep.to_dict(),
     script:
         "../workflow/scripts/rpm_sweep.py"
 

@@ -81,8 +81,12 @@ def test_every_module_has_a_layer():
 
 
 def test_no_upward_or_sideways_imports():
-    bad = [(m, d) for m, deps in import_graph().items() for d in deps
-           if unit(d) != unit(m) and layer(d) >= layer(m) and unit(d) != ""]
+    bad = [
+        (m, d)
+        for m, deps in import_graph().items()
+        for d in deps
+        if unit(d) != unit(m) and layer(d) >= layer(m) and unit(d) != ""
+    ]
     assert not bad, "imports against the layering (module -> dependency): " + ", ".join(f"{m} -> {d}" for m, d in bad)
 
 
@@ -99,7 +103,7 @@ def test_no_import_circles():
             if dep.startswith(node + "."):
                 continue  # a package's __init__ re-exporting its own modules is not a circle
             if state.get(dep) == "open":
-                cycles.append(stack[stack.index(dep):] + [dep])
+                cycles.append(stack[stack.index(dep) :] + [dep])
             elif dep not in state:
                 visit(dep)
         stack.pop()

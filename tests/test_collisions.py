@@ -7,9 +7,9 @@ import pytest
 
 from pbmdem.atomic import write_csv
 from pbmdem.dem import collisions
-from pbmdem.dem.grid_tables import aggregate
 from pbmdem.dem.collisions import window_starts
 from pbmdem.dem.dumps import DumpFormatError, read_dump
+from pbmdem.dem.grid_tables import aggregate
 
 
 def count_pair_collisions(snaps, class_of, k, stride=1):
@@ -26,9 +26,11 @@ def count_wall_collisions(snaps, class_of, k):
 
 
 def frame(step: int, rows: list[tuple], kind: str = "ENTRIES") -> str:
-    head = (f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF {kind}\n{len(rows)}\n"
-            "ITEM: BOX BOUNDS ff ff ff\n-1 1\n-1 1\n-1 1\n"
-            f"ITEM: {kind} c_pairs[1] c_pairs[2] c_pairs[4] \n")
+    head = (
+        f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF {kind}\n{len(rows)}\n"
+        "ITEM: BOX BOUNDS ff ff ff\n-1 1\n-1 1\n-1 1\n"
+        f"ITEM: {kind} c_pairs[1] c_pairs[2] c_pairs[4] \n"
+    )
     return head + "".join(" ".join(str(v) for v in r) + " \n" for r in rows)
 
 
@@ -143,8 +145,9 @@ def test_pair_table_normalises_per_pair():
     median = np.array([[0.1, 0.2], [np.nan, 0.3]])
     tally = collisions.Tally(counts, enc, np.zeros((2, 2, 17)), median)
     n = np.array([5, 3])
-    table = collisions.pair_table(tally, n, [0.002, 0.003], 2.0,
-                                  {"point_id": "p", "rpm": 100.0, "distribution": "d", "replicate": 0})
+    table = collisions.pair_table(
+        tally, n, [0.002, 0.003], 2.0, {"point_id": "p", "rpm": 100.0, "distribution": "d", "replicate": 0}
+    )
     assert table[["class_i", "class_j"]].values.tolist() == [[0, 0], [0, 1], [1, 1]]
     # pairs: 5*4/2 = 10 on the diagonal, 5*3 = 15 across, 3*2/2 = 3
     np.testing.assert_allclose(table["frequency_per_pair"], [10 / (10 * 2), 6 / (15 * 2), 4 / (3 * 2)])
@@ -156,9 +159,20 @@ def test_pair_table_normalises_per_pair():
 def test_replicate_mean_and_standard_error(tmp_path):
     rows = []
     for rep, (enc, f) in enumerate([(2.0, 0.1), (4.0, 0.3), (6.0, 0.2)]):
-        rows.append({"point_id": "p", "rpm": 100.0, "distribution": "d", "replicate": rep, "class_i": 0,
-                     "class_j": 0, "d_i": 0.002, "d_j": 0.002, "encounters": enc,
-                     "encounter_frequency_per_pair": f})
+        rows.append(
+            {
+                "point_id": "p",
+                "rpm": 100.0,
+                "distribution": "d",
+                "replicate": rep,
+                "class_i": 0,
+                "class_j": 0,
+                "d_i": 0.002,
+                "d_j": 0.002,
+                "encounters": enc,
+                "encounter_frequency_per_pair": f,
+            }
+        )
     paths = []
     for rep, row in enumerate(rows):
         paths.append(tmp_path / f"rep{rep}.csv")

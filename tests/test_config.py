@@ -41,7 +41,9 @@ def test_negative_size(default_config):
 
 
 def test_fractions_must_sum_to_one(default_config):
-    msg = bad(default_config, lambda c: c["size_distributions"]["fine"].__setitem__("number_fractions", [0.5, 0.3, 0.1]))
+    msg = bad(
+        default_config, lambda c: c["size_distributions"]["fine"].__setitem__("number_fractions", [0.5, 0.3, 0.1])
+    )
     assert "size_distributions.fine.number_fractions" in msg and "sum to 0.9" in msg and "must sum to 1" in msg
 
 
@@ -67,9 +69,11 @@ def test_unknown_key_lists_allowed(default_config):
 
 def test_injection_in_a_distribution_name_is_rejected(default_config):
     evil = "fine\nshell touch /tmp/pwned"
+
     def edit(c):
         c["size_distributions"][evil] = c["size_distributions"]["fine"]
         c["grid"]["size_distributions"] = [evil]
+
     msg = bad(default_config, edit)
     assert "does not match" in msg
 
@@ -80,9 +84,23 @@ def test_snakemake_rejects_a_bad_config_before_running(tmp_path, root, default_m
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(cfg))
     proc = subprocess.run(
-        [sys.executable, "-m", "snakemake", "-s", str(root / "Snakefile"), "--directory", str(tmp_path),
-         "--configfile", str(path), "-n", "--cores", "1"],
-        capture_output=True, text=True, timeout=300,
+        [
+            sys.executable,
+            "-m",
+            "snakemake",
+            "-s",
+            str(root / "Snakefile"),
+            "--directory",
+            str(tmp_path),
+            "--configfile",
+            str(path),
+            "-n",
+            "--cores",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     assert proc.returncode != 0
     assert "diameters" in proc.stdout + proc.stderr and "minimum" in proc.stdout + proc.stderr

@@ -38,7 +38,7 @@ def test_sample_does_not_see_round_off():
     # the DEM is chaotic: a diameter one unit in the last place apart changes its collisions, so a
     # PBM state that differs by round-off only must give the very same DEM input
     x = 1e-9 * 2.0 ** np.arange(12)
-    n = np.array([400, 300, 200, 90, 40, 15, 6, 3, 1, 0.4, 0.3, 0.0])   # no class count at a .5 tie
+    n = np.array([400, 300, 200, 90, 40, 15, 6, 3, 1, 0.4, 0.3, 0.0])  # no class count at a .5 tie
     ref = coupling.representative_sample(x, n, rule())
     rng = np.random.default_rng(3)
     for _ in range(20):
@@ -100,7 +100,9 @@ def test_pbm_dem_loop_stops_keeps_finished_intervals_and_resumes(tiny_config, tm
     assert loop.coupling_intervals >= 2
     out = tmp_path / "pbm_dem"
     monkeypatch.setenv("PBMDEM_LIGGGHTS", str(_failing_for_interval(tmp_path, 1)))
-    with pytest.raises(coupling.CouplingError, match=r"(?s)interval 1 .*failed.*simulated node failure.*rerun to resume"):
+    with pytest.raises(
+        coupling.CouplingError, match=r"(?s)interval 1 .*failed.*simulated node failure.*rerun to resume"
+    ):
         coupling.pbm_dem(loop, 600.0, out, execution, replicate=0)
     assert (out / "interval_00" / "interval.json").exists()
     assert (out / "interval_00" / "dem" / "collisions.csv").exists()
@@ -209,8 +211,15 @@ def test_velocity_fractions_of_a_dem_interval_reach_the_pbm_bins():
     rows = []
     for i, j, counts in [(0, 0, {3: 2.0, 5: 2.0}), (0, 1, {5: 3.0}), (1, 1, {})]:
         for b in range(N_VELOCITY_BINS):
-            rows.append({"class_i": i, "class_j": j, "v_lo": VELOCITY_EDGES[b], "v_hi": VELOCITY_EDGES[b + 1],
-                         "encounters": counts.get(b, 0.0)})
+            rows.append(
+                {
+                    "class_i": i,
+                    "class_j": j,
+                    "v_lo": VELOCITY_EDGES[b],
+                    "v_hi": VELOCITY_EDGES[b + 1],
+                    "encounters": counts.get(b, 0.0),
+                }
+            )
     frac = velocity_fractions_from_table(pd.DataFrame(rows), 2)
     assert frac.shape == (2, 2, N_VELOCITY_BINS)
     np.testing.assert_allclose(frac.sum(axis=2), 1.0)

@@ -31,9 +31,25 @@ def _start_dem(root: Path, tmp_path: Path) -> tuple[subprocess.Popen, Path]:
     config.write_text(yaml.safe_dump(cfg))
     out = tmp_path / "run"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "pbmdem.cli", "dem", "--config", str(config), "--rpm", "600",
-         "--distribution", "small", "--out", str(out)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        [
+            sys.executable,
+            "-m",
+            "pbmdem.cli",
+            "dem",
+            "--config",
+            str(config),
+            "--rpm",
+            "600",
+            "--distribution",
+            "small",
+            "--out",
+            str(out),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     return proc, out
 
 
@@ -82,8 +98,11 @@ def _check_rejected(proc: subprocess.Popen, out: Path, interrupted_by: str | Non
     assert not list(out.glob("restart_forced_*"))
     plan = json.loads((out / "plan.json").read_text())
     step = crash["forced_restart_files"][0]["step"]
-    assert plan["settle_steps"] + plan["spinup_steps"] < step < (
-        plan["settle_steps"] + plan["spinup_steps"] + plan["sampling_steps"]), (step, plan)
+    assert (
+        plan["settle_steps"] + plan["spinup_steps"]
+        < step
+        < (plan["settle_steps"] + plan["spinup_steps"] + plan["sampling_steps"])
+    ), (step, plan)
 
 
 def test_sigterm_to_liggghts_during_sampling_is_a_failure(root, tmp_path):

@@ -57,12 +57,14 @@ def test_halving_the_snapshot_interval_changes_encounters_by_less_than_5_percent
     auto = tiny_run["plan"].collision_interval
     assert auto >= 2
     point = tiny_config.dem_point("small")
-    point = point.replace(dem=point.dem.replace(collision_interval=auto // 2, keep_contact_dumps=True,
-                                                sampling_time=0.03))
+    point = point.replace(
+        dem=point.dem.replace(collision_interval=auto // 2, keep_contact_dumps=True, sampling_time=0.03)
+    )
     plan = plan_point(point, 1200)
     run_point(point, plan, tmp_path, tiny_config.dem_execution)
-    analysis = collisions.RunAnalysis(tmp_path / "post", plan, tiny_config.granulator.bowl,
-                                      tiny_config.granulator.impeller)
+    analysis = collisions.RunAnalysis(
+        tmp_path / "post", plan, tiny_config.granulator.bowl, tiny_config.granulator.impeller
+    )
     fine = analysis.pair_events(stride=1)[0].encounter.sum()
     coarse = analysis.pair_events(stride=2)[0].encounter.sum()
     assert fine > 200
@@ -91,7 +93,10 @@ def test_replicates_differ_only_by_seed_and_aggregate_to_mean_and_se(tiny_run, t
         assert {k for k in base if base[k] != other[k]} == {"seed", "replicate"}
     decks = [deck.granulator_values(point, p, ranks=1) for p in plans]
     assert {k for k in decks[0] if decks[0][k] != decks[1][k]} <= {
-        "seed_dist", "seed_insert", "particle_templates_block"}
+        "seed_dist",
+        "seed_insert",
+        "particle_templates_block",
+    }
     tables = [tiny_run["dir"] / "collisions.csv"]
     for plan in plans[1:]:
         run_dir = tmp_path / f"rep{plan.replicate}"
@@ -103,8 +108,7 @@ def test_replicates_differ_only_by_seed_and_aggregate_to_mean_and_se(tiny_run, t
     grid = aggregate(tables, tmp_path / "grid.csv")
     f = np.stack([r["encounter_frequency_per_pair"].to_numpy() for r in runs])
     np.testing.assert_allclose(grid["encounter_frequency_per_pair"], f.mean(axis=0), rtol=1e-12)
-    np.testing.assert_allclose(grid["encounter_frequency_per_pair_se"], f.std(axis=0, ddof=1) / np.sqrt(3),
-                               rtol=1e-12)
+    np.testing.assert_allclose(grid["encounter_frequency_per_pair_se"], f.std(axis=0, ddof=1) / np.sqrt(3), rtol=1e-12)
     assert (grid["n_replicates"] == 3).all()
 
 
@@ -130,7 +134,8 @@ def _failing_liggghts(tmp_path):
     contact dumps)."""
     real = engine.executable()
     script = tmp_path / "liggghts-broken"
-    script.write_text(textwrap.dedent(f"""\
+    script.write_text(
+        textwrap.dedent(f"""\
         #!{sys.executable}
         import os, sys
         args = sys.argv[1:]
@@ -141,7 +146,8 @@ def _failing_liggghts(tmp_path):
         open("broken.in", "w").write("\\n".join(lines) + "\\n")
         args[args.index("-in") + 1] = "broken.in"
         os.execv({real!r}, [{real!r}, *args])
-        """))
+        """)
+    )
     script.chmod(script.stat().st_mode | stat.S_IEXEC)
     return script
 
@@ -181,12 +187,38 @@ def test_insertion_shortfall_is_an_error(tiny_config, tmp_path):
 def test_dem_cli_plan_only(root, capsys):
     from pbmdem.cli import main
 
-    assert main(["dem", "--config", str(root / "config" / "test.yaml"), "--rpm", "600",
-                 "--distribution", "small", "--plan-only"]) == 0
+    assert (
+        main(
+            [
+                "dem",
+                "--config",
+                str(root / "config" / "test.yaml"),
+                "--rpm",
+                "600",
+                "--distribution",
+                "small",
+                "--plan-only",
+            ]
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert out["point_id"] == "rpm600_small" and out["n_particles"] > 100
-    assert main(["dem", "--config", str(root / "config" / "test.yaml"), "--rpm", "600",
-                 "--distribution", "nope", "--plan-only"]) == 2
+    assert (
+        main(
+            [
+                "dem",
+                "--config",
+                str(root / "config" / "test.yaml"),
+                "--rpm",
+                "600",
+                "--distribution",
+                "nope",
+                "--plan-only",
+            ]
+        )
+        == 2
+    )
     assert "'nope' is not defined" in capsys.readouterr().err
 
 

@@ -11,9 +11,22 @@ def replicate_rows(rpm, rep, enc):
     # two classes: 4 and 2 particles; pairs 6, 8, 1; window 0.5 s
     rows = []
     for (i, j), e in zip([(0, 0), (0, 1), (1, 1)], enc):
-        rows.append({"point_id": f"rpm{rpm}_f", "rpm": rpm, "distribution": "f", "replicate": rep,
-                     "class_i": i, "class_j": j, "n_i": [4, 4, 2][i + j], "n_j": [4, 2, 2][i + j],
-                     "sampling_time": 0.5, "encounters": e, "collisions": 3 * e, "impact_velocity_median": 0.1})
+        rows.append(
+            {
+                "point_id": f"rpm{rpm}_f",
+                "rpm": rpm,
+                "distribution": "f",
+                "replicate": rep,
+                "class_i": i,
+                "class_j": j,
+                "n_i": [4, 4, 2][i + j],
+                "n_j": [4, 2, 2][i + j],
+                "sampling_time": 0.5,
+                "encounters": e,
+                "collisions": 3 * e,
+                "impact_velocity_median": 0.1,
+            }
+        )
     return rows
 
 
@@ -30,8 +43,16 @@ def test_speed_response_mean_and_se():
 
 
 def test_flow_development_flags_a_drift():
-    runs = pd.DataFrame({"point_id": "p", "rpm": 100.0, "distribution": "f", "replicate": [0, 1, 2],
-                         "encounters_first_half": [100, 104, 98], "encounters_second_half": [101, 99, 103]})
+    runs = pd.DataFrame(
+        {
+            "point_id": "p",
+            "rpm": 100.0,
+            "distribution": "f",
+            "replicate": [0, 1, 2],
+            "encounters_first_half": [100, 104, 98],
+            "encounters_second_half": [101, 99, 103],
+        }
+    )
     flow = flow_development(runs)
     assert flow.within_error.iloc[0]
     # means 100.67 and 101.0; SEs sqrt(var/3) of [100, 104, 98] and [101, 99, 103]

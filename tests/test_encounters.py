@@ -49,8 +49,17 @@ def approach_then(gaps_after: list[float], start_gap=2e-3, v=0.1, steps_in=30):
 
 def classify(snaps, traj, window_start=0, stride=1):
     s = window_starts(snaps, window_start, stride=stride)
-    ev = pair_events(traj, s.first, s.second, np.full(len(s.first), R), np.full(len(s.first), R),
-                     s.step, s.prev_step, gap_fraction=0.25, stride=stride)
+    ev = pair_events(
+        traj,
+        s.first,
+        s.second,
+        np.full(len(s.first), R),
+        np.full(len(s.first), R),
+        s.step,
+        s.prev_step,
+        gap_fraction=0.25,
+        stride=stride,
+    )
     return s, ev
 
 
@@ -109,8 +118,15 @@ def test_wall_gaps_and_impeller_velocity():
     gap, normal = bowl_gap(pos, np.full(3, 1e-3), bowl)
     np.testing.assert_allclose(gap, [0.0, 0.0005, 0.0005], atol=1e-12)
     np.testing.assert_allclose(normal, [[1, 0, 0], [0, 0, -1], [0, 0, 1]], atol=1e-12)
-    imp = Impeller(blades=1, blade_length=0.02, blade_height=0.01, blade_thickness=0.002, clearance=0.001,
-                   pitch_deg=0.0, hub_diameter=0.004)
+    imp = Impeller(
+        blades=1,
+        blade_length=0.02,
+        blade_height=0.01,
+        blade_thickness=0.002,
+        clearance=0.001,
+        pitch_deg=0.0,
+        hub_diameter=0.004,
+    )
     # a particle 1 mm in front of the blade (turned by 90 degrees, so it lies along +y)
     p = np.array([[-0.0030, 0.015, 0.006]])  # blade face at x = -0.001 after the turn
     g, towards = impeller_gap(p, np.array([5e-4]), imp, np.array([np.pi / 2]))
@@ -118,9 +134,9 @@ def test_wall_gaps_and_impeller_velocity():
     np.testing.assert_allclose(towards[0], [1, 0, 0], atol=1e-12)
     # a resting particle hit by the blade: its approach speed is the blade's omega x r
     omega = 100.0
-    traj = Trajectories(steps=np.array([0, 1]), ids=np.array([1]), pos=np.repeat(p[None], 2, 0),
-                        vel=np.zeros((2, 1, 3)))
-    ev = wall_events(traj, [1], [1], [5e-4], [2], [-1], 0.25, bowl, imp, lambda s: np.full(len(s), np.pi / 2),
-                     omega)
+    traj = Trajectories(
+        steps=np.array([0, 1]), ids=np.array([1]), pos=np.repeat(p[None], 2, 0), vel=np.zeros((2, 1, 3))
+    )
+    ev = wall_events(traj, [1], [1], [5e-4], [2], [-1], 0.25, bowl, imp, lambda s: np.full(len(s), np.pi / 2), omega)
     assert ev.encounter[0]
     assert ev.velocity[0] == pytest.approx(omega * 0.015, rel=1e-9)  # the face moves at omega x r towards it

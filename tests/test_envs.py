@@ -16,24 +16,55 @@ import pytest
 import yaml
 
 # conda package name -> import name, for the packages pbmdem uses
-IMPORT_NAME = {"numpy": "numpy", "scipy": "scipy", "pandas": "pandas", "scikit-learn": "sklearn",
-               "skops": "skops", "matplotlib-base": "matplotlib", "pyyaml": "yaml",
-               "jsonschema": "jsonschema", "meshio": "meshio", "pyvista": "pyvista", "numba": "numba"}
+IMPORT_NAME = {
+    "numpy": "numpy",
+    "scipy": "scipy",
+    "pandas": "pandas",
+    "scikit-learn": "sklearn",
+    "skops": "skops",
+    "matplotlib-base": "matplotlib",
+    "pyyaml": "yaml",
+    "jsonschema": "jsonschema",
+    "meshio": "meshio",
+    "pyvista": "pyvista",
+    "numba": "numba",
+}
 # packages that come with the ones listed (conda installs their dependencies too)
 IMPLIED = {"jsonschema": ["referencing", "jsonschema_specifications", "rpds", "attrs"], "numba": ["llvmlite"]}
 
 # what each stage's rules load, including imports made inside functions on the rule's path
 STAGE_MODULES = {
-    "dem": ["pbmdem.dem", "pbmdem.dem.run", "pbmdem.dem.collisions", "pbmdem.dem.vtk_series",
-            "pbmdem.dem.geometry", "pbmdem.dem.deck", "pbmdem.dem.engine", "pbmdem.dem.grid_tables",
-            "pbmdem.dem.speed_response"],
+    "dem": [
+        "pbmdem.dem",
+        "pbmdem.dem.run",
+        "pbmdem.dem.collisions",
+        "pbmdem.dem.vtk_series",
+        "pbmdem.dem.geometry",
+        "pbmdem.dem.deck",
+        "pbmdem.dem.engine",
+        "pbmdem.dem.grid_tables",
+        "pbmdem.dem.speed_response",
+    ],
     "pbm": ["pbmdem.pbm", "pbmdem.pbm.setup", "pbmdem.pbm.results", "pbmdem.pbm.kernels"],
     "surrogate": ["pbmdem.surrogate", "pbmdem.surrogate.train", "pbmdem.surrogate.plots"],
-    "validation": ["pbmdem.coupling", "pbmdem.coupling.sweep", "pbmdem.report", "pbmdem.report.outputs",
-                   "pbmdem.report.figures", "pbmdem.report.frequencies", "pbmdem.report.html",
-                   "pbmdem.report.provenance", "pbmdem.report.statements", "pbmdem.report.tables",
-                   "pbmdem.validation.results", "pbmdem.surrogate",
-                   "pbmdem.pbm.setup", "pbmdem.dem", "pbmdem.dem.collisions", "pbmdem.dem.vtk_series"],
+    "validation": [
+        "pbmdem.coupling",
+        "pbmdem.coupling.sweep",
+        "pbmdem.report",
+        "pbmdem.report.outputs",
+        "pbmdem.report.figures",
+        "pbmdem.report.frequencies",
+        "pbmdem.report.html",
+        "pbmdem.report.provenance",
+        "pbmdem.report.statements",
+        "pbmdem.report.tables",
+        "pbmdem.validation.results",
+        "pbmdem.surrogate",
+        "pbmdem.pbm.setup",
+        "pbmdem.dem",
+        "pbmdem.dem.collisions",
+        "pbmdem.dem.vtk_series",
+    ],
 }
 
 # building a PBM model imports its compiled rates (numba), in the stages that build models
@@ -81,13 +112,23 @@ def test_every_rule_names_an_existing_env(root):
 def test_env_is_sufficient_for_its_rules(root, stage):
     guarded = sorted(set(IMPORT_NAME.values()) | {m for v in IMPLIED.values() for m in v} | {"vtk"})
     code = BLOCKER.format(allowed=env_packages(root, stage), guarded=guarded, modules=STAGE_MODULES[stage])
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
-                          env={"PYTHONPATH": str(root / "src"), "PATH": "/usr/bin:/bin"})
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={"PYTHONPATH": str(root / "src"), "PATH": "/usr/bin:/bin"},
+    )
     assert proc.returncode == 0 and proc.stdout.strip().endswith("ok"), proc.stderr[-3000:]
 
 
 def test_the_blocker_really_blocks(root):
     code = BLOCKER.format(allowed=["numpy"], guarded=["numpy", "pandas"], modules=["pbmdem.dem.collisions"])
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
-                          env={"PYTHONPATH": str(root / "src"), "PATH": "/usr/bin:/bin"})
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={"PYTHONPATH": str(root / "src"), "PATH": "/usr/bin:/bin"},
+    )
     assert proc.returncode != 0 and "pandas is not in the environment" in proc.stderr

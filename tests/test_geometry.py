@@ -47,8 +47,15 @@ def test_open_surface_is_detected(default_config):
 
 def test_blade_reaching_the_wall_is_rejected(default_config):
     bowl = default_config.granulator.bowl
-    imp = Impeller(blades=3, blade_length=bowl.radius, blade_height=0.01, blade_thickness=0.002,
-                   clearance=0.001, pitch_deg=0.0, hub_diameter=0.01)
+    imp = Impeller(
+        blades=3,
+        blade_length=bowl.radius,
+        blade_height=0.01,
+        blade_thickness=0.002,
+        clearance=0.001,
+        pitch_deg=0.0,
+        hub_diameter=0.01,
+    )
     with pytest.raises(ValueError, match="reaches the bowl wall"):
         geometry.impeller_mesh(imp, bowl)
 

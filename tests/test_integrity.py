@@ -11,10 +11,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 import yaml
-
 from conftest import config_of
 
 from pbmdem.config import ConfigError, load_config, point_id, rpm_text
@@ -30,8 +28,12 @@ def _write(path: Path, text: str) -> Path:
 
 
 def _snakemake(root: Path, workdir: Path, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "snakemake", "-s", str(root / "Snakefile"), "--directory",
-                           str(workdir), *args], capture_output=True, text=True, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "snakemake", "-s", str(root / "Snakefile"), "--directory", str(workdir), *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
 
 
 # ----------------------------------------------------------------------------- defect 4: duplicate keys
@@ -54,8 +56,9 @@ def test_snakemake_refuses_a_duplicate_key(root, tmp_path):
 
 
 # ----------------------------------------------------------------------------- defect 3: non-finite numbers
-@pytest.mark.parametrize("text, key", [(".nan", "material.restitution"), (".inf", "material.restitution"),
-                                       ("-.inf", "material.restitution")])
+@pytest.mark.parametrize(
+    "text, key", [(".nan", "material.restitution"), (".inf", "material.restitution"), ("-.inf", "material.restitution")]
+)
 def test_non_finite_config_values_name_key_and_value(root, tmp_path, text, key):
     cfg_text = (root / "config" / "test.yaml").read_text().replace("restitution: 0.4", f"restitution: {text}")
     path = _write(tmp_path / "bad.yaml", cfg_text)
@@ -79,8 +82,20 @@ def test_impossible_cli_speeds_are_refused_and_leave_a_finished_run_alone(tiny_r
     run = tmp_path / "run"
     shutil.copytree(tiny_run["dir"], run)
     before = {p: (p.stat().st_mtime_ns, p.stat().st_size) for p in run.rglob("*")}
-    code = main(["dem", "--config", str(root / "config" / "test.yaml"), "--rpm", rpm, "--distribution", "small",
-                 "--out", str(run), "--force"])
+    code = main(
+        [
+            "dem",
+            "--config",
+            str(root / "config" / "test.yaml"),
+            "--rpm",
+            rpm,
+            "--distribution",
+            "small",
+            "--out",
+            str(run),
+            "--force",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2
     assert "--rpm" in err and repr(rpm) in err and "Traceback" not in err
@@ -97,13 +112,16 @@ def test_impossible_speed_for_the_pbm_cli(root, tmp_path, capsys, rpm):
 
 
 def _dump(path: Path, rows: list[str]) -> Path:
-    text = (f"ITEM: TIMESTEP\n100\nITEM: NUMBER OF ENTRIES\n{len(rows)}\nITEM: BOX BOUNDS ff ff ff\n"
-            "-0.01 0.01\n-0.01 0.01\n0 0.03\nITEM: ENTRIES c_1 c_2 c_3\n")
+    text = (
+        f"ITEM: TIMESTEP\n100\nITEM: NUMBER OF ENTRIES\n{len(rows)}\nITEM: BOX BOUNDS ff ff ff\n"
+        "-0.01 0.01\n-0.01 0.01\n0 0.03\nITEM: ENTRIES c_1 c_2 c_3\n"
+    )
     return _write(path, text + "".join(r + "\n" for r in rows))
 
 
-@pytest.mark.parametrize("rows, col", [(["1 2 0.001", "nan 3 0.002"], 1), (["1 2 0.001", "2 3 nan"], 3),
-                                       (["1 2 inf", "2 3 0.002"], 3)])
+@pytest.mark.parametrize(
+    "rows, col", [(["1 2 0.001", "nan 3 0.002"], 1), (["1 2 0.001", "2 3 nan"], 3), (["1 2 inf", "2 3 0.002"], 3)]
+)
 def test_non_finite_value_in_a_dump_names_file_and_column(tmp_path, rows, col):
     path = _dump(tmp_path / "pairs.dump", rows)
     with pytest.raises(dumps.DumpFormatError) as info:
@@ -149,8 +167,7 @@ def test_snakemake_plans_a_tiny_speed(root, tmp_path, tiny_mapping):
     cfg = tiny_mapping
     cfg["grid"]["impeller_rpm"] = [1e-9, 1234.567]
     path = _write(tmp_path / "c.yaml", yaml.safe_dump(cfg))
-    proc = _snakemake(root, tmp_path, "--configfile", str(path), "-n", "--cores", "1",
-                      "results/dem/collisions.csv")
+    proc = _snakemake(root, tmp_path, "--configfile", str(path), "-n", "--cores", "1", "results/dem/collisions.csv")
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "rpm0.000000001_small" in proc.stdout + proc.stderr
     assert "rpm1234.567_large" in proc.stdout + proc.stderr
@@ -167,8 +184,12 @@ def test_snakemake_lists_every_config_error_tidily(root, tmp_path, tiny_mapping)
     proc = _snakemake(root, tmp_path, "--configfile", str(path), "-n", "--cores", "1")
     assert proc.returncode != 0
     err = proc.stderr
-    for key, value in (("material.restitution", "7.0"), ("material.density", "'heavy'"),
-                       ("grid.impeller_rpm[1]", "-3"), ("dem", "'foo'")):
+    for key, value in (
+        ("material.restitution", "7.0"),
+        ("material.density", "'heavy'"),
+        ("grid.impeller_rpm[1]", "-3"),
+        ("dem", "'foo'"),
+    ):
         assert key in err and value in err, (key, err)
     assert "allowed" in err and "Traceback" not in err
     assert len(err.strip().splitlines()) < 15  # no schema or config dump
@@ -186,8 +207,19 @@ def test_manual_run_refuses_to_rewrite_a_finished_point(tiny_run, tmp_path, root
     run = tmp_path / "rpm600_small"
     shutil.copytree(tiny_run["dir"], run)
     before = _state(run)
-    code = main(["dem", "--config", str(root / "config" / "test.yaml"), "--rpm", "600", "--distribution", "small",
-                 "--out", str(run)])
+    code = main(
+        [
+            "dem",
+            "--config",
+            str(root / "config" / "test.yaml"),
+            "--rpm",
+            "600",
+            "--distribution",
+            "small",
+            "--out",
+            str(run),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "already holds a finished run" in err and "--force" in err
     assert _state(run) == before
@@ -204,8 +236,20 @@ def test_forced_run_that_fails_leaves_the_finished_run_untouched(tiny_run, tmp_p
     shutil.copytree(tiny_run["dir"], run)
     before = _state(run)
     monkeypatch.setenv("PBMDEM_LIGGGHTS", str(_failing_liggghts(tmp_path)))
-    code = main(["dem", "--config", str(root / "config" / "test.yaml"), "--rpm", "600", "--distribution", "small",
-                 "--out", str(run), "--force"])
+    code = main(
+        [
+            "dem",
+            "--config",
+            str(root / "config" / "test.yaml"),
+            "--rpm",
+            "600",
+            "--distribution",
+            "small",
+            "--out",
+            str(run),
+            "--force",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "no/such/style" in err and "untouched" in err
     assert _state(run) == before
@@ -247,9 +291,13 @@ def small_surrogate(tmp_path_factory):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # convergence of this deliberately tiny fit is not the point
         data = training_data(table, radius)
-        model = CollisionSurrogate(EnsembleMLPRegressorCV(hidden_layer_sizes=((4,),), alpha=(0.1,), seeds=(0, 1),
-                                                          max_iter=300, activation="tanh", solver="lbfgs"),
-                                   impeller_radius=radius, physics_offset="cross_section")
+        model = CollisionSurrogate(
+            EnsembleMLPRegressorCV(
+                hidden_layer_sizes=((4,),), alpha=(0.1,), seeds=(0, 1), max_iter=300, activation="tanh", solver="lbfgs"
+            ),
+            impeller_radius=radius,
+            physics_offset="cross_section",
+        )
         model.fit(data.X, data.y, groups=data.groups)
     path = tmp_path_factory.mktemp("surrogate") / "model.skops"
     save_surrogate(model, path)
@@ -260,15 +308,33 @@ def test_pbm_cli_with_the_ann_kernel_reports_out_of_domain_use(small_surrogate, 
     from pbmdem.cli import main
 
     out = tmp_path / "pbm"
-    code = main(["pbm", "--config", str(root / "config" / "test.yaml"), "--kernel", "ann", "--model",
-                 str(small_surrogate), "--rpm", "5000", "--distribution", "small", "--out", str(out)])
+    code = main(
+        [
+            "pbm",
+            "--config",
+            str(root / "config" / "test.yaml"),
+            "--kernel",
+            "ann",
+            "--model",
+            str(small_surrogate),
+            "--rpm",
+            "5000",
+            "--distribution",
+            "small",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0
     err = capsys.readouterr().err
     assert "outside its training domain" in err and "tip_speed" in err  # 5000 rpm: tip speed far out
     info = json.loads((out / "run.json").read_text())
     n = info["coupling_intervals"]
-    assert info["surrogate_domain"] == {"out_of_domain_intervals": n, "out_of_domain_count": info["surrogate_domain"][
-        "out_of_domain_count"]} and info["surrogate_domain"]["out_of_domain_count"] >= n > 0
+    assert (
+        info["surrogate_domain"]
+        == {"out_of_domain_intervals": n, "out_of_domain_count": info["surrogate_domain"]["out_of_domain_count"]}
+        and info["surrogate_domain"]["out_of_domain_count"] >= n > 0
+    )
     intervals = __import__("pandas").read_csv(out / "intervals.csv")
     assert len(intervals) == n and intervals.out_of_domain.str.contains("tip_speed").all()
 
@@ -297,8 +363,13 @@ def test_validation_loops_log_count_and_report_out_of_domain_use(small_surrogate
     text = caplog.text
     assert "surrogate out of its training domain" in text  # logged as they happen
     assert f"interval {n} of {n}" in text and "PBM wall time" in text and "out-of-domain" in text
-    speed = SpeedResults("5000", [], load_run(vdir / "rpm5000" / "pbm_ann", "PBM-ANN result"),
-                         load_run(vdir / "rpm5000" / "pbm_constant", "PBM-constant result"), None)
+    speed = SpeedResults(
+        "5000",
+        [],
+        load_run(vdir / "rpm5000" / "pbm_ann", "PBM-ANN result"),
+        load_run(vdir / "rpm5000" / "pbm_constant", "PBM-constant result"),
+        None,
+    )
     counts = domain_counts(speed)
     assert counts["ann_out_of_domain_intervals"] == n and counts["constant_calibration_out_of_domain_warnings"] > 0
     statement = out_of_domain_sentence("5000", out_of_domain(speed))
@@ -322,19 +393,35 @@ def test_the_readme_resume_command_works_after_kill_9_of_snakemake(root, tmp_pat
     started = tmp_path / "started"
     slow = tmp_path / "liggghts-slow"
     real = engine.executable()
-    slow.write_text(textwrap.dedent(f"""\
+    slow.write_text(
+        textwrap.dedent(f"""\
         #!{sys.executable}
         import os, sys, time
         open({str(started)!r}, "a").write(f"{{os.getpid()}}\\n")
         time.sleep(600)
         os.execv({real!r}, [{real!r}, *sys.argv[1:]])
-        """))
+        """)
+    )
     slow.chmod(slow.stat().st_mode | stat.S_IEXEC)
-    base = [sys.executable, "-m", "snakemake", "-s", str(root / "Snakefile"), "--directory", str(tmp_path),
-            "--configfile", str(config)]
+    base = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(root / "Snakefile"),
+        "--directory",
+        str(tmp_path),
+        "--configfile",
+        str(config),
+    ]
     target = "results/dem/collisions.csv"
-    proc = subprocess.Popen([*base, "--cores", "1", target], env=dict(os.environ, PBMDEM_LIGGGHTS=str(slow)),
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    proc = subprocess.Popen(
+        [*base, "--cores", "1", target],
+        env=dict(os.environ, PBMDEM_LIGGGHTS=str(slow)),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     try:
         deadline = time.monotonic() + 300
         while not started.exists() and time.monotonic() < deadline:
@@ -390,25 +477,49 @@ def test_dem_progress_is_read_from_liggghts_thermo_while_it_runs(tiny_config, tm
     assert {p for _, p, _ in seen} >= {"settling", "sampling"}
     assert seen[-1][2] == plan.n_particles
     lines = [r.getMessage() for r in caplog.records if r.name == "pbmdem.dem.progress"]
-    assert any(re.search(r"DEM test: (settling|spin-up|sampling), step \d+ of %d \(\d+ %%\), \d+ particles, "
-                         r"elapsed \d+:\d\d, remaining ~" % total, line) for line in lines), lines
+    assert any(
+        re.search(
+            rf"DEM test: (settling|spin-up|sampling), step \d+ of {total} \(\d+ %\), \d+ particles, "
+            r"elapsed \d+:\d\d, remaining ~",
+            line,
+        )
+        for line in lines
+    ), lines
     assert f"step {total} of {total}" in lines[-1]
     assert f"{total}/{total}" in capsys.readouterr().err  # tqdm's bar, complete
 
 
 def test_dem_cli_logs_progress_lines_when_not_on_a_terminal(root, tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "pbmdem.cli", "dem", "--config", str(root / "config" / "test.yaml"),
-                           "--rpm", "600", "--distribution", "small", "--out", str(tmp_path / "run")],
-                          capture_output=True, text=True, timeout=600)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pbmdem.cli",
+            "dem",
+            "--config",
+            str(root / "config" / "test.yaml"),
+            "--rpm",
+            "600",
+            "--distribution",
+            "small",
+            "--out",
+            str(tmp_path / "run"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert re.search(r"pbmdem.dem.progress: DEM rpm600_small: (settling|spin-up|sampling), step \d+ of \d+ "
-                     r"\(\d+ %\), \d+ particles, elapsed", proc.stderr), proc.stderr
+    assert re.search(
+        r"pbmdem.dem.progress: DEM rpm600_small: (settling|spin-up|sampling), step \d+ of \d+ "
+        r"\(\d+ %\), \d+ particles, elapsed",
+        proc.stderr,
+    ), proc.stderr
     assert "engine stopped at step" in proc.stderr
 
 
 # ----------------------------------------------------------------------------- defect 6: errors name the file
-@pytest.mark.parametrize("text", ["", "a,b\n1,2\n", "d_i,d_j,frequency_per_pair\n0.002,0.002,nan\n",
-                                  "\x00\x01garbage"])
+@pytest.mark.parametrize("text", ["", "a,b\n1,2\n", "d_i,d_j,frequency_per_pair\n0.002,0.002,nan\n", "\x00\x01garbage"])
 def test_bad_collision_table_for_the_pbm_names_the_file(tmp_path, text):
     from pbmdem.pbm.errors import PBMInputError
     from pbmdem.pbm.kernels import TableFrequency
@@ -473,9 +584,13 @@ def test_surrogate_cross_validation_logs_each_fold_and_candidate(caplog):
     from pbmdem.surrogate.synthetic import make_synthetic_table
 
     table = make_synthetic_table(0.0265, rpms=(300, 600, 900), seed=4)
-    model = CollisionSurrogate(EnsembleMLPRegressorCV(hidden_layer_sizes=((4,), (6,)), alpha=(0.1,), seeds=(0,),
-                                                      max_iter=200, activation="tanh", solver="lbfgs"),
-                               impeller_radius=0.0265, physics_offset="cross_section")
+    model = CollisionSurrogate(
+        EnsembleMLPRegressorCV(
+            hidden_layer_sizes=((4,), (6,)), alpha=(0.1,), seeds=(0,), max_iter=200, activation="tanh", solver="lbfgs"
+        ),
+        impeller_radius=0.0265,
+        physics_offset="cross_section",
+    )
     caplog.set_level(logging.INFO, logger="pbmdem.surrogate")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -487,8 +602,14 @@ def test_surrogate_cross_validation_logs_each_fold_and_candidate(caplog):
     assert len(candidates) == 3 * 2  # two candidates in each outer fold's inner search
 
 
-@pytest.mark.parametrize("args, flag", [(["--rpm", "nan"], "--rpm"), (["--rpm", "0"], "--rpm"),
-                                        (["--rpm", "600", "--diameters", "0.002", "nan"], "--diameters")])
+@pytest.mark.parametrize(
+    "args, flag",
+    [
+        (["--rpm", "nan"], "--rpm"),
+        (["--rpm", "0"], "--rpm"),
+        (["--rpm", "600", "--diameters", "0.002", "nan"], "--diameters"),
+    ],
+)
 def test_surrogate_predict_refuses_non_finite_inputs(small_surrogate, capsys, args, flag):
     from pbmdem.cli import main
 
@@ -505,11 +626,15 @@ def test_surrogate_train_config_with_duplicate_or_nan_is_refused(root, tmp_path,
     from pbmdem.cli import main
 
     table = _write(tmp_path / "t.csv", "point_id\n")
-    for name, text in (("dup.yaml", "surrogate:\n  max_iter: 10\n  max_iter: 20\n"),
-                       ("nan.yaml", "surrogate:\n  alpha: [.nan]\n")):
+    for name, text in (
+        ("dup.yaml", "surrogate:\n  max_iter: 10\n  max_iter: 20\n"),
+        ("nan.yaml", "surrogate:\n  alpha: [.nan]\n"),
+    ):
         path = _write(tmp_path / name, text)
-        assert main(["surrogate", "train", "--table", str(table), "--config", str(path),
-                     "--out", str(tmp_path / "out")]) == 2
+        assert (
+            main(["surrogate", "train", "--table", str(table), "--config", str(path), "--out", str(tmp_path / "out")])
+            == 2
+        )
         err = capsys.readouterr().err
         assert str(path) in err and ("duplicate key 'max_iter'" in err or "surrogate.alpha[0] = nan" in err)
         assert not (tmp_path / "out").exists()

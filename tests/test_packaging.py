@@ -18,22 +18,48 @@ def test_a_wheel_installed_into_a_fresh_venv_runs_outside_the_checkout(root, tmp
     for name in ("pyproject.toml", "README.md"):
         shutil.copy2(root / name, source / name)
     for name in ("src", "workflow", "liggghts_templates"):
-        shutil.copytree(root / name, source / name, symlinks=True,
-                        ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
+        shutil.copytree(
+            root / name, source / name, symlinks=True, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info")
+        )
     wheels = tmp_path / "wheels"
-    build = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
-                            "-w", str(wheels), str(source)], capture_output=True, text=True, timeout=600)
+    build = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "--no-build-isolation",
+            "-q",
+            "-w",
+            str(wheels),
+            str(source),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert build.returncode == 0, build.stderr[-3000:]
     wheel = next(wheels.glob("pbmdem-*.whl"))
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=300)
     python = venv / "bin" / "python"
-    install = subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps", "-q",
-                              str(wheel)], capture_output=True, text=True, timeout=600)
+    install = subprocess.run(
+        [sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps", "-q", str(wheel)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert install.returncode == 0, install.stderr[-3000:]
     # the dependencies come from this test's environment (a path entry, not its editable pbmdem)
-    site = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                               capture_output=True, text=True, check=True).stdout.strip())
+    site = Path(
+        subprocess.run(
+            [str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    )
     (site / "dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
@@ -42,17 +68,39 @@ def test_a_wheel_installed_into_a_fresh_venv_runs_outside_the_checkout(root, tmp
     def run(*args):
         return subprocess.run(args, capture_output=True, text=True, cwd=elsewhere, timeout=300)
 
-    where = run(str(python), "-c", "import pbmdem, pbmdem.config, pbmdem.dem.deck as d; "
-                "print(pbmdem.__file__); print(pbmdem.config.schema_dir()); print(d.template_dir())")
+    where = run(
+        str(python),
+        "-c",
+        "import pbmdem, pbmdem.config, pbmdem.dem.deck as d; "
+        "print(pbmdem.__file__); print(pbmdem.config.schema_dir()); print(d.template_dir())",
+    )
     assert where.returncode == 0, where.stderr
     for line in where.stdout.split():
         assert Path(line).resolve().is_relative_to(venv.resolve()), where.stdout
     helped = run(str(venv / "bin" / "pbmdem"), "--help")
     assert helped.returncode == 0 and "dem" in helped.stdout and "surrogate" in helped.stdout, helped.stderr
-    plan = run(str(venv / "bin" / "pbmdem"), "dem", "--config", str(config), "--rpm", "600", "--distribution",
-               "small", "--plan-only")
+    plan = run(
+        str(venv / "bin" / "pbmdem"),
+        "dem",
+        "--config",
+        str(config),
+        "--rpm",
+        "600",
+        "--distribution",
+        "small",
+        "--plan-only",
+    )
     assert plan.returncode == 0, plan.stderr
     assert json.loads(plan.stdout)["point_id"] == "rpm600_small"
-    bad = run(str(venv / "bin" / "pbmdem"), "dem", "--config", str(config), "--rpm", "600", "--distribution",
-              "nope", "--plan-only")
+    bad = run(
+        str(venv / "bin" / "pbmdem"),
+        "dem",
+        "--config",
+        str(config),
+        "--rpm",
+        "600",
+        "--distribution",
+        "nope",
+        "--plan-only",
+    )
     assert bad.returncode == 2 and "'nope' is not defined" in bad.stderr and "Traceback" not in bad.stderr

@@ -31,7 +31,7 @@ from pbmdem.pbm.errors import KernelShapeError
 def random_totals(rng, M, empty=5):
     """(3, M) class totals spanning 30 decades, with empty top classes (as a run's state)."""
     nlg = rng.random((3, M)) * 10.0 ** rng.uniform(-30, 3, (3, M))
-    nlg[:, M - empty:] = 0.0
+    nlg[:, M - empty :] = 0.0
     return nlg
 
 
@@ -61,7 +61,9 @@ def test_compiled_totals_take_any_layout_of_the_kernel():
     beta = np.asfortranarray(rng.random((12, 12)))
     beta = beta + beta.T
     nlg = random_totals(rng, 12, empty=2)
-    np.testing.assert_array_equal(op.totals_stacked(beta, nlg)[0], op.totals_stacked(np.ascontiguousarray(beta), nlg)[0])
+    np.testing.assert_array_equal(
+        op.totals_stacked(beta, nlg)[0], op.totals_stacked(np.ascontiguousarray(beta), nlg)[0]
+    )
 
 
 class _Counting:
@@ -81,8 +83,14 @@ class _Counting:
 
 def _input(K, phi, t=0.0):
     x = 1e-9 * 2.0 ** np.arange(K)
-    return KernelInput(t=t, volumes=x, diameters=(6 * x / np.pi) ** (1 / 3), numbers=np.ones(K),
-                       surface_fraction=np.asarray(phi, float), rpm=600.0)
+    return KernelInput(
+        t=t,
+        volumes=x,
+        diameters=(6 * x / np.pi) ** (1 / 3),
+        numbers=np.ones(K),
+        surface_fraction=np.asarray(phi, float),
+        rpm=600.0,
+    )
 
 
 @pytest.mark.parametrize("model", ["step", "logistic", "always"])
@@ -124,8 +132,11 @@ def test_a_source_that_turns_bad_between_refreshes_is_refused():
     # an unchanged matrix is not checked again, a changed one is
     g = Grid(12, 2.0, min_diameter=1e-3)
     src = _Counting(12)
-    model = GranulationPBM(g, CollisionKernel(src, 1e-4, SuccessProbability("always"), update_interval=0.5),
-                           solver=Solver.defaults().replace(max_step=0.25))
+    model = GranulationPBM(
+        g,
+        CollisionKernel(src, 1e-4, SuccessProbability("always"), update_interval=0.5),
+        solver=Solver.defaults().replace(max_step=0.25),
+    )
     state = model.initial_state(np.pi / 6 * np.array([2e-3]) ** 3, [100])
     res = model.run(0.0, 2.0, state)
     assert res.info["step_limits"]["kernel_refreshes"] == src.calls >= 2
@@ -146,8 +157,10 @@ def test_import_pbmdem_pbm_does_not_import_numba():
     code = "import sys, pbmdem.pbm; print('numba' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
-    code = ("import sys, numpy as np, pbmdem.pbm as p; p.GranulationPBM(p.Grid(5, 2.0, v0=1.0), "
-            "p.ConstantKernel(1.0)); print('numba' in sys.modules)")
+    code = (
+        "import sys, numpy as np, pbmdem.pbm as p; p.GranulationPBM(p.Grid(5, 2.0, v0=1.0), "
+        "p.ConstantKernel(1.0)); print('numba' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "True"
 
@@ -164,7 +177,7 @@ def test_spraying_and_consolidation_rates_follow_their_formulas():
         return model.rates(1.0, N, L, G, spraying)
 
     plain = rates(None, None, False)
-    for rule, w in (("surface_area", N * g.d ** 2), ("solid_volume", N * g.x)):
+    for rule, w in (("surface_area", N * g.d**2), ("solid_volume", N * g.x)):
         sprayed = rates(LiquidAddition(Q, 0.0, 10.0, rule), None, True)
         np.testing.assert_allclose(sprayed[1] - plain[1], Q * w / w.sum(), rtol=1e-12, atol=1e-12 * Q)
         assert np.sum(sprayed[1] - plain[1]) == pytest.approx(Q, rel=1e-12)
@@ -172,8 +185,9 @@ def test_spraying_and_consolidation_rates_follow_their_formulas():
         not_spraying = rates(LiquidAddition(Q, 0.0, 10.0, rule), None, False)
         np.testing.assert_array_equal(not_spraying[1], plain[1])
     consolidated = rates(None, Consolidation(c, eps), False)
-    np.testing.assert_allclose(consolidated[2] - plain[2], -c * (G - eps / (1 - eps) * N * g.x),
-                               rtol=1e-12, atol=1e-12 * np.abs(G).max() * c)
+    np.testing.assert_allclose(
+        consolidated[2] - plain[2], -c * (G - eps / (1 - eps) * N * g.x), rtol=1e-12, atol=1e-12 * np.abs(G).max() * c
+    )
 
 
 def test_table_frequency_from_matrix_is_the_table_of_the_matrix():
@@ -185,7 +199,7 @@ def test_table_frequency_from_matrix_is_the_table_of_the_matrix():
         d = np.geomspace(2e-3, 8e-3, k) * rng.uniform(0.97, 1.03, k)
         c = rng.uniform(0.0, 0.2, (k, k))
         c = 0.5 * (c + c.T)
-        c[0, -1] = c[-1, 0] = 0.0                      # a zero is floored as in the table
+        c[0, -1] = c[-1, 0] = 0.0  # a zero is floored as in the table
         iu, ju = np.triu_indices(k)
         table = pd.DataFrame({"d_i": d[iu], "d_j": d[ju], "frequency_per_pair": c[iu, ju]})
         for extrapolation in ("clamp", "linear"):
@@ -216,26 +230,29 @@ class _Unfactored:
     def reset(self):
         self.kernel.reset()
 
-    def __getattr__(self, name):              # evaluations, ... but no factors
+    def __getattr__(self, name):  # evaluations, ... but no factors
         if name == "factors":
             raise AttributeError(name)
         return getattr(self.kernel, name)
 
 
-@pytest.mark.parametrize("kernel", [
-    lambda: CollisionKernel(ConstantFrequency(0.12), 2e-4, SuccessProbability("step", 0.02), update_interval=1.0),
-    lambda: CollisionKernel(ConstantFrequency(0.12), 2e-4, SuccessProbability("logistic", 0.02, 0.005)),
-    lambda: CollisionKernel(ConstantFrequency(0.12), 2e-4, SuccessProbability("always")),
-    lambda: ConstantKernel(2e-5),
-], ids=["step", "logistic", "always", "constant"])
+@pytest.mark.parametrize(
+    "kernel",
+    [
+        lambda: CollisionKernel(ConstantFrequency(0.12), 2e-4, SuccessProbability("step", 0.02), update_interval=1.0),
+        lambda: CollisionKernel(ConstantFrequency(0.12), 2e-4, SuccessProbability("logistic", 0.02, 0.005)),
+        lambda: CollisionKernel(ConstantFrequency(0.12), 2e-4, SuccessProbability("always")),
+        lambda: ConstantKernel(2e-5),
+    ],
+    ids=["step", "logistic", "always", "constant"],
+)
 def test_factored_kernel_in_the_compiled_rates_equals_calling_the_kernel(kernel):
     # the default process with feed classes: the compiled path (factors) and the generic one
     g = Grid.spanning(2e-3, 32e-3, 2.0 ** (1 / 3))
     runs = []
     for k in (kernel(), _Unfactored(kernel())):
         model = GranulationPBM(g, k, LiquidAddition(5.8e-8, 60.0, 240.0), Consolidation(0.02, 0.2), rpm=600.0)
-        state = model.initial_state(np.pi / 6 * np.array([2e-3, 3e-3, 4e-3]) ** 3, [900.0, 540.0, 360.0],
-                                    porosity=0.5)
+        state = model.initial_state(np.pi / 6 * np.array([2e-3, 3e-3, 4e-3]) ** 3, [900.0, 540.0, 360.0], porosity=0.5)
         runs.append(model.run(0.0, 480.0, state, output_times=np.arange(0.0, 481.0, 10.0)))
     fast, generic = runs
     assert fast.info["kernel_evaluation"] == "compiled" and generic.info["kernel_evaluation"] == "called"
@@ -247,14 +264,17 @@ def test_factored_kernel_in_the_compiled_rates_equals_calling_the_kernel(kernel)
             np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12 * np.abs(b).max())
         else:
             np.testing.assert_array_equal(a, b)
-    assert fast.summary().d50.iloc[-1] > 1.2 * fast.summary().d50.iloc[0]      # it did granulate
+    assert fast.summary().d50.iloc[-1] > 1.2 * fast.summary().d50.iloc[0]  # it did granulate
 
 
 def test_a_velocity_dependent_success_is_not_factored():
     from pbmdem.pbm import StokesCriterion
 
-    kern = CollisionKernel(ConstantFrequency(0.12, impact_velocity=0.1), 2e-4,
-                           SuccessProbability("step", 0.02, velocity=StokesCriterion(0.1, 0.4, 5e-6, 1000.0)))
+    kern = CollisionKernel(
+        ConstantFrequency(0.12, impact_velocity=0.1),
+        2e-4,
+        SuccessProbability("step", 0.02, velocity=StokesCriterion(0.1, 0.4, 5e-6, 1000.0)),
+    )
     inp = _input(4, [0.03, 0.03, 0.0, 0.0])
     kern.prepare(inp)
     assert kern.factors(inp) is None

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 from conftest import config_of
 
-from pbmdem.config import Solver, ConfigError
-
+from pbmdem.config import ConfigError, Solver
 from pbmdem.pbm import (
     CollisionKernel,
     Consolidation,
@@ -27,7 +26,6 @@ from pbmdem.pbm import (
     SumKernel,
     run_batch,
 )
-from pbmdem.pbm import analytical as an
 from pbmdem.pbm import verification as ver
 
 
@@ -36,24 +34,27 @@ def test_errors_are_value_errors():
         assert issubclass(cls, PBMError) and issubclass(cls, ValueError)
 
 
-@pytest.mark.parametrize("make,match", [
-    (lambda: LiquidAddition(0.0, 0, 10), r"liquid addition rate \(m3/s\) = 0.0 .*allowed: a finite number > 0"),
-    (lambda: LiquidAddition(-1e-9, 0, 10), r"liquid addition rate .*= -1e-09"),
-    (lambda: LiquidAddition(1e-9, 10, 10), r"window \[10, 10\] s is empty; allowed: t_end > t_start"),
-    (lambda: LiquidAddition(1e-9, 0, 10, "mass"), r"distribution = 'mass'; allowed"),
-    (lambda: Consolidation(0.0, 0.2), r"consolidation rate \(1/s\) = 0.0"),
-    (lambda: Consolidation(-0.1, 0.2), r"consolidation rate \(1/s\) = -0.1"),
-    (lambda: Consolidation(0.1, 1.0), r"min_porosity = 1.0; allowed: 0 <= eps_min < 1"),
-    (lambda: ConstantKernel(0.0), r"beta0 = 0.0"),
-    (lambda: SumKernel(-1.0), r"sum kernel b = -1.0"),
-    (lambda: ConstantFrequency(0.0), r"constant collision frequency = 0.0"),
-    (lambda: ConstantFrequency(float("nan")), r"constant collision frequency = nan"),
-    (lambda: CollisionKernel(ConstantFrequency(1.0), -2.0), r"aggregation beta0 = -2.0"),
-    (lambda: SuccessProbability("always_on"), r"model = 'always_on'; allowed"),
-    (lambda: Grid(2, 2.0, v0=1.0), r"grid bins = 2; allowed: an integer >= 3"),
-    (lambda: Grid(10, 1.0, v0=1.0), r"grid ratio = 1.0; allowed: a number > 1"),
-    (lambda: Grid(10, 2.0, v0=-1.0), r"grid v0 = -1.0"),
-])
+@pytest.mark.parametrize(
+    "make,match",
+    [
+        (lambda: LiquidAddition(0.0, 0, 10), r"liquid addition rate \(m3/s\) = 0.0 .*allowed: a finite number > 0"),
+        (lambda: LiquidAddition(-1e-9, 0, 10), r"liquid addition rate .*= -1e-09"),
+        (lambda: LiquidAddition(1e-9, 10, 10), r"window \[10, 10\] s is empty; allowed: t_end > t_start"),
+        (lambda: LiquidAddition(1e-9, 0, 10, "mass"), r"distribution = 'mass'; allowed"),
+        (lambda: Consolidation(0.0, 0.2), r"consolidation rate \(1/s\) = 0.0"),
+        (lambda: Consolidation(-0.1, 0.2), r"consolidation rate \(1/s\) = -0.1"),
+        (lambda: Consolidation(0.1, 1.0), r"min_porosity = 1.0; allowed: 0 <= eps_min < 1"),
+        (lambda: ConstantKernel(0.0), r"beta0 = 0.0"),
+        (lambda: SumKernel(-1.0), r"sum kernel b = -1.0"),
+        (lambda: ConstantFrequency(0.0), r"constant collision frequency = 0.0"),
+        (lambda: ConstantFrequency(float("nan")), r"constant collision frequency = nan"),
+        (lambda: CollisionKernel(ConstantFrequency(1.0), -2.0), r"aggregation beta0 = -2.0"),
+        (lambda: SuccessProbability("always_on"), r"model = 'always_on'; allowed"),
+        (lambda: Grid(2, 2.0, v0=1.0), r"grid bins = 2; allowed: an integer >= 3"),
+        (lambda: Grid(10, 1.0, v0=1.0), r"grid ratio = 1.0; allowed: a number > 1"),
+        (lambda: Grid(10, 2.0, v0=-1.0), r"grid v0 = -1.0"),
+    ],
+)
 def test_bad_parameters(make, match):
     with pytest.raises(PBMInputError, match=match):
         make()
@@ -87,9 +88,12 @@ def test_overflow_beyond_the_last_bin_is_reported():
     N = ver.discretise_exponential(g, 1.0, 0.1)
     model = GranulationPBM(g, ConstantKernel(1.0))
     s = State(0.0, N, np.zeros(8), np.zeros(8))
-    with pytest.raises(GridOverflowError, match=r"beyond the last bin .* by t = [0-9.e+-]+ s aggregates carrying "
-                                                r"[0-9.e+-]+ m3 of solid were refused, .*allowed: at most "
-                                                r"max_overflow_fraction = 1e-06"):
+    with pytest.raises(
+        GridOverflowError,
+        match=r"beyond the last bin .* by t = [0-9.e+-]+ s aggregates carrying "
+        r"[0-9.e+-]+ m3 of solid were refused, .*allowed: at most "
+        r"max_overflow_fraction = 1e-06",
+    ):
         model.run(0.0, 50.0, s)
 
 
@@ -115,13 +119,16 @@ class _Source:
         return "BadSource"
 
 
-@pytest.mark.parametrize("fn,match", [
-    (lambda K: np.ones((K - 1, K)), r"BadSource returned shape \(9, 10\); expected \(10, 10\)"),
-    (lambda K: np.ones(K), r"returned shape \(10,\); expected \(10, 10\)"),
-    (lambda K: np.triu(np.ones((K, K))), r"non-symmetric matrix: c\[0,1\] = 1 but c\[1,0\] = 0"),
-    (lambda K: -np.ones((K, K)), r"negative value c\[0,0\] = -1; allowed: values >= 0"),
-    (lambda K: np.full((K, K), np.nan), r"non-finite value c\[0,0\] = nan"),
-])
+@pytest.mark.parametrize(
+    "fn,match",
+    [
+        (lambda K: np.ones((K - 1, K)), r"BadSource returned shape \(9, 10\); expected \(10, 10\)"),
+        (lambda K: np.ones(K), r"returned shape \(10,\); expected \(10, 10\)"),
+        (lambda K: np.triu(np.ones((K, K))), r"non-symmetric matrix: c\[0,1\] = 1 but c\[1,0\] = 0"),
+        (lambda K: -np.ones((K, K)), r"negative value c\[0,0\] = -1; allowed: values >= 0"),
+        (lambda K: np.full((K, K), np.nan), r"non-finite value c\[0,0\] = nan"),
+    ],
+)
 def test_inconsistent_frequency_source(fn, match):
     g = Grid(10, 2.0, min_diameter=1e-3)
     model = GranulationPBM(g, CollisionKernel(_Source(fn), 1.0))
@@ -130,10 +137,13 @@ def test_inconsistent_frequency_source(fn, match):
         model.run(0.0, 1.0, state)
 
 
-@pytest.mark.parametrize("what,value,match", [
-    ("number", -1.0, r"number of bin 3 .* is -1.0 at t = 2 s \(start of run\)"),
-    ("liquid", np.nan, r"liquid of bin 3 .* is nan at t = 2 s"),
-])
+@pytest.mark.parametrize(
+    "what,value,match",
+    [
+        ("number", -1.0, r"number of bin 3 .* is -1.0 at t = 2 s \(start of run\)"),
+        ("liquid", np.nan, r"liquid of bin 3 .* is nan at t = 2 s"),
+    ],
+)
 def test_negative_or_nan_state(what, value, match):
     g = Grid(10, 2.0, min_diameter=1e-3)
     model = GranulationPBM(g, ConstantKernel(1e-3))
@@ -154,7 +164,7 @@ def test_nan_during_the_run_names_time_and_bin():
             K = inp.volumes.size
             beta = np.full((K, K), 1e-3)
             if inp.t > 0.5:
-                beta[4, 4] = np.inf   # an infinite rate in bin 4
+                beta[4, 4] = np.inf  # an infinite rate in bin 4
             return beta
 
         def prepare(self, inp):
@@ -186,8 +196,11 @@ def test_run_state_time_mismatch():
 def test_bad_config_section(default_mapping):
     cfg = default_mapping
     cfg["pbm"] = {"liquid_addition": {"rate": 0.0}}
-    with pytest.raises(ConfigError, match=r"pbm\.liquid_addition\.rate = 0\.0: 0\.0 is less than or equal to "
-                                          r"the minimum of 0"):
+    with pytest.raises(
+        ConfigError,
+        match=r"pbm\.liquid_addition\.rate = 0\.0: 0\.0 is less than or equal to "
+        r"the minimum of 0",
+    ):
         config_of(cfg)
     cfg["pbm"] = {"consolidation": {"rate": 1.0, "speed": 2}}
     with pytest.raises(ConfigError, match=r"'speed' was unexpected"):

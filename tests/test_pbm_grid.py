@@ -25,7 +25,7 @@ from pbmdem.pbm import (
 from pbmdem.pbm.errors import PBMInputError
 from pbmdem.pbm.setup import build_model, initial_state
 
-D4 = np.pi / 6 * 4e-3 ** 3
+D4 = np.pi / 6 * 4e-3**3
 
 
 def _batch(cfg, **grid):
@@ -46,10 +46,10 @@ def test_default_batch_is_grid_converged_in_d10_d50_d90(default_config):
     +0.28 %; the lumped model gave +2.1 / +1.7 / +2.0 %)."""
     ratio = default_config.pbm.grid.ratio
     out = {}
-    for label, r in (("default", ratio), ("4x finer", ratio ** 0.25)):
+    for label, r in (("default", ratio), ("4x finer", ratio**0.25)):
         res = _batch(default_config, ratio=r)
         s = res.summary()
-        assert s.d50.iloc[-1] > 1.5 * s.d50.iloc[0]                      # it did granulate
+        assert s.d50.iloc[-1] > 1.5 * s.d50.iloc[0]  # it did granulate
         out[label] = s[["d10", "d50", "d90"]].iloc[-1].to_numpy()
         print(f"{label}: {res.grid.bins} bins, d10/d50/d90 {np.round(out[label] * 1e3, 4)} mm")
         if label == "4x finer":
@@ -69,7 +69,7 @@ def test_feed_granules_only_die_and_the_totals_add_up(default_config):
     np.testing.assert_allclose(np.cbrt(6 / np.pi * f.volumes), [2e-3, 3e-3, 4e-3], rtol=1e-12)
     batch = default_config.pbm_batch("fine")
     s0 = initial_state(batch, build_model(batch.pbm, None, 600))
-    assert np.all(f.number < s0.feed.number)                  # they aggregated, and none was born
+    assert np.all(f.number < s0.feed.number)  # they aggregated, and none was born
     # the driest feed granules (the largest: least liquid per solid under surface-area spraying)
     # start to aggregate last, so the larger the feed class, the more of it is left
     left = f.number / s0.feed.number
@@ -125,7 +125,7 @@ def test_collision_source_sees_the_bins_not_the_feed_classes():
     st = model.initial_state(np.pi / 6 * np.array([2e-3, 3e-3]) ** 3, [100.0, 50.0])
     res = model.run(0.0, 5.0, st)
     for d, n in seen:
-        np.testing.assert_array_equal(d, grid.d)               # the K pivots, in order
+        np.testing.assert_array_equal(d, grid.d)  # the K pivots, in order
         assert n.shape == (grid.bins,)
     # the bin totals the source saw last: aggregates plus the feed on its pivots
     assert seen[0][1].sum() == pytest.approx(150.0, rel=1e-12)
@@ -134,11 +134,11 @@ def test_collision_source_sees_the_bins_not_the_feed_classes():
 
 def test_lever_weights_put_a_class_on_a_pivot_whole():
     g = Grid(37, 2 ** (1 / 3), min_diameter=2e-3)
-    wn, ws = g.lever_weights([D4, np.pi / 6 * 3e-3 ** 3])
+    wn, ws = g.lever_weights([D4, np.pi / 6 * 3e-3**3])
     assert np.count_nonzero(wn[0]) == 1 and wn[0, 9] == 1.0 and ws[0, 9] == 1.0
     assert np.count_nonzero(wn[1]) == 2
     np.testing.assert_allclose(wn.sum(axis=1), 1.0, rtol=0, atol=1e-15)
     np.testing.assert_allclose(ws.sum(axis=1), 1.0, rtol=0, atol=1e-15)
     # number and solid of the split class are exact
-    v3 = np.pi / 6 * 3e-3 ** 3
+    v3 = np.pi / 6 * 3e-3**3
     assert wn[1] @ g.x == pytest.approx(v3, rel=1e-14)

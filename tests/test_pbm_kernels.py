@@ -6,7 +6,6 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-import yaml
 
 from pbmdem.pbm import (
     SCHEMES,
@@ -30,8 +29,18 @@ def make_table(rpms=(300.0, 900.0), sym_law=True):
             for b in range(a, 3):
                 di, dj = D[a], D[b]
                 f = 1e-3 * (rpm / 300.0) * (di * dj / 4e-6) ** 1.2
-                rows.append({"point_id": f"rpm{rpm:g}_fine", "rpm": rpm, "distribution": "fine", "class_i": a,
-                             "class_j": b, "d_i": di, "d_j": dj, "encounter_frequency_per_pair": f})
+                rows.append(
+                    {
+                        "point_id": f"rpm{rpm:g}_fine",
+                        "rpm": rpm,
+                        "distribution": "fine",
+                        "class_i": a,
+                        "class_j": b,
+                        "d_i": di,
+                        "d_j": dj,
+                        "encounter_frequency_per_pair": f,
+                    }
+                )
     return pd.DataFrame(rows)
 
 
@@ -78,9 +87,11 @@ def test_table_averages_duplicate_pairs_and_floors_zeros():
     src = TableFrequency(pd.concat([t, t2]))
     np.testing.assert_allclose(src(D, np.ones(3), 300.0), 2.0 * law(D[:, None], D[None, :], 300.0), rtol=1e-12)
     t3 = t.copy()
-    t3.loc[t3.index[-1], "encounter_frequency_per_pair"] = 0.0      # the (4 mm, 4 mm) pair saw no collision
+    t3.loc[t3.index[-1], "encounter_frequency_per_pair"] = 0.0  # the (4 mm, 4 mm) pair saw no collision
     c = TableFrequency(t3, zero_floor=1e-3)(D, np.ones(3), 300.0)
-    assert c[2, 2] == pytest.approx(1e-3 * t3["encounter_frequency_per_pair"][t3["encounter_frequency_per_pair"] > 0].min())
+    assert c[2, 2] == pytest.approx(
+        1e-3 * t3["encounter_frequency_per_pair"][t3["encounter_frequency_per_pair"] > 0].min()
+    )
 
 
 def test_table_from_csv_selects_distribution(tmp_path):
@@ -96,12 +107,18 @@ def test_table_from_csv_selects_distribution(tmp_path):
         TableFrequency.from_csv(p, distribution="huge")
 
 
-@pytest.mark.parametrize("mutate,match", [
-    (lambda t: t.drop(columns=["encounter_frequency_per_pair"]), r"lacks columns \['encounter_frequency_per_pair'\]"),
-    (lambda t: t.assign(encounter_frequency_per_pair=-1.0), r"encounter_frequency_per_pair has values \[-1\."),
-    (lambda t: t.assign(d_i=0.0), r"column d_i has values \[0\."),
-    (lambda t: t.iloc[1:], r"no row for the pair d_i = 0.002, d_j = 0.002"),
-])
+@pytest.mark.parametrize(
+    "mutate,match",
+    [
+        (
+            lambda t: t.drop(columns=["encounter_frequency_per_pair"]),
+            r"lacks columns \['encounter_frequency_per_pair'\]",
+        ),
+        (lambda t: t.assign(encounter_frequency_per_pair=-1.0), r"encounter_frequency_per_pair has values \[-1\."),
+        (lambda t: t.assign(d_i=0.0), r"column d_i has values \[0\."),
+        (lambda t: t.iloc[1:], r"no row for the pair d_i = 0.002, d_j = 0.002"),
+    ],
+)
 def test_bad_tables(mutate, match):
     with pytest.raises(PBMInputError, match=match):
         TableFrequency(mutate(make_table(rpms=(300.0,))))
@@ -144,15 +161,15 @@ def test_aggregation_targets_and_conservation(scheme):
 
 
 def test_fixed_pivot_splits_each_aggregate_between_its_two_pivots():
-    g = Grid(6, 2.0, v0=1.0)      # pivots 1, 2, 4, 8, 16, 32
+    g = Grid(6, 2.0, v0=1.0)  # pivots 1, 2, 4, 8, 16, 32
     fp = FixedPivotAggregation(g.x)
     ca = CellAverageAggregation(g.x)
     beta = np.zeros((6, 6))
-    beta[1, 2] = beta[2, 1] = 1.0          # only pairs (2, 4) -> 6, between pivots 4 and 8
-    beta[0, 3] = beta[3, 0] = 1.0          # and (1, 8) -> 9, between 8 and 16
+    beta[1, 2] = beta[2, 1] = 1.0  # only pairs (2, 4) -> 6, between pivots 4 and 8
+    beta[0, 3] = beta[3, 0] = 1.0  # and (1, 8) -> 9, between 8 and 16
     N = np.array([0.0, 1.0, 2.0, 3.0, 0.0, 0.0]) + np.eye(6)[0]
     dN, dL, _, _ = fp.rates(beta, N, np.ones(6), np.zeros(6))
-    r1, r2 = 1.0 * 2.0, 1.0 * 3.0          # event rates of (2, 4) and (1, 8)
+    r1, r2 = 1.0 * 2.0, 1.0 * 3.0  # event rates of (2, 4) and (1, 8)
     births = np.array([0.0, 0.0, r1 * 0.5, r1 * 0.5 + r2 * 7 / 8, r2 / 8, 0.0])
     deaths = np.array([r2, r1, r1, r2, 0.0, 0.0])
     np.testing.assert_allclose(dN, births - deaths, rtol=1e-14)
@@ -161,8 +178,7 @@ def test_fixed_pivot_splits_each_aggregate_between_its_two_pivots():
     # the cell average pools both aggregates (6 and 9) in the cell of pivot 8 and splits their mean
     # 7.8 between 4 and 8: other births per bin, the same number and solid-volume totals
     dN_ca, _, _, _ = ca.rates(beta, N, np.zeros(6), np.zeros(6))
-    np.testing.assert_allclose(dN_ca, np.array([0.0, 0.0, 5 * 0.2 / 4, 5 - 5 * 0.2 / 4, 0.0, 0.0]) - deaths,
-                               rtol=1e-14)
+    np.testing.assert_allclose(dN_ca, np.array([0.0, 0.0, 5 * 0.2 / 4, 5 - 5 * 0.2 / 4, 0.0, 0.0]) - deaths, rtol=1e-14)
     assert dN_ca.sum() == pytest.approx(dN.sum()) and abs(dN_ca @ g.x) < 1e-13
 
 
@@ -171,7 +187,9 @@ def test_unknown_aggregation_scheme_is_refused(default_mapping):
 
     from pbmdem.config import ConfigError
 
-    with pytest.raises(PBMInputError, match=r"aggregation scheme = 'pivot'; allowed: \['cell_average', 'fixed_pivot'\]"):
+    with pytest.raises(
+        PBMInputError, match=r"aggregation scheme = 'pivot'; allowed: \['cell_average', 'fixed_pivot'\]"
+    ):
         GranulationPBM(Grid(5, 2.0, v0=1.0), ConstantKernel(1.0), scheme="pivot")
     default_mapping["pbm"]["aggregation"]["scheme"] = "pivot"
     with pytest.raises(ConfigError, match=r"pbm.aggregation.scheme = 'pivot'"):
@@ -192,8 +210,24 @@ def test_cli_constant_run(tmp_path, root):
     from pbmdem.cli import main
 
     out = tmp_path / "rpm600_fine"
-    assert main(["pbm", "--config", str(root / "config" / "config.yaml"), "--kernel", "constant",
-                 "--rpm", "600", "--distribution", "fine", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "pbm",
+                "--config",
+                str(root / "config" / "config.yaml"),
+                "--kernel",
+                "constant",
+                "--rpm",
+                "600",
+                "--distribution",
+                "fine",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     for name in ("summary.csv", "bins.csv", "run.json", "psd.png", "d50.png"):
         assert (out / name).is_file()
 
@@ -201,8 +235,22 @@ def test_cli_constant_run(tmp_path, root):
 def test_cli_table_needs_a_table(tmp_path, root, capsys):
     from pbmdem.cli import main
 
-    assert main(["pbm", "--config", str(root / "config" / "config.yaml"), "--kernel", "table",
-                 "--rpm", "600", "--out", str(tmp_path / "t")]) == 2
+    assert (
+        main(
+            [
+                "pbm",
+                "--config",
+                str(root / "config" / "config.yaml"),
+                "--kernel",
+                "table",
+                "--rpm",
+                "600",
+                "--out",
+                str(tmp_path / "t"),
+            ]
+        )
+        == 2
+    )
     assert "--kernel table needs --table PATH" in capsys.readouterr().err
 
 
@@ -212,7 +260,25 @@ def test_cli_table_run(tmp_path, root):
     table = tmp_path / "collisions.csv"
     make_table().to_csv(table, index=False)
     out = tmp_path / "table"
-    assert main(["pbm", "--config", str(root / "config" / "config.yaml"), "--kernel", "table",
-                 "--table", str(table), "--rpm", "600", "--distribution", "fine", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "pbm",
+                "--config",
+                str(root / "config" / "config.yaml"),
+                "--kernel",
+                "table",
+                "--table",
+                str(table),
+                "--rpm",
+                "600",
+                "--distribution",
+                "fine",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     s = pd.read_csv(out / "summary.csv")
     assert s["number_mean_diameter"].iloc[-1] > s["number_mean_diameter"].iloc[0]

@@ -31,7 +31,7 @@ def test_default_run_conserves_solid_and_liquid(default_mapping, scheme):
     res = run_batch(config.pbm_batch("fine"), None, 600)
     assert res.info["aggregation_scheme"] == scheme
     process = config.pbm.process
-    t0, t1, t_end = process.spray_start, process.spray_end, process.end
+    t0, t1 = process.spray_start, process.spray_end
     S = res.moments()[:, 1]
     assert S[0] == pytest.approx(config.granulator.bed_solid_volume, rel=1e-12)
     rel = np.abs(S / S[0] - 1).max()
@@ -40,14 +40,18 @@ def test_default_run_conserves_solid_and_liquid(default_mapping, scheme):
     rate = config.pbm.liquid_addition.rate
     L = res.liquid.sum(axis=1)
     expected = rate * np.clip(np.minimum(res.times, t1) - t0, 0, None)
-    print(f"default run: max liquid error relative to the sprayed total {np.abs(L - expected).max() / expected[-1]:.2e}")
+    print(
+        f"default run: max liquid error relative to the sprayed total {np.abs(L - expected).max() / expected[-1]:.2e}"
+    )
     np.testing.assert_allclose(L, expected, rtol=1e-10, atol=1e-12 * expected[-1])
     assert res.state.liquid_added == pytest.approx(rate * (t1 - t0), rel=1e-12)
     # all processes acted: granules grew, porosity fell toward eps_min, no overflow
     s = res.summary()
     growth = s["number_mean_diameter"].iloc[-1] / s["number_mean_diameter"].iloc[0]
-    print(f"default run: number-mean diameter x{growth:.2f}, d50 {s['d50'].iloc[0]*1e3:.2f} -> "
-          f"{s['d50'].iloc[-1]*1e3:.2f} mm, {res.info['steps']} steps")
+    print(
+        f"default run: number-mean diameter x{growth:.2f}, d50 {s['d50'].iloc[0] * 1e3:.2f} -> "
+        f"{s['d50'].iloc[-1] * 1e3:.2f} mm, {res.info['steps']} steps"
+    )
     assert 1.8 < growth < 3.5
     assert s["mean_porosity"].iloc[-1] == pytest.approx(0.2, abs=2e-3)
     # nothing reaches the last pivot (the fixed pivot's numerical diffusion carries ~1e-124 of the
@@ -60,8 +64,9 @@ def _grid_and_state(model_kwargs, porosity=0.5, liquid_content=0.0):
     g = Grid(20, 2.0, min_diameter=1e-3)
     model = GranulationPBM(g, **model_kwargs)
     d = np.array([2e-3, 3e-3, 4e-3])
-    state = model.initial_state(np.pi / 6 * d ** 3, [600.0, 300.0, 100.0], liquid_content=liquid_content,
-                                porosity=porosity)
+    state = model.initial_state(
+        np.pi / 6 * d**3, [600.0, 300.0, 100.0], liquid_content=liquid_content, porosity=porosity
+    )
     return g, model, state
 
 
@@ -74,8 +79,9 @@ def _no_aggregation():
 @pytest.mark.parametrize("rule", ["surface_area", "solid_volume"])
 def test_liquid_addition_alone_is_linear(rule, separate_feed):
     rate, t0, t1 = 2e-9, 5.0, 25.0
-    g, model, state = _grid_and_state({"kernel": _no_aggregation(), "separate_feed": separate_feed,
-                                       "liquid": LiquidAddition(rate, t0, t1, rule)})
+    g, model, state = _grid_and_state(
+        {"kernel": _no_aggregation(), "separate_feed": separate_feed, "liquid": LiquidAddition(rate, t0, t1, rule)}
+    )
     times = np.linspace(0, 30, 31)
     res = model.run(0.0, 30.0, state, output_times=times)
     L = res.liquid.sum(axis=1)
@@ -85,7 +91,7 @@ def test_liquid_addition_alone_is_linear(rule, separate_feed):
     np.testing.assert_array_equal(res.number, np.broadcast_to(res.number[0], res.number.shape))
     # distribution rule: share per bin proportional to N d^2 (or N v), constant without aggregation
     if not separate_feed:
-        w = state.number * (g.d ** 2 if rule == "surface_area" else g.x)
+        w = state.number * (g.d**2 if rule == "surface_area" else g.x)
         np.testing.assert_allclose(res.liquid[-1], rate * (t1 - t0) * w / w.sum(), rtol=1e-10, atol=1e-25)
         return
     # feed granules at their own sizes (2, 3, 4 mm; 3 mm is between pivots): share per class
@@ -93,7 +99,7 @@ def test_liquid_addition_alone_is_linear(rule, separate_feed):
     f = state.feed
     assert res.state.feed is not None
     d_f = np.cbrt(6 / np.pi * f.volumes)
-    w = f.number * (d_f ** 2 if rule == "surface_area" else f.volumes)
+    w = f.number * (d_f**2 if rule == "surface_area" else f.volumes)
     np.testing.assert_allclose(res.state.feed.liquid, rate * (t1 - t0) * w / w.sum(), rtol=1e-10, atol=1e-25)
     _, solid_share = g.lever_weights(f.volumes)
     np.testing.assert_allclose(res.liquid[-1], res.state.feed.liquid @ solid_share, rtol=1e-10, atol=1e-25)
@@ -105,8 +111,10 @@ def test_consolidation_alone_is_exponential():
     times = np.linspace(0, 60, 13)
     errs = []
     for rtol in (1e-3, 1e-5):
-        g, model, state = _grid_and_state({"kernel": _no_aggregation(), "consolidation": cons,
-                                           "solver": Solver.defaults().replace(rtol=rtol)}, porosity=0.5)
+        g, model, state = _grid_and_state(
+            {"kernel": _no_aggregation(), "consolidation": cons, "solver": Solver.defaults().replace(rtol=rtol)},
+            porosity=0.5,
+        )
         res = model.run(0.0, 60.0, state, output_times=times)
         S = state.number * g.x
         G_exact = np.array([cons.gas(t, S, state.gas) for t in times])
@@ -124,12 +132,13 @@ def test_consolidation_squeezes_liquid_to_the_surface():
     from pbmdem.pbm import surface_fraction
 
     cons = Consolidation(0.1, 0.2)
-    g, model, state = _grid_and_state({"kernel": _no_aggregation(), "consolidation": cons},
-                                      porosity=0.5, liquid_content=0.5)
+    g, model, state = _grid_and_state(
+        {"kernel": _no_aggregation(), "consolidation": cons}, porosity=0.5, liquid_content=0.5
+    )
     res = model.run(0.0, 60.0, state, output_times=[30.0])
     S = state.number * g.x
     phi = surface_fraction(S.sum(), res.liquid.sum(1), res.gas.sum(1))
-    assert phi[0] == 0.0      # l/s = 0.5 < g/s = 1: all liquid in pores
+    assert phi[0] == 0.0  # l/s = 0.5 < g/s = 1: all liquid in pores
     # at the end g/s -> 0.25: surface liquid (0.5 - 0.25) / (1 + 0.5)
     assert phi[-1] == pytest.approx(0.25 / 1.5, rel=1e-2)
 
@@ -164,8 +173,16 @@ def test_result_tables_and_files(tmp_path, default_config):
     K = res.grid.bins
     assert len(b) == len(s) * K
     assert list(s["time"]) == sorted(s["time"])
-    for col in ("d10", "d50", "d90", "number_mean_diameter", "mass_mean_diameter", "total_number",
-                "mean_liquid_content", "mean_porosity"):
+    for col in (
+        "d10",
+        "d50",
+        "d90",
+        "number_mean_diameter",
+        "mass_mean_diameter",
+        "total_number",
+        "mean_liquid_content",
+        "mean_porosity",
+    ):
         assert s[col].notna().all()
     assert (s["d10"] < s["d50"]).all() and (s["d50"] < s["d90"]).all()
     np.testing.assert_allclose(b.groupby("time")["mass_fraction"].sum(), 1.0, rtol=1e-12)
@@ -176,7 +193,7 @@ def test_result_tables_and_files(tmp_path, default_config):
 
     back = pd.read_csv(paths["summary"])
     np.testing.assert_allclose(back["d50"], s["d50"], rtol=1e-12)
-    assert not list((tmp_path / "out").glob(".*"))   # no temporary files left behind
+    assert not list((tmp_path / "out").glob(".*"))  # no temporary files left behind
 
 
 def test_mass_quantiles_interpolate_in_log_d():
@@ -186,7 +203,7 @@ def test_mass_quantiles_interpolate_in_log_d():
     d50 = mass_quantiles(np.array([0.0, 1.0, 0.0]), edges, q=(0.5,))
     assert d50[0] == pytest.approx(np.sqrt(8.0))
     d = mass_quantiles(np.array([0.25, 0.5, 0.25]), edges, q=(0.1, 0.5, 0.9))
-    np.testing.assert_allclose(d, [2 ** 0.4, 2 ** 1.5, 2 ** 2.6])
+    np.testing.assert_allclose(d, [2**0.4, 2**1.5, 2**2.6])
 
 
 def test_constant_frequency_equals_constant_kernel():
@@ -197,6 +214,5 @@ def test_constant_frequency_equals_constant_kernel():
     N = ver.discretise_exponential(g, 1.0, 1.0)
     s = State(0.0, N, np.zeros(g.bins), np.zeros(g.bins))
     a = GranulationPBM(g, ConstantKernel(0.5)).run(0.0, 4.0, s)
-    b = GranulationPBM(g, CollisionKernel(ConstantFrequency(0.25), 2.0,
-                                          SuccessProbability("always"))).run(0.0, 4.0, s)
+    b = GranulationPBM(g, CollisionKernel(ConstantFrequency(0.25), 2.0, SuccessProbability("always"))).run(0.0, 4.0, s)
     np.testing.assert_allclose(a.state.number, b.state.number, rtol=1e-12, atol=1e-15)

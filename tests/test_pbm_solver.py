@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pbmdem.config import Pbm, Solver
 from pbmdem.pbm import (
     CollisionKernel,
     Consolidation,
@@ -22,7 +23,6 @@ from pbmdem.pbm import analytical as an
 from pbmdem.pbm import verification as ver
 from pbmdem.pbm.errors import PBMInputError, SolverLimitError
 from pbmdem.pbm.kernels import Kernel
-from pbmdem.config import Pbm, Solver
 from pbmdem.pbm.setup import build_grid, build_model, run_batch
 
 DEFAULT_RATIO = Pbm.defaults().grid.ratio
@@ -37,9 +37,10 @@ def _process_run(unit: float, bins: int = 40, t_end: float = 480.0):
     g_si = Grid(bins, 2.0, min_diameter=1e-3)
     grid = Grid(bins, 2.0, v0=g_si.x[0] * unit)
     kernel = CollisionKernel(ConstantFrequency(0.5), 5e-5, SuccessProbability("step", 0.02), update_interval=1.0)
-    model = GranulationPBM(grid, kernel, LiquidAddition(4.5e-8 * unit, 60.0, 240.0), Consolidation(0.02, 0.2),
-                           rpm=600.0)
-    v_classes = np.pi / 6 * D_CLASSES ** 3 * unit
+    model = GranulationPBM(
+        grid, kernel, LiquidAddition(4.5e-8 * unit, 60.0, 240.0), Consolidation(0.02, 0.2), rpm=600.0
+    )
+    v_classes = np.pi / 6 * D_CLASSES**3 * unit
     numbers = np.array([900.0, 540.0, 360.0])
     state = model.initial_state(v_classes, numbers, liquid_content=0.0, porosity=0.5)
     return model.run(0.0, t_end, state, output_times=np.arange(0.0, t_end + 1.0, 10.0))
@@ -77,7 +78,7 @@ def test_full_process_is_independent_of_the_unit_of_volume():
     x0 = Grid(40, 2.0, min_diameter=1e-3).x[0]
     runs = {u: _process_run(u) for u in (1.0, 1e9, 1.0 / x0)}
     ref = runs[1.0]
-    assert ref.summary().d50.iloc[-1] > 1.5 * ref.summary().d50.iloc[0]      # it did granulate
+    assert ref.summary().d50.iloc[-1] > 1.5 * ref.summary().d50.iloc[0]  # it did granulate
     for u, res in runs.items():
         _same(ref, res, 1.0, u)
         _no_subnormal(res)
@@ -89,12 +90,15 @@ def test_full_process_is_independent_of_the_unit_of_volume():
 def test_pure_aggregation_in_si_volumes_on_a_wide_grid(name):
     # the constant kernel is per pair (unit-free); the sum kernel's b is per unit of volume
     if name == "constant":
+
         def kernel_of(unit):
             return ConstantKernel(1e-3)
     else:
+
         def kernel_of(unit):
             return SumKernel(1e-3 / (1e-9 * unit) / 4.0)
-    x0_units = 1.0 / 1e-12                     # first pivot 1e-12 m3
+
+    x0_units = 1.0 / 1e-12  # first pivot 1e-12 m3
     runs = {u: _pure_aggregation_run(kernel_of, u) for u in (1.0, 1e9, x0_units)}
     ref = runs[1.0]
     # a long run: the mean volume grows 10x (constant) / 90x (sum), the far tail stays on the grid
@@ -114,14 +118,16 @@ def test_step_limits_are_recorded_and_add_up():
     assert set(Solver.__dataclass_fields__) >= {"max_steps", "max_wall_time"}
     accepted = sum(lim[k] for k in ("positivity", "error", "max_step", "event"))
     assert accepted == res.info["steps"]
-    assert lim["event"] + lim["max_step"] >= 48                 # at least one step per 10 s output
+    assert lim["event"] + lim["max_step"] >= 48  # at least one step per 10 s output
     assert lim["kernel_refreshes"] >= 1
 
 
 def test_step_guard_stops_with_a_clear_error():
     g = Grid(12, 2.0, v0=1.0)
     N = ver.discretise_exponential(g, 1.0, 1.0)
-    model = GranulationPBM(g, ConstantKernel(1.0), solver=Solver.defaults().replace(max_steps=5, max_overflow_fraction=1.0))
+    model = GranulationPBM(
+        g, ConstantKernel(1.0), solver=Solver.defaults().replace(max_steps=5, max_overflow_fraction=1.0)
+    )
     with pytest.raises(SolverLimitError, match=r"run stopped at t = .* after 5 steps \(solver max_steps = 5\)"):
         model.run(0.0, 50.0, State(0.0, N, np.zeros(12), np.zeros(12)))
 
@@ -129,8 +135,11 @@ def test_step_guard_stops_with_a_clear_error():
 def test_wall_time_guard_stops_with_a_clear_error():
     g = Grid(12, 2.0, v0=1.0)
     N = ver.discretise_exponential(g, 1.0, 1.0)
-    model = GranulationPBM(g, ConstantKernel(1.0), solver=Solver.defaults().replace(max_step=0.01, max_wall_time=1e-9,
-                                                                         max_overflow_fraction=1.0))
+    model = GranulationPBM(
+        g,
+        ConstantKernel(1.0),
+        solver=Solver.defaults().replace(max_step=0.01, max_wall_time=1e-9, max_overflow_fraction=1.0),
+    )
     with pytest.raises(SolverLimitError, match=r"solver max_wall_time = 1e-09 s"):
         model.run(0.0, 50.0, State(0.0, N, np.zeros(12), np.zeros(12)))
 
@@ -172,7 +181,7 @@ def test_default_grid_is_converged_in_d10_d50_d90(default_config):
     out = {}
     batch = default_config.pbm_batch("fine")
     pbm = batch.pbm.replace(liquid_addition=batch.pbm.liquid_addition.replace(distribution="solid_volume"))
-    for label, r in (("default", DEFAULT_RATIO), ("4x finer", DEFAULT_RATIO ** 0.25)):
+    for label, r in (("default", DEFAULT_RATIO), ("4x finer", DEFAULT_RATIO**0.25)):
         res = run_batch(batch.replace(pbm=pbm.replace(grid=pbm.grid.replace(ratio=r))), None, 600)
         s = res.summary()
         assert s.d50.iloc[-1] > 1.5 * s.d50.iloc[0]
@@ -228,8 +237,9 @@ def test_product_kernel_before_gelation_moments_and_psd():
     print(f"product kernel, ratio {grid.ratio:.4f}: M2 error {err[2]:+.2e}, cumulative-mass error {psd:.2e}")
 
 
-@pytest.mark.parametrize("name,kernel,t", [("constant", ConstantKernel(1.0), 98.0),
-                                           ("sum", SumKernel(1.0), float(np.log(50.0)))])
+@pytest.mark.parametrize(
+    "name,kernel,t", [("constant", ConstantKernel(1.0), 98.0), ("sum", SumKernel(1.0), float(np.log(50.0)))]
+)
 def test_monodisperse_start_50x_growth(name, kernel, t):
     grid, res = _monodisperse_run(kernel, t, top=2e6 if name == "sum" else 1e5)
     k = np.arange(1.0, 4e6 if name == "sum" else 2e5)
@@ -239,6 +249,6 @@ def test_monodisperse_start_50x_growth(name, kernel, t):
     assert abs(err[0]) < 1e-5 and abs(err[1]) < 1e-5
     psd = _cumulative_mass_error(name, grid, res.number[-1], t, k[-1])
     if name == "constant":
-        assert abs(err[2]) < 0.01                       # measured -0.60 % at ratio 2^(1/3)
+        assert abs(err[2]) < 0.01  # measured -0.60 % at ratio 2^(1/3)
     print(f"{name} kernel, monodisperse, mean volume x50: M2 error {err[2]:+.2e}, cumulative-mass error {psd:.2e}")
     assert psd < 0.02

@@ -9,10 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from pbmdem.config import ConfigError, Pbm
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, EncounterRates, representative_velocities, velocity_bin
 from pbmdem.pbm import CollisionKernel, GranulationPBM, Grid, KernelInput, SuccessProbability, TableFrequency
 from pbmdem.pbm.errors import KernelShapeError, PBMInputError
-from pbmdem.config import ConfigError, Pbm
 from pbmdem.pbm.setup import build_success, run_batch
 from pbmdem.pbm.success import (
     StokesCriterion,
@@ -60,8 +60,9 @@ def test_stokes_number_does_not_depend_on_the_unit_system():
     crit_si = StokesCriterion(0.05, 0.4, 5e-6, 1200.0)
     crit_mm = StokesCriterion(0.05, 0.4, 5e-3, 1200.0e-6)
     d, phi = np.array([2.5e-3, 4e-3]), np.array([0.03, 0.05])
-    np.testing.assert_allclose(crit_mm.critical_velocity(d * 1e3, phi), 1e3 * crit_si.critical_velocity(d, phi),
-                               rtol=1e-13)
+    np.testing.assert_allclose(
+        crit_mm.critical_velocity(d * 1e3, phi), 1e3 * crit_si.critical_velocity(d, phi), rtol=1e-13
+    )
 
 
 def test_layer_thickness_is_the_shell_holding_the_surface_liquid():
@@ -69,7 +70,7 @@ def test_layer_thickness_is_the_shell_holding_the_surface_liquid():
     h = layer_thickness(d, phi)
     assert h == pytest.approx(1.5e-3 * (1.0 - 0.98 ** (1.0 / 3.0)), rel=1e-12)
     # the shell volume is phi of the granule volume
-    assert (d ** 3 - (d - 2 * h) ** 3) / d ** 3 == pytest.approx(phi, rel=1e-12)
+    assert (d**3 - (d - 2 * h) ** 3) / d**3 == pytest.approx(phi, rel=1e-12)
     assert h == pytest.approx(phi * d / 6, rel=0.01)  # thin layer: about phi d / 6 (10 um here)
     assert layer_thickness(d, 0.0) == 0.0
 
@@ -77,7 +78,7 @@ def test_layer_thickness_is_the_shell_holding_the_surface_liquid():
 def test_critical_stokes_number_by_hand():
     # h = 2 h_a, e = 0.4: St* = (1 + 2.5) ln 2
     assert critical_stokes_number(10e-6, 5e-6, 0.4) == pytest.approx(3.5 * math.log(2.0), rel=1e-14)
-    assert critical_stokes_number(5e-6, 5e-6, 0.4) == 0.0           # layer no thicker than the asperities
+    assert critical_stokes_number(5e-6, 5e-6, 0.4) == 0.0  # layer no thicker than the asperities
     assert critical_stokes_number(2e-6, 5e-6, 1.0) == pytest.approx(2 * math.log(0.4))
     assert critical_stokes_number(0.0, 5e-6, 0.4) == -np.inf
 
@@ -132,7 +133,7 @@ def test_success_combines_liquid_condition_and_stokes_criterion():
     psi = SuccessProbability("step", threshold=0.02, velocity=crit)
     assert psi.velocity_dependent and not SuccessProbability().velocity_dependent
     d = np.array([3e-3, 3e-3, 3e-3])
-    phi = np.array([0.01, 0.02, 0.05])   # below, at and above the liquid threshold
+    phi = np.array([0.01, 0.02, 0.05])  # below, at and above the liquid threshold
     res = psi.resolved(d, phi, V)
     w_star = crit.critical_velocity(d, phi)
     for i in range(3):
@@ -143,22 +144,27 @@ def test_success_combines_liquid_condition_and_stokes_criterion():
     # more surface liquid -> thicker layer -> faster impacts held
     assert w_star[2, 2] > w_star[1, 1]
     # without the velocity criterion: the liquid condition in every bin
-    np.testing.assert_array_equal(SuccessProbability("step", 0.02).resolved(d, phi, V),
-                                  np.repeat(SuccessProbability("step", 0.02)(phi)[:, :, None], V.size, axis=2))
+    np.testing.assert_array_equal(
+        SuccessProbability("step", 0.02).resolved(d, phi, V),
+        np.repeat(SuccessProbability("step", 0.02)(phi)[:, :, None], V.size, axis=2),
+    )
 
 
 def test_build_success_from_config():
     assert not build_success(Pbm.defaults()).velocity_dependent  # default: seed study
     psi = build_success(Pbm.from_section(STOKES))
     assert psi.velocity_dependent
-    assert (psi.velocity.viscosity, psi.velocity.restitution, psi.velocity.asperity_height,
-            psi.velocity.density) == (0.1, 0.4, 5e-6, 1000.0)
+    assert (psi.velocity.viscosity, psi.velocity.restitution, psi.velocity.asperity_height, psi.velocity.density) == (
+        0.1,
+        0.4,
+        5e-6,
+        1000.0,
+    )
 
 
 def test_default_parameters_put_the_critical_speed_inside_the_bins():
     # documented in config.yaml: two 3 mm granules at phi = 0.02 are held below about 0.36 m/s
-    w = build_success(Pbm.from_section(STOKES)).velocity.critical_velocity(
-        np.array([3e-3]), np.array([0.02]))[0, 0]
+    w = build_success(Pbm.from_section(STOKES)).velocity.critical_velocity(np.array([3e-3]), np.array([0.02]))[0, 0]
     assert 0.3 < w < 0.4
     assert VELOCITY_EDGES[1] < w < VELOCITY_EDGES[-1]
 
@@ -181,7 +187,7 @@ class FakeEncounters:
         K = d.size
         centre = 0.1 * np.sqrt(d[:, None] * d[None, :]) / 3e-3 * (1 + rpm / 600.0)  # m/s
         z = (np.log(V)[None, None, :] - np.log(centre)[:, :, None]) / self.spread
-        f = np.exp(-0.5 * z ** 2)
+        f = np.exp(-0.5 * z**2)
         return EncounterRates(np.full((K, K), self.value), f / f.sum(axis=2, keepdims=True))
 
 
@@ -195,13 +201,20 @@ def two_bin_source(fractions):
             for b, w in fractions.items():
                 f[:, :, b] = w
             return EncounterRates(np.full((d.size, d.size), 0.8), f)
+
     return S()
 
 
 def kernel_input(d, phi):
     d = np.asarray(d, float)
-    return KernelInput(t=0.0, volumes=math.pi / 6 * d ** 3, diameters=d, numbers=np.ones(d.size),
-                       surface_fraction=np.asarray(phi, float), rpm=600.0)
+    return KernelInput(
+        t=0.0,
+        volumes=math.pi / 6 * d**3,
+        diameters=d,
+        numbers=np.ones(d.size),
+        surface_fraction=np.asarray(phi, float),
+        rpm=600.0,
+    )
 
 
 def test_collision_kernel_sums_over_velocity_bins_by_hand():
@@ -234,7 +247,7 @@ def test_collision_kernel_equals_the_sum_over_bins_of_the_definition():
     rates = src.encounters(d, np.ones(d.size), inp.rpm)
     expected = 2e-3 * rates.frequency * np.sum(rates.velocity_fractions * psi.resolved(d, phi, V), axis=2)
     np.testing.assert_allclose(beta, expected, rtol=1e-12, atol=0.0)
-    assert 0 < np.count_nonzero(beta) < beta.size       # some pairs held, some not
+    assert 0 < np.count_nonzero(beta) < beta.size  # some pairs held, some not
 
 
 def test_collision_kernel_needs_encounters_for_a_velocity_model():
@@ -246,16 +259,20 @@ def test_collision_kernel_needs_encounters_for_a_velocity_model():
         kern.set_source(lambda d, n, rpm: np.ones((d.size, d.size)))
 
 
-@pytest.mark.parametrize("bad,match", [
-    (lambda f: f * 2.0, r"sum to 2; allowed: 1"),
-    (lambda f: np.where(f > 0, -f, f), "allowed: finite values >= 0"),
-    (lambda f: f[:, :, :5], r"expected \(3, 3, 17\)"),
-])
+@pytest.mark.parametrize(
+    "bad,match",
+    [
+        (lambda f: f * 2.0, r"sum to 2; allowed: 1"),
+        (lambda f: np.where(f > 0, -f, f), "allowed: finite values >= 0"),
+        (lambda f: f[:, :, :5], r"expected \(3, 3, 17\)"),
+    ],
+)
 def test_bad_velocity_fractions_are_refused(bad, match):
     class Bad(FakeEncounters):
         def encounters(self, d, n, rpm):
             r = super().encounters(d, n, rpm)
             return type("R", (), {"frequency": r.frequency, "velocity_fractions": bad(r.velocity_fractions)})()
+
     psi = SuccessProbability("always", velocity=StokesCriterion(0.1, 0.4, 5e-6, 1000.0))
     kern = CollisionKernel(Bad(), 1e-3, psi)
     with pytest.raises(KernelShapeError, match=match):
@@ -287,7 +304,7 @@ def test_pure_aggregation_with_velocity_resolved_kernel_conserves_solid_volume()
     s0 = float(np.sum(state.number * x))
     s1 = float(np.sum(res.state.number * x))
     assert abs(s1 - s0) <= 1e-13 * s0
-    assert res.state.number.sum() < 0.9 * state.number.sum()   # it did aggregate
+    assert res.state.number.sum() < 0.9 * state.number.sum()  # it did aggregate
 
 
 # ----------------------------------------------------------------------------- DEM table with velocities
@@ -298,9 +315,19 @@ def pair_table(rpms=(300.0, 900.0)):
     rows = []
     for rpm in rpms:
         for a, b in ((0, 0), (0, 1), (1, 1)):
-            rows.append({"point_id": f"rpm{rpm:g}_fine", "rpm": rpm, "distribution": "fine", "class_i": a,
-                         "class_j": b, "d_i": D2[a], "d_j": D2[b], "frequency_per_pair": 9.0,
-                         "encounter_frequency_per_pair": 0.1 * (a + b + 1) * rpm / 300.0})
+            rows.append(
+                {
+                    "point_id": f"rpm{rpm:g}_fine",
+                    "rpm": rpm,
+                    "distribution": "fine",
+                    "class_i": a,
+                    "class_j": b,
+                    "d_i": D2[a],
+                    "d_j": D2[b],
+                    "frequency_per_pair": 9.0,
+                    "encounter_frequency_per_pair": 0.1 * (a + b + 1) * rpm / 300.0,
+                }
+            )
     return pd.DataFrame(rows)
 
 
@@ -319,9 +346,18 @@ def velocity_table():
     rows = []
     for (rpm, a, b), bins in COUNTS.items():
         for k in range(N_VELOCITY_BINS):
-            rows.append({"point_id": f"rpm{rpm:g}_fine", "rpm": rpm, "distribution": "fine", "class_i": a,
-                         "class_j": b, "v_lo": VELOCITY_EDGES[k], "v_hi": VELOCITY_EDGES[k + 1],
-                         "encounters": bins.get(k, 0.0)})
+            rows.append(
+                {
+                    "point_id": f"rpm{rpm:g}_fine",
+                    "rpm": rpm,
+                    "distribution": "fine",
+                    "class_i": a,
+                    "class_j": b,
+                    "v_lo": VELOCITY_EDGES[k],
+                    "v_hi": VELOCITY_EDGES[k + 1],
+                    "encounters": bins.get(k, 0.0),
+                }
+            )
     return pd.DataFrame(rows)
 
 
@@ -351,11 +387,13 @@ def test_table_encounters_at_the_nodes_between_sizes_and_speeds():
     np.testing.assert_allclose(far[1, 1], hand_fractions(300.0, 1, 1), atol=1e-15)
     # between speeds: fractions mixed linearly with the weights of the rpm interpolation
     r = src.encounters(D2, np.ones(2), 450.0)
-    np.testing.assert_allclose(r.velocity_fractions[0, 1],
-                               0.75 * hand_fractions(300.0, 0, 1) + 0.25 * hand_fractions(900.0, 0, 1), atol=1e-15)
+    np.testing.assert_allclose(
+        r.velocity_fractions[0, 1], 0.75 * hand_fractions(300.0, 0, 1) + 0.25 * hand_fractions(900.0, 0, 1), atol=1e-15
+    )
     np.testing.assert_allclose(r.velocity_fractions.sum(axis=2), 1.0, rtol=1e-14)
-    np.testing.assert_allclose(src.encounters(D2, np.ones(2), 2000.0).velocity_fractions[1, 1],
-                               hand_fractions(900.0, 1, 1), atol=1e-15)
+    np.testing.assert_allclose(
+        src.encounters(D2, np.ones(2), 2000.0).velocity_fractions[1, 1], hand_fractions(900.0, 1, 1), atol=1e-15
+    )
 
 
 def test_table_pair_without_encounters_gets_the_pooled_distribution():
@@ -374,12 +412,16 @@ def test_table_encounters_from_csv(tmp_path):
     coarse = t.assign(distribution="coarse", point_id=t.point_id.str.replace("fine", "coarse"))
     pc, pv = tmp_path / "collisions.csv", tmp_path / "impact_velocity.csv"
     pd.concat([t, coarse]).to_csv(pc, index=False)
-    vt_coarse = vt.assign(distribution="coarse", point_id=vt.point_id.str.replace("fine", "coarse"),
-                          encounters=np.where(vt.v_lo == VELOCITY_EDGES[3], 1.0, 0.0))
+    vt_coarse = vt.assign(
+        distribution="coarse",
+        point_id=vt.point_id.str.replace("fine", "coarse"),
+        encounters=np.where(vt.v_lo == VELOCITY_EDGES[3], 1.0, 0.0),
+    )
     pd.concat([vt, vt_coarse]).to_csv(pv, index=False)
     fine = TableFrequency.from_csv(pc, distribution="fine", velocity_path=pv)
-    np.testing.assert_allclose(fine.encounters(D2, np.ones(2), 900.0).velocity_fractions[1, 1],
-                               hand_fractions(900.0, 1, 1), atol=1e-15)
+    np.testing.assert_allclose(
+        fine.encounters(D2, np.ones(2), 900.0).velocity_fractions[1, 1], hand_fractions(900.0, 1, 1), atol=1e-15
+    )
     c = TableFrequency.from_csv(pc, distribution="coarse", velocity_path=pv).encounters(D2, np.ones(2), 300.0)
     np.testing.assert_allclose(c.velocity_fractions[:, :, 3], 1.0)
     with pytest.raises(PBMInputError, match="needs the impact-velocity table"):
@@ -388,15 +430,20 @@ def test_table_encounters_from_csv(tmp_path):
         TableFrequency.from_csv(pc, distribution="fine", velocity_path=tmp_path / "missing.csv")
 
 
-@pytest.mark.parametrize("mutate,match", [
-    (lambda v: v.drop(columns=["encounters"]), r"impact-velocity table lacks columns \['encounters'\]"),
-    (lambda v: v.assign(encounters=-1.0), r"encounters has values \[-1\."),
-    (lambda v: v.assign(v_lo=v.v_lo * 1.5), r"is not one of the project's velocity bins"),
-    (lambda v: v.assign(point_id="rpm600_fine"), r"has no rows for the collision table's points"),
-    (lambda v: v.assign(class_j=np.where(v.class_j == 1, 2, v.class_j)), r"has no row in the collision table"),
-    (lambda v: v.assign(encounters=np.where((v.class_i == 0) & (v.class_j == 1), 0.0, v.encounters)),
-     r"pair d_i = 0.002, d_j = 0.004 has encounter_frequency_per_pair = 0.2 but no encounters"),
-])
+@pytest.mark.parametrize(
+    "mutate,match",
+    [
+        (lambda v: v.drop(columns=["encounters"]), r"impact-velocity table lacks columns \['encounters'\]"),
+        (lambda v: v.assign(encounters=-1.0), r"encounters has values \[-1\."),
+        (lambda v: v.assign(v_lo=v.v_lo * 1.5), r"is not one of the project's velocity bins"),
+        (lambda v: v.assign(point_id="rpm600_fine"), r"has no rows for the collision table's points"),
+        (lambda v: v.assign(class_j=np.where(v.class_j == 1, 2, v.class_j)), r"has no row in the collision table"),
+        (
+            lambda v: v.assign(encounters=np.where((v.class_i == 0) & (v.class_j == 1), 0.0, v.encounters)),
+            r"pair d_i = 0.002, d_j = 0.004 has encounter_frequency_per_pair = 0.2 but no encounters",
+        ),
+    ],
+)
 def test_bad_velocity_tables(mutate, match):
     with pytest.raises(PBMInputError, match=match):
         TableFrequency(pair_table(), velocity_table=mutate(velocity_table()))
@@ -451,8 +498,21 @@ def test_cli_table_run_with_velocity_table(tmp_path, root, capsys):
     cfg["pbm"]["aggregation"]["success"]["velocity_model"] = "stokes"
     cfg_path = tmp_path / "config.yaml"
     cfg_path.write_text(yaml.safe_dump(cfg))
-    base = ["pbm", "--config", str(cfg_path), "--kernel", "table", "--table", str(pc), "--rpm", "600",
-            "--distribution", "fine", "--out", str(tmp_path / "out")]
+    base = [
+        "pbm",
+        "--config",
+        str(cfg_path),
+        "--kernel",
+        "table",
+        "--table",
+        str(pc),
+        "--rpm",
+        "600",
+        "--distribution",
+        "fine",
+        "--out",
+        str(tmp_path / "out"),
+    ]
     assert main(base) == 2
     assert "needs --velocity-table PATH" in capsys.readouterr().err
     assert main(base + ["--velocity-table", str(pv)]) == 0
@@ -460,8 +520,24 @@ def test_cli_table_run_with_velocity_table(tmp_path, root, capsys):
     assert s["total_solid_volume"].iloc[-1] == pytest.approx(s["total_solid_volume"].iloc[0], rel=1e-13)
     assert s["number_mean_diameter"].iloc[-1] > s["number_mean_diameter"].iloc[0]
     capsys.readouterr()
-    assert main(["pbm", "--config", str(cfg_path), "--kernel", "constant", "--velocity-table", str(pv),
-                 "--rpm", "600", "--out", str(tmp_path / "o2")]) == 2
+    assert (
+        main(
+            [
+                "pbm",
+                "--config",
+                str(cfg_path),
+                "--kernel",
+                "constant",
+                "--velocity-table",
+                str(pv),
+                "--rpm",
+                "600",
+                "--out",
+                str(tmp_path / "o2"),
+            ]
+        )
+        == 2
+    )
     assert "read with --kernel table only" in capsys.readouterr().err
 
 

@@ -23,9 +23,16 @@ DIAMETERS = [0.002, 0.0025, 0.003]
 
 def _summary(growth: float) -> pd.DataFrame:
     f = 1.0 + growth * np.clip((TIMES - 10.0) / 10.0, 0.0, None)
-    return pd.DataFrame({"time": TIMES, "d10": 0.0019 * f, "d50": 0.0026 * f, "d90": 0.0032 * f,
-                         "mean_liquid_content": 0.035 * np.clip(TIMES - 2.0, 0.0, 10.0),
-                         "mean_porosity": 0.2 + 0.3 * np.exp(-0.2 * TIMES)})
+    return pd.DataFrame(
+        {
+            "time": TIMES,
+            "d10": 0.0019 * f,
+            "d50": 0.0026 * f,
+            "d90": 0.0032 * f,
+            "mean_liquid_content": 0.035 * np.clip(TIMES - 2.0, 0.0, 10.0),
+            "mean_porosity": 0.2 + 0.3 * np.exp(-0.2 * TIMES),
+        }
+    )
 
 
 def _bins(growth: float) -> pd.DataFrame:
@@ -34,19 +41,31 @@ def _bins(growth: float) -> pd.DataFrame:
     for t in TIMES:
         centre = 0.0026 * (1.0 + growth * max(t - 10.0, 0.0) / 10.0)
         q = np.exp(-0.5 * (np.log(d / centre) / 0.2) ** 2)
-        rows += [{"time": t, "bin": k, "diameter": d[k], "mass_fraction": q[k] / q.sum(),
-                  "mass_density_lnd": q[k]} for k in range(len(d))]
+        rows += [
+            {"time": t, "bin": k, "diameter": d[k], "mass_fraction": q[k] / q.sum(), "mass_density_lnd": q[k]}
+            for k in range(len(d))
+        ]
     return pd.DataFrame(rows)
 
 
 def _intervals(method: str, frequency: float, outside: dict[int, str] | None = None) -> pd.DataFrame:
     rows = []
     for k, (t0, t1) in enumerate(((0.0, 10.0), (10.0, 20.0))):
-        row = {"interval": k, "t_start": t0, "t_end": t1, "rpm": float(RPM), "method": method, "classes": 3,
-               "class_diameters": json.dumps(DIAMETERS), "class_counts": json.dumps([230, 138, 92]),
-               "sample_particles": 460, "class_frequencies": json.dumps([frequency * (1 + 0.1 * j) for j in range(6)]),
-               "mean_frequency_per_pair": frequency * (1 + 0.05 * k), "provider_wall_time_s": 1.0,
-               "pbm_wall_time_s": 0.1}
+        row = {
+            "interval": k,
+            "t_start": t0,
+            "t_end": t1,
+            "rpm": float(RPM),
+            "method": method,
+            "classes": 3,
+            "class_diameters": json.dumps(DIAMETERS),
+            "class_counts": json.dumps([230, 138, 92]),
+            "sample_particles": 460,
+            "class_frequencies": json.dumps([frequency * (1 + 0.1 * j) for j in range(6)]),
+            "mean_frequency_per_pair": frequency * (1 + 0.05 * k),
+            "provider_wall_time_s": 1.0,
+            "pbm_wall_time_s": 0.1,
+        }
         if method == "pbm_ann":
             message = (outside or {}).get(k)
             row.update(out_of_domain=message or np.nan, out_of_domain_count=1 if message else 0)
@@ -73,17 +92,34 @@ def write_validation(root: Path, replicates: int = 2, outside: dict[int, str] | 
     vdir = root / "validation"
     speed = vdir / f"rpm{RPM}"
     for k in range(replicates):
-        _write_run(speed / "pbm_dem" / f"rep{k}", 0.04 + 0.01 * k,
-                   {"total_wall_time_s": 300.0, "provider_wall_time_s": 290.0, "pbm_wall_time_s": 10.0},
-                   _intervals("pbm_dem", 0.28 + 0.01 * k))
-    _write_run(speed / "pbm_ann", 0.045, {"total_wall_time_s": 0.2, "provider_wall_time_s": 0.1,
-                                          "pbm_wall_time_s": 0.1}, _intervals("pbm_ann", 0.29, outside))
-    members = pd.concat([_summary(0.044 + 0.002 * m).assign(member=m, out_of_domain_intervals=len(outside or {}))
-                         for m in range(2)])
+        _write_run(
+            speed / "pbm_dem" / f"rep{k}",
+            0.04 + 0.01 * k,
+            {"total_wall_time_s": 300.0, "provider_wall_time_s": 290.0, "pbm_wall_time_s": 10.0},
+            _intervals("pbm_dem", 0.28 + 0.01 * k),
+        )
+    _write_run(
+        speed / "pbm_ann",
+        0.045,
+        {"total_wall_time_s": 0.2, "provider_wall_time_s": 0.1, "pbm_wall_time_s": 0.1},
+        _intervals("pbm_ann", 0.29, outside),
+    )
+    members = pd.concat(
+        [_summary(0.044 + 0.002 * m).assign(member=m, out_of_domain_intervals=len(outside or {})) for m in range(2)]
+    )
     members.to_csv(speed / "pbm_ann" / "members.csv", index=False)
-    _write_run(speed / "pbm_constant", 0.05, {"total_wall_time_s": 0.05, "provider_wall_time_s": 0.0,
-                                              "pbm_wall_time_s": 0.05, "frequency": 0.29, "out_of_domain": "",
-                                              "out_of_domain_count": 0})
+    _write_run(
+        speed / "pbm_constant",
+        0.05,
+        {
+            "total_wall_time_s": 0.05,
+            "provider_wall_time_s": 0.0,
+            "pbm_wall_time_s": 0.05,
+            "frequency": 0.29,
+            "out_of_domain": "",
+            "out_of_domain_count": 0,
+        },
+    )
     bands_of(load_speed(vdir, RPM, replicates)).to_csv(speed / "bands.csv", index=False)
     compare(vdir, [RPM], [600.0], replicates).to_csv(root / "comparison.csv", index=False)
     return vdir
@@ -129,8 +165,15 @@ def test_process_settings_and_speeds_from_the_typed_config(tiny_config):
 
     pbm, granulator = tiny_config.pbm, tiny_config.granulator
     v = tiny_config.validation
-    table = process_settings(pbm, granulator.bed_solid_volume, v.distribution, tiny_config.distribution(v.distribution),
-                             v.coupling_intervals, v.dem_replicates, v.dem_sampling_time).set_index("setting")
+    table = process_settings(
+        pbm,
+        granulator.bed_solid_volume,
+        v.distribution,
+        tiny_config.distribution(v.distribution),
+        v.coupling_intervals,
+        v.dem_replicates,
+        v.dem_sampling_time,
+    ).set_index("setting")
     assert (table.unit != "").all() and (table["config key"] != "").all()
     p = pbm.process
     assert table.loc["liquid addition (spray window)", "value"] == f"{p.spray_start:.1f} - {p.spray_end:.1f}"
@@ -138,8 +181,9 @@ def test_process_settings_and_speeds_from_the_typed_config(tiny_config):
     sprayed = pbm.liquid_addition.rate * p.liquid_addition_time
     expected = pbm.initial.liquid_content + sprayed / granulator.bed_solid_volume
     assert liquid_solid_ratio(pbm, granulator.bed_solid_volume) == pytest.approx(expected)
-    assert float(table.loc["liquid/solid ratio L/S at the end of the liquid addition", "value"]) == \
-        pytest.approx(expected, rel=1e-3)
+    assert float(table.loc["liquid/solid ratio L/S at the end of the liquid addition", "value"]) == pytest.approx(
+        expected, rel=1e-3
+    )
     assert float(table.loc["binder addition rate", "value"]) == pytest.approx(6e7 * pbm.liquid_addition.rate, rel=1e-3)
     assert float(table.loc["aggregation rate constant beta0", "value"]) == pytest.approx(pbm.aggregation.beta0)
     assert table.loc["success probability", "value"].startswith(pbm.aggregation.success.model)
@@ -148,8 +192,9 @@ def test_process_settings_and_speeds_from_the_typed_config(tiny_config):
     assert set(fast.index) == {f"{r:g}" for r in (*v.rpm, *tiny_config.grid.impeller_rpm)}
     for rpm in fast.index:
         assert float(fast.loc[rpm, "tip speed (m/s)"]) == pytest.approx(granulator.tip_speed(float(rpm)), abs=5e-4)
-        assert float(fast.loc[rpm, "Froude number at the tip (-)"]) == \
-            pytest.approx(granulator.froude_number(float(rpm)), rel=5e-3)
+        assert float(fast.loc[rpm, "Froude number at the tip (-)"]) == pytest.approx(
+            granulator.froude_number(float(rpm)), rel=5e-3
+        )
     assert fast.loc["900", "used in"] == "validation" and "DEM training grid" in fast.loc["1200", "used in"]
 
 
@@ -168,16 +213,30 @@ def test_wide_tables_are_split_with_their_key_repeated():
 def test_targets_are_stated_met_or_not_met_with_the_measured_values():
     from pbmdem.report.statements import target_sentences, targets
 
-    table = pd.DataFrame([
-        {"rpm": 300.0, "ann_d50_outside_band_max": 0.0, "ann_out_of_domain_intervals": 0, "ann_intervals": 6,
-         "wall_time_ratio_dem_over_ann": 3500.0},
-        {"rpm": 900.0, "ann_d50_outside_band_max": 0.031, "ann_out_of_domain_intervals": 6, "ann_intervals": 6,
-         "wall_time_ratio_dem_over_ann": float("nan")},
-    ])
+    table = pd.DataFrame(
+        [
+            {
+                "rpm": 300.0,
+                "ann_d50_outside_band_max": 0.0,
+                "ann_out_of_domain_intervals": 0,
+                "ann_intervals": 6,
+                "wall_time_ratio_dem_over_ann": 3500.0,
+            },
+            {
+                "rpm": 900.0,
+                "ann_d50_outside_band_max": 0.031,
+                "ann_out_of_domain_intervals": 6,
+                "ann_intervals": 6,
+                "wall_time_ratio_dem_over_ann": float("nan"),
+            },
+        ]
+    )
     rows = targets(table).set_index(["criterion", "speed (rpm)"])
     assert rows.loc[("ann_d50_outside_band_max <= 2.00 %", "300"), "met"] == "met"
-    assert rows.loc[("ann_d50_outside_band_max <= 2.00 %", "900"), ["measured", "met"]].tolist() == ["3.10 %",
-                                                                                                       "not met"]
+    assert rows.loc[("ann_d50_outside_band_max <= 2.00 %", "900"), ["measured", "met"]].tolist() == [
+        "3.10 %",
+        "not met",
+    ]
     assert rows.loc[("ann_out_of_domain_intervals = 0", "900"), "measured"] == "6 of 6 intervals"
     assert rows.loc[("wall_time_ratio_dem_over_ann >= 3000x", "300"), ["measured", "met"]].tolist() == ["3500x", "met"]
     assert rows.loc[("wall_time_ratio_dem_over_ann >= 3000x", "900"), "met"] == "not met (not measured)"
@@ -244,8 +303,12 @@ def test_figures_have_units_legends_and_sizes_in_mm(tmp_path):
     figures.pyplot().close(fig)
 
     fig = figures.liquid_porosity(speed, process, RPM)
-    assert _labels(fig) == ["time (s)", "mean liquid content L/S (m3 liquid / m3 solid)", "time (s)",
-                            "mean porosity (%)"]
+    assert _labels(fig) == [
+        "time (s)",
+        "mean liquid content L/S (m3 liquid / m3 solid)",
+        "time (s)",
+        "mean porosity (%)",
+    ]
     figures.pyplot().close(fig)
 
     frequency = interval_frequencies(speed, vdir / f"rpm{RPM}" / "pbm_constant" / "timing.json")
@@ -255,8 +318,12 @@ def test_figures_have_units_legends_and_sizes_in_mm(tmp_path):
     assert len(pairs) == 2 * 2 * 6 and pairs.out_of_domain.all() and (pairs.surrogate == 0.3).all()
     assert pairs.warnings.str.contains("outside the training range").all()
     fig = figures.collision_frequency(frequency, pairs, RPM)
-    assert _labels(fig) == ["time (s)", "pair-weighted mean c (1/s per pair)", "DEM c_ij (1/s per pair)",
-                            "surrogate c_ij, same sample (1/s per pair)"]
+    assert _labels(fig) == [
+        "time (s)",
+        "pair-weighted mean c (1/s per pair)",
+        "DEM c_ij (1/s per pair)",
+        "surrogate c_ij, same sample (1/s per pair)",
+    ]
     assert any("outside its training domain on 4 of 4 PBM-DEM samples" in t.get_text() for t in fig.axes[1].texts)
     figures.pyplot().close(fig)
 
@@ -269,12 +336,23 @@ def test_speed_outputs_are_written_whole(tmp_path, monkeypatch):
     vdir = write_validation(tmp_path, outside={0: "tip_speed outside the training range"})
     monkeypatch.setattr(pbmdem.surrogate, "load_surrogate", lambda path: FakeSurrogate())
     out_dir = tmp_path / "report" / f"rpm{RPM}"
-    out = {"sizes": out_dir / "size_statistics.png", "psd": out_dir / "psd_evolution.png",
-           "liquid": out_dir / "liquid_porosity.png", "frequency": out_dir / "collision_frequency.png",
-           "domain_csv": out_dir / "out_of_domain.csv", "domain_html": out_dir / "out_of_domain.html"}
-    write_speed(validation_dir=vdir, rpm=RPM, replicates=2, process={"premixing_time": 2.0,
-                "liquid_addition_time": 10.0, "wet_massing_time": 8.0}, bands=vdir / f"rpm{RPM}" / "bands.csv",
-                model=tmp_path / "model.skops", out=out)
+    out = {
+        "sizes": out_dir / "size_statistics.png",
+        "psd": out_dir / "psd_evolution.png",
+        "liquid": out_dir / "liquid_porosity.png",
+        "frequency": out_dir / "collision_frequency.png",
+        "domain_csv": out_dir / "out_of_domain.csv",
+        "domain_html": out_dir / "out_of_domain.html",
+    }
+    write_speed(
+        validation_dir=vdir,
+        rpm=RPM,
+        replicates=2,
+        process={"premixing_time": 2.0, "liquid_addition_time": 10.0, "wet_massing_time": 8.0},
+        bands=vdir / f"rpm{RPM}" / "bands.csv",
+        model=tmp_path / "model.skops",
+        out=out,
+    )
     assert sorted(p.name for p in out_dir.iterdir()) == sorted(p.name for p in out.values())
     for key in ("sizes", "psd", "liquid", "frequency"):
         assert out[key].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", key
@@ -294,15 +372,27 @@ def test_bad_inputs_of_the_report_name_the_file(tmp_path, monkeypatch):
     monkeypatch.setattr(pbmdem.surrogate, "load_surrogate", lambda path: FakeSurrogate())
     out = {k: tmp_path / "out" / f"{k}.png" for k in ("sizes", "psd", "liquid", "frequency")}
     with pytest.raises(InputFileError, match=re.escape(str(bins)) + ".*mass_density_lnd"):
-        write_speed(validation_dir=vdir, rpm=RPM, replicates=2, process={"premixing_time": 2.0,
-                    "liquid_addition_time": 10.0, "wet_massing_time": 8.0}, bands=vdir / f"rpm{RPM}" / "bands.csv",
-                    model=tmp_path / "model.skops", out=out)
+        write_speed(
+            validation_dir=vdir,
+            rpm=RPM,
+            replicates=2,
+            process={"premixing_time": 2.0, "liquid_addition_time": 10.0, "wet_massing_time": 8.0},
+            bands=vdir / f"rpm{RPM}" / "bands.csv",
+            model=tmp_path / "model.skops",
+            out=out,
+        )
     summary = vdir / f"rpm{RPM}" / "pbm_dem" / "rep1" / "summary.csv"
     pd.read_csv(summary).drop(columns="mean_porosity").to_csv(summary, index=False)
     with pytest.raises(InputFileError, match=re.escape(str(summary)) + ".*mean_porosity"):
-        write_speed(validation_dir=vdir, rpm=RPM, replicates=2, process={"premixing_time": 2.0,
-                    "liquid_addition_time": 10.0, "wet_massing_time": 8.0}, bands=vdir / f"rpm{RPM}" / "bands.csv",
-                    model=tmp_path / "model.skops", out=out)
+        write_speed(
+            validation_dir=vdir,
+            rpm=RPM,
+            replicates=2,
+            process={"premixing_time": 2.0, "liquid_addition_time": 10.0, "wet_massing_time": 8.0},
+            bands=vdir / f"rpm{RPM}" / "bands.csv",
+            model=tmp_path / "model.skops",
+            out=out,
+        )
     comparison = tmp_path / "comparison.csv"
     pd.read_csv(comparison).drop(columns="pbm_ann_wall_s").to_csv(comparison, index=False)
     with pytest.raises(InputFileError, match=re.escape(str(comparison)) + ".*pbm_ann_wall_s"):
@@ -317,10 +407,14 @@ def test_provenance_hashes_commit_and_versions(tiny_config, tiny_mapping, root, 
     runs = tmp_path / "runs.csv"
     version = "LIGGGHTS-PUBLIC 3.8.0, compiled 2022-01-26-19:42:32 by buildd, git commit unknown"
     pd.DataFrame({"point_id": ["rpm600_small", "rpm600_large"], "liggghts_version": [version, version]}).to_csv(
-        runs, index=False)
+        runs, index=False
+    )
     meta = tmp_path / "model.json"
-    meta.write_text(json.dumps({"model_sha256": "ab" * 32, "created_utc": "2026-12-01T00:00:00+00:00",
-                                "versions": {"sklearn": "1.9.1"}}))
+    meta.write_text(
+        json.dumps(
+            {"model_sha256": "ab" * 32, "created_utc": "2026-12-01T00:00:00+00:00", "versions": {"sklearn": "1.9.1"}}
+        )
+    )
     settings = settings_mapping(tiny_config.to_dict())
     table = provenance(tiny_config.sha256(), settings, root, runs, meta).set_index("quantity")["value"]
     assert table["config sha256"] == tiny_config.sha256()
@@ -354,8 +448,10 @@ def test_liggghts_version_is_read_from_the_log_header(tmp_path):
     from pbmdem.dem.engine import version_of_log
 
     log = tmp_path / "log.liggghts"
-    log.write_text("LIGGGHTS (Version LIGGGHTS-PUBLIC 3.8.0, compiled 2022-01-26 by buildd, git commit unknown)\n"
-                   "Created orthogonal box = (-0.0165 -0.0165 -0.0015) to (0.0165 0.0165 0.0315)\n")
+    log.write_text(
+        "LIGGGHTS (Version LIGGGHTS-PUBLIC 3.8.0, compiled 2022-01-26 by buildd, git commit unknown)\n"
+        "Created orthogonal box = (-0.0165 -0.0165 -0.0015) to (0.0165 0.0165 0.0315)\n"
+    )
     assert version_of_log(log) == "LIGGGHTS-PUBLIC 3.8.0, compiled 2022-01-26 by buildd, git commit unknown"
     log.write_text("Created orthogonal box\n")
     with pytest.raises(InputFileError, match=re.escape(str(log)) + ".*no header line"):

@@ -19,7 +19,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import shutil
 import subprocess
 import sys
 import time
@@ -38,13 +37,14 @@ RANKS = 2  # the profile's tasks for dem_point
 def cluster(root, tmp_path_factory):
     """A running single-node SLURM cluster; stopped (every daemon by PID) whatever happens."""
     if os.geteuid() != 0:
-        pytest.fail("the SLURM test needs root (it installs slurm-wlm/munge and runs the daemons); "
-                    "CI runs as root")
+        pytest.fail("the SLURM test needs root (it installs slurm-wlm/munge and runs the daemons); CI runs as root")
     script = root / "scripts" / "slurm_cluster.sh"
     state = tmp_path_factory.mktemp("slurm-state")
     env = dict(os.environ, PBMDEM_SLURM_STATE=str(state))
-    stop = lambda: subprocess.run(["bash", str(script), "stop"], env=env, capture_output=True,  # noqa: E731
-                                  text=True, timeout=120)
+
+    def stop():
+        return subprocess.run(["bash", str(script), "stop"], env=env, capture_output=True, text=True, timeout=120)
+
     t0 = time.perf_counter()
     try:
         proc = subprocess.run(["bash", str(script), "start"], env=env, capture_output=True, text=True, timeout=900)
@@ -63,8 +63,18 @@ def cluster(root, tmp_path_factory):
 
 
 def _snakemake_cmd(root: Path, workdir: Path, configfile: Path, *args: str) -> list[str]:
-    return [sys.executable, "-m", "snakemake", "-s", str(root / "Snakefile"), "--directory", str(workdir),
-            "--configfile", str(configfile), *args]
+    return [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(root / "Snakefile"),
+        "--directory",
+        str(workdir),
+        "--configfile",
+        str(configfile),
+        *args,
+    ]
 
 
 # polling faster than the profile's 10 s keeps the test short; everything else is the profile
@@ -79,8 +89,11 @@ def _run(cmd, env, timeout, cwd):
 
 
 def _job_counts(text: str) -> dict[str, int]:
-    return {w[0]: int(w[1]) for w in (line.split() for line in text.splitlines())
-            if len(w) == 2 and w[1].isdigit() and w[0] != "total"}
+    return {
+        w[0]: int(w[1])
+        for w in (line.split() for line in text.splitlines())
+        if len(w) == 2 and w[1].isdigit() and w[0] != "total"
+    }
 
 
 def _cancel_in_sampling(proc: subprocess.Popen, workdir: Path, env: dict, timeout: float = 500) -> str:
@@ -92,8 +105,9 @@ def _cancel_in_sampling(proc: subprocess.Popen, workdir: Path, env: dict, timeou
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout:
         if proc.poll() is not None:
-            raise AssertionError("the workflow ended before the DEM job could be cancelled:\n"
-                                 + proc.stdout.read() + proc.stderr.read())
+            raise AssertionError(
+                "the workflow ended before the DEM job could be cancelled:\n" + proc.stdout.read() + proc.stderr.read()
+            )
         pairs, plan = stage / "post" / "pairs.dump", stage / "plan.json"
         job_logs = sorted(logs.glob(f"{rpm}_{dist}*/*.log"))
         if pairs.exists() and plan.exists() and job_logs:
@@ -125,8 +139,14 @@ def test_tiny_workflow_through_the_slurm_profile(cluster, root, tmp_path):
 
     # 2./3. the workflow through SLURM, one DEM job cancelled during sampling
     t0 = time.perf_counter()
-    proc = subprocess.Popen(_snakemake_cmd(root, workdir, configfile, *profile), env=env, cwd=workdir,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        _snakemake_cmd(root, workdir, configfile, *profile),
+        env=env,
+        cwd=workdir,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         jobid = _cancel_in_sampling(proc, workdir, env)
         stdout, stderr = proc.communicate(timeout=600)
@@ -137,8 +157,9 @@ def test_tiny_workflow_through_the_slurm_profile(cluster, root, tmp_path):
     first = time.perf_counter() - t0
     out = stdout + stderr
     assert proc.returncode != 0, out[-5000:]
-    assert re.search(rf"Error in rule dem_point:.*?SLURM-jobid.*?{jobid}|{jobid}.*?(CANCELLED|failed)", out,
-                     re.DOTALL), out[-5000:]
+    assert re.search(
+        rf"Error in rule dem_point:.*?SLURM-jobid.*?{jobid}|{jobid}.*?(CANCELLED|failed)", out, re.DOTALL
+    ), out[-5000:]
     res = workdir / "results"
     cancelled = res / "dem" / f"rpm{CANCEL[0]}_{CANCEL[1]}" / "rep0"
     for table in ("collisions.csv", "wall_collisions.csv", "summary.json"):
@@ -146,8 +167,9 @@ def test_tiny_workflow_through_the_slurm_profile(cluster, root, tmp_path):
     assert not (res / "dem" / "collisions.csv").exists()  # nothing aggregated from the grid
     crash = json.loads((cancelled / "crash.json").read_text())
     assert any("interrupted" in p for p in crash["problems"]), crash
-    finished = [(r, d) for r in cfg["grid"]["impeller_rpm"] for d in cfg["grid"]["size_distributions"]
-                if (f"{r}", d) != CANCEL]
+    finished = [
+        (r, d) for r in cfg["grid"]["impeller_rpm"] for d in cfg["grid"]["size_distributions"] if (f"{r}", d) != CANCEL
+    ]
     for rpm, dist in finished:  # keep-going: the other points finished
         assert (res / "dem" / f"rpm{rpm}_{dist}" / "rep0" / "collisions.csv").exists(), (rpm, dist)
 
@@ -173,5 +195,4 @@ def test_tiny_workflow_through_the_slurm_profile(cluster, root, tmp_path):
         assert re.search(rf"Loop time of .* on {RANKS} procs", (run / "log.liggghts").read_text())
     slurm_logs = sorted((res / "logs" / "slurm" / "rule_dem_point").glob("*/*.log"))
     assert slurm_logs, "no SLURM job logs under results/logs/slurm"
-    print(f"[slurm] tiny workflow with one cancel: {first:.1f} s; rerun: {second:.1f} s "
-          f"(status checks every 2 s)")
+    print(f"[slurm] tiny workflow with one cancel: {first:.1f} s; rerun: {second:.1f} s (status checks every 2 s)")

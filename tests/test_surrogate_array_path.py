@@ -34,16 +34,21 @@ def data():
     return training_data(table, R, velocity_table=velocity)
 
 
-@pytest.fixture(scope="module", params=[((8,), "tanh", "cross_section"), ((6, 6), "relu", "none"),
-                                        ((5,), "logistic", "cross_section")], ids=["tanh", "relu", "logistic"])
+@pytest.fixture(
+    scope="module",
+    params=[((8,), "tanh", "cross_section"), ((6, 6), "relu", "none"), ((5,), "logistic", "cross_section")],
+    ids=["tanh", "relu", "logistic"],
+)
 def fitted(request, data):
     hidden, activation, offset = request.param
-    est = EnsembleMLPRegressorCV(hidden_layer_sizes=(hidden,), alpha=(0.1,), seeds=(0, 1), max_iter=200,
-                                 activation=activation, solver="lbfgs")
+    est = EnsembleMLPRegressorCV(
+        hidden_layer_sizes=(hidden,), alpha=(0.1,), seeds=(0, 1), max_iter=200, activation=activation, solver="lbfgs"
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return CollisionSurrogate(frequency_model=est, impeller_radius=R, physics_offset=offset).fit(
-            data.X, data.y, groups=data.groups, velocity=data.velocity)
+            data.X, data.y, groups=data.groups, velocity=data.velocity
+        )
 
 
 def frame_path(model):
@@ -92,8 +97,12 @@ def test_frequency_matrix_and_encounters_equal_the_frame_path_with_the_same_warn
         fast_e, fast_warn_e = recorded(partial(fitted.encounters, d, n, rpm))
         slow_e, slow_warn_e = recorded(partial(slow.encounters, d, n, rpm))
         assert fast_warn == slow_warn and fast_warn_e == slow_warn_e
-        for a, b in ((fast_c, slow_c), (fast_s, slow_s), (fast_e.frequency, slow_e.frequency),
-                     (fast_e.velocity_fractions, slow_e.velocity_fractions)):
+        for a, b in (
+            (fast_c, slow_c),
+            (fast_s, slow_s),
+            (fast_e.frequency, slow_e.frequency),
+            (fast_e.velocity_fractions, slow_e.velocity_fractions),
+        ):
             np.testing.assert_allclose(a, b, rtol=1e-12, atol=0.0)
     # the distributions above include out-of-domain ones: the warnings were compared, not absent
     _, messages = recorded(partial(fitted.encounters, np.array([0.002, 0.011]), np.array([10.0, 5.0]), 600.0))
@@ -125,12 +134,13 @@ def test_array_path_is_one_forward_pass_per_member(fitted, monkeypatch):
         warnings.simplefilter("ignore", OutOfDomainWarning)
         fitted.encounters(np.linspace(0.002, 0.004, 5), np.full(5, 400.0), 600.0)
     members = len(fitted.frequency_model_.estimators_) + len(fitted.velocity_model_.estimators_)
-    assert rows == [15] * members          # K (K + 1) / 2 pairs, one pass per member of both models
+    assert rows == [15] * members  # K (K + 1) / 2 pairs, one pass per member of both models
 
 
 def test_a_surrogate_fitted_on_an_array_keeps_the_frame_path(data):
-    est = EnsembleMLPRegressorCV(hidden_layer_sizes=((6,),), alpha=(0.1,), seeds=(0,), max_iter=200,
-                                 activation="tanh", solver="lbfgs")
+    est = EnsembleMLPRegressorCV(
+        hidden_layer_sizes=((6,),), alpha=(0.1,), seeds=(0,), max_iter=200, activation="tanh", solver="lbfgs"
+    )
     plain = CollisionSurrogate(frequency_model=est, impeller_radius=R)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

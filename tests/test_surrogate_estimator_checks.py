@@ -26,12 +26,13 @@ from pbmdem.surrogate import CollisionSurrogate, EnsembleMLPRegressorCV, HGBBase
 from pbmdem.surrogate.synthetic import make_synthetic_table
 
 #: A small ensemble: two members, one tiny architecture, quick lbfgs fits.
-SMALL = dict(hidden_layer_sizes=((5,),), alpha=(0.01,), seeds=(0, 1), max_iter=200, activation="tanh",
-             solver="lbfgs")
+SMALL = dict(hidden_layer_sizes=((5,),), alpha=(0.01,), seeds=(0, 1), max_iter=200, activation="tanh", solver="lbfgs")
 R = 0.0265  # impeller radius (m); not used by fit/predict on a feature matrix, but required
 
-_GENERIC = ("fits on generic unnamed arrays; the law needs the named features d_small, d_large and tip_speed "
-            "(a feature frame, or an array with the columns FEATURE_NAMES)")
+_GENERIC = (
+    "fits on generic unnamed arrays; the law needs the named features d_small, d_large and tip_speed "
+    "(a feature frame, or an array with the columns FEATURE_NAMES)"
+)
 
 #: Checks that fit a law of named features on generic data, each with its reason.
 NAMED_FEATURE_LAW_FAILURES = {
@@ -67,7 +68,8 @@ NAMED_FEATURE_LAW_FAILURES = {
 
 def is_named_feature_law(estimator) -> bool:
     return isinstance(estimator, PhysicalScaling) or (
-        isinstance(estimator, CollisionSurrogate) and estimator.physics_offset == "cross_section")
+        isinstance(estimator, CollisionSurrogate) and estimator.physics_offset == "cross_section"
+    )
 
 
 def expected_failures(estimator) -> dict:
@@ -77,8 +79,9 @@ def expected_failures(estimator) -> dict:
 ESTIMATORS = [
     EnsembleMLPRegressorCV(**SMALL),
     CollisionSurrogate(frequency_model=EnsembleMLPRegressorCV(**SMALL), impeller_radius=R, physics_offset="none"),
-    CollisionSurrogate(frequency_model=EnsembleMLPRegressorCV(**SMALL), impeller_radius=R,
-                       physics_offset="cross_section"),
+    CollisionSurrogate(
+        frequency_model=EnsembleMLPRegressorCV(**SMALL), impeller_radius=R, physics_offset="cross_section"
+    ),
     HGBBaseline(max_iter=20),
     PhysicalScaling(),
 ]

@@ -13,8 +13,8 @@ from pbmdem.surrogate.features import (
     TABLE_COLUMNS,
     TARGET_NAME,
     TARGET_NOISE_VAR,
-    duplicated_features,
     CollisionTableError,
+    duplicated_features,
     make_features,
     pair_table,
     prepare_training_table,
@@ -42,13 +42,29 @@ def one_run(diameters=(0.002, 0.003, 0.004), numbers=(600, 300, 100), rpm=600, p
             pairs = numbers[i] * (numbers[i] - 1) / 2 if i == j else numbers[i] * numbers[j]
             c = 10.0 + i + j
             e = 4.0 + i + j  # encounters, mean per replicate
-            rows.append(dict(point_id=pid, rpm=rpm, distribution="x", class_i=i, class_j=j,
-                             d_i=diameters[i], d_j=diameters[j], n_i=numbers[i], n_j=numbers[j],
-                             n_total=n_total, collisions=c, sampling_time=0.2, frequency=c / 0.2,
-                             frequency_per_pair=c / (pairs * 0.2) if pairs else np.nan, n_replicates=2, encounters=e,
-                             encounter_frequency_per_pair=e / (pairs * 0.2) if pairs else np.nan,
-                             encounter_frequency_per_pair_se=0.1 * e / (pairs * 0.2) if pairs else np.nan,
-                             impact_velocity_median=0.2))
+            rows.append(
+                dict(
+                    point_id=pid,
+                    rpm=rpm,
+                    distribution="x",
+                    class_i=i,
+                    class_j=j,
+                    d_i=diameters[i],
+                    d_j=diameters[j],
+                    n_i=numbers[i],
+                    n_j=numbers[j],
+                    n_total=n_total,
+                    collisions=c,
+                    sampling_time=0.2,
+                    frequency=c / 0.2,
+                    frequency_per_pair=c / (pairs * 0.2) if pairs else np.nan,
+                    n_replicates=2,
+                    encounters=e,
+                    encounter_frequency_per_pair=e / (pairs * 0.2) if pairs else np.nan,
+                    encounter_frequency_per_pair_se=0.1 * e / (pairs * 0.2) if pairs else np.nan,
+                    impact_velocity_median=0.2,
+                )
+            )
     return pd.DataFrame(rows)
 
 
@@ -178,8 +194,9 @@ def test_synthetic_tables_follow_contract():
     assert np.allclose(np.sort(v["v_lo"].unique()), VELOCITY_EDGES[:-1])
     # the bins of a pair add up to its encounters
     total = v.groupby(["point_id", "class_i", "class_j"])["encounters"].sum()
-    assert np.allclose(total.to_numpy(), t.set_index(["point_id", "class_i", "class_j"])["encounters"]
-                       .reindex(total.index).to_numpy())
+    assert np.allclose(
+        total.to_numpy(), t.set_index(["point_id", "class_i", "class_j"])["encounters"].reindex(total.index).to_numpy()
+    )
     one = make_synthetic_table(R, rpms=(600,), seed=2, n_replicates=1)
     assert one["encounter_frequency_per_pair_se"].isna().all()
 
@@ -192,8 +209,9 @@ def test_attach_velocity_bins():
     # a pair whose empty bins are omitted still gets zeros there; a pair without rows gets NaN
     sparse = v[v["encounters"] > 1e-6]
     first = (t["point_id"].iloc[0], t["class_i"].iloc[0], t["class_j"].iloc[0])
-    sparse = sparse[~((sparse["point_id"] == first[0]) & (sparse["class_i"] == first[1])
-                      & (sparse["class_j"] == first[2]))]
+    sparse = sparse[
+        ~((sparse["point_id"] == first[0]) & (sparse["class_i"] == first[1]) & (sparse["class_j"] == first[2]))
+    ]
     m2 = attach_velocity_bins(t, sparse)
     assert m2[list(VELOCITY_COUNT_COLUMNS)].iloc[0].isna().all()
     assert np.isfinite(m2[list(VELOCITY_COUNT_COLUMNS)].iloc[1:].to_numpy()).all()
@@ -220,7 +238,7 @@ def test_lognormal_fit_recovers_known_law():
     # the open last bin takes the fast tail: a median at 20 m/s puts most encounters there
     assert lognormal_fractions(np.log10(20.0), 0.2)[0, -1] > 0.9
     m, s = velocity_law(0.002, 0.004, 600, R)
-    assert 10 ** m == pytest.approx(0.12 * 2 * math.pi * R * 600 / 60 * 0.5 ** 0.5)
+    assert 10**m == pytest.approx(0.12 * 2 * math.pi * R * 600 / 60 * 0.5**0.5)
     assert s == pytest.approx(0.30)
 
 
@@ -251,8 +269,10 @@ def test_training_data_is_the_one_table_to_model_inputs_path():
     pd.testing.assert_frame_equal(data.X, make_features(kept, R))
     assert np.array_equal(data.y, np.log10(kept["encounter_frequency_per_pair"].to_numpy()))
     assert list(data.groups) == list(kept["point_id"].astype(str))
-    assert np.allclose(data.noise_var, (kept["encounter_frequency_per_pair_se"]
-                                        / (kept["encounter_frequency_per_pair"] * math.log(10))) ** 2)
+    assert np.allclose(
+        data.noise_var,
+        (kept["encounter_frequency_per_pair_se"] / (kept["encounter_frequency_per_pair"] * math.log(10))) ** 2,
+    )
     # impact-speed targets: the log-normal fit of every row's bins
     bins = attach_velocity_bins(t, v).drop(index=3)[list(VELOCITY_COUNT_COLUMNS)].to_numpy()
     mu, sigma = fit_lognormal(bins)

@@ -1,4 +1,5 @@
-"""CollisionSurrogate and EnsembleMLPRegressorCV: law recovery, grouped CV, domain warnings, PBM interface, baselines."""
+"""CollisionSurrogate and EnsembleMLPRegressorCV: law recovery, grouped CV, domain warnings, PBM interface,
+baselines."""
 
 import warnings
 
@@ -30,13 +31,24 @@ from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tabl
 from pbmdem.surrogate.velocity import attach_velocity_bins
 
 R = 0.0265  # impeller radius (m) of the synthetic tables and models
-SMALL = dict(hidden_layer_sizes=((6,), (8,)), alpha=(0.01, 0.1), seeds=(0, 1, 2), max_iter=800,
-             activation="tanh", solver="lbfgs", cv="group_kfold", n_splits=3)
+SMALL = dict(
+    hidden_layer_sizes=((6,), (8,)),
+    alpha=(0.01, 0.1),
+    seeds=(0, 1, 2),
+    max_iter=800,
+    activation="tanh",
+    solver="lbfgs",
+    cv="group_kfold",
+    n_splits=3,
+)
 
 
 def surrogate(**ensemble) -> CollisionSurrogate:
-    return CollisionSurrogate(frequency_model=EnsembleMLPRegressorCV(**{**SMALL, **ensemble}), impeller_radius=R,
-                              physics_offset="cross_section")
+    return CollisionSurrogate(
+        frequency_model=EnsembleMLPRegressorCV(**{**SMALL, **ensemble}),
+        impeller_radius=R,
+        physics_offset="cross_section",
+    )
 
 
 @pytest.fixture(scope="module")
@@ -67,8 +79,9 @@ def test_recovers_known_law_on_held_out_runs(table, data):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         metrics, pred = cross_validate_models(data, surrogate(), cv="group_kfold", n_splits=5)
-    pooled = metrics[(metrics["model"] == "mlp") & (metrics["fold"] == "pooled")
-                     & (metrics["target"] == "encounter_frequency")].iloc[0]
+    pooled = metrics[
+        (metrics["model"] == "mlp") & (metrics["fold"] == "pooled") & (metrics["target"] == "encounter_frequency")
+    ].iloc[0]
     print(f"held-out grouped R2(log10) mlp = {pooled['r2_log10']:.4f}, MAE = {pooled['mae_log10']:.4f}")
     assert pooled["r2_log10"] > 0.95
     assert pooled["mae_log10"] < 0.06
@@ -79,9 +92,14 @@ def test_recovers_known_law_on_held_out_runs(table, data):
     assert 0.95 < pooled["noise_floor_r2_log10"] <= 1.0
     assert {"pooled", "mean"} <= set(metrics["fold"])
     # the noise-free law is matched too (geometric mean of the ensemble)
-    law = np.log10(power_law(pred["d_i"], pred["d_j"], pred["rpm"],
-                             table.set_index("point_id")["n_total"].groupby(level=0).first()
-                             .reindex(pred["point_id"]).to_numpy()))
+    law = np.log10(
+        power_law(
+            pred["d_i"],
+            pred["d_j"],
+            pred["rpm"],
+            table.set_index("point_id")["n_total"].groupby(level=0).first().reindex(pred["point_id"]).to_numpy(),
+        )
+    )
     assert r2_score(law, pred["mlp_log10"]) > 0.95
 
 
@@ -106,8 +124,9 @@ def test_fitted_attributes_and_conventions(fitted, data, table):
     assert p.shape == (len(data.y),)
     assert r2_score(data.y, p) == pytest.approx(fitted.score(data.X, data.y)) and fitted.score(data.X, data.y) > 0.95
     # a collision table gives the same as its feature frame
-    np.testing.assert_array_equal(fitted.predict_log10(table, check_domain=False),
-                                  fitted.predict(make_features(table, R), check_domain=False))
+    np.testing.assert_array_equal(
+        fitted.predict_log10(table, check_domain=False), fitted.predict(make_features(table, R), check_domain=False)
+    )
 
 
 def test_ensemble_spread_returned(fitted, data):
@@ -140,8 +159,9 @@ def test_leaked_cv_is_over_optimistic_grouped_cv_is_not():
     # a per-run random offset (0.3 decades) that no feature explains: a model can only learn it
     # from rows of the same run, i.e. when runs leak between train and test (6 classes: 21 rows
     # per run, so a leaked fold has seen most of every run)
-    t = make_synthetic_table(R, seed=5, noise_log10=0.01, run_noise_log10=0.3,
-                             diameters=(0.0015, 0.002, 0.0025, 0.003, 0.0035, 0.004))
+    t = make_synthetic_table(
+        R, seed=5, noise_log10=0.01, run_noise_log10=0.3, diameters=(0.0015, 0.002, 0.0025, 0.003, 0.0035, 0.004)
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # frequency-only table
         d = training_data(t, R)
@@ -262,8 +282,9 @@ def test_physical_scaling_constant(data):
     mu, sigma = phys.predict_velocity(data.X)
     assert np.allclose(mu - np.log10(data.X["tip_speed"]), phys.log10_speed_ratio_) and np.ptp(sigma) == 0
     # an array is read as the columns FEATURE_NAMES; other arrays are refused, naming the features
-    np.testing.assert_array_equal(PhysicalScaling().fit(data.X.to_numpy(), data.y).predict(data.X.to_numpy()),
-                                  phys.predict(data.X))
+    np.testing.assert_array_equal(
+        PhysicalScaling().fit(data.X.to_numpy(), data.y).predict(data.X.to_numpy()), phys.predict(data.X)
+    )
     with pytest.raises(ValueError, match=r"needs the features \['d_small', 'd_large', 'tip_speed'\]"):
         PhysicalScaling().fit(data.X.to_numpy()[:, :3], data.y)
     with pytest.raises(ValueError, match="lacks \\['tip_speed'\\]"):
@@ -283,30 +304,56 @@ def test_hgb_baseline_on_the_feature_matrix(data):
 def test_ensemble_search_is_a_grouped_grid_search(data):
     """EnsembleMLPRegressorCV: the same search as GridSearchCV on explicit grouped folds, then one
     member per seed with the chosen values."""
-    est = EnsembleMLPRegressorCV(hidden_layer_sizes=((4,), (6,)), alpha=(0.01, 1.0), seeds=(7, 8), max_iter=300,
-                                 activation="tanh", solver="lbfgs", cv="group_kfold", n_splits=3)
+    est = EnsembleMLPRegressorCV(
+        hidden_layer_sizes=((4,), (6,)),
+        alpha=(0.01, 1.0),
+        seeds=(7, 8),
+        max_iter=300,
+        activation="tanh",
+        solver="lbfgs",
+        cv="group_kfold",
+        n_splits=3,
+    )
     X, y = data.X.to_numpy(), data.y
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         est.fit(X, y, groups=data.groups)
-        pipe = Pipeline([("scale", StandardScaler()),
-                         ("mlp", MLPRegressor(activation="tanh", solver="lbfgs", max_iter=300, random_state=7))])
-        ref = GridSearchCV(pipe, {"mlp__hidden_layer_sizes": [(4,), (6,)], "mlp__alpha": [0.01, 1.0]},
-                           cv=grouped_splits(data.groups, "group_kfold", 3), scoring="neg_mean_squared_error",
-                           refit=False).fit(X, y)
-        member = clone(pipe).set_params(mlp__hidden_layer_sizes=ref.best_params_["mlp__hidden_layer_sizes"],
-                                        mlp__alpha=ref.best_params_["mlp__alpha"], mlp__random_state=8).fit(X, y)
+        pipe = Pipeline(
+            [
+                ("scale", StandardScaler()),
+                ("mlp", MLPRegressor(activation="tanh", solver="lbfgs", max_iter=300, random_state=7)),
+            ]
+        )
+        ref = GridSearchCV(
+            pipe,
+            {"mlp__hidden_layer_sizes": [(4,), (6,)], "mlp__alpha": [0.01, 1.0]},
+            cv=grouped_splits(data.groups, "group_kfold", 3),
+            scoring="neg_mean_squared_error",
+            refit=False,
+        ).fit(X, y)
+        member = (
+            clone(pipe)
+            .set_params(
+                mlp__hidden_layer_sizes=ref.best_params_["mlp__hidden_layer_sizes"],
+                mlp__alpha=ref.best_params_["mlp__alpha"],
+                mlp__random_state=8,
+            )
+            .fit(X, y)
+        )
     assert est.best_score_ == ref.best_score_
-    assert est.best_params_ == {"hidden_layer_sizes": ref.best_params_["mlp__hidden_layer_sizes"],
-                                "alpha": ref.best_params_["mlp__alpha"]}
+    assert est.best_params_ == {
+        "hidden_layer_sizes": ref.best_params_["mlp__hidden_layer_sizes"],
+        "alpha": ref.best_params_["mlp__alpha"],
+    }
     np.testing.assert_array_equal(est.cv_results_["mean_test_score"], ref.cv_results_["mean_test_score"])
     np.testing.assert_array_equal(est.estimators_[1].predict(X), member.predict(X))
     assert not hasattr(est, "feature_names_in_") and est.n_features_in_ == X.shape[1]
 
 
 def test_ensemble_without_groups_uses_the_first_candidate_and_takes_2d_targets(data):
-    est = EnsembleMLPRegressorCV(hidden_layer_sizes=((4,), (6,)), alpha=(0.1, 1.0), seeds=(0, 1), max_iter=300,
-                                 activation="tanh", solver="lbfgs")
+    est = EnsembleMLPRegressorCV(
+        hidden_layer_sizes=((4,), (6,)), alpha=(0.1, 1.0), seeds=(0, 1), max_iter=300, activation="tanh", solver="lbfgs"
+    )
     Y = np.column_stack([data.y, 2 * data.y])
     with pytest.warns(UserWarning, match="no groups given: no grouped hyperparameter search"):
         est.fit(data.X, Y)

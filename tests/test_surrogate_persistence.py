@@ -18,18 +18,24 @@ from pbmdem.surrogate import (
     save_surrogate,
     training_data,
 )
-from pbmdem.surrogate.persistence import ALLOWED_TYPES, schema_types, sha256_file
-from pbmdem.surrogate.persistence import FORMAT_VERSION
+from pbmdem.surrogate.persistence import ALLOWED_TYPES, FORMAT_VERSION, schema_types, sha256_file
 from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables
 from pbmdem.surrogate.velocity import attach_velocity_bins
-
 
 R = 0.0265  # impeller radius (m) of the synthetic tables and models
 
 
 def tiny_surrogate(**kwargs) -> CollisionSurrogate:
-    ensemble = EnsembleMLPRegressorCV(hidden_layer_sizes=((4,), (5,)), alpha=(0.1,), seeds=(0, 1), max_iter=300,
-                                      activation="tanh", solver="lbfgs", cv="group_kfold", n_splits=3)
+    ensemble = EnsembleMLPRegressorCV(
+        hidden_layer_sizes=((4,), (5,)),
+        alpha=(0.1,),
+        seeds=(0, 1),
+        max_iter=300,
+        activation="tanh",
+        solver="lbfgs",
+        cv="group_kfold",
+        n_splits=3,
+    )
     return CollisionSurrogate(frequency_model=ensemble, impeller_radius=R, physics_offset="cross_section", **kwargs)
 
 
@@ -65,9 +71,13 @@ def test_round_trip_identical_predictions(fitted, saved, table):
     np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(sa, sb)
     d, n = [0.002, 0.003, 0.004], [1200, 700, 300]
-    np.testing.assert_array_equal(fitted.frequency_matrix(d, n, 600, check_domain=False),
-                                  loaded.frequency_matrix(d, n, 600, check_domain=False))
-    plain = lambda m: {k: v for k, v in m.get_params().items() if k not in ("frequency_model", "velocity_model")}
+    np.testing.assert_array_equal(
+        fitted.frequency_matrix(d, n, 600, check_domain=False), loaded.frequency_matrix(d, n, 600, check_domain=False)
+    )
+
+    def plain(m):
+        return {k: v for k, v in m.get_params().items() if k not in ("frequency_model", "velocity_model")}
+
     assert plain(loaded) == plain(fitted) and loaded.velocity_model is None
     assert loaded.feature_ranges() == fitted.feature_ranges()
     assert list(loaded.feature_names_in_) == list(fitted.feature_names_in_) and loaded.n_features_in_ == 6
@@ -76,8 +86,11 @@ def test_round_trip_identical_predictions(fitted, saved, table):
     for attr in ("best_params_", "cv_folds_", "n_outputs_"):
         assert getattr(loaded.frequency_model_, attr) == getattr(fitted.frequency_model_, attr), attr
     assert loaded.frequency_model_.best_score_ == pytest.approx(fitted.frequency_model_.best_score_, rel=1e-12)
-    np.testing.assert_allclose(loaded.frequency_model_.cv_results_["mean_test_score"],
-                               fitted.frequency_model_.cv_results_["mean_test_score"], rtol=1e-12)
+    np.testing.assert_allclose(
+        loaded.frequency_model_.cv_results_["mean_test_score"],
+        fitted.frequency_model_.cv_results_["mean_test_score"],
+        rtol=1e-12,
+    )
     assert loaded.frequency_model_.cv_results_["params"] == fitted.frequency_model_.cv_results_["params"]
     np.testing.assert_array_equal(loaded.frequency_model_.n_iter_, fitted.frequency_model_.n_iter_)
     # the impact-velocity model round-trips too
@@ -195,8 +208,9 @@ def test_unfitted_cannot_be_saved(tmp_path):
         save_surrogate(CollisionSurrogate(), tmp_path / "m.skops")
     # nor one fitted on other features than FEATURE_NAMES (the loader rebuilds the feature frame)
     rng = np.random.default_rng(0)
-    generic = CollisionSurrogate(EnsembleMLPRegressorCV(hidden_layer_sizes=((3,),), max_iter=50, solver="lbfgs"),
-                                 impeller_radius=R)
+    generic = CollisionSurrogate(
+        EnsembleMLPRegressorCV(hidden_layer_sizes=((3,),), max_iter=50, solver="lbfgs"), impeller_radius=R
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         generic.fit(rng.normal(size=(20, 3)), rng.normal(size=20))

@@ -4,7 +4,6 @@ import math
 import warnings
 
 import numpy as np
-import pandas as pd
 import pytest
 
 from pbmdem.impact import N_VELOCITY_BINS, EncounterRates
@@ -23,14 +22,23 @@ from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tabl
 from pbmdem.surrogate.velocity import attach_velocity_bins, lognormal_fractions
 
 R = 0.0265  # impeller radius (m) of the synthetic tables and models
-SMALL = dict(hidden_layer_sizes=((6,), (8,)), alpha=(0.001, 0.01), seeds=(0, 1, 2), max_iter=1500,
-             activation="tanh", solver="lbfgs", cv="group_kfold", n_splits=3)
+SMALL = dict(
+    hidden_layer_sizes=((6,), (8,)),
+    alpha=(0.001, 0.01),
+    seeds=(0, 1, 2),
+    max_iter=1500,
+    activation="tanh",
+    solver="lbfgs",
+    cv="group_kfold",
+    n_splits=3,
+)
 TINY = dict(hidden_layer_sizes=((4,),), alpha=(0.01,), seeds=(0, 1), max_iter=2000, activation="tanh", solver="lbfgs")
 
 
 def surrogate(**ensemble) -> CollisionSurrogate:
-    return CollisionSurrogate(frequency_model=EnsembleMLPRegressorCV(**ensemble), impeller_radius=R,
-                              physics_offset="cross_section")
+    return CollisionSurrogate(
+        frequency_model=EnsembleMLPRegressorCV(**ensemble), impeller_radius=R, physics_offset="cross_section"
+    )
 
 
 def fit(model, data):
@@ -62,9 +70,11 @@ def test_held_out_velocity_distribution_recovers_known_law(data):
     vel = summarise(metrics, "impact_velocity")
     assert set(vel) == {"mlp", "physical"}
     mlp, phys = vel["mlp"], vel["physical"]
-    print(f"held-out median impact speed: MAE {mlp['pooled_mae_log10']:.4f} decades "
-          f"(physical {phys['pooled_mae_log10']:.4f}), TV distance {mlp['pooled_tv_distance']:.4f} "
-          f"(physical {phys['pooled_tv_distance']:.4f})")
+    print(
+        f"held-out median impact speed: MAE {mlp['pooled_mae_log10']:.4f} decades "
+        f"(physical {phys['pooled_mae_log10']:.4f}), TV distance {mlp['pooled_tv_distance']:.4f} "
+        f"(physical {phys['pooled_tv_distance']:.4f})"
+    )
     assert mlp["pooled_mae_log10"] < 0.03
     assert mlp["pooled_tv_distance"] < 0.12
     assert mlp["pooled_mae_log10"] < phys["pooled_mae_log10"]
@@ -174,8 +184,9 @@ def test_noise_floor_from_replicate_se_in_metrics():
     expected = 1.0 - np.mean((se / (c * np.log(10))) ** 2) / np.var(y)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        metrics, pred = cross_validate_models(training_data(t, R, velocity_table=v), surrogate(**TINY),
-                                              cv="group_kfold", n_splits=3)
+        metrics, pred = cross_validate_models(
+            training_data(t, R, velocity_table=v), surrogate(**TINY), cv="group_kfold", n_splits=3
+        )
     freq = metrics[metrics["target"] == "encounter_frequency"]
     pooled = freq[freq["fold"] == "pooled"]
     assert np.allclose(pooled["noise_floor_r2_log10"], expected)  # same value beside every model

@@ -10,19 +10,25 @@ import pandas as pd
 import pytest
 import yaml
 
+from pbmdem.config import ConfigError, Surrogate, load_config, section_defaults
+from pbmdem.impact import N_VELOCITY_BINS
 from pbmdem.surrogate import load_surrogate
 from pbmdem.surrogate.cli import add_cli, main
-from pbmdem.config import ConfigError, Surrogate, load_config, section_defaults
 from pbmdem.surrogate.features import check_impeller_radius
 from pbmdem.surrogate.settings import build_baselines, build_surrogate
-from pbmdem.impact import N_VELOCITY_BINS
 from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables
 from pbmdem.surrogate.train import train_and_report
 
 REPO = Path(__file__).resolve().parents[1]
 R = 0.0265  # impeller radius (m) of the synthetic tables
-TINY = {"hidden_layer_sizes": [[4]], "alpha": [0.01, 0.1], "ensemble_size": 2, "seeds": [3, 4],
-        "max_iter": 300, "cv": {"strategy": "group_kfold", "n_splits": 3}}
+TINY = {
+    "hidden_layer_sizes": [[4]],
+    "alpha": [0.01, 0.1],
+    "ensemble_size": 2,
+    "seeds": [3, 4],
+    "max_iter": 300,
+    "cv": {"strategy": "group_kfold", "n_splits": 3},
+}
 
 
 def tiny_settings() -> dict:
@@ -68,15 +74,26 @@ def test_build_surrogate_from_settings():
     params = est.get_params(deep=False)
     assert sorted(params) == ["domain_margin", "frequency_model", "impeller_radius", "physics_offset", "velocity_model"]
     assert (params["impeller_radius"], params["physics_offset"], params["domain_margin"]) == (
-        radius, s["physics_offset"], s["domain_margin"])
+        radius,
+        s["physics_offset"],
+        s["domain_margin"],
+    )
     assert est.frequency_model.get_params() == {
-        "hidden_layer_sizes": tuple(tuple(h) for h in s["hidden_layer_sizes"]), "alpha": tuple(s["alpha"]),
-        "seeds": tuple(s["seeds"]), "max_iter": s["max_iter"], "activation": s["activation"], "solver": s["solver"],
-        "cv": s["cv"]["strategy"], "n_splits": s["cv"]["n_splits"], "n_jobs": 2}
+        "hidden_layer_sizes": tuple(tuple(h) for h in s["hidden_layer_sizes"]),
+        "alpha": tuple(s["alpha"]),
+        "seeds": tuple(s["seeds"]),
+        "max_iter": s["max_iter"],
+        "activation": s["activation"],
+        "solver": s["solver"],
+        "cv": s["cv"]["strategy"],
+        "n_splits": s["cv"]["n_splits"],
+        "n_jobs": 2,
+    }
     assert build_baselines(s)["hgb"].random_state == s["random_state"]
     # seeds: null -> random_state, random_state + 1, ...
-    assert build_surrogate({**s, "seeds": None, "random_state": 7}, radius).frequency_model.seeds == \
-        tuple(range(7, 7 + s["ensemble_size"]))
+    assert build_surrogate({**s, "seeds": None, "random_state": 7}, radius).frequency_model.seeds == tuple(
+        range(7, 7 + s["ensemble_size"])
+    )
 
 
 def test_the_impeller_radius_comes_only_from_the_granulator():
@@ -91,8 +108,12 @@ def test_the_impeller_radius_comes_only_from_the_granulator():
 def test_train_and_report_writes_outputs(tmp_path):
     table, velocity = make_synthetic_tables(R, rpms=(300, 600, 900), seed=7)
     table.loc[3, ["encounters", "encounter_frequency_per_pair"]] = 0.0  # dropped with a warning
-    velocity.loc[(velocity["point_id"] == table.loc[3, "point_id"]) & (velocity["class_i"] == table.loc[3, "class_i"])
-                 & (velocity["class_j"] == table.loc[3, "class_j"]), "encounters"] = 0.0
+    velocity.loc[
+        (velocity["point_id"] == table.loc[3, "point_id"])
+        & (velocity["class_i"] == table.loc[3, "class_i"])
+        & (velocity["class_j"] == table.loc[3, "class_j"]),
+        "encounters",
+    ] = 0.0
     csv = tmp_path / "collisions.csv"
     vcsv = tmp_path / "impact_velocity.csv"
     table.to_csv(csv, index=False)
@@ -100,8 +121,9 @@ def test_train_and_report_writes_outputs(tmp_path):
     out = tmp_path / "surrogate"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        meta = train_and_report(csv, out / "model.skops", settings=tiny_settings(), impeller_radius=R,
-                                velocity_table=vcsv)
+        meta = train_and_report(
+            csv, out / "model.skops", settings=tiny_settings(), impeller_radius=R, velocity_table=vcsv
+        )
     for name in ("model.skops", "model.json", "metrics.csv", "parity.png"):
         assert (out / name).stat().st_size > 0
     metrics = pd.read_csv(out / "metrics.csv", dtype={"fold": str})
@@ -116,7 +138,8 @@ def test_train_and_report_writes_outputs(tmp_path):
     assert meta["n_dropped_rows"] == 1 and meta["seeds"] == [3, 4]
     assert set(meta["cv_scores"]["outer_summary"]) == {"mlp", "hgb", "physical"}
     assert meta["cv_scores"]["noise_floor_r2_log10"] == pytest.approx(
-        freq[freq["fold"] == "pooled"]["noise_floor_r2_log10"].iloc[0])
+        freq[freq["fold"] == "pooled"]["noise_floor_r2_log10"].iloc[0]
+    )
     assert set(meta["cv_scores"]["velocity_summary"]) == {"mlp", "physical"}
     assert meta["velocity_table"] == str(vcsv) and meta["n_velocity_rows"] == len(table) - 1
     assert (out / "parity.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -137,23 +160,68 @@ def test_cli_train_and_predict(tmp_path, capsys):
     out = tmp_path / "out"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        assert main(["surrogate", "train", "--table", str(csv), "--velocity-table", str(vcsv),
-                     "--config", str(cfg_path), "--out", str(out)]) == 0
+        assert (
+            main(
+                [
+                    "surrogate",
+                    "train",
+                    "--table",
+                    str(csv),
+                    "--velocity-table",
+                    str(vcsv),
+                    "--config",
+                    str(cfg_path),
+                    "--out",
+                    str(out),
+                ]
+            )
+            == 0
+        )
     printed = capsys.readouterr().out
     assert "replicate noise floor" in printed and "median impact speed" in printed
     assert json.loads((out / "model.json").read_text())["params"]["impeller_radius"] == 0.012
-    assert main(["surrogate", "predict", "--model", str(out / "model.skops"), "--diameters", "0.002", "0.004",
-                 "--numbers", "1500", "500", "--rpm", "600"]) == 0
+    assert (
+        main(
+            [
+                "surrogate",
+                "predict",
+                "--model",
+                str(out / "model.skops"),
+                "--diameters",
+                "0.002",
+                "0.004",
+                "--numbers",
+                "1500",
+                "500",
+                "--rpm",
+                "600",
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
-    result = json.loads(printed[printed.index("{"):])
+    result = json.loads(printed[printed.index("{") :])
     c = np.array(result["encounter_frequency_per_pair"])
     assert c.shape == (2, 2) and np.allclose(c, c.T) and (c > 0).all()
     v = np.array(result["velocity_fractions"])
     assert v.shape == (2, 2, N_VELOCITY_BINS) and np.allclose(v.sum(axis=-1), 1.0)
     assert len(result["velocity_edges"]) == N_VELOCITY_BINS + 1
     pred_csv = tmp_path / "pred.csv"
-    assert main(["surrogate", "predict", "--model", str(out / "model.skops"), "--table", str(csv),
-                 "--output", str(pred_csv)]) == 0
+    assert (
+        main(
+            [
+                "surrogate",
+                "predict",
+                "--model",
+                str(out / "model.skops"),
+                "--table",
+                str(csv),
+                "--output",
+                str(pred_csv),
+            ]
+        )
+        == 0
+    )
     pred = pd.read_csv(pred_csv)
     assert (pred["predicted_encounter_frequency_per_pair"] > 0).all()
     assert (pred["predicted_impact_velocity_median"] > 0).all()
@@ -176,8 +244,14 @@ def test_add_cli_registers_subcommands():
 def test_rule_declares_contract_paths():
     text = (REPO / "rules" / "surrogate.smk").read_text()
     assert "rule train_surrogate" in text
-    for path in ("/dem/collisions.csv", "/dem/impact_velocity.csv", "/surrogate/model.json",
-                 "/surrogate/metrics.csv", "/surrogate/parity.png", "../workflow/scripts/train_surrogate.py"):
+    for path in (
+        "/dem/collisions.csv",
+        "/dem/impact_velocity.csv",
+        "/surrogate/model.json",
+        "/surrogate/metrics.csv",
+        "/surrogate/parity.png",
+        "../workflow/scripts/train_surrogate.py",
+    ):
         assert path in text
     script = (REPO / "workflow" / "scripts" / "train_surrogate.py").read_text()
     assert "velocity_table=snakemake.input.velocity" in script

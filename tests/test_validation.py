@@ -19,7 +19,7 @@ def summary(times, d50, scale=1.0):
 def test_band_is_the_replicate_envelope_and_outside_is_measured_from_its_edge():
     t = np.array([0.0, 10.0, 20.0])
     dem = [summary(t, [2.0, 3.0, 4.0]), summary(t, [2.0, 3.2, 4.4]), summary(t, [2.0, 2.9, 4.1])]
-    ann = summary(t, [2.0, 3.1, 4.8])          # inside, inside, 0.4 above the top edge 4.4
+    ann = summary(t, [2.0, 3.1, 4.8])  # inside, inside, 0.4 above the top edge 4.4
     members = pd.concat([summary(t, [2.0, 3.0, 4.6]).assign(member=0), summary(t, [2.0, 3.3, 5.0]).assign(member=1)])
     table = bands.band_table(dem, ann, members, constant=summary(t, [2.0, 2.5, 3.0]))
     d50 = table[table.statistic == "d50"].reset_index(drop=True)
@@ -49,9 +49,13 @@ def write_run(folder, times, d50, wall, provider_wall, intervals=None):
     folder.mkdir(parents=True, exist_ok=True)
     summary(times, d50, 1e-3).assign(number_mean_diameter=1e-3).to_csv(folder / "summary.csv", index=False)
     pd.DataFrame({"time": [times[-1]], "diameter": [1e-3], "mass_fraction": [1.0]}).to_csv(
-        folder / "final_bins.csv", index=False)
-    (folder / "timing.json").write_text(json.dumps({"total_wall_time_s": wall, "provider_wall_time_s": provider_wall,
-                                                    "pbm_wall_time_s": wall - provider_wall}))
+        folder / "final_bins.csv", index=False
+    )
+    (folder / "timing.json").write_text(
+        json.dumps(
+            {"total_wall_time_s": wall, "provider_wall_time_s": provider_wall, "pbm_wall_time_s": wall - provider_wall}
+        )
+    )
     if intervals is not None:
         intervals.to_csv(folder / "intervals.csv", index=False)
 
@@ -63,9 +67,19 @@ def test_comparison_row_follows_the_contract(tmp_path):
     folder = tmp_path / "rpm300"
     loop = pd.DataFrame({"interval": [0, 1], "out_of_domain_count": [0, 0], "out_of_domain": ["", ""]})
     for k, end in enumerate((4.0, 4.4, 4.1)):
-        write_run(folder / "pbm_dem" / f"rep{k}", t, [2.0, 3.0, end], wall=120.0 + k, provider_wall=119.0, intervals=loop)
-    write_run(folder / "pbm_ann", t, [2.0, 3.1, 4.8], wall=0.04, provider_wall=0.01, intervals=loop.assign(
-        out_of_domain_count=[0, 2], out_of_domain=["", "d_large = 0.011 outside the training range"]))
+        write_run(
+            folder / "pbm_dem" / f"rep{k}", t, [2.0, 3.0, end], wall=120.0 + k, provider_wall=119.0, intervals=loop
+        )
+    write_run(
+        folder / "pbm_ann",
+        t,
+        [2.0, 3.1, 4.8],
+        wall=0.04,
+        provider_wall=0.01,
+        intervals=loop.assign(
+            out_of_domain_count=[0, 2], out_of_domain=["", "d_large = 0.011 outside the training range"]
+        ),
+    )
     write_run(folder / "pbm_constant", t, [2.0, 2.5, 3.0], wall=0.03, provider_wall=0.0)
     table = compare(tmp_path, ["300"], [150, 300], replicates=3)
     row = table.iloc[0]
@@ -75,26 +89,44 @@ def test_comparison_row_follows_the_contract(tmp_path):
     assert row.ann_out_of_domain_intervals == 1 and row.ann_intervals == 2
     assert row.pbm_dem_wall_s == pytest.approx(121.0) and row.wall_time_ratio_dem_over_ann == pytest.approx(121 / 0.04)
     assert row.dem_calls == 2
-    for col in ("n_dem_replicates", "ann_d50_outside_band_max", "ann_out_of_domain_intervals",
-                "wall_time_ratio_dem_over_ann", "ann_d50_rel_error_max", "d50_end_ann_mm"):
+    for col in (
+        "n_dem_replicates",
+        "ann_d50_outside_band_max",
+        "ann_out_of_domain_intervals",
+        "wall_time_ratio_dem_over_ann",
+        "ann_d50_rel_error_max",
+        "d50_end_ann_mm",
+    ):
         assert col in table.columns
 
 
 def test_proposals_rank_out_of_domain_samples_and_cap_what_the_bowl_cannot_hold(tiny_config):
     a_in = proposals.Assessment(900.0, 0, [0.002, 0.0025, 0.003], [230, 138, 92], {}, spread=0.01)
     a_out = proposals.Assessment(900.0, 1, [0.002, 0.0031, 0.0049], [200, 60, 20], {"d_large": 0.5}, spread=0.02)
-    a_big = proposals.Assessment(900.0, 2, [0.002, 0.004, 0.03], [150, 40, 12],
-                                 {"d_large": 4.0, "frac_large": 0.3}, spread=0.05)
-    table = proposals.propose(tiny_config.grid, tiny_config.granulator, tiny_config.size_distributions,
-                              [a_in, a_out, a_big], max_points=3)
+    a_big = proposals.Assessment(
+        900.0, 2, [0.002, 0.004, 0.03], [150, 40, 12], {"d_large": 4.0, "frac_large": 0.3}, spread=0.05
+    )
+    table = proposals.propose(
+        tiny_config.grid, tiny_config.granulator, tiny_config.size_distributions, [a_in, a_out, a_big], max_points=3
+    )
     assert list(table.kind) == ["distribution", "distribution", "speed"]
-    assert list(table.interval) == [2, 1, 0]          # by out-of-domain excess, then spread
+    assert list(table.interval) == [2, 1, 0]  # by out-of-domain excess, then spread
     big = table.iloc[0]
     assert big.capped_at_granulator_limit and max(json.loads(big.diameters)) == pytest.approx(
-        proposals.largest_feasible_diameter(tiny_config.granulator))
+        proposals.largest_feasible_diameter(tiny_config.granulator)
+    )
     assert sum(json.loads(big.number_fractions)) == pytest.approx(1.0, abs=1e-12)
     # the in-domain sample is the grid's 'small' feed: its speed is proposed, not a copy of it
     assert table.iloc[2]["name"] == "small" and table.iloc[2].propose_speed
+    # names never clash with a defined distribution
+    again = proposals.propose(
+        tiny_config.grid,
+        tiny_config.granulator,
+        {**tiny_config.size_distributions, "al_rpm900_i2": tiny_config.distribution("small")},
+        [a_big],
+        max_points=1,
+    )
+    assert again["name"].tolist() == ["al_rpm900_i2_2"]
     frag = proposals.fragment(tiny_config.grid, table)
     assert set(frag["size_distributions"]) == {"al_rpm900_i2", "al_rpm900_i1"}
     assert frag["grid"]["impeller_rpm"] == [600.0, 900.0, 1200.0]

@@ -3,8 +3,8 @@
 
 import pytest
 
-from pbmdem.dem import viewer, vtk_series
 from pbmdem.cli import main
+from pbmdem.dem import viewer, vtk_series
 
 pytestmark = pytest.mark.liggghts
 

@@ -17,10 +17,21 @@ import yaml
 pytestmark = [pytest.mark.liggghts, pytest.mark.workflow]
 
 
-def snakemake(root: Path, workdir: Path, configfile: Path, *args: str, env: dict | None = None,
-              check: bool = True) -> subprocess.CompletedProcess:
-    cmd = [sys.executable, "-m", "snakemake", "-s", str(root / "Snakefile"), "--directory", str(workdir),
-           "--configfile", str(configfile), *args]
+def snakemake(
+    root: Path, workdir: Path, configfile: Path, *args: str, env: dict | None = None, check: bool = True
+) -> subprocess.CompletedProcess:
+    cmd = [
+        sys.executable,
+        "-m",
+        "snakemake",
+        "-s",
+        str(root / "Snakefile"),
+        "--directory",
+        str(workdir),
+        "--configfile",
+        str(configfile),
+        *args,
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1800, env=env)
     if check and proc.returncode != 0:
         raise AssertionError(f"snakemake failed ({proc.returncode}):\n{proc.stdout[-4000:]}\n{proc.stderr[-6000:]}")
@@ -44,21 +55,50 @@ def test_grid_tables_have_counts_for_every_class_pair(tiny_workflow):
     points = {(float(r), d) for r in cfg["grid"]["impeller_rpm"] for d in cfg["grid"]["size_distributions"]}
     assert set(zip(table.rpm, table.distribution)) == points
     assert (table.collisions > 0).all(), table[table.collisions == 0]
-    expected_columns = ["point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j", "n_i", "n_j",
-                        "n_total", "collisions", "sampling_time", "frequency", "frequency_per_pair",
-                        "encounters", "encounter_frequency_per_pair", "impact_velocity_median", "n_replicates",
-                        "encounter_frequency_per_pair_se", "frequency_per_pair_se"]
+    expected_columns = [
+        "point_id",
+        "rpm",
+        "distribution",
+        "class_i",
+        "class_j",
+        "d_i",
+        "d_j",
+        "n_i",
+        "n_j",
+        "n_total",
+        "collisions",
+        "sampling_time",
+        "frequency",
+        "frequency_per_pair",
+        "encounters",
+        "encounter_frequency_per_pair",
+        "impact_velocity_median",
+        "n_replicates",
+        "encounter_frequency_per_pair_se",
+        "frequency_per_pair_se",
+    ]
     assert list(table.columns) == expected_columns
     runs = pd.read_csv(workdir / "results" / "dem" / "runs.csv")
     assert len(runs) == len(points) * cfg["dem"]["replicates"]
     assert sorted(set(runs.replicate)) == list(range(cfg["dem"]["replicates"]))
     assert (table.n_replicates == cfg["dem"]["replicates"]).all()
     velocities = pd.read_csv(workdir / "results" / "dem" / "impact_velocity.csv")
-    assert list(velocities.columns) == ["point_id", "rpm", "distribution", "class_i", "class_j", "v_lo", "v_hi",
-                                        "encounters", "n_replicates"]
+    assert list(velocities.columns) == [
+        "point_id",
+        "rpm",
+        "distribution",
+        "class_i",
+        "class_j",
+        "v_lo",
+        "v_hi",
+        "encounters",
+        "n_replicates",
+    ]
     per_pair = velocities.groupby(["point_id", "class_i", "class_j"])["encounters"].sum()
-    np.testing.assert_allclose(per_pair.to_numpy(), table.set_index(["point_id", "class_i", "class_j"])
-                               .loc[per_pair.index, "encounters"].to_numpy())
+    np.testing.assert_allclose(
+        per_pair.to_numpy(),
+        table.set_index(["point_id", "class_i", "class_j"]).loc[per_pair.index, "encounters"].to_numpy(),
+    )
     assert (runs.particle_steps_per_s > 0).all()
     walls = pd.read_csv(workdir / "results" / "dem" / "wall_collisions.csv")
     assert set(walls.wall) == {"bowl", "impeller"}
@@ -87,8 +127,11 @@ def test_adding_an_operating_point_runs_only_that_point(tiny_workflow, root, tmp
     dem_jobs = [line for line in out.splitlines() if line.strip().startswith("dem_point")]
     assert dem_jobs, out
     # one new rpm x every size distribution, and nothing for the points already computed
-    counts = {line.split()[0]: int(line.split()[1]) for line in out.splitlines()
-              if len(line.split()) == 2 and line.split()[1].isdigit()}
+    counts = {
+        line.split()[0]: int(line.split()[1])
+        for line in out.splitlines()
+        if len(line.split()) == 2 and line.split()[1].isdigit()
+    }
     reps = cfg["dem"]["replicates"]
     assert counts["dem_point"] == len(cfg["grid"]["size_distributions"]) * reps, out
     # the jobs of the detailed dry run are exactly the new speed's points
@@ -99,8 +142,9 @@ def test_adding_an_operating_point_runs_only_that_point(tiny_workflow, root, tmp
             current = line.split()[1].rstrip(":")
         elif current == "dem_point" and line.strip().startswith("wildcards:"):
             planned.add(line.split("wildcards:")[1].strip())
-    assert planned == {f"rpm=900, dist={d}, rep={r}" for d in cfg["grid"]["size_distributions"]
-                       for r in range(reps)}, planned
+    assert planned == {f"rpm=900, dist={d}, rep={r}" for d in cfg["grid"]["size_distributions"] for r in range(reps)}, (
+        planned
+    )
 
 
 def test_adding_a_replicate_runs_only_that_replicate(tiny_workflow, root, tmp_path):
@@ -118,8 +162,11 @@ def test_adding_a_replicate_runs_only_that_replicate(tiny_workflow, root, tmp_pa
         elif current == "dem_point" and line.strip().startswith("wildcards:"):
             planned.add(line.split("wildcards:")[1].strip())
     new = cfg["dem"]["replicates"] - 1
-    assert planned == {f"rpm={float(r):g}, dist={d}, rep={new}" for r in cfg["grid"]["impeller_rpm"]
-                       for d in cfg["grid"]["size_distributions"]}, planned
+    assert planned == {
+        f"rpm={float(r):g}, dist={d}, rep={new}"
+        for r in cfg["grid"]["impeller_rpm"]
+        for d in cfg["grid"]["size_distributions"]
+    }, planned
 
 
 def test_execution_settings_rerun_nothing(tiny_workflow, root, tmp_path):
@@ -131,8 +178,20 @@ def test_execution_settings_rerun_nothing(tiny_workflow, root, tmp_path):
     cfg["dem"]["timeout"] = 1234
     changed = tmp_path / "ranks.yaml"
     changed.write_text(yaml.safe_dump(cfg))
-    proc = snakemake(root, workdir, changed, "-n", "--cores", "1", "--set-resources", "dem_point:tasks=2",
-                     "dem_point:runtime=90", "--set-threads", "dem_point=2", "pbm_dem_coupled=2")
+    proc = snakemake(
+        root,
+        workdir,
+        changed,
+        "-n",
+        "--cores",
+        "1",
+        "--set-resources",
+        "dem_point:tasks=2",
+        "dem_point:runtime=90",
+        "--set-threads",
+        "dem_point=2",
+        "pbm_dem_coupled=2",
+    )
     out = proc.stdout + proc.stderr
     assert "Nothing to be done" in out, out
     # a change that does alter results is still seen (the check above is not vacuous)
@@ -178,9 +237,18 @@ def test_a_failed_point_keeps_the_finished_ones(root, tmp_path):
     workdir = tmp_path / "wd"
     workdir.mkdir()
     env = dict(__import__("os").environ, PBMDEM_LIGGGHTS=str(wrapper))
-    proc = snakemake(root, workdir, configfile, "--cores", "2", "--keep-going",
-                     "results/dem/rpm600_small/rep0/collisions.csv", "results/dem/rpm600_large/rep0/collisions.csv",
-                     env=env, check=False)
+    proc = snakemake(
+        root,
+        workdir,
+        configfile,
+        "--cores",
+        "2",
+        "--keep-going",
+        "results/dem/rpm600_small/rep0/collisions.csv",
+        "results/dem/rpm600_large/rep0/collisions.csv",
+        env=env,
+        check=False,
+    )
     assert proc.returncode != 0
     out = proc.stdout + proc.stderr
     assert "no/such/style" in out  # the log's tail reaches the user
@@ -220,8 +288,9 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
     assert sorted(comparison.rpm) == sorted(float(r) for r in cfg["validation"]["rpm"])
     assert (comparison.dem_calls == cfg["validation"]["coupling_intervals"]).all()
     assert (comparison.wall_time_ratio_dem_over_ann > 1).all()
-    replicates = [sorted((res / "validation" / f"rpm{rpm}" / "pbm_dem").glob("rep*"))
-                  for rpm in cfg["validation"]["rpm"]]
+    replicates = [
+        sorted((res / "validation" / f"rpm{rpm}" / "pbm_dem").glob("rep*")) for rpm in cfg["validation"]["rpm"]
+    ]
     n_replicates = load_config(configfile).validation.dem_replicates
     assert [len(r) for r in replicates] == [n_replicates] * len(cfg["validation"]["rpm"])
     for rep in (r for speed in replicates for r in speed):
@@ -240,8 +309,16 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
 
 
 REPORT_FIGURES = ("size_statistics.png", "psd_evolution.png", "liquid_porosity.png", "collision_frequency.png")
-REPORT_TABLES = ("settings", "speeds", "provenance", "targets", "comparison_d50", "comparison_accuracy",
-                 "comparison_cost", "comparison_domain")
+REPORT_TABLES = (
+    "settings",
+    "speeds",
+    "provenance",
+    "targets",
+    "comparison_d50",
+    "comparison_accuracy",
+    "comparison_cost",
+    "comparison_domain",
+)
 
 
 def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
@@ -269,8 +346,17 @@ def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
         assert files[name] == speeds, (name, files)
     for name in REPORT_TABLES:
         assert files[f"{name}.csv"] == 1 and files[f"{name}.html"] == 1, (name, files)
-    for name in ("comparison.csv", "proposals.csv", "rpm_sweep.png", "speed_response.png", "impact_velocity.png",
-                 "parity.png", "metrics.csv", "runs.csv", "report.html"):
+    for name in (
+        "comparison.csv",
+        "proposals.csv",
+        "rpm_sweep.png",
+        "speed_response.png",
+        "impact_velocity.png",
+        "parity.png",
+        "metrics.csv",
+        "runs.csv",
+        "report.html",
+    ):
         assert files[name] == 1, (name, files)
     assert page == (workdir / "results" / "report" / "report.html").read_bytes()
     assert "aggregation rate constant beta0" in settings and "<table" in settings
@@ -278,12 +364,19 @@ def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
     flat = re.sub(r"(\\n|\s)+", " ", index)
     replicates = load_config(configfile).validation.dem_replicates
     for rpm in cfg["validation"]["rpm"]:
-        assert f"against time (s) at {rpm:g} rpm. Grey: the PBM-DEM band, the envelope (min-max) of {replicates} " \
-               "coupled PBM-DEM loops" in flat, rpm
+        assert (
+            f"against time (s) at {rpm:g} rpm. Grey: the PBM-DEM band, the envelope (min-max) of {replicates} "
+            "coupled PBM-DEM loops" in flat
+        ), rpm
         assert f"Where PBM-ANN used the surrogate outside its training domain at {rpm:g} rpm" in flat
-    for phrase in ("Every impeller speed of the DEM training grid", "Where the results come from.",
-                   "The targets of the validation at every speed", "PBM-ANN against the coupled PBM-DEM model of",
-                   "The surrogate on DEM runs it never saw", "The whole report as one self-contained page"):
+    for phrase in (
+        "Every impeller speed of the DEM training grid",
+        "Where the results come from.",
+        "The targets of the validation at every speed",
+        "PBM-ANN against the coupled PBM-DEM model of",
+        "The surrogate on DEM runs it never saw",
+        "The whole report as one self-contained page",
+    ):
         assert phrase in flat, phrase
 
 
@@ -324,8 +417,19 @@ def test_pbm_cli_with_each_kernel(tiny_workflow, tmp_path, kernel, capsys):
         cfg.setdefault("pbm", {}).setdefault("aggregation", {})["success"] = {"velocity_model": "stokes"}
         configfile = tmp_path / "stokes.yaml"
         configfile.write_text(yaml.safe_dump(cfg))
-    args = ["pbm", "--config", str(configfile), "--kernel", kernel.split("_")[0], "--rpm", "900",
-            "--distribution", "large", "--out", str(tmp_path / kernel)]
+    args = [
+        "pbm",
+        "--config",
+        str(configfile),
+        "--kernel",
+        kernel.split("_")[0],
+        "--rpm",
+        "900",
+        "--distribution",
+        "large",
+        "--out",
+        str(tmp_path / kernel),
+    ]
     if kernel.startswith("table"):
         args += ["--table", str(res / "dem" / "collisions.csv")]
     if kernel == "table_stokes":
@@ -351,11 +455,16 @@ def test_job_logs_show_progress(tiny_workflow):
     workdir, _ = tiny_workflow
     logs = workdir / "results" / "logs"
     dem_log = (logs / "dem" / "rpm600_small_rep0.log").read_text()
-    assert re.search(r"pbmdem.dem.progress: DEM rpm600_small: \w[\w-]*, step \d+ of \d+ \(\d+ %\), \d+ particles", dem_log)
+    assert re.search(
+        r"pbmdem.dem.progress: DEM rpm600_small: \w[\w-]*, step \d+ of \d+ \(\d+ %\), \d+ particles", dem_log
+    )
     assert "CV fold 1 of" in (logs / "train_surrogate.log").read_text()
     loop = (logs / "validation" / "pbm_dem_rpm600.log").read_text()
-    assert re.search(r"pbm_dem at rpm 600: interval 1 of \d+ .* DEM wall time [\d.]+ s, PBM wall time [\d.]+ s, "
-                     r"\d+ surrogate out-of-domain", loop), loop[-2000:]
+    assert re.search(
+        r"pbm_dem at rpm 600: interval 1 of \d+ .* DEM wall time [\d.]+ s, PBM wall time [\d.]+ s, "
+        r"\d+ surrogate out-of-domain",
+        loop,
+    ), loop[-2000:]
     assert "pbmdem.dem.progress: DEM" in loop  # the loop's LIGGGHTS calls report progress too
     ann = (logs / "validation" / "pbm_ann_rpm600.log").read_text()
     assert "pbm_ann at rpm 600: interval 1 of" in ann
@@ -368,8 +477,24 @@ def test_a_manual_dem_run_on_a_finished_point_changes_nothing(tiny_workflow, roo
     workdir, configfile = tiny_workflow
     point = workdir / "results" / "dem" / "rpm600_small" / "rep0"
     before = {p: p.stat().st_mtime_ns for p in point.rglob("*")}
-    proc = subprocess.run([sys.executable, "-m", "pbmdem.cli", "dem", "--config", str(configfile), "--rpm", "600",
-                           "--distribution", "small"], cwd=workdir, capture_output=True, text=True, timeout=600)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pbmdem.cli",
+            "dem",
+            "--config",
+            str(configfile),
+            "--rpm",
+            "600",
+            "--distribution",
+            "small",
+        ],
+        cwd=workdir,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert proc.returncode == 2 and "already holds a finished run" in proc.stderr and "--force" in proc.stderr
     assert {p: p.stat().st_mtime_ns for p in point.rglob("*")} == before
     dry = snakemake(root, workdir, configfile, "-n", "--cores", "2")
@@ -398,8 +523,11 @@ def test_deck_template_edit_reruns_every_dem_job_and_execution_settings_none(roo
     def planned(config: Path) -> dict[str, int]:
         out = snakemake(project, workdir, config, "-n", "--cores", "2", *targets, "--quiet", "rules")
         text = out.stdout + out.stderr
-        return {line.split()[0]: int(line.split()[1]) for line in text.splitlines()
-                if len(line.split()) == 2 and line.split()[1].isdigit() and line.split()[0] != "total"}
+        return {
+            line.split()[0]: int(line.split()[1])
+            for line in text.splitlines()
+            if len(line.split()) == 2 and line.split()[1].isdigit() and line.split()[0] != "total"
+        }
 
     assert planned(configfile) == {}
     cfg["dem"]["timeout"], cfg["dem"]["mpi_ranks"] = 99.0, 2
@@ -437,12 +565,17 @@ def test_adding_the_proposed_points_removes_the_out_of_domain_intervals(tiny_wor
     grid = yaml.safe_load(fragment.read_text())["grid"]
     assert 1500.0 in grid["impeller_rpm"]
     planned = snakemake(root, copy, config, str(fragment), "-n", "--cores", "2", *targets, "--quiet", "rules")
-    counts = {line.split()[0]: int(line.split()[1]) for line in (planned.stdout + planned.stderr).splitlines()
-              if len(line.split()) == 2 and line.split()[1].isdigit()}
+    counts = {
+        line.split()[0]: int(line.split()[1])
+        for line in (planned.stdout + planned.stderr).splitlines()
+        if len(line.split()) == 2 and line.split()[1].isdigit()
+    }
     new_dists = yaml.safe_load(fragment.read_text()).get("size_distributions", {})
     reps = cfg["dem"]["replicates"]
-    expected = reps * (len(grid["impeller_rpm"]) * len(grid["size_distributions"])
-                       - len(cfg["grid"]["impeller_rpm"]) * len(cfg["grid"]["size_distributions"]))
+    expected = reps * (
+        len(grid["impeller_rpm"]) * len(grid["size_distributions"])
+        - len(cfg["grid"]["impeller_rpm"]) * len(cfg["grid"]["size_distributions"])
+    )
     assert counts.get("dem_point") == expected, counts  # only the new operating points run
     assert counts.get("pbm_dem_coupled", 0) == 0  # the reference does not depend on the grid
     snakemake(root, copy, config, str(fragment), "--cores", "2", *targets)
@@ -450,5 +583,7 @@ def test_adding_the_proposed_points_removes_the_out_of_domain_intervals(tiny_wor
     assert (after.out_of_domain_count == 0).all(), after.out_of_domain.tolist()
     meta = json.loads((copy / "results" / "surrogate" / "model.json").read_text())
     assert any(pid.startswith("rpm1500_") for pid in meta["training_point_ids"])
-    print(f"active learning: {len(new_dists)} new distribution(s), speeds {grid['impeller_rpm']}; out-of-domain "
-          f"intervals {int((before.out_of_domain_count > 0).sum())} -> {int((after.out_of_domain_count > 0).sum())}")
+    print(
+        f"active learning: {len(new_dists)} new distribution(s), speeds {grid['impeller_rpm']}; out-of-domain "
+        f"intervals {int((before.out_of_domain_count > 0).sum())} -> {int((after.out_of_domain_count > 0).sum())}"
+    )

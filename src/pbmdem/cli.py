@@ -49,10 +49,15 @@ def _pbm(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     distribution = args.distribution or cfg.grid.size_distributions[0]
     batch = cfg.pbm_batch(distribution)
-    for flag, value, kernels in (("--table", args.table, ("table",)), ("--velocity-table", args.velocity_table, ("table",)),
-                                 ("--model", args.model, ("ann",))):
+    for flag, value, kernels in (
+        ("--table", args.table, ("table",)),
+        ("--velocity-table", args.velocity_table, ("table",)),
+        ("--model", args.model, ("ann",)),
+    ):
         if value is not None and args.kernel not in kernels:
-            raise ValueError(f"{flag} {value} is read with --kernel {' or '.join(kernels)} only, not --kernel {args.kernel}")
+            raise ValueError(
+                f"{flag} {value} is read with --kernel {' or '.join(kernels)} only, not --kernel {args.kernel}"
+            )
     info: dict = {"kernel_source": args.kernel}
     if args.kernel == "ann":
         from pbmdem.coupling import pbm_ann
@@ -65,9 +70,12 @@ def _pbm(args: argparse.Namespace) -> int:
         info["coupling_intervals"] = totals["intervals"]
         if totals.get("out_of_domain_count"):
             messages = sorted({r["out_of_domain"] for r in outcome.intervals if r.get("out_of_domain")})
-            print(f"warning: the surrogate was evaluated outside its training domain in "
-                  f"{totals['out_of_domain_intervals']} of {totals['intervals']} coupling intervals "
-                  f"({totals['out_of_domain_count']} warnings); " + "; ".join(messages), file=sys.stderr)
+            print(
+                f"warning: the surrogate was evaluated outside its training domain in "
+                f"{totals['out_of_domain_intervals']} of {totals['intervals']} coupling intervals "
+                f"({totals['out_of_domain_count']} warnings); " + "; ".join(messages),
+                file=sys.stderr,
+            )
         info["surrogate_domain"] = {k: totals.get(k, 0) for k in ("out_of_domain_count", "out_of_domain_intervals")}
     else:
         from pbmdem.pbm.setup import run_batch
@@ -77,9 +85,19 @@ def _pbm(args: argparse.Namespace) -> int:
     result.info.update(info)
     paths = result.save(args.out)
     last = result.summary().iloc[-1]
-    print(json.dumps({"out": str(args.out), "files": sorted(p.name for p in paths.values()),
-                      "d50_final_m": float(last["d50"]), "number_mean_diameter_final_m": float(last["number_mean_diameter"]),
-                      "steps": int(result.info["steps"]), "wall_time_s": round(result.info["wall_time_s"], 3)}, indent=2))
+    print(
+        json.dumps(
+            {
+                "out": str(args.out),
+                "files": sorted(p.name for p in paths.values()),
+                "d50_final_m": float(last["d50"]),
+                "number_mean_diameter_final_m": float(last["number_mean_diameter"]),
+                "steps": int(result.info["steps"]),
+                "wall_time_s": round(result.info["wall_time_s"], 3),
+            },
+            indent=2,
+        )
+    )
     return 0
 
 
@@ -91,11 +109,17 @@ def _table_source(batch, args):
     if args.table is None:
         raise PBMInputError("--kernel table needs --table PATH (a DEM collision table CSV)")
     if args.velocity_table is None and success.velocity_resolved:
-        raise PBMInputError(f"pbm.aggregation.success.velocity_model = {success.velocity_model!r} needs impact "
-                            "velocities: --kernel table needs --velocity-table PATH (results/dem/impact_velocity.csv)")
+        raise PBMInputError(
+            f"pbm.aggregation.success.velocity_model = {success.velocity_model!r} needs impact "
+            "velocities: --kernel table needs --velocity-table PATH (results/dem/impact_velocity.csv)"
+        )
     # one distribution's rows: the grid's distributions have different class sizes
-    return TableFrequency.from_csv(args.table, distribution=batch.distribution, velocity_path=args.velocity_table,
-                                   extrapolation=batch.pbm.aggregation.table_extrapolation)
+    return TableFrequency.from_csv(
+        args.table,
+        distribution=batch.distribution,
+        velocity_path=args.velocity_table,
+        extrapolation=batch.pbm.aggregation.table_extrapolation,
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -109,21 +133,35 @@ def build_parser() -> argparse.ArgumentParser:
     dem.add_argument("--replicate", type=int, default=0, help="replicate (insertion seeds), 0 .. dem.replicates-1")
     dem.add_argument("--out", default=None, help="run folder (default results/dem/<point id>/rep<replicate>)")
     dem.add_argument("--plan-only", action="store_true", help="print the run plan and stop")
-    dem.add_argument("--force", action="store_true",
-                     help="replace a finished run in the run folder (refused otherwise: it would make "
-                          "Snakemake redo everything downstream of that point)")
+    dem.add_argument(
+        "--force",
+        action="store_true",
+        help="replace a finished run in the run folder (refused otherwise: it would make "
+        "Snakemake redo everything downstream of that point)",
+    )
     dem.set_defaults(func=_dem)
 
-    pbm = sub.add_parser("pbm", help="run the population balance model of the batch granulator",
-                         description="Run the PBM for one impeller speed and size distribution.")
+    pbm = sub.add_parser(
+        "pbm",
+        help="run the population balance model of the batch granulator",
+        description="Run the PBM for one impeller speed and size distribution.",
+    )
     pbm.add_argument("--config", required=True, type=Path, help="workflow config (YAML)")
-    pbm.add_argument("--kernel", choices=["constant", "table", "ann"], default="constant",
-                     help="collision-frequency source: constant c_ij, the DEM collision table, or PBM-ANN (the "
-                          "surrogate, refreshed at each of validation.coupling_intervals, as in the validation)")
+    pbm.add_argument(
+        "--kernel",
+        choices=["constant", "table", "ann"],
+        default="constant",
+        help="collision-frequency source: constant c_ij, the DEM collision table, or PBM-ANN (the "
+        "surrogate, refreshed at each of validation.coupling_intervals, as in the validation)",
+    )
     pbm.add_argument("--table", type=Path, help="collision table CSV (with --kernel table)")
-    pbm.add_argument("--velocity-table", type=Path, default=None,
-                     help="impact-velocity table CSV (results/dem/impact_velocity.csv; with --kernel table); "
-                          "needed when pbm.aggregation.success.velocity_model is not 'none'")
+    pbm.add_argument(
+        "--velocity-table",
+        type=Path,
+        default=None,
+        help="impact-velocity table CSV (results/dem/impact_velocity.csv; with --kernel table); "
+        "needed when pbm.aggregation.success.velocity_model is not 'none'",
+    )
     pbm.add_argument("--model", type=Path, help="surrogate model file (with --kernel ann)")
     pbm.add_argument("--rpm", required=True, help="impeller speed (1/min), 0 < rpm <= 20000")
     pbm.add_argument("--distribution", default=None, help="size distribution name (default: first of the grid)")

@@ -81,7 +81,10 @@ def velocity_fractions_from_table(velocities, k: int) -> np.ndarray:
 
     upper = np.zeros((k, k, N_VELOCITY_BINS))
     b = velocity_bin(velocities["v_lo"].to_numpy(float))
-    np.add.at(upper, (velocities["class_i"].to_numpy(int), velocities["class_j"].to_numpy(int), b),
-              velocities["encounters"].to_numpy(float))
+    np.add.at(
+        upper,
+        (velocities["class_i"].to_numpy(int), velocities["class_j"].to_numpy(int), b),
+        velocities["encounters"].to_numpy(float),
+    )
     strictly_upper = np.triu(np.ones((k, k)), 1)[:, :, None] * upper
     return fractions_with_fallback(upper + np.transpose(strictly_upper, (1, 0, 2)), upper.sum(axis=(0, 1)))

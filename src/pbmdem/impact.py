@@ -22,8 +22,9 @@ import numpy as np
 BINS_PER_DECADE = 4
 V_MIN = 1.0e-3  # m/s, lower edge of the first log-spaced bin
 V_MAX = 10.0  # m/s, upper edge of the last bin
-VELOCITY_EDGES = np.concatenate([[0.0], np.logspace(np.log10(V_MIN), np.log10(V_MAX),
-                                                    int(round(BINS_PER_DECADE * np.log10(V_MAX / V_MIN))) + 1)])
+VELOCITY_EDGES = np.concatenate(
+    [[0.0], np.logspace(np.log10(V_MIN), np.log10(V_MAX), int(round(BINS_PER_DECADE * np.log10(V_MAX / V_MIN))) + 1)]
+)
 N_VELOCITY_BINS = len(VELOCITY_EDGES) - 1
 
 
@@ -61,8 +62,9 @@ class EncounterRates:
         if self.frequency.shape != (K, K):
             raise ValueError(f"encounter frequency must be (K, K), got {self.frequency.shape}")
         if self.velocity_fractions.shape != (K, K, N_VELOCITY_BINS):
-            raise ValueError(f"velocity fractions must be ({K}, {K}, {N_VELOCITY_BINS}), "
-                             f"got {self.velocity_fractions.shape}")
+            raise ValueError(
+                f"velocity fractions must be ({K}, {K}, {N_VELOCITY_BINS}), got {self.velocity_fractions.shape}"
+            )
 
     def resolved(self) -> np.ndarray:
         """(K, K, N_VELOCITY_BINS) encounter frequency per pair in each velocity bin (1/s)."""

@@ -40,8 +40,10 @@ def read_table(path: str | Path, what: str = "table", *, columns=(), finite=(), 
         bad = ~np.isfinite(values)
         if bad.any():
             row = int(np.argmax(bad))
-            raise InputFileError(f"{what} {path}: column {name!r} row {row + 1} = {frame[name].iloc[row]!r}: "
-                                 f"a finite number is required ({int(bad.sum())} such row(s))")
+            raise InputFileError(
+                f"{what} {path}: column {name!r} row {row + 1} = {frame[name].iloc[row]!r}: "
+                f"a finite number is required ({int(bad.sum())} such row(s))"
+            )
     return frame
 
 

@@ -7,13 +7,21 @@ from pbmdem.config import DemExecution, DemPoint
 from pbmdem.dem import run_operating_point
 
 # progress lines (phase, step of total, particles, elapsed, remaining) go to the job log and the terminal
-logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s",
-                    handlers=[logging.FileHandler(snakemake.log[0]), logging.StreamHandler()])  # noqa: F821
+logging.basicConfig(
+    level=logging.INFO,
+    format="%(asctime)s %(name)s: %(message)s",
+    handlers=[logging.FileHandler(snakemake.log[0]), logging.StreamHandler()],
+)  # noqa: F821
 # params hold what fixes the result; ranks and timeout come from the config and the job's resources
 point = DemPoint.from_dict(snakemake.params.point)  # noqa: F821
 execution = DemExecution.of_job(snakemake.config, snakemake.resources)  # noqa: F821
 if snakemake.resources.get("mpi"):  # noqa: F821
     os.environ["PBMDEM_MPI_LAUNCHER"] = str(snakemake.resources.mpi)  # noqa: F821
-summary = run_operating_point(point, float(snakemake.wildcards.rpm), snakemake.params.run_dir,  # noqa: F821
-                              execution, replicate=int(snakemake.wildcards.rep))  # noqa: F821
+summary = run_operating_point(
+    point,
+    float(snakemake.wildcards.rpm),
+    snakemake.params.run_dir,  # noqa: F821
+    execution,
+    replicate=int(snakemake.wildcards.rep),
+)  # noqa: F821
 logging.info("finished %s", summary)

@@ -10,9 +10,17 @@ import logging
 from pbmdem.report.outputs import write_provenance
 
 sm = snakemake  # noqa: F821
-logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-                    handlers=[logging.FileHandler(sm.log[0]), logging.StreamHandler()])
+logging.basicConfig(
+    level=logging.INFO,
+    format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    handlers=[logging.FileHandler(sm.log[0]), logging.StreamHandler()],
+)
 logging.captureWarnings(True)
-write_provenance(config=sm.config, settings=sm.params.settings, basedir=sm.params.basedir,
-                 runs=sm.input.runs, metadata=sm.input.metadata,
-                 out={"csv": sm.output.csv, "html": sm.output.html})
+write_provenance(
+    config=sm.config,
+    settings=sm.params.settings,
+    basedir=sm.params.basedir,
+    runs=sm.input.runs,
+    metadata=sm.input.metadata,
+    out={"csv": sm.output.csv, "html": sm.output.html},
+)

@@ -7,8 +7,12 @@ from pbmdem.config import PbmBatch
 from pbmdem.pbm.kernels import TableFrequency
 from pbmdem.pbm.setup import run_batch
 
-logging.basicConfig(filename=snakemake.log[0], filemode="w", level=logging.INFO,  # noqa: F821
-                    format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+logging.basicConfig(
+    filename=snakemake.log[0],
+    filemode="w",
+    level=logging.INFO,  # noqa: F821
+    format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+)
 logging.captureWarnings(True)
 
 batch = PbmBatch.from_dict(snakemake.params.batch)  # noqa: F821
@@ -17,11 +21,21 @@ rpm = float(snakemake.wildcards.rpm)  # noqa: F821
 source = None  # the constant kernel of pbm.aggregation
 if kernel == "table":
     # DEM collision table (encounter frequencies) and its impact-velocity table, this feed's rows
-    source = TableFrequency.from_csv(snakemake.input.table, distribution=batch.distribution,  # noqa: F821
-                                     velocity_path=snakemake.input.velocities,  # noqa: F821
-                                     extrapolation=batch.pbm.aggregation.table_extrapolation)
+    source = TableFrequency.from_csv(
+        snakemake.input.table,
+        distribution=batch.distribution,  # noqa: F821
+        velocity_path=snakemake.input.velocities,  # noqa: F821
+        extrapolation=batch.pbm.aggregation.table_extrapolation,
+    )
 result = run_batch(batch, source, rpm)
 result.info["kernel_source"] = kernel
 paths = result.save(Path(snakemake.output.summary).parent)  # noqa: F821
-logging.info("PBM %s kernel rpm %g %s: %d steps, %.3f s; wrote %s", kernel, rpm, batch.distribution,
-             result.info["steps"], result.info["wall_time_s"], sorted(str(p) for p in paths.values()))
+logging.info(
+    "PBM %s kernel rpm %g %s: %d steps, %.3f s; wrote %s",
+    kernel,
+    rpm,
+    batch.distribution,
+    result.info["steps"],
+    result.info["wall_time_s"],
+    sorted(str(p) for p in paths.values()),
+)

@@ -8,5 +8,7 @@ response = speed_response(read_table(snakemake.input.replicates, "per-replicate 
 write_csv(snakemake.output.table, response)  # noqa: F821
 write_csv(snakemake.output.flow, flow_development(read_table(snakemake.input.runs, "DEM run table")))  # noqa: F821
 plot_speed_response(response, snakemake.output.plot)  # noqa: F821
-plot_impact_velocities(read_table(snakemake.input.velocities, "impact-velocity table"),  # noqa: F821
-                       snakemake.output.velocity_plot)  # noqa: F821
+plot_impact_velocities(
+    read_table(snakemake.input.velocities, "impact-velocity table"),  # noqa: F821
+    snakemake.output.velocity_plot,
+)  # noqa: F821

@@ -6,8 +6,11 @@ from pbmdem.config import SurrogateTraining
 from pbmdem.surrogate.train import train_and_report
 
 # each CV fold and hyperparameter candidate is logged as it finishes: job log and terminal
-logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-                    handlers=[logging.FileHandler(snakemake.log[0], mode="w"), logging.StreamHandler()])  # noqa: F821
+logging.basicConfig(
+    level=logging.INFO,
+    format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    handlers=[logging.FileHandler(snakemake.log[0], mode="w"), logging.StreamHandler()],
+)  # noqa: F821
 logging.captureWarnings(True)
 
 training = SurrogateTraining.from_dict(snakemake.params.training)  # noqa: F821

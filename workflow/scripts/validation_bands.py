@@ -4,6 +4,9 @@ from pbmdem.atomic import write_csv
 from pbmdem.validation.comparison import bands_of
 from pbmdem.validation.results import load_speed
 
-speed = load_speed(snakemake.params.validation_dir, snakemake.wildcards.rpm,  # noqa: F821
-                   snakemake.params.replicates)  # noqa: F821
+speed = load_speed(
+    snakemake.params.validation_dir,
+    snakemake.wildcards.rpm,  # noqa: F821
+    snakemake.params.replicates,
+)  # noqa: F821
 write_csv(snakemake.output.bands, bands_of(speed))  # noqa: F821

@@ -8,8 +8,11 @@ from pbmdem.atomic import write_csv
 from pbmdem.config import CoupledLoop, DemExecution
 
 # interval lines (DEM and PBM wall time, out-of-domain count) and DEM progress: job log and terminal
-logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-                    handlers=[logging.FileHandler(snakemake.log[0]), logging.StreamHandler()])  # noqa: F821
+logging.basicConfig(
+    level=logging.INFO,
+    format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    handlers=[logging.FileHandler(snakemake.log[0]), logging.StreamHandler()],
+)  # noqa: F821
 logging.captureWarnings(True)
 loop = CoupledLoop.from_dict(snakemake.params.loop)  # noqa: F821
 rpm = float(snakemake.wildcards.rpm)  # noqa: F821

@@ -9,6 +9,7 @@ The schema (`workflow/schemas/*.schema.yaml`, shipped as package data) is the on
 defaults live; `Config.from_mapping` validates once, fills them in, and builds the typed objects.
 """
 
+from .dem import Dem, DemExecution
 from .errors import RPM_MAX, ConfigError, check_rpm
 from .granulator import Bed, Bowl, Granulator, Impeller, Material
 from .pbm import Pbm, Solver
@@ -17,7 +18,6 @@ from .schema import complete, non_finite_values, schema_dir, section_defaults
 from .settings import Config, CoupledLoop, DemPoint, PbmBatch, SurrogateTraining
 from .surrogate import Surrogate
 from .validation import SampleRule, Sweep, Validation
-from .dem import Dem, DemExecution
 from .yamlfile import load_yaml
 
 
@@ -30,8 +30,35 @@ def load_config(path) -> Config:
 
 
 __all__ = [
-    "Config", "ConfigError", "load_config", "load_yaml", "check_rpm", "RPM_MAX", "complete", "non_finite_values",
-    "schema_dir", "section_defaults", "Granulator", "Bowl", "Impeller", "Bed", "Material", "SizeDistribution",
-    "OperatingGrid", "point_id", "rpm_text", "Dem", "DemExecution", "Pbm", "Solver", "Surrogate", "Validation",
-    "Sweep", "SampleRule", "DemPoint", "PbmBatch", "SurrogateTraining", "CoupledLoop",
+    "Config",
+    "ConfigError",
+    "load_config",
+    "load_yaml",
+    "check_rpm",
+    "RPM_MAX",
+    "complete",
+    "non_finite_values",
+    "schema_dir",
+    "section_defaults",
+    "Granulator",
+    "Bowl",
+    "Impeller",
+    "Bed",
+    "Material",
+    "SizeDistribution",
+    "OperatingGrid",
+    "point_id",
+    "rpm_text",
+    "Dem",
+    "DemExecution",
+    "Pbm",
+    "Solver",
+    "Surrogate",
+    "Validation",
+    "Sweep",
+    "SampleRule",
+    "DemPoint",
+    "PbmBatch",
+    "SurrogateTraining",
+    "CoupledLoop",
 ]

@@ -20,18 +20,25 @@ def check(cfg) -> None:
     bowl, imp, bed = cfg.granulator.bowl, cfg.granulator.impeller, cfg.granulator.bed
     radius = bowl.radius
     if imp.blade_length >= radius:
-        problems.append(f"granulator.impeller.blade_length = {imp.blade_length}: must be smaller than the "
-                        f"bowl radius {radius}")
+        problems.append(
+            f"granulator.impeller.blade_length = {imp.blade_length}: must be smaller than the bowl radius {radius}"
+        )
     if imp.hub_diameter / 2 >= imp.blade_length:
-        problems.append(f"granulator.impeller.hub_diameter = {imp.hub_diameter}: must be smaller than "
-                        f"twice the blade length {2 * imp.blade_length}")
+        problems.append(
+            f"granulator.impeller.hub_diameter = {imp.hub_diameter}: must be smaller than "
+            f"twice the blade length {2 * imp.blade_length}"
+        )
     top = imp.top
     if top >= bowl.height:
-        problems.append(f"granulator.impeller: the blades reach z = {top:.6g} m (clearance, blade height and "
-                        f"pitch), which must be below the bowl height {bowl.height}")
+        problems.append(
+            f"granulator.impeller: the blades reach z = {top:.6g} m (clearance, blade height and "
+            f"pitch), which must be below the bowl height {bowl.height}"
+        )
     if bed.height <= top:
-        problems.append(f"dem.bed_height = {bed.height}: the bed must cover the impeller, i.e. exceed the "
-                        f"blade top at {top:.6g} m (clearance + blade height, with the pitch)")
+        problems.append(
+            f"dem.bed_height = {bed.height}: the bed must cover the impeller, i.e. exceed the "
+            f"blade top at {top:.6g} m (clearance + blade height, with the pitch)"
+        )
     if bed.height >= bowl.height:
         problems.append(f"dem.bed_height = {bed.height}: must be below the bowl height {bowl.height}")
     for name, dist in cfg.size_distributions.items():
@@ -44,23 +51,29 @@ def check(cfg) -> None:
             problems.append(f"{key}.diameters = {list(d)}: must be strictly ascending (class k is the k-th size)")
         total = math.fsum(w)
         if abs(total - 1.0) > FRACTION_TOLERANCE:
-            problems.append(f"{key}.number_fractions = {list(w)}: sum to {total:.6g}, must sum to 1 "
-                            f"(within {FRACTION_TOLERANCE})")
+            problems.append(
+                f"{key}.number_fractions = {list(w)}: sum to {total:.6g}, must sum to 1 (within {FRACTION_TOLERANCE})"
+            )
         d_max = max(d)
         free_height = bowl.height - top
         if 3 * d_max >= free_height:
-            problems.append(f"{key}.diameters: largest {d_max} m does not fit the bowl: the space above the "
-                            f"impeller ({free_height:.4g} m) must exceed 3 particle diameters")
+            problems.append(
+                f"{key}.diameters: largest {d_max} m does not fit the bowl: the space above the "
+                f"impeller ({free_height:.4g} m) must exceed 3 particle diameters"
+            )
         if 2 * d_max >= radius:
-            problems.append(f"{key}.diameters: largest {d_max} m does not fit the bowl: it must be below "
-                            f"half the bowl radius ({radius / 2:.4g} m)")
+            problems.append(
+                f"{key}.diameters: largest {d_max} m does not fit the bowl: it must be below "
+                f"half the bowl radius ({radius / 2:.4g} m)"
+            )
     defined = sorted(cfg.size_distributions)
     for name in cfg.grid.size_distributions:
         if name not in cfg.size_distributions:
             problems.append(f"grid.size_distributions: {name!r} is not defined; defined names: {defined}")
     if cfg.validation.distribution not in cfg.size_distributions:
-        problems.append(f"validation.distribution: {cfg.validation.distribution!r} is not defined; defined names: "
-                        f"{defined}")
+        problems.append(
+            f"validation.distribution: {cfg.validation.distribution!r} is not defined; defined names: {defined}"
+        )
     sweep = cfg.validation.sweep
     if not sweep.stop > sweep.start:
         problems.append(f"validation.sweep: stop = {sweep.stop:g} must be greater than start = {sweep.start:g}")

@@ -44,7 +44,7 @@ class DemExecution(Settings):
     timeout: float
 
     @classmethod
-    def of_job(cls, config: dict, resources=None) -> "DemExecution":
+    def of_job(cls, config: dict, resources=None) -> DemExecution:
         """The execution settings of a Snakemake job: `dem.mpi_ranks` and `dem.timeout` of the
         workflow's completed config, the ranks replaced by the job's `tasks` resource when a
         cluster profile sets it."""

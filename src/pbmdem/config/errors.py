@@ -21,6 +21,7 @@ def check_rpm(rpm, key: str = "--rpm") -> float:
     except (TypeError, ValueError):
         raise ConfigError(f"{key} = {rpm!r}: not a number (allowed: 0 < rpm <= {RPM_MAX:g})") from None
     if not math.isfinite(value) or not 0.0 < value <= RPM_MAX:
-        raise ConfigError(f"{key} = {rpm!r}: impossible impeller speed (allowed: a finite number, "
-                          f"0 < rpm <= {RPM_MAX:g})")
+        raise ConfigError(
+            f"{key} = {rpm!r}: impossible impeller speed (allowed: a finite number, 0 < rpm <= {RPM_MAX:g})"
+        )
     return value

@@ -37,7 +37,7 @@ class Bowl(Settings):
 
     @property
     def floor_area(self) -> float:
-        return math.pi * self.radius ** 2
+        return math.pi * self.radius**2
 
 
 @dataclass(frozen=True)
@@ -99,7 +99,7 @@ class Granulator(Settings):
     def bed_solid_volume(self) -> float:
         """Solid volume of the settled bed (m3): bed height x bowl floor area x packing fraction.
         The DEM bed of every operating point and the PBM's population hold this volume."""
-        return self.bed.height * math.pi / 4 * self.bowl.diameter ** 2 * self.bed.packing_fraction
+        return self.bed.height * math.pi / 4 * self.bowl.diameter**2 * self.bed.packing_fraction
 
 
 @dataclass(frozen=True)

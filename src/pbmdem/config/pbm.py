@@ -109,7 +109,7 @@ class Solver(Settings):
     max_wall_time: float
 
     @classmethod
-    def defaults(cls) -> "Solver":
+    def defaults(cls) -> Solver:
         """The schema's defaults of `pbm.solver` (the same as the config's when it sets none)."""
         from .schema import section_defaults
 
@@ -133,12 +133,12 @@ class Pbm(Settings):
     output: OutputSettings
 
     @classmethod
-    def defaults(cls) -> "Pbm":
+    def defaults(cls) -> Pbm:
         """The schema's defaults of the whole `pbm:` section (grid.min_diameter stays null)."""
         return cls.from_section({})
 
     @classmethod
-    def from_section(cls, section: dict) -> "Pbm":
+    def from_section(cls, section: dict) -> Pbm:
         """Settings from a (partial) `pbm:` section, validated and completed with the schema's
         defaults (for library use without a whole configuration; grid.min_diameter stays null
         unless given)."""

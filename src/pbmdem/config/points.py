@@ -32,7 +32,7 @@ class SizeDistribution(Settings):
     @property
     def mean_particle_volume(self) -> float:
         """Number-weighted mean particle volume sum_k f_k pi d_k^3 / 6 (m3)."""
-        return math.fsum(f * math.pi / 6.0 * d ** 3 for d, f in zip(self.diameters, self.number_fractions))
+        return math.fsum(f * math.pi / 6.0 * d**3 for d, f in zip(self.diameters, self.number_fractions))
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ def schema_dir() -> Path:
     return Path(str(resources.files("pbmdem") / "data" / "schemas"))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _schemas() -> dict:
     import yaml
 
@@ -43,8 +43,12 @@ def _validator():
     # the referenced section schemas without their own "$schema": a subschema naming its dialect
     # would be checked by jsonschema's plain validator of that dialect, which fills no defaults
     registry = Registry().with_resources(
-        (name, Resource.from_contents({k: v for k, v in s.items() if k != "$schema"},
-                                      default_specification=DRAFT202012)) for name, s in schemas.items())
+        (
+            name,
+            Resource.from_contents({k: v for k, v in s.items() if k != "$schema"}, default_specification=DRAFT202012),
+        )
+        for name, s in schemas.items()
+    )
     base = jsonschema.Draft202012Validator
     check_properties = base.VALIDATORS["properties"]
 
@@ -71,8 +75,10 @@ def non_finite_values(obj, prefix: str = "") -> list[str]:
         for i, v in enumerate(obj):
             out += non_finite_values(v, f"{prefix}[{i}]")
     elif isinstance(obj, float) and not math.isfinite(obj):
-        out.append(f"config key {prefix or '(top level)'} = {obj!r}: not a finite number (allowed: finite numbers "
-                   "within the key's range)")
+        out.append(
+            f"config key {prefix or '(top level)'} = {obj!r}: not a finite number (allowed: finite numbers "
+            "within the key's range)"
+        )
     return out
 
 
@@ -111,8 +117,7 @@ def complete(cfg: dict) -> dict:
     errors = sorted(_validator().iter_errors(out), key=lambda e: list(map(str, e.absolute_path)))
     problems = non_finite_values(cfg)
     # a non-finite value is reported once, by the check above
-    problems += [_describe(e) for e in errors
-                 if not (isinstance(e.instance, float) and not math.isfinite(e.instance))]
+    problems += [_describe(e) for e in errors if not (isinstance(e.instance, float) and not math.isfinite(e.instance))]
     if problems:
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
     return out

@@ -97,7 +97,7 @@ class Config:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_mapping(cls, cfg: dict, source: str | Path | None = None) -> "Config":
+    def from_mapping(cls, cfg: dict, source: str | Path | None = None) -> Config:
         """Validate `cfg` (a parsed config file), fill in the defaults and build the Config;
         ConfigError listing every problem (prefixed with the file, if `source` is given)."""
         from .checks import check
@@ -114,14 +114,17 @@ class Config:
         return config
 
     @classmethod
-    def _build(cls, full: dict) -> "Config":
-        dists = {name: SizeDistribution.from_dict(d, f"size_distributions.{name}")
-                 for name, d in full["size_distributions"].items()}
+    def _build(cls, full: dict) -> Config:
+        dists = {
+            name: SizeDistribution.from_dict(d, f"size_distributions.{name}")
+            for name, d in full["size_distributions"].items()
+        }
         dem_section = full["dem"]
         bed = Bed(height=float(dem_section["bed_height"]), packing_fraction=float(dem_section["packing_fraction"]))
         g = full["granulator"]
-        granulator = Granulator(Bowl.from_dict(g["bowl"], "granulator.bowl"),
-                                Impeller.from_dict(g["impeller"], "granulator.impeller"), bed)
+        granulator = Granulator(
+            Bowl.from_dict(g["bowl"], "granulator.bowl"), Impeller.from_dict(g["impeller"], "granulator.impeller"), bed
+        )
         run_keys = {k: v for k, v in dem_section.items() if k not in (*BED_KEYS, *EXECUTION_KEYS, REPLICATES_KEY)}
         grid = OperatingGrid.from_dict(full["grid"], "grid")
         # defaults that depend on other sections
@@ -151,8 +154,9 @@ class Config:
     # ------------------------------------------------------------------ stage settings
     def distribution(self, name: str) -> SizeDistribution:
         if name not in self.size_distributions:
-            raise ConfigError(f"size distribution {name!r} is not defined; defined names: "
-                              f"{sorted(self.size_distributions)}")
+            raise ConfigError(
+                f"size distribution {name!r} is not defined; defined names: {sorted(self.size_distributions)}"
+            )
         return self.size_distributions[name]
 
     def dem_point(self, distribution: str) -> DemPoint:
@@ -165,13 +169,19 @@ class Config:
         return SurrogateTraining(self.surrogate, self.granulator)
 
     def sample_rule(self) -> SampleRule:
-        return SampleRule(self.validation.max_classes, self.validation.min_particles_per_class,
-                          self.dem.max_particles)
+        return SampleRule(self.validation.max_classes, self.validation.min_particles_per_class, self.dem.max_particles)
 
     def coupled_loop(self) -> CoupledLoop:
         v = self.validation
-        return CoupledLoop(self.pbm_batch(v.distribution), self.granulator, self.material, self.dem,
-                           v.coupling_intervals, v.dem_sampling_time, self.sample_rule())
+        return CoupledLoop(
+            self.pbm_batch(v.distribution),
+            self.granulator,
+            self.material,
+            self.dem,
+            v.coupling_intervals,
+            v.dem_sampling_time,
+            self.sample_rule(),
+        )
 
     # ------------------------------------------------------------------ provenance
     def to_dict(self) -> dict:

@@ -33,7 +33,7 @@ class Surrogate(Settings):
     physics_offset: str
 
     @classmethod
-    def from_section(cls, section: dict) -> "Surrogate":
+    def from_section(cls, section: dict) -> Surrogate:
         """Settings from a (partial) `surrogate:` section, validated and completed with the
         schema's defaults (for library use without a whole configuration)."""
         from .errors import ConfigError
@@ -48,8 +48,10 @@ class Surrogate(Settings):
     def problems(self) -> list[str]:
         """What the schema cannot check: one seed per ensemble member."""
         if self.seeds is not None and len(self.seeds) != self.ensemble_size:
-            return [f"surrogate.seeds = {list(self.seeds)}: {len(self.seeds)} seeds but ensemble_size = "
-                    f"{self.ensemble_size}; one seed per ensemble member (or seeds: null)"]
+            return [
+                f"surrogate.seeds = {list(self.seeds)}: {len(self.seeds)} seeds but ensemble_size = "
+                f"{self.ensemble_size}; one seed per ensemble member (or seeds: null)"
+            ]
         return []
 
     @property

@@ -19,7 +19,7 @@ import typing
 from .errors import ConfigError
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _hints(cls) -> dict:
     return typing.get_type_hints(cls)
 
@@ -69,8 +69,10 @@ def build(cls, data, key: str):
         if not f.init:
             continue
         if f.name not in data:
-            raise ConfigError(f"config key {key}.{f.name} is missing (the configuration was not completed by "
-                              "pbmdem.config.load_config / validate)")
+            raise ConfigError(
+                f"config key {key}.{f.name} is missing (the configuration was not completed by "
+                "pbmdem.config.load_config / validate)"
+            )
         kwargs[f.name] = _convert(hints[f.name], data[f.name], f"{key}.{f.name}")
     return cls(**kwargs)
 

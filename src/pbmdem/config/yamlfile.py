@@ -24,8 +24,12 @@ class UniqueKeyLoader(yaml.SafeLoader):
             line = key_node.start_mark.line + 1
             if first is not None:
                 raise yaml.constructor.ConstructorError(
-                    None, None, f"duplicate key {key!r} on line {line} (first given on line {first}); "
-                    "each key may appear only once in a mapping", key_node.start_mark)
+                    None,
+                    None,
+                    f"duplicate key {key!r} on line {line} (first given on line {first}); "
+                    "each key may appear only once in a mapping",
+                    key_node.start_mark,
+                )
             seen[key] = line
         return super().construct_mapping(node, deep=deep)
 

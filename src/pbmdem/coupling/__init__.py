@@ -15,5 +15,14 @@ from .loop import CouplingError, run_loop
 from .methods import calibrated_frequency, pbm_ann, pbm_ann_members, pbm_constant, pbm_dem
 from .sample import DemSample, representative_sample
 
-__all__ = ["CouplingError", "run_loop", "pbm_dem", "pbm_ann", "pbm_ann_members", "pbm_constant", "calibrated_frequency",
-           "DemSample", "representative_sample"]
+__all__ = [
+    "CouplingError",
+    "run_loop",
+    "pbm_dem",
+    "pbm_ann",
+    "pbm_ann_members",
+    "pbm_constant",
+    "calibrated_frequency",
+    "DemSample",
+    "representative_sample",
+]

@@ -45,8 +45,9 @@ class ClassFrequencySource:
             self._table = None
         else:
             # the TableFrequency of class_table(diameters, matrix), built without its DataFrames
-            self._table = TableFrequency.from_matrix(self.diameters, self.matrix, extrapolation="clamp",
-                                                     column="frequency_per_pair")
+            self._table = TableFrequency.from_matrix(
+                self.diameters, self.matrix, extrapolation="clamp", column="frequency_per_pair"
+            )
 
     def __repr__(self) -> str:
         return f"ClassFrequencySource({self.label}, classes={len(self.diameters)})"

@@ -55,16 +55,33 @@ def save(folder: Path, result, sample: DemSample, matrix: np.ndarray, info: dict
     state = result.state
     feed = {}
     if state.feed is not None:
-        feed = {"feed_volumes": state.feed.volumes, "feed_number": state.feed.number,
-                "feed_liquid": state.feed.liquid, "feed_gas": state.feed.gas}
+        feed = {
+            "feed_volumes": state.feed.volumes,
+            "feed_number": state.feed.number,
+            "feed_liquid": state.feed.liquid,
+            "feed_gas": state.feed.gas,
+        }
     with atomic_path(folder / "records.npz") as tmp:
         with open(tmp, "wb") as fh:
-            np.savez(fh, times=result.times, number=result.number, liquid=result.liquid, gas=result.gas,
-                     liquid_added=result.liquid_added, refused=result.refused_volume, steps=result.steps,
-                     state_t=state.t, state_number=state.number, state_liquid=state.liquid,
-                     state_gas=state.gas, state_refused=state.refused_volume,
-                     state_liquid_added=state.liquid_added, state_steps=state.steps,
-                     class_matrix=matrix, **feed)
+            np.savez(
+                fh,
+                times=result.times,
+                number=result.number,
+                liquid=result.liquid,
+                gas=result.gas,
+                liquid_added=result.liquid_added,
+                refused=result.refused_volume,
+                steps=result.steps,
+                state_t=state.t,
+                state_number=state.number,
+                state_liquid=state.liquid,
+                state_gas=state.gas,
+                state_refused=state.refused_volume,
+                state_liquid_added=state.liquid_added,
+                state_steps=state.steps,
+                class_matrix=matrix,
+                **feed,
+            )
     # interval.json is written last: its presence marks the interval as finished
     write_json(folder / "interval.json", {**info, "sample": asdict(sample)})
 
@@ -79,7 +96,15 @@ def load(folder: Path, grid):
     feed = None
     if "feed_volumes" in data:
         feed = FeedGranules(data["feed_volumes"], data["feed_number"], data["feed_liquid"], data["feed_gas"])
-    state = State(float(data["state_t"]), data["state_number"], data["state_liquid"], data["state_gas"],
-                  float(data["state_refused"]), float(data["state_liquid_added"]), int(data["state_steps"]), feed)
+    state = State(
+        float(data["state_t"]),
+        data["state_number"],
+        data["state_liquid"],
+        data["state_gas"],
+        float(data["state_refused"]),
+        float(data["state_liquid_added"]),
+        int(data["state_steps"]),
+        feed,
+    )
     info = read_json(folder / "interval.json", "coupling interval record")
     return Result(grid, records, state, {"wall_time_s": info.get("pbm_wall_time_s", 0.0)}), info, data["class_matrix"]

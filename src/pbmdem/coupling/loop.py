@@ -97,8 +97,10 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
         try:
             rates, extra = provider(sample, folder, k)
         except Exception as exc:
-            raise CouplingError(f"{provider.name} at rpm {rpm:g}: interval {k} ({t0:g}-{t1:g} s) failed: {exc}. "
-                                f"Intervals 0..{k - 1} are kept in {outdir}; rerun to resume.") from exc
+            raise CouplingError(
+                f"{provider.name} at rpm {rpm:g}: interval {k} ({t0:g}-{t1:g} s) failed: {exc}. "
+                f"Intervals 0..{k - 1} are kept in {outdir}; rerun to resume."
+            ) from exc
         provider_wall = time.perf_counter() - t_provider
         model.kernel.set_source(ClassFrequencySource(sample.diameters, rates, f"{provider.name} interval {k}"))
         matrix = rates.frequency if isinstance(rates, EncounterRates) else np.asarray(rates, float)
@@ -106,23 +108,44 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
         result = model.run(t0, t1, state, output_times=output_times(pbm, t0, t1))
         pbm_wall = time.perf_counter() - t_pbm
         info = {
-            "interval": k, "t_start": t0, "t_end": t1, "rpm": rpm, "method": provider.name,
-            "classes": len(sample.counts), "class_diameters": json.dumps(sample.diameters),
-            "class_counts": json.dumps(sample.counts), "sample_particles": sample.n_particles,
+            "interval": k,
+            "t_start": t0,
+            "t_end": t1,
+            "rpm": rpm,
+            "method": provider.name,
+            "classes": len(sample.counts),
+            "class_diameters": json.dumps(sample.diameters),
+            "class_counts": json.dumps(sample.counts),
+            "sample_particles": sample.n_particles,
             "class_frequencies": json.dumps(pairs_of(matrix).tolist()),
             "mean_frequency_per_pair": pair_weighted_mean(matrix, sample.counts),
-            "provider_wall_time_s": provider_wall, "pbm_wall_time_s": pbm_wall, **extra,
+            "provider_wall_time_s": provider_wall,
+            "pbm_wall_time_s": pbm_wall,
+            **extra,
         }
         intervals.save(folder, result, sample, matrix, info)
-        log.info("%s at rpm %g: interval %d of %d (%.4g-%.4g s) done: %s wall time %.2f s, PBM wall time %.3f s, "
-                 "%d surrogate out-of-domain warning(s)", provider.name, rpm, k + 1, n_intervals, t0, t1,
-                 "DEM" if provider.name == "pbm_dem" else "provider", provider_wall, pbm_wall,
-                 int(extra.get("out_of_domain_count", 0)))
+        log.info(
+            "%s at rpm %g: interval %d of %d (%.4g-%.4g s) done: %s wall time %.2f s, PBM wall time %.3f s, "
+            "%d surrogate out-of-domain warning(s)",
+            provider.name,
+            rpm,
+            k + 1,
+            n_intervals,
+            t0,
+            t1,
+            "DEM" if provider.name == "pbm_dem" else "provider",
+            provider_wall,
+            pbm_wall,
+            int(extra.get("out_of_domain_count", 0)),
+        )
         results.append(result)
         rows.append(info)
         state = result.state
     totals = {
-        "method": provider.name, "rpm": rpm, "distribution": loop.batch.distribution, "intervals": n_intervals,
+        "method": provider.name,
+        "rpm": rpm,
+        "distribution": loop.batch.distribution,
+        "intervals": n_intervals,
         "provider_wall_time_s": float(sum(r["provider_wall_time_s"] for r in rows)),
         "pbm_wall_time_s": float(sum(r["pbm_wall_time_s"] for r in rows)),
     }
@@ -131,9 +154,15 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
         totals["out_of_domain_count"] = int(sum(per_interval))
         totals["out_of_domain_intervals"] = int(sum(c > 0 for c in per_interval))
         if totals["out_of_domain_count"]:
-            log.warning("%s at rpm %g: the surrogate was outside its training domain in %d of %d intervals "
-                        "(%d warnings; see intervals.csv)", provider.name, rpm, totals["out_of_domain_intervals"],
-                        len(rows), totals["out_of_domain_count"])
+            log.warning(
+                "%s at rpm %g: the surrogate was outside its training domain in %d of %d intervals "
+                "(%d warnings; see intervals.csv)",
+                provider.name,
+                rpm,
+                totals["out_of_domain_intervals"],
+                len(rows),
+                totals["out_of_domain_count"],
+            )
     totals["total_wall_time_s"] = totals["provider_wall_time_s"] + totals["pbm_wall_time_s"]
     full = Result.concat(results)
     write_outputs(outdir, full, rows, totals)

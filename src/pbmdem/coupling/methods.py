@@ -26,8 +26,9 @@ def pbm_dem(loop: CoupledLoop, rpm: float, outdir: str | Path, execution: DemExe
     return run_loop(loop, DemProvider(loop, rpm, execution, replicate), rpm, outdir)
 
 
-def pbm_ann(loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: str | Path,
-            member: int | None = None) -> LoopOutcome:
+def pbm_ann(
+    loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: str | Path, member: int | None = None
+) -> LoopOutcome:
     """PBM-ANN at `rpm`: the surrogate in `model_path` (its ensemble mean, or member `member`
     alone) gives the frequencies of every interval."""
     return run_loop(loop, SurrogateProvider(model_path, rpm, member), rpm, outdir)
@@ -57,15 +58,34 @@ def pbm_ann_members(loop: CoupledLoop, model_path: str | Path, rpm: float):
                 outcome = pbm_ann(loop, model_path, rpm, Path(tmp) / f"member{k}", member=k)
             except (PBMError, CouplingError) as exc:
                 logging.getLogger(__name__).warning("PBM-ANN at rpm %g with ensemble member %d failed: %s", rpm, k, exc)
-                frames.append(pd.DataFrame({"member": [k], "time": [np.nan], "failed": [str(exc)],
-                                            "wall_time_s": [time.perf_counter() - t0]}))
+                frames.append(
+                    pd.DataFrame(
+                        {
+                            "member": [k],
+                            "time": [np.nan],
+                            "failed": [str(exc)],
+                            "wall_time_s": [time.perf_counter() - t0],
+                        }
+                    )
+                )
                 continue
             s = outcome.result.summary()
-            frames.append(pd.DataFrame({
-                "member": k, "time": s.time, "d10": s.d10, "d50": s.d50, "d90": s.d90,
-                "mean_liquid_content": s.mean_liquid_content, "mean_porosity": s.mean_porosity,
-                "out_of_domain_intervals": outcome.totals.get("out_of_domain_intervals", 0), "failed": "",
-                "wall_time_s": time.perf_counter() - t0}))
+            frames.append(
+                pd.DataFrame(
+                    {
+                        "member": k,
+                        "time": s.time,
+                        "d10": s.d10,
+                        "d50": s.d50,
+                        "d90": s.d90,
+                        "mean_liquid_content": s.mean_liquid_content,
+                        "mean_porosity": s.mean_porosity,
+                        "out_of_domain_intervals": outcome.totals.get("out_of_domain_intervals", 0),
+                        "failed": "",
+                        "wall_time_s": time.perf_counter() - t0,
+                    }
+                )
+            )
     return pd.concat(frames, ignore_index=True)
 
 
@@ -100,9 +120,17 @@ def pbm_constant(loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: 
     t0 = time.perf_counter()
     result = run_batch(loop.batch, ConstantFrequency(frequency), rpm)
     wall = time.perf_counter() - t0
-    totals = {"method": "pbm_constant", "rpm": rpm, "distribution": loop.batch.distribution, "frequency": frequency,
-              "total_wall_time_s": wall, "pbm_wall_time_s": wall, "provider_wall_time_s": 0.0,
-              "out_of_domain": "; ".join(sorted(set(found))), "out_of_domain_count": len(found)}
+    totals = {
+        "method": "pbm_constant",
+        "rpm": rpm,
+        "distribution": loop.batch.distribution,
+        "frequency": frequency,
+        "total_wall_time_s": wall,
+        "pbm_wall_time_s": wall,
+        "provider_wall_time_s": 0.0,
+        "out_of_domain": "; ".join(sorted(set(found))),
+        "out_of_domain_count": len(found),
+    }
     write_outputs(outdir, result, [], totals)
     return LoopOutcome(result, [], totals)
 

@@ -45,17 +45,24 @@ class DemProvider:
         plan = plan_point(point, self.rpm, replicate=self.replicate, counts=sample.counts)
         # an interval without interval.json is unfinished, whatever its DEM folder holds
         summary = run_point(point, plan, interval_dir / "dem", self.execution, force=True)
-        table = read_table(interval_dir / "dem" / "collisions.csv", "collision table of a coupling interval",
-                           columns=("class_i", "class_j", "encounter_frequency_per_pair"),
-                           finite=("encounter_frequency_per_pair",))
-        velocities = read_table(interval_dir / "dem" / "impact_velocity.csv",
-                                "impact-velocity table of a coupling interval",
-                                columns=("class_i", "class_j", "v_lo", "encounters"), finite=("encounters",))
+        table = read_table(
+            interval_dir / "dem" / "collisions.csv",
+            "collision table of a coupling interval",
+            columns=("class_i", "class_j", "encounter_frequency_per_pair"),
+            finite=("encounter_frequency_per_pair",),
+        )
+        velocities = read_table(
+            interval_dir / "dem" / "impact_velocity.csv",
+            "impact-velocity table of a coupling interval",
+            columns=("class_i", "class_j", "v_lo", "encounters"),
+            finite=("encounters",),
+        )
         k = len(sample.diameters)
         rates = EncounterRates(matrix_from_table(table, k), velocity_fractions_from_table(velocities, k))
         return rates, {
             "dem_wall_time_s": summary["liggghts_wall_time_s"] + summary["parse_time_s"],
-            "dem_particles": summary["n_particles"], "dem_collisions": summary["total_collisions"],
+            "dem_particles": summary["n_particles"],
+            "dem_collisions": summary["total_collisions"],
             "dem_encounters": summary["total_encounters"],
         }
 
@@ -78,8 +85,12 @@ class SurrogateProvider:
         self.velocity_resolved = bool(self.model.has_velocity_model())
 
     def fingerprint(self) -> dict:
-        return {"name": self.name, "rpm": self.rpm, "member": self.member,
-                "model_sha256": hashlib.sha256(self.model_path.read_bytes()).hexdigest()}
+        return {
+            "name": self.name,
+            "rpm": self.rpm,
+            "member": self.member,
+            "model_sha256": hashlib.sha256(self.model_path.read_bytes()).hexdigest(),
+        }
 
     def __call__(self, sample: DemSample, interval_dir: Path, index: int):
         from pbmdem.surrogate.domain import out_of_domain_recorded
@@ -91,5 +102,8 @@ class SurrogateProvider:
                 rates = self.model.encounters(d, n, self.rpm)
             else:
                 rates = np.asarray(self.model.frequency_matrix(d, n, self.rpm), float)
-        return rates, {"ann_wall_time_s": time.perf_counter() - t0,
-                       "out_of_domain": "; ".join(sorted(set(found))), "out_of_domain_count": len(found)}
+        return rates, {
+            "ann_wall_time_s": time.perf_counter() - t0,
+            "out_of_domain": "; ".join(sorted(set(found))),
+            "out_of_domain_count": len(found),
+        }

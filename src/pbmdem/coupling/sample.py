@@ -59,12 +59,15 @@ def representative_sample(volumes, numbers, rule: SampleRule) -> DemSample:
         raise ValueError(f"volumes {x.shape} and numbers {n.shape} must be 1-D of the same length")
     max_classes, min_per_class = rule.max_classes, rule.min_particles_per_class
     if max_classes < 1 or min_per_class < 1:
-        raise ValueError(f"max_classes = {max_classes}, min_particles_per_class = {min_per_class}: "
-                         "both must be at least 1")
+        raise ValueError(
+            f"max_classes = {max_classes}, min_particles_per_class = {min_per_class}: both must be at least 1"
+        )
     total = n.sum()
     if not total >= min_per_class:
-        raise ValueError(f"the PBM holds {total:.3g} particles, fewer than min_particles_per_class = "
-                         f"{min_per_class}: no representative DEM bed can be formed")
+        raise ValueError(
+            f"the PBM holds {total:.3g} particles, fewer than min_particles_per_class = "
+            f"{min_per_class}: no representative DEM bed can be formed"
+        )
     groups: list[list[int]] = []
     current: list[int] = []
     acc = 0.0
@@ -86,14 +89,20 @@ def representative_sample(volumes, numbers, rule: SampleRule) -> DemSample:
     while len(groups) > max_classes:
         neighbours = [count(a) + count(b) for a, b in zip(groups, groups[1:])]
         j = int(np.argmin(neighbours))
-        groups[j: j + 2] = [groups[j] + groups[j + 1]]
-    diam = [round(float((6.0 / math.pi * float((n[g] * x[g]).sum() / n[g].sum())) ** (1.0 / 3.0))
-                  / DIAMETER_RESOLUTION) * DIAMETER_RESOLUTION for g in groups]
+        groups[j : j + 2] = [groups[j] + groups[j + 1]]
+    diam = [
+        round(float((6.0 / math.pi * float((n[g] * x[g]).sum() / n[g].sum())) ** (1.0 / 3.0)) / DIAMETER_RESOLUTION)
+        * DIAMETER_RESOLUTION
+        for g in groups
+    ]
     counts = np.array([count(g) for g in groups])
     scale = 1.0
     if counts.sum() > rule.max_particles:
         scale = rule.max_particles / counts.sum()
-        warnings.warn(f"representative DEM sample of {counts.sum():.0f} particles capped at dem.max_particles = "
-                      f"{rule.max_particles}: the DEM bed is scaled down by {scale:.3f}", stacklevel=2)
+        warnings.warn(
+            f"representative DEM sample of {counts.sum():.0f} particles capped at dem.max_particles = "
+            f"{rule.max_particles}: the DEM bed is scaled down by {scale:.3f}",
+            stacklevel=2,
+        )
     rounded = np.maximum(1, np.round(counts * scale)).astype(int)
     return DemSample(diameters=diam, counts=rounded.tolist(), bins=groups, scaled_down=scale)

@@ -18,8 +18,9 @@ from .methods import pbm_ann
 log = logging.getLogger(__name__)
 
 
-def rpm_sweep(loop: CoupledLoop, sweep: Sweep, model_path: str | Path, table_path: str | Path,
-              plot_path: str | Path) -> pd.DataFrame:
+def rpm_sweep(
+    loop: CoupledLoop, sweep: Sweep, model_path: str | Path, table_path: str | Path, plot_path: str | Path
+) -> pd.DataFrame:
     """PBM-ANN at every speed of `sweep`: final d10/d50/d90 and mean diameters (table), and the
     d50(t) curves and final sizes against speed (plot)."""
     speeds = sweep.speeds()
@@ -33,15 +34,31 @@ def rpm_sweep(loop: CoupledLoop, sweep: Sweep, model_path: str | Path, table_pat
             summary = pd.read_csv(folder / "summary.csv")
             ood = pd.read_csv(folder / "intervals.csv").get("out_of_domain_count", pd.Series([0]))
             last = summary.iloc[-1]
-            rows.append({"rpm": float(rpm), "d10": last.d10, "d50": last.d50, "d90": last.d90,
-                         "number_mean_diameter": last.number_mean_diameter,
-                         "mass_mean_diameter": last.mass_mean_diameter, "total_number": last.total_number,
-                         "wall_time_s": wall, "out_of_domain_intervals": int((ood.fillna(0) > 0).sum()),
-                         "out_of_domain_count": int(ood.fillna(0).sum())})
+            rows.append(
+                {
+                    "rpm": float(rpm),
+                    "d10": last.d10,
+                    "d50": last.d50,
+                    "d90": last.d90,
+                    "number_mean_diameter": last.number_mean_diameter,
+                    "mass_mean_diameter": last.mass_mean_diameter,
+                    "total_number": last.total_number,
+                    "wall_time_s": wall,
+                    "out_of_domain_intervals": int((ood.fillna(0) > 0).sum()),
+                    "out_of_domain_count": int(ood.fillna(0).sum()),
+                }
+            )
             curves.append((rpm, summary.time.to_numpy(), summary.d50.to_numpy()))
-            log.info("rpm sweep: %g rpm done (%d of %d) in %.2f s; final d50 %.4g m; surrogate out of its "
-                     "training domain in %d interval(s)", rpm, len(rows), len(speeds), wall, last.d50,
-                     rows[-1]["out_of_domain_intervals"])
+            log.info(
+                "rpm sweep: %g rpm done (%d of %d) in %.2f s; final d50 %.4g m; surrogate out of its "
+                "training domain in %d interval(s)",
+                rpm,
+                len(rows),
+                len(speeds),
+                wall,
+                last.d50,
+                rows[-1]["out_of_domain_intervals"],
+            )
     table = pd.DataFrame(rows)
     write_csv(table_path, table)
     plot_sweep(table, curves, plot_path)

@@ -114,8 +114,12 @@ def _tally(group: np.ndarray, events, shape: tuple[int, ...]) -> Tally:
     g, v = group[events.encounter], events.velocity[events.encounter]
     enc = np.bincount(g, minlength=size)
     hist = np.bincount(g * N_VELOCITY_BINS + velocity_bin(v), minlength=size * N_VELOCITY_BINS)
-    return Tally(raw.reshape(shape), enc.reshape(shape), hist.reshape(*shape, N_VELOCITY_BINS),
-                 _median_by(g, v, size).reshape(shape))
+    return Tally(
+        raw.reshape(shape),
+        enc.reshape(shape),
+        hist.reshape(*shape, N_VELOCITY_BINS),
+        _median_by(g, v, size).reshape(shape),
+    )
 
 
 def pair_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, meta: dict) -> pd.DataFrame:
@@ -128,15 +132,28 @@ def pair_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, met
     with np.errstate(divide="ignore", invalid="ignore"):
         per_pair = np.where(pairs > 0, coll / (pairs * sampling_time), np.nan)
         enc_per_pair = np.where(pairs > 0, enc / (pairs * sampling_time), np.nan)
-    return pd.DataFrame({
-        "point_id": meta["point_id"], "rpm": meta["rpm"], "distribution": meta["distribution"],
-        "replicate": meta["replicate"],
-        "class_i": i, "class_j": j, "d_i": d[i], "d_j": d[j], "n_i": n[i], "n_j": n[j],
-        "n_total": int(n.sum()), "collisions": coll, "sampling_time": sampling_time,
-        "frequency": coll / sampling_time, "frequency_per_pair": per_pair,
-        "encounters": enc, "encounter_frequency_per_pair": enc_per_pair,
-        "impact_velocity_median": tally.median_velocity[i, j],
-    })
+    return pd.DataFrame(
+        {
+            "point_id": meta["point_id"],
+            "rpm": meta["rpm"],
+            "distribution": meta["distribution"],
+            "replicate": meta["replicate"],
+            "class_i": i,
+            "class_j": j,
+            "d_i": d[i],
+            "d_j": d[j],
+            "n_i": n[i],
+            "n_j": n[j],
+            "n_total": int(n.sum()),
+            "collisions": coll,
+            "sampling_time": sampling_time,
+            "frequency": coll / sampling_time,
+            "frequency_per_pair": per_pair,
+            "encounters": enc,
+            "encounter_frequency_per_pair": enc_per_pair,
+            "impact_velocity_median": tally.median_velocity[i, j],
+        }
+    )
 
 
 def velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
@@ -146,31 +163,47 @@ def velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
     k = tally.raw.shape[0]
     i, j = np.triu_indices(k)
     b = np.arange(N_VELOCITY_BINS)
-    return pd.DataFrame({
-        "point_id": meta["point_id"], "rpm": meta["rpm"], "distribution": meta["distribution"],
-        "replicate": meta["replicate"],
-        "class_i": np.repeat(i, N_VELOCITY_BINS), "class_j": np.repeat(j, N_VELOCITY_BINS),
-        "v_lo": np.tile(VELOCITY_EDGES[:-1], len(i)), "v_hi": np.tile(VELOCITY_EDGES[1:], len(i)),
-        "encounters": tally.histogram[i, j][:, b].ravel(),
-    })
+    return pd.DataFrame(
+        {
+            "point_id": meta["point_id"],
+            "rpm": meta["rpm"],
+            "distribution": meta["distribution"],
+            "replicate": meta["replicate"],
+            "class_i": np.repeat(i, N_VELOCITY_BINS),
+            "class_j": np.repeat(j, N_VELOCITY_BINS),
+            "v_lo": np.tile(VELOCITY_EDGES[:-1], len(i)),
+            "v_hi": np.tile(VELOCITY_EDGES[1:], len(i)),
+            "encounters": tally.histogram[i, j][:, b].ravel(),
+        }
+    )
 
 
 def wall_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, meta: dict) -> pd.DataFrame:
     rows = []
     for w, wall in enumerate(WALL_NAMES):
         for c in range(len(n)):
-            rows.append({
-                "point_id": meta["point_id"], "rpm": meta["rpm"], "distribution": meta["distribution"],
-                "replicate": meta["replicate"],
-                "class_i": c, "d_i": float(diameters[c]), "n_i": int(n[c]), "n_total": int(n.sum()),
-                "wall": wall, "collisions": int(tally.raw[w, c]), "sampling_time": sampling_time,
-                "frequency": tally.raw[w, c] / sampling_time,
-                "frequency_per_particle": tally.raw[w, c] / (n[c] * sampling_time) if n[c] else np.nan,
-                "encounters": int(tally.encounters[w, c]),
-                "encounter_frequency_per_particle":
-                    tally.encounters[w, c] / (n[c] * sampling_time) if n[c] else np.nan,
-                "impact_velocity_median": tally.median_velocity[w, c],
-            })
+            rows.append(
+                {
+                    "point_id": meta["point_id"],
+                    "rpm": meta["rpm"],
+                    "distribution": meta["distribution"],
+                    "replicate": meta["replicate"],
+                    "class_i": c,
+                    "d_i": float(diameters[c]),
+                    "n_i": int(n[c]),
+                    "n_total": int(n.sum()),
+                    "wall": wall,
+                    "collisions": int(tally.raw[w, c]),
+                    "sampling_time": sampling_time,
+                    "frequency": tally.raw[w, c] / sampling_time,
+                    "frequency_per_particle": tally.raw[w, c] / (n[c] * sampling_time) if n[c] else np.nan,
+                    "encounters": int(tally.encounters[w, c]),
+                    "encounter_frequency_per_particle": tally.encounters[w, c] / (n[c] * sampling_time)
+                    if n[c]
+                    else np.nan,
+                    "impact_velocity_median": tally.median_velocity[w, c],
+                }
+            )
     return pd.DataFrame(rows)
 
 
@@ -223,8 +256,16 @@ class RunAnalysis:
         if (ca < 0).any() or (cb < 0).any():
             raise DumpFormatError(f"{self.plan.point_id}: a contact names a particle id missing from the class map")
         ev = self._encounters.pair_events(
-            self.traj, s.first, s.second, self.radius_of_class[ca], self.radius_of_class[cb], s.step, s.prev_step,
-            self.plan.encounter_gap_fraction, stride=stride)
+            self.traj,
+            s.first,
+            s.second,
+            self.radius_of_class[ca],
+            self.radius_of_class[cb],
+            s.step,
+            s.prev_step,
+            self.plan.encounter_gap_fraction,
+            stride=stride,
+        )
         i, j = np.minimum(ca, cb), np.maximum(ca, cb)
         return ev, i * self.n_classes + j
 
@@ -232,18 +273,34 @@ class RunAnalysis:
         s = window_starts(self.walls, self.window_start, wall=True, stride=stride)
         c = self.class_of[s.second]
         if (c < 0).any():
-            raise DumpFormatError(f"{self.plan.point_id}: a wall contact names a particle id missing from the class map")
+            raise DumpFormatError(
+                f"{self.plan.point_id}: a wall contact names a particle id missing from the class map"
+            )
         ev = self._encounters.wall_events(
-            self.traj, s.first, s.second, self.radius_of_class[c], s.step, s.prev_step,
-            self.plan.encounter_gap_fraction, self.bowl, self.impeller, self.angle_of_step, self.plan.omega,
-            stride=stride)
+            self.traj,
+            s.first,
+            s.second,
+            self.radius_of_class[c],
+            s.step,
+            s.prev_step,
+            self.plan.encounter_gap_fraction,
+            self.bowl,
+            self.impeller,
+            self.angle_of_step,
+            self.plan.omega,
+            stride=stride,
+        )
         return ev, s.first * self.n_classes + c
 
     def tables(self) -> RunTables:
         K = self.n_classes
         plan = self.plan
-        meta = {"point_id": plan.point_id, "rpm": plan.rpm, "distribution": plan.distribution,
-                "replicate": plan.replicate}
+        meta = {
+            "point_id": plan.point_id,
+            "rpm": plan.rpm,
+            "distribution": plan.distribution,
+            "replicate": plan.replicate,
+        }
         ev, group = self.pair_events()
         pair_tally = _tally(group, ev, (K, K))
         wev, wgroup = self.wall_events()
@@ -252,15 +309,20 @@ class RunAnalysis:
         raw, raw2 = int(pair_tally.raw.sum()), int(np.bincount(group2, minlength=K * K).sum())
         enc, enc2 = int(ev.encounter.sum()), int(ev2.encounter.sum())
         mid = self.window_start + 0.5 * self.sampling_time / plan.timestep
-        history = {f"encounters_history_{f:g}": int((ev.encounter & (ev.lag_steps <= f * plan.history_steps)).sum())
-                   for f in (0.125, 0.25, 0.5, 1.0)}
+        history = {
+            f"encounters_history_{f:g}": int((ev.encounter & (ev.lag_steps <= f * plan.history_steps)).sum())
+            for f in (0.125, 0.25, 0.5, 1.0)
+        }
         diagnostics = {
-            "snapshots": int(self.pairs.frames), "position_snapshots": int(len(self.traj.steps)),
+            "snapshots": int(self.pairs.frames),
+            "position_snapshots": int(len(self.traj.steps)),
             "contact_rows": int(len(self.pairs.data)),
             "mean_contacts_per_snapshot": float(len(self.pairs.data) / max(self.pairs.frames, 1)),
-            "collisions_every_snapshot": raw, "collisions_every_second_snapshot": raw2,
+            "collisions_every_snapshot": raw,
+            "collisions_every_second_snapshot": raw2,
             "convergence_change_when_interval_doubled": (raw2 - raw) / raw if raw else float("nan"),
-            "encounters_every_snapshot": enc, "encounters_every_second_snapshot": enc2,
+            "encounters_every_snapshot": enc,
+            "encounters_every_second_snapshot": enc2,
             "encounter_change_when_interval_doubled": (enc2 - enc) / enc if enc else float("nan"),
             "encounters_undetermined": int(ev.undetermined.sum()),
             "encounters_first_half": int((ev.encounter & (ev.step <= mid)).sum()),
@@ -288,5 +350,3 @@ def write_tables(tables: RunTables, run_dir: str | Path) -> None:
     write_csv(run_dir / "wall_collisions.csv", tables.walls)
     write_csv(run_dir / "impact_velocity.csv", tables.velocities)
     write_csv(run_dir / "collisions.csv", tables.pairs)  # last: its presence marks a finished run
-
-

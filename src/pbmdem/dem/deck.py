@@ -42,8 +42,15 @@ def template_path(name: str = GRANULATOR_TEMPLATE) -> Path:
     return template_dir() / name
 
 
-def number(name: str, value, *, minimum: float | None = None, maximum: float | None = None,
-           integer: bool = False, exclusive_minimum: bool = False) -> str:
+def number(
+    name: str,
+    value,
+    *,
+    minimum: float | None = None,
+    maximum: float | None = None,
+    integer: bool = False,
+    exclusive_minimum: bool = False,
+) -> str:
     """Validate `value` as a finite number in range and return its text for a deck."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise DeckValueError(f"{name} = {value!r}: a number is required, got {type(value).__name__}")
@@ -138,23 +145,27 @@ def granulator_values(point: DemPoint, plan: DemPlan, ranks: int) -> dict[str, s
     return {
         "point_id": known_name("point_id", plan.point_id.replace(".", "p")),
         "processors": f"{num('mpi_ranks', ranks, integer=True, minimum=1)} 1 1",
-        "box_xlo": num("box", -bowl.radius - margin), "box_xhi": num("box", bowl.radius + margin),
-        "box_ylo": num("box", -bowl.radius - margin), "box_yhi": num("box", bowl.radius + margin),
-        "box_zlo": num("box", -margin), "box_zhi": num("box", bowl.height + margin),
+        "box_xlo": num("box", -bowl.radius - margin),
+        "box_xhi": num("box", bowl.radius + margin),
+        "box_ylo": num("box", -bowl.radius - margin),
+        "box_yhi": num("box", bowl.radius + margin),
+        "box_zlo": num("box", -margin),
+        "box_zhi": num("box", bowl.height + margin),
         "n_types": num("n_classes", n, integer=True, minimum=1),
         "neighbor_skin": num("neighbor_skin", 0.5 * d_max, minimum=0.0),
-        "youngs_list": " ".join([num("material.youngs_modulus", mat.youngs_modulus, exclusive_minimum=True,
-                                     minimum=0.0)] * n),
-        "poisson_list": " ".join([num("material.poisson_ratio", mat.poisson_ratio, minimum=0.0,
-                                      maximum=0.5)] * n),
+        "youngs_list": " ".join(
+            [num("material.youngs_modulus", mat.youngs_modulus, exclusive_minimum=True, minimum=0.0)] * n
+        ),
+        "poisson_list": " ".join([num("material.poisson_ratio", mat.poisson_ratio, minimum=0.0, maximum=0.5)] * n),
         "restitution_matrix": _matrix("material.restitution", mat.restitution, n),
         "friction_matrix": _matrix("material.friction", mat.friction, n),
         "rolling_matrix": _matrix("material.rolling_friction", mat.rolling_friction, n),
         "timestep": num("timestep", plan.timestep, exclusive_minimum=True, minimum=0.0),
-        "bowl_stl": "bowl.stl", "impeller_stl": "impeller.stl", "post_dir": "post",
+        "bowl_stl": "bowl.stl",
+        "impeller_stl": "impeller.stl",
+        "post_dir": "post",
         # thermo reads fix check/timestep/gran, so both run at the same interval (LIGGGHTS requires it)
-        "check_every": num("check_every", thermo_interval(plan.n_particles, plan.vtk_every),
-                           integer=True, minimum=1),
+        "check_every": num("check_every", thermo_interval(plan.n_particles, plan.vtk_every), integer=True, minimum=1),
         "particle_templates_block": "\n".join(templates),
         "seed_dist": num("seed", next_prime(seed + 1), integer=True),
         "distribution_weights": weights,
@@ -165,8 +176,7 @@ def granulator_values(point: DemPoint, plan: DemPlan, ranks: int) -> dict[str, s
         "n_particles": num("n_particles", plan.n_particles, integer=True, minimum=1),
         "insert_rate": num("insert_rate", plan.n_particles / insert_time, exclusive_minimum=True, minimum=0.0),
         "insert_every": num("insert_every", insert_every, integer=True, minimum=1),
-        "thermo_every": num("thermo_every", thermo_interval(plan.n_particles, plan.vtk_every),
-                            integer=True, minimum=1),
+        "thermo_every": num("thermo_every", thermo_interval(plan.n_particles, plan.vtk_every), integer=True, minimum=1),
         "vtk_every": num("vtk_every", plan.vtk_every, integer=True, minimum=1),
         "settle_steps": num("settle_steps", plan.settle_steps, integer=True, minimum=1),
         "spinup_steps": num("spinup_steps", plan.spinup_steps, integer=True, minimum=1),

@@ -57,16 +57,24 @@ def read_dump(path: str | Path, columns: int) -> Snapshots:
         raise DumpFormatError(f"{path}: does not start with a LIGGGHTS dump header ('ITEM: TIMESTEP')")
     steps = np.array([int(m.group(1)) for m in headers], dtype=np.int64)
     counts = np.array([int(m.group(2)) for m in headers], dtype=np.int64)
-    bodies = [raw[m.end(): (headers[k + 1].start() if k + 1 < len(headers) else len(raw))]
-              for k, m in enumerate(headers)]
+    bodies = [
+        raw[m.end() : (headers[k + 1].start() if k + 1 < len(headers) else len(raw))] for k, m in enumerate(headers)
+    ]
     body = b"".join(bodies)
     total = int(counts.sum())
     if total == 0:
         data = np.zeros((0, columns))
     else:
         try:
-            frame = pd.read_csv(io.BytesIO(body), sep=" ", header=None, usecols=range(columns),
-                                dtype=np.float64, engine="c", skip_blank_lines=True)
+            frame = pd.read_csv(
+                io.BytesIO(body),
+                sep=" ",
+                header=None,
+                usecols=range(columns),
+                dtype=np.float64,
+                engine="c",
+                skip_blank_lines=True,
+            )
         except (ValueError, pd.errors.ParserError) as exc:
             raise DumpFormatError(f"{path}: malformed entry rows ({exc})") from None
         data = frame.to_numpy()
@@ -84,14 +92,15 @@ def read_dump(path: str | Path, columns: int) -> Snapshots:
         row, col = (int(x) for x in np.argwhere(bad)[0])
         frame = int(np.searchsorted(offsets, row, side="right") - 1)
         raise DumpFormatError(
-            f"{path}: non-finite value {float(data[row, col])!r} in column {col + 1} of entry row {row - offsets[frame] + 1} "
+            f"{path}: non-finite value {float(data[row, col])!r} in column {col + 1} of "
+            f"entry row {row - offsets[frame] + 1} "
             f"of the frame at step {steps[frame]} ({int(bad.sum())} non-finite value(s) in all); every value of a "
-            "dump must be a finite number")
+            "dump must be a finite number"
+        )
     # each frame's rows must be as many as its header says; a short last frame is truncation
     last_lines = bodies[-1].count(b"\n")
     if last_lines < counts[-1]:
-        raise DumpFormatError(f"{path}: last frame (step {steps[-1]}) is truncated: "
-                              f"{last_lines} of {counts[-1]} rows")
+        raise DumpFormatError(f"{path}: last frame (step {steps[-1]}) is truncated: {last_lines} of {counts[-1]} rows")
     return Snapshots(steps=steps, offsets=offsets, data=data)
 
 
@@ -100,7 +109,7 @@ def read_classes(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     snaps = read_dump(path, 3)
     if snaps.frames == 0:
         raise DumpFormatError(f"{path}: no particle frame (no particles inserted?)")
-    rows = snaps.data[snaps.offsets[0]:snaps.offsets[1]]
+    rows = snaps.data[snaps.offsets[0] : snaps.offsets[1]]
     return rows[:, 0].astype(np.int64), rows[:, 1].astype(np.int64) - 1
 
 
@@ -117,13 +126,14 @@ def read_trajectories(path: str | Path, n_particles: int):
     snaps = read_dump(path, 7)
     counts = np.diff(snaps.offsets)
     if snaps.frames == 0 or (counts != n_particles).any():
-        raise DumpFormatError(f"{path}: every position snapshot must list the {n_particles} particles; "
-                              f"found {sorted(set(counts.tolist()))} rows per snapshot")
+        raise DumpFormatError(
+            f"{path}: every position snapshot must list the {n_particles} particles; "
+            f"found {sorted(set(counts.tolist()))} rows per snapshot"
+        )
     data = snaps.data.reshape(snaps.frames, n_particles, 7)
     ids = data[0, :, 0].astype(np.int64)
     if (np.diff(ids) <= 0).any() or not (data[:, :, 0] == data[0:1, :, 0]).all():
-        raise DumpFormatError(f"{path}: particle ids are not sorted identically in every snapshot "
-                              "(the deck must use dump_modify sort id)")
+        raise DumpFormatError(
+            f"{path}: particle ids are not sorted identically in every snapshot (the deck must use dump_modify sort id)"
+        )
     return Trajectories(steps=snaps.steps, ids=ids, pos=data[:, :, 1:4], vel=data[:, :, 4:7])
-
-

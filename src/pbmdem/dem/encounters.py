@@ -101,8 +101,9 @@ def _lookback(traj: Trajectories, event_step, prev_step, gap_fn, stride: int = 1
     return encounter, np.clip(velocity, 0.0, None), lag, undetermined
 
 
-def pair_events(traj: Trajectories, a, b, radius_a, radius_b, event_step, prev_step,
-                gap_fraction: float, stride: int = 1) -> Events:
+def pair_events(
+    traj: Trajectories, a, b, radius_a, radius_b, event_step, prev_step, gap_fraction: float, stride: int = 1
+) -> Events:
     """Classify particle-particle contacts that begin at `event_step` (previous contact of the
     same pair at `prev_step`, or -1 for none in the record)."""
     ia, ib = traj.index_of(np.asarray(a, np.int64)), traj.index_of(np.asarray(b, np.int64))
@@ -132,8 +133,9 @@ def bowl_gap(pos: np.ndarray, radius: np.ndarray, bowl: Bowl):
     gaps = np.stack([side, bottom, lid], axis=1)
     which = np.argmin(gaps, axis=1)
     radial = np.column_stack([pos[:, 0], pos[:, 1], np.zeros(len(pos))]) / np.where(rho > 0, rho, 1.0)[:, None]
-    normals = np.where((which == 0)[:, None], radial,
-                       np.where((which == 1)[:, None], [0.0, 0.0, -1.0], [0.0, 0.0, 1.0]))
+    normals = np.where(
+        (which == 0)[:, None], radial, np.where((which == 1)[:, None], [0.0, 0.0, -1.0], [0.0, 0.0, 1.0])
+    )
     return gaps[np.arange(len(pos)), which], normals
 
 
@@ -157,7 +159,9 @@ def impeller_gap(pos: np.ndarray, radius: np.ndarray, imp: Impeller, angle: np.n
         theta = angle + 2.0 * np.pi * k / imp.blades
         local = _rot_z(pos, -theta) - centre
         # undo the pitch (a rotation about the blade's radial x axis)
-        local = np.column_stack([local[:, 0], cp * local[:, 1] + sp * local[:, 2], -sp * local[:, 1] + cp * local[:, 2]])
+        local = np.column_stack(
+            [local[:, 0], cp * local[:, 1] + sp * local[:, 2], -sp * local[:, 1] + cp * local[:, 2]]
+        )
         nearest = np.clip(local, -half, half)
         diff = nearest - local
         dist = np.linalg.norm(diff, axis=1)
@@ -175,7 +179,9 @@ def impeller_gap(pos: np.ndarray, radius: np.ndarray, imp: Impeller, angle: np.n
     better = hub < best
     if better.any():
         radial = -np.column_stack([pos[:, 0], pos[:, 1], np.zeros(len(pos))]) / np.where(rho > 0, rho, 1.0)[:, None]
-        vertical = np.column_stack([np.zeros(len(pos)), np.zeros(len(pos)), np.sign(np.clip(pos[:, 2], z0, z1) - pos[:, 2])])
+        vertical = np.column_stack(
+            [np.zeros(len(pos)), np.zeros(len(pos)), np.sign(np.clip(pos[:, 2], z0, z1) - pos[:, 2])]
+        )
         vec = radial * dr[:, None] + vertical * dz[:, None]
         norm = np.linalg.norm(vec, axis=1)
         vec = vec / np.where(norm > 0, norm, 1.0)[:, None]
@@ -184,8 +190,20 @@ def impeller_gap(pos: np.ndarray, radius: np.ndarray, imp: Impeller, angle: np.n
     return best - radius, towards
 
 
-def wall_events(traj: Trajectories, wall: np.ndarray, pid, radius, event_step, prev_step, gap_fraction: float,
-                bowl: Bowl, imp: Impeller, angle_of_step, omega: float, stride: int = 1) -> Events:
+def wall_events(
+    traj: Trajectories,
+    wall: np.ndarray,
+    pid,
+    radius,
+    event_step,
+    prev_step,
+    gap_fraction: float,
+    bowl: Bowl,
+    imp: Impeller,
+    angle_of_step,
+    omega: float,
+    stride: int = 1,
+) -> Events:
     """Classify particle-wall contacts (wall 0 = bowl, 1 = impeller) that begin at `event_step`.
     `angle_of_step(steps)` gives the impeller's rotation angle (rad); `omega` its angular speed
     (rad/s, signed about +z). The gap threshold is gap_fraction x the particle diameter."""

@@ -92,8 +92,14 @@ def _forced_restarts(workdir: Path) -> list[dict]:
     removed = []
     for path in sorted(workdir.glob("restart_forced_*")):
         step = re.search(r"(\d+)", path.name.rsplit("_", 1)[-1])
-        removed.append({"file": path.name, "bytes": path.stat().st_size,
-                        "step": int(step.group(1)) if step else None, "removed": True})
+        removed.append(
+            {
+                "file": path.name,
+                "bytes": path.stat().st_size,
+                "step": int(step.group(1)) if step else None,
+                "removed": True,
+            }
+        )
         path.unlink()
     return removed
 
@@ -102,10 +108,16 @@ def record_crash(workdir: Path, problems: list[str], **details) -> None:
     """Write `workdir/crash.json` and raise LiggghtsError naming the problems and the log's tail."""
     log = workdir / "log.liggghts"
     restarts = _forced_restarts(workdir)
-    write_json(workdir / "crash.json", {
-        "problems": problems, **details, "forced_restart_files": restarts,
-        "log_tail": tail(log, 40), "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-    })
+    write_json(
+        workdir / "crash.json",
+        {
+            "problems": problems,
+            **details,
+            "forced_restart_files": restarts,
+            "log_tail": tail(log, 40),
+            "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        },
+    )
     stderr = details.get("stderr_tail") or ""
     err = details.get("error_line")
     raise LiggghtsError(
@@ -150,8 +162,14 @@ class _PassSignals:
             signal.signal(sig, old)
 
 
-def run(deck: str | Path, workdir: str | Path, ranks: int = 1, timeout: float | None = None,
-        progress=None, poll: float = 1.0) -> LiggghtsRun:
+def run(
+    deck: str | Path,
+    workdir: str | Path,
+    ranks: int = 1,
+    timeout: float | None = None,
+    progress=None,
+    poll: float = 1.0,
+) -> LiggghtsRun:
     """Run `deck` (a file in `workdir`) with the working directory `workdir`.
 
     `progress` (e.g. a `pbmdem.progress.ThermoProgress` on the log) gets `update()` every `poll`
@@ -164,8 +182,9 @@ def run(deck: str | Path, workdir: str | Path, ranks: int = 1, timeout: float | 
     log = workdir / "log.liggghts"
     t0 = time.perf_counter()
     env = dict(os.environ, OMP_NUM_THREADS="1")
-    proc = subprocess.Popen(cmd, cwd=workdir, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            errors="replace", env=env)
+    proc = subprocess.Popen(
+        cmd, cwd=workdir, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, errors="replace", env=env
+    )
     with _PassSignals(proc) as signals:
         try:
             while True:
@@ -208,8 +227,15 @@ def run(deck: str | Path, workdir: str | Path, ranks: int = 1, timeout: float | 
     if _FORCED_RESTART.search(log_text):
         problems.append("interrupted: LIGGGHTS wrote a forced restart (it received SIGINT or SIGTERM)")
     if problems:
-        record_crash(workdir, problems, command=cmd, returncode=returncode, wall_time_s=wall,
-                     stderr_tail=stderr[-4000:], error_line=err.group(0).strip() if err else None)
+        record_crash(
+            workdir,
+            problems,
+            command=cmd,
+            returncode=returncode,
+            wall_time_s=wall,
+            stderr_tail=stderr[-4000:],
+            error_line=err.group(0).strip() if err else None,
+        )
     return LiggghtsRun(log=log, wall_time=wall, returncode=returncode)
 
 
@@ -236,8 +262,10 @@ def check_finished(workdir: str | Path, total_steps: int, dumps: dict[str, tuple
     for name, (frames, last_step) in dumps.items():
         found = dump_steps(workdir / name)
         if len(found) != frames or (found and found[-1] != last_step):
-            problems.append(f"unfinished: {name} holds {len(found)} frames up to step "
-                            f"{found[-1] if found else None}, the plan has {frames} up to step {last_step}")
+            problems.append(
+                f"unfinished: {name} holds {len(found)} frames up to step "
+                f"{found[-1] if found else None}, the plan has {frames} up to step {last_step}"
+            )
     if problems:
         record_crash(workdir, problems, last_thermo_step=last, planned_steps=total_steps)
 

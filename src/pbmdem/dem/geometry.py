@@ -1,8 +1,9 @@
 """Granulator geometry: a closed cylindrical bowl and a bladed impeller as STL triangle meshes.
 
-The bowl's axis is the z axis, its bottom at z = 0 (dimensions: `pbmdem.config.Granulator`). The impeller turns about the same axis. Both
-meshes are written with meshio; every closed part is watertight with outward normals (triangles
-ordered counter-clockwise seen from outside), which `check_closed_surface` verifies.
+The bowl's axis is the z axis, its bottom at z = 0 (dimensions: `pbmdem.config.Granulator`). The
+impeller turns about the same axis. Both meshes are written with meshio; every closed part is
+watertight with outward normals (triangles ordered counter-clockwise seen from outside), which
+`check_closed_surface` verifies.
 """
 
 from __future__ import annotations
@@ -51,16 +52,32 @@ def _box(half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Axis-aligned box centred at the origin with outward-oriented triangles."""
     hx, hy, hz = half
     pts = np.array(
-        [[-hx, -hy, -hz], [hx, -hy, -hz], [hx, hy, -hz], [-hx, hy, -hz],
-         [-hx, -hy, hz], [hx, -hy, hz], [hx, hy, hz], [-hx, hy, hz]]
+        [
+            [-hx, -hy, -hz],
+            [hx, -hy, -hz],
+            [hx, hy, -hz],
+            [-hx, hy, -hz],
+            [-hx, -hy, hz],
+            [hx, -hy, hz],
+            [hx, hy, hz],
+            [-hx, hy, hz],
+        ]
     )
     tris = np.array(
-        [[0, 2, 1], [0, 3, 2],  # bottom (-z)
-         [4, 5, 6], [4, 6, 7],  # top (+z)
-         [0, 1, 5], [0, 5, 4],  # -y
-         [1, 2, 6], [1, 6, 5],  # +x
-         [2, 3, 7], [2, 7, 6],  # +y
-         [3, 0, 4], [3, 4, 7]]  # -x
+        [
+            [0, 2, 1],
+            [0, 3, 2],  # bottom (-z)
+            [4, 5, 6],
+            [4, 6, 7],  # top (+z)
+            [0, 1, 5],
+            [0, 5, 4],  # -y
+            [1, 2, 6],
+            [1, 6, 5],  # +x
+            [2, 3, 7],
+            [2, 7, 6],  # +y
+            [3, 0, 4],
+            [3, 4, 7],
+        ]  # -x
     )
     return pts, tris
 
@@ -113,8 +130,12 @@ def impeller_mesh(imp: Impeller, bowl: Bowl | None = None) -> tuple[np.ndarray, 
     i0, i1 = np.arange(m), np.arange(m, 2 * m)
     j0, j1 = np.roll(i0, -1), np.roll(i1, -1)
     hub_tris = np.vstack(
-        [np.stack([i0, j0, j1], axis=1), np.stack([i0, j1, i1], axis=1),
-         _disc_fan(2 * m, i0, upward=False), _disc_fan(2 * m + 1, i1, upward=True)]
+        [
+            np.stack([i0, j0, j1], axis=1),
+            np.stack([i0, j1, i1], axis=1),
+            _disc_fan(2 * m, i0, upward=False),
+            _disc_fan(2 * m + 1, i1, upward=True),
+        ]
     )
     parts_pts.append(hub_pts)
     parts_tris.append(hub_tris + offset)

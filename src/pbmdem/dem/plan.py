@@ -122,8 +122,9 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
     else:
         n_particles = int(sum(counts))
     if n_particles > dem.max_particles:
-        raise ConfigError(f"operating point {pid} needs {n_particles} particles, more than dem.max_particles = "
-                          f"{dem.max_particles}")
+        raise ConfigError(
+            f"operating point {pid} needs {n_particles} particles, more than dem.max_particles = {dem.max_particles}"
+        )
     if n_particles < 2:
         raise ConfigError(f"operating point {pid}: the bed holds {n_particles} particles; raise dem.bed_height")
     counts = class_counts(n_particles, sizes.number_fractions) if counts is None else [int(c) for c in counts]
@@ -131,8 +132,9 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
     t_r = rayleigh_time(r_min, mat.density, mat.youngs_modulus, mat.poisson_ratio)
     dt = dem.timestep_fraction * t_r
     tip_speed = float(granulator.tip_speed(rpm))
-    t_c = hertz_contact_time(r_min, mat.density, mat.youngs_modulus, mat.poisson_ratio,
-                             max(tip_speed, MIN_CONTACT_SPEED))
+    t_c = hertz_contact_time(
+        r_min, mat.density, mat.youngs_modulus, mat.poisson_ratio, max(tip_speed, MIN_CONTACT_SPEED)
+    )
     interval = dem.collision_interval
     if interval == "auto":
         interval = max(1, int(t_c / (SNAPSHOTS_PER_CONTACT * dt)))
@@ -145,17 +147,31 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
     spinup_steps = steps(dem.phase_time("spinup", rpm))
     history_steps = int(math.ceil(steps(dem.history_time) / position_interval) * position_interval)
     if history_steps >= spinup_steps:
-        raise ConfigError(f"dem.history_time = {dem.history_time} s: the position history before the sampling "
-                          f"window must be shorter than the spin-up ({spinup_steps * dt:.4g} s at {rpm:g} rpm)")
+        raise ConfigError(
+            f"dem.history_time = {dem.history_time} s: the position history before the sampling "
+            f"window must be shorter than the spin-up ({spinup_steps * dt:.4g} s at {rpm:g} rpm)"
+        )
     return DemPlan(
-        point_id=pid, rpm=float(rpm), distribution=point.distribution,
-        diameters=list(sizes.diameters), number_fractions=list(sizes.number_fractions), counts=counts,
-        n_particles=int(sum(counts)), timestep=dt, rayleigh_time=t_r, contact_time=t_c,
-        collision_interval=int(interval), settle_steps=steps(dem.settle_time),
-        spinup_steps=spinup_steps, sampling_steps=sampling_steps,
-        vtk_every=steps(dem.vtk_interval), tip_speed=tip_speed,
-        history_steps=history_steps, position_interval=int(position_interval),
+        point_id=pid,
+        rpm=float(rpm),
+        distribution=point.distribution,
+        diameters=list(sizes.diameters),
+        number_fractions=list(sizes.number_fractions),
+        counts=counts,
+        n_particles=int(sum(counts)),
+        timestep=dt,
+        rayleigh_time=t_r,
+        contact_time=t_c,
+        collision_interval=int(interval),
+        settle_steps=steps(dem.settle_time),
+        spinup_steps=spinup_steps,
+        sampling_steps=sampling_steps,
+        vtk_every=steps(dem.vtk_interval),
+        tip_speed=tip_speed,
+        history_steps=history_steps,
+        position_interval=int(position_interval),
         encounter_gap_fraction=dem.encounter_gap_fraction,
-        omega=float(granulator.angular_speed(rpm)), replicate=int(replicate),
+        omega=float(granulator.angular_speed(rpm)),
+        replicate=int(replicate),
         seed=dem.seed + REPLICATE_SEED_STRIDE * int(replicate),
     )

@@ -37,16 +37,26 @@ def _eta(seconds: float) -> str:
     if seconds != seconds or seconds == float("inf"):
         return "?"
     seconds = int(round(seconds))
-    return f"{seconds // 3600:d}:{seconds // 60 % 60:02d}:{seconds % 60:02d}" if seconds >= 3600 \
+    return (
+        f"{seconds // 3600:d}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
+        if seconds >= 3600
         else f"{seconds // 60:d}:{seconds % 60:02d}"
+    )
 
 
 class ThermoProgress:
     """Follow `log_path` (a LIGGGHTS log being written) for a run of `phases`, a list of
     (name, steps) in the order the deck runs them (steps accumulate across `run` commands)."""
 
-    def __init__(self, log_path: str | Path, phases: list[tuple[str, int]], *, label: str = "LIGGGHTS",
-                 bar: bool = False, log_every: float = LOG_EVERY_S):
+    def __init__(
+        self,
+        log_path: str | Path,
+        phases: list[tuple[str, int]],
+        *,
+        label: str = "LIGGGHTS",
+        bar: bool = False,
+        log_every: float = LOG_EVERY_S,
+    ):
         self.path = Path(log_path)
         self.phases = [(str(n), int(s)) for n, s in phases]
         self.total = sum(s for _, s in self.phases)
@@ -115,9 +125,11 @@ class ThermoProgress:
         return self.elapsed() * (self.total - self.step) / self.step
 
     def status(self) -> str:
-        return (f"{self.label}: {self.phase()}, step {self.step} of {self.total} "
-                f"({100.0 * self.step / max(self.total, 1):.0f} %), {self.atoms} particles, "
-                f"elapsed {_eta(self.elapsed())}, remaining ~{_eta(self.remaining())}")
+        return (
+            f"{self.label}: {self.phase()}, step {self.step} of {self.total} "
+            f"({100.0 * self.step / max(self.total, 1):.0f} %), {self.atoms} particles, "
+            f"elapsed {_eta(self.elapsed())}, remaining ~{_eta(self.remaining())}"
+        )
 
     # -------------------------------------------------------------- reporting
     def update(self) -> None:
@@ -136,5 +148,6 @@ class ThermoProgress:
         self.update()
         if self._bar is not None:
             self._bar.close()
-        log.info("%s: engine stopped at step %d of %d after %s", self.label, self.step, self.total,
-                 _eta(self.elapsed()))
+        log.info(
+            "%s: engine stopped at step %d of %d after %s", self.label, self.step, self.total, _eta(self.elapsed())
+        )

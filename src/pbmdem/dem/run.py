@@ -49,8 +49,19 @@ def is_finished(run_dir: str | Path) -> bool:
 
 
 # what a run writes into its folder (besides whatever LIGGGHTS itself adds)
-RUN_PRODUCTS = ("bowl.stl", "impeller.stl", "in.granulator", "plan.json", "log.liggghts", "screen.liggghts",
-                "crash.json", "post", "wall_collisions.csv", "impact_velocity.csv", *FINISHED_MARKERS)
+RUN_PRODUCTS = (
+    "bowl.stl",
+    "impeller.stl",
+    "in.granulator",
+    "plan.json",
+    "log.liggghts",
+    "screen.liggghts",
+    "crash.json",
+    "post",
+    "wall_collisions.csv",
+    "impact_velocity.csv",
+    *FINISHED_MARKERS,
+)
 
 
 def _remove(path: Path) -> None:
@@ -71,8 +82,9 @@ def _move_into(stage: Path, run_dir: Path) -> None:
     for name in RUN_PRODUCTS:
         if not (stage / name).exists() and (run_dir / name).exists():
             _remove(run_dir / name)
-    last = [stage / n for n in ("wall_collisions.csv", "impact_velocity.csv", *FINISHED_MARKERS)
-            if (stage / n).exists()]
+    last = [
+        stage / n for n in ("wall_collisions.csv", "impact_velocity.csv", *FINISHED_MARKERS) if (stage / n).exists()
+    ]
     for item in [p for p in sorted(stage.iterdir()) if p not in last] + last:
         target = run_dir / item.name
         if target.is_dir() and not target.is_symlink():
@@ -93,8 +105,11 @@ def planned_dumps(plan: DemPlan) -> dict[str, tuple[int, int]]:
         return multiples + (1 if start % every else 0), (end // every * every if multiples > 0 else start)
 
     contacts = frames_and_last(plan.collision_interval)
-    return {"post/pairs.dump": contacts, "post/walls.dump": contacts,
-            "post/positions.dump": frames_and_last(plan.position_interval)}
+    return {
+        "post/pairs.dump": contacts,
+        "post/walls.dump": contacts,
+        "post/positions.dump": frames_and_last(plan.position_interval),
+    }
 
 
 def check_finished(plan: DemPlan, run_dir: str | Path) -> None:
@@ -103,8 +118,15 @@ def check_finished(plan: DemPlan, run_dir: str | Path) -> None:
     engine.check_finished(run_dir, plan.total_steps, planned_dumps(plan))
 
 
-def run_point(point: DemPoint, plan: DemPlan, run_dir: str | Path, execution: DemExecution, *,
-              force: bool = False, progress_bar: bool = False) -> dict:
+def run_point(
+    point: DemPoint,
+    plan: DemPlan,
+    run_dir: str | Path,
+    execution: DemExecution,
+    *,
+    force: bool = False,
+    progress_bar: bool = False,
+) -> dict:
     """Run LIGGGHTS for `plan` in `run_dir`, then tabulate collisions and index the VTK files.
 
     Everything is validated before any file is touched: the speed and the whole deck, and a
@@ -122,10 +144,12 @@ def run_point(point: DemPoint, plan: DemPlan, run_dir: str | Path, execution: De
     render_granulator(point, plan, execution.mpi_ranks)  # raises on any bad value, before any I/O
     finished = is_finished(run_dir)
     if finished and not force:
+        markers = ", ".join(n for n in FINISHED_MARKERS if (run_dir / n).exists())
         raise FinishedRunError(
-            f"{run_dir} already holds a finished run ({', '.join(n for n in FINISHED_MARKERS if (run_dir / n).exists())}); "
+            f"{run_dir} already holds a finished run ({markers}); "
             "refusing to overwrite it (rerunning would give it new time stamps, so Snakemake would redo "
-            "everything downstream). Use --force to replace it, or --out to write elsewhere.")
+            "everything downstream). Use --force to replace it, or --out to write elsewhere."
+        )
     where = run_dir.resolve()
     stage = where.parent / f".{where.name}.staging"
     if stage.exists():
@@ -145,16 +169,20 @@ def run_point(point: DemPoint, plan: DemPlan, run_dir: str | Path, execution: De
     return summary
 
 
-def _run_in(point: DemPoint, plan: DemPlan, run_dir: Path, final_dir: Path, execution: DemExecution,
-            progress_bar: bool = False) -> dict:
+def _run_in(
+    point: DemPoint, plan: DemPlan, run_dir: Path, final_dir: Path, execution: DemExecution, progress_bar: bool = False
+) -> dict:
     """run_point's work in the (staging) folder `run_dir`; paths in the summary name `final_dir`."""
     from . import collisions, vtk_series  # local: keep this module light to import
     from .progress import ThermoProgress
 
     deck_path = prepare_run(point, plan, run_dir, execution.mpi_ranks)
-    watcher = ThermoProgress(run_dir / "log.liggghts", [("settling", plan.settle_steps), ("spin-up", plan.spinup_steps),
-                                                        ("sampling", plan.sampling_steps)],
-                             label=f"DEM {plan.point_id}", bar=progress_bar)
+    watcher = ThermoProgress(
+        run_dir / "log.liggghts",
+        [("settling", plan.settle_steps), ("spin-up", plan.spinup_steps), ("sampling", plan.sampling_steps)],
+        label=f"DEM {plan.point_id}",
+        bar=progress_bar,
+    )
     result = engine.run(deck_path, run_dir, ranks=execution.mpi_ranks, timeout=execution.timeout, progress=watcher)
     check_finished(plan, run_dir)
     t0 = time.perf_counter()
@@ -167,29 +195,40 @@ def _run_in(point: DemPoint, plan: DemPlan, run_dir: Path, final_dir: Path, exec
             (run_dir / "post" / dump).unlink(missing_ok=True)
     thermo = engine.thermo_table(result.log)
     # fix check/timestep/gran: ts[1] = dt / Rayleigh time, ts[2] = dt / Hertz time (LIGGGHTS' own)
-    checks = {"dt_over_rayleigh_time": max(thermo.get("ts[1]", [float("nan")])),
-              "dt_over_hertz_time_max": max(thermo.get("ts[2]", [float("nan")]))}
+    checks = {
+        "dt_over_rayleigh_time": max(thermo.get("ts[1]", [float("nan")])),
+        "dt_over_hertz_time_max": max(thermo.get("ts[2]", [float("nan")])),
+    }
     summary = {
         **checks,
-        "point_id": plan.point_id, "rpm": plan.rpm, "distribution": plan.distribution,
-        "n_particles": plan.n_particles, "timestep": plan.timestep,
-        "steps": plan.total_steps, "mpi_ranks": execution.mpi_ranks,
+        "point_id": plan.point_id,
+        "rpm": plan.rpm,
+        "distribution": plan.distribution,
+        "n_particles": plan.n_particles,
+        "timestep": plan.timestep,
+        "steps": plan.total_steps,
+        "mpi_ranks": execution.mpi_ranks,
         "liggghts_version": engine.version_of_log(result.log),
-        "particle_steps": plan.particle_steps, "liggghts_wall_time_s": result.wall_time,
+        "particle_steps": plan.particle_steps,
+        "liggghts_wall_time_s": result.wall_time,
         "particle_steps_per_s": plan.particle_steps / result.wall_time,
-        "parse_time_s": parse_time, "parse_cost_ratio": parse_time / result.wall_time,
+        "parse_time_s": parse_time,
+        "parse_cost_ratio": parse_time / result.wall_time,
         "collision_interval": plan.collision_interval,
-        "replicate": plan.replicate, "seed": plan.seed,
+        "replicate": plan.replicate,
+        "seed": plan.seed,
         "total_collisions": int(tables.pairs["collisions"].sum()),
         "total_encounters": int(tables.pairs["encounters"].sum()),
         "sampling_time": float(tables.pairs["sampling_time"].iloc[0]),
-        **tables.diagnostics, **{f"series_{k}": str(final_dir / "post" / Path(v).name) for k, v in series.items()},
+        **tables.diagnostics,
+        **{f"series_{k}": str(final_dir / "post" / Path(v).name) for k, v in series.items()},
     }
     write_json(run_dir / "summary.json", summary)
     return summary
 
 
-def run_operating_point(point: DemPoint, rpm: float, run_dir: str | Path, execution: DemExecution,
-                        replicate: int = 0) -> dict:
+def run_operating_point(
+    point: DemPoint, rpm: float, run_dir: str | Path, execution: DemExecution, replicate: int = 0
+) -> dict:
     """Plan and run one replicate of a grid point (the Snakemake rule's entry point)."""
     return run_point(point, plan_point(point, rpm, replicate=replicate), run_dir, execution)

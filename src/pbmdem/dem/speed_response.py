@@ -40,20 +40,33 @@ def per_replicate_rates(replicates: pd.DataFrame) -> pd.DataFrame:
         pairs = pair_counts(n)[run.class_i.to_numpy(), run.class_j.to_numpy()].sum()
         t = float(run.sampling_time.iloc[0])
         total = float(n.sum())
-        rows.append({
-            "point_id": point, "rpm": rpm, "distribution": dist, "replicate": rep, "n_particles": total,
-            "encounters": float(run.encounters.sum()), "collisions": float(run.collisions.sum()),
-            "encounters_per_particle_per_s": 2.0 * run.encounters.sum() / (total * t),
-            "new_contacts_per_particle_per_s": 2.0 * run.collisions.sum() / (total * t),
-            "mean_encounter_frequency_per_pair": run.encounters.sum() / (pairs * t),
-            "impact_velocity_median": float(np.average(run.impact_velocity_median.fillna(0.0),
-                                                       weights=run.encounters.clip(lower=1e-12))),
-        })
+        rows.append(
+            {
+                "point_id": point,
+                "rpm": rpm,
+                "distribution": dist,
+                "replicate": rep,
+                "n_particles": total,
+                "encounters": float(run.encounters.sum()),
+                "collisions": float(run.collisions.sum()),
+                "encounters_per_particle_per_s": 2.0 * run.encounters.sum() / (total * t),
+                "new_contacts_per_particle_per_s": 2.0 * run.collisions.sum() / (total * t),
+                "mean_encounter_frequency_per_pair": run.encounters.sum() / (pairs * t),
+                "impact_velocity_median": float(
+                    np.average(run.impact_velocity_median.fillna(0.0), weights=run.encounters.clip(lower=1e-12))
+                ),
+            }
+        )
     return pd.DataFrame(rows)
 
 
-RATE_COLUMNS = ["encounters_per_particle_per_s", "new_contacts_per_particle_per_s",
-                "mean_encounter_frequency_per_pair", "impact_velocity_median", "n_particles"]
+RATE_COLUMNS = [
+    "encounters_per_particle_per_s",
+    "new_contacts_per_particle_per_s",
+    "mean_encounter_frequency_per_pair",
+    "impact_velocity_median",
+    "n_particles",
+]
 
 
 def speed_response(replicates: pd.DataFrame) -> pd.DataFrame:
@@ -71,9 +84,10 @@ def flow_development(runs: pd.DataFrame) -> pd.DataFrame:
     within their replicate error."""
     r = runs.copy()
     r["half_difference"] = r.encounters_second_half / r.encounters_first_half - 1.0
-    out = _mean_se(r, ["distribution", "rpm", "point_id"], ["half_difference", "encounters_first_half",
-                                                           "encounters_second_half"])
-    combined = np.sqrt(out.encounters_first_half_se ** 2 + out.encounters_second_half_se ** 2)
+    out = _mean_se(
+        r, ["distribution", "rpm", "point_id"], ["half_difference", "encounters_first_half", "encounters_second_half"]
+    )
+    combined = np.sqrt(out.encounters_first_half_se**2 + out.encounters_second_half_se**2)
     poisson = np.sqrt(out.encounters_first_half + out.encounters_second_half)
     err = combined.where(out.n_replicates > 1, poisson)
     out["half_z"] = (out.encounters_second_half - out.encounters_first_half) / err
@@ -94,14 +108,30 @@ def plot_speed_response(response: pd.DataFrame, path) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     for dist, g in response.groupby("distribution"):
         g = g.sort_values("rpm")
-        axes[0].errorbar(g.rpm, g.encounters_per_particle_per_s, yerr=g.encounters_per_particle_per_s_se,
-                         marker="o", capsize=3, label=dist)
-        axes[1].errorbar(g.rpm, g.new_contacts_per_particle_per_s, yerr=g.new_contacts_per_particle_per_s_se,
-                         marker="s", capsize=3, label=dist)
-    axes[0].set(xlabel="impeller speed (rpm)", ylabel="encounters per particle (1/s)",
-                title="encounters (kernel-relevant), mean ± SE")
-    axes[1].set(xlabel="impeller speed (rpm)", ylabel="new contacts per particle (1/s)",
-                title="raw new contacts (diagnostic)")
+        axes[0].errorbar(
+            g.rpm,
+            g.encounters_per_particle_per_s,
+            yerr=g.encounters_per_particle_per_s_se,
+            marker="o",
+            capsize=3,
+            label=dist,
+        )
+        axes[1].errorbar(
+            g.rpm,
+            g.new_contacts_per_particle_per_s,
+            yerr=g.new_contacts_per_particle_per_s_se,
+            marker="s",
+            capsize=3,
+            label=dist,
+        )
+    axes[0].set(
+        xlabel="impeller speed (rpm)",
+        ylabel="encounters per particle (1/s)",
+        title="encounters (kernel-relevant), mean ± SE",
+    )
+    axes[1].set(
+        xlabel="impeller speed (rpm)", ylabel="new contacts per particle (1/s)", title="raw new contacts (diagnostic)"
+    )
     for ax in axes:
         ax.set_xscale("log")
         ax.grid(alpha=0.3)

@@ -1,7 +1,7 @@
 """Look at a DEM run: particles coloured by diameter, the impeller and the bowl, with pyvista.
 
-    pbmdem view results/dem/rpm600_fine                 # interactive window
-    pbmdem view results/dem/rpm600_fine --step 40000 --screenshot shot.png   # off-screen PNG
+pbmdem view results/dem/rpm600_fine                 # interactive window
+pbmdem view results/dem/rpm600_fine --step 40000 --screenshot shot.png   # off-screen PNG
 """
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 
 from pbmdem.atomic import atomic_path
+
 from .vtk_series import snapshots
 
 
@@ -42,11 +43,11 @@ def build_scene(run_dir: str | Path, step: int | None = None, off_screen: bool =
     if particles.n_points == 0:
         raise ViewError(f"{particle_file} holds no particles")
     particles["diameter (mm)"] = 2000.0 * particles["radius"]
-    spheres = particles.glyph(scale="radius", factor=2.0, orient=False,
-                              geom=pv.Sphere(radius=0.5, theta_resolution=12, phi_resolution=12))
+    spheres = particles.glyph(
+        scale="radius", factor=2.0, orient=False, geom=pv.Sphere(radius=0.5, theta_resolution=12, phi_resolution=12)
+    )
     plotter = pv.Plotter(off_screen=off_screen, window_size=(900, 700))
-    plotter.add_mesh(spheres, scalars="diameter (mm)", cmap="viridis",
-                     scalar_bar_args={"title": "diameter (mm)"})
+    plotter.add_mesh(spheres, scalars="diameter (mm)", cmap="viridis", scalar_bar_args={"title": "diameter (mm)"})
     impellers = dict(snapshots(post, "impeller"))
     if step in impellers:
         plotter.add_mesh(pv.read(impellers[step]), color="lightgrey")

@@ -28,8 +28,10 @@ def write_series(post_dir: str | Path, timestep: float) -> dict[str, Path]:
         entries = "\n".join(
             f'    <DataSet timestep="{step * timestep:.9g}" part="0" file="{path.name}"/>' for step, path in snaps
         )
-        text = ('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
-                f"{entries}\n  </Collection>\n</VTKFile>\n")
+        text = (
+            '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
+            f"{entries}\n  </Collection>\n</VTKFile>\n"
+        )
         out[kind] = write_text(post_dir / f"{kind}.pvd", text)
     return out
 

@@ -21,8 +21,7 @@ from numba import njit
 #: success models of a factored kernel (``Kernel.factors``): p = 1, the step, the logistic
 ALWAYS, STEP, LOGISTIC = 0, 1, 2
 
-_SIGNATURE = ("f8(f8[:, ::1], f8[::1], b1, f8[:, ::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], "
-              "f8[:, ::1])")
+_SIGNATURE = "f8(f8[:, ::1], f8[::1], b1, f8[:, ::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1])"
 
 
 @njit(_SIGNATURE, cache=True, nogil=True)
@@ -47,7 +46,7 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
     of beta_ij L_i N_j is the liquid born).
     """
     M = nlg.shape[1]
-    born = work[:4]                 # rows: number, liquid, gas born per cell, first moment D_c
+    born = work[:4]  # rows: number, liquid, gas born per cell, first moment D_c
     split = work[4:]
     for r in range(4):
         for c in range(K):
@@ -57,7 +56,7 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
         Ni = nlg[0, i]
         Li = nlg[1, i]
         Gi = nlg[2, i]
-        dN = 0.0                    # deaths: sum over the pairs within the grid of R_ij, RL_ij, RG_ij
+        dN = 0.0  # deaths: sum over the pairs within the grid of R_ij, RL_ij, RG_ij
         dL = 0.0
         dG = 0.0
         row = i * M
@@ -67,7 +66,7 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
                 q = (beta[i, j] * (pi * p[j])) * nlg[0, j]
             else:
                 q = beta[i, j] * nlg[0, j]
-            R = Ni * q              # R_ij; RL_ij = L_i q, RG_ij = G_i q
+            R = Ni * q  # R_ij; RL_ij = L_i q, RG_ij = G_i q
             t = target[row + j]
             if t < 0:
                 refused += 0.5 * weight[0, row + j] * R
@@ -78,7 +77,7 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
             dL += RL
             dG += RG
             if cell_average:
-                h = 0.5 * R         # every ordered pair counts half an event
+                h = 0.5 * R  # every ordered pair counts half an event
                 born[0, t] += h
                 born[3, t] += h * weight[0, row + j]
                 born[1, t] += RL
@@ -112,7 +111,7 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
         D = born[3, c]
         up = max(D, 0.0) * cu[c]
         down = min(D, 0.0) * ncd[c]
-        V = born[0, c] + D          # solid born, units of x_c
+        V = born[0, c] + D  # solid born, units of x_c
         inv = 1.0 / V if V > 0 else 0.0
         split[0, c] = up
         split[3, c] = down
@@ -153,6 +152,7 @@ def add_processes(d, nlg, spray_rate, spray_weight, consolidation_rate, gas_min)
 # ----------------------------------------------------------------- helpers of the time integration
 # Each replaces 2-6 numpy calls on the (3M,) state by one; elementwise the same operations, so
 # the same result to the bit.
+
 
 @njit("void(f8[:, ::1], f8[::1], f8[::1])", cache=True, nogil=True)
 def surface_fraction(nlg, xc, out):
@@ -223,8 +223,12 @@ def all_nonnegative(u):
     return True
 
 
-@njit("f8(f8[::1], f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], "
-      "f8[:, ::1], f8[:, ::1])", cache=True, nogil=True)
+@njit(
+    "f8(f8[::1], f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], "
+    "f8[:, ::1], f8[:, ::1])",
+    cache=True,
+    nogil=True,
+)
 def class_rates(u, beta, model, vectors, params, K, cell_average, target, weight, factors, work, pw, d):
     """All rates ``d`` (3, M) of the class state u = [N, L, G] (3M,) with a factored kernel
     beta_ij p(phi_i) p(phi_j) (success ``model``: ALWAYS, STEP or LOGISTIC), and the refused solid
@@ -264,11 +268,35 @@ def class_rates(u, beta, model, vectors, params, K, cell_average, target, weight
     return refused
 
 
-@njit("Tuple((f8, b1))(f8[::1], f8[::1], f8, f8, i8, f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], "
-      "f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[:, ::1])",
-      cache=True, nogil=True)
-def ssp_stages(u, k1, r1, dt, order, beta, model, vectors, params, K, cell_average, target, weight, factors,
-               work, pw, u_new, u_low, stage, k2, k3):
+@njit(
+    "Tuple((f8, b1))(f8[::1], f8[::1], f8, f8, i8, f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], "
+    "f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[:, ::1])",
+    cache=True,
+    nogil=True,
+)
+def ssp_stages(
+    u,
+    k1,
+    r1,
+    dt,
+    order,
+    beta,
+    model,
+    vectors,
+    params,
+    K,
+    cell_average,
+    target,
+    weight,
+    factors,
+    work,
+    pw,
+    u_new,
+    u_low,
+    stage,
+    k2,
+    k3,
+):
     """The stages of one explicit SSP Runge-Kutta step of size ``dt`` from u with rates ``k1``
     (refused rate ``r1``), with the compiled rates of a factored kernel (:func:`class_rates`):
     what ``GranulationPBM._stages`` does in numpy, the same operations in the same order (increment
@@ -278,7 +306,7 @@ def ssp_stages(u, k1, r1, dt, order, beta, model, vectors, params, K, cell_avera
     with that stage as ``u_new`` (the caller then halves the step). ``stage``, ``k2``, ``k3``: work."""
     n = u.size
     for i in range(n):
-        stage[i] = u[i] + dt * k1[i]                               # u1 (Euler)
+        stage[i] = u[i] + dt * k1[i]  # u1 (Euler)
     if order == 1 or any_negative(stage):
         for i in range(n):
             u_new[i] = stage[i]
@@ -289,13 +317,13 @@ def ssp_stages(u, k1, r1, dt, order, beta, model, vectors, params, K, cell_avera
     if order == 2:
         for i in range(n):
             u_low[i] = stage[i]
-            u_new[i] = u[i] + h * (k1[i] + k2f[i])                # Heun (SSP-RK2)
+            u_new[i] = u[i] + h * (k1[i] + k2f[i])  # Heun (SSP-RK2)
         return 0.5 * (r1 + r2), True
     q = 0.25 * dt
     for i in range(n):
         k12 = k1[i] + k2f[i]
-        u_low[i] = u[i] + h * k12                                  # Heun: the embedded estimate
-        stage[i] = u[i] + q * k12                                  # u2 of SSP-RK3 (Shu & Osher 1988)
+        u_low[i] = u[i] + h * k12  # Heun: the embedded estimate
+        stage[i] = u[i] + q * k12  # u2 of SSP-RK3 (Shu & Osher 1988)
     if any_negative(stage):
         for i in range(n):
             u_new[i] = stage[i]

@@ -155,19 +155,23 @@ class PivotAggregation:
                 extra_v = np.concatenate([np.ones(dr.size), 0.5 * self._S[refused]])
             else:
                 extra_r, extra_c, extra_v = dr, dc, np.ones(dr.size)
-            blocks.append(sparse.csr_matrix((np.concatenate([vals, extra_v]),
-                                             (np.concatenate([rows, extra_r]), np.concatenate([cc, extra_c]))),
-                                            shape=(R, M * M)))
+            blocks.append(
+                sparse.csr_matrix(
+                    (np.concatenate([vals, extra_v]), (np.concatenate([rows, extra_r]), np.concatenate([cc, extra_c]))),
+                    shape=(R, M * M),
+                )
+            )
         m = sparse.block_diag(blocks, format="csr")
         m.sum_duplicates()
         m.sort_indices()
         self._map = m
         self._y = np.zeros(3 * R)
         self._U = np.empty((3, M, M))
-        try:                                   # the bare CSR kernel skips scipy's dispatch (~5 us)
+        try:  # the bare CSR kernel skips scipy's dispatch (~5 us)
             from scipy.sparse import _sparsetools
+
             self._matvec = _sparsetools.csr_matvec
-        except ImportError:                    # pragma: no cover - other scipy layouts
+        except ImportError:  # pragma: no cover - other scipy layouts
             self._matvec = None
 
     def _pair_weights(self) -> tuple[np.ndarray, np.ndarray]:
@@ -188,12 +192,24 @@ class PivotAggregation:
         pairs, equal to the bit to :meth:`totals_numpy` (the sparse map)."""
         M = self.M
         if np.shape(beta) != (M, M) or np.shape(nlg) != (3, M):
-            raise ValueError(f"aggregation totals: beta {np.shape(beta)} and N, L, G {np.shape(nlg)}; expected "
-                             f"({M}, {M}) and (3, {M}) for the {M} classes")
+            raise ValueError(
+                f"aggregation totals: beta {np.shape(beta)} and N, L, G {np.shape(nlg)}; expected "
+                f"({M}, {M}) and (3, {M}) for the {M} classes"
+            )
         d = np.empty((3, M))
-        refused = self._totals(np.ascontiguousarray(beta, dtype=float), self._no_p, False,
-                               np.ascontiguousarray(nlg, dtype=float), self.K, self._cell_average, self._target,
-                               self._weight, self._factors, self._work, d)
+        refused = self._totals(
+            np.ascontiguousarray(beta, dtype=float),
+            self._no_p,
+            False,
+            np.ascontiguousarray(nlg, dtype=float),
+            self.K,
+            self._cell_average,
+            self._target,
+            self._weight,
+            self._factors,
+            self._work,
+            d,
+        )
         return d, refused
 
     def compiled_arrays(self) -> tuple:
@@ -206,7 +222,7 @@ class PivotAggregation:
         reference of the compiled evaluation; about 25 numpy calls instead of one)."""
         if self._map is None:
             self._build_map()
-        U = np.multiply(nlg[:, :, None], beta * nlg[0], out=self._U)     # R, RL, RG
+        U = np.multiply(nlg[:, :, None], beta * nlg[0], out=self._U)  # R, RL, RG
         m, y = self._map, self._y
         if self._matvec is not None:
             y.fill(0.0)
@@ -215,7 +231,7 @@ class PivotAggregation:
             y = m @ U.reshape(-1)
         Y = y.reshape(3, self.R)
         K, M = self.K, self.M
-        d = -Y[:, 2 * K:2 * K + M]
+        d = -Y[:, 2 * K : 2 * K + M]
         d[:, :K] += self._births(Y)
         return d, float(Y[0, 2 * K + M])
 
@@ -248,7 +264,7 @@ class CellAverageAggregation(PivotAggregation):
 
     def _number_rows(self):
         K, T, ok, S, xr = self.K, self._T, self._ok, self._S, self.xr
-        cols = np.arange(self.M ** 2)[ok]
+        cols = np.arange(self.M**2)[ok]
         t = T[ok]
         # rows 0..K-1: B_c (weight 1/2 per ordered pair); rows K..2K-1: D_c = sum R (s/x_c - 1)
         rows = np.concatenate([t, K + t])
@@ -257,14 +273,14 @@ class CellAverageAggregation(PivotAggregation):
 
     def _liquid_rows(self):
         ok = self._ok
-        cols = np.arange(self.M ** 2)[ok]
+        cols = np.arange(self.M**2)[ok]
         return self._T[ok], cols, np.ones(cols.size)
 
     def _pair_weights(self):
         T, ok, S = self._T, self._ok, self._S
         w = np.zeros((2, T.size))
-        w[0, ok] = S[ok] / self.xr[T[ok]] - 1.0        # s/x_c - 1: the first moment about the pivot
-        w[0, ~ok] = S[~ok]                              # refused: the aggregate's volume
+        w[0, ok] = S[ok] / self.xr[T[ok]] - 1.0  # s/x_c - 1: the first moment about the pivot
+        w[0, ~ok] = S[~ok]  # refused: the aggregate's volume
         return np.where(ok, T, -1), w
 
     def _build(self):
@@ -272,25 +288,25 @@ class CellAverageAggregation(PivotAggregation):
         xr = self.xr
         dx_up = np.append(xr[1:] - xr[:-1], np.inf)
         dx_down = np.insert(xr[1:] - xr[:-1], 0, np.inf)
-        self._cu = xr / dx_up            # n_up = D_c x_c / (x_(c+1) - x_c); 0 for the last cell
-        self._ncd = -xr / dx_down        # n_down = -D_c x_c / (x_c - x_(c-1)); 0 for the first cell
-        self._ru = np.append(xr[1:] / xr[:-1], 0.0)     # x_(c+1) / x_c
+        self._cu = xr / dx_up  # n_up = D_c x_c / (x_(c+1) - x_c); 0 for the last cell
+        self._ncd = -xr / dx_down  # n_down = -D_c x_c / (x_c - x_(c-1)); 0 for the first cell
+        self._ru = np.append(xr[1:] / xr[:-1], 0.0)  # x_(c+1) / x_c
         self._rd = np.insert(xr[:-1] / xr[1:], 0, 0.0)  # x_(c-1) / x_c
         self._factors = np.ascontiguousarray(np.stack([self._cu, self._ncd, self._ru, self._rd]))
 
     def _births(self, Y):
         K = self.K
-        A = Y[:, :K]                                    # number, liquid, gas born per cell
-        B, D = A[0], Y[0, K:2 * K]
+        A = Y[:, :K]  # number, liquid, gas born per cell
+        B, D = A[0], Y[0, K : 2 * K]
         up = np.maximum(D, 0.0) * self._cu
         down = np.minimum(D, 0.0) * self._ncd
-        V = B + D                                       # solid born, units of x_c (>= B 2/(1+r))
+        V = B + D  # solid born, units of x_c (>= B 2/(1+r))
         inv = np.divide(1.0, V, out=np.zeros(K), where=V > 0)
         mu = np.empty((3, K))
         md = np.empty((3, K))
         mu[0] = up
         md[0] = down
-        np.multiply(A[1:], up * self._ru * inv, out=mu[1:])     # liquid and gas follow the solid
+        np.multiply(A[1:], up * self._ru * inv, out=mu[1:])  # liquid and gas follow the solid
         np.multiply(A[1:], down * self._rd * inv, out=md[1:])
         out = A - mu - md
         out[:, 1:] += mu[:, :-1]
@@ -314,7 +330,7 @@ class FixedPivotAggregation(PivotAggregation):
         lo = np.clip(np.searchsorted(xr, s, side="right") - 1, 0, K - 2)
         up_number = (s - xr[lo]) / (xr[lo + 1] - xr[lo])
         up_solid = up_number * xr[lo + 1] / s
-        return np.arange(self.M ** 2)[ok], lo, up_number, up_solid
+        return np.arange(self.M**2)[ok], lo, up_number, up_solid
 
     def _number_rows(self):
         cols, lo, up, _ = self._split()
@@ -327,7 +343,7 @@ class FixedPivotAggregation(PivotAggregation):
         return rows, np.concatenate([cols, cols]), np.concatenate([1.0 - up, up])
 
     def _births(self, Y):
-        return Y[:, :self.K]
+        return Y[:, : self.K]
 
     def _pair_weights(self):
         ok, S = self._ok, self._S

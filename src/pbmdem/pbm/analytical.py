@@ -47,7 +47,7 @@ def sum_number_density(v, t, b, N0, m):
     sq = np.sqrt(tau)
     z = 2.0 * v * sq / m
     # exp(-(1+tau) v/m) I1(z) = exp(-(1 - sqrt(tau))^2 v/m) * ive(1, z)
-    return N0 * (1.0 - tau) / (v * sq) * np.exp(-(1.0 - sq) ** 2 * v / m) * special.ive(1, z)
+    return N0 * (1.0 - tau) / (v * sq) * np.exp(-((1.0 - sq) ** 2) * v / m) * special.ive(1, z)
 
 
 def sum_moments(t, b, N0, m):
@@ -95,10 +95,10 @@ def monodisperse_numbers(kernel: str, t: float, k) -> np.ndarray:
 
     k = np.asarray(k, float)
     if kernel == "constant":
-        tau = 0.5 * t                                   # c_k = tau^(k-1) / (1 + tau)^(k+1)
+        tau = 0.5 * t  # c_k = tau^(k-1) / (1 + tau)^(k+1)
         return np.exp((k - 1) * np.log(tau) - (k + 1) * np.log1p(tau)) if tau > 0 else (k == 1) * 1.0
     if kernel == "sum":
-        tau = -np.expm1(-t)                             # c_k = (1-tau) (k tau)^(k-1) e^(-k tau) / k!
+        tau = -np.expm1(-t)  # c_k = (1-tau) (k tau)^(k-1) e^(-k tau) / k!
         if tau == 0:
             return (k == 1) * 1.0
         return np.exp(np.log1p(-tau) + (k - 1) * np.log(k * tau) - k * tau - gammaln(k + 1))
@@ -106,6 +106,6 @@ def monodisperse_numbers(kernel: str, t: float, k) -> np.ndarray:
         if not 0 <= t < 1:
             raise ValueError(f"product kernel: t = {t:g}; the solution holds before gelation at t = 1")
         if t == 0:
-            return (k == 1) * 1.0                       # c_k = k^(k-3) t^(k-1) e^(-k t) / (k-1)!
+            return (k == 1) * 1.0  # c_k = k^(k-3) t^(k-1) e^(-k t) / (k-1)!
         return np.exp((k - 3) * np.log(k) + (k - 1) * np.log(t) - k * t - gammaln(k))
     raise ValueError(f"kernel {kernel!r}; allowed: 'constant', 'sum', 'product'")

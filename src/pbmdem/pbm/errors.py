@@ -35,12 +35,14 @@ def positive(name: str, value, allow_zero: bool = False) -> float:
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise PBMInputError(f"{name} = {value!r} is not a number; allowed: a finite number "
-                            f"{'>= 0' if allow_zero else '> 0'}") from None
+        raise PBMInputError(
+            f"{name} = {value!r} is not a number; allowed: a finite number {'>= 0' if allow_zero else '> 0'}"
+        ) from None
     ok = v >= 0 if allow_zero else v > 0
     if not (ok and v == v and v != float("inf")):
-        raise PBMInputError(f"{name} = {value!r} is not allowed; allowed: a finite number "
-                            f"{'>= 0' if allow_zero else '> 0'}")
+        raise PBMInputError(
+            f"{name} = {value!r} is not allowed; allowed: a finite number {'>= 0' if allow_zero else '> 0'}"
+        )
     return v
 
 

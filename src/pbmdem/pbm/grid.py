@@ -30,8 +30,7 @@ class Grid:
     Give the first pivot either as a volume ``v0`` or as a diameter ``min_diameter``.
     """
 
-    def __init__(self, bins: int, ratio: float = 2.0, v0: float | None = None,
-                 min_diameter: float | None = None):
+    def __init__(self, bins: int, ratio: float = 2.0, v0: float | None = None, min_diameter: float | None = None):
         if isinstance(bins, bool) or int(bins) != bins or bins < 3:
             raise PBMInputError(f"grid bins = {bins!r}; allowed: an integer >= 3")
         ratio = positive("grid ratio", ratio)
@@ -39,8 +38,9 @@ class Grid:
             raise PBMInputError(f"grid ratio = {ratio!r}; allowed: a number > 1 (v_(k+1) = ratio * v_k)")
         if (v0 is None) == (min_diameter is None):
             raise PBMInputError("grid: give exactly one of v0 (first pivot volume, m3) and min_diameter (m)")
-        v0 = positive("grid v0", v0) if v0 is not None else float(volume_of(positive("grid min_diameter",
-                                                                                     min_diameter)))
+        v0 = (
+            positive("grid v0", v0) if v0 is not None else float(volume_of(positive("grid min_diameter", min_diameter)))
+        )
         self.bins = int(bins)
         self.ratio = ratio
         self.v0 = v0
@@ -57,7 +57,7 @@ class Grid:
         self.d_edges = np.concatenate([[self.d[0] / q], np.sqrt(self.d[:-1] * self.d[1:]), [self.d[-1] * q]])
 
     @classmethod
-    def spanning(cls, min_diameter: float, max_diameter: float, ratio: float) -> "Grid":
+    def spanning(cls, min_diameter: float, max_diameter: float, ratio: float) -> Grid:
         """Grid of ``ratio`` from the first pivot of diameter ``min_diameter`` to the first pivot at
         or above ``max_diameter`` (m): bins = ceil(ln(x_max / x_0) / ln(ratio)) + 1."""
         dmin = positive("grid min_diameter", min_diameter)
@@ -78,9 +78,10 @@ class Grid:
         """Put particles of solid ``volumes`` on the grid, conserving number and solid volume.
 
         A class of volume u with x_i <= u <= x_(i+1) is split between the two pivots by the lever
-        rule (a class within 1e-12 of a pivot goes to that pivot alone). Returns ``(N, fraction)`` where ``N`` is the number per bin and ``fraction`` a
-        (n_classes, K) matrix: the share of each class's solid volume sent to each bin (use it to
-        carry liquid and gas with the solid). Raises GridRangeError outside [x_0, x_(K-1)].
+        rule (a class within 1e-12 of a pivot goes to that pivot alone). Returns ``(N, fraction)``
+        where ``N`` is the number per bin and ``fraction`` a (n_classes, K) matrix: the share of
+        each class's solid volume sent to each bin (use it to carry liquid and gas with the solid).
+        Raises GridRangeError outside [x_0, x_(K-1)].
         """
         u = np.atleast_1d(np.asarray(volumes, float))
         n = np.atleast_1d(np.asarray(numbers, float))
@@ -96,7 +97,8 @@ class Grid:
                 f"{what}: diameters {[float(f'{d:.4g}') for d in d_bad]} m (solid volumes "
                 f"{[float(f'{v:.4g}') for v in u[bad]]} m3) lie outside the grid; allowed: "
                 f"{self.d[0]:.4g} .. {self.d[-1]:.4g} m (pivots x_0 = {self.x[0]:.4g} .. "
-                f"x_{self.bins - 1} = {self.x[-1]:.4g} m3); change pbm.grid.min_diameter, bins or ratio")
+                f"x_{self.bins - 1} = {self.x[-1]:.4g} m3); change pbm.grid.min_diameter, bins or ratio"
+            )
         i, w_hi, f_hi = self._lever(u)
         rows = np.arange(u.size)
         n_hi = w_hi * n
@@ -114,8 +116,8 @@ class Grid:
         within 1e-12 (relative) of a pivot goes to that pivot alone (no round-off fragment)."""
         u = np.clip(np.atleast_1d(np.asarray(volumes, float)), self.x[0], self.x[-1])
         i = np.clip(np.searchsorted(self.x, u, side="right") - 1, 0, self.bins - 2)
-        w_hi = (u - self.x[i]) / (self.x[i + 1] - self.x[i])      # number fraction to i+1
-        f_hi = w_hi * self.x[i + 1] / u                             # solid-volume fraction to i+1
+        w_hi = (u - self.x[i]) / (self.x[i + 1] - self.x[i])  # number fraction to i+1
+        f_hi = w_hi * self.x[i + 1] / u  # solid-volume fraction to i+1
         lo, hi = np.abs(u / self.x[i] - 1.0) <= 1e-12, np.abs(u / self.x[i + 1] - 1.0) <= 1e-12
         w_hi[lo], f_hi[lo] = 0.0, 0.0
         w_hi[hi], f_hi[hi] = 1.0, 1.0

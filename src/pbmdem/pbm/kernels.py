@@ -165,25 +165,27 @@ class SuccessProbability:
     holds an impact iff its speed is below ``critical_velocity(d, phi)``, and ``success(d, phi,
     velocities)`` gives that step per speed); with it the success of an impact at speed v is
     psi_ij(v) = p(phi_i) p(phi_j) x [criterion holds at v] (:meth:`resolved`), and
-    :class:`CollisionKernel` needs velocity-resolved encounter rates from its source. Without it (default) the success is velocity-independent,
-    as in the seed study.
+    :class:`CollisionKernel` needs velocity-resolved encounter rates from its source. Without it
+    (default) the success is velocity-independent, as in the seed study.
     """
 
     MODELS = ("step", "logistic", "always")
 
-    def __init__(self, model: str = "step", threshold: float = 0.02, width: float = 0.005,
-                 velocity=None):
+    def __init__(self, model: str = "step", threshold: float = 0.02, width: float = 0.005, velocity=None):
         if velocity is not None and not (hasattr(velocity, "success") and hasattr(velocity, "critical_velocity")):
-            raise PBMInputError(f"success velocity criterion {velocity!r} lacks success(d, phi, velocities) or "
-                                "critical_velocity(d, phi); allowed: None or a pbmdem.pbm.success.StokesCriterion")
+            raise PBMInputError(
+                f"success velocity criterion {velocity!r} lacks success(d, phi, velocities) or "
+                "critical_velocity(d, phi); allowed: None or a pbmdem.pbm.success.StokesCriterion"
+            )
         self.velocity = velocity
         if model not in self.MODELS:
             raise PBMInputError(f"success probability model = {model!r}; allowed: {list(self.MODELS)}")
         self.model = model
         self.threshold = positive("success threshold", threshold, allow_zero=True)
         if self.threshold >= 1:
-            raise PBMInputError(f"success threshold = {threshold!r}; allowed: 0 <= threshold < 1 "
-                                "(a surface-liquid volume fraction)")
+            raise PBMInputError(
+                f"success threshold = {threshold!r}; allowed: 0 <= threshold < 1 (a surface-liquid volume fraction)"
+            )
         self.width = positive("success width", width)
 
     def __repr__(self) -> str:
@@ -221,24 +223,32 @@ def check_frequency_matrix(c, K: int, name: str) -> np.ndarray:
     """Validate what a collision-frequency source returned: (K, K), finite, >= 0, symmetric."""
     c = np.asarray(c, dtype=float)
     if c.shape != (K, K):
-        raise KernelShapeError(f"collision-frequency source {name} returned shape {c.shape}; expected "
-                               f"({K}, {K}) for {K} bins (one c_ij per bin pair)")
+        raise KernelShapeError(
+            f"collision-frequency source {name} returned shape {c.shape}; expected "
+            f"({K}, {K}) for {K} bins (one c_ij per bin pair)"
+        )
     bad = ~np.isfinite(c)
     if bad.any():
         i, j = np.argwhere(bad)[0]
-        raise KernelShapeError(f"collision-frequency source {name} returned a non-finite value "
-                               f"c[{i},{j}] = {c[i, j]}; allowed: finite values >= 0 (1/s per pair)")
+        raise KernelShapeError(
+            f"collision-frequency source {name} returned a non-finite value "
+            f"c[{i},{j}] = {c[i, j]}; allowed: finite values >= 0 (1/s per pair)"
+        )
     if (c < 0).any():
         i, j = np.argwhere(c < 0)[0]
-        raise KernelShapeError(f"collision-frequency source {name} returned a negative value "
-                               f"c[{i},{j}] = {c[i, j]:.6g}; allowed: values >= 0 (1/s per pair)")
+        raise KernelShapeError(
+            f"collision-frequency source {name} returned a negative value "
+            f"c[{i},{j}] = {c[i, j]:.6g}; allowed: values >= 0 (1/s per pair)"
+        )
     diff = np.abs(c - c.T)
     tol = SYMMETRY_RTOL * np.maximum(np.abs(c), np.abs(c.T)) + 1e-300
     if (diff > tol).any():
         i, j = np.argwhere(diff > tol)[0]
-        raise KernelShapeError(f"collision-frequency source {name} returned a non-symmetric matrix: "
-                               f"c[{i},{j}] = {c[i, j]:.6g} but c[{j},{i}] = {c[j, i]:.6g}; c_ij must "
-                               f"equal c_ji within relative {SYMMETRY_RTOL:g}")
+        raise KernelShapeError(
+            f"collision-frequency source {name} returned a non-symmetric matrix: "
+            f"c[{i},{j}] = {c[i, j]:.6g} but c[{j},{i}] = {c[j, i]:.6g}; c_ij must "
+            f"equal c_ji within relative {SYMMETRY_RTOL:g}"
+        )
     return 0.5 * (c + c.T)
 
 
@@ -251,29 +261,39 @@ def check_encounter_rates(rates, K: int, name: str):
 
     for attr in ("frequency", "velocity_fractions"):
         if not hasattr(rates, attr):
-            raise KernelShapeError(f"collision-frequency source {name}.encounters returned {type(rates).__name__} "
-                                   f"without {attr!r}; expected a pbmdem.impact.EncounterRates")
+            raise KernelShapeError(
+                f"collision-frequency source {name}.encounters returned {type(rates).__name__} "
+                f"without {attr!r}; expected a pbmdem.impact.EncounterRates"
+            )
     c = check_frequency_matrix(rates.frequency, K, name + ".encounters")
     f = np.asarray(rates.velocity_fractions, dtype=float)
     if f.shape != (K, K, N_VELOCITY_BINS):
-        raise KernelShapeError(f"collision-frequency source {name}.encounters returned velocity fractions of "
-                               f"shape {f.shape}; expected ({K}, {K}, {N_VELOCITY_BINS})")
+        raise KernelShapeError(
+            f"collision-frequency source {name}.encounters returned velocity fractions of "
+            f"shape {f.shape}; expected ({K}, {K}, {N_VELOCITY_BINS})"
+        )
     bad = ~np.isfinite(f) | (f < 0)
     if bad.any():
         i, j, b = np.argwhere(bad)[0]
-        raise KernelShapeError(f"collision-frequency source {name}.encounters returned velocity fraction "
-                               f"[{i},{j},{b}] = {f[i, j, b]!r}; allowed: finite values >= 0")
+        raise KernelShapeError(
+            f"collision-frequency source {name}.encounters returned velocity fraction "
+            f"[{i},{j},{b}] = {f[i, j, b]!r}; allowed: finite values >= 0"
+        )
     total = f.sum(axis=2)
     off = (np.abs(total - 1.0) > 1e-8) & (total != 0.0)
     if off.any():
         i, j = np.argwhere(off)[0]
-        raise KernelShapeError(f"collision-frequency source {name}.encounters: the velocity fractions of pair "
-                               f"({i}, {j}) sum to {total[i, j]:.10g}; allowed: 1 (or 0 for a pair without data)")
+        raise KernelShapeError(
+            f"collision-frequency source {name}.encounters: the velocity fractions of pair "
+            f"({i}, {j}) sum to {total[i, j]:.10g}; allowed: 1 (or 0 for a pair without data)"
+        )
     asym = np.abs(f - f.transpose(1, 0, 2)) > 1e-8
     if asym.any():
         i, j, b = np.argwhere(asym)[0]
-        raise KernelShapeError(f"collision-frequency source {name}.encounters: velocity fractions are not "
-                               f"symmetric: [{i},{j},{b}] = {f[i, j, b]:.6g} but [{j},{i},{b}] = {f[j, i, b]:.6g}")
+        raise KernelShapeError(
+            f"collision-frequency source {name}.encounters: velocity fractions are not "
+            f"symmetric: [{i},{j},{b}] = {f[i, j, b]:.6g} but [{j},{i},{b}] = {f[j, i, b]:.6g}"
+        )
     return c, 0.5 * (f + f.transpose(1, 0, 2))
 
 
@@ -293,8 +313,7 @@ class CollisionKernel(Kernel):
     are all 0 (no velocity data) gets beta_ij = 0.
     """
 
-    def __init__(self, source, beta0: float, success: SuccessProbability | None = None,
-                 update_interval: float = 0.0):
+    def __init__(self, source, beta0: float, success: SuccessProbability | None = None, update_interval: float = 0.0):
         self.beta0 = positive("aggregation beta0", beta0)
         self.success = success if success is not None else SuccessProbability()
         if self.success.velocity_dependent:
@@ -310,18 +329,24 @@ class CollisionKernel(Kernel):
         self.reset()
 
     def __repr__(self) -> str:
-        return (f"CollisionKernel(source={self.source!r}, beta0={self.beta0:g}, success={self.success!r}, "
-                f"update_interval={self.update_interval:g})")
+        return (
+            f"CollisionKernel(source={self.source!r}, beta0={self.beta0:g}, success={self.success!r}, "
+            f"update_interval={self.update_interval:g})"
+        )
 
     def _check_source(self, source) -> None:
         if not callable(source):
-            raise PBMInputError(f"collision-frequency source {source!r} is not callable; allowed: "
-                                "source(diameters, numbers, rpm) -> (K, K)")
+            raise PBMInputError(
+                f"collision-frequency source {source!r} is not callable; allowed: "
+                "source(diameters, numbers, rpm) -> (K, K)"
+            )
         if self.success.velocity_dependent and not callable(getattr(source, "encounters", None)):
-            raise PBMInputError(f"the velocity-dependent success probability {self.success!r} needs impact "
-                                f"velocities, but the collision-frequency source {source!r} has no "
-                                "encounters(diameters, numbers, rpm) method; use a DEM table with its "
-                                "impact-velocity table, or success velocity_model: none")
+            raise PBMInputError(
+                f"the velocity-dependent success probability {self.success!r} needs impact "
+                f"velocities, but the collision-frequency source {source!r} has no "
+                "encounters(diameters, numbers, rpm) method; use a DEM table with its "
+                "impact-velocity table, or success velocity_model: none"
+            )
 
     def reset(self) -> None:
         self._c: np.ndarray | None = None
@@ -329,8 +354,8 @@ class CollisionKernel(Kernel):
         self._classes: np.ndarray | None = None
         self._class_c = self._class_cumulative = None
         self._t_eval = -np.inf
-        self._raw: np.ndarray | None = None     # the source's last matrix as returned (before the check)
-        self._beta_of = None                    # the class matrix the cached products below belong to
+        self._raw: np.ndarray | None = None  # the source's last matrix as returned (before the check)
+        self._beta_of = None  # the class matrix the cached products below belong to
         self._scaled = self._beta = self._beta_key = None
 
     def set_source(self, source) -> None:
@@ -369,9 +394,15 @@ class CollisionKernel(Kernel):
                     self._raw = np.array(c, dtype=float)
             self._t_eval = inp.t
             self.evaluations += 1
-            if self.success.velocity_dependent or previous is None or (previous is not self._c and (
-                    previous.shape != self._c.shape or not np.array_equal(previous, self._c))):
-                self._classes = None                # the feed classes' c_ij must be blended again
+            if (
+                self.success.velocity_dependent
+                or previous is None
+                or (
+                    previous is not self._c
+                    and (previous.shape != self._c.shape or not np.array_equal(previous, self._c))
+                )
+            ):
+                self._classes = None  # the feed classes' c_ij must be blended again
         W = inp.feed_weights
         if W is None:
             self._class_c, self._class_cumulative = self._c, getattr(self, "_cumulative", None)
@@ -381,11 +412,11 @@ class CollisionKernel(Kernel):
                 # the pivots' c_ij (and velocity fractions): E c E^T, E = [I; W] (K + P, K)
                 E = np.vstack([np.eye(W.shape[1]), W])
                 c = E @ self._c @ E.T
-                self._class_c = 0.5 * (c + c.T)                 # symmetric to the last digit
+                self._class_c = 0.5 * (c + c.T)  # symmetric to the last digit
                 if self.success.velocity_dependent:
                     cum = np.einsum("jl,ilv->ijv", E, np.einsum("ik,klv->ilv", E, self._cumulative))
                     self._class_cumulative = 0.5 * (cum + cum.transpose(1, 0, 2))
-            self._classes = W                   # the model hands the same array at every step
+            self._classes = W  # the model hands the same array at every step
 
     def _scaled_classes(self, inp: KernelInput) -> np.ndarray:
         """beta0 c_ij of the classes (kept until c_ij changes)."""
@@ -417,7 +448,7 @@ class CollisionKernel(Kernel):
             n = np.searchsorted(self._speeds, w_star, side="left")
             held = np.take_along_axis(self._class_cumulative, n[:, :, None], axis=2)[:, :, 0]
             return self.beta0 * c * self.success(inp.surface_fraction) * held
-        scaled = self._scaled_classes(inp)       # beta0 c_ij and the last kernel kept until c_ij changes
+        scaled = self._scaled_classes(inp)  # beta0 c_ij and the last kernel kept until c_ij changes
         if self.success.model == "always":
             return scaled
         # psi_ij = p_i p_j: with the step success p is 0 or 1 and changes only when a class crosses
@@ -425,7 +456,7 @@ class CollisionKernel(Kernel):
         p = self.success.per_particle(inp.surface_fraction)
         key = p.tobytes()
         if key != self._beta_key:
-            self._beta = self._scaled * np.outer(p, p)       # = beta0 c_ij psi_ij, as before, to the bit
+            self._beta = self._scaled * np.outer(p, p)  # = beta0 c_ij psi_ij, as before, to the bit
             self._beta_key = key
         return self._beta
 
@@ -440,8 +471,9 @@ class ConstantFrequency:
 
     def __init__(self, value: float, impact_velocity: float | None = None):
         self.value = positive("constant collision frequency", value)
-        self.impact_velocity = None if impact_velocity is None else \
-            positive("constant impact velocity (m/s)", impact_velocity)
+        self.impact_velocity = (
+            None if impact_velocity is None else positive("constant impact velocity (m/s)", impact_velocity)
+        )
 
     def __repr__(self) -> str:
         vel = "" if self.impact_velocity is None else f", impact_velocity={self.impact_velocity:g}"
@@ -456,8 +488,9 @@ class ConstantFrequency:
         from pbmdem.impact import N_VELOCITY_BINS, EncounterRates, velocity_bin
 
         if self.impact_velocity is None:
-            raise PBMInputError("ConstantFrequency.encounters needs an impact velocity "
-                                "(pbm.aggregation.constant_impact_velocity, m/s)")
+            raise PBMInputError(
+                "ConstantFrequency.encounters needs an impact velocity (pbm.aggregation.constant_impact_velocity, m/s)"
+            )
         K = np.atleast_1d(diameters).size
         f = np.zeros((K, K, N_VELOCITY_BINS))
         f[:, :, int(velocity_bin(self.impact_velocity))] = 1.0

@@ -37,8 +37,14 @@ import numpy as np
 from pbmdem.config import Solver
 
 from .aggregation import SCHEMES
-from .errors import (GridOverflowError, KernelShapeError, NegativePopulationError, PBMInputError, SolverLimitError,
-                     positive)
+from .errors import (
+    GridOverflowError,
+    KernelShapeError,
+    NegativePopulationError,
+    PBMInputError,
+    SolverLimitError,
+    positive,
+)
 from .grid import Grid, diameter_of
 from .kernels import Kernel, KernelInput
 from .processes import Consolidation, LiquidAddition
@@ -63,8 +69,9 @@ def check_solver(opt: Solver) -> Solver:
         raise PBMInputError(f"solver method = {opt.method!r}; allowed: {list(METHODS)}")
     safety = positive("solver safety", opt.safety)
     if safety > 1:
-        raise PBMInputError(f"solver safety = {opt.safety!r}; allowed: 0 < safety <= 1 (fraction of the "
-                            "fastest depletion time)")
+        raise PBMInputError(
+            f"solver safety = {opt.safety!r}; allowed: 0 < safety <= 1 (fraction of the fastest depletion time)"
+        )
     if opt.max_step != np.inf:
         positive("solver max_step (s)", opt.max_step)
     positive("solver rtol", opt.rtol)
@@ -106,9 +113,17 @@ class GranulationPBM:
     of their bins (:class:`FeedGranules`; default True), False: they share the bin's liquid and gas.
     """
 
-    def __init__(self, grid: Grid, kernel: Kernel, liquid: LiquidAddition | None = None,
-                 consolidation: Consolidation | None = None, solver: Solver | None = None,
-                 rpm: float = 0.0, scheme: str = "cell_average", separate_feed: bool = True):
+    def __init__(
+        self,
+        grid: Grid,
+        kernel: Kernel,
+        liquid: LiquidAddition | None = None,
+        consolidation: Consolidation | None = None,
+        solver: Solver | None = None,
+        rpm: float = 0.0,
+        scheme: str = "cell_average",
+        separate_feed: bool = True,
+    ):
         self.grid = grid
         self.kernel = kernel
         self.liquid = liquid
@@ -135,16 +150,18 @@ class GranulationPBM:
         self._use_classes(np.zeros(0))
 
     def __repr__(self) -> str:
-        return (f"GranulationPBM({self.grid!r}, {self.kernel!r}, liquid={self.liquid!r}, "
-                f"consolidation={self.consolidation!r}, rpm={self.rpm:g}, scheme={self.aggregation.name!r}, "
-                f"separate_feed={self.separate_feed})")
+        return (
+            f"GranulationPBM({self.grid!r}, {self.kernel!r}, liquid={self.liquid!r}, "
+            f"consolidation={self.consolidation!r}, rpm={self.rpm:g}, scheme={self.aggregation.name!r}, "
+            f"separate_feed={self.separate_feed})"
+        )
 
     def _use_classes(self, feed_volumes: np.ndarray) -> None:
         """Set up the classes of a run: the K pivots (aggregates, or everything without feed
         classes) followed by one class per feed volume (m3)."""
         key = tuple(float(v) for v in feed_volumes)
         if key == getattr(self, "_classes_key", None):
-            return                              # the classes of the last run (a coupled loop's intervals)
+            return  # the classes of the last run (a coupled loop's intervals)
         self._classes_key = key
         op = self._operators.get(key)
         if op is None:
@@ -152,9 +169,9 @@ class GranulationPBM:
         self._op = op
         self._M = op.M
         g = self.grid
-        self._xc = op.class_volumes                                     # class volumes in units of x_0
-        self._vc = np.concatenate([g.x, op.extra])                      # class volumes (m3)
-        self._dc = np.concatenate([g.d, diameter_of(op.extra)])         # class diameters (m)
+        self._xc = op.class_volumes  # class volumes in units of x_0
+        self._vc = np.concatenate([g.x, op.extra])  # class volumes (m3)
+        self._dc = np.concatenate([g.d, diameter_of(op.extra)])  # class diameters (m)
         if key:
             # lever rule of the feed classes onto the pivots: numbers, and solid (liquid, gas)
             self._feed_number_w, self._feed_solid_w = g.lever_weights(op.extra)
@@ -163,8 +180,9 @@ class GranulationPBM:
         self._spray_weight = self._xc
         if self.liquid is not None and self.liquid.rule == "surface_area":
             self._spray_weight = (self._dc / g.d[0]) ** 2
-        self._gas_min = self.consolidation.gas_per_solid * self._xc if self.consolidation is not None else \
-            np.zeros(self._M)
+        self._gas_min = (
+            self.consolidation.gas_per_solid * self._xc if self.consolidation is not None else np.zeros(self._M)
+        )
         # the compiled rates of a factored kernel (_use_factors)
         self._factored = self._factors_of = self._factors_key = None
         self._vectors = np.ascontiguousarray(np.stack([self._xc, self._spray_weight, self._gas_min]), dtype=float)
@@ -200,8 +218,15 @@ class GranulationPBM:
         order = np.argsort(volumes, kind="stable")
         return volumes[order], numbers[order]
 
-    def initial_state(self, volumes, numbers, liquid_content: float = 0.0, porosity: float = 0.0,
-                      t: float = 0.0, what: str = "initial distribution") -> State:
+    def initial_state(
+        self,
+        volumes,
+        numbers,
+        liquid_content: float = 0.0,
+        porosity: float = 0.0,
+        t: float = 0.0,
+        what: str = "initial distribution",
+    ) -> State:
         """State from particle classes of solid ``volumes`` (m3) and ``numbers``, each with liquid
         ``liquid_content`` x solid volume and pore volume such that G / (S + G) = ``porosity``."""
         lc = positive("initial liquid_content", liquid_content, allow_zero=True)
@@ -209,8 +234,10 @@ class GranulationPBM:
         if eps >= 1:
             raise PBMInputError(f"initial porosity = {porosity!r}; allowed: 0 <= porosity < 1")
         if self.consolidation is not None and eps < self.consolidation.min_porosity:
-            raise PBMInputError(f"initial porosity = {eps:g} is below the minimum porosity "
-                                f"{self.consolidation.min_porosity:g}; allowed: porosity >= min_porosity")
+            raise PBMInputError(
+                f"initial porosity = {eps:g} is below the minimum porosity "
+                f"{self.consolidation.min_porosity:g}; allowed: porosity >= min_porosity"
+            )
         N, frac = self.grid.map_particles(volumes, numbers, what=what)
         solid = np.asarray(volumes, float) * np.asarray(numbers, float)
         S_bins = solid @ frac
@@ -232,8 +259,14 @@ class GranulationPBM:
     def kernel_input(self, t: float, N, L, G) -> KernelInput:
         """Kernel input at (t, N, L, G); L and G in m3 or in any unit (only ratios are used)."""
         S = N * self.grid.x
-        return KernelInput(t=t, volumes=self.grid.x, diameters=self.grid.d, numbers=N,
-                           surface_fraction=surface_fraction(S, L, G), rpm=self.rpm)
+        return KernelInput(
+            t=t,
+            volumes=self.grid.x,
+            diameters=self.grid.d,
+            numbers=N,
+            surface_fraction=surface_fraction(S, L, G),
+            rpm=self.rpm,
+        )
 
     def rates(self, t: float, N, L, G, spraying: bool):
         """Rates (dN, dL, dG) in m3 and the refused solid-volume rate (m3/s) at (t, N, L, G)
@@ -246,7 +279,7 @@ class GranulationPBM:
         self._use_factors(inp)
         d, refused = self._rates(t, u, spraying)
         K = self.grid.bins
-        return d[:K], d[K:2 * K] * x0, d[2 * K:] * x0, refused * x0
+        return d[:K], d[K : 2 * K] * x0, d[2 * K :] * x0, refused * x0
 
     def _rates(self, t: float, u: np.ndarray, spraying: bool, beta: np.ndarray | None = None):
         """Rates (3M,) of the scaled class state u = [N, L/x_0, G/x_0] (M classes: the K pivots and the
@@ -261,23 +294,31 @@ class GranulationPBM:
             # a factored kernel (Kernel.factors): flush, kernel, aggregation, spraying and
             # consolidation in one compiled call
             d = np.empty((3, M))
-            refused = self._jit.class_rates(u, self._factored, self._success_code, self._vectors,
-                                            self._params[1] if spraying else self._params[0], *self._op_arrays,
-                                            self._pw, d)
+            refused = self._jit.class_rates(
+                u,
+                self._factored,
+                self._success_code,
+                self._vectors,
+                self._params[1] if spraying else self._params[0],
+                *self._op_arrays,
+                self._pw,
+                d,
+            )
             return d.reshape(-1), refused
         if self._flush_n > 0 and self._jit.below_flush(u, self._flush_vec):
             # entries below the flush level count as zero (they are zeroed after every step; here
             # also inside a step, so no event rate can underflow)
             u = u.copy()
-            self._jit.flush(u, M, self._flush_n, self._flush_v)   # a class flushed loses L, G too
+            self._jit.flush(u, M, self._flush_n, self._flush_v)  # a class flushed loses L, G too
             beta = None
         nlg = u.reshape(3, M)
         if beta is None:
             beta = self.kernel(self._input(t, nlg))
         d, refused = self._op.totals_stacked(beta, nlg)
         # spraying (Q shared in proportion to N_k w_k) and consolidation -c (G_k - G_min,k)
-        self._jit.add_processes(d, nlg, self._spray_rate if spraying else 0.0, self._spray_weight,
-                                self._consolidation_rate, self._gas_min)
+        self._jit.add_processes(
+            d, nlg, self._spray_rate if spraying else 0.0, self._spray_weight, self._consolidation_rate, self._gas_min
+        )
         return d.reshape(-1), refused
 
     def _stages(self, t: float, u: np.ndarray, k1: np.ndarray, r1: float, dt: float, order: int, spraying: bool):
@@ -289,9 +330,23 @@ class GranulationPBM:
             n = u.size
             u_new, u_low = np.empty(n), np.empty(n)
             refused_rate, _ = self._jit.ssp_stages(
-                u, k1, r1, dt, order, self._factored, self._success_code, self._vectors,
-                self._params[1] if spraying else self._params[0], *self._op_arrays, self._pw, u_new, u_low,
-                self._stage, self._k2, self._k3)
+                u,
+                k1,
+                r1,
+                dt,
+                order,
+                self._factored,
+                self._success_code,
+                self._vectors,
+                self._params[1] if spraying else self._params[0],
+                *self._op_arrays,
+                self._pw,
+                u_new,
+                u_low,
+                self._stage,
+                self._k2,
+                self._k3,
+            )
             return u_new, u_low, refused_rate
         jit = self._jit
         u1 = u + dt * k1
@@ -300,10 +355,10 @@ class GranulationPBM:
         k2, r2 = self._rates(t + dt, u1, spraying)
         # increment forms of the Shu-Osher stages: zero rates leave u exactly unchanged
         k12 = k1 + k2
-        u_h = u + (0.5 * dt) * k12                                 # Heun (SSP-RK2)
+        u_h = u + (0.5 * dt) * k12  # Heun (SSP-RK2)
         if order == 2:
             return u_h, u1, 0.5 * (r1 + r2)
-        u2 = u + (0.25 * dt) * k12                                 # SSP-RK3 (Shu & Osher 1988)
+        u2 = u + (0.25 * dt) * k12  # SSP-RK3 (Shu & Osher 1988)
         if jit.any_negative(u2):
             return u2, u_h, r1
         k3, r3 = self._rates(t + 0.5 * dt, u2, spraying)
@@ -312,7 +367,7 @@ class GranulationPBM:
     def _use_factors(self, inp: KernelInput) -> None:
         """Ask the kernel for its factors at this step (after ``prepare``): the compiled rates use
         them until the next step; None: :meth:`_rates` calls the kernel."""
-        factors = getattr(self.kernel, "factors", None)        # kernels need not derive from Kernel
+        factors = getattr(self.kernel, "factors", None)  # kernels need not derive from Kernel
         f = factors(inp) if factors is not None else None
         if f is None:
             self._factored = self._factors_of = None
@@ -320,10 +375,12 @@ class GranulationPBM:
         S, model, threshold, width = f
         key = (model, threshold, width, self._flush_n, self._flush_v)
         if S is self._factors_of and key == self._factors_key:
-            return                              # the kernel's factors of the last step
+            return  # the kernel's factors of the last step
         if np.shape(S) != (self._M, self._M):
-            raise KernelShapeError(f"kernel {self.kernel!r} returned factors of shape {np.shape(S)}; expected "
-                                   f"({self._M}, {self._M}) for the {self._M} classes")
+            raise KernelShapeError(
+                f"kernel {self.kernel!r} returned factors of shape {np.shape(S)}; expected "
+                f"({self._M}, {self._M}) for the {self._M} classes"
+            )
         self._factors_of, self._factors_key = S, key
         self._factored = np.ascontiguousarray(S, dtype=float)
         self._success_code = _SUCCESS_CODES[model]
@@ -335,24 +392,38 @@ class GranulationPBM:
     def _input(self, t: float, nlg: np.ndarray) -> KernelInput:
         """KernelInput of the scaled class state (3, M): surface-liquid fraction from class totals."""
         phi = np.empty(nlg.shape[1])
-        self._jit.surface_fraction(nlg, self._xc, phi)    # max(L - G, 0) / (S + max(L, G)), 0 if empty
-        return KernelInput(t=t, volumes=self._vc, diameters=self._dc, numbers=nlg[0],
-                           surface_fraction=phi, rpm=self.rpm, feed_weights=self._feed_number_w)
+        self._jit.surface_fraction(nlg, self._xc, phi)  # max(L - G, 0) / (S + max(L, G)), 0 if empty
+        return KernelInput(
+            t=t,
+            volumes=self._vc,
+            diameters=self._dc,
+            numbers=nlg[0],
+            surface_fraction=phi,
+            rpm=self.rpm,
+            feed_weights=self._feed_number_w,
+        )
 
     def check_state(self, s: State, where: str = "") -> None:
         arrays = [("number", s.number, None), ("liquid", s.liquid, None), ("gas", s.gas, None)]
         if s.feed is not None:
             d = diameter_of(s.feed.volumes)
-            arrays += [("feed number", s.feed.number, d), ("feed liquid", s.feed.liquid, d),
-                       ("feed gas", s.feed.gas, d)]
+            arrays += [
+                ("feed number", s.feed.number, d),
+                ("feed liquid", s.feed.liquid, d),
+                ("feed gas", s.feed.gas, d),
+            ]
         for name, arr, d in arrays:
             bad = ~np.isfinite(arr) | (arr < 0)
             if bad.any():
                 k = int(np.argmax(bad))
-                where_k = f"bin {k} (diameter {self.grid.d[k]:.4g} m)" if d is None else \
-                    f"the feed class of diameter {d[k]:.4g} m"
-                raise NegativePopulationError(f"{name} of {where_k} is {float(arr[k])!r} at t = {s.t:.6g} s"
-                                              f"{where}; allowed: finite values >= 0")
+                where_k = (
+                    f"bin {k} (diameter {self.grid.d[k]:.4g} m)"
+                    if d is None
+                    else f"the feed class of diameter {d[k]:.4g} m"
+                )
+                raise NegativePopulationError(
+                    f"{name} of {where_k} is {float(arr[k])!r} at t = {s.t:.6g} s{where}; allowed: finite values >= 0"
+                )
 
     def _check_feed(self, s: State) -> np.ndarray:
         """Volumes of the state's feed classes (checked: distinct, on the grid, shapes; their
@@ -363,10 +434,16 @@ class GranulationPBM:
         g = self.grid
         v = np.asarray(f.volumes, float)
         P = v.size
-        if v.ndim != 1 or np.unique(v).size != P or not np.all(np.isfinite(v)) \
-                or (P and (v.min() < g.x[0] * (1 - 1e-12) or v.max() > g.x[-1] * (1 + 1e-12))):
-            raise PBMInputError(f"state.feed.volumes = {v.tolist()}; allowed: distinct solid volumes within the "
-                                f"grid, {g.x[0]:.4g} .. {g.x[-1]:.4g} (x_0 .. x_(K-1))")
+        if (
+            v.ndim != 1
+            or np.unique(v).size != P
+            or not np.all(np.isfinite(v))
+            or (P and (v.min() < g.x[0] * (1 - 1e-12) or v.max() > g.x[-1] * (1 + 1e-12)))
+        ):
+            raise PBMInputError(
+                f"state.feed.volumes = {v.tolist()}; allowed: distinct solid volumes within the "
+                f"grid, {g.x[0]:.4g} .. {g.x[-1]:.4g} (x_0 .. x_(K-1))"
+            )
         for name in ("number", "liquid", "gas"):
             if np.shape(getattr(f, name)) != (P,):
                 raise PBMInputError(f"state.feed.{name} has shape {np.shape(getattr(f, name))}; expected ({P},)")
@@ -376,8 +453,10 @@ class GranulationPBM:
             over = part > total * (1.0 + 1e-9) + 1e-300
             if over.any():
                 k = int(np.argmax(over))
-                raise PBMInputError(f"state.feed.{name} puts {part[k]!r} into bin {k}, more than the bin's total "
-                                    f"{total[k]!r}; the feed granules are part of the bin totals")
+                raise PBMInputError(
+                    f"state.feed.{name} puts {part[k]!r} into bin {k}, more than the bin's total "
+                    f"{total[k]!r}; the feed granules are part of the bin totals"
+                )
         return v
 
     # ----------------------------------------------------------------- integration
@@ -390,11 +469,13 @@ class GranulationPBM:
         idx = int(np.argmax(bad))
         name = ("number", "liquid", "gas")[idx // M]
         c = idx % M
-        what = f"bin {c} (diameter {self.grid.d[c]:.4g} m)" if c < K else \
-            f"the feed class of diameter {self._dc[c]:.4g} m"
+        what = (
+            f"bin {c} (diameter {self.grid.d[c]:.4g} m)" if c < K else f"the feed class of diameter {self._dc[c]:.4g} m"
+        )
         value = float(arr[idx]) * (scale if idx >= M else 1.0)
         raise NegativePopulationError(
-            f"{name} of {what} became {value!r} at t = {t:.6g} s ({why}); populations must stay finite and >= 0")
+            f"{name} of {what} became {value!r} at t = {t:.6g} s ({why}); populations must stay finite and >= 0"
+        )
 
     def run(self, t_start: float, t_end: float, state: State, output_times=None):
         """Integrate from ``t_start`` (= ``state.t``) to ``t_end``; returns a :class:`Result`.
@@ -443,15 +524,17 @@ class GranulationPBM:
         if feed_volumes.size:
             # classes [aggregates of the K bins, feed classes]: aggregates = bin totals - feed
             parts = []
-            for total, part, scale, w in ((s.number, s.feed.number, 1.0, self._feed_number_w),
-                                          (s.liquid, s.feed.liquid, x0, self._feed_solid_w),
-                                          (s.gas, s.feed.gas, x0, self._feed_solid_w)):
+            for total, part, scale, w in (
+                (s.number, s.feed.number, 1.0, self._feed_number_w),
+                (s.liquid, s.feed.liquid, x0, self._feed_solid_w),
+                (s.gas, s.feed.gas, x0, self._feed_solid_w),
+            ):
                 feed = np.asarray(part, float) / scale
                 parts += [np.maximum(total / scale - feed @ w, 0.0), feed]
             u = np.concatenate(parts)
         else:
             u = np.concatenate([s.number, s.liquid / x0, s.gas / x0])
-        total_solid = float(np.sum(u[:M] * xr))               # x_0 units
+        total_solid = float(np.sum(u[:M] * xr))  # x_0 units
         allowed_refused = opt.max_overflow_fraction * total_solid
         refused = s.refused_volume / x0
         # error scale of entry k: rtol |u_k| + atol x total solid / w_k, where number entries count
@@ -484,7 +567,7 @@ class GranulationPBM:
             k1, r1 = self._rates(t, u, spraying, None if self._factored is not None else self.kernel(inp))
             if not np.isfinite(k1).all():
                 self._raise_bad(t, np.where(np.isfinite(k1), u, np.nan), "non-finite rate", x0)
-            dt_pos = opt.safety * jit.depletion_time(u, k1)     # min u / -rate over rate < 0
+            dt_pos = opt.safety * jit.depletion_time(u, k1)  # min u / -rate over rate < 0
             cands = (dt_pos, dt_prop, opt.max_step, t_next - t)
             dt = min(cands)
             why = cands.index(dt)
@@ -533,16 +616,19 @@ class GranulationPBM:
                     f"{self.grid.d[-1]:.4g} m): by t = {t:.6g} s aggregates carrying {refused * x0:.4g} m3 of solid "
                     f"were refused, {refused / total_solid:.3g} of the total solid volume {total_solid * x0:.4g} m3; "
                     f"allowed: at most max_overflow_fraction = {opt.max_overflow_fraction:g} of the total solid. "
-                    "Raise the top of the grid (pbm.grid.max_diameter, or bins / ratio)")
+                    "Raise the top of the grid (pbm.grid.max_diameter, or bins / ratio)"
+                )
             if taken >= opt.max_steps and t < t_end:
                 raise SolverLimitError(
                     f"run stopped at t = {t:.6g} s of [{t_start:g}, {t_end:g}] s after {taken} steps "
-                    f"(solver max_steps = {opt.max_steps}); step limits so far: {limits}")
+                    f"(solver max_steps = {opt.max_steps}); step limits so far: {limits}"
+                )
             if taken % 64 == 0 and _time.perf_counter() - wall0 > opt.max_wall_time and t < t_end:
                 raise SolverLimitError(
                     f"run stopped at t = {t:.6g} s of [{t_start:g}, {t_end:g}] s after {taken} steps and "
                     f"{_time.perf_counter() - wall0:.3g} s of wall time (solver max_wall_time = "
-                    f"{opt.max_wall_time:g} s); step limits so far: {limits}")
+                    f"{opt.max_wall_time:g} s); step limits so far: {limits}"
+                )
             if capped and t in record_at:
                 s.t, s.steps = t, steps
                 self._store(s, u, x0)
@@ -553,13 +639,21 @@ class GranulationPBM:
         s.refused_volume = refused * x0
         if refresh0 is not None:
             limits["kernel_refreshes"] = int(self.kernel.evaluations - refresh0)
-        info = {"kernel": repr(self.kernel), "liquid_addition": repr(self.liquid),
-                "consolidation": repr(self.consolidation), "rpm": self.rpm, "steps": taken,
-                "wall_time_s": _time.perf_counter() - wall0, "method": opt.method,
-                "aggregation_scheme": self.aggregation.name, "safety": opt.safety, "step_limits": limits,
-                # the kernel evaluated inside the compiled rates (Kernel.factors), or called per evaluation
-                "kernel_evaluation": "compiled" if self._factored is not None else "called",
-                "feed_volumes": feed_volumes.tolist()}
+        info = {
+            "kernel": repr(self.kernel),
+            "liquid_addition": repr(self.liquid),
+            "consolidation": repr(self.consolidation),
+            "rpm": self.rpm,
+            "steps": taken,
+            "wall_time_s": _time.perf_counter() - wall0,
+            "method": opt.method,
+            "aggregation_scheme": self.aggregation.name,
+            "safety": opt.safety,
+            "step_limits": limits,
+            # the kernel evaluated inside the compiled rates (Kernel.factors), or called per evaluation
+            "kernel_evaluation": "compiled" if self._factored is not None else "called",
+            "feed_volumes": feed_volumes.tolist(),
+        }
         return Result(self.grid, rec, s, info)
 
     def _store(self, s: State, u: np.ndarray, x0: float) -> None:

@@ -36,15 +36,17 @@ class LiquidAddition:
         self.t_start = positive("liquid addition t_start (s)", t_start, allow_zero=True)
         self.t_end = positive("liquid addition t_end (s)", t_end)
         if self.t_end <= self.t_start:
-            raise PBMInputError(f"liquid addition window [{t_start}, {t_end}] s is empty; allowed: "
-                                "t_end > t_start >= 0")
+            raise PBMInputError(
+                f"liquid addition window [{t_start}, {t_end}] s is empty; allowed: t_end > t_start >= 0"
+            )
         if rule not in self.RULES:
             raise PBMInputError(f"liquid addition distribution = {rule!r}; allowed: {list(self.RULES)}")
         self.rule = rule
 
     def __repr__(self) -> str:
-        return (f"LiquidAddition(rate={self.rate:g} m3/s, window=[{self.t_start:g}, {self.t_end:g}] s, "
-                f"rule={self.rule!r})")
+        return (
+            f"LiquidAddition(rate={self.rate:g} m3/s, window=[{self.t_start:g}, {self.t_end:g}] s, rule={self.rule!r})"
+        )
 
     def active(self, t: float) -> bool:
         """Spraying during the step that starts at t (steps never straddle the window edges)."""

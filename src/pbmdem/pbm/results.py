@@ -61,7 +61,7 @@ class Result:
         self.info = dict(info)
 
     @classmethod
-    def concat(cls, results: list["Result"]) -> "Result":
+    def concat(cls, results: list[Result]) -> Result:
         """Join consecutive runs (e.g. the intervals of a coupled loop); duplicate joint times are
         kept once."""
         first = results[0]
@@ -71,8 +71,15 @@ class Result:
 
         rec = _R()
         keep = [np.ones(first.times.size, bool)] + [r.times > prev.times[-1] for prev, r in zip(results, results[1:])]
-        for name, attr in (("times", "times"), ("number", "number"), ("liquid", "liquid"), ("gas", "gas"),
-                           ("liquid_added", "liquid_added"), ("refused", "refused_volume"), ("steps", "steps")):
+        for name, attr in (
+            ("times", "times"),
+            ("number", "number"),
+            ("liquid", "liquid"),
+            ("gas", "gas"),
+            ("liquid_added", "liquid_added"),
+            ("refused", "refused_volume"),
+            ("steps", "steps"),
+        ):
             setattr(rec, name, np.concatenate([getattr(r, attr)[k] for r, k in zip(results, keep)]))
         info = dict(results[-1].info)
         info["steps"] = int(sum(r.info.get("steps", 0) for r in results))
@@ -94,7 +101,7 @@ class Result:
 
     def moments(self, orders=(0, 1, 2)) -> np.ndarray:
         """Moments of the number distribution in solid volume, (T, len(orders))."""
-        return np.stack([(self.number * self.grid.x ** k).sum(axis=1) for k in orders], axis=1)
+        return np.stack([(self.number * self.grid.x**k).sum(axis=1) for k in orders], axis=1)
 
     def summary(self) -> pd.DataFrame:
         d = self.grid.d
@@ -103,23 +110,27 @@ class Result:
         q = mass_quantiles(S, self.grid.d_edges)
         import pandas as pd
 
-        return pd.DataFrame({
-            "time": self.times,
-            "total_number": Ntot,
-            "total_solid_volume": Stot,
-            "total_liquid_volume": Ltot,
-            "total_gas_volume": Gtot,
-            "d10": q[:, 0], "d50": q[:, 1], "d90": q[:, 2],
-            "number_mean_diameter": (N * d).sum(1) / Ntot,
-            "mass_mean_diameter": (S * d).sum(1) / Stot,
-            "mean_volume": Stot / Ntot,
-            "mean_liquid_content": Ltot / Stot,
-            "mean_porosity": Gtot / (Stot + Gtot),
-            "mean_surface_liquid_fraction": surface_fraction(Stot, Ltot, Gtot),
-            "liquid_added": self.liquid_added,
-            "refused_solid_volume": self.refused_volume,
-            "steps": self.steps,
-        })
+        return pd.DataFrame(
+            {
+                "time": self.times,
+                "total_number": Ntot,
+                "total_solid_volume": Stot,
+                "total_liquid_volume": Ltot,
+                "total_gas_volume": Gtot,
+                "d10": q[:, 0],
+                "d50": q[:, 1],
+                "d90": q[:, 2],
+                "number_mean_diameter": (N * d).sum(1) / Ntot,
+                "mass_mean_diameter": (S * d).sum(1) / Stot,
+                "mean_volume": Stot / Ntot,
+                "mean_liquid_content": Ltot / Stot,
+                "mean_porosity": Gtot / (Stot + Gtot),
+                "mean_surface_liquid_fraction": surface_fraction(Stot, Ltot, Gtot),
+                "liquid_added": self.liquid_added,
+                "refused_solid_volume": self.refused_volume,
+                "steps": self.steps,
+            }
+        )
 
     def bins(self) -> pd.DataFrame:
         """Tidy per-bin table: one row per (time, bin)."""
@@ -132,21 +143,23 @@ class Result:
         eps = np.divide(self.gas, S + self.gas, out=np.zeros_like(S), where=(S + self.gas) > 0)
         import pandas as pd
 
-        return pd.DataFrame({
-            "time": np.repeat(self.times, K),
-            "bin": np.tile(np.arange(K), T),
-            "solid_volume_pivot": np.tile(g.x, T),
-            "diameter": np.tile(g.d, T),
-            "number": self.number.ravel(),
-            "solid_volume": S.ravel(),
-            "liquid_volume": self.liquid.ravel(),
-            "gas_volume": self.gas.ravel(),
-            "mass_fraction": (S / Stot).ravel(),
-            "mass_density_lnd": (S / Stot / dlog).ravel(),
-            "liquid_content": lc.ravel(),
-            "porosity": eps.ravel(),
-            "surface_liquid_fraction": surface_fraction(S, self.liquid, self.gas).ravel(),
-        })
+        return pd.DataFrame(
+            {
+                "time": np.repeat(self.times, K),
+                "bin": np.tile(np.arange(K), T),
+                "solid_volume_pivot": np.tile(g.x, T),
+                "diameter": np.tile(g.d, T),
+                "number": self.number.ravel(),
+                "solid_volume": S.ravel(),
+                "liquid_volume": self.liquid.ravel(),
+                "gas_volume": self.gas.ravel(),
+                "mass_fraction": (S / Stot).ravel(),
+                "mass_density_lnd": (S / Stot / dlog).ravel(),
+                "liquid_content": lc.ravel(),
+                "porosity": eps.ravel(),
+                "surface_liquid_fraction": surface_fraction(S, self.liquid, self.gas).ravel(),
+            }
+        )
 
     def to_frames(self) -> dict[str, pd.DataFrame]:
         return {"summary": self.summary(), "bins": self.bins()}
@@ -169,8 +182,9 @@ class Result:
         occupied = np.nonzero(self.number.max(axis=0) > 1e-6 * self.number.max())[0]
         lo, hi = occupied.min(), occupied.max()
         for n, i in enumerate(idx):
-            ax.step(g.d * 1e3, dens[i], where="mid", color=cmap(n / max(1, len(idx) - 1)),
-                    label=f"t = {self.times[i]:g} s")
+            ax.step(
+                g.d * 1e3, dens[i], where="mid", color=cmap(n / max(1, len(idx) - 1)), label=f"t = {self.times[i]:g} s"
+            )
         ax.set_xscale("log")
         ax.set_xlim(g.d_edges[max(lo - 1, 0)] * 1e3, g.d_edges[min(hi + 2, g.bins)] * 1e3)
         ax.set_xlabel("solid-equivalent diameter (mm)")
@@ -191,8 +205,13 @@ class Result:
 
         s = self.summary()
         fig, (a1, a2) = plt.subplots(2, 1, figsize=(6, 6), sharex=True, layout="constrained")
-        for col, style in (("d50", "-"), ("d10", ":"), ("d90", ":"), ("number_mean_diameter", "--"),
-                           ("mass_mean_diameter", "-.")):
+        for col, style in (
+            ("d50", "-"),
+            ("d10", ":"),
+            ("d90", ":"),
+            ("number_mean_diameter", "--"),
+            ("mass_mean_diameter", "-."),
+        ):
             a1.plot(s["time"], s[col] * 1e3, style, label=col)
         a1.set_ylabel("diameter (mm)")
         a1.legend(fontsize=7)

@@ -16,8 +16,8 @@ from .errors import PBMInputError
 from .grid import Grid, volume_of
 from .kernels import CollisionKernel, ConstantFrequency, SuccessProbability
 from .model import GranulationPBM
-from .state import State
 from .processes import Consolidation, LiquidAddition
+from .state import State
 from .success import StokesCriterion
 
 
@@ -30,17 +30,20 @@ def build_success(pbm: Pbm) -> SuccessProbability:
         st = succ.stokes
         velocity = StokesCriterion(st.binder_viscosity, st.restitution, st.asperity_height, st.granule_density)
     elif succ.velocity_model != "none":
-        raise PBMInputError(f"pbm.aggregation.success.velocity_model = {succ.velocity_model!r}; "
-                            "allowed: 'none', 'stokes'")
+        raise PBMInputError(
+            f"pbm.aggregation.success.velocity_model = {succ.velocity_model!r}; allowed: 'none', 'stokes'"
+        )
     return SuccessProbability(succ.model, succ.threshold, succ.width, velocity=velocity)
 
 
 def build_grid(pbm: Pbm) -> Grid:
     g = pbm.grid
     if g.min_diameter is None:
-        raise PBMInputError("pbm.grid.min_diameter = null (the smallest class of size_distributions) but no "
-                            "configuration resolved it; allowed: a diameter (m), or settings from "
-                            "pbmdem.config.load_config")
+        raise PBMInputError(
+            "pbm.grid.min_diameter = null (the smallest class of size_distributions) but no "
+            "configuration resolved it; allowed: a diameter (m), or settings from "
+            "pbmdem.config.load_config"
+        )
     if g.bins is not None:
         return Grid(g.bins, g.ratio, min_diameter=g.min_diameter)
     return Grid.spanning(g.min_diameter, g.max_diameter, g.ratio)
@@ -51,10 +54,12 @@ def constant_source(pbm: Pbm) -> ConstantFrequency:
     constant_impact_velocity for a velocity-dependent success)."""
     agg = pbm.aggregation
     if agg.success.velocity_resolved and agg.constant_impact_velocity is None:
-        raise PBMInputError("pbm.aggregation.success.velocity_model = "
-                            f"{agg.success.velocity_model!r} needs impact velocities; the constant "
-                            "collision-frequency kernel has them only with pbm.aggregation."
-                            "constant_impact_velocity = a speed in m/s (now null)")
+        raise PBMInputError(
+            "pbm.aggregation.success.velocity_model = "
+            f"{agg.success.velocity_model!r} needs impact velocities; the constant "
+            "collision-frequency kernel has them only with pbm.aggregation."
+            "constant_impact_velocity = a speed in m/s (now null)"
+        )
     return ConstantFrequency(agg.constant_frequency, agg.constant_impact_velocity)
 
 
@@ -67,11 +72,13 @@ def build_model(pbm: Pbm, source=None, rpm: float = 0.0) -> GranulationPBM:
         source = constant_source(pbm)
     kernel = CollisionKernel(source, agg.beta0, build_success(pbm), update_interval=agg.frequency_update_interval)
     process = pbm.process
-    liquid = LiquidAddition(pbm.liquid_addition.rate, process.spray_start, process.spray_end,
-                            pbm.liquid_addition.distribution)
+    liquid = LiquidAddition(
+        pbm.liquid_addition.rate, process.spray_start, process.spray_end, pbm.liquid_addition.distribution
+    )
     cons = Consolidation(pbm.consolidation.rate, pbm.consolidation.min_porosity)
-    return GranulationPBM(grid, kernel, liquid, cons, pbm.solver, rpm=rpm, scheme=agg.scheme,
-                          separate_feed=pbm.grid.separate_feed)
+    return GranulationPBM(
+        grid, kernel, liquid, cons, pbm.solver, rpm=rpm, scheme=agg.scheme, separate_feed=pbm.grid.separate_feed
+    )
 
 
 def initial_state(batch: PbmBatch, model: GranulationPBM) -> State:
@@ -80,14 +87,21 @@ def initial_state(batch: PbmBatch, model: GranulationPBM) -> State:
     d = np.asarray(batch.sizes.diameters, float)
     f = np.asarray(batch.sizes.number_fractions, float)
     if d.shape != f.shape or f.sum() <= 0:
-        raise PBMInputError(f"size_distributions.{batch.distribution}: {d.size} diameters, {f.size} fractions "
-                            f"summing to {f.sum():g}; need one fraction per diameter and a positive sum")
+        raise PBMInputError(
+            f"size_distributions.{batch.distribution}: {d.size} diameters, {f.size} fractions "
+            f"summing to {f.sum():g}; need one fraction per diameter and a positive sum"
+        )
     u = volume_of(d)
     f = f / f.sum()
     numbers = batch.bed_solid_volume / float(np.sum(f * u)) * f
     ini = batch.pbm.initial
-    return model.initial_state(u, numbers, liquid_content=ini.liquid_content, porosity=ini.porosity,
-                               what=f"size distribution {batch.distribution!r}")
+    return model.initial_state(
+        u,
+        numbers,
+        liquid_content=ini.liquid_content,
+        porosity=ini.porosity,
+        what=f"size distribution {batch.distribution!r}",
+    )
 
 
 def output_times(pbm: Pbm, t_start: float, t_end: float) -> np.ndarray:
@@ -106,8 +120,14 @@ def run_batch(batch: PbmBatch, source=None, rpm: float = 0.0, *, t_end: float | 
     t_end = batch.pbm.process.end if t_end is None else float(t_end)
     times = output_times(batch.pbm, 0.0, t_end) if times is None else times
     res = model.run(0.0, t_end, state, output_times=times)
-    res.info.update({"distribution": batch.distribution, "source": repr(model.kernel.source),
-                     "frequency_evaluations": model.kernel.evaluations,
-                     "bed_solid_volume": batch.bed_solid_volume, "settings": batch.pbm.to_dict(),
-                     "spray_window": [batch.pbm.process.spray_start, batch.pbm.process.spray_end]})
+    res.info.update(
+        {
+            "distribution": batch.distribution,
+            "source": repr(model.kernel.source),
+            "frequency_evaluations": model.kernel.evaluations,
+            "bed_solid_volume": batch.bed_solid_volume,
+            "settings": batch.pbm.to_dict(),
+            "spray_window": [batch.pbm.process.spray_start, batch.pbm.process.spray_end],
+        }
+    )
     return res

@@ -21,8 +21,12 @@ class FeedGranules:
     gas: np.ndarray
 
     def copy(self) -> FeedGranules:
-        return FeedGranules(np.array(self.volumes, float), np.array(self.number, float),
-                            np.array(self.liquid, float), np.array(self.gas, float))
+        return FeedGranules(
+            np.array(self.volumes, float),
+            np.array(self.number, float),
+            np.array(self.liquid, float),
+            np.array(self.gas, float),
+        )
 
 
 @dataclass
@@ -44,10 +48,17 @@ class State:
     steps: int = 0
     feed: FeedGranules | None = None
 
-    def copy(self) -> "State":
-        return State(self.t, self.number.copy(), self.liquid.copy(), self.gas.copy(),
-                     self.refused_volume, self.liquid_added, self.steps,
-                     None if self.feed is None else self.feed.copy())
+    def copy(self) -> State:
+        return State(
+            self.t,
+            self.number.copy(),
+            self.liquid.copy(),
+            self.gas.copy(),
+            self.refused_volume,
+            self.liquid_added,
+            self.steps,
+            None if self.feed is None else self.feed.copy(),
+        )
 
 
 def surface_fraction(S: np.ndarray, L: np.ndarray, G: np.ndarray) -> np.ndarray:

@@ -60,7 +60,7 @@ def viscous_stokes_number(d_i, d_j, w, viscosity: float, density: float) -> np.n
     Broadcasts over d_i, d_j and w."""
     m = harmonic_mean(sphere_mass(d_i, density), sphere_mass(d_j, density))
     d = harmonic_mean(d_i, d_j)
-    return 4.0 * m * np.asarray(w, float) / (3.0 * math.pi * viscosity * d ** 2)
+    return 4.0 * m * np.asarray(w, float) / (3.0 * math.pi * viscosity * d**2)
 
 
 def layer_thickness(d, phi) -> np.ndarray:
@@ -98,8 +98,10 @@ class StokesCriterion:
         self.density = positive("success stokes granule_density (kg/m3)", density)
 
     def __repr__(self) -> str:
-        return (f"StokesCriterion(viscosity={self.viscosity:g} Pa s, restitution={self.restitution:g}, "
-                f"asperity_height={self.asperity_height:g} m, density={self.density:g} kg/m3)")
+        return (
+            f"StokesCriterion(viscosity={self.viscosity:g} Pa s, restitution={self.restitution:g}, "
+            f"asperity_height={self.asperity_height:g} m, density={self.density:g} kg/m3)"
+        )
 
     def stokes_number(self, d_i, d_j, w) -> np.ndarray:
         return viscous_stokes_number(d_i, d_j, w, self.viscosity, self.density)

@@ -49,19 +49,24 @@ class TableFrequency:
 
     ``velocity_table`` (optional): the impact-velocity table (results/dem/impact_velocity.csv,
     columns ``point_id, class_i, class_j, v_lo, v_hi, encounters``), joined to ``table`` on
-    (point_id, class_i, class_j) (rows of points absent from ``table`` are left out); it enables :meth:`encounters`. Per speed, the encounter counts of
-    a pair (and of its mirror and of duplicate rows) are pooled and normalised to fractions per
-    velocity bin; a table pair without encounters gets the pooled distribution of all pairs at
-    that speed (its frequency is floored, not zero, see above). The fractions are interpolated
-    bilinearly in (log d_i, log d_j), always clamped at the table's sizes (a linearly extrapolated
-    distribution could turn negative), and mixed linearly in rpm with the weights of the
-    frequency interpolation.
+    (point_id, class_i, class_j) (rows of points absent from ``table`` are left out); it enables
+    :meth:`encounters`. Per speed, the encounter counts of a pair (and of its mirror and of
+    duplicate rows) are pooled and normalised to fractions per velocity bin; a table pair without
+    encounters gets the pooled distribution of all pairs at that speed (its frequency is floored,
+    not zero, see above). The fractions are interpolated bilinearly in (log d_i, log d_j), always
+    clamped at the table's sizes (a linearly extrapolated distribution could turn negative), and
+    mixed linearly in rpm with the weights of the frequency interpolation.
     """
 
-    def __init__(self, table: pd.DataFrame, extrapolation: str = "clamp", zero_floor: float = 1e-3,
-                 column: str = FREQUENCY_COLUMN, velocity_table: pd.DataFrame | None = None):
+    def __init__(
+        self,
+        table: pd.DataFrame,
+        extrapolation: str = "clamp",
+        zero_floor: float = 1e-3,
+        column: str = FREQUENCY_COLUMN,
+        velocity_table: pd.DataFrame | None = None,
+    ):
         import pandas as pd
-
         from scipy.interpolate import RegularGridInterpolator
 
         if extrapolation not in ("clamp", "linear"):
@@ -71,8 +76,10 @@ class TableFrequency:
         self.column = column
         missing = [c for c in ("d_i", "d_j", column) if c not in table.columns]
         if missing:
-            raise PBMInputError(f"collision table lacks columns {missing}; required: d_i, d_j, "
-                                f"{column} (and rpm); present: {list(table.columns)}")
+            raise PBMInputError(
+                f"collision table lacks columns {missing}; required: d_i, d_j, "
+                f"{column} (and rpm); present: {list(table.columns)}"
+            )
         if len(table) == 0:
             raise PBMInputError("collision table is empty")
         t = table.copy().reset_index(drop=True)
@@ -81,12 +88,16 @@ class TableFrequency:
         for col in ("d_i", "d_j"):
             v = t[col].to_numpy(float)
             if not np.all(np.isfinite(v) & (v > 0)):
-                raise PBMInputError(f"collision table column {col} has values {v[~(np.isfinite(v) & (v > 0))][:5]}; "
-                                    "allowed: finite diameters > 0 (m)")
+                raise PBMInputError(
+                    f"collision table column {col} has values {v[~(np.isfinite(v) & (v > 0))][:5]}; "
+                    "allowed: finite diameters > 0 (m)"
+                )
         f = t[column].to_numpy(float)
         if not np.all(np.isfinite(f) & (f >= 0)):
-            raise PBMInputError(f"collision table {column} has values {f[~(np.isfinite(f) & (f >= 0))][:5]}; "
-                                "allowed: finite values >= 0 (1/s per pair)")
+            raise PBMInputError(
+                f"collision table {column} has values {f[~(np.isfinite(f) & (f >= 0))][:5]}; "
+                "allowed: finite values >= 0 (1/s per pair)"
+            )
         if not (f > 0).any():
             raise PBMInputError(f"collision table has no positive {column}; cannot interpolate in log space")
         counts = None if velocity_table is None else self._velocity_counts(t, velocity_table)
@@ -97,15 +108,18 @@ class TableFrequency:
         self.ranges = []
         groups = [(np.nan, t)] if t["rpm"].isna().all() else sorted(t.groupby("rpm"), key=lambda kv: kv[0])
         for rpm, g in groups:
-            sym = pd.concat([g[["d_i", "d_j", column]],
-                             g.rename(columns={"d_i": "d_j", "d_j": "d_i"})[["d_i", "d_j", column]]])
+            sym = pd.concat(
+                [g[["d_i", "d_j", column]], g.rename(columns={"d_i": "d_j", "d_j": "d_i"})[["d_i", "d_j", column]]]
+            )
             mean = sym.groupby(["d_i", "d_j"])[column].mean()
             u = np.unique(np.concatenate([mean.index.get_level_values(0), mean.index.get_level_values(1)]))
             F = mean.unstack().reindex(index=u, columns=u).to_numpy(float)
             if np.isnan(F).any():
                 a, b = np.argwhere(np.isnan(F))[0]
-                raise PBMInputError(f"collision table at rpm {rpm:g}: no row for the pair d_i = {u[a]:g}, "
-                                    f"d_j = {u[b]:g}; every pair of the table's sizes is needed")
+                raise PBMInputError(
+                    f"collision table at rpm {rpm:g}: no row for the pair d_i = {u[a]:g}, "
+                    f"d_j = {u[b]:g}; every pair of the table's sizes is needed"
+                )
             logF = np.log(np.maximum(F, floor))
             lu = np.log(u)
             self.rpms.append(float(rpm))
@@ -117,8 +131,14 @@ class TableFrequency:
         self.rpms = np.array(self.rpms)
 
     @classmethod
-    def from_matrix(cls, diameters, matrix, extrapolation: str = "clamp", zero_floor: float = 1e-3,
-                    column: str = "frequency_per_pair") -> TableFrequency:
+    def from_matrix(
+        cls,
+        diameters,
+        matrix,
+        extrapolation: str = "clamp",
+        zero_floor: float = 1e-3,
+        column: str = "frequency_per_pair",
+    ) -> TableFrequency:
         """The source of one speed's table of K classes given as their ascending ``diameters``
         (K,) and the symmetric (K, K) per-pair frequency ``matrix``: what the constructor makes
         of the upper-triangle table (d_i, d_j, ``column``), without DataFrames (a coupling
@@ -141,13 +161,17 @@ class TableFrequency:
         self.zero_floor = positive("table zero_floor", zero_floor)
         self.column = column
         if not np.all(np.isfinite(d) & (d > 0)):
-            raise PBMInputError(f"collision table column d_i has values {d[~(np.isfinite(d) & (d > 0))][:5]}; "
-                                "allowed: finite diameters > 0 (m)")
+            raise PBMInputError(
+                f"collision table column d_i has values {d[~(np.isfinite(d) & (d > 0))][:5]}; "
+                "allowed: finite diameters > 0 (m)"
+            )
         iu, ju = np.triu_indices(d.size)
         f = m[iu, ju]
         if not np.all(np.isfinite(f) & (f >= 0)):
-            raise PBMInputError(f"collision table {column} has values {f[~(np.isfinite(f) & (f >= 0))][:5]}; "
-                                "allowed: finite values >= 0 (1/s per pair)")
+            raise PBMInputError(
+                f"collision table {column} has values {f[~(np.isfinite(f) & (f >= 0))][:5]}; "
+                "allowed: finite values >= 0 (1/s per pair)"
+            )
         if not (f > 0).any():
             raise PBMInputError(f"collision table has no positive {column}; cannot interpolate in log space")
         # the table's symmetric mean: each off-diagonal pair once per order, the diagonal twice
@@ -165,7 +189,7 @@ class TableFrequency:
     @staticmethod
     def _interpolator(rgi, lu: np.ndarray, values: np.ndarray):
         if lu.size == 1:
-            return (lambda value: (lambda pts: np.repeat(value[None], pts.shape[0], axis=0)))(values[0, 0])
+            return (lambda value: lambda pts: np.repeat(value[None], pts.shape[0], axis=0))(values[0, 0])
         return rgi((lu, lu), values, method="linear", bounds_error=False, fill_value=None)
 
     @staticmethod
@@ -177,36 +201,49 @@ class TableFrequency:
 
         missing = [c for c in VELOCITY_TABLE_COLUMNS if c not in velocity_table.columns]
         if missing:
-            raise PBMInputError(f"impact-velocity table lacks columns {missing}; required: "
-                                f"{list(VELOCITY_TABLE_COLUMNS)}; present: {list(velocity_table.columns)}")
+            raise PBMInputError(
+                f"impact-velocity table lacks columns {missing}; required: "
+                f"{list(VELOCITY_TABLE_COLUMNS)}; present: {list(velocity_table.columns)}"
+            )
         keys = ["point_id", "class_i", "class_j"]
         missing = [c for c in keys if c not in t.columns]
         if missing:
-            raise PBMInputError(f"collision table lacks columns {missing}, needed to join the impact-velocity "
-                                f"table on {keys}; present: {list(t.columns)}")
+            raise PBMInputError(
+                f"collision table lacks columns {missing}, needed to join the impact-velocity "
+                f"table on {keys}; present: {list(t.columns)}"
+            )
         # rows of other DEM points (e.g. the grid's velocity table beside one point's collision table)
         points = set(t["point_id"].astype(str))
         vt = velocity_table[velocity_table["point_id"].astype(str).isin(points)]
         if vt.empty:
-            raise PBMInputError(f"impact-velocity table has no rows for the collision table's points "
-                                f"{sorted(points)[:5]}; both tables must come from the same DEM runs")
+            raise PBMInputError(
+                f"impact-velocity table has no rows for the collision table's points "
+                f"{sorted(points)[:5]}; both tables must come from the same DEM runs"
+            )
         n = vt["encounters"].to_numpy(float)
         if not np.all(np.isfinite(n) & (n >= 0)):
-            raise PBMInputError(f"impact-velocity table encounters has values {n[~(np.isfinite(n) & (n >= 0))][:5]}; "
-                                "allowed: finite counts >= 0")
+            raise PBMInputError(
+                f"impact-velocity table encounters has values {n[~(np.isfinite(n) & (n >= 0))][:5]}; "
+                "allowed: finite counts >= 0"
+            )
         lo, hi = vt["v_lo"].to_numpy(float), vt["v_hi"].to_numpy(float)
         b = np.searchsorted(VELOCITY_EDGES[:-1], lo)
         b_ok = np.clip(b, 0, N_VELOCITY_BINS - 1)
         ok = (b < N_VELOCITY_BINS) & np.isclose(VELOCITY_EDGES[:-1][b_ok], lo, rtol=1e-6, atol=0.0)
-        ok &= np.isclose(VELOCITY_EDGES[1:][b_ok], hi, rtol=1e-6, atol=0.0) | \
-            ((b_ok == N_VELOCITY_BINS - 1) & np.isinf(hi))
+        ok &= np.isclose(VELOCITY_EDGES[1:][b_ok], hi, rtol=1e-6, atol=0.0) | (
+            (b_ok == N_VELOCITY_BINS - 1) & np.isinf(hi)
+        )
         if not ok.all():
             k = int(np.argmin(ok))
-            raise PBMInputError(f"impact-velocity table row {k}: bin [v_lo, v_hi) = [{lo[k]!r}, {hi[k]!r}) m/s is "
-                                "not one of the project's velocity bins; allowed: consecutive edges of "
-                                f"pbmdem.impact.VELOCITY_EDGES {np.round(VELOCITY_EDGES, 6).tolist()}")
-        row = pd.Series(np.arange(len(t)), index=pd.MultiIndex.from_frame(
-            t[keys].astype({"point_id": str, "class_i": int, "class_j": int})))
+            raise PBMInputError(
+                f"impact-velocity table row {k}: bin [v_lo, v_hi) = [{lo[k]!r}, {hi[k]!r}) m/s is "
+                "not one of the project's velocity bins; allowed: consecutive edges of "
+                f"pbmdem.impact.VELOCITY_EDGES {np.round(VELOCITY_EDGES, 6).tolist()}"
+            )
+        row = pd.Series(
+            np.arange(len(t)),
+            index=pd.MultiIndex.from_frame(t[keys].astype({"point_id": str, "class_i": int, "class_j": int})),
+        )
         if row.index.duplicated().any():
             dup = row.index[row.index.duplicated()][0]
             raise PBMInputError(f"collision table has several rows for (point_id, class_i, class_j) = {dup}")
@@ -214,8 +251,10 @@ class TableFrequency:
         idx = row.reindex(vkeys).to_numpy()
         if np.isnan(idx.astype(float)).any():
             k = int(np.argmax(np.isnan(idx.astype(float))))
-            raise PBMInputError(f"impact-velocity table row {k}: (point_id, class_i, class_j) = {tuple(vkeys[k])} "
-                                "has no row in the collision table; both tables must come from the same DEM runs")
+            raise PBMInputError(
+                f"impact-velocity table row {k}: (point_id, class_i, class_j) = {tuple(vkeys[k])} "
+                "has no row in the collision table; both tables must come from the same DEM runs"
+            )
         counts = np.zeros((len(t), N_VELOCITY_BINS))
         np.add.at(counts, (idx.astype(int), b_ok), n)
         return counts
@@ -226,9 +265,11 @@ class TableFrequency:
         lacking = has & (counts.sum(axis=1) <= 0)
         if lacking.any():
             r = g.iloc[int(np.argmax(lacking))]
-            raise PBMInputError(f"collision table at rpm {rpm:g}: pair d_i = {r['d_i']:g}, d_j = {r['d_j']:g} has "
-                                f"{self.column} = {r[self.column]:g} but no encounters in the impact-velocity "
-                                "table; both tables must come from the same DEM runs")
+            raise PBMInputError(
+                f"collision table at rpm {rpm:g}: pair d_i = {r['d_i']:g}, d_j = {r['d_j']:g} has "
+                f"{self.column} = {r[self.column]:g} but no encounters in the impact-velocity "
+                "table; both tables must come from the same DEM runs"
+            )
         pooled = counts.sum(axis=0)
         if not pooled.sum() > 0:
             raise PBMInputError(f"impact-velocity table: no encounters at rpm {rpm:g}")
@@ -248,7 +289,7 @@ class TableFrequency:
         return f"TableFrequency(rpm=[{speeds}], extrapolation={self.extrapolation!r}{vel})"
 
     @classmethod
-    def from_csv(cls, path, distribution: str | None = None, velocity_path=None, **kwargs) -> "TableFrequency":
+    def from_csv(cls, path, distribution: str | None = None, velocity_path=None, **kwargs) -> TableFrequency:
         """Read a collision table CSV; ``distribution`` keeps only that distribution's rows;
         ``velocity_path``: the impact-velocity table CSV (results/dem/impact_velocity.csv) that
         enables :meth:`encounters`."""
@@ -333,9 +374,11 @@ class TableFrequency:
         from pbmdem.impact import EncounterRates
 
         if not self._frac_interp:
-            raise PBMInputError("TableFrequency.encounters needs the impact-velocity table "
-                                "(results/dem/impact_velocity.csv: velocity_table= / from_csv(velocity_path=...), "
-                                "pbmdem pbm --velocity-table)")
+            raise PBMInputError(
+                "TableFrequency.encounters needs the impact-velocity table "
+                "(results/dem/impact_velocity.csv: velocity_table= / from_csv(velocity_path=...), "
+                "pbmdem pbm --velocity-table)"
+            )
         d = self._diameters(diameters)
         weights = self._speed_weights(rpm)
         freq = np.exp(sum(w * self._log_matrix(k, d) for k, w in weights))

@@ -37,8 +37,17 @@ def geometric_grid(q: int = 1, x0: float = 1e-3, x_max: float = 1.6e7):
     return Grid(int(np.ceil(np.log(x_max / x0) / np.log(r))) + 1, r, v0=x0)
 
 
-def simulate_exponential(kernel, t_end, grid, scheme: str = "cell_average", N0: float = 1.0, m: float = 1.0,
-                         rtol: float = 1e-3, atol: float = 1e-9, max_overflow_fraction: float = 1e-6):
+def simulate_exponential(
+    kernel,
+    t_end,
+    grid,
+    scheme: str = "cell_average",
+    N0: float = 1.0,
+    m: float = 1.0,
+    rtol: float = 1e-3,
+    atol: float = 1e-9,
+    max_overflow_fraction: float = 1e-6,
+):
     """Pure aggregation with ``kernel`` from the discretised exponential n(v, 0) = N0/m e^(-v/m) to
     ``t_end``. Returns ``(result, errors)``: the Result and the relative errors of the moments
     M0, M1, M2 at ``t_end`` against ``kernel.analytical_moments`` (M_k = sum N x^k)."""

@@ -41,7 +41,7 @@ def percent(fraction, decimals: int = 2) -> str:
 
 
 def value_range(lo, hi, decimals: int = 3) -> str:
-    """"lo - hi" of two numbers already in display units."""
+    """ "lo - hi" of two numbers already in display units."""
     if _missing(lo) or _missing(hi):
         return "n/a"
     return f"{float(lo):.{decimals}f} - {float(hi):.{decimals}f}"
@@ -59,4 +59,4 @@ def split_columns(frame: pd.DataFrame, keys: int = 1, max_columns: int = MAX_COL
     key_cols = list(frame.columns[:keys])
     rest = list(frame.columns[keys:])
     per_part = max(1, max_columns - keys)
-    return [frame[key_cols + rest[k:k + per_part]] for k in range(0, len(rest), per_part)]
+    return [frame[key_cols + rest[k : k + per_part]] for k in range(0, len(rest), per_part)]

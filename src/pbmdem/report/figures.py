@@ -95,12 +95,18 @@ def size_bands(bands: pd.DataFrame, process, rpm: str, what: str = "bands table"
             raise InputFileError(f"{what}: no rows of statistic {stat!r}")
         n = int(b["n_dem_replicates"].iloc[0])
         _spray(ax, process)
-        ax.fill_between(b.time, MM * b.dem_min, MM * b.dem_max, **BAND["PBM-DEM"],
-                        label=f"PBM-DEM band (min-max of {n} replicates)")
+        ax.fill_between(
+            b.time, MM * b.dem_min, MM * b.dem_max, **BAND["PBM-DEM"], label=f"PBM-DEM band (min-max of {n} replicates)"
+        )
         ax.plot(b.time, MM * b.dem_mean, **STYLES["PBM-DEM"], label="PBM-DEM mean")
         if {"ann_member_min", "ann_member_max"} <= set(b.columns):
-            ax.fill_between(b.time, MM * b.ann_member_min, MM * b.ann_member_max, **BAND["PBM-ANN"],
-                            label="PBM-ANN band (min-max of the ensemble members)")
+            ax.fill_between(
+                b.time,
+                MM * b.ann_member_min,
+                MM * b.ann_member_max,
+                **BAND["PBM-ANN"],
+                label="PBM-ANN band (min-max of the ensemble members)",
+            )
         ax.plot(b.time, MM * b.ann, **STYLES["PBM-ANN"], label="PBM-ANN (ensemble mean)")
         if "constant" in b.columns:
             ax.plot(b.time, MM * b.constant, **STYLES["PBM-constant"], label="PBM-constant")
@@ -115,8 +121,7 @@ def snapshot_times(recorded, process) -> list[float]:
     """The recorded times nearest to the start, the start, middle and end of the liquid addition and
     the end of the batch (duplicates dropped, ascending)."""
     recorded = np.unique(np.asarray(recorded, float))
-    wanted = [0.0, process.spray_start, 0.5 * (process.spray_start + process.spray_end), process.spray_end,
-              process.end]
+    wanted = [0.0, process.spray_start, 0.5 * (process.spray_start + process.spray_end), process.spray_end, process.end]
     return sorted({float(recorded[np.argmin(np.abs(recorded - t))]) for t in wanted})
 
 
@@ -125,8 +130,7 @@ def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str, what: dict[s
     `bins`: panel title -> that run's bins.csv (time, diameter, mass_density_lnd)."""
     plt = pyplot()
     what = what or {}
-    fig, axes = plt.subplots(1, len(bins), figsize=(4.2 * len(bins), 4.0), sharex=True, sharey=True,
-                             squeeze=False)
+    fig, axes = plt.subplots(1, len(bins), figsize=(4.2 * len(bins), 4.0), sharex=True, sharey=True, squeeze=False)
     axes = axes[0]
     first = next(iter(bins.values()))
     times = snapshot_times(_column(first, "time", what.get(next(iter(bins)), "bins table")), process)
@@ -156,8 +160,9 @@ def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str, what: dict[s
     return fig
 
 
-def _band_lines(ax, times: list[np.ndarray], values: list[np.ndarray], model: str, band_label: str,
-                line_label: str, scale: float) -> None:
+def _band_lines(
+    ax, times: list[np.ndarray], values: list[np.ndarray], model: str, band_label: str, line_label: str, scale: float
+) -> None:
     grid = times[0]
     stack = np.stack([np.interp(grid, t, v) for t, v in zip(times, values)]) * scale
     if len(values) > 1:
@@ -170,15 +175,23 @@ def liquid_porosity(speed, process, rpm: str):
     (band and mean), PBM-ANN ensemble members (band) and ensemble mean, PBM-constant."""
     plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.2))
-    quantities = (("mean_liquid_content", 1.0, "mean liquid content L/S (m3 liquid / m3 solid)"),
-                  ("mean_porosity", PERCENT, "mean porosity (%)"))
+    quantities = (
+        ("mean_liquid_content", 1.0, "mean liquid content L/S (m3 liquid / m3 solid)"),
+        ("mean_porosity", PERCENT, "mean porosity (%)"),
+    )
     members = speed.members
     for ax, (column, scale, ylabel) in zip(axes, quantities):
         _spray(ax, process)
         dem = [r.summary for r in speed.dem]
-        _band_lines(ax, [_column(s, "time", f"PBM-DEM replicate {k} summary") for k, s in enumerate(dem)],
-                    [_column(s, column, f"PBM-DEM replicate {k} summary") for k, s in enumerate(dem)], "PBM-DEM",
-                    f"PBM-DEM band (min-max of {len(dem)} replicates)", "PBM-DEM mean", scale)
+        _band_lines(
+            ax,
+            [_column(s, "time", f"PBM-DEM replicate {k} summary") for k, s in enumerate(dem)],
+            [_column(s, column, f"PBM-DEM replicate {k} summary") for k, s in enumerate(dem)],
+            "PBM-DEM",
+            f"PBM-DEM band (min-max of {len(dem)} replicates)",
+            "PBM-DEM mean",
+            scale,
+        )
         ann = speed.ann.summary
         t_ann = _column(ann, "time", "PBM-ANN summary")
         if members is not None and len(members) and column in members.columns:
@@ -186,11 +199,16 @@ def liquid_porosity(speed, process, rpm: str):
             lo = np.min([np.interp(t_ann, g.time, g[column]) for g in per], axis=0) * scale
             hi = np.max([np.interp(t_ann, g.time, g[column]) for g in per], axis=0) * scale
             ax.fill_between(t_ann, lo, hi, **BAND["PBM-ANN"], label="PBM-ANN band (min-max of the ensemble members)")
-        ax.plot(t_ann, scale * _column(ann, column, "PBM-ANN summary"), **STYLES["PBM-ANN"],
-                label="PBM-ANN (ensemble mean)")
+        ax.plot(
+            t_ann, scale * _column(ann, column, "PBM-ANN summary"), **STYLES["PBM-ANN"], label="PBM-ANN (ensemble mean)"
+        )
         con = speed.constant.summary
-        ax.plot(_column(con, "time", "PBM-constant summary"), scale * _column(con, column, "PBM-constant summary"),
-                **STYLES["PBM-constant"], label="PBM-constant")
+        ax.plot(
+            _column(con, "time", "PBM-constant summary"),
+            scale * _column(con, column, "PBM-constant summary"),
+            **STYLES["PBM-constant"],
+            label="PBM-constant",
+        )
         ax.set(xlabel="time (s)", ylabel=ylabel, title=f"{ylabel.split(' (')[0]}, {rpm} rpm")
         ax.grid(alpha=0.3)
     _figure_legend(fig, axes[0], ncol=3)
@@ -216,8 +234,11 @@ def collision_frequency(frequencies: pd.DataFrame, pairs: pd.DataFrame, rpm: str
         edges = np.append(g.t_start.to_numpy(float), g.t_end.to_numpy(float)[-1])
         values = g.mean_frequency_per_pair.to_numpy(float)
         left.stairs(values, edges, baseline=None, **style, label=f"{model}, {run}")
-    left.set(xlabel="time (s)", ylabel="pair-weighted mean c (1/s per pair)",
-             title=f"collision frequency per coupling interval, {rpm} rpm")
+    left.set(
+        xlabel="time (s)",
+        ylabel="pair-weighted mean c (1/s per pair)",
+        title=f"collision frequency per coupling interval, {rpm} rpm",
+    )
     left.grid(alpha=0.3)
     left.legend(fontsize=7, loc="best")
     outside = pairs[pairs.out_of_domain] if len(pairs) else pairs
@@ -231,10 +252,19 @@ def collision_frequency(frequencies: pd.DataFrame, pairs: pd.DataFrame, rpm: str
         hi = float(max(positive.dem.max(), positive.surrogate.max()))
         right.plot([lo / 1.2, hi * 1.2], [lo / 1.2, hi * 1.2], "k:", lw=1, label="equal")
     samples = pairs.groupby(["replicate", "interval"]).out_of_domain.first() if len(pairs) else pd.Series(dtype=bool)
-    right.set(xlabel="DEM c_ij (1/s per pair)", ylabel="surrogate c_ij, same sample (1/s per pair)",
-              title=f"class pairs of the PBM-DEM samples, {rpm} rpm")
-    right.text(0.02, 0.98, f"surrogate outside its training domain on {int(samples.sum())} of {len(samples)} "
-               "PBM-DEM samples", transform=right.transAxes, va="top", fontsize=8)
+    right.set(
+        xlabel="DEM c_ij (1/s per pair)",
+        ylabel="surrogate c_ij, same sample (1/s per pair)",
+        title=f"class pairs of the PBM-DEM samples, {rpm} rpm",
+    )
+    right.text(
+        0.02,
+        0.98,
+        f"surrogate outside its training domain on {int(samples.sum())} of {len(samples)} PBM-DEM samples",
+        transform=right.transAxes,
+        va="top",
+        fontsize=8,
+    )
     right.grid(alpha=0.3, which="both")
     _plain_log(right, "xy")
     right.legend(fontsize=7, loc="lower right")

@@ -21,8 +21,15 @@ from pbmdem.frequency import upper_pairs
 from pbmdem.readers import InputFileError
 
 #: the interval columns these tables read
-INTERVAL_COLUMNS = ("interval", "t_start", "t_end", "class_diameters", "class_counts", "class_frequencies",
-                    "mean_frequency_per_pair")
+INTERVAL_COLUMNS = (
+    "interval",
+    "t_start",
+    "t_end",
+    "class_diameters",
+    "class_counts",
+    "class_frequencies",
+    "mean_frequency_per_pair",
+)
 
 
 def _intervals(run, what: str) -> pd.DataFrame:
@@ -42,15 +49,41 @@ def interval_frequencies(speed, constant_timing_path: str | Path | None = None) 
     rows = []
     for k, rep in enumerate(speed.dem):
         frame = _intervals(rep, f"PBM-DEM replicate {k} result")
-        rows += [{"model": "PBM-DEM", "run": f"replicate {k}", "interval": int(r.interval), "t_start": r.t_start,
-                  "t_end": r.t_end, "mean_frequency_per_pair": r.mean_frequency_per_pair} for r in frame.itertuples()]
+        rows += [
+            {
+                "model": "PBM-DEM",
+                "run": f"replicate {k}",
+                "interval": int(r.interval),
+                "t_start": r.t_start,
+                "t_end": r.t_end,
+                "mean_frequency_per_pair": r.mean_frequency_per_pair,
+            }
+            for r in frame.itertuples()
+        ]
     ann = _intervals(speed.ann, "PBM-ANN result")
-    rows += [{"model": "PBM-ANN", "run": "ensemble mean", "interval": int(r.interval), "t_start": r.t_start,
-              "t_end": r.t_end, "mean_frequency_per_pair": r.mean_frequency_per_pair} for r in ann.itertuples()]
+    rows += [
+        {
+            "model": "PBM-ANN",
+            "run": "ensemble mean",
+            "interval": int(r.interval),
+            "t_start": r.t_start,
+            "t_end": r.t_end,
+            "mean_frequency_per_pair": r.mean_frequency_per_pair,
+        }
+        for r in ann.itertuples()
+    ]
     if "frequency" not in speed.constant.timing:
         raise InputFileError(f"PBM-constant timing {constant_timing_path}: missing field(s) ['frequency']")
-    rows.append({"model": "PBM-constant", "run": "calibrated", "interval": -1, "t_start": float(ann.t_start.min()),
-                 "t_end": float(ann.t_end.max()), "mean_frequency_per_pair": float(speed.constant.timing["frequency"])})
+    rows.append(
+        {
+            "model": "PBM-constant",
+            "run": "calibrated",
+            "interval": -1,
+            "t_start": float(ann.t_start.min()),
+            "t_end": float(ann.t_end.max()),
+            "mean_frequency_per_pair": float(speed.constant.timing["frequency"]),
+        }
+    )
     return pd.DataFrame(rows)
 
 
@@ -66,17 +99,44 @@ def surrogate_on_dem_samples(speed, surrogate) -> pd.DataFrame:
             d = np.asarray(json.loads(r.class_diameters), float)
             n = np.asarray(json.loads(r.class_counts), float)
             dem = np.asarray(json.loads(r.class_frequencies), float)
-            with out_of_domain_recorded(f"report, {speed.rpm} rpm, PBM-DEM replicate {k} interval {r.interval}",
-                                        log_each=False) as found:
+            with out_of_domain_recorded(
+                f"report, {speed.rpm} rpm, PBM-DEM replicate {k} interval {r.interval}", log_each=False
+            ) as found:
                 c = surrogate.frequency_matrix(d, n, float(speed.rpm))
             iu, ju = upper_pairs(len(d))
             if dem.shape != iu.shape:
-                raise InputFileError(f"PBM-DEM replicate {k} intervals.csv, interval {r.interval}: "
-                                     f"{dem.size} class-pair frequencies for {len(d)} classes "
-                                     f"({iu.size} pairs expected)")
-            rows += [{"replicate": k, "interval": int(r.interval), "class_i": int(i), "class_j": int(j),
-                      "d_i": d[i], "d_j": d[j], "dem": float(dem[p]), "surrogate": float(c[i, j]),
-                      "out_of_domain": bool(found), "warnings": "; ".join(found)}
-                     for p, (i, j) in enumerate(zip(iu, ju))]
-    return pd.DataFrame(rows, columns=["replicate", "interval", "class_i", "class_j", "d_i", "d_j", "dem",
-                                       "surrogate", "out_of_domain", "warnings"])
+                raise InputFileError(
+                    f"PBM-DEM replicate {k} intervals.csv, interval {r.interval}: "
+                    f"{dem.size} class-pair frequencies for {len(d)} classes "
+                    f"({iu.size} pairs expected)"
+                )
+            rows += [
+                {
+                    "replicate": k,
+                    "interval": int(r.interval),
+                    "class_i": int(i),
+                    "class_j": int(j),
+                    "d_i": d[i],
+                    "d_j": d[j],
+                    "dem": float(dem[p]),
+                    "surrogate": float(c[i, j]),
+                    "out_of_domain": bool(found),
+                    "warnings": "; ".join(found),
+                }
+                for p, (i, j) in enumerate(zip(iu, ju))
+            ]
+    return pd.DataFrame(
+        rows,
+        columns=[
+            "replicate",
+            "interval",
+            "class_i",
+            "class_j",
+            "d_i",
+            "d_j",
+            "dem",
+            "surrogate",
+            "out_of_domain",
+            "warnings",
+        ],
+    )

@@ -34,13 +34,17 @@ def escape(text) -> str:
 def table_html(frame: pd.DataFrame, keys: int = 1) -> str:
     """`frame` as HTML tables of at most `display.MAX_COLUMNS` columns each (the first `keys`
     columns repeated in each part), values as they are (display tables hold strings)."""
-    return "".join(part.to_html(index=False, border=0, classes="t", na_rep="n/a", escape=True)
-                   for part in split_columns(frame, keys))
+    return "".join(
+        part.to_html(index=False, border=0, classes="t", na_rep="n/a", escape=True)
+        for part in split_columns(frame, keys)
+    )
 
 
 def page(title: str, body: str) -> str:
-    return (f"<!doctype html><html><head><meta charset='utf-8'><title>{escape(title)}</title>"
-            f"<style>{STYLE}</style></head><body>{body}</body></html>\n")
+    return (
+        f"<!doctype html><html><head><meta charset='utf-8'><title>{escape(title)}</title>"
+        f"<style>{STYLE}</style></head><body>{body}</body></html>\n"
+    )
 
 
 def table_page(title: str, intro: str, tables: list[tuple[str, pd.DataFrame]], keys: int = 1) -> str:
@@ -51,8 +55,9 @@ def table_page(title: str, intro: str, tables: list[tuple[str, pd.DataFrame]], k
     return page(title, "".join(body))
 
 
-def write_table(csv_path: str | Path, html_path: str | Path, frame: pd.DataFrame, title: str, intro: str = "",
-                keys: int = 1) -> None:
+def write_table(
+    csv_path: str | Path, html_path: str | Path, frame: pd.DataFrame, title: str, intro: str = "", keys: int = 1
+) -> None:
     """A display table as CSV and as its HTML page, both atomically."""
     from pbmdem.atomic import write_csv
 
@@ -93,19 +98,34 @@ def _sweep(path) -> pd.DataFrame:
 def _metrics(path) -> pd.DataFrame:
     met = read_table(path, "surrogate metrics table", columns=("target", "model", "fold"))
     met = met[met.fold.astype(str).isin(["pooled", "mean"])]
-    names = {"target": "target", "model": "model", "fold": "fold", "n_test": "test rows",
-             "r2_log10": "R2 of log10 (-)", "mae_log10": "MAE of log10 (decades)",
-             "noise_floor_r2_log10": "replicate noise floor R2 (-)", "tv_distance": "velocity bins TV distance (-)"}
+    names = {
+        "target": "target",
+        "model": "model",
+        "fold": "fold",
+        "n_test": "test rows",
+        "r2_log10": "R2 of log10 (-)",
+        "mae_log10": "MAE of log10 (decades)",
+        "noise_floor_r2_log10": "replicate noise floor R2 (-)",
+        "tv_distance": "velocity bins TV distance (-)",
+    }
     met = met[[c for c in names if c in met.columns]].rename(columns=names)
     return met.map(lambda v: number(v, ".3g") if isinstance(v, float) else v)
 
 
 def _runs(path) -> pd.DataFrame:
     runs = read_table(path, "DEM run table", columns=("point_id",))
-    names = {"point_id": "operating point", "replicate": "replicate", "n_particles": "particles (-)",
-             "timestep": "time step (s)", "steps": "steps (-)", "total_encounters": "encounters (-)",
-             "total_collisions": "new contacts (-)", "liggghts_wall_time_s": "LIGGGHTS wall time (s)",
-             "particle_steps_per_s": "particle-steps per s (1/s)", "parse_cost_ratio": "parse / LIGGGHTS time (-)"}
+    names = {
+        "point_id": "operating point",
+        "replicate": "replicate",
+        "n_particles": "particles (-)",
+        "timestep": "time step (s)",
+        "steps": "steps (-)",
+        "total_encounters": "encounters (-)",
+        "total_collisions": "new contacts (-)",
+        "liggghts_wall_time_s": "LIGGGHTS wall time (s)",
+        "particle_steps_per_s": "particle-steps per s (1/s)",
+        "parse_cost_ratio": "parse / LIGGGHTS time (-)",
+    }
     runs = runs[[c for c in names if c in runs.columns]].rename(columns=names)
     return runs.map(lambda v: number(v, ".4g") if isinstance(v, float) else v)
 
@@ -113,16 +133,27 @@ def _runs(path) -> pd.DataFrame:
 def _speed_response(paths: dict) -> list[str]:
     response = read_table(paths["table"], "DEM speed-response table", columns=("distribution", "rpm"))
     flow = read_table(paths["flow"], "DEM flow-development table", columns=("within_error",))
-    names = {"distribution": "feed", "rpm": "impeller speed (rpm)", "n_replicates": "replicates (-)",
-             "n_particles": "particles (-)", "encounters_per_particle_per_s": "encounters per particle (1/s)",
-             "encounters_per_particle_per_s_se": "SE (1/s)",
-             "new_contacts_per_particle_per_s": "new contacts per particle (1/s)",
-             "mean_encounter_frequency_per_pair": "encounter frequency per pair (1/s)",
-             "impact_velocity_median": "median impact speed (m/s)"}
+    names = {
+        "distribution": "feed",
+        "rpm": "impeller speed (rpm)",
+        "n_replicates": "replicates (-)",
+        "n_particles": "particles (-)",
+        "encounters_per_particle_per_s": "encounters per particle (1/s)",
+        "encounters_per_particle_per_s_se": "SE (1/s)",
+        "new_contacts_per_particle_per_s": "new contacts per particle (1/s)",
+        "mean_encounter_frequency_per_pair": "encounter frequency per pair (1/s)",
+        "impact_velocity_median": "median impact speed (m/s)",
+    }
     shown = response[[c for c in names if c in response.columns]].rename(columns=names)
     shown = shown.map(lambda v: number(v, ".4g") if isinstance(v, float) else v)
-    flow_cols = {"distribution": "feed", "rpm": "impeller speed (rpm)", "half_difference": "second - first half (-)",
-                 "half_difference_se": "SE (-)", "half_z": "difference / SE (-)", "within_error": "within 2 SE"}
+    flow_cols = {
+        "distribution": "feed",
+        "rpm": "impeller speed (rpm)",
+        "half_difference": "second - first half (-)",
+        "half_difference_se": "SE (-)",
+        "half_z": "difference / SE (-)",
+        "within_error": "within 2 SE",
+    }
     flow_shown = flow[[c for c in flow_cols if c in flow.columns]].rename(columns=flow_cols)
     flow_shown = flow_shown.map(lambda v: number(v, ".3g") if isinstance(v, float) else v)
     ok = int(flow.within_error.astype(bool).sum())
@@ -131,11 +162,13 @@ def _speed_response(paths: dict) -> list[str]:
         "<p>An encounter is an impact of two granules that were apart by more than "
         "<code>dem.encounter_gap_fraction</code> of the smaller diameter since their previous contact "
         "(docs/dem.md). Means over the DEM replicates (insertion seeds) with standard errors (SE).</p>",
-        table_html(shown, 2), _image(paths["plot"], "encounter rate against impeller speed"),
+        table_html(shown, 2),
+        _image(paths["plot"], "encounter rate against impeller speed"),
         f"<p>Flow development: the encounter rates of the first and second halves of the sampling window agree "
         f"within twice their replicate standard error at {ok} of {len(flow)} operating points.</p>",
         table_html(flow_shown, 2),
-        "<h3>Impact-velocity distributions</h3>", _image(paths["velocity_plot"], "impact-velocity distributions"),
+        "<h3>Impact-velocity distributions</h3>",
+        _image(paths["velocity_plot"], "impact-velocity distributions"),
     ]
 
 
@@ -148,8 +181,15 @@ def _proposals(path) -> pd.DataFrame:
         except (TypeError, ValueError):
             return str(text)
 
-    out = pd.DataFrame({"name": table.name, "kind": table.kind, "speed (rpm)": table.rpm.map(lambda v: f"{v:g}"),
-                        "PBM-ANN interval": table.interval.astype(str), "reason": table.reason})
+    out = pd.DataFrame(
+        {
+            "name": table.name,
+            "kind": table.kind,
+            "speed (rpm)": table.rpm.map(lambda v: f"{v:g}"),
+            "PBM-ANN interval": table.interval.astype(str),
+            "reason": table.reason,
+        }
+    )
     if "diameters" in table:
         out["class diameters (mm)"] = table.diameters.map(classes)
     if "number_fractions" in table:
@@ -166,16 +206,31 @@ SPEED_FIGURES = {
 }
 
 
-def build_report(*, html_path, tables: dict, speeds: dict, comparison, sweep, sweep_plot, metrics, parity,
-                 metadata, runs, collisions, speed_study: dict, proposals) -> None:
+def build_report(
+    *,
+    html_path,
+    tables: dict,
+    speeds: dict,
+    comparison,
+    sweep,
+    sweep_plot,
+    metrics,
+    parity,
+    metadata,
+    runs,
+    collisions,
+    speed_study: dict,
+    proposals,
+) -> None:
     """Write the self-contained report page. `tables`: name -> CSV of the display tables
     (`settings`, `speeds`, `provenance`, `targets`, `comparison_d50`, `comparison_accuracy`,
     `comparison_cost`, `comparison_domain`); `speeds`: rpm -> {figure key of SPEED_FIGURES -> PNG,
     `out_of_domain` -> CSV}; the rest are the workflow's own tables and figures."""
     table = read_table(comparison, "comparison table", columns=("rpm",))
     shown = {name: read_display(path, f"report table {name}") for name, path in tables.items()}
-    domain = {rpm: read_display(files["out_of_domain"], f"out-of-domain table of {rpm} rpm")
-              for rpm, files in speeds.items()}
+    domain = {
+        rpm: read_display(files["out_of_domain"], f"out-of-domain table of {rpm} rpm") for rpm, files in speeds.items()
+    }
     meta = read_json(metadata, "surrogate metadata")
     coll = read_table(collisions, "collision table")
     runs_shown = _runs(runs)
@@ -185,18 +240,26 @@ def build_report(*, html_path, tables: dict, speeds: dict, comparison, sweep, sw
         "<code>snakemake --report report.zip</code> collects). PBM-DEM is the mean and envelope of "
         "<code>validation.dem_replicates</code> coupled loops that differ only by their DEM insertion seeds. "
         "Sizes in mm; wall times measured in this run on this machine.</p>",
-        "<h2>Targets</h2>", _verdicts(target_sentences(table)), table_html(shown["targets"], 3),
+        "<h2>Targets</h2>",
+        _verdicts(target_sentences(table)),
+        table_html(shown["targets"], 3),
         "<h2>Surrogate training domain</h2>",
         "<p>Where PBM-ANN used the surrogate outside its training domain its frequencies are extrapolations; "
         "every coupling interval is accounted for:</p><ul>"
         + "".join(f"<li>{escape(out_of_domain_sentence(rpm, frame))}</li>" for rpm, frame in domain.items())
         + "</ul>",
-        "<h2>Process settings</h2>", table_html(shown["settings"]), table_html(shown["speeds"]),
+        "<h2>Process settings</h2>",
+        table_html(shown["settings"]),
+        table_html(shown["speeds"]),
         "<h2>Comparison (one row per validation speed)</h2>",
-        "<h3>d50</h3>", table_html(shown["comparison_d50"]),
-        "<h3>Accuracy against PBM-DEM</h3>", table_html(shown["comparison_accuracy"]),
-        "<h3>Computing time</h3>", table_html(shown["comparison_cost"]),
-        "<h3>Surrogate domain</h3>", table_html(shown["comparison_domain"]),
+        "<h3>d50</h3>",
+        table_html(shown["comparison_d50"]),
+        "<h3>Accuracy against PBM-DEM</h3>",
+        table_html(shown["comparison_accuracy"]),
+        "<h3>Computing time</h3>",
+        table_html(shown["comparison_cost"]),
+        "<h3>Surrogate domain</h3>",
+        table_html(shown["comparison_domain"]),
     ]
     for rpm, files in speeds.items():
         parts.append(f"<h2>{escape(rpm)} rpm</h2>")
@@ -204,12 +267,19 @@ def build_report(*, html_path, tables: dict, speeds: dict, comparison, sweep, sw
             parts += [f"<h3>{escape(heading)}</h3>", _image(files[key], f"{heading}, {rpm} rpm")]
         parts += ["<h3>Surrogate domain, interval by interval</h3>", table_html(domain[rpm], 2)]
     parts += ["<h2>Impeller-speed study (PBM-ANN)</h2>", table_html(_sweep(sweep)), _image(sweep_plot, "sweep")]
-    parts += ["<h2>Surrogate (held-out DEM runs)</h2>", table_html(_metrics(metrics), 3),
-              f"<p>Selected: {escape(json.dumps(meta.get('best_params', meta.get('params', {}))))}; "
-              f"training runs: {len(meta.get('training_point_ids', []))}.</p>", _image(parity, "surrogate parity")]
+    parts += [
+        "<h2>Surrogate (held-out DEM runs)</h2>",
+        table_html(_metrics(metrics), 3),
+        f"<p>Selected: {escape(json.dumps(meta.get('best_params', meta.get('params', {}))))}; "
+        f"training runs: {len(meta.get('training_point_ids', []))}.</p>",
+        _image(parity, "surrogate parity"),
+    ]
     parts += _speed_response(speed_study)
-    parts += ["<h2>DEM runs</h2>", table_html(runs_shown, 2),
-              f"<p>{len(runs_shown)} LIGGGHTS runs; {len(coll)} class-pair rows in the collision table.</p>"]
+    parts += [
+        "<h2>DEM runs</h2>",
+        table_html(runs_shown, 2),
+        f"<p>{len(runs_shown)} LIGGGHTS runs; {len(coll)} class-pair rows in the collision table.</p>",
+    ]
     parts += ["<h2>Proposed operating points (active learning)</h2>", table_html(_proposals(proposals))]
     parts += ["<h2>Provenance</h2>", table_html(shown["provenance"])]
     write_text(html_path, page("pbmdem report", "".join(parts)))

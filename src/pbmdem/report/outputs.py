@@ -37,30 +37,57 @@ def write_speed(*, validation_dir, rpm: str, replicates: int, process: dict, ban
     process = ProcessSettings.from_dict(process, "pbm.process")
     speed = load_speed(validation_dir, rpm, replicates)
     folders = {f"PBM-DEM replicate {k}": run_folder(validation_dir, rpm, "pbm_dem", k) for k in range(replicates)}
-    folders.update({"PBM-ANN": run_folder(validation_dir, rpm, "pbm_ann"),
-                    "PBM-constant": run_folder(validation_dir, rpm, "pbm_constant")})
+    folders.update(
+        {
+            "PBM-ANN": run_folder(validation_dir, rpm, "pbm_ann"),
+            "PBM-constant": run_folder(validation_dir, rpm, "pbm_constant"),
+        }
+    )
     runs = [*speed.dem, speed.ann, speed.constant]
     for (name, folder), run in zip(folders.items(), runs):
         _require(run.summary, SUMMARY_COLUMNS, folder / "summary.csv", f"{name} summary")
-    band_table = read_table(bands, "bands table", columns=("statistic", "time", "n_dem_replicates", "dem_mean",
-                                                           "dem_min", "dem_max", "ann"))
+    band_table = read_table(
+        bands, "bands table", columns=("statistic", "time", "n_dem_replicates", "dem_mean", "dem_min", "dem_max", "ann")
+    )
     figures.save(figures.size_bands(band_table, process, rpm, what=f"bands table {bands}"), out["sizes"])
-    shown = {"PBM-DEM replicate 0": folders["PBM-DEM replicate 0"], "PBM-ANN": folders["PBM-ANN"],
-             "PBM-constant": folders["PBM-constant"]}
-    bins = {name: read_table(folder / "bins.csv", f"{name} bins table", columns=BINS_COLUMNS, finite=BINS_COLUMNS)
-            for name, folder in shown.items()}
+    shown = {
+        "PBM-DEM replicate 0": folders["PBM-DEM replicate 0"],
+        "PBM-ANN": folders["PBM-ANN"],
+        "PBM-constant": folders["PBM-constant"],
+    }
+    bins = {
+        name: read_table(folder / "bins.csv", f"{name} bins table", columns=BINS_COLUMNS, finite=BINS_COLUMNS)
+        for name, folder in shown.items()
+    }
     figures.save(figures.psd_evolution(bins, process, rpm), out["psd"])
     figures.save(figures.liquid_porosity(speed, process, rpm), out["liquid"])
     frequency = interval_frequencies(speed, folders["PBM-constant"] / "timing.json")
     pairs = surrogate_on_dem_samples(speed, load_surrogate(model))
     figures.save(figures.collision_frequency(frequency, pairs, rpm), out["frequency"])
     domain = out_of_domain(speed)
-    write_table(out["domain_csv"], out["domain_html"], domain, f"Surrogate training domain, {rpm} rpm",
-                out_of_domain_sentence(rpm, domain), keys=2)
+    write_table(
+        out["domain_csv"],
+        out["domain_html"],
+        domain,
+        f"Surrogate training domain, {rpm} rpm",
+        out_of_domain_sentence(rpm, domain),
+        keys=2,
+    )
 
 
-def write_settings(*, pbm: dict, granulator: dict, feed_name: str, feed: dict, coupling_intervals: int,
-                   dem_replicates: int, dem_sampling_time: float, validation_rpm, grid_rpm, out: dict) -> None:
+def write_settings(
+    *,
+    pbm: dict,
+    granulator: dict,
+    feed_name: str,
+    feed: dict,
+    coupling_intervals: int,
+    dem_replicates: int,
+    dem_sampling_time: float,
+    validation_rpm,
+    grid_rpm,
+    out: dict,
+) -> None:
     """The process-settings and speeds tables. `out`: settings_csv, settings_html, speeds_csv, speeds_html."""
     from pbmdem.config import Granulator, Pbm, SizeDistribution
 
@@ -68,14 +95,30 @@ def write_settings(*, pbm: dict, granulator: dict, feed_name: str, feed: dict, c
 
     pbm_settings = Pbm.from_dict(pbm, "pbm")
     machine = Granulator.from_dict(granulator, "granulator")
-    settings = process_settings(pbm_settings, machine.bed_solid_volume, feed_name,
-                                SizeDistribution.from_dict(feed, f"size_distributions.{feed_name}"),
-                                coupling_intervals, dem_replicates, dem_sampling_time)
-    write_table(out["settings_csv"], out["settings_html"], settings, "Process settings",
-                "The batch that PBM-DEM, PBM-ANN and PBM-constant run at every validation speed.")
-    write_table(out["speeds_csv"], out["speeds_html"], speeds(machine, validation_rpm, grid_rpm), "Impeller speeds",
-                f"Tip speed 2 pi R rpm / 60 and Froude number omega^2 R / g at the blade tip "
-                f"(R = {1e3 * machine.impeller.tip_radius:g} mm).")
+    settings = process_settings(
+        pbm_settings,
+        machine.bed_solid_volume,
+        feed_name,
+        SizeDistribution.from_dict(feed, f"size_distributions.{feed_name}"),
+        coupling_intervals,
+        dem_replicates,
+        dem_sampling_time,
+    )
+    write_table(
+        out["settings_csv"],
+        out["settings_html"],
+        settings,
+        "Process settings",
+        "The batch that PBM-DEM, PBM-ANN and PBM-constant run at every validation speed.",
+    )
+    write_table(
+        out["speeds_csv"],
+        out["speeds_html"],
+        speeds(machine, validation_rpm, grid_rpm),
+        "Impeller speeds",
+        f"Tip speed 2 pi R rpm / 60 and Froude number omega^2 R / g at the blade tip "
+        f"(R = {1e3 * machine.impeller.tip_radius:g} mm).",
+    )
 
 
 def write_comparison(*, comparison, out: dict) -> None:
@@ -85,12 +128,17 @@ def write_comparison(*, comparison, out: dict) -> None:
     from .tables import COMPARISON_COLUMNS, comparison_tables
 
     table = read_table(comparison, "comparison table", columns=COMPARISON_COLUMNS)
-    titles = {"d50": "d50 at the start and the end of the batch", "accuracy": "Accuracy against PBM-DEM",
-              "cost": "Computing time", "domain": "Surrogate training domain"}
+    titles = {
+        "d50": "d50 at the start and the end of the batch",
+        "accuracy": "Accuracy against PBM-DEM",
+        "cost": "Computing time",
+        "domain": "Surrogate training domain",
+    }
     for name, frame in comparison_tables(table).items():
         write_table(out[f"comparison_{name}_csv"], out[f"comparison_{name}_html"], frame, titles[name])
-    write_table(out["targets_csv"], out["targets_html"], targets(table), "Targets", " ".join(target_sentences(table)),
-                keys=3)
+    write_table(
+        out["targets_csv"], out["targets_html"], targets(table), "Targets", " ".join(target_sentences(table)), keys=3
+    )
 
 
 def write_provenance(*, config: dict, settings: dict, basedir, runs, metadata, out: dict) -> None:
@@ -101,5 +149,10 @@ def write_provenance(*, config: dict, settings: dict, basedir, runs, metadata, o
     from .provenance import provenance
 
     table = provenance(Config.from_mapping(config).sha256(), settings, basedir, runs, metadata)
-    write_table(out["csv"], out["html"], table, "Provenance",
-                "Configuration hashes, the workflow's git commit and the versions of the software.")
+    write_table(
+        out["csv"],
+        out["html"],
+        table,
+        "Provenance",
+        "Configuration hashes, the workflow's git commit and the versions of the software.",
+    )

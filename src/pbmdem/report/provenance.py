@@ -55,8 +55,10 @@ def liggghts_versions(runs_table: str | Path) -> str:
 
     runs = read_table(runs_table, "DEM run table", columns=("point_id",))
     if "liggghts_version" not in runs.columns:
-        return (f"not recorded in {runs_table} (DEM runs made before pbmdem recorded it; the first line of "
-                "each run's log.liggghts names it)")
+        return (
+            f"not recorded in {runs_table} (DEM runs made before pbmdem recorded it; the first line of "
+            "each run's log.liggghts names it)"
+        )
     counts = Counter(runs["liggghts_version"].fillna("not recorded").astype(str))
     if not counts:
         return "no DEM run"
@@ -87,8 +89,10 @@ def library_versions() -> dict[str, str]:
     """Python, pbmdem (with the folder it was imported from) and the LIBRARIES installed in this environment."""
     import pbmdem
 
-    out = {"Python": platform.python_version(),
-           "pbmdem": f"{pbmdem.__version__} (imported from {Path(pbmdem.__file__).parent})"}
+    out = {
+        "Python": platform.python_version(),
+        "pbmdem": f"{pbmdem.__version__} (imported from {Path(pbmdem.__file__).parent})",
+    }
     for name in LIBRARIES:
         try:
             out[name] = importlib.metadata.version(name)
@@ -97,24 +101,38 @@ def library_versions() -> dict[str, str]:
     return out
 
 
-def provenance(config_sha256: str, settings: dict, basedir: str | Path, runs_table: str | Path,
-               surrogate_metadata: str | Path | None = None):
+def provenance(
+    config_sha256: str,
+    settings: dict,
+    basedir: str | Path,
+    runs_table: str | Path,
+    surrogate_metadata: str | Path | None = None,
+):
     """The provenance table (a DataFrame): quantity, value, source. `settings`: the completed
     configuration without the execution settings (`settings_mapping`)."""
     import pandas as pd
 
     from pbmdem.readers import read_json
+
     commit, state = git_commit(basedir)
     rows = [
         ("config sha256", config_sha256, "Config.sha256() of the configuration this table was written under"),
-        ("settings sha256", sha256_of(settings),
-         "the same without the execution settings " + ", ".join(f"dem.{k}" for k in EXECUTION_KEYS)),
+        (
+            "settings sha256",
+            sha256_of(settings),
+            "the same without the execution settings " + ", ".join(f"dem.{k}" for k in EXECUTION_KEYS),
+        ),
         ("git commit", commit, f"git rev-parse HEAD in {basedir}"),
     ]
     if commit != NOT_GIT:
         rows.append(("git working tree", state, "git status --porcelain --untracked-files=no"))
-    rows.append(("LIGGGHTS", liggghts_versions(runs_table),
-                 f"{runs_table}, column liggghts_version (the header line of each run's log.liggghts)"))
+    rows.append(
+        (
+            "LIGGGHTS",
+            liggghts_versions(runs_table),
+            f"{runs_table}, column liggghts_version (the header line of each run's log.liggghts)",
+        )
+    )
     rows += [(name, version, "this job's environment") for name, version in library_versions().items()]
     rows.append(("platform", platform.platform(), "this job's machine"))
     if surrogate_metadata is not None:
@@ -123,7 +141,12 @@ def provenance(config_sha256: str, settings: dict, basedir: str | Path, runs_tab
         if "created_utc" in meta:
             rows.append(("surrogate trained (UTC)", str(meta["created_utc"]), str(surrogate_metadata)))
         if isinstance(meta.get("versions"), dict):
-            rows.append(("surrogate trained with", ", ".join(f"{k} {v}" for k, v in sorted(meta["versions"].items())),
-                         str(surrogate_metadata)))
+            rows.append(
+                (
+                    "surrogate trained with",
+                    ", ".join(f"{k} {v}" for k, v in sorted(meta["versions"].items())),
+                    str(surrogate_metadata),
+                )
+            )
     rows.append(("table written (UTC)", datetime.now(UTC).strftime("%Y-%m-%d %H:%M:%S"), "clock"))
     return pd.DataFrame(rows, columns=COLUMNS)

@@ -70,10 +70,15 @@ def targets(table: pd.DataFrame) -> pd.DataFrame:
             if target.column == "ann_out_of_domain_intervals" and "ann_intervals" in r:
                 measured = f"{number(value, '.0f')} of {number(r['ann_intervals'], '.0f')} intervals"
             met = target.met(value)
-            rows.append({"target": target.goal, "criterion": target.criterion, "speed (rpm)": f"{r['rpm']:g}",
-                         "measured": measured,
-                         "met": "met" if met else ("not met (not measured)" if measured.startswith("n/a")
-                                                   else "not met")})
+            rows.append(
+                {
+                    "target": target.goal,
+                    "criterion": target.criterion,
+                    "speed (rpm)": f"{r['rpm']:g}",
+                    "measured": measured,
+                    "met": "met" if met else ("not met (not measured)" if measured.startswith("n/a") else "not met"),
+                }
+            )
     return pd.DataFrame(rows, columns=["target", "criterion", "speed (rpm)", "measured", "met"])
 
 
@@ -84,8 +89,11 @@ def target_sentences(table: pd.DataFrame) -> list[str]:
     for target in TARGETS:
         mine = rows[rows.target == target.goal]
         values = ", ".join(f"{r['measured']} at {r['speed (rpm)']} rpm" for _, r in mine.iterrows())
-        verdict = "met at every speed" if (mine.met == "met").all() else (
-            "not met at " + ", ".join(f"{s} rpm" for s in mine.loc[mine.met != "met", "speed (rpm)"]))
+        verdict = (
+            "met at every speed"
+            if (mine.met == "met").all()
+            else ("not met at " + ", ".join(f"{s} rpm" for s in mine.loc[mine.met != "met", "speed (rpm)"]))
+        )
         out.append(f"{target.goal} ({target.criterion}): {verdict}; measured {values}.")
     return out
 
@@ -108,40 +116,59 @@ def out_of_domain(speed) -> pd.DataFrame:
     ann = speed.ann.intervals
     rows = []
     recorded = ann is not None and "out_of_domain_count" in ann.columns
-    for r in (ann.to_dict("records") if ann is not None else []):
+    for r in ann.to_dict("records") if ann is not None else []:
         count = r.get("out_of_domain_count", float("nan"))
         known = recorded and not (isinstance(count, float) and math.isnan(count))
-        rows.append({
-            "model": "PBM-ANN (ensemble mean)", "interval": str(int(r["interval"])),
-            "start (s)": number(r["t_start"], ".4g"), "end (s)": number(r["t_end"], ".4g"),
-            "sample classes (mm)": _classes(r.get("class_diameters")),
-            "sample particles (count)": number(r.get("sample_particles", float("nan")), ".0f"),
-            "outside the training domain": ("yes" if count > 0 else "no") if known else "not recorded",
-            "warnings (count)": number(count, ".0f") if known else "not recorded",
-            "what lay outside": _messages(r.get("out_of_domain")),
-        })
+        rows.append(
+            {
+                "model": "PBM-ANN (ensemble mean)",
+                "interval": str(int(r["interval"])),
+                "start (s)": number(r["t_start"], ".4g"),
+                "end (s)": number(r["t_end"], ".4g"),
+                "sample classes (mm)": _classes(r.get("class_diameters")),
+                "sample particles (count)": number(r.get("sample_particles", float("nan")), ".0f"),
+                "outside the training domain": ("yes" if count > 0 else "no") if known else "not recorded",
+                "warnings (count)": number(count, ".0f") if known else "not recorded",
+                "what lay outside": _messages(r.get("out_of_domain")),
+            }
+        )
     n_intervals = len(ann) if ann is not None else 0
     members = speed.members
     if members is not None and len(members) and "out_of_domain_intervals" in members.columns:
         for member, g in members.groupby("member"):
             k = int(g.out_of_domain_intervals.max())
-            rows.append({"model": f"PBM-ANN member {int(member)}", "interval": f"all {n_intervals}",
-                         "start (s)": number(g.time.min(), ".4g"), "end (s)": number(g.time.max(), ".4g"),
-                         "sample classes (mm)": "as above", "sample particles (count)": "as above",
-                         "outside the training domain": f"{k} of {n_intervals} intervals",
-                         "warnings (count)": "not recorded per member", "what lay outside": ""})
+            rows.append(
+                {
+                    "model": f"PBM-ANN member {int(member)}",
+                    "interval": f"all {n_intervals}",
+                    "start (s)": number(g.time.min(), ".4g"),
+                    "end (s)": number(g.time.max(), ".4g"),
+                    "sample classes (mm)": "as above",
+                    "sample particles (count)": "as above",
+                    "outside the training domain": f"{k} of {n_intervals} intervals",
+                    "warnings (count)": "not recorded per member",
+                    "what lay outside": "",
+                }
+            )
     timing = speed.constant.timing
     count = timing.get("out_of_domain_count", float("nan"))
     known = not (isinstance(count, float) and math.isnan(count))
     first = ann.iloc[0] if ann is not None and len(ann) else {}
-    rows.append({"model": "PBM-constant calibration", "interval": "initial sample",
-                 "start (s)": "0", "end (s)": "0",
-                 "sample classes (mm)": _classes(first.get("class_diameters")) if len(first) else "n/a",
-                 "sample particles (count)": number(first.get("sample_particles", float("nan")), ".0f") if len(first)
-                 else "n/a",
-                 "outside the training domain": ("yes" if count > 0 else "no") if known else "not recorded",
-                 "warnings (count)": number(count, ".0f") if known else "not recorded",
-                 "what lay outside": _messages(timing.get("out_of_domain"))})
+    rows.append(
+        {
+            "model": "PBM-constant calibration",
+            "interval": "initial sample",
+            "start (s)": "0",
+            "end (s)": "0",
+            "sample classes (mm)": _classes(first.get("class_diameters")) if len(first) else "n/a",
+            "sample particles (count)": number(first.get("sample_particles", float("nan")), ".0f")
+            if len(first)
+            else "n/a",
+            "outside the training domain": ("yes" if count > 0 else "no") if known else "not recorded",
+            "warnings (count)": number(count, ".0f") if known else "not recorded",
+            "what lay outside": _messages(timing.get("out_of_domain")),
+        }
+    )
     return pd.DataFrame(rows)
 
 
@@ -151,24 +178,33 @@ def out_of_domain_sentence(rpm: str, table: pd.DataFrame) -> str:
     outside = ann[ann["outside the training domain"] == "yes"]
     unknown = ann[ann["outside the training domain"] == "not recorded"]
     if len(unknown):
-        text = (f"{rpm} rpm: whether PBM-ANN left the surrogate's training domain was not recorded for "
-                f"{len(unknown)} of {len(ann)} coupling intervals")
+        text = (
+            f"{rpm} rpm: whether PBM-ANN left the surrogate's training domain was not recorded for "
+            f"{len(unknown)} of {len(ann)} coupling intervals"
+        )
     elif len(outside):
-        where = "; ".join(f"interval {r['interval']} ({r['start (s)']}-{r['end (s)']} s, {r['warnings (count)']} "
-                          f"warnings): {r['what lay outside']}" for _, r in outside.iterrows())
-        text = (f"{rpm} rpm: PBM-ANN used the surrogate outside its training domain in {len(outside)} of "
-                f"{len(ann)} coupling intervals, where its frequencies are extrapolations: {where}")
+        where = "; ".join(
+            f"interval {r['interval']} ({r['start (s)']}-{r['end (s)']} s, {r['warnings (count)']} "
+            f"warnings): {r['what lay outside']}"
+            for _, r in outside.iterrows()
+        )
+        text = (
+            f"{rpm} rpm: PBM-ANN used the surrogate outside its training domain in {len(outside)} of "
+            f"{len(ann)} coupling intervals, where its frequencies are extrapolations: {where}"
+        )
     else:
         text = f"{rpm} rpm: PBM-ANN stayed inside the surrogate's training domain in all {len(ann)} coupling intervals"
     members = table[table.model.str.startswith("PBM-ANN member")]
     if len(members):
         text += "; ensemble members: " + ", ".join(
-            f"{r['model'].split()[-1]}: {r['outside the training domain']} outside" for _, r in members.iterrows())
+            f"{r['model'].split()[-1]}: {r['outside the training domain']} outside" for _, r in members.iterrows()
+        )
     cal = table[table.model == "PBM-constant calibration"]
     if len(cal):
         state = cal["outside the training domain"].iloc[0]
-        text += {"yes": f"; the constant kernel's calibration sample was outside it ({cal['warnings (count)'].iloc[0]}"
-                        " warnings)",
-                 "no": "; the constant kernel's calibration sample was inside it"}.get(
-            state, "; the constant kernel's calibration was not recorded")
+        text += {
+            "yes": f"; the constant kernel's calibration sample was outside it ({cal['warnings (count)'].iloc[0]}"
+            " warnings)",
+            "no": "; the constant kernel's calibration sample was inside it",
+        }.get(state, "; the constant kernel's calibration was not recorded")
     return text + "."

@@ -22,12 +22,33 @@ from .display import MM, PERCENT, number, percent, value_range, yes_no
 ML = 1e6
 #: the comparison.csv columns `comparison_tables` shows
 COMPARISON_COLUMNS = (
-    "rpm", "in_training_grid", "n_dem_replicates", "d50_start_mm", "d50_end_dem_mm", "d50_end_dem_sd_mm",
-    "d50_end_dem_min_mm", "d50_end_dem_max_mm", "d50_end_ann_mm", "d50_end_constant_mm", "ann_d50_rel_error_max",
-    "ann_d50_rel_error_end", "ann_d50_outside_band_max", "constant_d50_rel_error_max", "constant_d50_rel_error_end",
-    "constant_d50_outside_band_max", "dem_calls", "pbm_dem_wall_s", "pbm_dem_liggghts_wall_s", "pbm_ann_wall_s",
-    "pbm_ann_surrogate_wall_s", "pbm_constant_wall_s", "wall_time_ratio_dem_over_ann", "ann_out_of_domain_intervals",
-    "ann_intervals", "ann_out_of_domain_warnings", "constant_calibration_out_of_domain_warnings",
+    "rpm",
+    "in_training_grid",
+    "n_dem_replicates",
+    "d50_start_mm",
+    "d50_end_dem_mm",
+    "d50_end_dem_sd_mm",
+    "d50_end_dem_min_mm",
+    "d50_end_dem_max_mm",
+    "d50_end_ann_mm",
+    "d50_end_constant_mm",
+    "ann_d50_rel_error_max",
+    "ann_d50_rel_error_end",
+    "ann_d50_outside_band_max",
+    "constant_d50_rel_error_max",
+    "constant_d50_rel_error_end",
+    "constant_d50_outside_band_max",
+    "dem_calls",
+    "pbm_dem_wall_s",
+    "pbm_dem_liggghts_wall_s",
+    "pbm_ann_wall_s",
+    "pbm_ann_surrogate_wall_s",
+    "pbm_constant_wall_s",
+    "wall_time_ratio_dem_over_ann",
+    "ann_out_of_domain_intervals",
+    "ann_intervals",
+    "ann_out_of_domain_warnings",
+    "constant_calibration_out_of_domain_warnings",
 )
 SETTING_COLUMNS = ["setting", "value", "unit", "config key"]
 
@@ -54,16 +75,25 @@ def success_model(pbm: Pbm) -> str:
         text = s.model
     if s.velocity_model == "stokes":
         st = s.stokes
-        text += (f"; and the Stokes criterion (binder viscosity {st.binder_viscosity:g} Pa s, restitution "
-                 f"{st.restitution:g}, asperity height {st.asperity_height:g} m, granule density "
-                 f"{st.granule_density:g} kg/m3)")
+        text += (
+            f"; and the Stokes criterion (binder viscosity {st.binder_viscosity:g} Pa s, restitution "
+            f"{st.restitution:g}, asperity height {st.asperity_height:g} m, granule density "
+            f"{st.granule_density:g} kg/m3)"
+        )
     else:
         text += "; independent of the impact velocity"
     return text
 
 
-def process_settings(pbm: Pbm, bed_solid_volume: float, feed_name: str, feed: SizeDistribution,
-                     coupling_intervals: int, dem_replicates: int, dem_sampling_time: float) -> pd.DataFrame:
+def process_settings(
+    pbm: Pbm,
+    bed_solid_volume: float,
+    feed_name: str,
+    feed: SizeDistribution,
+    coupling_intervals: int,
+    dem_replicates: int,
+    dem_sampling_time: float,
+) -> pd.DataFrame:
     """The settings of the validation batch: setting, value, unit and config key (one row each)."""
     p, agg = pbm.process, pbm.aggregation
     added = pbm.liquid_addition.rate * p.liquid_addition_time
@@ -73,38 +103,74 @@ def process_settings(pbm: Pbm, bed_solid_volume: float, feed_name: str, feed: Si
     rows = [
         ("feed size distribution", feed_name, "-", "validation.distribution"),
         ("feed size classes", _joined(MM * pd.Series(feed.diameters), ".2f"), "mm", f"size_distributions.{feed_name}"),
-        ("feed number fractions", _joined(PERCENT * pd.Series(feed.number_fractions), ".1f"), "%",
-         f"size_distributions.{feed_name}"),
-        ("bed solid volume (DEM bed = PBM population)", number(ML * bed_solid_volume, ".4g"), "mL",
-         "dem.bed_height, dem.packing_fraction, granulator.bowl"),
+        (
+            "feed number fractions",
+            _joined(PERCENT * pd.Series(feed.number_fractions), ".1f"),
+            "%",
+            f"size_distributions.{feed_name}",
+        ),
+        (
+            "bed solid volume (DEM bed = PBM population)",
+            number(ML * bed_solid_volume, ".4g"),
+            "mL",
+            "dem.bed_height, dem.packing_fraction, granulator.bowl",
+        ),
         ("dry premixing", value_range(0.0, p.spray_start, 1), "s", "pbm.process.premixing_time"),
-        ("liquid addition (spray window)", value_range(p.spray_start, p.spray_end, 1), "s",
-         "pbm.process.liquid_addition_time"),
+        (
+            "liquid addition (spray window)",
+            value_range(p.spray_start, p.spray_end, 1),
+            "s",
+            "pbm.process.liquid_addition_time",
+        ),
         ("wet massing", value_range(p.spray_end, p.end, 1), "s", "pbm.process.wet_massing_time"),
         ("batch length", number(p.end, ".4g"), "s", "pbm.process"),
-        ("binder addition rate", number(ML * 60.0 * pbm.liquid_addition.rate, ".4g"), "mL/min",
-         "pbm.liquid_addition.rate"),
+        (
+            "binder addition rate",
+            number(ML * 60.0 * pbm.liquid_addition.rate, ".4g"),
+            "mL/min",
+            "pbm.liquid_addition.rate",
+        ),
         ("binder sprayed in total", number(ML * added, ".4g"), "mL", "pbm.liquid_addition"),
-        ("binder distribution over the granules", pbm.liquid_addition.distribution, "-",
-         "pbm.liquid_addition.distribution"),
-        ("initial liquid content L/S", number(pbm.initial.liquid_content, ".4g"), "m3 liquid / m3 solid",
-         "pbm.initial.liquid_content"),
-        ("liquid/solid ratio L/S at the end of the liquid addition",
-         number(liquid_solid_ratio(pbm, bed_solid_volume), ".4g"), "m3 liquid / m3 solid", "pbm.liquid_addition"),
+        (
+            "binder distribution over the granules",
+            pbm.liquid_addition.distribution,
+            "-",
+            "pbm.liquid_addition.distribution",
+        ),
+        (
+            "initial liquid content L/S",
+            number(pbm.initial.liquid_content, ".4g"),
+            "m3 liquid / m3 solid",
+            "pbm.initial.liquid_content",
+        ),
+        (
+            "liquid/solid ratio L/S at the end of the liquid addition",
+            number(liquid_solid_ratio(pbm, bed_solid_volume), ".4g"),
+            "m3 liquid / m3 solid",
+            "pbm.liquid_addition",
+        ),
         ("initial porosity", percent(pbm.initial.porosity, 1), "%", "pbm.initial.porosity"),
         ("consolidation rate", number(pbm.consolidation.rate, ".4g"), "1/s", "pbm.consolidation.rate"),
         ("minimum porosity", percent(pbm.consolidation.min_porosity, 1), "%", "pbm.consolidation.min_porosity"),
         ("aggregation rate constant beta0", number(agg.beta0, ".4g"), "-", "pbm.aggregation.beta0"),
         ("success probability", success_model(pbm), "-", "pbm.aggregation.success"),
         ("aggregation scheme", agg.scheme, "-", "pbm.aggregation.scheme"),
-        ("collision-frequency refresh", number(agg.frequency_update_interval, ".4g"), "s",
-         "pbm.aggregation.frequency_update_interval"),
+        (
+            "collision-frequency refresh",
+            number(agg.frequency_update_interval, ".4g"),
+            "s",
+            "pbm.aggregation.frequency_update_interval",
+        ),
         ("PBM grid", f"{bins}, volume ratio {grid.ratio:.4g}, first pivot {start}", "-", "pbm.grid"),
         ("coupling intervals per batch", str(coupling_intervals), "-", "validation.coupling_intervals"),
         ("coupling interval length", number(p.end / coupling_intervals, ".4g"), "s", "validation.coupling_intervals"),
         ("PBM-DEM replicates (DEM insertion seeds)", str(dem_replicates), "-", "validation.dem_replicates"),
-        ("DEM sampling window per coupling interval (at least)", number(dem_sampling_time, ".4g"), "s",
-         "validation.dem_sampling_time"),
+        (
+            "DEM sampling window per coupling interval (at least)",
+            number(dem_sampling_time, ".4g"),
+            "s",
+            "validation.dem_sampling_time",
+        ),
     ]
     return pd.DataFrame(rows, columns=SETTING_COLUMNS)
 
@@ -116,10 +182,17 @@ def speeds(granulator: Granulator, validation_rpm, grid_rpm) -> pd.DataFrame:
     validation = {float(r) for r in validation_rpm}
     rows = []
     for rpm in sorted(grid | validation):
-        role = " and ".join(name for name, speeds in (("DEM training grid", grid), ("validation", validation))
-                            if rpm in speeds)
-        rows.append({"impeller speed (rpm)": f"{rpm:g}", "tip speed (m/s)": f"{granulator.tip_speed(rpm):.3f}",
-                     "Froude number at the tip (-)": f"{granulator.froude_number(rpm):.3g}", "used in": role})
+        role = " and ".join(
+            name for name, speeds in (("DEM training grid", grid), ("validation", validation)) if rpm in speeds
+        )
+        rows.append(
+            {
+                "impeller speed (rpm)": f"{rpm:g}",
+                "tip speed (m/s)": f"{granulator.tip_speed(rpm):.3f}",
+                "Froude number at the tip (-)": f"{granulator.froude_number(rpm):.3g}",
+                "used in": role,
+            }
+        )
     return pd.DataFrame(rows)
 
 
@@ -138,41 +211,58 @@ def comparison_tables(table: pd.DataFrame) -> dict[str, pd.DataFrame]:
     out = {"d50": [], "accuracy": [], "cost": [], "domain": []}
     for r in table.itertuples():
         speed = f"{r.rpm:g}"
-        members = (value_range(r.ann_member_d50_end_min_mm, r.ann_member_d50_end_max_mm)
-                   if hasattr(r, "ann_member_d50_end_min_mm") else "n/a")
-        out["d50"].append({
-            "speed (rpm)": speed, "in DEM training grid (yes/no)": yes_no(r.in_training_grid),
-            "d50 at start (mm)": number(r.d50_start_mm, ".3f"),
-            "PBM-DEM d50 at end, mean +- SD (mm)": _mean_sd(r.d50_end_dem_mm, r.d50_end_dem_sd_mm, r.n_dem_replicates),
-            "PBM-DEM replicates' range (mm)": value_range(r.d50_end_dem_min_mm, r.d50_end_dem_max_mm),
-            "PBM-ANN d50 at end (mm)": number(r.d50_end_ann_mm, ".3f"),
-            "PBM-ANN members' range (mm)": members,
-            "PBM-constant d50 at end (mm)": number(r.d50_end_constant_mm, ".3f"),
-        })
-        out["accuracy"].append({
-            "speed (rpm)": speed,
-            "PBM-ANN d50 error, largest (%)": percent(r.ann_d50_rel_error_max),
-            "PBM-ANN d50 error at end (%)": percent(r.ann_d50_rel_error_end),
-            "PBM-ANN d50 outside the PBM-DEM band, largest (%)": percent(r.ann_d50_outside_band_max),
-            "PBM-constant d50 error, largest (%)": percent(r.constant_d50_rel_error_max),
-            "PBM-constant d50 error at end (%)": percent(r.constant_d50_rel_error_end),
-            "PBM-constant d50 outside the band, largest (%)": percent(r.constant_d50_outside_band_max),
-        })
-        out["cost"].append({
-            "speed (rpm)": speed, "DEM calls per PBM-DEM loop (count)": str(int(r.dem_calls)),
-            "PBM-DEM wall time, mean of a loop (s)": number(r.pbm_dem_wall_s, ".4g"),
-            "of it LIGGGHTS (s)": number(r.pbm_dem_liggghts_wall_s, ".4g"),
-            "PBM-ANN wall time (s)": number(r.pbm_ann_wall_s, ".3g"),
-            "of it surrogate (s)": number(r.pbm_ann_surrogate_wall_s, ".3g"),
-            "PBM-constant wall time (s)": number(r.pbm_constant_wall_s, ".3g"),
-            "wall-time ratio PBM-DEM / PBM-ANN (-)": number(r.wall_time_ratio_dem_over_ann, ".0f"),
-        })
-        out["domain"].append({
-            "speed (rpm)": speed,
-            "PBM-ANN intervals outside the training domain (of all)": _of(r.ann_out_of_domain_intervals,
-                                                                          r.ann_intervals),
-            "PBM-ANN out-of-domain warnings (count)": number(r.ann_out_of_domain_warnings, ".0f"),
-            "PBM-constant calibration out-of-domain warnings (count)":
-                number(r.constant_calibration_out_of_domain_warnings, ".0f"),
-        })
+        members = (
+            value_range(r.ann_member_d50_end_min_mm, r.ann_member_d50_end_max_mm)
+            if hasattr(r, "ann_member_d50_end_min_mm")
+            else "n/a"
+        )
+        out["d50"].append(
+            {
+                "speed (rpm)": speed,
+                "in DEM training grid (yes/no)": yes_no(r.in_training_grid),
+                "d50 at start (mm)": number(r.d50_start_mm, ".3f"),
+                "PBM-DEM d50 at end, mean +- SD (mm)": _mean_sd(
+                    r.d50_end_dem_mm, r.d50_end_dem_sd_mm, r.n_dem_replicates
+                ),
+                "PBM-DEM replicates' range (mm)": value_range(r.d50_end_dem_min_mm, r.d50_end_dem_max_mm),
+                "PBM-ANN d50 at end (mm)": number(r.d50_end_ann_mm, ".3f"),
+                "PBM-ANN members' range (mm)": members,
+                "PBM-constant d50 at end (mm)": number(r.d50_end_constant_mm, ".3f"),
+            }
+        )
+        out["accuracy"].append(
+            {
+                "speed (rpm)": speed,
+                "PBM-ANN d50 error, largest (%)": percent(r.ann_d50_rel_error_max),
+                "PBM-ANN d50 error at end (%)": percent(r.ann_d50_rel_error_end),
+                "PBM-ANN d50 outside the PBM-DEM band, largest (%)": percent(r.ann_d50_outside_band_max),
+                "PBM-constant d50 error, largest (%)": percent(r.constant_d50_rel_error_max),
+                "PBM-constant d50 error at end (%)": percent(r.constant_d50_rel_error_end),
+                "PBM-constant d50 outside the band, largest (%)": percent(r.constant_d50_outside_band_max),
+            }
+        )
+        out["cost"].append(
+            {
+                "speed (rpm)": speed,
+                "DEM calls per PBM-DEM loop (count)": str(int(r.dem_calls)),
+                "PBM-DEM wall time, mean of a loop (s)": number(r.pbm_dem_wall_s, ".4g"),
+                "of it LIGGGHTS (s)": number(r.pbm_dem_liggghts_wall_s, ".4g"),
+                "PBM-ANN wall time (s)": number(r.pbm_ann_wall_s, ".3g"),
+                "of it surrogate (s)": number(r.pbm_ann_surrogate_wall_s, ".3g"),
+                "PBM-constant wall time (s)": number(r.pbm_constant_wall_s, ".3g"),
+                "wall-time ratio PBM-DEM / PBM-ANN (-)": number(r.wall_time_ratio_dem_over_ann, ".0f"),
+            }
+        )
+        out["domain"].append(
+            {
+                "speed (rpm)": speed,
+                "PBM-ANN intervals outside the training domain (of all)": _of(
+                    r.ann_out_of_domain_intervals, r.ann_intervals
+                ),
+                "PBM-ANN out-of-domain warnings (count)": number(r.ann_out_of_domain_warnings, ".0f"),
+                "PBM-constant calibration out-of-domain warnings (count)": number(
+                    r.constant_calibration_out_of_domain_warnings, ".0f"
+                ),
+            }
+        )
     return {name: pd.DataFrame(rows) for name, rows in out.items()}

@@ -40,8 +40,9 @@ class HGBBaseline(RegressorMixin, BaseEstimator):
     ``min_samples_leaf`` is capped at half the training rows, so tiny tables still split.
     """
 
-    def __init__(self, max_iter: int = 200, learning_rate: float = 0.1, min_samples_leaf: int = 5,
-                 random_state: int | None = 0):
+    def __init__(
+        self, max_iter: int = 200, learning_rate: float = 0.1, min_samples_leaf: int = 5, random_state: int | None = 0
+    ):
         self.max_iter = max_iter
         self.learning_rate = learning_rate
         self.min_samples_leaf = min_samples_leaf
@@ -52,7 +53,8 @@ class HGBBaseline(RegressorMixin, BaseEstimator):
         X, y = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
         with single_threaded():
             self.model_ = HistGradientBoostingRegressor(
-                max_iter=self.max_iter, learning_rate=self.learning_rate,
+                max_iter=self.max_iter,
+                learning_rate=self.learning_rate,
                 min_samples_leaf=min(self.min_samples_leaf, max(1, len(y) // 2)),
                 random_state=self.random_state,
             ).fit(X, y)
@@ -80,13 +82,16 @@ class PhysicalScaling(RegressorMixin, BaseEstimator):
             names = [str(n) for n in names]
             missing = [n for n in LAW_FEATURES if n not in names]
             if missing:
-                raise ValueError(f"PhysicalScaling needs the features {list(LAW_FEATURES)}; X lacks {missing} "
-                                 f"(columns {names})")
+                raise ValueError(
+                    f"PhysicalScaling needs the features {list(LAW_FEATURES)}; X lacks {missing} (columns {names})"
+                )
             return [names.index(n) for n in LAW_FEATURES]
         if self.n_features_in_ != len(FEATURE_NAMES):
-            raise ValueError(f"PhysicalScaling needs the features {list(LAW_FEATURES)}: pass a feature frame with "
-                             f"these columns or an array with the {len(FEATURE_NAMES)} columns {list(FEATURE_NAMES)}; "
-                             f"got an array with {self.n_features_in_} column(s) and no feature names")
+            raise ValueError(
+                f"PhysicalScaling needs the features {list(LAW_FEATURES)}: pass a feature frame with "
+                f"these columns or an array with the {len(FEATURE_NAMES)} columns {list(FEATURE_NAMES)}; "
+                f"got an array with {self.n_features_in_} column(s) and no feature names"
+            )
         return [list(FEATURE_NAMES).index(n) for n in LAW_FEATURES]
 
     def _law_inputs(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -99,14 +104,14 @@ class PhysicalScaling(RegressorMixin, BaseEstimator):
 
     def _log10_shape(self, X: np.ndarray) -> np.ndarray:
         dsum, v_tip = self._law_inputs(X)
-        return np.log10(dsum ** 2 * v_tip)
+        return np.log10(dsum**2 * v_tip)
 
     def fit(self, X, y, groups=None, velocity=None):
         """Fit ``log10 K'`` to ``y`` (log10 frequency); with ``velocity`` ((n, 2): mu = log10
         median speed, sigma; NaN rows skipped) also the speed ratio and spread. ``groups`` is not used."""
         X, y = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
         self.log10_K_ = float(np.mean(y - self._log10_shape(X)))
-        self.K_ = 10.0 ** self.log10_K_
+        self.K_ = 10.0**self.log10_K_
         self.log10_speed_ratio_ = self.log10_sigma_ = None
         if velocity is not None:
             V = np.asarray(velocity, dtype=float)
@@ -133,7 +138,7 @@ class PhysicalScaling(RegressorMixin, BaseEstimator):
         X = validate_data(self, X, reset=False, dtype=np.float64)
         _, v_tip = self._law_inputs(X)
         mu = self.log10_speed_ratio_ + np.log10(v_tip)
-        return mu, np.full(len(mu), 10.0 ** self.log10_sigma_)
+        return mu, np.full(len(mu), 10.0**self.log10_sigma_)
 
     def velocity_fractions(self, X) -> np.ndarray:
         return lognormal_fractions(*self.predict_velocity(X))

@@ -14,21 +14,33 @@ import numpy as np
 
 def add_cli(subparsers) -> argparse.ArgumentParser:
     """Register ``surrogate`` with subcommands ``train`` and ``predict`` on an argparse subparsers."""
-    parser = subparsers.add_parser("surrogate", help="MLP encounter surrogate",
-                                   description="Train or query the encounter surrogate (encounter frequency "
-                                               "and impact-velocity distribution per class pair).")
+    parser = subparsers.add_parser(
+        "surrogate",
+        help="MLP encounter surrogate",
+        description="Train or query the encounter surrogate (encounter frequency "
+        "and impact-velocity distribution per class pair).",
+    )
     sub = parser.add_subparsers(dest="surrogate_command", required=True)
 
     train = sub.add_parser("train", help="train on a collision table (grouped CV, baselines, parity plot)")
     train.add_argument("--table", required=True, type=Path, help="aggregated collision table (CSV)")
-    train.add_argument("--velocity-table", type=Path, default=None,
-                       help="impact-velocity table (results/dem/impact_velocity.csv); without it only the "
-                            "encounter frequency is learned")
-    train.add_argument("--config", type=Path, required=True,
-                       help="workflow config YAML (its surrogate: section and the impeller radius "
-                            "granulator.impeller.blade_length of the tip-speed feature)")
-    train.add_argument("--out", required=True, type=Path,
-                       help="output folder: model.skops, model.json, metrics.csv, parity.png")
+    train.add_argument(
+        "--velocity-table",
+        type=Path,
+        default=None,
+        help="impact-velocity table (results/dem/impact_velocity.csv); without it only the "
+        "encounter frequency is learned",
+    )
+    train.add_argument(
+        "--config",
+        type=Path,
+        required=True,
+        help="workflow config YAML (its surrogate: section and the impeller radius "
+        "granulator.impeller.blade_length of the tip-speed feature)",
+    )
+    train.add_argument(
+        "--out", required=True, type=Path, help="output folder: model.skops, model.json, metrics.csv, parity.png"
+    )
     train.add_argument("--jobs", type=int, default=None, help="parallel jobs of the grid search")
     train.set_defaults(func=_train)
 
@@ -40,7 +52,9 @@ def add_cli(subparsers) -> argparse.ArgumentParser:
     src.add_argument("--diameters", type=float, nargs="+", help="class diameters (m) of one distribution")
     pred.add_argument("--numbers", type=float, nargs="+", help="particles per class (with --diameters)")
     pred.add_argument("--rpm", type=float, help="impeller speed (with --diameters)")
-    pred.add_argument("--output", type=Path, default=None, help="CSV (table mode) or JSON (matrix mode); default stdout")
+    pred.add_argument(
+        "--output", type=Path, default=None, help="CSV (table mode) or JSON (matrix mode); default stdout"
+    )
     pred.set_defaults(func=_predict)
     return parser
 
@@ -52,16 +66,25 @@ def _train(args) -> int:
 
     cfg = load_config(args.config)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    meta = train_and_report(args.table, args.out / "model.skops", settings=cfg.surrogate.to_dict(),
-                            impeller_radius=cfg.granulator.impeller.tip_radius, n_jobs=args.jobs,
-                            velocity_table=args.velocity_table)
+    meta = train_and_report(
+        args.table,
+        args.out / "model.skops",
+        settings=cfg.surrogate.to_dict(),
+        impeller_radius=cfg.granulator.impeller.tip_radius,
+        n_jobs=args.jobs,
+        velocity_table=args.velocity_table,
+    )
     summary = meta["cv_scores"]["outer_summary"]
     for name, s in summary.items():
-        print(f"{name:9s} held-out R2(log10 c) {_fmt(s['pooled_r2_log10'])} (replicate noise floor "
-              f"{_fmt(s['noise_floor_r2_log10'])})  MAE {_fmt(s['pooled_mae_log10'])} decades")
+        print(
+            f"{name:9s} held-out R2(log10 c) {_fmt(s['pooled_r2_log10'])} (replicate noise floor "
+            f"{_fmt(s['noise_floor_r2_log10'])})  MAE {_fmt(s['pooled_mae_log10'])} decades"
+        )
     for name, s in meta["cv_scores"]["velocity_summary"].items():
-        print(f"{name:9s} held-out median impact speed MAE {_fmt(s['pooled_mae_log10'])} decades, "
-              f"bin-fraction distance (TV) {_fmt(s['pooled_tv_distance'])}")
+        print(
+            f"{name:9s} held-out median impact speed MAE {_fmt(s['pooled_mae_log10'])} decades, "
+            f"bin-fraction distance (TV) {_fmt(s['pooled_tv_distance'])}"
+        )
     print(f"wrote {args.out}/model.skops, model.json, metrics.csv, parity.png")
     return 0
 
@@ -71,7 +94,6 @@ def _fmt(x) -> str:
 
 
 def _predict(args) -> int:
-    import pandas as pd
 
     from .model import OutOfDomainWarning
     from .persistence import load_surrogate
@@ -84,10 +106,10 @@ def _predict(args) -> int:
 
             table = read_table(args.table, "collision table")
             log_c, std = model.predict_log10(table, return_std=True)
-            out = table.assign(predicted_encounter_frequency_per_pair=10.0 ** log_c, predicted_std_log10=std)
+            out = table.assign(predicted_encounter_frequency_per_pair=10.0**log_c, predicted_std_log10=std)
             if model.has_velocity_model():
                 mu, sigma = model.predict_velocity(table, check_domain=False)
-                out = out.assign(predicted_impact_velocity_median=10.0 ** mu, predicted_impact_velocity_sigma_log10=sigma)
+                out = out.assign(predicted_impact_velocity_median=10.0**mu, predicted_impact_velocity_sigma_log10=sigma)
             if args.output:
                 out.to_csv(args.output, index=False)
             else:
@@ -102,17 +124,21 @@ def _predict(args) -> int:
                 bad = [v for v in values if not np.isfinite(v) or v <= 0]
                 if bad:
                     raise ValueError(f"{flag} = {bad[0]!r}: every value must be a finite number > 0")
-            c, s = model.frequency_matrix(np.array(args.diameters), np.array(args.numbers), args.rpm,
-                                          return_std=True)
-            result = {"diameters": args.diameters, "numbers": args.numbers, "rpm": args.rpm,
-                      "encounter_frequency_per_pair": c.tolist(), "std_log10": s.tolist()}
+            c, s = model.frequency_matrix(np.array(args.diameters), np.array(args.numbers), args.rpm, return_std=True)
+            result = {
+                "diameters": args.diameters,
+                "numbers": args.numbers,
+                "rpm": args.rpm,
+                "encounter_frequency_per_pair": c.tolist(),
+                "std_log10": s.tolist(),
+            }
             if model.has_velocity_model():
                 from pbmdem.impact import VELOCITY_EDGES
 
-                rates = model.encounters(np.array(args.diameters), np.array(args.numbers), args.rpm,
-                                         check_domain=False)
-                result.update(velocity_edges=VELOCITY_EDGES.tolist(),
-                              velocity_fractions=rates.velocity_fractions.tolist())
+                rates = model.encounters(np.array(args.diameters), np.array(args.numbers), args.rpm, check_domain=False)
+                result.update(
+                    velocity_edges=VELOCITY_EDGES.tolist(), velocity_fractions=rates.velocity_fractions.tolist()
+                )
             text = json.dumps(result, indent=2)
             if args.output:
                 args.output.write_text(text + "\n", encoding="utf-8")

@@ -42,7 +42,9 @@ def make_group_cv(strategy: str = "leave_one_group_out", n_splits: int = 5, n_gr
     raise ValueError(f"cv strategy must be one of {CV_STRATEGIES}, got {strategy!r}")
 
 
-def grouped_splits(groups, strategy: str = "leave_one_group_out", n_splits: int = 5) -> list[tuple[np.ndarray, np.ndarray]]:
+def grouped_splits(
+    groups, strategy: str = "leave_one_group_out", n_splits: int = 5
+) -> list[tuple[np.ndarray, np.ndarray]]:
     """Explicit (train, test) index arrays of a grouped split; checked to be group-disjoint."""
     groups = np.asarray(groups)
     n_groups = len(np.unique(groups))
@@ -114,8 +116,18 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         As in scikit-learn (``feature_names_in_`` only for X with string column names).
     """
 
-    def __init__(self, hidden_layer_sizes=((100,),), alpha=(1e-4,), seeds=(0,), max_iter=200,
-                 activation="relu", solver="adam", cv="leave_one_group_out", n_splits=5, n_jobs=None):
+    def __init__(
+        self,
+        hidden_layer_sizes=((100,),),
+        alpha=(1e-4,),
+        seeds=(0,),
+        max_iter=200,
+        activation="relu",
+        solver="adam",
+        cv="leave_one_group_out",
+        n_splits=5,
+        n_jobs=None,
+    ):
         self.hidden_layer_sizes = hidden_layer_sizes
         self.alpha = alpha
         self.seeds = seeds
@@ -139,8 +151,10 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         sizes = [tuple(int(u) for u in np.atleast_1d(h)) for h in sizes]
         alphas = [float(a) for a in np.atleast_1d(self.alpha)]
         if not sizes or not alphas:
-            raise ValueError("hidden_layer_sizes and alpha need at least one candidate each, "
-                             f"got hidden_layer_sizes={self.hidden_layer_sizes!r}, alpha={self.alpha!r}")
+            raise ValueError(
+                "hidden_layer_sizes and alpha need at least one candidate each, "
+                f"got hidden_layer_sizes={self.hidden_layer_sizes!r}, alpha={self.alpha!r}"
+            )
         if any(not h or min(h) < 1 for h in sizes):
             raise ValueError(f"hidden_layer_sizes: every layer needs >= 1 unit, got {self.hidden_layer_sizes!r}")
         if any(not (np.isfinite(a) and a >= 0) for a in alphas):
@@ -154,10 +168,12 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         return seeds
 
     def _pipeline(self) -> Pipeline:
-        return Pipeline([
-            ("scale", StandardScaler()),
-            ("mlp", MLPRegressor(activation=self.activation, solver=self.solver, max_iter=int(self.max_iter))),
-        ])
+        return Pipeline(
+            [
+                ("scale", StandardScaler()),
+                ("mlp", MLPRegressor(activation=self.activation, solver=self.solver, max_iter=int(self.max_iter))),
+            ]
+        )
 
     # ------------------------------------------------------------------ fit
     def fit(self, X, y, groups=None):
@@ -171,7 +187,9 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         if groups is not None:
             groups = np.asarray(groups)
             if groups.shape != (X.shape[0],):
-                raise ValueError(f"groups must be 1-d with one entry per sample ({X.shape[0]}), got shape {groups.shape}")
+                raise ValueError(
+                    f"groups must be 1-d with one entry per sample ({X.shape[0]}), got shape {groups.shape}"
+                )
         with single_threaded():
             self._fit(X, y, groups, sizes, alphas, seeds)
         return self
@@ -181,8 +199,12 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         n_groups = 0 if groups is None else len(np.unique(groups))
         if n_candidates > 1 and n_groups < 2:
             why = "no groups given" if groups is None else "only one group (DEM run)"
-            warnings.warn(f"{why}: no grouped hyperparameter search possible, using the first candidate of "
-                          f"hidden_layer_sizes and alpha", UserWarning, stacklevel=3)
+            warnings.warn(
+                f"{why}: no grouped hyperparameter search possible, using the first candidate of "
+                f"hidden_layer_sizes and alpha",
+                UserWarning,
+                stacklevel=3,
+            )
         grid = {"mlp__hidden_layer_sizes": sizes, "mlp__alpha": alphas}
         n_conv = 0
         self.cv_results_ = None
@@ -192,8 +214,13 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         if n_candidates > 1 and n_groups >= 2:
             splits = grouped_splits(groups, self.cv, self.n_splits)
             search = GridSearchCV(
-                self._pipeline().set_params(mlp__random_state=seeds[0]), grid, cv=splits,
-                scoring="neg_mean_squared_error", refit=False, n_jobs=self.n_jobs, error_score="raise",
+                self._pipeline().set_params(mlp__random_state=seeds[0]),
+                grid,
+                cv=splits,
+                scoring="neg_mean_squared_error",
+                refit=False,
+                n_jobs=self.n_jobs,
+                error_score="raise",
             )
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always", ConvergenceWarning)
@@ -205,23 +232,36 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
             self.cv_folds_ = [sorted({str(g) for g in groups[test]}) for _, test in splits]
             rmse = np.sqrt(-self.cv_results_["mean_test_score"])
             for k, params in enumerate(self.cv_results_["params"]):
-                log.info("hyperparameter candidate hidden_layer_sizes=%s alpha=%g: RMSE %.4f (log10) over %d grouped "
-                         "folds, rank %d", str(params["hidden_layer_sizes"]), params["alpha"], rmse[k], len(splits),
-                         self.cv_results_["rank_test_score"][k])
-        self.best_params_ = {"hidden_layer_sizes": tuple(best["mlp__hidden_layer_sizes"]),
-                             "alpha": float(best["mlp__alpha"])}
+                log.info(
+                    "hyperparameter candidate hidden_layer_sizes=%s alpha=%g: RMSE %.4f (log10) over %d grouped "
+                    "folds, rank %d",
+                    str(params["hidden_layer_sizes"]),
+                    params["alpha"],
+                    rmse[k],
+                    len(splits),
+                    self.cv_results_["rank_test_score"][k],
+                )
+        self.best_params_ = {
+            "hidden_layer_sizes": tuple(best["mlp__hidden_layer_sizes"]),
+            "alpha": float(best["mlp__alpha"]),
+        }
         members = []
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ConvergenceWarning)
             for seed in seeds:
                 est = clone(self._pipeline()).set_params(
                     mlp__hidden_layer_sizes=self.best_params_["hidden_layer_sizes"],
-                    mlp__alpha=self.best_params_["alpha"], mlp__random_state=seed)
+                    mlp__alpha=self.best_params_["alpha"],
+                    mlp__random_state=seed,
+                )
                 members.append(est.fit(X, y))
         n_conv += sum(issubclass(w.category, ConvergenceWarning) for w in caught)
         if n_conv:
-            warnings.warn(f"{n_conv} MLP fit(s) stopped at max_iter={self.max_iter} before converging",
-                          ConvergenceWarning, stacklevel=3)
+            warnings.warn(
+                f"{n_conv} MLP fit(s) stopped at max_iter={self.max_iter} before converging",
+                ConvergenceWarning,
+                stacklevel=3,
+            )
         self.estimators_ = members
         self.n_outputs_ = 1 if y.ndim == 1 else int(y.shape[1])
         self.n_iter_ = np.array([m[-1].n_iter_ for m in members], dtype=int)
@@ -229,8 +269,10 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
     @staticmethod
     def _results(res: dict, n_splits: int) -> dict:
         """GridSearchCV results with the pipeline prefix dropped from the parameter names."""
-        params = [{"hidden_layer_sizes": tuple(p["mlp__hidden_layer_sizes"]), "alpha": float(p["mlp__alpha"])}
-                  for p in res["params"]]
+        params = [
+            {"hidden_layer_sizes": tuple(p["mlp__hidden_layer_sizes"]), "alpha": float(p["mlp__alpha"])}
+            for p in res["params"]
+        ]
         out = {
             "params": params,
             "param_hidden_layer_sizes": _object_array([p["hidden_layer_sizes"] for p in params]),
@@ -273,7 +315,7 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         std = preds.std(axis=0, ddof=1) if len(self.estimators_) > 1 else np.zeros_like(mean)
         return mean, std
 
-    def member(self, k: int) -> "EnsembleMLPRegressorCV":
+    def member(self, k: int) -> EnsembleMLPRegressorCV:
         """A copy of the fitted ensemble that predicts with member `k` alone (0 .. n - 1)."""
         import copy
 
@@ -294,16 +336,24 @@ def search_table(estimator: EnsembleMLPRegressorCV) -> pd.DataFrame:
     res = estimator.cv_results_
     if res is None:
         best = estimator.best_params_
-        return pd.DataFrame({"hidden_layer_sizes": _object_array([tuple(best["hidden_layer_sizes"])]),
-                             "alpha": [float(best["alpha"])], "rmse_log10": [np.nan],
-                             "fold_mse_log10_std": [np.nan], "rank": [1]})
-    return pd.DataFrame({
-        "hidden_layer_sizes": _object_array([tuple(p["hidden_layer_sizes"]) for p in res["params"]]),
-        "alpha": np.asarray(res["param_alpha"], dtype=float),
-        "rmse_log10": np.sqrt(-np.asarray(res["mean_test_score"], dtype=float)),
-        "fold_mse_log10_std": np.asarray(res["std_test_score"], dtype=float),
-        "rank": np.asarray(res["rank_test_score"], dtype=int),
-    })
+        return pd.DataFrame(
+            {
+                "hidden_layer_sizes": _object_array([tuple(best["hidden_layer_sizes"])]),
+                "alpha": [float(best["alpha"])],
+                "rmse_log10": [np.nan],
+                "fold_mse_log10_std": [np.nan],
+                "rank": [1],
+            }
+        )
+    return pd.DataFrame(
+        {
+            "hidden_layer_sizes": _object_array([tuple(p["hidden_layer_sizes"]) for p in res["params"]]),
+            "alpha": np.asarray(res["param_alpha"], dtype=float),
+            "rmse_log10": np.sqrt(-np.asarray(res["mean_test_score"], dtype=float)),
+            "fold_mse_log10_std": np.asarray(res["std_test_score"], dtype=float),
+            "rank": np.asarray(res["rank_test_score"], dtype=int),
+        }
+    )
 
 
 def _forward(member, X: np.ndarray) -> np.ndarray:
@@ -314,9 +364,15 @@ def _forward(member, X: np.ndarray) -> np.ndarray:
     arithmetic). Any other member, or one whose ``predict`` was replaced on the instance, is asked
     for ``member.predict(X)``."""
     steps = getattr(member, "steps", None)
-    if not (type(member) is Pipeline and "predict" not in vars(member) and len(steps) == 2
-            and type(steps[0][1]) is StandardScaler and type(steps[1][1]) is MLPRegressor
-            and steps[1][1].out_activation_ in _ACTIVATIONS and steps[1][1].activation in _ACTIVATIONS):
+    if not (
+        type(member) is Pipeline
+        and "predict" not in vars(member)
+        and len(steps) == 2
+        and type(steps[0][1]) is StandardScaler
+        and type(steps[1][1]) is MLPRegressor
+        and steps[1][1].out_activation_ in _ACTIVATIONS
+        and steps[1][1].activation in _ACTIVATIONS
+    ):
         return member.predict(X)
     scaler, mlp = steps[0][1], steps[1][1]
     a = np.array(X, dtype=np.float64, copy=True)
@@ -342,5 +398,9 @@ def _logistic(a):
 
 
 #: in-place activations, as scikit-learn's ``neural_network._base.ACTIVATIONS``
-_ACTIVATIONS = {"identity": lambda a: None, "tanh": lambda a: np.tanh(a, out=a),
-                "relu": lambda a: np.maximum(a, 0, out=a), "logistic": _logistic}
+_ACTIVATIONS = {
+    "identity": lambda a: None,
+    "tanh": lambda a: np.tanh(a, out=a),
+    "relu": lambda a: np.maximum(a, 0, out=a),
+    "logistic": _logistic,
+}

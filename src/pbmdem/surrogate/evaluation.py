@@ -38,8 +38,18 @@ MODEL_NAMES = ("mlp", "hgb", "physical")
 #: Models scored on the impact-velocity distribution (the HGB baseline is a frequency baseline only).
 VELOCITY_MODEL_NAMES = ("mlp", "physical")
 TARGETS = ("encounter_frequency", "impact_velocity")
-METRIC_COLUMNS = ["target", "model", "fold", "test_point_ids", "n_train_runs", "n_test", "r2_log10", "mae_log10",
-                  "noise_floor_r2_log10", "tv_distance"]
+METRIC_COLUMNS = [
+    "target",
+    "model",
+    "fold",
+    "test_point_ids",
+    "n_train_runs",
+    "n_test",
+    "r2_log10",
+    "mae_log10",
+    "noise_floor_r2_log10",
+    "tv_distance",
+]
 
 
 def noise_floor_r2(y, noise_var) -> float:
@@ -69,8 +79,18 @@ def _metrics(y: np.ndarray, p: np.ndarray) -> tuple[float, float]:
 
 
 def _row(target, model, fold, ids, n_train, n_test, r2, mae, floor=np.nan, tv=np.nan) -> dict:
-    return {"target": target, "model": model, "fold": fold, "test_point_ids": ids, "n_train_runs": n_train,
-            "n_test": n_test, "r2_log10": r2, "mae_log10": mae, "noise_floor_r2_log10": floor, "tv_distance": tv}
+    return {
+        "target": target,
+        "model": model,
+        "fold": fold,
+        "test_point_ids": ids,
+        "n_train_runs": n_train,
+        "n_test": n_test,
+        "r2_log10": r2,
+        "mae_log10": mae,
+        "noise_floor_r2_log10": floor,
+        "tv_distance": tv,
+    }
 
 
 def default_baselines(random_state: int | None = 0) -> dict:
@@ -86,8 +106,13 @@ def _fit(model, data: TrainingData, rows: np.ndarray):
     return clone(model).fit(data.X.iloc[rows], data.y[rows], **kwargs)
 
 
-def cross_validate_models(data: TrainingData, surrogate: CollisionSurrogate, baselines: dict | None = None,
-                          cv: str | None = None, n_splits: int | None = None):
+def cross_validate_models(
+    data: TrainingData,
+    surrogate: CollisionSurrogate,
+    baselines: dict | None = None,
+    cv: str | None = None,
+    n_splits: int | None = None,
+):
     """Evaluate the surrogate (``mlp``) and the baselines on the same grouped outer folds.
 
     ``data`` comes from :func:`~pbmdem.surrogate.features.training_data`. The outer folds hold out
@@ -106,8 +131,22 @@ def cross_validate_models(data: TrainingData, surrogate: CollisionSurrogate, bas
     splits = grouped_splits(groups, cv or inner.cv, n_splits or inner.n_splits)
     table = data.table
 
-    keep = [c for c in ("point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j", TARGET_COLUMN,
-                        TARGET_NAME, TARGET_NOISE_VAR) if c in table]
+    keep = [
+        c
+        for c in (
+            "point_id",
+            "rpm",
+            "distribution",
+            "class_i",
+            "class_j",
+            "d_i",
+            "d_j",
+            TARGET_COLUMN,
+            TARGET_NAME,
+            TARGET_NOISE_VAR,
+        )
+        if c in table
+    ]
     pred = table[keep].copy()
     pred["fold"] = -1
     for name in models:
@@ -165,13 +204,21 @@ def cross_validate_models(data: TrainingData, surrogate: CollisionSurrogate, bas
                 pred.loc[idx, f"{name}_velocity_sigma"] = sigma
                 pred.loc[idx, f"{name}_velocity_tv"] = tv
                 r2v, maev = _metrics(pred.loc[idx, "velocity_mu_log10"].to_numpy(float), mu)
-                rows.append(_row("impact_velocity", name, str(k), ids, n_train, len(vt), r2v, maev, tv=float(tv.mean())))
+                rows.append(
+                    _row("impact_velocity", name, str(k), ids, n_train, len(vt), r2v, maev, tv=float(tv.mean()))
+                )
         elapsed = time.perf_counter() - t_start
         done = [r for r in rows if r["fold"] == str(k) and r["target"] == "encounter_frequency"]
-        log.info("CV fold %d of %d done (held out %s) in %.1f s: %s; elapsed %.0f s, remaining ~%.0f s",
-                 k + 1, len(splits), ids, time.perf_counter() - t_fold,
-                 ", ".join(f"{r['model']} R2 {r['r2_log10']:.3f}" for r in done),
-                 elapsed, elapsed / (k + 1) * (len(splits) - k - 1))
+        log.info(
+            "CV fold %d of %d done (held out %s) in %.1f s: %s; elapsed %.0f s, remaining ~%.0f s",
+            k + 1,
+            len(splits),
+            ids,
+            time.perf_counter() - t_fold,
+            ", ".join(f"{r['model']} R2 {r['r2_log10']:.3f}" for r in done),
+            elapsed,
+            elapsed / (k + 1) * (len(splits) - k - 1),
+        )
 
     metrics = pd.DataFrame(rows, columns=METRIC_COLUMNS)
     summary = []
@@ -184,14 +231,26 @@ def cross_validate_models(data: TrainingData, surrogate: CollisionSurrogate, bas
                 n_test, tv, fl = len(pred), np.nan, floor
             else:
                 sel = vmask
-                r2, mae = _metrics(pred.loc[sel, "velocity_mu_log10"].to_numpy(float),
-                                   pred.loc[sel, f"{name}_velocity_mu_log10"].to_numpy(float))
+                r2, mae = _metrics(
+                    pred.loc[sel, "velocity_mu_log10"].to_numpy(float),
+                    pred.loc[sel, f"{name}_velocity_mu_log10"].to_numpy(float),
+                )
                 n_test, tv, fl = int(sel.sum()), float(pred.loc[sel, f"{name}_velocity_tv"].mean()), np.nan
             summary.append(_row(target, name, "pooled", "all", np.nan, n_test, r2, mae, fl, tv))
-            summary.append(_row(target, name, "mean", "all", float(per["n_train_runs"].mean()),
-                                float(per["n_test"].mean()), float(per["r2_log10"].mean()),
-                                float(per["mae_log10"].mean()), float(per["noise_floor_r2_log10"].mean()),
-                                float(per["tv_distance"].mean())))
+            summary.append(
+                _row(
+                    target,
+                    name,
+                    "mean",
+                    "all",
+                    float(per["n_train_runs"].mean()),
+                    float(per["n_test"].mean()),
+                    float(per["r2_log10"].mean()),
+                    float(per["mae_log10"].mean()),
+                    float(per["noise_floor_r2_log10"].mean()),
+                    float(per["tv_distance"].mean()),
+                )
+            )
     metrics = pd.concat([metrics, pd.DataFrame(summary, columns=METRIC_COLUMNS)], ignore_index=True)
     return metrics, pred
 
@@ -207,8 +266,10 @@ def summarise(metrics: pd.DataFrame, target: str = "encounter_frequency") -> dic
         pooled = g[g["fold"] == "pooled"].iloc[0]
         mean = g[g["fold"] == "mean"].iloc[0]
         out[name] = {
-            "pooled_r2_log10": float(pooled["r2_log10"]), "pooled_mae_log10": float(pooled["mae_log10"]),
-            "mean_fold_r2_log10": float(mean["r2_log10"]), "mean_fold_mae_log10": float(mean["mae_log10"]),
+            "pooled_r2_log10": float(pooled["r2_log10"]),
+            "pooled_mae_log10": float(pooled["mae_log10"]),
+            "mean_fold_r2_log10": float(mean["r2_log10"]),
+            "mean_fold_mae_log10": float(mean["mae_log10"]),
             "n_folds": int((~g["fold"].isin(["pooled", "mean"])).sum()),
             "noise_floor_r2_log10": float(pooled["noise_floor_r2_log10"]),
             "pooled_tv_distance": float(pooled["tv_distance"]),

@@ -32,27 +32,47 @@ from .errors import CollisionTableError
 
 #: Columns of the collision-table contract (docs/architecture.md).
 TABLE_COLUMNS = (
-    "point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j", "n_i", "n_j",
-    "n_total", "collisions", "sampling_time", "frequency", "frequency_per_pair",
-    "n_replicates", "encounters", "encounter_frequency_per_pair", "encounter_frequency_per_pair_se",
+    "point_id",
+    "rpm",
+    "distribution",
+    "class_i",
+    "class_j",
+    "d_i",
+    "d_j",
+    "n_i",
+    "n_j",
+    "n_total",
+    "collisions",
+    "sampling_time",
+    "frequency",
+    "frequency_per_pair",
+    "n_replicates",
+    "encounters",
+    "encounter_frequency_per_pair",
+    "encounter_frequency_per_pair_se",
     "impact_velocity_median",
 )
 
 #: Columns of the collision table the target is built from.
-TARGET_SOURCE_COLUMNS = ("n_replicates", "encounters", "sampling_time", "encounter_frequency_per_pair",
-                         "encounter_frequency_per_pair_se")
+TARGET_SOURCE_COLUMNS = (
+    "n_replicates",
+    "encounters",
+    "sampling_time",
+    "encounter_frequency_per_pair",
+    "encounter_frequency_per_pair_se",
+)
 
 #: Columns needed to build features (the others are needed only for the target).
 FEATURE_SOURCE_COLUMNS = ("point_id", "rpm", "class_i", "class_j", "d_i", "d_j", "n_i", "n_j", "n_total")
 
 #: Model inputs, in this order.
 FEATURE_NAMES = (
-    "d_small",      # smaller diameter of the colliding pair (m)
-    "d_large",      # larger diameter of the colliding pair (m)
-    "frac_small",   # number fraction of the smaller particle's class in the run
-    "frac_large",   # number fraction of the larger particle's class in the run
-    "n_total",      # particles in the run
-    "tip_speed",    # impeller tip speed 2 pi R rpm / 60 (m/s)
+    "d_small",  # smaller diameter of the colliding pair (m)
+    "d_large",  # larger diameter of the colliding pair (m)
+    "frac_small",  # number fraction of the smaller particle's class in the run
+    "frac_large",  # number fraction of the larger particle's class in the run
+    "n_total",  # particles in the run
+    "tip_speed",  # impeller tip speed 2 pi R rpm / 60 (m/s)
 )
 # Not features, because they duplicate one above (docs/surrogate.md, "Features"):
 # * rpm: tip_speed = 2 pi R rpm / 60 with one impeller radius R;
@@ -81,8 +101,9 @@ def check_impeller_radius(impeller_radius) -> float:
     except (TypeError, ValueError):
         value = float("nan")
     if isinstance(impeller_radius, bool) or not (math.isfinite(value) and value > 0):
-        raise ValueError(f"impeller_radius (granulator.impeller.blade_length) must be a finite number > 0 m, "
-                         f"got {impeller_radius!r}")
+        raise ValueError(
+            f"impeller_radius (granulator.impeller.blade_length) must be a finite number > 0 m, got {impeller_radius!r}"
+        )
     return value
 
 
@@ -146,16 +167,20 @@ def run_descriptors(table: pd.DataFrame) -> pd.DataFrame:
     classes = run_classes(table)
     classes["nd"] = classes["n"] * classes["d"]
     classes["nv"] = classes["n"] * math.pi / 6.0 * classes["d"] ** 3
-    agg = classes.groupby("point_id").agg(n_sum=("n", "sum"), nd=("nd", "sum"), solid_volume=("nv", "sum"),
-                                          n_classes=("cls", "size"))
+    agg = classes.groupby("point_id").agg(
+        n_sum=("n", "sum"), nd=("nd", "sum"), solid_volume=("nv", "sum"), n_classes=("cls", "size")
+    )
     n_total = table.groupby("point_id")["n_total"].first().astype(float)
     agg["n_total"] = n_total
     if (agg["n_sum"] <= 0).any():
         raise CollisionTableError("a run has no particles in its classes")
     mismatch = agg.index[~np.isclose(agg["n_sum"], agg["n_total"], rtol=1e-9)].tolist()
     if mismatch:
-        warnings.warn(f"run(s) {mismatch[:5]}: class numbers do not add up to n_total; "
-                      "fractions use n_total, the mean diameter uses the listed classes", stacklevel=3)
+        warnings.warn(
+            f"run(s) {mismatch[:5]}: class numbers do not add up to n_total; "
+            "fractions use n_total, the mean diameter uses the listed classes",
+            stacklevel=3,
+        )
     agg["d_mean"] = agg["nd"] / agg["n_sum"]
     return agg[["n_total", "n_classes", "d_mean", "solid_volume"]]
 
@@ -185,7 +210,9 @@ def make_features(table: pd.DataFrame, impeller_radius: float) -> pd.DataFrame:
     )
 
 
-def duplicated_features(features: pd.DataFrame, threshold: float = DUPLICATE_CORRELATION) -> list[tuple[str, str, float]]:
+def duplicated_features(
+    features: pd.DataFrame, threshold: float = DUPLICATE_CORRELATION
+) -> list[tuple[str, str, float]]:
     """Pairs of feature columns whose |Pearson r| (of the values and of their logs) exceeds ``threshold``.
 
     Such a pair carries one piece of information twice on this table: the network cannot tell
@@ -255,18 +282,26 @@ def prepare_training_table(table: pd.DataFrame, zero_policy: str = "drop") -> pd
         se = np.full(len(out), np.nan)
     no_pairs = ~(pairs > 0)
     if no_pairs.any():
-        warnings.warn(f"dropping {int(no_pairs.sum())} row(s) without particle pairs "
-                      f"(e.g. a class with a single particle on the diagonal)", stacklevel=2)
+        warnings.warn(
+            f"dropping {int(no_pairs.sum())} row(s) without particle pairs "
+            f"(e.g. a class with a single particle on the diagonal)",
+            stacklevel=2,
+        )
     zero = ~no_pairs & ((counts <= 0) | (np.nan_to_num(fpp, nan=1.0) <= 0))
     out["floored"] = False
     if zero.any():
         ids = sorted(set(out.loc[zero, "point_id"].astype(str)))
         if zero_policy == "drop":
-            warnings.warn(f"dropping {int(zero.sum())} row(s) with zero encounters (log10 undefined) "
-                          f"in run(s) {ids[:5]}", stacklevel=2)
+            warnings.warn(
+                f"dropping {int(zero.sum())} row(s) with zero encounters (log10 undefined) in run(s) {ids[:5]}",
+                stacklevel=2,
+            )
         else:
-            warnings.warn(f"flooring {int(zero.sum())} row(s) with zero encounters at half an encounter "
-                          f"over all replicates of the sampling window, run(s) {ids[:5]}", stacklevel=2)
+            warnings.warn(
+                f"flooring {int(zero.sum())} row(s) with zero encounters at half an encounter "
+                f"over all replicates of the sampling window, run(s) {ids[:5]}",
+                stacklevel=2,
+            )
             fpp = fpp.copy()
             fpp[zero] = 0.5 / (reps[zero] * pairs[zero] * out["sampling_time"].to_numpy(float)[zero])
             out[TARGET_COLUMN] = fpp
@@ -294,10 +329,19 @@ def pair_table(diameters, numbers, rpm: float) -> tuple[pd.DataFrame, np.ndarray
     """
     d, n = _distribution(diameters, numbers, rpm)
     iu, ju = np.triu_indices(d.size)
-    frame = pd.DataFrame({
-        "point_id": "query", "rpm": float(rpm), "class_i": iu, "class_j": ju,
-        "d_i": d[iu], "d_j": d[ju], "n_i": n[iu], "n_j": n[ju], "n_total": n.sum(),
-    })
+    frame = pd.DataFrame(
+        {
+            "point_id": "query",
+            "rpm": float(rpm),
+            "class_i": iu,
+            "class_j": ju,
+            "d_i": d[iu],
+            "d_j": d[ju],
+            "n_i": n[iu],
+            "n_j": n[ju],
+            "n_total": n.sum(),
+        }
+    )
     return frame, iu, ju
 
 
@@ -365,9 +409,13 @@ class TrainingData:
     """Rows whose zero count was floored (``zero_policy="floor"``)."""
 
 
-def training_data(table: pd.DataFrame, impeller_radius: float, zero_policy: str = "drop",
-                  velocity_table: pd.DataFrame | None = None,
-                  velocity_source: str = "impact-velocity table") -> TrainingData:
+def training_data(
+    table: pd.DataFrame,
+    impeller_radius: float,
+    zero_policy: str = "drop",
+    velocity_table: pd.DataFrame | None = None,
+    velocity_source: str = "impact-velocity table",
+) -> TrainingData:
     """Features, target, groups, replicate noise and impact-speed targets of a collision table.
 
     ``table`` is the collision table (``results/dem/collisions.csv``); ``velocity_table`` the
@@ -389,11 +437,19 @@ def training_data(table: pd.DataFrame, impeller_radius: float, zero_policy: str 
         mu, sigma = fit_lognormal(bin_counts(data.loc[vmask]))
         velocity[vmask] = np.column_stack([mu, sigma])
     else:
-        warnings.warn("the collision table carries no impact-velocity bins (results/dem/impact_velocity.csv "
-                      "not attached): the surrogate predicts encounter frequencies only", UserWarning,
-                      stacklevel=2)
+        warnings.warn(
+            "the collision table carries no impact-velocity bins (results/dem/impact_velocity.csv "
+            "not attached): the surrogate predicts encounter frequencies only",
+            UserWarning,
+            stacklevel=2,
+        )
     return TrainingData(
-        X=X, y=data[TARGET_NAME].to_numpy(float), groups=data["point_id"].astype(str).to_numpy(),
-        noise_var=data[TARGET_NOISE_VAR].to_numpy(float), velocity=velocity, table=data,
-        n_dropped=int(len(table) - len(data)), n_floored=int(data["floored"].sum()),
+        X=X,
+        y=data[TARGET_NAME].to_numpy(float),
+        groups=data["point_id"].astype(str).to_numpy(),
+        noise_var=data[TARGET_NOISE_VAR].to_numpy(float),
+        velocity=velocity,
+        table=data,
+        n_dropped=int(len(table) - len(data)),
+        n_floored=int(data["floored"].sum()),
     )

@@ -99,8 +99,9 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         As in scikit-learn.
     """
 
-    def __init__(self, frequency_model=None, velocity_model=None, impeller_radius=None,
-                 physics_offset="none", domain_margin=0.0):
+    def __init__(
+        self, frequency_model=None, velocity_model=None, impeller_radius=None, physics_offset="none", domain_margin=0.0
+    ):
         self.frequency_model = frequency_model
         self.velocity_model = velocity_model
         self.impeller_radius = impeller_radius
@@ -159,9 +160,11 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         if self.physics_offset != "none":
             missing = [n for n in OFFSET_FEATURES if n not in F.columns]
             if missing:
-                raise ValueError(f"physics_offset = {self.physics_offset!r} needs X with the named features "
-                                 f"{list(OFFSET_FEATURES)} (a feature frame from make_features/training_data); "
-                                 f"missing {missing}")
+                raise ValueError(
+                    f"physics_offset = {self.physics_offset!r} needs X with the named features "
+                    f"{list(OFFSET_FEATURES)} (a feature frame from make_features/training_data); "
+                    f"missing {missing}"
+                )
         if groups is not None:
             groups = np.asarray(groups)
             if groups.shape != (len(y),):
@@ -169,15 +172,20 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         if velocity is not None:
             V = np.asarray(velocity, dtype=float)
             if V.shape != (len(y), 2):
-                raise ValueError(f"velocity must have shape (n_samples, 2) = ({len(y)}, 2) (mu, sigma per row), "
-                                 f"got {V.shape}")
+                raise ValueError(
+                    f"velocity must have shape (n_samples, 2) = ({len(y)}, 2) (mu, sigma per row), got {V.shape}"
+                )
             vmask = np.isfinite(V).all(axis=1)
             if (V[vmask, 1] <= 0).any():
                 raise ValueError("velocity: sigma (second column) must be > 0 where given")
         self.duplicated_features_ = duplicated_features(F)
         for a, b, r in self.duplicated_features_:
-            warnings.warn(f"features {a} and {b} are duplicates on this training table (Pearson r = {r:.4f}): "
-                          f"predictions where they disagree are extrapolations", UserWarning, stacklevel=2)
+            warnings.warn(
+                f"features {a} and {b} are duplicates on this training table (Pearson r = {r:.4f}): "
+                f"predictions where they disagree are extrapolations",
+                UserWarning,
+                stacklevel=2,
+            )
 
         template = EnsembleMLPRegressorCV() if self.frequency_model is None else self.frequency_model
         self.frequency_model_ = clone(template).fit(self._inner(F), y - self._offset(F), groups=groups)
@@ -189,7 +197,8 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
             Yv = np.column_stack([V[vmask, 0] - self._velocity_offset(Fv), np.log10(V[vmask, 1])])
             vtemplate = template if self.velocity_model is None else self.velocity_model
             self.velocity_model_ = clone(vtemplate).fit(
-                self._inner(Fv), Yv, groups=None if groups is None else groups[vmask])
+                self._inner(Fv), Yv, groups=None if groups is None else groups[vmask]
+            )
             self.n_velocity_rows_ = int(vmask.sum())
 
         self.feature_min_ = X.min(axis=0)
@@ -202,7 +211,9 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
     def feature_ranges(self) -> dict[str, tuple[float, float]]:
         """Training range (min, max) of every feature."""
         check_is_fitted(self)
-        return {n: (float(lo), float(hi)) for n, lo, hi in zip(self._feature_names(), self.feature_min_, self.feature_max_)}
+        return {
+            n: (float(lo), float(hi)) for n, lo, hi in zip(self._feature_names(), self.feature_min_, self.feature_max_)
+        }
 
     def _domain_mask(self, vals: np.ndarray) -> np.ndarray:
         span = self.feature_max_ - self.feature_min_
@@ -231,7 +242,9 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
                     f"{name} = {worst:.6g} outside the training range "
                     f"[{self.feature_min_[j]:.6g}, {self.feature_max_[j]:.6g}] "
                     f"({int(col.sum())} of {len(col)} prediction(s) out of domain for {name})",
-                    OutOfDomainWarning, stacklevel=stacklevel)
+                    OutOfDomainWarning,
+                    stacklevel=stacklevel,
+                )
 
     # ------------------------------------------------------------------ predict
     def predict(self, X, return_std: bool = False, check_domain: bool = True):
@@ -261,7 +274,8 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         if not self.has_velocity_model():
             raise VelocityModelMissingError(
                 "this surrogate was trained without impact-velocity bins (results/dem/impact_velocity.csv); "
-                "retrain it with the impact-velocity table to predict impact speeds")
+                "retrain it with the impact-velocity table to predict impact speeds"
+            )
 
     def predict_velocity(self, X, return_std: bool = False, check_domain: bool = True):
         """Log-normal impact-speed law per row: ``(mu, sigma)``.
@@ -326,8 +340,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         velocity_offset = np.zeros(len(F)) if self.physics_offset == "none" else np.log10(F[:, 5])
         return lognormal_fractions(mean[:, 0] + velocity_offset, 10.0 ** mean[:, 1])
 
-    def frequency_matrix(self, diameters, numbers, rpm: float, return_std: bool = False,
-                         check_domain: bool = True):
+    def frequency_matrix(self, diameters, numbers, rpm: float, return_std: bool = False, check_domain: bool = True):
         """(K,) diameters (m) and (K,) particle numbers -> (K, K) symmetric encounter frequency c_ij (1/s per pair).
 
         One vectorised predict over the K (K + 1) / 2 unordered class pairs. ``numbers`` are
@@ -341,8 +354,8 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         F, iu, ju, k = self._pairs(diameters, numbers, rpm, check_domain)
         mean, std = self._pair_log10(F, return_std=True)
         c = np.empty((k, k))
-        c[iu, ju] = 10.0 ** mean
-        c[ju, iu] = 10.0 ** mean
+        c[iu, ju] = 10.0**mean
+        c[ju, iu] = 10.0**mean
         if not return_std:
             return c
         s = np.empty((k, k))
@@ -362,8 +375,8 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         log_c = self._pair_log10(F)
         fractions = self._pair_velocity(F)
         c = np.empty((k, k))
-        c[iu, ju] = 10.0 ** log_c
-        c[ju, iu] = 10.0 ** log_c
+        c[iu, ju] = 10.0**log_c
+        c[ju, iu] = 10.0**log_c
         v = np.empty((k, k, fractions.shape[1]))
         v[iu, ju] = fractions
         v[ju, iu] = fractions
@@ -379,7 +392,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         check_is_fitted(self)
         return len(self.frequency_model_.estimators_)
 
-    def member(self, k: int) -> "CollisionSurrogate":
+    def member(self, k: int) -> CollisionSurrogate:
         """A copy of the fitted surrogate that predicts with ensemble member `k` alone (its
         frequency and impact-velocity networks): running the PBM once per member gives the
         spread of PBM-ANN that the ensemble's uncertainty implies."""

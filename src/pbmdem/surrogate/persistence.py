@@ -4,8 +4,8 @@ Two files:
 
 * ``model.skops`` - the fitted ensembles, ``{"frequency": [...], "velocity": [...]}`` (lists of
   ``Pipeline(StandardScaler, MLPRegressor)``; ``velocity`` is empty for a surrogate trained
-  without impact-velocity bins) written with :func:`skops.io.dump`. Only scikit-learn/numpy objects are stored; the wrapper
-  class itself is rebuilt from the metadata, so no project class has to be trusted.
+  without impact-velocity bins) written with :func:`skops.io.dump`. Only scikit-learn/numpy
+  objects are stored; the wrapper class itself is rebuilt from the metadata, so no project class has to be trusted.
 * ``model.json`` - metadata: estimator parameters (the impeller radius among them), feature names
   and training ranges, training runs, CV scores, library versions and the SHA-256 of ``model.skops``.
 
@@ -31,9 +31,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import scipy
+import sklearn
 import skops
 import skops.io as sio
-import sklearn
 from sklearn.base import clone
 
 from pbmdem.impact import VELOCITY_EDGES
@@ -49,16 +49,31 @@ FORMAT = "pbmdem-surrogate"
 FORMAT_VERSION = 3
 
 #: Every type that may appear in a surrogate model file (module.qualname).
-ALLOWED_TYPES = frozenset({
-    "builtins.dict", "builtins.list", "builtins.tuple", "builtins.str", "builtins.int",
-    "builtins.float", "builtins.bool", "builtins.NoneType",
-    "numpy.ndarray", "numpy.dtype", "numpy.float64", "numpy.float32", "numpy.int64", "numpy.int32",
-    "numpy.bool_", "numpy.bool",
-    "numpy.random.mtrand.RandomState", "numpy.random._mt19937.MT19937",
-    "sklearn.pipeline.Pipeline",
-    "sklearn.preprocessing._data.StandardScaler",
-    "sklearn.neural_network._multilayer_perceptron.MLPRegressor",
-})
+ALLOWED_TYPES = frozenset(
+    {
+        "builtins.dict",
+        "builtins.list",
+        "builtins.tuple",
+        "builtins.str",
+        "builtins.int",
+        "builtins.float",
+        "builtins.bool",
+        "builtins.NoneType",
+        "numpy.ndarray",
+        "numpy.dtype",
+        "numpy.float64",
+        "numpy.float32",
+        "numpy.int64",
+        "numpy.int32",
+        "numpy.bool_",
+        "numpy.bool",
+        "numpy.random.mtrand.RandomState",
+        "numpy.random._mt19937.MT19937",
+        "sklearn.pipeline.Pipeline",
+        "sklearn.preprocessing._data.StandardScaler",
+        "sklearn.neural_network._multilayer_perceptron.MLPRegressor",
+    }
+)
 
 
 class SurrogateLoadError(RuntimeError):
@@ -86,8 +101,14 @@ def sha256_file(path: str | os.PathLike) -> str:
 
 
 def library_versions() -> dict[str, str]:
-    return {"python": platform.python_version(), "sklearn": sklearn.__version__, "numpy": np.__version__,
-            "scipy": scipy.__version__, "skops": skops.__version__, "pandas": pd.__version__}
+    return {
+        "python": platform.python_version(),
+        "sklearn": sklearn.__version__,
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "skops": skops.__version__,
+        "pandas": pd.__version__,
+    }
 
 
 def _major_minor(version: str) -> tuple[str, ...]:
@@ -127,20 +148,25 @@ def _surrogate_params(surrogate: CollisionSurrogate) -> dict:
 def _search_meta(est: EnsembleMLPRegressorCV | None) -> dict:
     if est is None:
         return {"best_rmse_log10": None, "results": []}
-    return {"best_rmse_log10": float(np.sqrt(-est.best_score_)),
-            "results": search_table(est).to_dict(orient="records")}
+    return {"best_rmse_log10": float(np.sqrt(-est.best_score_)), "results": search_table(est).to_dict(orient="records")}
 
 
-def save_surrogate(surrogate: CollisionSurrogate, model_path: str | os.PathLike,
-                   metadata_path: str | os.PathLike | None = None, cv_scores: dict | None = None,
-                   extra: dict | None = None) -> dict:
+def save_surrogate(
+    surrogate: CollisionSurrogate,
+    model_path: str | os.PathLike,
+    metadata_path: str | os.PathLike | None = None,
+    cv_scores: dict | None = None,
+    extra: dict | None = None,
+) -> dict:
     """Write ``model.skops`` and its JSON metadata (atomically); return the metadata dict."""
     if not hasattr(surrogate, "frequency_model_"):
         raise ValueError("only a fitted CollisionSurrogate can be saved")
     names = [str(n) for n in getattr(surrogate, "feature_names_in_", [])]
     if names != list(FEATURE_NAMES):
-        raise ValueError(f"only a surrogate fitted on the feature frame {list(FEATURE_NAMES)} can be saved, "
-                         f"this one was fitted on {names or 'an array without feature names'}")
+        raise ValueError(
+            f"only a surrogate fitted on the feature frame {list(FEATURE_NAMES)} can be saved, "
+            f"this one was fitted on {names or 'an array without feature names'}"
+        )
     model_path = Path(model_path)
     metadata_path = metadata_path_for(model_path) if metadata_path is None else Path(metadata_path)
     freq, vel = surrogate.frequency_model_, surrogate.velocity_model_
@@ -149,15 +175,19 @@ def save_surrogate(surrogate: CollisionSurrogate, model_path: str | os.PathLike,
     meta = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
-        "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "created_utc": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "model_file": model_path.name,
         "model_sha256": sha256_file(model_path),
         "estimator": "pbmdem.surrogate.CollisionSurrogate",
         "params": _surrogate_params(surrogate),
         "target": f"{TARGET_NAME} (fitted in log10 space; frequency_matrix returns 1/s per particle pair)",
-        "velocity_target": ("log-normal impact-speed law per pair: [log10 median speed (m/s) minus the "
-                            "physics offset, log10 sigma (decades)], fitted by ML to the bins of "
-                            "pbmdem.impact.VELOCITY_EDGES" if vel is not None else None),
+        "velocity_target": (
+            "log-normal impact-speed law per pair: [log10 median speed (m/s) minus the "
+            "physics offset, log10 sigma (decades)], fitted by ML to the bins of "
+            "pbmdem.impact.VELOCITY_EDGES"
+            if vel is not None
+            else None
+        ),
         "velocity_edges": [float(e) for e in VELOCITY_EDGES],
         "velocity_best_params": None if vel is None else vel.best_params_,
         "velocity_seeds": None if vel is None else [int(s) for s in np.atleast_1d(vel.seeds)],
@@ -217,7 +247,8 @@ def read_metadata(metadata_path: str | os.PathLike) -> dict:
     if meta.get("format_version") != FORMAT_VERSION:
         raise IncompatibleVersionError(
             f"{metadata_path}: metadata format version {meta.get('format_version')} "
-            f"(this pbmdem reads version {FORMAT_VERSION}); retrain the surrogate")
+            f"(this pbmdem reads version {FORMAT_VERSION}); retrain the surrogate"
+        )
     return meta
 
 
@@ -231,13 +262,15 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
     if digest != meta.get("model_sha256"):
         raise TamperedModelError(
             f"{model_path}: SHA-256 {digest} does not match {meta.get('model_sha256')} recorded in "
-            f"{metadata_path}; the model file was modified or belongs to another training run")
+            f"{metadata_path}; the model file was modified or belongs to another training run"
+        )
 
     saved = meta.get("versions", {}).get("sklearn", "?")
     if _major_minor(saved) != _major_minor(sklearn.__version__):
         raise IncompatibleVersionError(
             f"{model_path} was written with scikit-learn {saved}, installed is {sklearn.__version__} "
-            f"(major.minor must match); retrain the surrogate with the installed version")
+            f"(major.minor must match); retrain the surrogate with the installed version"
+        )
 
     types = schema_types(model_path)
     bad = sorted(types - ALLOWED_TYPES)
@@ -248,14 +281,19 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
     if bad:
         raise UntrustedTypesError(f"{model_path} contains types outside the allow-list: {bad}")
     stored = sio.load(model_path, trusted=list(untrusted))
-    if (not isinstance(stored, dict) or not isinstance(stored.get("frequency"), list) or not stored["frequency"]
-            or not isinstance(stored.get("velocity"), list)):
+    if (
+        not isinstance(stored, dict)
+        or not isinstance(stored.get("frequency"), list)
+        or not stored["frequency"]
+        or not isinstance(stored.get("velocity"), list)
+    ):
         raise SurrogateLoadError(f"{model_path} does not hold the fitted frequency and velocity pipelines")
     edges = meta.get("velocity_edges")
     if edges is None or len(edges) != len(VELOCITY_EDGES) or not np.allclose(edges, VELOCITY_EDGES, rtol=1e-9):
         raise IncompatibleVersionError(
             f"{metadata_path}: velocity bins {edges} differ from this version's pbmdem.impact.VELOCITY_EDGES; "
-            f"retrain the surrogate")
+            f"retrain the surrogate"
+        )
 
     try:
         return _from_metadata(stored, meta, metadata_path)
@@ -263,7 +301,8 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
         what = f"missing field {exc}" if isinstance(exc, KeyError) else str(exc)
         raise IncompatibleVersionError(
             f"{metadata_path}: metadata does not fit this pbmdem version ({type(exc).__name__}: {what}); "
-            "it was written by another version or edited; retrain the surrogate") from None
+            "it was written by another version or edited; retrain the surrogate"
+        ) from None
 
 
 def _build(cls, params: dict, what: str):
@@ -271,8 +310,10 @@ def _build(cls, params: dict, what: str):
     take its default: refused like an unknown one)."""
     expected = set(cls().get_params(deep=False))
     if set(params) != expected:
-        raise ValueError(f"{what} parameters differ from this version's: missing {sorted(expected - set(params))}, "
-                         f"unknown {sorted(set(params) - expected)}")
+        raise ValueError(
+            f"{what} parameters differ from this version's: missing {sorted(expected - set(params))}, "
+            f"unknown {sorted(set(params) - expected)}"
+        )
     return cls(**params)
 
 
@@ -284,25 +325,29 @@ def _ensemble(params: dict, what: str) -> EnsembleMLPRegressorCV:
     return _build(EnsembleMLPRegressorCV, params, what)
 
 
-def _restore_ensemble(est: EnsembleMLPRegressorCV, members: list, best: dict, search: dict, folds: list,
-                      names: list[str], n_outputs: int) -> EnsembleMLPRegressorCV:
+def _restore_ensemble(
+    est: EnsembleMLPRegressorCV, members: list, best: dict, search: dict, folds: list, names: list[str], n_outputs: int
+) -> EnsembleMLPRegressorCV:
     """The fitted state of an :class:`EnsembleMLPRegressorCV` from its pipelines and metadata."""
     est.estimators_ = members
     est.best_params_ = {"hidden_layer_sizes": tuple(best["hidden_layer_sizes"]), "alpha": float(best["alpha"])}
     rmse = search["best_rmse_log10"]
-    est.best_score_ = float("nan") if rmse is None else -float(rmse) ** 2
+    est.best_score_ = float("nan") if rmse is None else -(float(rmse) ** 2)
     rows = [r for r in search["results"] if r.get("rmse_log10") is not None]
     est.cv_results_ = None
     if rows:
-        params = [{"hidden_layer_sizes": tuple(int(u) for u in r["hidden_layer_sizes"]), "alpha": float(r["alpha"])}
-                  for r in rows]
+        params = [
+            {"hidden_layer_sizes": tuple(int(u) for u in r["hidden_layer_sizes"]), "alpha": float(r["alpha"])}
+            for r in rows
+        ]
         est.cv_results_ = {
             "params": params,
             "param_hidden_layer_sizes": _object_array([p["hidden_layer_sizes"] for p in params]),
             "param_alpha": np.array([p["alpha"] for p in params], dtype=float),
-            "mean_test_score": -np.array([r["rmse_log10"] for r in rows], dtype=float) ** 2,
-            "std_test_score": np.array([np.nan if r["fold_mse_log10_std"] is None else r["fold_mse_log10_std"]
-                                        for r in rows], dtype=float),
+            "mean_test_score": -(np.array([r["rmse_log10"] for r in rows], dtype=float) ** 2),
+            "std_test_score": np.array(
+                [np.nan if r["fold_mse_log10_std"] is None else r["fold_mse_log10_std"] for r in rows], dtype=float
+            ),
             "rank_test_score": np.array([r["rank"] for r in rows], dtype=int),
         }
     est.cv_folds_ = [list(f) for f in folds]
@@ -320,7 +365,8 @@ def _from_metadata(stored: dict, meta: dict, metadata_path) -> CollisionSurrogat
     names = list(meta["feature_names"])
     if names != list(FEATURE_NAMES):
         raise IncompatibleVersionError(
-            f"{metadata_path}: features {meta['feature_names']} differ from this version's {list(FEATURE_NAMES)}")
+            f"{metadata_path}: features {meta['feature_names']} differ from this version's {list(FEATURE_NAMES)}"
+        )
     params = dict(meta["params"])
     params["frequency_model"] = _ensemble(params["frequency_model"], "frequency_model")
     if params["velocity_model"] is not None:
@@ -329,13 +375,25 @@ def _from_metadata(stored: dict, meta: dict, metadata_path) -> CollisionSurrogat
     freq_template = surrogate.frequency_model
     vel_template = freq_template if surrogate.velocity_model is None else surrogate.velocity_model
     surrogate.frequency_model_ = _restore_ensemble(
-        clone(freq_template), stored["frequency"], meta["best_params"], meta["search"], meta["search_cv_folds"],
-        names, 1)
+        clone(freq_template),
+        stored["frequency"],
+        meta["best_params"],
+        meta["search"],
+        meta["search_cv_folds"],
+        names,
+        1,
+    )
     surrogate.velocity_model_ = None
     if stored["velocity"]:
         surrogate.velocity_model_ = _restore_ensemble(
-            clone(vel_template), stored["velocity"], meta["velocity_best_params"], meta["velocity_search"],
-            meta["velocity_search_cv_folds"], names, 2)
+            clone(vel_template),
+            stored["velocity"],
+            meta["velocity_best_params"],
+            meta["velocity_search"],
+            meta["velocity_search_cv_folds"],
+            names,
+            2,
+        )
     ranges = meta["feature_ranges"]
     surrogate.n_features_in_ = len(names)
     surrogate.feature_names_in_ = np.asarray(names, dtype=object)

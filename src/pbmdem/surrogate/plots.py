@@ -14,7 +14,6 @@ from .features import TARGET_NAME
 MODEL_LABELS = {"mlp": "MLP ensemble", "hgb": "gradient boosting", "physical": "physical scaling"}
 
 
-
 def _square_log_axes(ax, lo: float, hi: float) -> None:
     """Log-log parity axes with the same range on both."""
     ax.set_xscale("log")
@@ -23,8 +22,14 @@ def _square_log_axes(ax, lo: float, hi: float) -> None:
     ax.set_ylim(lo, hi)
     ax.set_aspect("equal")
 
-def parity_plot(predictions: pd.DataFrame, path: str | os.PathLike, metrics: pd.DataFrame | None = None,
-                models=("mlp", "hgb", "physical"), dpi: int = 120) -> Path:
+
+def parity_plot(
+    predictions: pd.DataFrame,
+    path: str | os.PathLike,
+    metrics: pd.DataFrame | None = None,
+    models=("mlp", "hgb", "physical"),
+    dpi: int = 120,
+) -> Path:
     """Write a PNG with one panel per model: held-out DEM vs predicted frequency per pair."""
     import matplotlib
 
@@ -42,9 +47,10 @@ def parity_plot(predictions: pd.DataFrame, path: str | os.PathLike, metrics: pd.
 
     vel_models = [m for m in models if f"{m}_velocity_mu_log10" in predictions]
     n_rows = 2 if vel_models else 1
-    fig, axes = plt.subplots(n_rows, len(models), figsize=(4.2 * len(models), 4.6 * n_rows), squeeze=False,
-                             layout="constrained")
-    for ax in axes[1][len(vel_models):] if vel_models else []:
+    fig, axes = plt.subplots(
+        n_rows, len(models), figsize=(4.2 * len(models), 4.6 * n_rows), squeeze=False, layout="constrained"
+    )
+    for ax in axes[1][len(vel_models) :] if vel_models else []:
         ax.axis("off")
     for ax, m in zip(axes[1] if vel_models else [], vel_models):
         sel_v = predictions[f"{m}_velocity_mu_log10"].notna().to_numpy()
@@ -61,10 +67,14 @@ def parity_plot(predictions: pd.DataFrame, path: str | os.PathLike, metrics: pd.
         ax.set_ylabel("predicted (held-out runs) (m/s)")
         title = f"{MODEL_LABELS.get(m, m)}: impact speed"
         if metrics is not None and "target" in metrics:
-            row = metrics[(metrics["model"] == m) & (metrics["fold"] == "pooled") & (metrics["target"] == "impact_velocity")]
+            row = metrics[
+                (metrics["model"] == m) & (metrics["fold"] == "pooled") & (metrics["target"] == "impact_velocity")
+            ]
             if len(row):
-                title += (f"\nMAE {row['mae_log10'].iloc[0]:.3f} dec, bin-fraction TV distance "
-                          f"{row['tv_distance'].iloc[0]:.3f}")
+                title += (
+                    f"\nMAE {row['mae_log10'].iloc[0]:.3f} dec, bin-fraction TV distance "
+                    f"{row['tv_distance'].iloc[0]:.3f}"
+                )
         ax.set_title(title, fontsize=10)
         ax.grid(True, which="both", lw=0.3, alpha=0.5)
     for ax, m in zip(axes[0], models):
@@ -73,9 +83,19 @@ def parity_plot(predictions: pd.DataFrame, path: str | os.PathLike, metrics: pd.
             sel = predictions["rpm"].to_numpy() == r
             if m == "mlp" and "mlp_std_log10" in predictions:
                 s = predictions["mlp_std_log10"].to_numpy(float)[sel]
-                yerr = np.vstack([pred[sel] * (1 - 10.0 ** -s), pred[sel] * (10.0 ** s - 1)])
-                ax.errorbar(obs[sel], pred[sel], yerr=yerr, fmt="o", ms=4, color=colours[r], ecolor=colours[r],
-                            elinewidth=0.8, alpha=0.85, label=f"{r:g} rpm")
+                yerr = np.vstack([pred[sel] * (1 - 10.0**-s), pred[sel] * (10.0**s - 1)])
+                ax.errorbar(
+                    obs[sel],
+                    pred[sel],
+                    yerr=yerr,
+                    fmt="o",
+                    ms=4,
+                    color=colours[r],
+                    ecolor=colours[r],
+                    elinewidth=0.8,
+                    alpha=0.85,
+                    label=f"{r:g} rpm",
+                )
             else:
                 ax.plot(obs[sel], pred[sel], "o", ms=4, color=colours[r], alpha=0.85, label=f"{r:g} rpm")
         ax.plot([lo, hi], [lo, hi], "k-", lw=0.8)
@@ -96,8 +116,10 @@ def parity_plot(predictions: pd.DataFrame, path: str | os.PathLike, metrics: pd.
         ax.set_title(title, fontsize=10)
         ax.grid(True, which="both", lw=0.3, alpha=0.5)
     axes[0][0].legend(title="impeller", fontsize=8, loc="upper left")
-    fig.suptitle("Grouped cross-validation: each point predicted by models that never saw its DEM run "
-                 "(dotted: factor 2)", fontsize=10)
+    fig.suptitle(
+        "Grouped cross-validation: each point predicted by models that never saw its DEM run (dotted: factor 2)",
+        fontsize=10,
+    )
 
     try:
         atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png"))

@@ -41,7 +41,7 @@ def velocity_law(d_i, d_j, rpm, impeller_radius: float):
     rpm = np.asarray(rpm, float)
     v_tip = tip_speed(rpm, impeller_radius)
     ratio = np.minimum(d_i, d_j) / np.maximum(d_i, d_j)
-    mu = np.log10(0.12 * v_tip * ratio ** 0.5)
+    mu = np.log10(0.12 * v_tip * ratio**0.5)
     sigma = 0.30 * (600.0 / rpm) ** 0.25
     return mu, sigma
 
@@ -81,7 +81,7 @@ def make_synthetic_tables(
     if distributions is None:
         distributions = {f"dist{k}": rng.dirichlet(np.full(d.size, 2.0)) for k in range(4)}
     lo, hi = n_total_range
-    d3 = {name: float(np.dot(np.asarray(f, float), d ** 3)) for name, f in distributions.items()}
+    d3 = {name: float(np.dot(np.asarray(f, float), d**3)) for name, f in distributions.items()}
     d3_lo, d3_hi = min(d3.values()), max(d3.values())
     rows, vrows = [], []
     v_lo, v_hi = VELOCITY_EDGES[:-1], VELOCITY_EDGES[1:]
@@ -105,8 +105,9 @@ def make_synthetic_tables(
                     mu, sigma = vlaw(d[i], d[j], rpm, impeller_radius)
                     frac = lognormal_fractions(mu, sigma)[0]
                     if sample_velocities and pairs > 0:
-                        counts = np.mean([rng.multinomial(int(round(r * pairs * sampling_time)), frac)
-                                          for r in reps], axis=0)
+                        counts = np.mean(
+                            [rng.multinomial(int(round(r * pairs * sampling_time)), frac) for r in reps], axis=0
+                        )
                     else:
                         counts = encounters * frac
                     if counts.sum() > 0:
@@ -116,21 +117,43 @@ def make_synthetic_tables(
                     else:
                         median = np.nan
                     collisions = CONTACTS_PER_ENCOUNTER * encounters
-                    rows.append({
-                        "point_id": pid, "rpm": rpm, "distribution": name, "class_i": i, "class_j": j,
-                        "d_i": d[i], "d_j": d[j], "n_i": int(n[i]), "n_j": int(n[j]), "n_total": n_total,
-                        "collisions": collisions, "sampling_time": sampling_time,
-                        "frequency": collisions / sampling_time,
-                        "frequency_per_pair": collisions / (pairs * sampling_time) if pairs > 0 else np.nan,
-                        "n_replicates": R, "encounters": encounters,
-                        "encounter_frequency_per_pair": efpp, "encounter_frequency_per_pair_se": se,
-                        "impact_velocity_median": median,
-                    })
+                    rows.append(
+                        {
+                            "point_id": pid,
+                            "rpm": rpm,
+                            "distribution": name,
+                            "class_i": i,
+                            "class_j": j,
+                            "d_i": d[i],
+                            "d_j": d[j],
+                            "n_i": int(n[i]),
+                            "n_j": int(n[j]),
+                            "n_total": n_total,
+                            "collisions": collisions,
+                            "sampling_time": sampling_time,
+                            "frequency": collisions / sampling_time,
+                            "frequency_per_pair": collisions / (pairs * sampling_time) if pairs > 0 else np.nan,
+                            "n_replicates": R,
+                            "encounters": encounters,
+                            "encounter_frequency_per_pair": efpp,
+                            "encounter_frequency_per_pair_se": se,
+                            "impact_velocity_median": median,
+                        }
+                    )
                     for b in range(len(counts)):
-                        vrows.append({"point_id": pid, "rpm": rpm, "distribution": name, "class_i": i,
-                                      "class_j": j, "v_lo": v_lo[b], "v_hi": v_hi[b], "encounters": counts[b]})
-    return (pd.DataFrame(rows, columns=list(TABLE_COLUMNS)),
-            pd.DataFrame(vrows, columns=list(VELOCITY_TABLE_COLUMNS)))
+                        vrows.append(
+                            {
+                                "point_id": pid,
+                                "rpm": rpm,
+                                "distribution": name,
+                                "class_i": i,
+                                "class_j": j,
+                                "v_lo": v_lo[b],
+                                "v_hi": v_hi[b],
+                                "encounters": counts[b],
+                            }
+                        )
+    return (pd.DataFrame(rows, columns=list(TABLE_COLUMNS)), pd.DataFrame(vrows, columns=list(VELOCITY_TABLE_COLUMNS)))
 
 
 def make_synthetic_table(impeller_radius: float, *args, **kwargs) -> pd.DataFrame:

@@ -8,13 +8,12 @@ import time
 import warnings
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
-import numpy as np
-
+from ._io import atomic_write
 from .evaluation import METRIC_COLUMNS, cross_validate_models, summarise
 from .features import training_data
-from ._io import atomic_write
 from .persistence import save_surrogate
 from .plots import empty_plot, parity_plot
 from .settings import build_baselines, build_surrogate
@@ -35,11 +34,18 @@ def _read_table(table, what: str, columns=()) -> tuple[pd.DataFrame, str]:
     return read_table(table, what, columns=columns), str(table)
 
 
-def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | os.PathLike,
-                     metadata_path: str | os.PathLike | None = None, metrics_path: str | os.PathLike | None = None,
-                     parity_path: str | os.PathLike | None = None, *, settings: dict,
-                     impeller_radius: float, n_jobs: int | None = None,
-                     velocity_table: str | os.PathLike | pd.DataFrame | None = None) -> dict:
+def train_and_report(
+    table: str | os.PathLike | pd.DataFrame,
+    model_path: str | os.PathLike,
+    metadata_path: str | os.PathLike | None = None,
+    metrics_path: str | os.PathLike | None = None,
+    parity_path: str | os.PathLike | None = None,
+    *,
+    settings: dict,
+    impeller_radius: float,
+    n_jobs: int | None = None,
+    velocity_table: str | os.PathLike | pd.DataFrame | None = None,
+) -> dict:
     """Grouped CV of MLP and baselines, final fit on every run, then write the outputs.
 
     ``table`` is the collision table (``results/dem/collisions.csv``), ``velocity_table`` the
@@ -65,8 +71,13 @@ def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | 
         log.info("impact-velocity table %s: %d rows", velocity_source, len(vframe))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        data = training_data(frame, impeller_radius, settings["zero_collisions"], velocity_table=vframe,
-                             velocity_source=f"impact-velocity table {velocity_source}")
+        data = training_data(
+            frame,
+            impeller_radius,
+            settings["zero_collisions"],
+            velocity_table=vframe,
+            velocity_source=f"impact-velocity table {velocity_source}",
+        )
     for w in caught:
         log.warning("%s: %s", w.category.__name__, w.message)
 
@@ -81,12 +92,22 @@ def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | 
     summary = summarise(metrics)
     velocity_summary = summarise(metrics, "impact_velocity")
     for name, s in summary.items():
-        log.info("%-8s held-out R2(log10 c) %.3f (pooled; replicate noise floor %.3f), MAE %.3f decades", name,
-                 s["pooled_r2_log10"], s["noise_floor_r2_log10"], s["pooled_mae_log10"])
+        log.info(
+            "%-8s held-out R2(log10 c) %.3f (pooled; replicate noise floor %.3f), MAE %.3f decades",
+            name,
+            s["pooled_r2_log10"],
+            s["noise_floor_r2_log10"],
+            s["pooled_mae_log10"],
+        )
     for name, s in velocity_summary.items():
-        log.info("%-8s held-out median impact speed: MAE %.3f decades, R2(log10) %.3f; bin fractions: "
-                 "mean total-variation distance %.3f", name, s["pooled_mae_log10"], s["pooled_r2_log10"],
-                 s["pooled_tv_distance"])
+        log.info(
+            "%-8s held-out median impact speed: MAE %.3f decades, R2(log10) %.3f; bin fractions: "
+            "mean total-variation distance %.3f",
+            name,
+            s["pooled_mae_log10"],
+            s["pooled_r2_log10"],
+            s["pooled_tv_distance"],
+        )
 
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
@@ -96,8 +117,13 @@ def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | 
         log.warning("%s: %s", w.category.__name__, w.message)
     t_fit = time.perf_counter() - t0
     freq = surrogate.frequency_model_
-    log.info("final fit: %s, %d members, %.1f s (cross-validation %.1f s)", freq.best_params_,
-             len(freq.estimators_), t_fit, t_cv)
+    log.info(
+        "final fit: %s, %d members, %.1f s (cross-validation %.1f s)",
+        freq.best_params_,
+        len(freq.estimators_),
+        t_fit,
+        t_cv,
+    )
 
     cv_scores = {
         "strategy": freq.cv,
@@ -107,10 +133,20 @@ def train_and_report(table: str | os.PathLike | pd.DataFrame, model_path: str | 
         "outer_folds": metrics[~metrics["fold"].isin(["pooled", "mean"])].to_dict(orient="records"),
         "search_best_rmse_log10": float(np.sqrt(-freq.best_score_)),
     }
-    meta = save_surrogate(surrogate, model_path, metadata_path, cv_scores=cv_scores,
-                          extra={"training_table": source, "velocity_table": velocity_source, "settings": settings,
-                                 "n_dropped_rows": data.n_dropped, "n_floored_rows": data.n_floored,
-                                 "timing_s": {"cross_validation": t_cv, "final_fit": t_fit}})
+    meta = save_surrogate(
+        surrogate,
+        model_path,
+        metadata_path,
+        cv_scores=cv_scores,
+        extra={
+            "training_table": source,
+            "velocity_table": velocity_source,
+            "settings": settings,
+            "n_dropped_rows": data.n_dropped,
+            "n_floored_rows": data.n_floored,
+            "timing_s": {"cross_validation": t_cv, "final_fit": t_fit},
+        },
+    )
     _write_csv(metrics, metrics_path)
     if predictions is not None:
         parity_plot(predictions, parity_path, metrics)

@@ -41,7 +41,9 @@ _LOG_EDGES = np.concatenate([[-np.inf], np.log10(VELOCITY_EDGES[1:-1]), [np.inf]
 _LOG_CENTRES = np.log10(representative_velocities())
 
 
-def attach_velocity_bins(table: pd.DataFrame, velocity: pd.DataFrame, source: str = "impact-velocity table") -> pd.DataFrame:
+def attach_velocity_bins(
+    table: pd.DataFrame, velocity: pd.DataFrame, source: str = "impact-velocity table"
+) -> pd.DataFrame:
     """The collision table with one column per velocity bin (:data:`VELOCITY_COUNT_COLUMNS`).
 
     ``velocity`` is the impact-velocity table (long format, one row per run, pair and bin). Bins a
@@ -58,8 +60,9 @@ def attach_velocity_bins(table: pd.DataFrame, velocity: pd.DataFrame, source: st
     if bad:
         raise CollisionTableError(f"{source}: non-numeric or missing values in column(s) {bad}")
     if (v["encounters"] < 0).any():
-        raise CollisionTableError(f"{source}: column 'encounters' must be >= 0, "
-                                  f"got {v.loc[v['encounters'] < 0, 'encounters'].iloc[0]!r}")
+        raise CollisionTableError(
+            f"{source}: column 'encounters' must be >= 0, got {v.loc[v['encounters'] < 0, 'encounters'].iloc[0]!r}"
+        )
     lo = v["v_lo"].to_numpy(float)
     b = np.searchsorted(VELOCITY_EDGES[:-1], lo)
     b = np.clip(b, 0, N_VELOCITY_BINS - 1)
@@ -70,7 +73,8 @@ def attach_velocity_bins(table: pd.DataFrame, velocity: pd.DataFrame, source: st
         k = int(np.flatnonzero(~(ok_lo & ok_hi))[0])
         raise CollisionTableError(
             f"{source}: velocity bin [{lo[k]!r}, {hi[k]!r}) m/s is not a bin of pbmdem.impact.VELOCITY_EDGES "
-            f"(allowed: [0, 1e-3) then 4 log bins per decade up to 10 m/s)")
+            f"(allowed: [0, 1e-3) then 4 log bins per decade up to 10 m/s)"
+        )
     v["bin"] = b
     v["point_id"] = v["point_id"].astype(str)
     key = ["point_id", "class_i", "class_j"]
@@ -84,13 +88,15 @@ def attach_velocity_bins(table: pd.DataFrame, velocity: pd.DataFrame, source: st
     wide["class_i"] = wide["class_i"].astype(int)
     wide["class_j"] = wide["class_j"].astype(int)
     out = table.drop(columns=[c for c in VELOCITY_COUNT_COLUMNS if c in table.columns]).copy()
-    out_key = out[key].assign(point_id=out["point_id"].astype(str), class_i=out["class_i"].astype(int),
-                              class_j=out["class_j"].astype(int))
+    out_key = out[key].assign(
+        point_id=out["point_id"].astype(str), class_i=out["class_i"].astype(int), class_j=out["class_j"].astype(int)
+    )
     known = set(map(tuple, out_key.to_numpy().tolist()))
     extra = [k for k in map(tuple, wide[key].to_numpy().tolist()) if k not in known]
     if extra:
-        raise CollisionTableError(f"{source}: pair(s) {extra[:3]} (point_id, class_i, class_j) are not in the "
-                                  f"collision table")
+        raise CollisionTableError(
+            f"{source}: pair(s) {extra[:3]} (point_id, class_i, class_j) are not in the collision table"
+        )
     merged = out_key.merge(wide, on=key, how="left")
     for col in VELOCITY_COUNT_COLUMNS:
         out[col] = merged[col].to_numpy(float)
@@ -166,9 +172,14 @@ def fit_lognormal(counts) -> tuple[np.ndarray, np.ndarray]:
     for r, c in enumerate(counts):
         w = c / c.sum()
         m0 = float(np.dot(w, _LOG_CENTRES))
-        s0 = float(np.clip(np.sqrt(np.dot(w, (_LOG_CENTRES - m0) ** 2) + 0.25 ** 2 / 12), *SIGMA_BOUNDS))
-        res = minimize(_neg_loglik, x0=[m0, np.log(s0)], args=(w,), method="L-BFGS-B",
-                       bounds=[(np.log10(VELOCITY_EDGES[1]) - 3.0, np.log10(VELOCITY_EDGES[-1]) + 3.0), log_bounds])
+        s0 = float(np.clip(np.sqrt(np.dot(w, (_LOG_CENTRES - m0) ** 2) + 0.25**2 / 12), *SIGMA_BOUNDS))
+        res = minimize(
+            _neg_loglik,
+            x0=[m0, np.log(s0)],
+            args=(w,),
+            method="L-BFGS-B",
+            bounds=[(np.log10(VELOCITY_EDGES[1]) - 3.0, np.log10(VELOCITY_EDGES[-1]) + 3.0), log_bounds],
+        )
         if not res.success and not np.isfinite(res.fun):
             warnings.warn(f"log-normal fit of velocity row {r} did not converge: {res.message}", stacklevel=2)
         mus[r], sigmas[r] = res.x[0], np.exp(res.x[1])

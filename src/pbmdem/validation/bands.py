@@ -24,8 +24,12 @@ def _on_times(summary: pd.DataFrame, column: str, times: np.ndarray) -> np.ndarr
     return np.interp(times, summary["time"].to_numpy(float), summary[column].to_numpy(float))
 
 
-def band_table(dem: list[pd.DataFrame], ann: pd.DataFrame, members: pd.DataFrame | None = None,
-               constant: pd.DataFrame | None = None) -> pd.DataFrame:
+def band_table(
+    dem: list[pd.DataFrame],
+    ann: pd.DataFrame,
+    members: pd.DataFrame | None = None,
+    constant: pd.DataFrame | None = None,
+) -> pd.DataFrame:
     """Long table, one row per (statistic, time) of the first PBM-DEM replicate's recorded times:
     n_dem_replicates, dem_mean, dem_sd (NaN for one replicate), dem_min, dem_max, ann (PBM-ANN,
     ensemble mean), ann_member_min, ann_member_max (if `members`), constant (if given), and
@@ -36,19 +40,26 @@ def band_table(dem: list[pd.DataFrame], ann: pd.DataFrame, members: pd.DataFrame
     for k, s in enumerate(dem[1:], 1):
         t = s["time"].to_numpy(float)
         if t.shape != times.shape or not np.allclose(t, times, rtol=0, atol=1e-9 * max(1.0, times.max())):
-            raise ValueError(f"PBM-DEM replicate {k} records other times than replicate 0; the loops of one "
-                             "speed must share their output times")
+            raise ValueError(
+                f"PBM-DEM replicate {k} records other times than replicate 0; the loops of one "
+                "speed must share their output times"
+            )
     rows = []
     for stat in STATISTICS:
         values = np.stack([s[stat].to_numpy(float) for s in dem])
         n = values.shape[0]
-        frame = pd.DataFrame({
-            "statistic": stat, "time": times, "n_dem_replicates": n,
-            "dem_mean": values.mean(axis=0),
-            "dem_sd": values.std(axis=0, ddof=1) if n > 1 else np.full(times.size, np.nan),
-            "dem_min": values.min(axis=0), "dem_max": values.max(axis=0),
-            "ann": _on_times(ann, stat, times),
-        })
+        frame = pd.DataFrame(
+            {
+                "statistic": stat,
+                "time": times,
+                "n_dem_replicates": n,
+                "dem_mean": values.mean(axis=0),
+                "dem_sd": values.std(axis=0, ddof=1) if n > 1 else np.full(times.size, np.nan),
+                "dem_min": values.min(axis=0),
+                "dem_max": values.max(axis=0),
+                "ann": _on_times(ann, stat, times),
+            }
+        )
         ok = finished_members(members)
         if ok is not None and len(ok):
             per = np.stack([_on_times(g, stat, times) for _, g in ok.groupby("member")])

@@ -55,18 +55,27 @@ def comparison_row(speed: SpeedResults, in_grid: bool) -> dict:
     dem_liggghts = np.array([r.timing["provider_wall_time_s"] for r in speed.dem])
     t_ann = float(speed.ann.timing["total_wall_time_s"])
     row = {
-        "rpm": float(speed.rpm), "in_training_grid": bool(in_grid), "n_dem_replicates": len(speed.dem),
-        "d50_start_mm": 1e3 * mean.d50.iloc[0], "d50_end_dem_mm": 1e3 * ends.mean(),
+        "rpm": float(speed.rpm),
+        "in_training_grid": bool(in_grid),
+        "n_dem_replicates": len(speed.dem),
+        "d50_start_mm": 1e3 * mean.d50.iloc[0],
+        "d50_end_dem_mm": 1e3 * ends.mean(),
         "d50_end_dem_sd_mm": 1e3 * ends.std(ddof=1) if len(ends) > 1 else float("nan"),
-        "d50_end_dem_min_mm": 1e3 * ends.min(), "d50_end_dem_max_mm": 1e3 * ends.max(),
-        "d50_end_ann_mm": 1e3 * ann.d50.iloc[-1], "d50_end_constant_mm": 1e3 * con.d50.iloc[-1],
-        "ann_d50_rel_error_max": ann_max, "ann_d50_rel_error_end": ann_end,
+        "d50_end_dem_min_mm": 1e3 * ends.min(),
+        "d50_end_dem_max_mm": 1e3 * ends.max(),
+        "d50_end_ann_mm": 1e3 * ann.d50.iloc[-1],
+        "d50_end_constant_mm": 1e3 * con.d50.iloc[-1],
+        "ann_d50_rel_error_max": ann_max,
+        "ann_d50_rel_error_end": ann_end,
         "ann_d50_outside_band_max": largest_outside(band, "ann", "d50"),
-        "constant_d50_rel_error_max": con_max, "constant_d50_rel_error_end": con_end,
+        "constant_d50_rel_error_max": con_max,
+        "constant_d50_rel_error_end": con_end,
         "constant_d50_outside_band_max": largest_outside(band, "constant", "d50"),
         "dem_calls": int(len(speed.dem[0].intervals)) if speed.dem[0].intervals is not None else 0,
-        "pbm_dem_wall_s": float(dem_wall.mean()), "pbm_dem_liggghts_wall_s": float(dem_liggghts.mean()),
-        "pbm_ann_wall_s": t_ann, "pbm_ann_surrogate_wall_s": float(speed.ann.timing["provider_wall_time_s"]),
+        "pbm_dem_wall_s": float(dem_wall.mean()),
+        "pbm_dem_liggghts_wall_s": float(dem_liggghts.mean()),
+        "pbm_ann_wall_s": t_ann,
+        "pbm_ann_surrogate_wall_s": float(speed.ann.timing["provider_wall_time_s"]),
         "pbm_ann_pbm_wall_s": float(speed.ann.timing["pbm_wall_time_s"]),
         "pbm_constant_wall_s": float(speed.constant.timing["total_wall_time_s"]),
         "wall_time_ratio_dem_over_ann": float(dem_wall.mean()) / t_ann if t_ann > 0 else float("nan"),
@@ -86,5 +95,6 @@ def comparison_row(speed: SpeedResults, in_grid: bool) -> dict:
 def compare(validation_dir: str | Path, rpms, grid_rpm, replicates: int) -> pd.DataFrame:
     """The comparison table of every validation speed (`rpms` as in the result folders)."""
     grid = {float(r) for r in grid_rpm}
-    return pd.DataFrame([comparison_row(load_speed(validation_dir, rpm, replicates), float(rpm) in grid)
-                         for rpm in rpms])
+    return pd.DataFrame(
+        [comparison_row(load_speed(validation_dir, rpm, replicates), float(rpm) in grid) for rpm in rpms]
+    )

@@ -107,16 +107,18 @@ def as_distribution(a: Assessment, d_max: float) -> tuple[list[float], list[floa
     return [float(x) for x in diameters], [round(float(x), 6) for x in f], capped
 
 
-def propose(grid: OperatingGrid, granulator: Granulator, distributions: dict, assessments: list[Assessment],
-            max_points: int) -> pd.DataFrame:
+def propose(
+    grid: OperatingGrid, granulator: Granulator, distributions: dict, assessments: list[Assessment], max_points: int
+) -> pd.DataFrame:
     """The proposals: one row per chosen sample (out-of-domain first, by excess; then by ensemble
     spread). A sample that is one of the grid's distributions (`distributions`: name ->
     SizeDistribution, as rounded here) proposes its speed for the grid, if the speed is new, and
     is skipped otherwise; any other sample proposes a new distribution (and its speed too when the
     tip speed is what lies outside the domain). Columns: name, kind ('distribution' or 'speed'),
     rpm, interval, reason, diameters (m) and fractions (JSON), propose_speed, capped."""
-    ranked = sorted(assessments, key=lambda a: (not a.is_out_of_domain,
-                                                 -max(a.out_of_domain.values(), default=0.0), -a.spread))
+    ranked = sorted(
+        assessments, key=lambda a: (not a.is_out_of_domain, -max(a.out_of_domain.values(), default=0.0), -a.spread)
+    )
     d_max = largest_feasible_diameter(granulator)
     known = {}
     for name in grid.size_distributions:
@@ -129,9 +131,12 @@ def propose(grid: OperatingGrid, granulator: Granulator, distributions: dict, as
             break
         diameters, fractions, capped = as_distribution(a, d_max)
         key = (tuple(diameters), tuple(fractions))
-        reason = ("outside the training domain in " + ", ".join(f"{k} (by {v:.2g} of its range)"
-                                                                 for k, v in sorted(a.out_of_domain.items()))
-                  if a.is_out_of_domain else f"largest ensemble spread ({a.spread:.3g} decades)")
+        reason = (
+            "outside the training domain in "
+            + ", ".join(f"{k} (by {v:.2g} of its range)" for k, v in sorted(a.out_of_domain.items()))
+            if a.is_out_of_domain
+            else f"largest ensemble spread ({a.spread:.3g} decades)"
+        )
         if key in known:
             name, kind = known[key], "speed"
             if a.rpm in grid.impeller_rpm or ("speed", a.rpm) in seen:
@@ -141,17 +146,53 @@ def propose(grid: OperatingGrid, granulator: Granulator, distributions: dict, as
             if any(similar(key, other) for other in seen if isinstance(other[0], tuple)):
                 continue
             seen.add(key)
-            name, kind = f"al_rpm{rpm_text(a.rpm).replace('.', 'p')}_i{a.interval}", "distribution"
-        rows.append({
-            "name": name, "kind": kind, "rpm": a.rpm, "interval": a.interval, "reason": reason,
-            "out_of_domain_features": ";".join(sorted(a.out_of_domain)), "ensemble_spread_log10": a.spread,
-            "diameters": json.dumps(diameters), "number_fractions": json.dumps(fractions),
-            "propose_speed": kind == "speed" or ("tip_speed" in a.out_of_domain and a.rpm not in grid.impeller_rpm),
-            "capped_at_granulator_limit": capped,
-        })
-    return pd.DataFrame(rows, columns=["name", "kind", "rpm", "interval", "reason", "out_of_domain_features",
-                                       "ensemble_spread_log10", "diameters", "number_fractions", "propose_speed",
-                                       "capped_at_granulator_limit"])
+            name, kind = (
+                unique_name(
+                    f"al_rpm{rpm_text(a.rpm).replace('.', 'p')}_i{a.interval}",
+                    set(distributions) | {r["name"] for r in rows},
+                ),
+                "distribution",
+            )
+        rows.append(
+            {
+                "name": name,
+                "kind": kind,
+                "rpm": a.rpm,
+                "interval": a.interval,
+                "reason": reason,
+                "out_of_domain_features": ";".join(sorted(a.out_of_domain)),
+                "ensemble_spread_log10": a.spread,
+                "diameters": json.dumps(diameters),
+                "number_fractions": json.dumps(fractions),
+                "propose_speed": kind == "speed" or ("tip_speed" in a.out_of_domain and a.rpm not in grid.impeller_rpm),
+                "capped_at_granulator_limit": capped,
+            }
+        )
+    return pd.DataFrame(
+        rows,
+        columns=[
+            "name",
+            "kind",
+            "rpm",
+            "interval",
+            "reason",
+            "out_of_domain_features",
+            "ensemble_spread_log10",
+            "diameters",
+            "number_fractions",
+            "propose_speed",
+            "capped_at_granulator_limit",
+        ],
+    )
+
+
+def unique_name(base: str, taken: set[str]) -> str:
+    """`base`, or `base_2`, `base_3`, ... if taken (a proposal never redefines a distribution)."""
+    name, k = base, 1
+    while name in taken:
+        k += 1
+        name = f"{base}_{k}"
+    return name
 
 
 def similar(a: tuple, b: tuple) -> bool:
@@ -165,8 +206,11 @@ def fragment(grid: OperatingGrid, proposals: pd.DataFrame) -> dict:
     lists with them (and any proposed speed) added."""
     if proposals.empty:
         return {}
-    dists = {r.name: {"diameters": json.loads(r.diameters), "number_fractions": json.loads(r.number_fractions)}
-             for r in proposals.itertuples() if r.kind == "distribution"}
+    dists = {
+        r.name: {"diameters": json.loads(r.diameters), "number_fractions": json.loads(r.number_fractions)}
+        for r in proposals.itertuples()
+        if r.kind == "distribution"
+    }
     speeds = list(grid.impeller_rpm)
     for r in proposals.itertuples():
         if r.propose_speed and r.rpm not in speeds:
@@ -182,15 +226,21 @@ def write_fragment(grid: OperatingGrid, proposals: pd.DataFrame, path, source: s
 
     from pbmdem.atomic import write_text
 
-    lines = [f"# Operating points proposed by pbmdem's active learning from {source}.",
-             "# Add them to the grid with (only the new DEM points run, then the surrogate and what follows):",
-             "#   snakemake --cores 2 --configfile config/config.yaml <this file>"]
+    lines = [
+        f"# Operating points proposed by pbmdem's active learning from {source}.",
+        "# Add them to the grid with (only the new DEM points run, then the surrogate and what follows):",
+        "#   snakemake --cores 2 --configfile config/config.yaml <this file>",
+    ]
     for r in proposals.itertuples():
         what = f"new distribution {r.name}" if r.kind == "distribution" else f"speed {r.rpm:g} rpm for {r.name}"
-        lines.append(f"# {what} (PBM-ANN at {r.rpm:g} rpm, interval {r.interval}): {r.reason}"
-                     + ("; largest class capped at the granulator's limit" if r.capped_at_granulator_limit else ""))
+        lines.append(
+            f"# {what} (PBM-ANN at {r.rpm:g} rpm, interval {r.interval}): {r.reason}"
+            + ("; largest class capped at the granulator's limit" if r.capped_at_granulator_limit else "")
+        )
     body = fragment(grid, proposals)
     if not body:
-        lines.append("# Nothing to propose: every sample the loops asked about is a point of the grid already "
-                     "(or validation.proposals.max_points is 0).")
+        lines.append(
+            "# Nothing to propose: every sample the loops asked about is a point of the grid already "
+            "(or validation.proposals.max_points is 0)."
+        )
     write_text(path, "\n".join(lines) + "\n" + (yaml.safe_dump(body, sort_keys=False) if body else "{}\n"))

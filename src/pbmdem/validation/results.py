@@ -39,11 +39,16 @@ class Run:
 
 
 def load_run(folder: Path, what: str) -> Run:
-    summary = read_table(folder / "summary.csv", what, columns=("time", "d10", "d50", "d90"),
-                         finite=("time", "d10", "d50", "d90"))
+    summary = read_table(
+        folder / "summary.csv", what, columns=("time", "d10", "d50", "d90"), finite=("time", "d10", "d50", "d90")
+    )
     intervals = read_table(folder / "intervals.csv", what) if (folder / "intervals.csv").exists() else None
-    return Run(summary, read_table(folder / "final_bins.csv", what),
-               read_json(folder / "timing.json", what, keys=("total_wall_time_s",)), intervals)
+    return Run(
+        summary,
+        read_table(folder / "final_bins.csv", what),
+        read_json(folder / "timing.json", what, keys=("total_wall_time_s",)),
+        intervals,
+    )
 
 
 @dataclass
@@ -58,12 +63,20 @@ class SpeedResults:
 
 
 def load_speed(validation_dir: str | Path, rpm: str, replicates: int) -> SpeedResults:
-    dem = [load_run(run_folder(validation_dir, rpm, "pbm_dem", k), f"PBM-DEM replicate {k} result")
-           for k in range(replicates)]
+    dem = [
+        load_run(run_folder(validation_dir, rpm, "pbm_dem", k), f"PBM-DEM replicate {k} result")
+        for k in range(replicates)
+    ]
     ann_dir = run_folder(validation_dir, rpm, "pbm_ann")
     members = None
     if (ann_dir / "members.csv").exists():
-        members = read_table(ann_dir / "members.csv", "PBM-ANN ensemble-member table",
-                             columns=("member", "time", "d50"))
-    return SpeedResults(rpm, dem, load_run(ann_dir, "PBM-ANN result"),
-                        load_run(run_folder(validation_dir, rpm, "pbm_constant"), "PBM-constant result"), members)
+        members = read_table(
+            ann_dir / "members.csv", "PBM-ANN ensemble-member table", columns=("member", "time", "d50")
+        )
+    return SpeedResults(
+        rpm,
+        dem,
+        load_run(ann_dir, "PBM-ANN result"),
+        load_run(run_folder(validation_dir, rpm, "pbm_constant"), "PBM-constant result"),
+        members,
+    )

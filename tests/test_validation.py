@@ -87,6 +87,8 @@ def test_comparison_row_follows_the_contract(tmp_path):
     assert row.d50_end_dem_mm == pytest.approx(12.5 / 3) and row.d50_end_dem_min_mm == 4.0
     assert row.ann_d50_outside_band_max == pytest.approx(0.4 / (12.5 / 3))
     assert row.ann_out_of_domain_intervals == 1 and row.ann_intervals == 2
+    # the reference's own spread: replicate 1 (4.4) against the others' mean (4.05) at the end
+    assert row.dem_replicate_d50_rel_error_max == pytest.approx(0.35 / 4.05)
     assert row.pbm_dem_wall_s == pytest.approx(121.0) and row.wall_time_ratio_dem_over_ann == pytest.approx(121 / 0.04)
     assert row.dem_calls == 2
     for col in (
@@ -131,6 +133,18 @@ def test_proposals_rank_out_of_domain_samples_and_cap_what_the_bowl_cannot_hold(
     assert set(frag["size_distributions"]) == {"al_rpm900_i2", "al_rpm900_i1"}
     assert frag["grid"]["impeller_rpm"] == [600.0, 900.0, 1200.0]
     assert frag["grid"]["size_distributions"] == ["small", "large", "al_rpm900_i2", "al_rpm900_i1"]
+
+
+def test_a_proposal_spans_the_sample_it_comes_from():
+    """Rounded outwards at both ends: a class 0.04 % above the training sizes is not rounded back
+    into them (which would propose what the surrogate already knows)."""
+    a = proposals.Assessment(900.0, 3, [0.002488707, 0.003651743, 0.004583121, 0.008003659], [125, 60, 66, 67])
+    d, f, capped = proposals.as_distribution(a, np.inf)
+    assert d == pytest.approx([0.0024, 0.0037, 0.0046, 0.0081]) and not capped
+    assert min(d) <= min(a.diameters) and max(d) >= max(a.diameters)
+    # a class on the step stays where it is (no round-off step outwards)
+    d, _, _ = proposals.as_distribution(proposals.Assessment(0.0, 0, [0.002, 0.003, 0.004], [5, 3, 2]), np.inf)
+    assert d == pytest.approx([0.002, 0.003, 0.004])
 
 
 def test_the_fragment_is_a_valid_addition_to_the_config(tiny_config, tmp_path):

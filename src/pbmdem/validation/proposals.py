@@ -10,7 +10,7 @@ those samples (the `intervals.csv` of each validation speed's PBM-ANN run) and r
    standard deviation of their log10 c_ij, in decades).
 
 Each chosen sample becomes a proposed operating point: its classes (diameters rounded to 0.1 mm,
-number fractions to 0.001) as a new named size distribution for the grid, and its speed when the
+outwards at both ends, number fractions to 0.001) as a new named size distribution for the grid, and its speed when the
 impeller tip speed is what lies outside the domain; a sample that is a grid distribution already
 proposes its speed instead (the grid runs every distribution at every speed). A class too large for the DEM granulator
 (three diameters above the blade top, half the bowl radius) is capped at that limit, and the
@@ -92,8 +92,15 @@ def largest_feasible_diameter(granulator: Granulator) -> float:
 
 def as_distribution(a: Assessment, d_max: float) -> tuple[list[float], list[float], bool]:
     """(diameters, number fractions, capped) of a sample: rounded, ascending, classes merged where
-    rounding makes them equal, too large classes capped at `d_max`."""
-    d = np.minimum(np.round(np.asarray(a.diameters) / DIAMETER_STEP) * DIAMETER_STEP, d_max)
+    rounding makes them equal, too large classes capped at `d_max`. The smallest class is rounded
+    down and the largest up (the others to the nearest step), so that the proposal spans the sample:
+    a sample just beyond the training sizes (8.004 mm against 8 mm) proposes 8.1 mm, not 8 mm again."""
+    steps = np.asarray(a.diameters, float) / DIAMETER_STEP
+    order = np.argsort(steps)
+    rounded = np.round(steps)
+    rounded[order[0]] = math.floor(steps[order[0]] + 1e-6)
+    rounded[order[-1]] = math.ceil(steps[order[-1]] - 1e-6)
+    d = np.minimum(rounded * DIAMETER_STEP, d_max)
     capped = bool(np.any(np.asarray(a.diameters) > d_max))
     n = np.asarray(a.counts, float)
     classes: dict[float, float] = {}

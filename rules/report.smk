@@ -52,7 +52,7 @@ rule report_settings:
             "dem_replicates": CFG.validation.dem_replicates,
             "dem_sampling_time": CFG.validation.dem_sampling_time,
             "validation_rpm": list(CFG.validation.rpm),
-            "grid_rpm": list(CFG.grid.impeller_rpm),
+            "grid_rpm": CFG.grid.speeds(),
         },
     script:
         "../workflow/scripts/report_settings.py"

@@ -115,7 +115,7 @@ rule propose_points:
         "../envs/validation.yaml"
     params:
         grid=CFG.grid.to_dict(),
-        distributions={n: CFG.size_distributions[n].to_dict() for n in CFG.grid.size_distributions},
+        distributions={n: CFG.size_distributions[n].to_dict() for n in CFG.grid.distributions()},
         granulator=CFG.granulator.to_dict(),
         max_points=CFG.validation.proposals.max_points,
         rpms=VAL_RPMS,

@@ -95,18 +95,18 @@ def _failing_for_interval(tmp_path, interval: int):
 
 @pytest.mark.liggghts
 def test_pbm_dem_loop_stops_keeps_finished_intervals_and_resumes(tiny_config, tmp_path, monkeypatch):
-    loop = tiny_config.coupled_loop()
+    # 3 intervals: interval 1 (t = 6.7 s, no growth yet) reuses the run of interval 0, interval 2 runs
+    loop = tiny_config.coupled_loop().replace(coupling_intervals=3)
     execution = tiny_config.dem_execution
-    assert loop.coupling_intervals >= 2
     out = tmp_path / "pbm_dem"
-    monkeypatch.setenv("PBMDEM_LIGGGHTS", str(_failing_for_interval(tmp_path, 1)))
+    monkeypatch.setenv("PBMDEM_LIGGGHTS", str(_failing_for_interval(tmp_path, 2)))
     with pytest.raises(
-        coupling.CouplingError, match=r"(?s)interval 1 .*failed.*simulated node failure.*rerun to resume"
+        coupling.CouplingError, match=r"(?s)interval 2 .*failed.*simulated node failure.*rerun to resume"
     ):
         coupling.pbm_dem(loop, 600.0, out, execution, replicate=0)
-    assert (out / "interval_00" / "interval.json").exists()
+    assert (out / "interval_00" / "interval.json").exists() and (out / "interval_01" / "interval.json").exists()
     assert (out / "interval_00" / "dem" / "collisions.csv").exists()
-    assert not (out / "interval_01" / "interval.json").exists()
+    assert not (out / "interval_02" / "interval.json").exists()
     assert not (out / "summary.csv").exists()
     first = (out / "interval_00" / "interval.json").read_text()
     first_dem = (out / "interval_00" / "dem" / "summary.json").stat().st_mtime_ns
@@ -129,6 +129,26 @@ def test_pbm_dem_loop_stops_keeps_finished_intervals_and_resumes(tiny_config, tm
     for _, row in intervals.iterrows():
         d = json.loads(row.class_diameters)
         assert d == sorted(d) and row.sample_particles == sum(json.loads(row.class_counts))
+
+
+@pytest.mark.liggghts
+def test_an_interval_with_the_sample_of_an_earlier_one_reuses_its_dem_run(tiny_config, tmp_path):
+    """Until the granules are wet enough to grow the sample stays the feed (in the tiny batch up to
+    t = 10 s, the start of interval 1): interval 1 asks for the very run of interval 0, which
+    LIGGGHTS would repeat to the bit, so it is read, not run."""
+    loop = tiny_config.coupled_loop().replace(coupling_intervals=2)
+    out = tmp_path / "pbm_dem"
+    coupling.pbm_dem(loop, 600.0, out, tiny_config.dem_execution, replicate=0)
+    intervals = pd.read_csv(out / "intervals.csv")
+    assert intervals.class_counts[0] == intervals.class_counts[1]
+    assert intervals.dem_reused_from_interval.isna()[0] and intervals.dem_reused_from_interval[1] == 0
+    assert intervals.dem_wall_time_s[0] > 0 and intervals.dem_wall_time_s[1] == 0
+    assert intervals.class_frequencies[0] == intervals.class_frequencies[1]
+    assert not (out / "interval_01" / "dem").exists()
+    # a different replicate (other seeds) is a different run: nothing is shared across loops
+    other = tmp_path / "rep1"
+    coupling.pbm_dem(loop, 600.0, other, tiny_config.dem_execution, replicate=1)
+    assert (other / "interval_00" / "dem" / "summary.json").exists()
 
 
 class _FixedProvider:

@@ -103,36 +103,86 @@ def test_comparison_row_follows_the_contract(tmp_path):
 
 
 def test_proposals_rank_out_of_domain_samples_and_cap_what_the_bowl_cannot_hold(tiny_config):
-    a_in = proposals.Assessment(900.0, 0, [0.002, 0.0025, 0.003], [230, 138, 92], {}, spread=0.01)
+    small = tiny_config.distribution("small")  # the tiny grid: 600 and 1200 rpm x small, large
+    feed = [round(f * 460) for f in small.number_fractions]
+    a_grid = proposals.Assessment(900.0, 0, list(small.diameters), feed, {}, spread=0.04)
+    a_fast = proposals.Assessment(1500.0, 0, list(small.diameters), feed, {"tip_speed": 0.25}, spread=0.01)
     a_out = proposals.Assessment(900.0, 1, [0.002, 0.0031, 0.0049], [200, 60, 20], {"d_large": 0.5}, spread=0.02)
     a_big = proposals.Assessment(
         900.0, 2, [0.002, 0.004, 0.03], [150, 40, 12], {"d_large": 4.0, "frac_large": 0.3}, spread=0.05
     )
     table = proposals.propose(
-        tiny_config.grid, tiny_config.granulator, tiny_config.size_distributions, [a_in, a_out, a_big], max_points=3
+        tiny_config.grid,
+        tiny_config.granulator,
+        tiny_config.size_distributions,
+        [a_grid, a_fast, a_out, a_big],
+        max_points=4,
     )
-    assert list(table.kind) == ["distribution", "distribution", "speed"]
-    assert list(table.interval) == [2, 1, 0]  # by out-of-domain excess, then spread
+    # by out-of-domain excess, then spread; the feed at 900 rpm is skipped: its bracketing grid
+    # points (600 and 1200 rpm) are run already
+    assert list(table.interval) == [2, 1, 0] and list(table.rpm) == [900.0, 900.0, 1500.0]
+    assert list(table.kind) == ["distribution", "distribution", "point"]
     big = table.iloc[0]
     assert big.capped_at_granulator_limit and max(json.loads(big.diameters)) == pytest.approx(
         proposals.largest_feasible_diameter(tiny_config.granulator)
     )
     assert sum(json.loads(big.number_fractions)) == pytest.approx(1.0, abs=1e-12)
-    # the in-domain sample is the grid's 'small' feed: its speed is proposed, not a copy of it
-    assert table.iloc[2]["name"] == "small" and table.iloc[2].propose_speed
+    # between grid speeds: run at the grid speeds on either side; beyond them: at its own speed
+    assert json.loads(big.points_rpm) == [600.0, 1200.0]
+    assert table.iloc[2]["name"] == "small" and json.loads(table.iloc[2].points_rpm) == [1500.0]
     # names never clash with a defined distribution
     again = proposals.propose(
         tiny_config.grid,
         tiny_config.granulator,
-        {**tiny_config.size_distributions, "al_rpm900_i2": tiny_config.distribution("small")},
+        {**tiny_config.size_distributions, "al_rpm900_i2": tiny_config.distribution("large")},
         [a_big],
         max_points=1,
     )
     assert again["name"].tolist() == ["al_rpm900_i2_2"]
     frag = proposals.fragment(tiny_config.grid, table)
     assert set(frag["size_distributions"]) == {"al_rpm900_i2", "al_rpm900_i1"}
-    assert frag["grid"]["impeller_rpm"] == [600.0, 900.0, 1200.0]
-    assert frag["grid"]["size_distributions"] == ["small", "large", "al_rpm900_i2", "al_rpm900_i1"]
+    assert frag["grid"] == {
+        "extra_points": [
+            {"rpm": 600.0, "distribution": "al_rpm900_i2"},
+            {"rpm": 1200.0, "distribution": "al_rpm900_i2"},
+            {"rpm": 600.0, "distribution": "al_rpm900_i1"},
+            {"rpm": 1200.0, "distribution": "al_rpm900_i1"},
+            {"rpm": 1500.0, "distribution": "small"},
+        ]
+    }
+
+
+def test_a_sample_like_a_defined_distribution_proposes_that_distribution(tiny_config):
+    large = tiny_config.distribution("large")
+    d = [x + 4e-5 for x in large.diameters]  # within a rounding step
+    n = [round(460 * (f + e)) for f, e in zip(large.number_fractions, (0.005, -0.005, 0.0))]
+    args = (tiny_config.grid, tiny_config.granulator, tiny_config.size_distributions)
+    beyond = proposals.propose(*args, [proposals.Assessment(1500.0, 3, d, n, {"tip_speed": 0.2})], max_points=2)
+    assert beyond[["name", "kind"]].values.tolist() == [["large", "point"]]
+    # between grid speeds its bracketing points are the grid's own: nothing to propose
+    assert proposals.propose(*args, [proposals.Assessment(900.0, 3, d, n, spread=0.1)], max_points=2).empty
+
+
+def test_extra_points_join_the_grid_once(tiny_config):
+    from conftest import config_of
+
+    from pbmdem.config import ConfigError
+
+    d = tiny_config.to_dict()
+    d["grid"]["extra_points"] = [
+        {"rpm": 900, "distribution": "small"},
+        {"rpm": 600, "distribution": "small"},  # a grid point already
+        {"rpm": 900, "distribution": "small"},
+    ]
+    with pytest.raises(ConfigError, match="extra_points"):
+        config_of(d)  # duplicates are refused by the schema
+    d["grid"]["extra_points"] = d["grid"]["extra_points"][:2]
+    grid = config_of(d).grid
+    assert grid.points() == [(600.0, "small"), (600.0, "large"), (1200.0, "small"), (1200.0, "large"), (900.0, "small")]
+    assert grid.speeds() == [600.0, 900.0, 1200.0] and grid.distributions() == ["small", "large"]
+    d["grid"]["extra_points"] = [{"rpm": 900, "distribution": "nowhere"}]
+    with pytest.raises(ConfigError, match=r"grid.extra_points\[0\].distribution: 'nowhere' is not defined"):
+        config_of(d)
 
 
 def test_a_proposal_spans_the_sample_it_comes_from():
@@ -158,12 +208,13 @@ def test_the_fragment_is_a_valid_addition_to_the_config(tiny_config, tmp_path):
     proposals.write_fragment(tiny_config.grid, table, path, source="a test")
     text = path.read_text()
     assert text.startswith("# Operating points proposed") and "outside the training domain in d_large" in text
+    from snakemake.utils import update_config
+
     merged = tiny_config.to_dict()
-    fragment = load_yaml(path)
-    merged["size_distributions"].update(fragment["size_distributions"])
-    merged["grid"] = fragment["grid"]
+    update_config(merged, load_yaml(path))  # as Snakemake merges a second --configfile
     cfg = config_of(merged)
-    assert "al_rpm900_i1" in cfg.grid.size_distributions
+    assert cfg.grid.size_distributions == tiny_config.grid.size_distributions
+    assert cfg.grid.points()[-2:] == [(600.0, "al_rpm900_i1"), (1200.0, "al_rpm900_i1")]
     assert cfg.dem_point("al_rpm900_i1").sizes.diameters == (0.002, 0.0031, 0.0049)
 
 

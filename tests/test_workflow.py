@@ -560,10 +560,10 @@ def test_adding_the_proposed_points_removes_the_out_of_domain_intervals(tiny_wor
     before = pd.read_csv(intervals)
     assert (before.out_of_domain_count > 0).all() and before.out_of_domain.str.contains("tip_speed").all()
     table = pd.read_csv(copy / "results" / "validation" / "proposals.csv")
-    assert table.propose_speed.any() and 1500.0 in set(table.rpm)
+    assert all(json.loads(speeds) == [1500.0] for speeds in table.points_rpm)  # beyond the grid: at 1500 rpm
     fragment = copy / "results" / "validation" / "proposals.yaml"
     grid = yaml.safe_load(fragment.read_text())["grid"]
-    assert 1500.0 in grid["impeller_rpm"]
+    assert grid.keys() == {"extra_points"} and {p["rpm"] for p in grid["extra_points"]} == {1500.0}
     planned = snakemake(root, copy, config, str(fragment), "-n", "--cores", "2", *targets, "--quiet", "rules")
     counts = {
         line.split()[0]: int(line.split()[1])
@@ -572,10 +572,7 @@ def test_adding_the_proposed_points_removes_the_out_of_domain_intervals(tiny_wor
     }
     new_dists = yaml.safe_load(fragment.read_text()).get("size_distributions", {})
     reps = cfg["dem"]["replicates"]
-    expected = reps * (
-        len(grid["impeller_rpm"]) * len(grid["size_distributions"])
-        - len(cfg["grid"]["impeller_rpm"]) * len(cfg["grid"]["size_distributions"])
-    )
+    expected = reps * len(grid["extra_points"])
     assert counts.get("dem_point") == expected, counts  # only the new operating points run
     assert counts.get("pbm_dem_coupled", 0) == 0  # the reference does not depend on the grid
     snakemake(root, copy, config, str(fragment), "--cores", "2", *targets)
@@ -584,6 +581,7 @@ def test_adding_the_proposed_points_removes_the_out_of_domain_intervals(tiny_wor
     meta = json.loads((copy / "results" / "surrogate" / "model.json").read_text())
     assert any(pid.startswith("rpm1500_") for pid in meta["training_point_ids"])
     print(
-        f"active learning: {len(new_dists)} new distribution(s), speeds {grid['impeller_rpm']}; out-of-domain "
-        f"intervals {int((before.out_of_domain_count > 0).sum())} -> {int((after.out_of_domain_count > 0).sum())}"
+        f"active learning: {len(new_dists)} new distribution(s), {len(grid['extra_points'])} new point(s); "
+        f"out-of-domain intervals {int((before.out_of_domain_count > 0).sum())} -> "
+        f"{int((after.out_of_domain_count > 0).sum())}"
     )

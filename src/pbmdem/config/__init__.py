@@ -13,7 +13,7 @@ from .dem import Dem, DemExecution
 from .errors import RPM_MAX, ConfigError, check_rpm
 from .granulator import Bed, Bowl, Granulator, Impeller, Material
 from .pbm import Pbm, Solver
-from .points import OperatingGrid, SizeDistribution, point_id, rpm_text
+from .points import ExtraPoint, OperatingGrid, SizeDistribution, point_id, rpm_text
 from .schema import complete, non_finite_values, schema_dir, section_defaults
 from .settings import Config, CoupledLoop, DemPoint, PbmBatch, SurrogateTraining
 from .surrogate import Surrogate
@@ -46,6 +46,7 @@ __all__ = [
     "Bed",
     "Material",
     "SizeDistribution",
+    "ExtraPoint",
     "OperatingGrid",
     "point_id",
     "rpm_text",

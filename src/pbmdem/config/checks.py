@@ -70,6 +70,11 @@ def check(cfg) -> None:
     for name in cfg.grid.size_distributions:
         if name not in cfg.size_distributions:
             problems.append(f"grid.size_distributions: {name!r} is not defined; defined names: {defined}")
+    for k, point in enumerate(cfg.grid.extra_points):
+        if point.distribution not in cfg.size_distributions:
+            problems.append(
+                f"grid.extra_points[{k}].distribution: {point.distribution!r} is not defined; defined names: {defined}"
+            )
     if cfg.validation.distribution not in cfg.size_distributions:
         problems.append(
             f"validation.distribution: {cfg.validation.distribution!r} is not defined; defined names: {defined}"

@@ -36,11 +36,33 @@ class SizeDistribution(Settings):
 
 
 @dataclass(frozen=True)
+class ExtraPoint(Settings):
+    """One operating point beyond the full grid: a size distribution at one impeller speed."""
+
+    rpm: float
+    distribution: str
+
+
+@dataclass(frozen=True)
 class OperatingGrid(Settings):
-    """The DEM grid: every impeller speed (rpm) with every named size distribution."""
+    """The DEM grid: every impeller speed (rpm) with every named size distribution, and single
+    extra points (the active learning's proposals)."""
 
     impeller_rpm: tuple[float, ...]
     size_distributions: tuple[str, ...]
+    extra_points: tuple[ExtraPoint, ...]
 
     def points(self) -> list[tuple[float, str]]:
-        return [(rpm, dist) for rpm in self.impeller_rpm for dist in self.size_distributions]
+        """Every operating point (rpm, distribution): the full grid, then the extra points not in it."""
+        full = [(rpm, dist) for rpm in self.impeller_rpm for dist in self.size_distributions]
+        extra = [(p.rpm, p.distribution) for p in self.extra_points]
+        return full + [p for k, p in enumerate(extra) if p not in full and p not in extra[:k]]
+
+    def speeds(self) -> list[float]:
+        """Every impeller speed that some operating point runs at, ascending."""
+        return sorted({rpm for rpm, _ in self.points()})
+
+    def distributions(self) -> list[str]:
+        """The size distributions of the grid and of the extra points, each once."""
+        names = list(self.size_distributions)
+        return names + sorted({p.distribution for p in self.extra_points} - set(names))

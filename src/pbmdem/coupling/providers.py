@@ -11,6 +11,7 @@ intervals of a changed provider are not reused.
 from __future__ import annotations
 
 import hashlib
+import json
 import time
 from pathlib import Path
 
@@ -19,13 +20,23 @@ import numpy as np
 from pbmdem.config import CoupledLoop, DemExecution
 from pbmdem.frequency import matrix_from_table, velocity_fractions_from_table
 from pbmdem.impact import EncounterRates
-from pbmdem.readers import read_table
+from pbmdem.readers import read_json, read_table
 
 from .sample import DemSample
 
+#: plan keys that name a run rather than define it (an interval's DEM bed is named after it)
+_NAME_KEYS = ("distribution", "point_id")
+
 
 class DemProvider:
-    """Class encounter frequencies from a LIGGGHTS run of the representative sample."""
+    """Class encounter frequencies from a LIGGGHTS run of the representative sample.
+
+    LIGGGHTS is deterministic for the same deck on the same number of ranks, so an interval whose
+    sample is the very sample of an earlier interval of the same loop (the same classes, counts,
+    speed, seeds and settings: typically the feed, until the binder makes granules grow) is not run
+    again: its tables are read from that interval's run, and the interval records which
+    (`dem_reused_from_interval`) with no DEM wall time.
+    """
 
     name = "pbm_dem"
 
@@ -43,16 +54,24 @@ class DemProvider:
 
         point = self.point.replace(distribution=f"interval{index:02d}", sizes=sample.sizes())
         plan = plan_point(point, self.rpm, replicate=self.replicate, counts=sample.counts)
-        # an interval without interval.json is unfinished, whatever its DEM folder holds
-        summary = run_point(point, plan, interval_dir / "dem", self.execution, force=True)
+        earlier = self._identical_earlier_run(plan, interval_dir, index)
+        if earlier is None:
+            run_dir = interval_dir / "dem"
+            # an interval without interval.json is unfinished, whatever its DEM folder holds
+            summary = run_point(point, plan, run_dir, self.execution, force=True)
+            info = {"dem_wall_time_s": summary["liggghts_wall_time_s"] + summary["parse_time_s"]}
+        else:
+            reused_from, run_dir = earlier
+            summary = read_json(run_dir / "summary.json", "DEM run summary of a coupling interval")
+            info = {"dem_wall_time_s": 0.0, "dem_reused_from_interval": reused_from}
         table = read_table(
-            interval_dir / "dem" / "collisions.csv",
+            run_dir / "collisions.csv",
             "collision table of a coupling interval",
             columns=("class_i", "class_j", "encounter_frequency_per_pair"),
             finite=("encounter_frequency_per_pair",),
         )
         velocities = read_table(
-            interval_dir / "dem" / "impact_velocity.csv",
+            run_dir / "impact_velocity.csv",
             "impact-velocity table of a coupling interval",
             columns=("class_i", "class_j", "v_lo", "encounters"),
             finite=("encounters",),
@@ -60,11 +79,27 @@ class DemProvider:
         k = len(sample.diameters)
         rates = EncounterRates(matrix_from_table(table, k), velocity_fractions_from_table(velocities, k))
         return rates, {
-            "dem_wall_time_s": summary["liggghts_wall_time_s"] + summary["parse_time_s"],
+            **info,
             "dem_particles": summary["n_particles"],
             "dem_collisions": summary["total_collisions"],
             "dem_encounters": summary["total_encounters"],
         }
+
+    def _identical_earlier_run(self, plan, interval_dir: Path, index: int) -> tuple[int, Path] | None:
+        """(interval, run folder) of an earlier interval of this loop whose finished DEM run had
+        this very plan on as many ranks, else None."""
+        from pbmdem.dem.run import is_finished
+
+        wanted = {k: v for k, v in plan.to_dict().items() if k not in _NAME_KEYS}
+        wanted = json.loads(json.dumps(wanted | {"mpi_ranks": self.execution.mpi_ranks}))  # as stored
+        for j in range(index):
+            run_dir = interval_dir.parent / f"interval_{j:02d}" / "dem"
+            if not (is_finished(run_dir) and (run_dir / "summary.json").exists() and (run_dir / "plan.json").exists()):
+                continue
+            done = read_json(run_dir / "plan.json", "DEM plan of a coupling interval")
+            if {k: v for k, v in done.items() if k not in _NAME_KEYS} == wanted:
+                return j, run_dir
+        return None
 
 
 class SurrogateProvider:

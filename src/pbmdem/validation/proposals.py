@@ -9,17 +9,20 @@ those samples (the `intervals.csv` of each validation speed's PBM-ANN run) and r
 2. then the samples where the surrogate's ensemble members disagree most (the pair-weighted mean
    standard deviation of their log10 c_ij, in decades).
 
-Each chosen sample becomes a proposed operating point: its classes (diameters rounded to 0.1 mm,
-outwards at both ends, number fractions to 0.001) as a new named size distribution for the grid, and its speed when the
-impeller tip speed is what lies outside the domain; a sample that is a grid distribution already
-proposes its speed instead (the grid runs every distribution at every speed). A class too large for the DEM granulator
-(three diameters above the blade top, half the bowl radius) is capped at that limit, and the
-proposal says so. `write_fragment` writes them as a config fragment to add to the grid:
+Each chosen sample becomes proposed operating points: its classes (diameters rounded to 0.1 mm,
+outwards at both ends, number fractions to 0.001) as a new named size distribution, run at the
+sample's speed if that is a grid speed (or beyond the grid's speeds), else at the grid speeds on
+either side (`placement`). They are single points (`grid.extra_points`), not a new row of the
+full grid: a row would run the distribution at every speed, two to four times the DEM work for
+what the surrogate is missing at one or two. A sample that is a defined distribution already proposes
+that distribution at the missing speeds. A class too large for the DEM granulator (three
+diameters above the blade top, half the bowl radius) is capped at that limit, and the proposal
+says so. `write_fragment` writes them as a config fragment to add to the grid:
 
     snakemake --cores 2 --configfile config/config.yaml results/validation/proposals.yaml
 
-(Snakemake merges the fragment's new distributions and its complete grid lists over the config;
-only the new DEM points run, then the surrogate and everything after it.)
+(Snakemake merges the fragment's new distributions and its complete list of extra points over the
+config; only the new DEM points run, then the surrogate and everything after it.)
 """
 
 from __future__ import annotations
@@ -37,8 +40,9 @@ from pbmdem.frequency import pair_counts, pairs_of
 #: rounding of proposed class diameters (m) and number fractions
 DIAMETER_STEP = 1e-4
 FRACTION_STEP = 1e-3
-#: two samples with the same (rounded) class diameters whose number fractions differ by less than
-#: this in every class teach the surrogate the same thing: only the first is proposed
+#: two samples whose (rounded) class diameters differ by at most one step and whose number fractions
+#: differ by less than this in every class teach the surrogate the same thing: only the first is
+#: proposed, and a sample like a defined distribution proposes that distribution
 SIMILAR_FRACTIONS = 0.02
 
 
@@ -114,52 +118,63 @@ def as_distribution(a: Assessment, d_max: float) -> tuple[list[float], list[floa
     return [float(x) for x in diameters], [round(float(x), 6) for x in f], capped
 
 
+def placement(rpm: float, grid_speeds) -> list[float]:
+    """The speeds at which a sample from PBM-ANN at `rpm` is run: `rpm` itself when it is a grid
+    speed or outside the grid's speeds (the tip speed must be learnt there), else the grid speeds on
+    either side (a validation speed between grid speeds stays a test of interpolation in speed)."""
+    speeds = sorted(float(r) for r in grid_speeds)
+    rpm = float(rpm)
+    if rpm in speeds or rpm < speeds[0] or rpm > speeds[-1]:
+        return [rpm]
+    return [max(r for r in speeds if r < rpm), min(r for r in speeds if r > rpm)]
+
+
 def propose(
     grid: OperatingGrid, granulator: Granulator, distributions: dict, assessments: list[Assessment], max_points: int
 ) -> pd.DataFrame:
     """The proposals: one row per chosen sample (out-of-domain first, by excess; then by ensemble
-    spread). A sample that is one of the grid's distributions (`distributions`: name ->
-    SizeDistribution, as rounded here) proposes its speed for the grid, if the speed is new, and
-    is skipped otherwise; any other sample proposes a new distribution (and its speed too when the
-    tip speed is what lies outside the domain). Columns: name, kind ('distribution' or 'speed'),
-    rpm, interval, reason, diameters (m) and fractions (JSON), propose_speed, capped."""
+    spread), each run as single operating points (`grid.extra_points`) at the speeds of
+    `placement`, not as a whole row of the grid. A sample that is one of the defined distributions
+    (`distributions`: name -> SizeDistribution, compared as rounded here) proposes that
+    distribution at those speeds, and is skipped if every such point exists already; any other
+    sample proposes a new distribution. Columns: name, kind ('distribution' or 'point'), rpm,
+    interval, reason, out-of-domain features, ensemble spread, diameters (m) and fractions (JSON),
+    points_rpm (JSON list of the speeds to run it at), capped_at_granulator_limit."""
     ranked = sorted(
         assessments, key=lambda a: (not a.is_out_of_domain, -max(a.out_of_domain.values(), default=0.0), -a.spread)
     )
     d_max = largest_feasible_diameter(granulator)
     known = {}
-    for name in grid.size_distributions:
-        dist = distributions[name]
+    for name, dist in distributions.items():
         rounded = as_distribution(Assessment(0.0, -1, list(dist.diameters), list(dist.number_fractions)), np.inf)
-        known[(tuple(rounded[0]), tuple(rounded[1]))] = name
-    rows, seen = [], set()
+        known.setdefault((tuple(rounded[0]), tuple(rounded[1])), name)
+    existing = set(grid.points())
+    rows, seen = [], []
     for a in ranked:
         if len(rows) >= max_points:
             break
         diameters, fractions, capped = as_distribution(a, d_max)
         key = (tuple(diameters), tuple(fractions))
+        speeds = placement(a.rpm, grid.impeller_rpm)
         reason = (
             "outside the training domain in "
             + ", ".join(f"{k} (by {v:.2g} of its range)" for k, v in sorted(a.out_of_domain.items()))
             if a.is_out_of_domain
             else f"largest ensemble spread ({a.spread:.3g} decades)"
         )
-        if key in known:
-            name, kind = known[key], "speed"
-            if a.rpm in grid.impeller_rpm or ("speed", a.rpm) in seen:
-                continue  # that very point is in the grid already
-            seen.add(("speed", a.rpm))
+        match = known.get(key) or next((n for k, n in known.items() if similar(key, k)), None)
+        if match is not None:
+            name, kind = match, "point"
+            speeds = [r for r in speeds if (r, name) not in existing]
+            if not speeds:
+                continue  # those very points are run already
+            existing |= {(r, name) for r in speeds}
         else:
-            if any(similar(key, other) for other in seen if isinstance(other[0], tuple)):
+            if any(similar(key, other) for other in seen):
                 continue
-            seen.add(key)
-            name, kind = (
-                unique_name(
-                    f"al_rpm{rpm_text(a.rpm).replace('.', 'p')}_i{a.interval}",
-                    set(distributions) | {r["name"] for r in rows},
-                ),
-                "distribution",
-            )
+            seen.append(key)
+            taken = set(distributions) | {r["name"] for r in rows}
+            name, kind = unique_name(f"al_rpm{rpm_text(a.rpm).replace('.', 'p')}_i{a.interval}", taken), "distribution"
         rows.append(
             {
                 "name": name,
@@ -171,26 +186,27 @@ def propose(
                 "ensemble_spread_log10": a.spread,
                 "diameters": json.dumps(diameters),
                 "number_fractions": json.dumps(fractions),
-                "propose_speed": kind == "speed" or ("tip_speed" in a.out_of_domain and a.rpm not in grid.impeller_rpm),
+                "points_rpm": json.dumps(speeds),
                 "capped_at_granulator_limit": capped,
             }
         )
-    return pd.DataFrame(
-        rows,
-        columns=[
-            "name",
-            "kind",
-            "rpm",
-            "interval",
-            "reason",
-            "out_of_domain_features",
-            "ensemble_spread_log10",
-            "diameters",
-            "number_fractions",
-            "propose_speed",
-            "capped_at_granulator_limit",
-        ],
-    )
+    return pd.DataFrame(rows, columns=PROPOSAL_COLUMNS)
+
+
+#: the columns of `propose` (results/validation/proposals.csv)
+PROPOSAL_COLUMNS = [
+    "name",
+    "kind",
+    "rpm",
+    "interval",
+    "reason",
+    "out_of_domain_features",
+    "ensemble_spread_log10",
+    "diameters",
+    "number_fractions",
+    "points_rpm",
+    "capped_at_granulator_limit",
+]
 
 
 def unique_name(base: str, taken: set[str]) -> str:
@@ -203,14 +219,18 @@ def unique_name(base: str, taken: set[str]) -> str:
 
 
 def similar(a: tuple, b: tuple) -> bool:
-    """Two rounded distributions (diameters, fractions) with the same diameters and fractions
-    within SIMILAR_FRACTIONS of each other."""
-    return a[0] == b[0] and bool(np.all(np.abs(np.subtract(a[1], b[1])) < SIMILAR_FRACTIONS))
+    """Two rounded distributions (diameters, fractions) with as many classes, diameters within one
+    rounding step and fractions within SIMILAR_FRACTIONS of each other: they teach the surrogate
+    the same thing."""
+    if len(a[0]) != len(b[0]):
+        return False
+    close_d = np.all(np.abs(np.subtract(a[0], b[0])) <= 1.5 * DIAMETER_STEP)
+    return bool(close_d and np.all(np.abs(np.subtract(a[1], b[1])) < SIMILAR_FRACTIONS))
 
 
 def fragment(grid: OperatingGrid, proposals: pd.DataFrame) -> dict:
     """The config fragment of the proposals: the new size distributions and the grid's complete
-    lists with them (and any proposed speed) added."""
+    list of extra points with the proposed ones added (the full grid itself is left as it is)."""
     if proposals.empty:
         return {}
     dists = {
@@ -218,12 +238,11 @@ def fragment(grid: OperatingGrid, proposals: pd.DataFrame) -> dict:
         for r in proposals.itertuples()
         if r.kind == "distribution"
     }
-    speeds = list(grid.impeller_rpm)
+    points = [p.to_dict() for p in grid.extra_points]
     for r in proposals.itertuples():
-        if r.propose_speed and r.rpm not in speeds:
-            speeds.append(float(r.rpm))
+        points += [{"rpm": float(rpm), "distribution": r.name} for rpm in json.loads(r.points_rpm)]
     out = {"size_distributions": dists} if dists else {}
-    out["grid"] = {"impeller_rpm": sorted(speeds), "size_distributions": list(grid.size_distributions) + list(dists)}
+    out["grid"] = {"extra_points": points}
     return out
 
 
@@ -239,7 +258,8 @@ def write_fragment(grid: OperatingGrid, proposals: pd.DataFrame, path, source: s
         "#   snakemake --cores 2 --configfile config/config.yaml <this file>",
     ]
     for r in proposals.itertuples():
-        what = f"new distribution {r.name}" if r.kind == "distribution" else f"speed {r.rpm:g} rpm for {r.name}"
+        at = " and ".join(f"{rpm:g}" for rpm in json.loads(r.points_rpm))
+        what = f"new distribution {r.name} at {at} rpm" if r.kind == "distribution" else f"{r.name} at {at} rpm"
         lines.append(
             f"# {what} (PBM-ANN at {r.rpm:g} rpm, interval {r.interval}): {r.reason}"
             + ("; largest class capped at the granulator's limit" if r.capped_at_granulator_limit else "")

@@ -5,13 +5,10 @@ import os
 
 from pbmdem.config import DemExecution, DemPoint
 from pbmdem.dem import run_operating_point
+from pbmdem.joblog import log_job
 
 # progress lines (phase, step of total, particles, elapsed, remaining) go to the job log and the terminal
-logging.basicConfig(
-    level=logging.INFO,
-    format="%(asctime)s %(name)s: %(message)s",
-    handlers=[logging.FileHandler(snakemake.log[0]), logging.StreamHandler()],
-)  # noqa: F821
+log_job(snakemake.log[0])  # noqa: F821
 # params hold what fixes the result; ranks and timeout come from the config and the job's resources
 point = DemPoint.from_dict(snakemake.params.point)  # noqa: F821
 execution = DemExecution.of_job(snakemake.config, snakemake.resources)  # noqa: F821

@@ -4,15 +4,12 @@ import logging
 
 from pbmdem.atomic import write_csv
 from pbmdem.config import Granulator, OperatingGrid, SizeDistribution
+from pbmdem.joblog import log_job
 from pbmdem.readers import read_table
 from pbmdem.surrogate import load_surrogate
 from pbmdem.validation import proposals
 
-logging.basicConfig(
-    level=logging.INFO,
-    format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-    handlers=[logging.FileHandler(snakemake.log[0]), logging.StreamHandler()],
-)  # noqa: F821
+log_job(snakemake.log[0])  # noqa: F821
 surrogate = load_surrogate(snakemake.input.model)  # noqa: F821
 found = []
 for rpm, path in zip(snakemake.params.rpms, snakemake.input.intervals):  # noqa: F821

@@ -1,16 +1,10 @@
 """Snakemake rule report: the self-contained results/report/report.html from the registered files (thin)."""
 
-import logging
-
+from pbmdem.joblog import log_job
 from pbmdem.report.html import SPEED_FIGURES, build_report
 
 sm = snakemake  # noqa: F821
-logging.basicConfig(
-    level=logging.INFO,
-    format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-    handlers=[logging.FileHandler(sm.log[0]), logging.StreamHandler()],
-)
-logging.captureWarnings(True)
+log_job(sm.log[0])
 tables = (
     "settings",
     "speeds",

@@ -5,17 +5,11 @@ the Snakefile completes from the typed config), like the execution settings a DE
 rule's params are the settings without the execution settings, so that changing only those
 reruns nothing (docs/validation.md, "Report")."""
 
-import logging
-
+from pbmdem.joblog import log_job
 from pbmdem.report.outputs import write_provenance
 
 sm = snakemake  # noqa: F821
-logging.basicConfig(
-    level=logging.INFO,
-    format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-    handlers=[logging.FileHandler(sm.log[0]), logging.StreamHandler()],
-)
-logging.captureWarnings(True)
+log_job(sm.log[0])
 write_provenance(
     config=sm.config,
     settings=sm.params.settings,

@@ -1,16 +1,10 @@
 """Snakemake rule report_speed: the figures and the out-of-domain table of one validation speed (thin)."""
 
-import logging
-
+from pbmdem.joblog import log_job
 from pbmdem.report.outputs import write_speed
 
 sm = snakemake  # noqa: F821
-logging.basicConfig(
-    level=logging.INFO,
-    format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-    handlers=[logging.FileHandler(sm.log[0]), logging.StreamHandler()],
-)
-logging.captureWarnings(True)
+log_job(sm.log[0])
 write_speed(
     validation_dir=sm.params.validation_dir,
     rpm=sm.wildcards.rpm,

@@ -4,16 +4,11 @@ import logging
 from pathlib import Path
 
 from pbmdem.config import PbmBatch
+from pbmdem.joblog import log_job
 from pbmdem.pbm.kernels import TableFrequency
 from pbmdem.pbm.setup import run_batch
 
-logging.basicConfig(
-    filename=snakemake.log[0],
-    filemode="w",
-    level=logging.INFO,  # noqa: F821
-    format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-)
-logging.captureWarnings(True)
+log_job(snakemake.log[0])  # noqa: F821
 
 batch = PbmBatch.from_dict(snakemake.params.batch)  # noqa: F821
 kernel = snakemake.params.kernel  # noqa: F821

@@ -1,17 +1,11 @@
 """Snakemake script of rule train_surrogate (thin: all logic is in pbmdem.surrogate)."""
 
-import logging
-
 from pbmdem.config import SurrogateTraining
+from pbmdem.joblog import log_job
 from pbmdem.surrogate.train import train_and_report
 
 # each CV fold and hyperparameter candidate is logged as it finishes: job log and terminal
-logging.basicConfig(
-    level=logging.INFO,
-    format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-    handlers=[logging.FileHandler(snakemake.log[0], mode="w"), logging.StreamHandler()],
-)  # noqa: F821
-logging.captureWarnings(True)
+log_job(snakemake.log[0])  # noqa: F821
 
 training = SurrogateTraining.from_dict(snakemake.params.training)  # noqa: F821
 train_and_report(

@@ -1,19 +1,14 @@
 """Snakemake rules pbm_dem_coupled / pbm_ann_coupled / pbm_constant_calibrated (thin)."""
 
-import logging
 import os
 
 from pbmdem import coupling
 from pbmdem.atomic import write_csv
 from pbmdem.config import CoupledLoop, DemExecution
+from pbmdem.joblog import log_job
 
 # interval lines (DEM and PBM wall time, out-of-domain count) and DEM progress: job log and terminal
-logging.basicConfig(
-    level=logging.INFO,
-    format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-    handlers=[logging.FileHandler(snakemake.log[0]), logging.StreamHandler()],
-)  # noqa: F821
-logging.captureWarnings(True)
+log_job(snakemake.log[0])  # noqa: F821
 loop = CoupledLoop.from_dict(snakemake.params.loop)  # noqa: F821
 rpm = float(snakemake.wildcards.rpm)  # noqa: F821
 outdir = snakemake.params.outdir  # noqa: F821

@@ -58,6 +58,13 @@ class TableFrequency:
     mixed linearly in rpm with the weights of the frequency interpolation.
     """
 
+    def _set_options(self, extrapolation: str, zero_floor: float, column: str) -> None:
+        if extrapolation not in ("clamp", "linear"):
+            raise PBMInputError(f"table extrapolation = {extrapolation!r}; allowed: 'clamp', 'linear'")
+        self.extrapolation = extrapolation
+        self.zero_floor = positive("table zero_floor", zero_floor)
+        self.column = column
+
     def __init__(
         self,
         table: pd.DataFrame,
@@ -69,11 +76,7 @@ class TableFrequency:
         import pandas as pd
         from scipy.interpolate import RegularGridInterpolator
 
-        if extrapolation not in ("clamp", "linear"):
-            raise PBMInputError(f"table extrapolation = {extrapolation!r}; allowed: 'clamp', 'linear'")
-        self.extrapolation = extrapolation
-        self.zero_floor = positive("table zero_floor", zero_floor)
-        self.column = column
+        self._set_options(extrapolation, zero_floor, column)
         missing = [c for c in ("d_i", "d_j", column) if c not in table.columns]
         if missing:
             raise PBMInputError(
@@ -86,20 +89,8 @@ class TableFrequency:
         if "rpm" not in t.columns:
             t["rpm"] = np.nan
         for col in ("d_i", "d_j"):
-            v = t[col].to_numpy(float)
-            if not np.all(np.isfinite(v) & (v > 0)):
-                raise PBMInputError(
-                    f"collision table column {col} has values {v[~(np.isfinite(v) & (v > 0))][:5]}; "
-                    "allowed: finite diameters > 0 (m)"
-                )
-        f = t[column].to_numpy(float)
-        if not np.all(np.isfinite(f) & (f >= 0)):
-            raise PBMInputError(
-                f"collision table {column} has values {f[~(np.isfinite(f) & (f >= 0))][:5]}; "
-                "allowed: finite values >= 0 (1/s per pair)"
-            )
-        if not (f > 0).any():
-            raise PBMInputError(f"collision table has no positive {column}; cannot interpolate in log space")
+            _check_diameters(t[col].to_numpy(float), col)
+        f = _checked_frequencies(t[column].to_numpy(float), column)
         counts = None if velocity_table is None else self._velocity_counts(t, velocity_table)
         floor = self.zero_floor * f[f > 0].min()
         self.rpms = []
@@ -155,25 +146,10 @@ class TableFrequency:
         from scipy.interpolate import RegularGridInterpolator
 
         self = cls.__new__(cls)
-        if extrapolation not in ("clamp", "linear"):
-            raise PBMInputError(f"table extrapolation = {extrapolation!r}; allowed: 'clamp', 'linear'")
-        self.extrapolation = extrapolation
-        self.zero_floor = positive("table zero_floor", zero_floor)
-        self.column = column
-        if not np.all(np.isfinite(d) & (d > 0)):
-            raise PBMInputError(
-                f"collision table column d_i has values {d[~(np.isfinite(d) & (d > 0))][:5]}; "
-                "allowed: finite diameters > 0 (m)"
-            )
+        self._set_options(extrapolation, zero_floor, column)
+        _check_diameters(d, "d_i")
         iu, ju = np.triu_indices(d.size)
-        f = m[iu, ju]
-        if not np.all(np.isfinite(f) & (f >= 0)):
-            raise PBMInputError(
-                f"collision table {column} has values {f[~(np.isfinite(f) & (f >= 0))][:5]}; "
-                "allowed: finite values >= 0 (1/s per pair)"
-            )
-        if not (f > 0).any():
-            raise PBMInputError(f"collision table has no positive {column}; cannot interpolate in log space")
+        f = _checked_frequencies(m[iu, ju], column)
         # the table's symmetric mean: each off-diagonal pair once per order, the diagonal twice
         F = np.empty((d.size, d.size))
         F[iu, ju] = f
@@ -384,3 +360,24 @@ class TableFrequency:
         freq = np.exp(sum(w * self._log_matrix(k, d) for k, w in weights))
         fractions = sum(w * self._fractions(k, d) for k, w in weights)
         return EncounterRates(freq, fractions)
+
+
+def _check_diameters(d: np.ndarray, column: str) -> None:
+    """Refuse class diameters that are not finite and positive, naming the column."""
+    bad = ~(np.isfinite(d) & (d > 0))
+    if bad.any():
+        raise PBMInputError(
+            f"collision table column {column} has values {d[bad][:5]}; allowed: finite diameters > 0 (m)"
+        )
+
+
+def _checked_frequencies(f: np.ndarray, column: str) -> np.ndarray:
+    """``f`` if its per-pair frequencies are finite and >= 0 and one is positive (log interpolation)."""
+    bad = ~(np.isfinite(f) & (f >= 0))
+    if bad.any():
+        raise PBMInputError(
+            f"collision table {column} has values {f[bad][:5]}; allowed: finite values >= 0 (1/s per pair)"
+        )
+    if not (f > 0).any():
+        raise PBMInputError(f"collision table has no positive {column}; cannot interpolate in log space")
+    return f

@@ -15,7 +15,7 @@ import pandas as pd
 from pbmdem.atomic import write_text
 from pbmdem.readers import read_json, read_table
 
-from .display import MM, number, split_columns
+from .display import MM, number, shown, split_columns
 from .statements import out_of_domain_sentence, target_sentences
 
 STYLE = (
@@ -108,8 +108,7 @@ def _metrics(path) -> pd.DataFrame:
         "noise_floor_r2_log10": "replicate noise floor R2 (-)",
         "tv_distance": "velocity bins TV distance (-)",
     }
-    met = met[[c for c in names if c in met.columns]].rename(columns=names)
-    return met.map(lambda v: number(v, ".3g") if isinstance(v, float) else v)
+    return shown(met, names, ".3g")
 
 
 def _runs(path) -> pd.DataFrame:
@@ -126,8 +125,7 @@ def _runs(path) -> pd.DataFrame:
         "particle_steps_per_s": "particle-steps per s (1/s)",
         "parse_cost_ratio": "parse / LIGGGHTS time (-)",
     }
-    runs = runs[[c for c in names if c in runs.columns]].rename(columns=names)
-    return runs.map(lambda v: number(v, ".4g") if isinstance(v, float) else v)
+    return shown(runs, names)
 
 
 def _speed_response(paths: dict) -> list[str]:
@@ -144,8 +142,7 @@ def _speed_response(paths: dict) -> list[str]:
         "mean_encounter_frequency_per_pair": "encounter frequency per pair (1/s)",
         "impact_velocity_median": "median impact speed (m/s)",
     }
-    shown = response[[c for c in names if c in response.columns]].rename(columns=names)
-    shown = shown.map(lambda v: number(v, ".4g") if isinstance(v, float) else v)
+    response_shown = shown(response, names)
     flow_cols = {
         "distribution": "feed",
         "rpm": "impeller speed (rpm)",
@@ -154,15 +151,14 @@ def _speed_response(paths: dict) -> list[str]:
         "half_z": "difference / SE (-)",
         "within_error": "within 2 SE",
     }
-    flow_shown = flow[[c for c in flow_cols if c in flow.columns]].rename(columns=flow_cols)
-    flow_shown = flow_shown.map(lambda v: number(v, ".3g") if isinstance(v, float) else v)
+    flow_shown = shown(flow, flow_cols, ".3g")
     ok = int(flow.within_error.astype(bool).sum())
     return [
         "<h2>DEM: encounter rate against impeller speed</h2>",
         "<p>An encounter is an impact of two granules that were apart by more than "
         "<code>dem.encounter_gap_fraction</code> of the smaller diameter since their previous contact "
         "(docs/dem.md). Means over the DEM replicates (insertion seeds) with standard errors (SE).</p>",
-        table_html(shown, 2),
+        table_html(response_shown, 2),
         _image(paths["plot"], "encounter rate against impeller speed"),
         f"<p>Flow development: the encounter rates of the first and second halves of the sampling window agree "
         f"within twice their replicate standard error at {ok} of {len(flow)} operating points.</p>",

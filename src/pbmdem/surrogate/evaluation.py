@@ -28,7 +28,7 @@ from sklearn.metrics import mean_absolute_error, r2_score
 
 from .baselines import HGBBaseline, PhysicalScaling
 from .ensemble import EnsembleMLPRegressorCV, grouped_splits
-from .features import TARGET_COLUMN, TARGET_NAME, TARGET_NOISE_VAR, TrainingData
+from .features import PAIR_ID_COLUMNS, TARGET_COLUMN, TARGET_NAME, TARGET_NOISE_VAR, TrainingData
 from .model import CollisionSurrogate
 from .velocity import bin_counts, empirical_fractions, total_variation
 
@@ -131,22 +131,7 @@ def cross_validate_models(
     splits = grouped_splits(groups, cv or inner.cv, n_splits or inner.n_splits)
     table = data.table
 
-    keep = [
-        c
-        for c in (
-            "point_id",
-            "rpm",
-            "distribution",
-            "class_i",
-            "class_j",
-            "d_i",
-            "d_j",
-            TARGET_COLUMN,
-            TARGET_NAME,
-            TARGET_NOISE_VAR,
-        )
-        if c in table
-    ]
+    keep = [c for c in (*PAIR_ID_COLUMNS, TARGET_COLUMN, TARGET_NAME, TARGET_NOISE_VAR) if c in table]
     pred = table[keep].copy()
     pred["fold"] = -1
     for name in models:

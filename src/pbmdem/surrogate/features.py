@@ -30,15 +30,12 @@ import pandas as pd
 
 from .errors import CollisionTableError
 
+#: Columns that name a row of the collision table: its run, its class pair and their diameters.
+PAIR_ID_COLUMNS = ("point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j")
+
 #: Columns of the collision-table contract (docs/architecture.md).
 TABLE_COLUMNS = (
-    "point_id",
-    "rpm",
-    "distribution",
-    "class_i",
-    "class_j",
-    "d_i",
-    "d_j",
+    *PAIR_ID_COLUMNS,
     "n_i",
     "n_j",
     "n_total",

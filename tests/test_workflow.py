@@ -459,7 +459,7 @@ def test_job_logs_show_progress(tiny_workflow):
         r"pbmdem.dem.progress: DEM rpm600_small: \w[\w-]*, step \d+ of \d+ \(\d+ %\), \d+ particles", dem_log
     )
     assert "CV fold 1 of" in (logs / "train_surrogate.log").read_text()
-    loop = (logs / "validation" / "pbm_dem_rpm600.log").read_text()
+    loop = (logs / "validation" / "pbm_dem_rpm600_rep0.log").read_text()
     assert re.search(
         r"pbm_dem at rpm 600: interval 1 of \d+ .* DEM wall time [\d.]+ s, PBM wall time [\d.]+ s, "
         r"\d+ surrogate out-of-domain",

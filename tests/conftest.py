@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import shutil
+import sys
 from pathlib import Path
 
 import pytest
@@ -26,6 +27,14 @@ def pytest_collection_modifyitems(config, items):
 def config_of(mapping: dict) -> Config:
     """A Config from a (possibly edited) configuration mapping, validated as in the workflow."""
     return Config.from_mapping(mapping)
+
+
+def snakemake_command(workdir: Path, *args: str, configfile: Path | None = None) -> list[str]:
+    """The command line that runs this project's workflow in `workdir` (with `configfile` if given)."""
+    cmd = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "--directory", str(workdir)]
+    if configfile is not None:
+        cmd += ["--configfile", str(configfile)]
+    return [*cmd, *args]
 
 
 @pytest.fixture(scope="session")

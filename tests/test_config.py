@@ -2,10 +2,10 @@
 
 import copy
 import subprocess
-import sys
 
 import pytest
 import yaml
+from conftest import snakemake_command
 
 from pbmdem.config import Config, ConfigError, load_config
 
@@ -84,20 +84,7 @@ def test_snakemake_rejects_a_bad_config_before_running(tmp_path, root, default_m
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(cfg))
     proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "snakemake",
-            "-s",
-            str(root / "Snakefile"),
-            "--directory",
-            str(tmp_path),
-            "--configfile",
-            str(path),
-            "-n",
-            "--cores",
-            "1",
-        ],
+        snakemake_command(tmp_path, "-n", "--cores", "1", configfile=path),
         capture_output=True,
         text=True,
         timeout=300,

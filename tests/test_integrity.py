@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from conftest import config_of
+from conftest import config_of, snakemake_command
 
 from pbmdem.config import ConfigError, load_config, point_id, rpm_text
 from pbmdem.dem import collisions, dumps, engine
@@ -27,9 +27,9 @@ def _write(path: Path, text: str) -> Path:
     return path
 
 
-def _snakemake(root: Path, workdir: Path, *args: str) -> subprocess.CompletedProcess:
+def _snakemake(workdir: Path, *args: str) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "snakemake", "-s", str(root / "Snakefile"), "--directory", str(workdir), *args],
+        snakemake_command(workdir, *args),
         capture_output=True,
         text=True,
         timeout=600,
@@ -50,7 +50,7 @@ def test_duplicate_key_in_a_config_file_is_refused_with_key_and_line(root, tmp_p
 def test_snakemake_refuses_a_duplicate_key(root, tmp_path):
     text = (root / "config" / "test.yaml").read_text().replace("  seed: 20141\n", "  seed: 20141\n  seed: 7\n")
     path = _write(tmp_path / "dup.yaml", text)
-    proc = _snakemake(root, tmp_path, "--configfile", str(path), "-n", "--cores", "1")
+    proc = _snakemake(tmp_path, "--configfile", str(path), "-n", "--cores", "1")
     assert proc.returncode != 0
     assert "duplicate key 'seed'" in proc.stderr and "Traceback" not in proc.stderr
 
@@ -167,7 +167,7 @@ def test_snakemake_plans_a_tiny_speed(root, tmp_path, tiny_mapping):
     cfg = tiny_mapping
     cfg["grid"]["impeller_rpm"] = [1e-9, 1234.567]
     path = _write(tmp_path / "c.yaml", yaml.safe_dump(cfg))
-    proc = _snakemake(root, tmp_path, "--configfile", str(path), "-n", "--cores", "1", "results/dem/collisions.csv")
+    proc = _snakemake(tmp_path, "--configfile", str(path), "-n", "--cores", "1", "results/dem/collisions.csv")
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "rpm0.000000001_small" in proc.stdout + proc.stderr
     assert "rpm1234.567_large" in proc.stdout + proc.stderr
@@ -181,7 +181,7 @@ def test_snakemake_lists_every_config_error_tidily(root, tmp_path, tiny_mapping)
     cfg["grid"]["impeller_rpm"] = [600, -3]
     cfg["dem"]["foo"] = 1
     path = _write(tmp_path / "bad.yaml", yaml.safe_dump(cfg))
-    proc = _snakemake(root, tmp_path, "--configfile", str(path), "-n", "--cores", "1")
+    proc = _snakemake(tmp_path, "--configfile", str(path), "-n", "--cores", "1")
     assert proc.returncode != 0
     err = proc.stderr
     for key, value in (
@@ -403,17 +403,7 @@ def test_the_readme_resume_command_works_after_kill_9_of_snakemake(root, tmp_pat
         """)
     )
     slow.chmod(slow.stat().st_mode | stat.S_IEXEC)
-    base = [
-        sys.executable,
-        "-m",
-        "snakemake",
-        "-s",
-        str(root / "Snakefile"),
-        "--directory",
-        str(tmp_path),
-        "--configfile",
-        str(config),
-    ]
+    base = snakemake_command(tmp_path, configfile=config)
     target = "results/dem/collisions.csv"
     proc = subprocess.Popen(
         [*base, "--cores", "1", target],

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from conftest import snakemake_command
 
 pytestmark = [pytest.mark.liggghts, pytest.mark.workflow, pytest.mark.slurm]
 
@@ -60,21 +61,6 @@ def cluster(root, tmp_path_factory):
     finally:
         out = stop()
         print(f"[slurm] {out.stdout.strip()} {out.stderr.strip()}")
-
-
-def _snakemake_cmd(root: Path, workdir: Path, configfile: Path, *args: str) -> list[str]:
-    return [
-        sys.executable,
-        "-m",
-        "snakemake",
-        "-s",
-        str(root / "Snakefile"),
-        "--directory",
-        str(workdir),
-        "--configfile",
-        str(configfile),
-        *args,
-    ]
 
 
 # polling faster than the profile's 10 s keeps the test short; everything else is the profile
@@ -140,7 +126,7 @@ def test_tiny_workflow_through_the_slurm_profile(cluster, root, tmp_path):
     # 2./3. the workflow through SLURM, one DEM job cancelled during sampling
     t0 = time.perf_counter()
     proc = subprocess.Popen(
-        _snakemake_cmd(root, workdir, configfile, *profile),
+        snakemake_command(workdir, *profile, configfile=configfile),
         env=env,
         cwd=workdir,
         stdout=subprocess.PIPE,
@@ -174,18 +160,18 @@ def test_tiny_workflow_through_the_slurm_profile(cluster, root, tmp_path):
         assert (res / "dem" / f"rpm{rpm}_{dist}" / "rep0" / "collisions.csv").exists(), (rpm, dist)
 
     # 4. the rerun redoes the cancelled point and what depends on it, nothing else
-    dry = _run(_snakemake_cmd(root, workdir, configfile, *profile, "-n", "--quiet", "rules"), env, 120, workdir)
+    dry = _run(snakemake_command(workdir, *profile, "-n", "--quiet", "rules", configfile=configfile), env, 120, workdir)
     counts = _job_counts(dry.stdout + dry.stderr)
     assert counts.get("dem_point") == 1, dry.stdout + dry.stderr
     assert "pbm_constant" not in counts and "pbm_dem_coupled" not in counts, counts
     t1 = time.perf_counter()
-    rerun = _run(_snakemake_cmd(root, workdir, configfile, *profile), env, 600, workdir)
+    rerun = _run(snakemake_command(workdir, *profile, configfile=configfile), env, 600, workdir)
     second = time.perf_counter() - t1
     assert rerun.returncode == 0, (rerun.stdout + rerun.stderr)[-5000:]
     assert (cancelled / "collisions.csv").exists() and not (cancelled / "crash.json").exists()
     assert (res / "report" / "report.html").exists()
     # another executor (local) sees nothing to do: the executor and its resources are not params
-    local = _run(_snakemake_cmd(root, workdir, configfile, "-n", "--cores", "2"), env, 120, workdir)
+    local = _run(snakemake_command(workdir, "-n", "--cores", "2", configfile=configfile), env, 120, workdir)
     assert "Nothing to be done" in local.stdout + local.stderr, local.stdout + local.stderr
 
     # 5. the DEM points ran as 2-rank MPI jobs under SLURM's launcher

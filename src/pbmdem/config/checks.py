@@ -55,16 +55,11 @@ def check(cfg) -> None:
                 f"{key}.number_fractions = {list(w)}: sum to {total:.6g}, must sum to 1 (within {FRACTION_TOLERANCE})"
             )
         d_max = max(d)
-        free_height = bowl.height - top
-        if 3 * d_max >= free_height:
-            problems.append(
-                f"{key}.diameters: largest {d_max} m does not fit the bowl: the space above the "
-                f"impeller ({free_height:.4g} m) must exceed 3 particle diameters"
-            )
-        if 2 * d_max >= radius:
+        if d_max >= cfg.granulator.particle_diameter_limit:
             problems.append(
                 f"{key}.diameters: largest {d_max} m does not fit the bowl: it must be below "
-                f"half the bowl radius ({radius / 2:.4g} m)"
+                f"{cfg.granulator.particle_diameter_limit:.4g} m (a third of the {bowl.height - top:.4g} m "
+                f"above the impeller, and half the bowl radius, {radius / 2:.4g} m)"
             )
     defined = sorted(cfg.size_distributions)
     for name in cfg.grid.size_distributions:

@@ -96,6 +96,12 @@ class Granulator(Settings):
         return self.angular_speed(rpm) ** 2 * self.impeller.tip_radius / GRAVITY
 
     @property
+    def particle_diameter_limit(self) -> float:
+        """Every DEM particle diameter must stay below this (m): three diameters must fit in the
+        space between the blade top and the lid, and two within the bowl radius."""
+        return min((self.bowl.height - self.impeller.top) / 3.0, self.bowl.radius / 2.0)
+
+    @property
     def bed_solid_volume(self) -> float:
         """Solid volume of the settled bed (m3): bed height x bowl floor area x packing fraction.
         The DEM bed of every operating point and the PBM's population hold this volume."""

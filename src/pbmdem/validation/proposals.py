@@ -88,10 +88,9 @@ def assess(surrogate, rpm: float, intervals: pd.DataFrame) -> list[Assessment]:
 
 
 def largest_feasible_diameter(granulator: Granulator) -> float:
-    """The largest DEM particle the granulator takes (the config checks' limits), m."""
-    bowl, top = granulator.bowl, granulator.impeller.top
-    limit = min((bowl.height - top) / 3.0, bowl.radius / 2.0)
-    return math.floor(limit * (1 - 1e-9) / DIAMETER_STEP) * DIAMETER_STEP
+    """The largest proposed diameter (m): the largest rounding step below the granulator's
+    `particle_diameter_limit`, which the config checks enforce."""
+    return math.floor(granulator.particle_diameter_limit * (1 - 1e-9) / DIAMETER_STEP) * DIAMETER_STEP
 
 
 def as_distribution(a: Assessment, d_max: float) -> tuple[list[float], list[float], bool]:

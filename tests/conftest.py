@@ -29,9 +29,10 @@ def config_of(mapping: dict) -> Config:
     return Config.from_mapping(mapping)
 
 
-def snakemake_command(workdir: Path, *args: str, configfile: Path | None = None) -> list[str]:
-    """The command line that runs this project's workflow in `workdir` (with `configfile` if given)."""
-    cmd = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "--directory", str(workdir)]
+def snakemake_command(workdir: Path, *args: str, configfile: Path | None = None, project: Path = ROOT) -> list[str]:
+    """The command line that runs the workflow of `project` (this checkout, or a copy of it) in
+    `workdir`, with `configfile` if given."""
+    cmd = [sys.executable, "-m", "snakemake", "-s", str(project / "Snakefile"), "--directory", str(workdir)]
     if configfile is not None:
         cmd += ["--configfile", str(configfile)]
     return [*cmd, *args]

@@ -19,11 +19,10 @@ pytestmark = [pytest.mark.liggghts, pytest.mark.workflow]
 
 
 def snakemake(
-    workdir: Path, configfile: Path, *args: str, env: dict | None = None, check: bool = True
+    root: Path, workdir: Path, configfile: Path, *args: str, env: dict | None = None, check: bool = True
 ) -> subprocess.CompletedProcess:
-    proc = subprocess.run(
-        snakemake_command(workdir, *args, configfile=configfile), capture_output=True, text=True, timeout=1800, env=env
-    )
+    cmd = snakemake_command(workdir, *args, configfile=configfile, project=root)
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1800, env=env)
     if check and proc.returncode != 0:
         raise AssertionError(f"snakemake failed ({proc.returncode}):\n{proc.stdout[-4000:]}\n{proc.stderr[-6000:]}")
     return proc
@@ -35,7 +34,7 @@ def tiny_workflow(tmp_path_factory, root):
     workdir = tmp_path_factory.mktemp("workflow")
     configfile = workdir / "config.yaml"
     shutil.copy(root / "config" / "test.yaml", configfile)
-    snakemake(workdir, configfile, "--cores", "2")
+    snakemake(root, workdir, configfile, "--cores", "2")
     return workdir, configfile
 
 
@@ -113,7 +112,7 @@ def test_adding_an_operating_point_runs_only_that_point(tiny_workflow, root, tmp
     cfg["grid"]["impeller_rpm"].append(900)
     grown = tmp_path / "grown.yaml"
     grown.write_text(yaml.safe_dump(cfg))
-    proc = snakemake(workdir, grown, "-n", "--cores", "2", "--quiet", "rules")
+    proc = snakemake(root, workdir, grown, "-n", "--cores", "2", "--quiet", "rules")
     out = proc.stdout + proc.stderr
     dem_jobs = [line for line in out.splitlines() if line.strip().startswith("dem_point")]
     assert dem_jobs, out
@@ -126,7 +125,7 @@ def test_adding_an_operating_point_runs_only_that_point(tiny_workflow, root, tmp
     reps = cfg["dem"]["replicates"]
     assert counts["dem_point"] == len(cfg["grid"]["size_distributions"]) * reps, out
     # the jobs of the detailed dry run are exactly the new speed's points
-    detail = snakemake(workdir, grown, "-n", "--cores", "2").stdout
+    detail = snakemake(root, workdir, grown, "-n", "--cores", "2").stdout
     planned, current = set(), None
     for line in detail.splitlines():
         if line.startswith("rule ") or line.startswith("localrule "):
@@ -144,7 +143,7 @@ def test_adding_a_replicate_runs_only_that_replicate(tiny_workflow, root, tmp_pa
     cfg["dem"]["replicates"] += 1
     grown = tmp_path / "more.yaml"
     grown.write_text(yaml.safe_dump(cfg))
-    detail = snakemake(workdir, grown, "-n", "--cores", "2").stdout
+    detail = snakemake(root, workdir, grown, "-n", "--cores", "2").stdout
     planned = set()
     current = None
     for line in detail.splitlines():
@@ -189,13 +188,13 @@ def test_execution_settings_rerun_nothing(tiny_workflow, root, tmp_path):
     cfg["dem"]["seed"] = 20143
     reseeded = tmp_path / "seed.yaml"
     reseeded.write_text(yaml.safe_dump(cfg))
-    out = snakemake(workdir, reseeded, "-n", "--cores", "1", "--quiet", "rules").stdout
+    out = snakemake(root, workdir, reseeded, "-n", "--cores", "1", "--quiet", "rules").stdout
     assert "dem_point" in out and "pbm_dem_coupled" in out, out
 
 
 def test_lint_is_clean(root, tiny_workflow):
     workdir, configfile = tiny_workflow
-    proc = snakemake(workdir, configfile, "--lint", check=False)
+    proc = snakemake(root, workdir, configfile, "--lint", check=False)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "Congratulations" in proc.stdout + proc.stderr
 
@@ -325,7 +324,7 @@ def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
     workdir, configfile = tiny_workflow
     cfg = yaml.safe_load(configfile.read_text())
     archive = tmp_path / "report.zip"
-    snakemake(workdir, configfile, "--report", str(archive))
+    snakemake(root, workdir, configfile, "--report", str(archive))
     with zipfile.ZipFile(archive) as z:
         raw = {Path(n).name: n for n in z.namelist() if "/data/raw/" in n}
         files = Counter(Path(n).name for n in z.namelist() if "/data/raw/" in n)
@@ -488,7 +487,7 @@ def test_a_manual_dem_run_on_a_finished_point_changes_nothing(tiny_workflow, roo
     )
     assert proc.returncode == 2 and "already holds a finished run" in proc.stderr and "--force" in proc.stderr
     assert {p: p.stat().st_mtime_ns for p in point.rglob("*")} == before
-    dry = snakemake(workdir, configfile, "-n", "--cores", "2")
+    dry = snakemake(root, workdir, configfile, "-n", "--cores", "2")
     assert "Nothing to be done" in dry.stdout + dry.stderr, dry.stdout[-3000:]
 
 
@@ -546,7 +545,7 @@ def test_adding_the_proposed_points_removes_the_out_of_domain_intervals(tiny_wor
     config = copy / "beyond.yaml"
     config.write_text(yaml.safe_dump(cfg))
     targets = ["results/validation/proposals.yaml", "results/validation/rpm1500/pbm_ann/intervals.csv"]
-    snakemake(copy, config, "--cores", "2", *targets)
+    snakemake(root, copy, config, "--cores", "2", *targets)
     intervals = copy / "results" / "validation" / "rpm1500" / "pbm_ann" / "intervals.csv"
     before = pd.read_csv(intervals)
     assert (before.out_of_domain_count > 0).all() and before.out_of_domain.str.contains("tip_speed").all()
@@ -555,7 +554,7 @@ def test_adding_the_proposed_points_removes_the_out_of_domain_intervals(tiny_wor
     fragment = copy / "results" / "validation" / "proposals.yaml"
     grid = yaml.safe_load(fragment.read_text())["grid"]
     assert grid.keys() == {"extra_points"} and {p["rpm"] for p in grid["extra_points"]} == {1500.0}
-    planned = snakemake(copy, config, str(fragment), "-n", "--cores", "2", *targets, "--quiet", "rules")
+    planned = snakemake(root, copy, config, str(fragment), "-n", "--cores", "2", *targets, "--quiet", "rules")
     counts = {
         line.split()[0]: int(line.split()[1])
         for line in (planned.stdout + planned.stderr).splitlines()
@@ -566,7 +565,7 @@ def test_adding_the_proposed_points_removes_the_out_of_domain_intervals(tiny_wor
     expected = reps * len(grid["extra_points"])
     assert counts.get("dem_point") == expected, counts  # only the new operating points run
     assert counts.get("pbm_dem_coupled", 0) == 0  # the reference does not depend on the grid
-    snakemake(copy, config, str(fragment), "--cores", "2", *targets)
+    snakemake(root, copy, config, str(fragment), "--cores", "2", *targets)
     after = pd.read_csv(intervals)
     assert (after.out_of_domain_count == 0).all(), after.out_of_domain.tolist()
     meta = json.loads((copy / "results" / "surrogate" / "model.json").read_text())

@@ -558,7 +558,7 @@ def test_model_metadata_with_unknown_or_missing_fields_is_a_version_error(small_
     elif edit == "missing_field":
         del meta["feature_ranges"]
     else:
-        del meta["params"]["frequency_model"]["alpha"]
+        del meta["params"]["frequency_model"]["params"]["alpha"]
     metadata_path_for(model).write_text(json.dumps(meta))
     with pytest.raises(IncompatibleVersionError) as info:
         load_surrogate(model)
@@ -571,6 +571,7 @@ def test_surrogate_cross_validation_logs_each_fold_and_candidate(caplog):
     import warnings
 
     from pbmdem.surrogate import CollisionSurrogate, EnsembleMLPRegressorCV, cross_validate_models, training_data
+    from pbmdem.surrogate.evaluation import default_baselines
     from pbmdem.surrogate.synthetic import make_synthetic_table
 
     table = make_synthetic_table(0.0265, rpms=(300, 600, 900), seed=4)
@@ -584,7 +585,9 @@ def test_surrogate_cross_validation_logs_each_fold_and_candidate(caplog):
     caplog.set_level(logging.INFO, logger="pbmdem.surrogate")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        metrics, _ = cross_validate_models(training_data(table, 0.0265), model, cv="group_kfold", n_splits=3)
+        metrics, _ = cross_validate_models(
+            training_data(table, 0.0265), {"mlp": model, **default_baselines()}, cv="group_kfold", n_splits=3
+        )
     folds = [r.getMessage() for r in caplog.records if r.getMessage().startswith("CV fold")]
     assert len(folds) == 3 and folds[-1].startswith("CV fold 3 of 3 done") and "mlp R2" in folds[0]
     assert "remaining ~" in folds[0]

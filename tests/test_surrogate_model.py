@@ -26,6 +26,7 @@ from pbmdem.surrogate import (
     training_data,
 )
 from pbmdem.surrogate._threads import single_threaded
+from pbmdem.surrogate.evaluation import default_baselines
 from pbmdem.surrogate.features import make_features, pair_table
 from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables, power_law
 from pbmdem.surrogate.velocity import attach_velocity_bins
@@ -78,7 +79,9 @@ def run_disjoint(splits, groups):
 def test_recovers_known_law_on_held_out_runs(table, data):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        metrics, pred = cross_validate_models(data, surrogate(), cv="group_kfold", n_splits=5)
+        metrics, pred = cross_validate_models(
+            data, {"mlp": surrogate(), **default_baselines()}, cv="group_kfold", n_splits=5
+        )
     pooled = metrics[
         (metrics["model"] == "mlp") & (metrics["fold"] == "pooled") & (metrics["target"] == "encounter_frequency")
     ].iloc[0]

@@ -112,10 +112,12 @@ def test_round_trip_identical_predictions(fitted, saved, table):
     assert {"sklearn", "numpy", "skops"} <= set(meta["versions"])
     assert meta["cv_scores"]["mlp"]["pooled_r2_log10"] == 0.9
     assert meta["cv_scores"]["mlp"]["nan_value"] is None  # strict JSON, no NaN
-    assert meta["format_version"] == FORMAT_VERSION == 3
+    assert meta["format_version"] == FORMAT_VERSION == 4
+    assert meta["family"] == "mlp"
+    assert meta["params"]["frequency_model"]["family"] == "mlp"
     # the impeller radius the model was trained with, and every estimator parameter
     assert meta["params"]["impeller_radius"] == R
-    assert meta["params"]["frequency_model"] == json.loads(json.dumps(fitted.frequency_model.get_params()))
+    assert meta["params"]["frequency_model"]["params"] == json.loads(json.dumps(fitted.frequency_model.get_params()))
     assert meta["target"].startswith("log10_encounter_frequency_per_pair")
     assert meta["n_velocity_rows"] == len(table) and len(meta["velocity_edges"]) == 18
 
@@ -221,9 +223,9 @@ def test_unfitted_cannot_be_saved(tmp_path):
 def test_format_2_files_are_refused_with_retrain(saved):
     model, meta_path = saved
     meta = json.loads(meta_path.read_text())
-    meta["format_version"] = 2
+    meta["format_version"] = 3
     meta_path.write_text(json.dumps(meta))
-    with pytest.raises(IncompatibleVersionError, match="format version 2 .*reads version 3.*retrain"):
+    with pytest.raises(IncompatibleVersionError, match="format version 3 .*reads version 4.*retrain"):
         load_surrogate(model)
 
 

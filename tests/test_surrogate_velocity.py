@@ -17,6 +17,7 @@ from pbmdem.surrogate import (
     summarise,
     training_data,
 )
+from pbmdem.surrogate.evaluation import default_baselines
 from pbmdem.surrogate.features import TARGET_NAME, pair_table
 from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables, velocity_law
 from pbmdem.surrogate.velocity import attach_velocity_bins, lognormal_fractions
@@ -66,7 +67,9 @@ def fitted(data):
 def test_held_out_velocity_distribution_recovers_known_law(data):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        metrics, pred = cross_validate_models(data, surrogate(**SMALL), cv="group_kfold", n_splits=5)
+        metrics, pred = cross_validate_models(
+            data, {"mlp": surrogate(**SMALL), **default_baselines()}, cv="group_kfold", n_splits=5
+        )
     vel = summarise(metrics, "impact_velocity")
     assert set(vel) == {"mlp", "physical"}
     mlp, phys = vel["mlp"], vel["physical"]
@@ -185,7 +188,10 @@ def test_noise_floor_from_replicate_se_in_metrics():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         metrics, pred = cross_validate_models(
-            training_data(t, R, velocity_table=v), surrogate(**TINY), cv="group_kfold", n_splits=3
+            training_data(t, R, velocity_table=v),
+            {"mlp": surrogate(**TINY), **default_baselines()},
+            cv="group_kfold",
+            n_splits=3,
         )
     freq = metrics[metrics["target"] == "encounter_frequency"]
     pooled = freq[freq["fold"] == "pooled"]
@@ -201,6 +207,8 @@ def test_noise_floor_from_replicate_se_in_metrics():
     one = make_synthetic_table(R, rpms=(300, 600, 900), seed=4, n_replicates=1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        m1, _ = cross_validate_models(training_data(one, R), surrogate(**TINY), cv="group_kfold", n_splits=3)
+        m1, _ = cross_validate_models(
+            training_data(one, R), {"mlp": surrogate(**TINY), **default_baselines()}, cv="group_kfold", n_splits=3
+        )
     assert m1["noise_floor_r2_log10"].isna().all()
     assert (m1["target"] == "encounter_frequency").all()  # no velocity bins, no velocity rows

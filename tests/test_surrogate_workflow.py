@@ -28,6 +28,8 @@ TINY = {
     "seeds": [3, 4],
     "max_iter": 300,
     "cv": {"strategy": "group_kfold", "n_splits": 3},
+    "model": "mlp",
+    "kriging": {"n_restarts_optimizer": 1},
 }
 
 
@@ -70,14 +72,26 @@ def test_build_surrogate_from_settings():
     assert est.velocity_model.get_params() == freq.get_params() and est.velocity_model is not freq
     # every value of the section reaches the estimators (none comes from a constructor default)
     s = cfg.surrogate.to_dict()
-    est = build_surrogate(s, radius, n_jobs=2)
+    est = build_surrogate(s, radius, n_jobs=2, family="mlp")
     params = est.get_params(deep=False)
-    assert sorted(params) == ["domain_margin", "frequency_model", "impeller_radius", "physics_offset", "velocity_model"]
+    assert sorted(params) == [
+        "domain_margin",
+        "feature_transform",
+        "frequency_model",
+        "impeller_radius",
+        "physics_offset",
+        "uncertainty_scale",
+        "velocity_model",
+        "velocity_uncertainty_scale",
+    ]
     assert (params["impeller_radius"], params["physics_offset"], params["domain_margin"]) == (
         radius,
         s["physics_offset"],
         s["domain_margin"],
     )
+    assert params["feature_transform"] == s["feature_transform"]
+    # the uncertainty scales are set by training from held-out coverage, not by a setting
+    assert params["uncertainty_scale"] == params["velocity_uncertainty_scale"] == 1.0
     assert est.frequency_model.get_params() == {
         "hidden_layer_sizes": tuple(tuple(h) for h in s["hidden_layer_sizes"]),
         "alpha": tuple(s["alpha"]),
@@ -90,6 +104,17 @@ def test_build_surrogate_from_settings():
         "n_jobs": 2,
     }
     assert build_baselines(s)["hgb"].random_state == s["random_state"]
+    kriging = build_surrogate(s, radius, family="kriging").frequency_model
+    assert kriging.get_params() == {
+        "n_restarts_optimizer": s["kriging"]["n_restarts_optimizer"],
+        "linear_trend": s["kriging"]["linear_trend"],
+        "random_state": s["random_state"],
+        "n_members": s["ensemble_size"],
+    }
+    rsm = build_surrogate(s, radius, family="rsm").frequency_model
+    assert rsm.get_params() == {"degree": s["rsm"]["degree"], "n_members": s["ensemble_size"]}
+    with pytest.raises(ValueError, match="surrogate family 'hdmr'"):
+        build_surrogate(s, radius, family="hdmr")
     # seeds: null -> random_state, random_state + 1, ...
     assert build_surrogate({**s, "seeds": None, "random_state": 7}, radius).frequency_model.seeds == tuple(
         range(7, 7 + s["ensemble_size"])
@@ -131,16 +156,22 @@ def test_train_and_report_writes_outputs(tmp_path):
     assert {"r2_log10", "mae_log10", "noise_floor_r2_log10", "tv_distance"} <= set(metrics.columns)
     freq = metrics[metrics["target"] == "encounter_frequency"]
     vel = metrics[metrics["target"] == "impact_velocity"]
-    assert set(freq["model"]) == {"mlp", "hgb", "physical"} and set(vel["model"]) == {"mlp", "physical"}
-    assert len(freq) == 3 * (3 + 2) and len(vel) == 2 * (3 + 2)  # 3 folds + pooled + mean, per model
+    families = {"mlp", "kriging", "rsm"}
+    assert set(freq["model"]) == families | {"hgb", "physical"} and set(vel["model"]) == families | {"physical"}
+    assert len(freq) == 5 * (3 + 2) and len(vel) == 4 * (3 + 2)  # 3 folds + pooled + mean, per model
     # the noise floor stands next to the grouped-CV R2 of every model
     assert freq[freq["fold"] == "pooled"]["noise_floor_r2_log10"].between(0.9, 1.0).all()
-    assert meta["n_dropped_rows"] == 1 and meta["seeds"] == [3, 4]
-    assert set(meta["cv_scores"]["outer_summary"]) == {"mlp", "hgb", "physical"}
+    assert meta["n_dropped_rows"] == 1 and meta["params"]["frequency_model"]["params"]["seeds"] == [3, 4]
+    assert set(meta["cv_scores"]["outer_summary"]) == families | {"hgb", "physical"}
+    # the model setting names the kernel source; every family is cross-validated all the same
+    assert meta["family"] == meta["cv_scores"]["selected"] == "mlp"
+    pooled = freq[freq["fold"] == "pooled"].set_index("model")
+    assert pooled.loc[sorted(families), "coverage_90"].between(0, 1).all()
+    assert pooled.loc[["hgb", "physical"], "coverage_90"].isna().all()
     assert meta["cv_scores"]["noise_floor_r2_log10"] == pytest.approx(
         freq[freq["fold"] == "pooled"]["noise_floor_r2_log10"].iloc[0]
     )
-    assert set(meta["cv_scores"]["velocity_summary"]) == {"mlp", "physical"}
+    assert set(meta["cv_scores"]["velocity_summary"]) == families | {"physical"}
     assert meta["velocity_table"] == str(vcsv) and meta["n_velocity_rows"] == len(table) - 1
     assert (out / "parity.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert load_surrogate(out / "model.skops").n_training_rows_ == len(table) - 1

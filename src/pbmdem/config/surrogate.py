@@ -16,6 +16,21 @@ class SurrogateCV(Settings):
 
 
 @dataclass(frozen=True)
+class KrigingSettings(Settings):
+    """Gaussian-process (Kriging) family: optimiser restarts and the linear trend."""
+
+    n_restarts_optimizer: int
+    linear_trend: bool
+
+
+@dataclass(frozen=True)
+class ResponseSurfaceSettings(Settings):
+    """Polynomial response-surface family: its degree."""
+
+    degree: int
+
+
+@dataclass(frozen=True)
 class Surrogate(Settings):
     """Hyperparameter candidates, ensemble, cross-validation and target options of the surrogate."""
 
@@ -31,6 +46,10 @@ class Surrogate(Settings):
     zero_collisions: str
     domain_margin: float
     physics_offset: str
+    model: str
+    feature_transform: str
+    kriging: KrigingSettings
+    rsm: ResponseSurfaceSettings
 
     @classmethod
     def from_section(cls, section: dict) -> Surrogate:

@@ -1,8 +1,9 @@
-"""MLP encounter surrogate trained on the DEM collision and impact-velocity tables (docs/surrogate.md)."""
+"""Encounter surrogate (MLP ensemble, Kriging, response surface) trained on the DEM collision and impact-velocity tables (docs/surrogate.md)."""
 
 from .baselines import HGBBaseline, PhysicalScaling
 from .ensemble import EnsembleMLPRegressorCV, grouped_splits, make_group_cv
-from .evaluation import cross_validate_models, noise_floor_r2, summarise
+from .evaluation import cross_validate_models, noise_floor_r2, select_family, summarise
+from .families import KrigingRegressor, ResponseSurface
 from .features import FEATURE_NAMES, TARGET_NAME, TrainingData, make_features, training_data
 from .model import CollisionSurrogate, OutOfDomainWarning, VelocityModelMissingError
 from .persistence import (
@@ -18,6 +19,9 @@ from .velocity import attach_velocity_bins, fit_lognormal, lognormal_fractions
 __all__ = [
     "CollisionSurrogate",
     "EnsembleMLPRegressorCV",
+    "KrigingRegressor",
+    "ResponseSurface",
+    "select_family",
     "OutOfDomainWarning",
     "HGBBaseline",
     "PhysicalScaling",

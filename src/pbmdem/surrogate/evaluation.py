@@ -23,20 +23,19 @@ import warnings
 
 import numpy as np
 import pandas as pd
+from scipy.stats import norm
 from sklearn.base import clone
 from sklearn.metrics import mean_absolute_error, r2_score
 
 from .baselines import HGBBaseline, PhysicalScaling
-from .ensemble import EnsembleMLPRegressorCV, grouped_splits
+from .ensemble import grouped_splits
 from .features import PAIR_ID_COLUMNS, TARGET_COLUMN, TARGET_NAME, TARGET_NOISE_VAR, TrainingData
-from .model import CollisionSurrogate
 from .velocity import bin_counts, empirical_fractions, total_variation
 
 log = logging.getLogger(__name__)
 
-MODEL_NAMES = ("mlp", "hgb", "physical")
-#: Models scored on the impact-velocity distribution (the HGB baseline is a frequency baseline only).
-VELOCITY_MODEL_NAMES = ("mlp", "physical")
+#: The nominal level of the predictive intervals whose coverage is checked on held-out runs.
+COVERAGE_LEVEL = 0.90
 TARGETS = ("encounter_frequency", "impact_velocity")
 METRIC_COLUMNS = [
     "target",
@@ -49,7 +48,51 @@ METRIC_COLUMNS = [
     "mae_log10",
     "noise_floor_r2_log10",
     "tv_distance",
+    "coverage_90",
+    "coverage_90_calibrated",
+    "uncertainty_scale",
 ]
+
+
+def interval_z(level: float = COVERAGE_LEVEL) -> float:
+    """Half-width of the central ``level`` interval of a standard normal (1.645 for 90 %)."""
+    return float(norm.ppf(0.5 + level / 2))
+
+
+def coverage(y, mean, std, scale: float | np.ndarray = 1.0, level: float = COVERAGE_LEVEL) -> float:
+    """Share of rows with ``|y - mean| <= z scale std``: the observed coverage of the nominal
+    ``level`` normal interval (rows with a non-finite or zero std are left out; NaN if none)."""
+    y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
+    scale = np.broadcast_to(np.asarray(scale, float), y.shape)
+    ok = np.isfinite(y) & np.isfinite(mean) & np.isfinite(std) & (std > 0)
+    if not ok.any():
+        return float("nan")
+    return float(np.mean(np.abs(y[ok] - mean[ok]) <= interval_z(level) * scale[ok] * std[ok]))
+
+
+def calibration_scale(y, mean, std, level: float = COVERAGE_LEVEL) -> float:
+    """Factor on ``std`` that makes the nominal ``level`` interval cover that share of the rows:
+    the ``level`` quantile of ``|y - mean| / std`` over ``z``. NaN without usable rows."""
+    y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
+    ok = np.isfinite(y) & np.isfinite(mean) & np.isfinite(std) & (std > 0)
+    if ok.sum() < 2:
+        return float("nan")
+    ratio = np.abs(y[ok] - mean[ok]) / std[ok]
+    return float(np.quantile(ratio, level, method="higher") / interval_z(level))
+
+
+def cross_fitted_coverage(y, mean, std, folds, level: float = COVERAGE_LEVEL) -> float:
+    """Coverage of the calibrated interval without calibrating on the rows it is judged on:
+    every fold's rows are judged with the scale calibrated on the other folds' held-out rows."""
+    y, mean, std, folds = (np.asarray(a) for a in (y, mean, std, folds))
+    scale = np.full(len(y), np.nan)
+    for k in np.unique(folds):
+        rows = folds == k
+        scale[rows] = calibration_scale(y[~rows], mean[~rows], std[~rows], level)
+    ok = np.isfinite(scale)
+    if not ok.any():
+        return float("nan")
+    return coverage(y[ok], mean[ok], std[ok], scale[ok], level)
 
 
 def noise_floor_r2(y, noise_var) -> float:
@@ -78,7 +121,7 @@ def _metrics(y: np.ndarray, p: np.ndarray) -> tuple[float, float]:
     return r2, float(mean_absolute_error(y, p))
 
 
-def _row(target, model, fold, ids, n_train, n_test, r2, mae, floor=np.nan, tv=np.nan) -> dict:
+def _row(target, model, fold, ids, n_train, n_test, r2, mae, floor=np.nan, tv=np.nan, cov=(np.nan,) * 3) -> dict:
     return {
         "target": target,
         "model": model,
@@ -90,6 +133,9 @@ def _row(target, model, fold, ids, n_train, n_test, r2, mae, floor=np.nan, tv=np
         "mae_log10": mae,
         "noise_floor_r2_log10": floor,
         "tv_distance": tv,
+        "coverage_90": cov[0],
+        "coverage_90_calibrated": cov[1],
+        "uncertainty_scale": cov[2],
     }
 
 
@@ -106,41 +152,41 @@ def _fit(model, data: TrainingData, rows: np.ndarray):
     return clone(model).fit(data.X.iloc[rows], data.y[rows], **kwargs)
 
 
-def cross_validate_models(
-    data: TrainingData,
-    surrogate: CollisionSurrogate,
-    baselines: dict | None = None,
-    cv: str | None = None,
-    n_splits: int | None = None,
-):
-    """Evaluate the surrogate (``mlp``) and the baselines on the same grouped outer folds.
+def _uncertain(model) -> bool:
+    """True for the surrogate families (they predict with an uncertainty and the impact speeds)."""
+    return hasattr(model, "predict_velocity") and hasattr(type(model), "n_members")
 
-    ``data`` comes from :func:`~pbmdem.surrogate.features.training_data`. The outer folds hold out
-    whole DEM runs (``data.groups``); ``cv`` and ``n_splits`` default to those of the surrogate's
-    frequency model, whose grid search then runs inside every outer training set (nested).
-    Returns ``(metrics, predictions)``: ``metrics`` has one row per (model, fold) plus, per model,
-    a ``pooled`` row (all held-out predictions together) and a ``mean`` row (average over folds;
-    ``r2_log10`` of the mean row averages the per-fold R2). ``predictions`` holds every held-out
-    row with the DEM value and each model's prediction (log10), the MLP's ensemble spread and the
-    fold number.
+
+def cross_validate_models(data: TrainingData, models: dict, cv: str = "group_kfold", n_splits: int = 5):
+    """Evaluate every model on the same grouped outer folds (whole DEM runs held out).
+
+    ``models``: name -> unfitted estimator, the surrogate families (``CollisionSurrogate``s:
+    frequency, impact-speed law and uncertainty) and the baselines. ``data`` comes from
+    :func:`~pbmdem.surrogate.features.training_data`; ``cv`` and ``n_splits`` choose the outer
+    folds (the MLP's own grouped search then runs inside every outer training set: nested).
+    Returns ``(metrics, predictions)``: ``metrics`` has one row per (target, model, fold) plus, per
+    model, a ``pooled`` row (all held-out predictions together) and a ``mean`` row (average over
+    folds). For the families the pooled row also gives the coverage of the nominal 90 % interval
+    (raw, and calibrated on the other folds) and the calibration factor from all held-out rows.
+    ``predictions`` holds every held-out row with the DEM value, each model's prediction (log10),
+    the families' predictive standard deviations and the fold number.
     """
-    baselines = default_baselines() if baselines is None else baselines
-    models = {"mlp": surrogate, **baselines}
-    inner = surrogate.frequency_model if surrogate.frequency_model is not None else EnsembleMLPRegressorCV()
     groups = data.groups
-    splits = grouped_splits(groups, cv or inner.cv, n_splits or inner.n_splits)
+    splits = grouped_splits(groups, cv, n_splits)
     table = data.table
 
     keep = [c for c in (*PAIR_ID_COLUMNS, TARGET_COLUMN, TARGET_NAME, TARGET_NOISE_VAR) if c in table]
     pred = table[keep].copy()
     pred["fold"] = -1
+    families = [name for name, model in models.items() if _uncertain(model)]
     for name in models:
         pred[f"{name}_log10"] = np.nan
-    pred["mlp_std_log10"] = np.nan
+    for name in families:
+        pred[f"{name}_std_log10"] = np.nan
 
     # impact-velocity distribution: DEM fractions and log-normal fit of every row with bins
     vmask = np.isfinite(data.velocity).all(axis=1)
-    vel_models = [m for m in VELOCITY_MODEL_NAMES if m in models] if vmask.any() else []
+    vel_models = [m for m, model in models.items() if hasattr(model, "predict_velocity")] if vmask.any() else []
     if vmask.any():
         obs_frac = empirical_fractions(bin_counts(table.loc[vmask]))
         pred["velocity_mu_log10"] = np.nan
@@ -148,9 +194,8 @@ def cross_validate_models(
         pred.loc[vmask, "velocity_mu_log10"] = data.velocity[vmask, 0]
         pred.loc[vmask, "velocity_sigma"] = data.velocity[vmask, 1]
         for name in vel_models:
-            pred[f"{name}_velocity_mu_log10"] = np.nan
-            pred[f"{name}_velocity_sigma"] = np.nan
-            pred[f"{name}_velocity_tv"] = np.nan
+            for col in ("mu_log10", "sigma", "tv", "mu_std_log10"):
+                pred[f"{name}_velocity_{col}"] = np.nan
         obs_frac_full = np.full((len(table), obs_frac.shape[1]), np.nan)
         obs_frac_full[vmask] = obs_frac
 
@@ -166,13 +211,14 @@ def cross_validate_models(
         X_test = data.X.iloc[test]
         for name, model in models.items():
             fitted = _fit(model, data, train)
-            if name == "mlp":
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", UserWarning)  # held-out runs may lie at the edges
+            with warnings.catch_warnings():
+                # held-out runs may lie at the edges of the training ranges: expected here
+                warnings.simplefilter("ignore", UserWarning)
+                if name in families:
                     p, s = fitted.predict(X_test, return_std=True)
-                pred.loc[pred.index[test], "mlp_std_log10"] = s
-            else:
-                p = fitted.predict(X_test)
+                    pred.loc[pred.index[test], f"{name}_std_log10"] = s
+                else:
+                    p = fitted.predict(X_test)
             pred.loc[pred.index[test], f"{name}_log10"] = p
             r2, mae = _metrics(y, p)
             rows.append(_row("encounter_frequency", name, str(k), ids, n_train, len(test), r2, mae, floor))
@@ -181,13 +227,17 @@ def cross_validate_models(
                 te_v = data.X.iloc[vt]
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", UserWarning)
-                    mu, sigma = fitted.predict_velocity(te_v)
+                    if name in families:
+                        mu, sigma, mu_std, _ = fitted.predict_velocity(te_v, return_std=True)
+                    else:
+                        (mu, sigma), mu_std = fitted.predict_velocity(te_v), np.full(len(vt), np.nan)
                     frac = fitted.velocity_fractions(te_v)
                 tv = total_variation(frac, obs_frac_full[vt])
                 idx = pred.index[vt]
                 pred.loc[idx, f"{name}_velocity_mu_log10"] = mu
                 pred.loc[idx, f"{name}_velocity_sigma"] = sigma
                 pred.loc[idx, f"{name}_velocity_tv"] = tv
+                pred.loc[idx, f"{name}_velocity_mu_std_log10"] = mu_std
                 r2v, maev = _metrics(pred.loc[idx, "velocity_mu_log10"].to_numpy(float), mu)
                 rows.append(
                     _row("impact_velocity", name, str(k), ids, n_train, len(vt), r2v, maev, tv=float(tv.mean()))
@@ -208,20 +258,29 @@ def cross_validate_models(
     metrics = pd.DataFrame(rows, columns=METRIC_COLUMNS)
     summary = []
     floor = noise_floor_r2(pred[TARGET_NAME].to_numpy(float), pred[TARGET_NOISE_VAR].to_numpy(float))
+    folds = pred["fold"].to_numpy()
     for target, names in (("encounter_frequency", list(models)), ("impact_velocity", vel_models)):
         for name in names:
             per = metrics[(metrics["model"] == name) & (metrics["target"] == target)]
             if target == "encounter_frequency":
-                r2, mae = _metrics(pred[TARGET_NAME].to_numpy(float), pred[f"{name}_log10"].to_numpy(float))
-                n_test, tv, fl = len(pred), np.nan, floor
+                obs, p = pred[TARGET_NAME].to_numpy(float), pred[f"{name}_log10"].to_numpy(float)
+                std = pred[f"{name}_std_log10"].to_numpy(float) if name in families else None
+                sel, n_test, tv, fl = slice(None), len(pred), np.nan, floor
             else:
                 sel = vmask
-                r2, mae = _metrics(
-                    pred.loc[sel, "velocity_mu_log10"].to_numpy(float),
-                    pred.loc[sel, f"{name}_velocity_mu_log10"].to_numpy(float),
-                )
+                obs = pred.loc[sel, "velocity_mu_log10"].to_numpy(float)
+                p = pred.loc[sel, f"{name}_velocity_mu_log10"].to_numpy(float)
+                std = pred.loc[sel, f"{name}_velocity_mu_std_log10"].to_numpy(float) if name in families else None
                 n_test, tv, fl = int(sel.sum()), float(pred.loc[sel, f"{name}_velocity_tv"].mean()), np.nan
-            summary.append(_row(target, name, "pooled", "all", np.nan, n_test, r2, mae, fl, tv))
+            r2, mae = _metrics(obs, p)
+            cov = (np.nan,) * 3
+            if std is not None:
+                cov = (
+                    coverage(obs, p, std),
+                    cross_fitted_coverage(obs, p, std, folds[sel]),
+                    calibration_scale(obs, p, std),
+                )
+            summary.append(_row(target, name, "pooled", "all", np.nan, n_test, r2, mae, fl, tv, cov))
             summary.append(
                 _row(
                     target,
@@ -238,6 +297,15 @@ def cross_validate_models(
             )
     metrics = pd.concat([metrics, pd.DataFrame(summary, columns=METRIC_COLUMNS)], ignore_index=True)
     return metrics, pred
+
+
+def select_family(metrics: pd.DataFrame, families) -> str:
+    """The family with the highest pooled held-out R2 of log10 c (the smallest squared error on
+    the same rows); ties (within 1e-9) go to the earlier family in ``families``."""
+    pooled = metrics[(metrics["target"] == "encounter_frequency") & (metrics["fold"] == "pooled")]
+    scores = {name: float(pooled.loc[pooled["model"] == name, "r2_log10"].iloc[0]) for name in families}
+    best = max(scores.values())
+    return next(name for name in families if scores[name] >= best - 1e-9)
 
 
 def summarise(metrics: pd.DataFrame, target: str = "encounter_frequency") -> dict:
@@ -258,5 +326,8 @@ def summarise(metrics: pd.DataFrame, target: str = "encounter_frequency") -> dic
             "n_folds": int((~g["fold"].isin(["pooled", "mean"])).sum()),
             "noise_floor_r2_log10": float(pooled["noise_floor_r2_log10"]),
             "pooled_tv_distance": float(pooled["tv_distance"]),
+            "coverage_90": float(pooled["coverage_90"]),
+            "coverage_90_calibrated": float(pooled["coverage_90_calibrated"]),
+            "uncertainty_scale": float(pooled["uncertainty_scale"]),
         }
     return out

@@ -41,6 +41,7 @@ from .features import (
 from .velocity import lognormal_fractions
 
 PHYSICS_OFFSETS = ("cross_section", "none")
+FEATURE_TRANSFORMS = ("log", "none")
 
 #: Features the physics offsets are computed from (``physics_offset="cross_section"``).
 OFFSET_FEATURES = ("d_small", "d_large", "tip_speed")
@@ -100,13 +101,24 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
     """
 
     def __init__(
-        self, frequency_model=None, velocity_model=None, impeller_radius=None, physics_offset="none", domain_margin=0.0
+        self,
+        frequency_model=None,
+        velocity_model=None,
+        impeller_radius=None,
+        physics_offset="none",
+        domain_margin=0.0,
+        feature_transform="none",
+        uncertainty_scale=1.0,
+        velocity_uncertainty_scale=1.0,
     ):
         self.frequency_model = frequency_model
         self.velocity_model = velocity_model
         self.impeller_radius = impeller_radius
         self.physics_offset = physics_offset
         self.domain_margin = domain_margin
+        self.feature_transform = feature_transform
+        self.uncertainty_scale = uncertainty_scale
+        self.velocity_uncertainty_scale = velocity_uncertainty_scale
 
     # ------------------------------------------------------------------ helpers
     def _feature_names(self) -> list[str]:
@@ -117,8 +129,18 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         return pd.DataFrame(X, columns=self._feature_names())
 
     def _inner(self, F: pd.DataFrame):
-        """What the inner models see: the frame when fitted with feature names, else the array."""
+        """What the inner models see: the (log) features, as a frame when fitted with feature
+        names, else as an array."""
+        F = self._transform(F)
         return F if hasattr(self, "feature_names_in_") else F.to_numpy()
+
+    def _transform(self, F):
+        """The features as the inner models see them: ``log10`` of every feature with
+        ``feature_transform="log"`` (all features are positive sizes, fractions, counts and
+        speeds that enter power laws), else unchanged. Domain checks use the untransformed values."""
+        if self.feature_transform == "none":
+            return F
+        return np.log10(F)
 
     def _offset(self, F: pd.DataFrame) -> np.ndarray:
         """log10 of the physical part of c_ij that the frequency model does not have to learn."""
@@ -155,7 +177,15 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         check_impeller_radius(self.impeller_radius)
         if self.physics_offset not in PHYSICS_OFFSETS:
             raise ValueError(f"physics_offset = {self.physics_offset!r}; allowed: {PHYSICS_OFFSETS}")
+        if self.feature_transform not in FEATURE_TRANSFORMS:
+            raise ValueError(f"feature_transform = {self.feature_transform!r}; allowed: {FEATURE_TRANSFORMS}")
+        for name in ("uncertainty_scale", "velocity_uncertainty_scale"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} = {value!r}; a finite number > 0 is required")
         X, y = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
+        if self.feature_transform == "log" and not (X > 0).all():
+            raise ValueError("feature_transform = 'log' needs features > 0 in every row")
         F = self._frame(X)
         if self.physics_offset != "none":
             missing = [n for n in OFFSET_FEATURES if n not in F.columns]
@@ -259,7 +289,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
             self._warn_domain(X, stacklevel=3)
         mean, std = self.frequency_model_.predict(self._inner(F), return_std=True)
         mean = mean + self._offset(F)
-        return (mean, std) if return_std else mean
+        return (mean, self.uncertainty_scale * std) if return_std else mean
 
     def predict_log10(self, X, return_std: bool = False, check_domain: bool = True):
         """:meth:`predict` for a collision table (contract columns), a feature frame or an array."""
@@ -291,7 +321,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         if check_domain:
             self._warn_domain(X, stacklevel=3)
         mean, std = self.velocity_model_.predict(self._inner(F), return_std=True)
-        mean, std = mean.reshape(len(F), 2), std.reshape(len(F), 2)
+        mean, std = mean.reshape(len(F), 2), self.velocity_uncertainty_scale * std.reshape(len(F), 2)
         mu = mean[:, 0] + self._velocity_offset(F)
         sigma = 10.0 ** mean[:, 1]
         return (mu, sigma, std[:, 0], std[:, 1]) if return_std else (mu, sigma)
@@ -327,16 +357,16 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         """:meth:`predict` of the pairs' features from :meth:`_pairs` (unchecked domain)."""
         if not isinstance(F, np.ndarray):
             return self.predict(F, return_std=return_std, check_domain=False)
-        out = self.frequency_model_.predict_array(F, return_std=return_std)
+        out = self.frequency_model_.predict_array(self._transform(F), return_std=return_std)
         mean, std = out if return_std else (out, None)
         mean = mean + self._offset_of(F[:, 0], F[:, 1])
-        return (mean, std) if return_std else mean
+        return (mean, self.uncertainty_scale * std) if return_std else mean
 
     def _pair_velocity(self, F) -> np.ndarray:
         """:meth:`velocity_fractions` of the pairs' features from :meth:`_pairs` (unchecked domain)."""
         if not isinstance(F, np.ndarray):
             return self.velocity_fractions(F, check_domain=False)
-        mean = self.velocity_model_.predict_array(F).reshape(len(F), 2)
+        mean = self.velocity_model_.predict_array(self._transform(F)).reshape(len(F), 2)
         velocity_offset = np.zeros(len(F)) if self.physics_offset == "none" else np.log10(F[:, 5])
         return lognormal_fractions(mean[:, 0] + velocity_offset, 10.0 ** mean[:, 1])
 
@@ -388,18 +418,47 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
 
     @property
     def n_members(self) -> int:
-        """Members of the ensembles (frequency and impact-velocity models have as many)."""
+        """Members of the frequency model's uncertainty (ensemble networks or predictive quantiles)."""
         check_is_fitted(self)
-        return len(self.frequency_model_.estimators_)
+        return self.frequency_model_.n_members_
 
     def member(self, k: int) -> CollisionSurrogate:
-        """A copy of the fitted surrogate that predicts with ensemble member `k` alone (its
-        frequency and impact-velocity networks): running the PBM once per member gives the
-        spread of PBM-ANN that the ensemble's uncertainty implies."""
+        """A copy of the fitted surrogate that predicts with member ``k`` of its calibrated
+        uncertainty alone: ``mean + scale (p_k - mean)``, with ``p_k`` the k-th ensemble network
+        (MLP) or predictive quantile (Kriging, RSM) and ``scale`` the calibrated
+        ``uncertainty_scale`` (``velocity_uncertainty_scale`` for the impact-speed law). Running
+        the PBM once per member gives the spread of PBM-ANN that the uncertainty implies."""
         import copy
 
+        n = self.n_members
+        if not 0 <= int(k) < n:
+            raise ValueError(f"surrogate member {k!r}: allowed 0 .. {n - 1}")
         out = copy.copy(self)
-        out.frequency_model_ = self.frequency_model_.member(k)
+        out.frequency_model_ = CalibratedMember(self.frequency_model_, int(k), self.uncertainty_scale)
         if self.velocity_model_ is not None:
-            out.velocity_model_ = self.velocity_model_.member(k)
+            out.velocity_model_ = CalibratedMember(self.velocity_model_, int(k), self.velocity_uncertainty_scale)
         return out
+
+
+class CalibratedMember:
+    """One member of a fitted model's uncertainty, widened or narrowed by a calibration factor.
+
+    ``model.predict_members(X)`` gives (K, n[, outputs]) member predictions p; member ``k``
+    predicts ``mean_K(p) + scale (p_k - mean_K(p))`` and has no spread of its own.
+    """
+
+    def __init__(self, model, k: int, scale: float):
+        self.model, self.k, self.scale = model, int(k), float(scale)
+        self.n_members_ = 1
+
+    def predict_array(self, X, return_std: bool = False):
+        members = self.model.predict_members(np.asarray(X, dtype=np.float64))
+        mean = members.mean(axis=0)
+        out = mean + self.scale * (members[self.k] - mean)
+        return (out, np.zeros_like(out)) if return_std else out
+
+    def predict(self, X, return_std: bool = False):
+        return self.predict_array(X, return_std=return_std)
+
+    def predict_members(self, X) -> np.ndarray:
+        return self.predict_array(X)[None]

@@ -39,14 +39,19 @@ from sklearn.base import clone
 from pbmdem.impact import VELOCITY_EDGES
 
 from ._io import atomic_write
-from .ensemble import EnsembleMLPRegressorCV, _object_array, search_table
+from .ensemble import EnsembleMLPRegressorCV
+from .families import KrigingRegressor, ResponseSurface
 from .features import FEATURE_NAMES, TARGET_NAME
 from .model import CollisionSurrogate
 
+#: The model families a saved surrogate may use, by their name in the metadata (``surrogate.model``).
+FAMILY_CLASSES = {"mlp": EnsembleMLPRegressorCV, "kriging": KrigingRegressor, "rsm": ResponseSurface}
+
 FORMAT = "pbmdem-surrogate"
-#: 3: parameters of CollisionSurrogate(frequency_model=EnsembleMLPRegressorCV, velocity_model=...)
-#: (2: the former single-class parameters; 1: raw collision target). The skops layout is unchanged.
-FORMAT_VERSION = 3
+#: 4: the model family of each inner model ({"family", "params"}) and its fitted state
+#: (``frequency_state``, ``velocity_state``); the skops file holds each model's fitted pipelines.
+#: (3: MLP ensembles only; 2: the former single-class parameters; 1: raw collision target.)
+FORMAT_VERSION = 4
 
 #: Every type that may appear in a surrogate model file (module.qualname).
 ALLOWED_TYPES = frozenset(
@@ -72,6 +77,15 @@ ALLOWED_TYPES = frozenset(
         "sklearn.pipeline.Pipeline",
         "sklearn.preprocessing._data.StandardScaler",
         "sklearn.neural_network._multilayer_perceptron.MLPRegressor",
+        "sklearn.gaussian_process._gpr.GaussianProcessRegressor",
+        "sklearn.gaussian_process.kernels.ConstantKernel",
+        "sklearn.gaussian_process.kernels.Product",
+        "sklearn.gaussian_process.kernels.Sum",
+        "sklearn.gaussian_process.kernels.RBF",
+        "sklearn.gaussian_process.kernels.DotProduct",
+        "sklearn.gaussian_process.kernels.WhiteKernel",
+        "sklearn.preprocessing._polynomial.PolynomialFeatures",
+        "sklearn.linear_model._bayes.BayesianRidge",
     }
 )
 
@@ -136,19 +150,21 @@ def metadata_path_for(model_path: str | os.PathLike) -> Path:
     return Path(model_path).with_suffix(".json")
 
 
+def family_name(model) -> str:
+    """The family name (``mlp``, ``kriging``, ``rsm``) of an inner model."""
+    for name, cls in FAMILY_CLASSES.items():
+        if type(model) is cls:
+            return name
+    raise ValueError(f"{type(model).__name__} is not a surrogate model family {sorted(FAMILY_CLASSES)}")
+
+
 def _surrogate_params(surrogate: CollisionSurrogate) -> dict:
-    """JSON form of the surrogate's parameters: the nested estimators as their own parameter dicts."""
+    """JSON form of the surrogate's parameters: each inner model as its family and parameters."""
     params = surrogate.get_params(deep=False)
     for key in ("frequency_model", "velocity_model"):
         if params[key] is not None:
-            params[key] = params[key].get_params(deep=False)
+            params[key] = {"family": family_name(params[key]), "params": params[key].get_params(deep=False)}
     return params
-
-
-def _search_meta(est: EnsembleMLPRegressorCV | None) -> dict:
-    if est is None:
-        return {"best_rmse_log10": None, "results": []}
-    return {"best_rmse_log10": float(np.sqrt(-est.best_score_)), "results": search_table(est).to_dict(orient="records")}
 
 
 def save_surrogate(
@@ -170,8 +186,8 @@ def save_surrogate(
     model_path = Path(model_path)
     metadata_path = metadata_path_for(model_path) if metadata_path is None else Path(metadata_path)
     freq, vel = surrogate.frequency_model_, surrogate.velocity_model_
-    velocity = [] if vel is None else list(vel.estimators_)
-    atomic_write(model_path, lambda tmp: sio.dump({"frequency": list(freq.estimators_), "velocity": velocity}, tmp))
+    velocity = [] if vel is None else vel.fitted_parts()
+    atomic_write(model_path, lambda tmp: sio.dump({"frequency": freq.fitted_parts(), "velocity": velocity}, tmp))
     meta = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -189,20 +205,15 @@ def save_surrogate(
             else None
         ),
         "velocity_edges": [float(e) for e in VELOCITY_EDGES],
-        "velocity_best_params": None if vel is None else vel.best_params_,
-        "velocity_seeds": None if vel is None else [int(s) for s in np.atleast_1d(vel.seeds)],
-        "velocity_search": _search_meta(vel),
-        "velocity_search_cv_folds": [] if vel is None else vel.cv_folds_,
+        "family": family_name(freq),
+        "frequency_state": freq.fitted_state(),
+        "velocity_state": None if vel is None else vel.fitted_state(),
         "n_velocity_rows": surrogate.n_velocity_rows_,
         "duplicated_features": [list(p) for p in surrogate.duplicated_features_],
         "feature_names": names,
         "feature_ranges": {k: list(v) for k, v in surrogate.feature_ranges().items()},
-        "best_params": freq.best_params_,
-        "seeds": [int(s) for s in np.atleast_1d(freq.seeds)],
         "training_point_ids": list(surrogate.training_point_ids_),
         "n_training_rows": surrogate.n_training_rows_,
-        "search_cv_folds": freq.cv_folds_,
-        "search": _search_meta(freq),
         "cv_scores": cv_scores or {},
         "versions": library_versions(),
     }
@@ -317,45 +328,17 @@ def _build(cls, params: dict, what: str):
     return cls(**params)
 
 
-def _ensemble(params: dict, what: str) -> EnsembleMLPRegressorCV:
-    params = dict(params)
-    params["hidden_layer_sizes"] = tuple(tuple(h) for h in params["hidden_layer_sizes"])
-    params["alpha"] = tuple(params["alpha"])
-    params["seeds"] = tuple(params["seeds"])
-    return _build(EnsembleMLPRegressorCV, params, what)
-
-
-def _restore_ensemble(
-    est: EnsembleMLPRegressorCV, members: list, best: dict, search: dict, folds: list, names: list[str], n_outputs: int
-) -> EnsembleMLPRegressorCV:
-    """The fitted state of an :class:`EnsembleMLPRegressorCV` from its pipelines and metadata."""
-    est.estimators_ = members
-    est.best_params_ = {"hidden_layer_sizes": tuple(best["hidden_layer_sizes"]), "alpha": float(best["alpha"])}
-    rmse = search["best_rmse_log10"]
-    est.best_score_ = float("nan") if rmse is None else -(float(rmse) ** 2)
-    rows = [r for r in search["results"] if r.get("rmse_log10") is not None]
-    est.cv_results_ = None
-    if rows:
-        params = [
-            {"hidden_layer_sizes": tuple(int(u) for u in r["hidden_layer_sizes"]), "alpha": float(r["alpha"])}
-            for r in rows
-        ]
-        est.cv_results_ = {
-            "params": params,
-            "param_hidden_layer_sizes": _object_array([p["hidden_layer_sizes"] for p in params]),
-            "param_alpha": np.array([p["alpha"] for p in params], dtype=float),
-            "mean_test_score": -(np.array([r["rmse_log10"] for r in rows], dtype=float) ** 2),
-            "std_test_score": np.array(
-                [np.nan if r["fold_mse_log10_std"] is None else r["fold_mse_log10_std"] for r in rows], dtype=float
-            ),
-            "rank_test_score": np.array([r["rank"] for r in rows], dtype=int),
-        }
-    est.cv_folds_ = [list(f) for f in folds]
-    est.n_features_in_ = len(names)
-    est.feature_names_in_ = np.asarray(names, dtype=object)
-    est.n_outputs_ = n_outputs
-    est.n_iter_ = np.array([m[-1].n_iter_ for m in members], dtype=int)
-    return est
+def _inner_model(spec: dict, what: str):
+    """An unfitted inner model from its metadata ``{"family": name, "params": {...}}``."""
+    family = spec["family"]
+    if family not in FAMILY_CLASSES:
+        raise ValueError(f"{what}.family = {family!r}; allowed: {sorted(FAMILY_CLASSES)}")
+    params = dict(spec["params"])
+    if family == "mlp":
+        params["hidden_layer_sizes"] = tuple(tuple(h) for h in params["hidden_layer_sizes"])
+        params["alpha"] = tuple(params["alpha"])
+        params["seeds"] = tuple(params["seeds"])
+    return _build(FAMILY_CLASSES[family], params, what)
 
 
 def _from_metadata(stored: dict, meta: dict, metadata_path) -> CollisionSurrogate:
@@ -368,32 +351,16 @@ def _from_metadata(stored: dict, meta: dict, metadata_path) -> CollisionSurrogat
             f"{metadata_path}: features {meta['feature_names']} differ from this version's {list(FEATURE_NAMES)}"
         )
     params = dict(meta["params"])
-    params["frequency_model"] = _ensemble(params["frequency_model"], "frequency_model")
+    params["frequency_model"] = _inner_model(params["frequency_model"], "params.frequency_model")
     if params["velocity_model"] is not None:
-        params["velocity_model"] = _ensemble(params["velocity_model"], "velocity_model")
+        params["velocity_model"] = _inner_model(params["velocity_model"], "params.velocity_model")
     surrogate = _build(CollisionSurrogate, params, "surrogate")
     freq_template = surrogate.frequency_model
     vel_template = freq_template if surrogate.velocity_model is None else surrogate.velocity_model
-    surrogate.frequency_model_ = _restore_ensemble(
-        clone(freq_template),
-        stored["frequency"],
-        meta["best_params"],
-        meta["search"],
-        meta["search_cv_folds"],
-        names,
-        1,
-    )
+    surrogate.frequency_model_ = clone(freq_template).restore(stored["frequency"], meta["frequency_state"], names)
     surrogate.velocity_model_ = None
     if stored["velocity"]:
-        surrogate.velocity_model_ = _restore_ensemble(
-            clone(vel_template),
-            stored["velocity"],
-            meta["velocity_best_params"],
-            meta["velocity_search"],
-            meta["velocity_search_cv_folds"],
-            names,
-            2,
-        )
+        surrogate.velocity_model_ = clone(vel_template).restore(stored["velocity"], meta["velocity_state"], names)
     ranges = meta["feature_ranges"]
     surrogate.n_features_in_ = len(names)
     surrogate.feature_names_in_ = np.asarray(names, dtype=object)

@@ -11,7 +11,22 @@ import pandas as pd
 from ._io import atomic_write
 from .features import TARGET_NAME
 
-MODEL_LABELS = {"mlp": "MLP ensemble", "hgb": "gradient boosting", "physical": "physical scaling"}
+MODEL_LABELS = {
+    "mlp": "MLP ensemble (ANN)",
+    "kriging": "Kriging",
+    "rsm": "response surface",
+    "hgb": "gradient boosting",
+    "physical": "physical scaling",
+}
+
+
+def _plain_log_ticks(ax) -> None:
+    """Major tick labels only on log axes (minor labels overlap on short ranges)."""
+    from matplotlib.ticker import LogFormatterSciNotation, NullFormatter
+
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_formatter(LogFormatterSciNotation(labelOnlyBase=False, minor_thresholds=(0, 0)))
+        axis.set_minor_formatter(NullFormatter())
 
 
 def _square_log_axes(ax, lo: float, hi: float) -> None:
@@ -21,13 +36,14 @@ def _square_log_axes(ax, lo: float, hi: float) -> None:
     ax.set_xlim(lo, hi)
     ax.set_ylim(lo, hi)
     ax.set_aspect("equal")
+    _plain_log_ticks(ax)
 
 
 def parity_plot(
     predictions: pd.DataFrame,
     path: str | os.PathLike,
     metrics: pd.DataFrame | None = None,
-    models=("mlp", "hgb", "physical"),
+    models=tuple(MODEL_LABELS),
     dpi: int = 120,
 ) -> Path:
     """Write a PNG with one panel per model: held-out DEM vs predicted frequency per pair."""
@@ -48,7 +64,7 @@ def parity_plot(
     vel_models = [m for m in models if f"{m}_velocity_mu_log10" in predictions]
     n_rows = 2 if vel_models else 1
     fig, axes = plt.subplots(
-        n_rows, len(models), figsize=(4.2 * len(models), 4.6 * n_rows), squeeze=False, layout="constrained"
+        n_rows, len(models), figsize=(3.6 * len(models), 4.0 * n_rows), squeeze=False, layout="constrained"
     )
     for ax in axes[1][len(vel_models) :] if vel_models else []:
         ax.axis("off")
@@ -81,8 +97,8 @@ def parity_plot(
         pred = 10.0 ** predictions[f"{m}_log10"].to_numpy(float)
         for r in rpms:
             sel = predictions["rpm"].to_numpy() == r
-            if m == "mlp" and "mlp_std_log10" in predictions:
-                s = predictions["mlp_std_log10"].to_numpy(float)[sel]
+            if f"{m}_std_log10" in predictions:
+                s = predictions[f"{m}_std_log10"].to_numpy(float)[sel]
                 yerr = np.vstack([pred[sel] * (1 - 10.0**-s), pred[sel] * (10.0**s - 1)])
                 ax.errorbar(
                     obs[sel],

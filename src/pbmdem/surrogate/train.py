@@ -12,11 +12,11 @@ import numpy as np
 import pandas as pd
 
 from ._io import atomic_write
-from .evaluation import METRIC_COLUMNS, cross_validate_models, summarise
+from .evaluation import METRIC_COLUMNS, cross_validate_models, select_family, summarise
 from .features import training_data
 from .persistence import save_surrogate
 from .plots import empty_plot, parity_plot
-from .settings import build_baselines, build_surrogate
+from .settings import FAMILIES, build_baselines, build_families
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +46,14 @@ def train_and_report(
     n_jobs: int | None = None,
     velocity_table: str | os.PathLike | pd.DataFrame | None = None,
 ) -> dict:
-    """Grouped CV of MLP and baselines, final fit on every run, then write the outputs.
+    """Grouped CV of the model families and baselines, choice of the kernel source, final fit on
+    every run, then write the outputs.
+
+    Every family of :data:`~pbmdem.surrogate.settings.FAMILIES` and every baseline is scored on
+    the same outer folds. The kernel source is ``surrogate.model``, or with ``auto`` the family
+    with the best pooled held-out R2 of log10 c (:func:`~pbmdem.surrogate.evaluation.select_family`;
+    held-out scores only). Its calibration factors (the held-out 90 % interval coverage made
+    nominal) become ``uncertainty_scale`` and ``velocity_uncertainty_scale`` of the final model.
 
     ``table`` is the collision table (``results/dem/collisions.csv``), ``velocity_table`` the
     impact-velocity table (``results/dem/impact_velocity.csv``); without it the surrogate learns
@@ -81,10 +88,13 @@ def train_and_report(
     for w in caught:
         log.warning("%s: %s", w.category.__name__, w.message)
 
-    surrogate = build_surrogate(settings, impeller_radius, n_jobs=n_jobs)
+    families = build_families(settings, impeller_radius, n_jobs=n_jobs)
     t0 = time.perf_counter()
     if len(np.unique(data.groups)) >= 2:
-        metrics, predictions = cross_validate_models(data, surrogate, build_baselines(settings))
+        cv = settings["cv"]
+        metrics, predictions = cross_validate_models(
+            data, {**families, **build_baselines(settings)}, cv["strategy"], cv["n_splits"]
+        )
     else:
         log.warning("a single DEM run: no held-out evaluation possible (metrics and parity plot are empty)")
         metrics, predictions = pd.DataFrame(columns=METRIC_COLUMNS), None
@@ -93,11 +103,14 @@ def train_and_report(
     velocity_summary = summarise(metrics, "impact_velocity")
     for name, s in summary.items():
         log.info(
-            "%-8s held-out R2(log10 c) %.3f (pooled; replicate noise floor %.3f), MAE %.3f decades",
+            "%-8s held-out R2(log10 c) %.3f (pooled; replicate noise floor %.3f), MAE %.3f decades, "
+            "90 %% interval coverage %.2f (calibrated %.2f)",
             name,
             s["pooled_r2_log10"],
             s["noise_floor_r2_log10"],
             s["pooled_mae_log10"],
+            s["coverage_90"],
+            s["coverage_90_calibrated"],
         )
     for name, s in velocity_summary.items():
         log.info(
@@ -109,6 +122,27 @@ def train_and_report(
             s["pooled_tv_distance"],
         )
 
+    choice = settings["model"]
+    selected = choice if choice != "auto" else (select_family(metrics, FAMILIES) if summary else FAMILIES[0])
+    reason = (
+        f"surrogate.model = {choice}"
+        if choice != "auto"
+        else "surrogate.model = auto: the best pooled held-out R2 of log10 c of " + ", ".join(FAMILIES)
+    )
+    log.info("kernel source: %s (%s)", selected, reason)
+    surrogate = families[selected]
+    scales = {}
+    for key, s in (("uncertainty_scale", summary), ("velocity_uncertainty_scale", velocity_summary)):
+        scale = s.get(selected, {}).get("uncertainty_scale", float("nan"))
+        scales[key] = float(scale) if np.isfinite(scale) and scale > 0 else 1.0
+    surrogate.set_params(**scales)
+    log.info(
+        "calibrated uncertainty of %s: standard deviations x %.3g (frequency), x %.3g (impact speed)",
+        selected,
+        scales["uncertainty_scale"],
+        scales["velocity_uncertainty_scale"],
+    )
+
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -117,21 +151,23 @@ def train_and_report(
         log.warning("%s: %s", w.category.__name__, w.message)
     t_fit = time.perf_counter() - t0
     freq = surrogate.frequency_model_
+    state = freq.fitted_state()
     log.info(
-        "final fit: %s, %d members, %.1f s (cross-validation %.1f s)",
-        freq.best_params_,
-        len(freq.estimators_),
+        "final fit of %s: %s, %.1f s (cross-validation %.1f s)",
+        selected,
+        state.get("best_params", state.get("fitted")),
         t_fit,
         t_cv,
     )
 
     cv_scores = {
-        "strategy": freq.cv,
+        "strategy": settings["cv"]["strategy"],
+        "selected": selected,
+        "selection": reason,
         "outer_summary": summary,
         "noise_floor_r2_log10": (next(iter(summary.values()))["noise_floor_r2_log10"] if summary else None),
         "velocity_summary": velocity_summary,
         "outer_folds": metrics[~metrics["fold"].isin(["pooled", "mean"])].to_dict(orient="records"),
-        "search_best_rmse_log10": float(np.sqrt(-freq.best_score_)),
     }
     meta = save_surrogate(
         surrogate,

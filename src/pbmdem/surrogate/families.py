@@ -1,0 +1,247 @@
+"""Model families of the encounter surrogate besides the MLP ensemble: Kriging and a response surface.
+
+The seed study's introduction names the families used as reduced-order models of expensive
+simulators: response surfaces (RSM), Kriging, high-dimensional model representation (HDMR) and
+neural networks (the study's choice). :mod:`pbmdem.surrogate` offers three of them as the PBM's
+kernel source, side by side on the same grouped folds (``pbmdem.surrogate.evaluation``):
+
+* ``mlp``: :class:`~pbmdem.surrogate.ensemble.EnsembleMLPRegressorCV` (the study's ANN);
+* ``kriging``: :class:`KrigingRegressor`, a Gaussian process with an anisotropic squared-exponential
+  kernel (one length scale per feature), a linear trend (universal Kriging) and a noise term;
+* ``rsm``: :class:`ResponseSurface`, a full quadratic polynomial with Bayesian ridge
+  regularisation. A second-order polynomial in the (log) features is also a second-order HDMR
+  expansion with polynomial component functions, so HDMR is not fitted separately.
+
+Both classes here are scikit-learn regressors on any numeric ``X`` (1-D or 2-D ``y``; every output
+gets a model of its own) whose ``predict(X, return_std=True)`` returns the predictive standard
+deviation of the model (Kriging: posterior incl. the fitted noise; RSM: Bayesian ridge
+posterior), and share the interface the surrogate uses with the MLP ensemble:
+
+* :meth:`predict_array` (the PBM's frequent calls; scikit-learn's per-call validation skipped
+  through ``sklearn.config_context``),
+* :meth:`predict_members` (``n_members`` quantiles ``mean + z_k std`` of the predictive normal,
+  ``z_k = Phi^-1((k + 1/2) / n)``), so that PBM-ANN can run once per member as with the ensemble,
+* :meth:`fitted_parts` / :meth:`restore` for persistence (only scikit-learn objects are stored).
+
+Fits are single-threaded (:func:`~pbmdem.surrogate._threads.single_threaded`): the matrices are
+tiny, and one thread makes the optimiser's path independent of the thread count.
+"""
+
+from __future__ import annotations
+
+import logging
+import warnings
+
+import numpy as np
+from scipy.stats import norm
+from sklearn import config_context
+from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.gaussian_process import GaussianProcessRegressor
+from sklearn.gaussian_process.kernels import RBF, DotProduct, WhiteKernel
+from sklearn.gaussian_process.kernels import ConstantKernel as Constant
+from sklearn.linear_model import BayesianRidge
+from sklearn.pipeline import Pipeline
+from sklearn.preprocessing import PolynomialFeatures, StandardScaler
+from sklearn.utils.validation import check_is_fitted, validate_data
+
+from ._threads import single_threaded
+
+log = logging.getLogger(__name__)
+
+
+def member_quantiles(n: int) -> np.ndarray:
+    """``n`` standard-normal quantiles at ``(k + 1/2) / n``: symmetric, mean 0 (0 for n = 1)."""
+    return norm.ppf((np.arange(int(n)) + 0.5) / int(n))
+
+
+class _PerOutputRegressor(RegressorMixin, BaseEstimator):
+    """Shared machinery: one scikit-learn pipeline per output, predictive mean and std, members."""
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.target_tags.multi_output = True
+        return tags
+
+    def _pipeline(self, n_features: int) -> Pipeline:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _check_params(self) -> None:
+        if int(self.n_members) < 1:
+            raise ValueError(f"n_members must be >= 1, got {self.n_members!r}")
+
+    def fit(self, X, y, groups=None):
+        """Fit one pipeline per column of ``y``; ``groups`` is accepted for the common interface
+        (these families have no hyperparameter search over groups) and not used."""
+        self._check_params()
+        X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
+        Y = y.reshape(len(y), -1)
+        with single_threaded(), warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ConvergenceWarning)
+            self.estimators_ = [self._pipeline(X.shape[1]).fit(X, Y[:, j]) for j in range(Y.shape[1])]
+        for w in caught:
+            self._report_warning(w)
+        self.n_outputs_ = 1 if y.ndim == 1 else int(Y.shape[1])
+        return self
+
+    def _report_warning(self, w) -> None:
+        """Warnings of the inner fits are passed on (never dropped)."""
+        warnings.warn(w.message, w.category, stacklevel=4)
+
+    @property
+    def n_members_(self) -> int:
+        return int(self.n_members)
+
+    def _mean_std(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        with single_threaded():
+            out = [est.predict(X, return_std=True) for est in self.estimators_]
+        mean = np.column_stack([m for m, _ in out])
+        std = np.column_stack([s for _, s in out])
+        if self.n_outputs_ == 1:
+            return mean[:, 0], std[:, 0]
+        return mean, std
+
+    def predict(self, X, return_std: bool = False):
+        """Predictive mean (units of ``y``); with ``return_std`` also the predictive standard deviation."""
+        check_is_fitted(self)
+        X = validate_data(self, X, reset=False, dtype=np.float64)
+        mean, std = self._mean_std(X)
+        return (mean, std) if return_std else mean
+
+    def predict_array(self, X: np.ndarray, return_std: bool = False):
+        """:meth:`predict` on a trusted float64 array in the training feature order, without
+        scikit-learn's per-call validation (``config_context``)."""
+        check_is_fitted(self)
+        X = np.asarray(X, dtype=np.float64)
+        if X.ndim != 2 or X.shape[1] != self.n_features_in_:
+            raise ValueError(f"predict_array: X must be (n, {self.n_features_in_}), got shape {X.shape}")
+        with config_context(assume_finite=True, skip_parameter_validation=True):
+            mean, std = self._mean_std(X)
+        return (mean, std) if return_std else mean
+
+    def predict_members(self, X) -> np.ndarray:
+        """(n_members, n[, n_outputs]): ``mean + z_k std`` for the quantiles of :func:`member_quantiles`."""
+        mean, std = self.predict_array(np.asarray(X, dtype=np.float64), return_std=True)
+        z = member_quantiles(self.n_members).reshape((-1,) + (1,) * mean.ndim)
+        return mean[None] + z * std[None]
+
+    # ------------------------------------------------------------------ persistence
+    def fitted_parts(self) -> list:
+        """The fitted scikit-learn pipelines (one per output) that persistence stores."""
+        check_is_fitted(self)
+        return list(self.estimators_)
+
+    def fitted_state(self) -> dict:
+        """JSON-able fitted information besides the pipelines (for the metadata)."""
+        return {"n_outputs": self.n_outputs_, "fitted": self.describe()}
+
+    def restore(self, parts: list, state: dict, feature_names: list[str]):
+        """The fitted state from stored pipelines (inverse of :meth:`fitted_parts`/:meth:`fitted_state`)."""
+        self.estimators_ = list(parts)
+        self.n_outputs_ = int(state["n_outputs"])
+        if len(self.estimators_) != max(1, self.n_outputs_):
+            raise ValueError(f"{len(self.estimators_)} stored model(s) for {self.n_outputs_} output(s)")
+        self.n_features_in_ = len(feature_names)
+        self.feature_names_in_ = np.asarray(feature_names, dtype=object)
+        return self
+
+
+class KrigingRegressor(_PerOutputRegressor):
+    """Kriging: Gaussian-process regression with an anisotropic kernel and a noise term.
+
+    Kernel (on standardised features): ``C * RBF(length_scale=[l_1 .. l_d]) + T * DotProduct +
+    WhiteKernel``. One length scale per feature (ARD) lets the data say how smooth the response is
+    along each feature and which features hardly matter (their length scale runs to the upper
+    bound); the dot-product term is a linear trend (universal Kriging), so that outside the data the
+    prediction follows the trend rather than reverting to the mean (with log features and a log
+    target a linear trend is a power law); the white-noise term absorbs the replicate noise of the
+    DEM means. Hyperparameters maximise the log marginal likelihood (L-BFGS-B) from the initial
+    values and ``n_restarts_optimizer`` random starts drawn with ``random_state``; ``normalize_y``.
+
+    Parameters
+    ----------
+    n_restarts_optimizer : int
+        Extra optimiser starts (the best likelihood wins).
+    linear_trend : bool
+        Add the dot-product (linear trend) term.
+    random_state : int
+        Seed of the optimiser's restarts.
+    n_members : int
+        Members of :meth:`predict_members` (quantiles of the predictive normal).
+    """
+
+    def __init__(self, n_restarts_optimizer: int = 5, linear_trend: bool = True, random_state: int = 0, n_members=5):
+        self.n_restarts_optimizer = n_restarts_optimizer
+        self.linear_trend = linear_trend
+        self.random_state = random_state
+        self.n_members = n_members
+
+    def _pipeline(self, n_features: int) -> Pipeline:
+        kernel = Constant(1.0, (1e-3, 1e3)) * RBF(np.ones(n_features), (1e-2, 1e3))
+        if self.linear_trend:
+            kernel = kernel + Constant(0.1, (1e-4, 1e2)) * DotProduct(1.0, (1e-3, 1e2))
+        kernel = kernel + WhiteKernel(1e-2, (1e-8, 1.0))
+        gp = GaussianProcessRegressor(
+            kernel,
+            normalize_y=True,
+            n_restarts_optimizer=int(self.n_restarts_optimizer),
+            random_state=int(self.random_state),
+        )
+        return Pipeline([("scale", StandardScaler()), ("gp", gp)])
+
+    def _report_warning(self, w) -> None:
+        # A length scale at its upper bound means the response hardly varies along that feature:
+        # expected for an irrelevant feature, so it is logged, not raised; any other warning is raised.
+        if issubclass(w.category, ConvergenceWarning) and "close to the specified" in str(w.message):
+            log.info("Kriging: %s", w.message)
+            return
+        super()._report_warning(w)
+
+    def describe(self) -> list[str]:
+        """The fitted kernel of every output."""
+        check_is_fitted(self)
+        return [str(est[-1].kernel_) for est in self.estimators_]
+
+
+class ResponseSurface(_PerOutputRegressor):
+    """Response surface: a polynomial of ``degree`` in the standardised features, Bayesian ridge.
+
+    The polynomial terms (with interactions) are standardised and fitted by
+    :class:`~sklearn.linear_model.BayesianRidge`, which chooses the penalty from the data (evidence
+    maximisation) instead of a search and gives the posterior predictive standard deviation.
+
+    Parameters
+    ----------
+    degree : int
+        Polynomial degree (2: the classical quadratic response surface).
+    n_members : int
+        Members of :meth:`predict_members`.
+    """
+
+    def __init__(self, degree: int = 2, n_members: int = 5):
+        self.degree = degree
+        self.n_members = n_members
+
+    def _check_params(self) -> None:
+        super()._check_params()
+        if not 1 <= int(self.degree) <= 4:
+            raise ValueError(f"degree must be 1 .. 4, got {self.degree!r}")
+
+    def _pipeline(self, n_features: int) -> Pipeline:
+        return Pipeline(
+            [
+                ("scale", StandardScaler()),
+                ("poly", PolynomialFeatures(int(self.degree), include_bias=False)),
+                ("scale_terms", StandardScaler()),
+                ("ridge", BayesianRidge()),
+            ]
+        )
+
+    def describe(self) -> list[str]:
+        """Terms and the fitted noise and weight precisions of every output."""
+        check_is_fitted(self)
+        return [
+            f"{est['poly'].n_output_features_} terms, noise precision {est[-1].alpha_:.4g}, "
+            f"weight precision {est[-1].lambda_:.4g}"
+            for est in self.estimators_
+        ]

@@ -1,4 +1,5 @@
-"""Encounter surrogate (MLP ensemble, Kriging, response surface) trained on the DEM collision and impact-velocity tables (docs/surrogate.md)."""
+"""Encounter surrogate (MLP ensemble, Kriging, response surface) of the DEM collision and impact-velocity
+tables (docs/surrogate.md)."""
 
 from .baselines import HGBBaseline, PhysicalScaling
 from .ensemble import EnsembleMLPRegressorCV, grouped_splits, make_group_cv

@@ -1,7 +1,7 @@
 """scikit-learn's estimator checks on the surrogate's estimators (small instances, quick fits).
 
-``EnsembleMLPRegressorCV``, ``CollisionSurrogate(physics_offset="none")`` and ``HGBBaseline``
-must pass every check. ``PhysicalScaling`` and ``CollisionSurrogate(physics_offset="cross_section")``
+``EnsembleMLPRegressorCV``, ``KrigingRegressor``, ``ResponseSurface``,
+``CollisionSurrogate(physics_offset="none")`` and ``HGBBaseline`` must pass every check. ``PhysicalScaling`` and ``CollisionSurrogate(physics_offset="cross_section")``
 are laws of the named features ``d_small``, ``d_large`` and ``tip_speed``; the checks below fit
 them on generic arrays (2-10 unnamed columns, negative values), which such a law cannot take, so
 exactly these checks are expected to fail for them (strict: a listed check that passes fails the
@@ -22,7 +22,15 @@ from sklearn.metrics import r2_score
 from sklearn.utils.estimator_checks import parametrize_with_checks
 from sklearn.utils.validation import check_is_fitted
 
-from pbmdem.surrogate import CollisionSurrogate, EnsembleMLPRegressorCV, HGBBaseline, PhysicalScaling, training_data
+from pbmdem.surrogate import (
+    CollisionSurrogate,
+    EnsembleMLPRegressorCV,
+    HGBBaseline,
+    KrigingRegressor,
+    PhysicalScaling,
+    ResponseSurface,
+    training_data,
+)
 from pbmdem.surrogate.synthetic import make_synthetic_table
 
 #: A small ensemble: two members, one tiny architecture, quick lbfgs fits.
@@ -84,6 +92,8 @@ ESTIMATORS = [
     ),
     HGBBaseline(max_iter=20),
     PhysicalScaling(),
+    KrigingRegressor(n_restarts_optimizer=0),
+    ResponseSurface(),
 ]
 
 

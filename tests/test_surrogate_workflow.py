@@ -112,7 +112,12 @@ def test_build_surrogate_from_settings():
         "n_members": s["ensemble_size"],
     }
     rsm = build_surrogate(s, radius, family="rsm").frequency_model
-    assert rsm.get_params() == {"degree": s["rsm"]["degree"], "n_members": s["ensemble_size"]}
+    assert rsm.get_params() == {
+        "degree": tuple(s["rsm"]["degree"]),
+        "cv": s["cv"]["strategy"],
+        "n_splits": s["cv"]["n_splits"],
+        "n_members": s["ensemble_size"],
+    }
     with pytest.raises(ValueError, match="surrogate family 'hdmr'"):
         build_surrogate(s, radius, family="hdmr")
     # seeds: null -> random_state, random_state + 1, ...

@@ -25,9 +25,9 @@ class KrigingSettings(Settings):
 
 @dataclass(frozen=True)
 class ResponseSurfaceSettings(Settings):
-    """Polynomial response-surface family: its degree."""
+    """Polynomial response-surface family: its candidate degrees (chosen by grouped CV)."""
 
-    degree: int
+    degree: tuple[int, ...]
 
 
 @dataclass(frozen=True)

@@ -50,6 +50,16 @@ from ._threads import single_threaded
 log = logging.getLogger(__name__)
 
 
+#: Bounds of the Kriging length scales, in standard deviations of each (log) feature. A DEM grid
+#: samples a feature at a handful of levels (3-5 speeds, a few distributions), about one standard
+#: deviation apart: a length scale far below 0.1 could only fit the noise between levels, and one
+#: that wanders down there makes the likelihood multi-modal, so that the optimiser's choice
+#: depended on the BLAS kernel (5 % different predictions under OpenBLAS' Haswell and SkylakeX
+#: kernels with (0.01, 1000); 1e-12 with these bounds; benchmarks/bench_surrogate_reproducibility.py).
+#: 1000 means "irrelevant feature".
+LENGTH_SCALE_BOUNDS = (0.1, 1e3)
+
+
 def member_quantiles(n: int) -> np.ndarray:
     """``n`` standard-normal quantiles at ``(k + 1/2) / n``: symmetric, mean 0 (0 for n = 1)."""
     return norm.ppf((np.arange(int(n)) + 0.5) / int(n))
@@ -150,7 +160,8 @@ class KrigingRegressor(_PerOutputRegressor):
     """Kriging: Gaussian-process regression with an anisotropic kernel and a noise term.
 
     Kernel (on standardised features): ``C * RBF(length_scale=[l_1 .. l_d]) + T * DotProduct +
-    WhiteKernel``. One length scale per feature (ARD) lets the data say how smooth the response is
+    WhiteKernel`` (length scales within :data:`LENGTH_SCALE_BOUNDS`, the dot product's offset fixed
+    at 1 so that the trend adds one hyperparameter, its variance ``T``). One length scale per feature (ARD) lets the data say how smooth the response is
     along each feature and which features hardly matter (their length scale runs to the upper
     bound); the dot-product term is a linear trend (universal Kriging), so that outside the data the
     prediction follows the trend rather than reverting to the mean (with log features and a log
@@ -177,10 +188,10 @@ class KrigingRegressor(_PerOutputRegressor):
         self.n_members = n_members
 
     def _pipeline(self, n_features: int) -> Pipeline:
-        kernel = Constant(1.0, (1e-3, 1e3)) * RBF(np.ones(n_features), (1e-2, 1e3))
+        kernel = Constant(1.0, (1e-3, 1e3)) * RBF(np.ones(n_features), LENGTH_SCALE_BOUNDS)
         if self.linear_trend:
-            kernel = kernel + Constant(0.1, (1e-4, 1e2)) * DotProduct(1.0, (1e-3, 1e2))
-        kernel = kernel + WhiteKernel(1e-2, (1e-8, 1.0))
+            kernel = kernel + Constant(0.1, (1e-4, 1e2)) * DotProduct(1.0, "fixed")
+        kernel = kernel + WhiteKernel(1e-2, (1e-6, 1.0))
         gp = GaussianProcessRegressor(
             kernel,
             normalize_y=True,
@@ -204,44 +215,103 @@ class KrigingRegressor(_PerOutputRegressor):
 
 
 class ResponseSurface(_PerOutputRegressor):
-    """Response surface: a polynomial of ``degree`` in the standardised features, Bayesian ridge.
+    """Response surface: a polynomial in the standardised features, fitted by Bayesian ridge.
 
     The polynomial terms (with interactions) are standardised and fitted by
     :class:`~sklearn.linear_model.BayesianRidge`, which chooses the penalty from the data (evidence
-    maximisation) instead of a search and gives the posterior predictive standard deviation.
+    maximisation) and gives the posterior predictive standard deviation. The degree is chosen per
+    output among the candidates ``degree`` by grouped cross-validation over ``groups`` (whole DEM
+    runs held out; the smallest mean squared error, ties to the lower degree): a full quadratic in
+    six features has 27 terms, and held out along a feature that the grid samples at a few levels
+    it can extrapolate wildly, where a lower degree does not.
 
     Parameters
     ----------
-    degree : int
-        Polynomial degree (2: the classical quadratic response surface).
+    degree : int or sequence of int
+        Candidate polynomial degrees (1: a power law in log features; 2: the classical quadratic
+        response surface).
+    cv, n_splits
+        Grouped splitter of the degree choice (as for the MLP ensemble).
     n_members : int
         Members of :meth:`predict_members`.
+
+    Attributes
+    ----------
+    degrees_ : list of int
+        The chosen degree of every output.
+    cv_mse_ : list of dict
+        Grouped-CV mean squared error of every candidate degree, per output (empty without groups).
     """
 
-    def __init__(self, degree: int = 2, n_members: int = 5):
+    def __init__(self, degree=(1, 2), cv: str = "group_kfold", n_splits: int = 5, n_members: int = 5):
         self.degree = degree
+        self.cv = cv
+        self.n_splits = n_splits
         self.n_members = n_members
+
+    def _degrees(self) -> list[int]:
+        degrees = sorted({int(d) for d in np.atleast_1d(self.degree)})
+        if not degrees or not all(1 <= d <= 4 for d in degrees):
+            raise ValueError(f"degree: candidates from 1 to 4 are allowed, got {self.degree!r}")
+        return degrees
 
     def _check_params(self) -> None:
         super()._check_params()
-        if not 1 <= int(self.degree) <= 4:
-            raise ValueError(f"degree must be 1 .. 4, got {self.degree!r}")
+        self._degrees()
 
-    def _pipeline(self, n_features: int) -> Pipeline:
+    def _pipeline_of(self, degree: int) -> Pipeline:
         return Pipeline(
             [
                 ("scale", StandardScaler()),
-                ("poly", PolynomialFeatures(int(self.degree), include_bias=False)),
+                ("poly", PolynomialFeatures(degree, include_bias=False)),
                 ("scale_terms", StandardScaler()),
                 ("ridge", BayesianRidge()),
             ]
         )
 
+    def fit(self, X, y, groups=None):
+        """Choose the degree of every output by grouped CV over ``groups`` (with one candidate or
+        fewer than two groups: the lowest candidate), then fit it on all rows."""
+        from .ensemble import grouped_splits
+
+        self._check_params()
+        X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
+        Y = y.reshape(len(y), -1)
+        degrees = self._degrees()
+        splits = []
+        if len(degrees) > 1 and groups is not None and len(np.unique(groups)) >= 2:
+            splits = grouped_splits(np.asarray(groups), self.cv, self.n_splits)
+        self.degrees_, self.cv_mse_, self.estimators_ = [], [], []
+        with single_threaded():
+            for j in range(Y.shape[1]):
+                mse = {}
+                for degree in degrees if splits else []:
+                    err = [
+                        (self._pipeline_of(degree).fit(X[tr], Y[tr, j]).predict(X[te]) - Y[te, j]) ** 2
+                        for tr, te in splits
+                    ]
+                    mse[degree] = float(np.mean(np.concatenate(err)))
+                best = min(mse, key=lambda d: (mse[d], d)) if mse else degrees[0]
+                self.degrees_.append(int(best))
+                self.cv_mse_.append(mse)
+                self.estimators_.append(self._pipeline_of(best).fit(X, Y[:, j]))
+        self.n_outputs_ = 1 if y.ndim == 1 else int(Y.shape[1])
+        return self
+
+    def restore(self, parts: list, state: dict, feature_names: list[str]):
+        super().restore(parts, state, feature_names)
+        self.degrees_ = [int(est["poly"].degree) for est in self.estimators_]
+        self.cv_mse_ = [{int(k): float(v) for k, v in m.items()} for m in state["cv_mse"]]
+        return self
+
+    def fitted_state(self) -> dict:
+        return {**super().fitted_state(), "cv_mse": [{str(k): v for k, v in m.items()} for m in self.cv_mse_]}
+
     def describe(self) -> list[str]:
-        """Terms and the fitted noise and weight precisions of every output."""
+        """Degree, terms and the fitted noise and weight precisions of every output."""
         check_is_fitted(self)
         return [
-            f"{est['poly'].n_output_features_} terms, noise precision {est[-1].alpha_:.4g}, "
-            f"weight precision {est[-1].lambda_:.4g}"
+            f"degree {est['poly'].degree}: {est['poly'].n_output_features_} terms, noise precision "
+            f"{est[-1].alpha_:.4g}, weight precision {est[-1].lambda_:.4g}"
             for est in self.estimators_
         ]

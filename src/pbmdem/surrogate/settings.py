@@ -39,7 +39,9 @@ def _inner_model(typed: Surrogate, family: str, n_jobs: int | None):
             n_members=typed.ensemble_size,
         )
     if family == "rsm":
-        return ResponseSurface(degree=typed.rsm.degree, n_members=typed.ensemble_size)
+        return ResponseSurface(
+            degree=typed.rsm.degree, cv=typed.cv.strategy, n_splits=typed.cv.n_splits, n_members=typed.ensemble_size
+        )
     raise ValueError(f"surrogate family {family!r}; allowed: {FAMILIES}")
 
 

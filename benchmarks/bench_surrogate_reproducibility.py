@@ -1,0 +1,100 @@
+"""Does a refit of every surrogate family give the same model on another BLAS kernel or thread count?
+
+For each OpenBLAS kernel in KERNELS (OPENBLAS_CORETYPE, set for a child process only) and thread
+count, the child fits every family (``pbmdem.surrogate.settings.FAMILIES``, settings of the given
+config) on the same collision and impact-velocity tables and prints its predictions on the
+training rows; the parent prints, per family, the largest relative difference of the encounter
+frequency and of the median impact speed against the first setting. The issue's target is
+<= 1e-6. Usage:
+
+    .venv/bin/python benchmarks/bench_surrogate_reproducibility.py [collisions.csv impact_velocity.csv]
+
+Without tables, the synthetic tables of pbmdem.surrogate.synthetic are used.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+KERNELS = ("default", "Haswell", "Prescott")
+THREADS = (1, 2)
+CHILD = r"""
+import json, sys, warnings
+import numpy as np, pandas as pd
+from threadpoolctl import threadpool_info
+from pbmdem.config import load_config
+from pbmdem.surrogate.features import training_data
+from pbmdem.surrogate.settings import FAMILIES, build_families
+cfg = load_config(sys.argv[1])
+radius = cfg.granulator.impeller.tip_radius
+table, velocity = pd.read_csv(sys.argv[2]), pd.read_csv(sys.argv[3])
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")
+    data = training_data(table, radius, cfg.surrogate.zero_collisions, velocity_table=velocity)
+    out = {"blas": [i.get("architecture") for i in threadpool_info()]}
+    for name, model in build_families(cfg.surrogate.to_dict(), radius).items():
+        model.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
+        out[name] = {
+            "log10_c": model.predict(data.X, check_domain=False).tolist(),
+            "mu": model.predict_velocity(data.X, check_domain=False)[0].tolist(),
+        }
+print(json.dumps(out))
+"""
+
+
+def main(argv: list[str]) -> None:
+    root = Path(__file__).resolve().parents[1]
+    config = root / "config" / "config.yaml"
+    with tempfile.TemporaryDirectory() as tmp:
+        if len(argv) >= 2:
+            tables = argv[:2]
+        else:
+            sys.path.insert(0, str(root / "src"))
+            from pbmdem.surrogate.synthetic import make_synthetic_tables
+
+            t, v = make_synthetic_tables(0.0265, rpms=(300, 600, 1200), sample_velocities=True)
+            tables = [Path(tmp) / "c.csv", Path(tmp) / "v.csv"]
+            t.to_csv(tables[0], index=False)
+            v.to_csv(tables[1], index=False)
+        runs = {}
+        for kernel in KERNELS:
+            for threads in THREADS:
+                env = dict(os.environ, OMP_NUM_THREADS=str(threads), OPENBLAS_NUM_THREADS=str(threads))
+                env.pop("OPENBLAS_CORETYPE", None)
+                if kernel != "default":
+                    env["OPENBLAS_CORETYPE"] = kernel
+                proc = subprocess.run(
+                    [sys.executable, "-c", CHILD, str(config), *map(str, tables)],
+                    env=env,
+                    capture_output=True,
+                    text=True,
+                    check=True,
+                )
+                runs[(kernel, threads)] = json.loads(proc.stdout.strip().splitlines()[-1])
+                print(
+                    f"fitted with kernel {kernel} ({runs[(kernel, threads)]['blas']}), {threads} thread(s)", flush=True
+                )
+    ref_key = next(iter(runs))
+    ref = runs[ref_key]
+    families = [k for k in ref if k != "blas"]
+    print(f"\nlargest relative difference against {ref_key} (encounter frequency c; median impact speed)")
+    print("| setting | " + " | ".join(families) + " |")
+    print("| --- |" + " --- |" * len(families))
+    for key, run in runs.items():
+        cells = []
+        for name in families:
+            dc = np.max(np.abs(10 ** (np.array(run[name]["log10_c"]) - np.array(ref[name]["log10_c"])) - 1))
+            dv = np.max(np.abs(10 ** (np.array(run[name]["mu"]) - np.array(ref[name]["mu"])) - 1))
+            cells.append(f"{dc:.1e}; {dv:.1e}")
+        print(f"| {key[0]}, {key[1]} thread(s) | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

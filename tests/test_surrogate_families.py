@@ -1,0 +1,256 @@
+"""The surrogate's model families side by side: recovery of a known law, reproducibility, coverage."""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+from sklearn.base import clone
+from threadpoolctl import threadpool_limits
+
+from pbmdem.config import Surrogate
+from pbmdem.surrogate import (
+    CollisionSurrogate,
+    KrigingRegressor,
+    ResponseSurface,
+    cross_validate_models,
+    load_surrogate,
+    save_surrogate,
+    select_family,
+    summarise,
+    training_data,
+)
+from pbmdem.surrogate.evaluation import (
+    calibration_scale,
+    coverage,
+    cross_fitted_coverage,
+    default_baselines,
+    interval_z,
+)
+from pbmdem.surrogate.families import member_quantiles
+from pbmdem.surrogate.settings import FAMILIES, build_families
+from pbmdem.surrogate.synthetic import make_synthetic_tables, power_law
+
+R = 0.0265
+#: Small but complete settings: every family, fast MLP candidates, 3 outer folds.
+SETTINGS = Surrogate.from_section(
+    {
+        "hidden_layer_sizes": [[6]],
+        "alpha": [0.1],
+        "ensemble_size": 3,
+        "max_iter": 1000,
+        "cv": {"strategy": "group_kfold", "n_splits": 4},
+        "kriging": {"n_restarts_optimizer": 2},
+    }
+).to_dict()
+
+
+@pytest.fixture(scope="module")
+def data():
+    table, velocity = make_synthetic_tables(R, rpms=(300, 600, 900), seed=3)
+    return training_data(table, R, velocity_table=velocity)
+
+
+@pytest.fixture(scope="module")
+def cv_result(data):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return cross_validate_models(
+            data, {**build_families(SETTINGS, R), **default_baselines()}, cv="group_kfold", n_splits=4
+        )
+
+
+def test_every_family_recovers_the_known_law_on_held_out_runs(cv_result, data):
+    metrics, pred = cv_result
+    summary = summarise(metrics)
+    floor = summary["mlp"]["noise_floor_r2_log10"]
+    for name in FAMILIES:
+        s = summary[name]
+        print(f"{name}: held-out R2 {s['pooled_r2_log10']:.4f} (floor {floor:.4f}), MAE {s['pooled_mae_log10']:.4f}")
+        # the synthetic law is smooth (a power law): each family reaches the replicate noise floor closely
+        assert s["pooled_r2_log10"] > floor - 0.02, name
+        assert s["pooled_mae_log10"] < 0.04, name
+    # and every family beats the baselines on the same folds
+    for name in FAMILIES:
+        assert summary[name]["pooled_r2_log10"] > summary["hgb"]["pooled_r2_log10"]
+        assert summary[name]["pooled_r2_log10"] > summary["physical"]["pooled_r2_log10"]
+    # the predictions match the noise-free law (not only the noisy replicate means)
+    n_total = data.table.groupby("point_id")["n_total"].first().reindex(pred["point_id"]).to_numpy()
+    law = np.log10(power_law(pred["d_i"], pred["d_j"], pred["rpm"], n_total))
+    for name in FAMILIES:
+        assert np.mean(np.abs(pred[f"{name}_log10"] - law)) < 0.03, name
+    # the impact-speed law too
+    vel = summarise(metrics, "impact_velocity")
+    for name in FAMILIES:
+        assert vel[name]["pooled_r2_log10"] > 0.9, name
+
+
+def test_families_report_coverage_and_are_selected_by_held_out_score(cv_result):
+    metrics, pred = cv_result
+    pooled = metrics[(metrics["fold"] == "pooled") & (metrics["target"] == "encounter_frequency")].set_index("model")
+    for name in FAMILIES:
+        row = pooled.loc[name]
+        assert 0 < row["coverage_90"] <= 1 and 0 < row["coverage_90_calibrated"] <= 1
+        assert row["uncertainty_scale"] > 0
+        # the figures are what the predictions give
+        obs, p, s = pred["log10_encounter_frequency_per_pair"], pred[f"{name}_log10"], pred[f"{name}_std_log10"]
+        assert row["coverage_90"] == pytest.approx(coverage(obs, p, s))
+        assert row["uncertainty_scale"] == pytest.approx(calibration_scale(obs, p, s))
+    assert pooled.loc[["hgb", "physical"], "coverage_90"].isna().all()
+    best = pooled.loc[list(FAMILIES), "r2_log10"].idxmax()
+    assert select_family(metrics, FAMILIES) == best
+
+
+def test_selection_prefers_the_earlier_family_on_a_tie():
+    metrics = pd.DataFrame(
+        {
+            "target": "encounter_frequency",
+            "fold": "pooled",
+            "model": ["mlp", "kriging", "rsm"],
+            "r2_log10": [0.95, 0.97, 0.97],
+        }
+    )
+    assert select_family(metrics, ("mlp", "kriging", "rsm")) == "kriging"
+    assert select_family(metrics, ("rsm", "kriging")) == "rsm"
+    metrics.loc[0, "r2_log10"] = 0.99
+    assert select_family(metrics, ("mlp", "kriging", "rsm")) == "mlp"
+
+
+def test_coverage_and_calibration_on_known_noise():
+    rng = np.random.default_rng(0)
+    n = 20000
+    mean = rng.normal(size=n)
+    sigma = rng.uniform(0.05, 0.2, size=n)
+    y = mean + sigma * rng.normal(size=n)
+    # the right standard deviation covers the nominal 90 %
+    assert coverage(y, mean, sigma) == pytest.approx(0.90, abs=0.01)
+    # a standard deviation half as large covers P(|z| <= 0.82) = 59 %; calibration finds the factor 2
+    assert coverage(y, mean, sigma / 2) == pytest.approx(0.588, abs=0.01)
+    assert calibration_scale(y, mean, sigma / 2) == pytest.approx(2.0, rel=0.03)
+    folds = np.arange(n) % 5
+    assert cross_fitted_coverage(y, mean, sigma / 2, folds) == pytest.approx(0.90, abs=0.01)
+    assert interval_z() == pytest.approx(1.6449, abs=1e-4)
+    # rows without a usable standard deviation are left out; none left: NaN
+    assert np.isnan(coverage(y[:3], mean[:3], np.zeros(3)))
+    assert np.isnan(calibration_scale(y[:1], mean[:1], sigma[:1]))
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_refits_do_not_depend_on_the_thread_count(data, family):
+    model = build_families(SETTINGS, R)[family]
+    fits = []
+    for threads in (1, 2):
+        with threadpool_limits(limits=threads), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            fitted = clone(model).fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
+            fits.append(
+                (
+                    fitted.predict(data.X, return_std=True, check_domain=False),
+                    fitted.predict_velocity(data.X, check_domain=False),
+                )
+            )
+    (c1, s1), (mu1, sg1) = fits[0]
+    (c2, s2), (mu2, sg2) = fits[1]
+    for a, b in ((c1, c2), (s1, s2), (mu1, mu2), (sg1, sg2)):
+        np.testing.assert_allclose(a, b, rtol=1e-6, atol=0)
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_held_out_score_is_stable_under_tiny_target_perturbations(data, family):
+    model = build_families(SETTINGS, R)[family]
+    rng = np.random.default_rng(1)
+    scores = []
+    for eps in (0.0, 1e-9):
+        perturbed = dataclasses.replace(data, y=data.y * (1 + eps * rng.standard_normal(len(data.y))))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            metrics, _ = cross_validate_models(perturbed, {family: model}, cv="group_kfold", n_splits=4)
+        scores.append(summarise(metrics)[family]["pooled_r2_log10"])
+    print(f"{family}: held-out R2 {scores[0]:.6f} vs {scores[1]:.6f} with targets perturbed by 1e-9")
+    assert abs(scores[0] - scores[1]) <= 0.005
+
+
+@pytest.mark.parametrize("cls, params", [(KrigingRegressor, {}), (ResponseSurface, {"degree": 2})])
+def test_closed_form_families_give_their_predictive_spread_and_members(cls, params):
+    rng = np.random.default_rng(2)
+    X = rng.uniform(-1, 1, size=(60, 3))
+    y = np.column_stack([1 + X[:, 0] - 0.5 * X[:, 1] ** 2, X[:, 2]]) + 0.01 * rng.normal(size=(60, 2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = cls(n_members=4, **params).fit(X, y)
+    mean, std = model.predict(X, return_std=True)
+    assert mean.shape == std.shape == (60, 2) and (std > 0).all()
+    assert np.sqrt(np.mean((mean - y) ** 2)) < 0.05  # the quadratic law is within reach of both
+    np.testing.assert_allclose(model.predict_array(X), mean, rtol=1e-12)
+    members = model.predict_members(X)
+    assert members.shape == (4, 60, 2)
+    np.testing.assert_allclose(members.mean(axis=0), mean, atol=1e-12)  # symmetric quantiles
+    np.testing.assert_allclose(members[-1] - mean, member_quantiles(4)[-1] * std, rtol=1e-12)
+    single = cls(**params).fit(X, y[:, 0])
+    assert single.predict(X).shape == (60,) and single.predict_members(X).shape == (5, 60)
+
+
+def test_members_follow_the_calibrated_scale(data):
+    model = build_families(SETTINGS, R)["kriging"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fitted = clone(model).fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
+        wide = clone(model).set_params(uncertainty_scale=2.0).fit(data.X, data.y, groups=data.groups)
+    d, n = np.array([0.002, 0.003, 0.004]), np.array([900.0, 600.0, 400.0])
+    c, s = fitted.frequency_matrix(d, n, 600, return_std=True, check_domain=False)
+    cw, sw = wide.frequency_matrix(d, n, 600, return_std=True, check_domain=False)
+    np.testing.assert_allclose(cw, c, rtol=1e-12)
+    np.testing.assert_allclose(sw, 2 * s, rtol=1e-12)
+    z = member_quantiles(fitted.n_members)
+    for k in (0, fitted.n_members - 1):
+        ck = fitted.member(k).frequency_matrix(d, n, 600, check_domain=False)
+        cwk = wide.member(k).frequency_matrix(d, n, 600, check_domain=False)
+        np.testing.assert_allclose(np.log10(ck), np.log10(c) + z[k] * s, rtol=1e-9)
+        np.testing.assert_allclose(np.log10(cwk), np.log10(c) + 2 * z[k] * s, rtol=1e-9)
+    with pytest.raises(ValueError, match="member 9"):
+        fitted.member(9)
+    with pytest.raises(ValueError, match="uncertainty_scale"):
+        clone(model).set_params(uncertainty_scale=0.0).fit(data.X, data.y)
+
+
+@pytest.mark.parametrize("family", ["kriging", "rsm"])
+def test_closed_form_families_round_trip_through_the_model_files(data, family, tmp_path):
+    model = build_families(SETTINGS, R)[family].set_params(uncertainty_scale=1.3, velocity_uncertainty_scale=0.8)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fitted = model.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
+    meta = save_surrogate(fitted, tmp_path / "model.skops")
+    assert meta["family"] == family and meta["params"]["uncertainty_scale"] == 1.3
+    loaded = load_surrogate(tmp_path / "model.skops")
+    assert isinstance(loaded, CollisionSurrogate) and loaded.n_members == fitted.n_members
+    d, n = np.array([0.002, 0.003, 0.004]), np.array([900.0, 600.0, 400.0])
+    for a, b in zip(
+        fitted.frequency_matrix(d, n, 600, return_std=True, check_domain=False),
+        loaded.frequency_matrix(d, n, 600, return_std=True, check_domain=False),
+    ):
+        np.testing.assert_array_equal(a, b)
+    ea, eb = fitted.encounters(d, n, 600, check_domain=False), loaded.encounters(d, n, 600, check_domain=False)
+    np.testing.assert_array_equal(ea.velocity_fractions, eb.velocity_fractions)
+    np.testing.assert_array_equal(
+        fitted.member(0).frequency_matrix(d, n, 600, check_domain=False),
+        loaded.member(0).frequency_matrix(d, n, 600, check_domain=False),
+    )
+
+
+def test_response_surface_chooses_its_degree_by_grouped_cv():
+    rng = np.random.default_rng(4)
+    groups = np.repeat(np.arange(12), 6).astype(str)
+    X = rng.uniform(-1, 1, size=(72, 2))
+    linear = 1 + 2 * X[:, 0] - X[:, 1] + 0.01 * rng.normal(size=72)
+    curved = linear + 1.5 * X[:, 0] * X[:, 1]
+    model = ResponseSurface(degree=(1, 2), n_splits=4).fit(X, np.column_stack([linear, curved]), groups=groups)
+    # a linear law keeps degree 1 (a tie or better goes to the lower degree); an interaction needs 2
+    assert model.degrees_ == [1, 2]
+    assert set(model.cv_mse_[1]) == {1, 2} and model.cv_mse_[1][2] < model.cv_mse_[1][1]
+    # without groups: the lowest candidate, no search
+    assert ResponseSurface(degree=(2, 1)).fit(X, curved).degrees_ == [1]
+    with pytest.raises(ValueError, match="degree"):
+        ResponseSurface(degree=(0, 2)).fit(X, curved)

@@ -2,12 +2,13 @@
 
 ``EnsembleMLPRegressorCV``, ``KrigingRegressor``, ``ResponseSurface``,
 ``CollisionSurrogate(physics_offset="none")`` and ``HGBBaseline`` must pass every check.
-``PhysicalScaling`` and ``CollisionSurrogate(physics_offset="cross_section")`` are laws of the
-named features ``d_small``, ``d_large`` and ``tip_speed``; the checks below fit them on generic arrays (2-10 unnamed columns, negative values), which such a law cannot take, so
-exactly these checks are expected to fail for them (strict: a listed check that passes fails the
-test). Their API checks (clone, parameters, tags, repr, unfitted errors) run and must pass;
-``test_surrogate_model.py`` exercises them on feature frames. ``check_array_api_input`` is
-skipped by scikit-learn itself unless ``SCIPY_ARRAY_API=1`` is set.
+``PhysicalScaling`` and ``CollisionSurrogate(physics_offset="cross_section")`` are laws of the named
+features ``d_small``, ``d_large`` and ``tip_speed``; the checks below fit them on generic arrays
+(2-10 unnamed columns, negative values), which such a law cannot take, so exactly these checks are
+expected to fail for them (strict: a listed check that passes fails the test). Their API checks
+(clone, parameters, tags, repr, unfitted errors) run and must pass; ``test_surrogate_model.py``
+exercises them on feature frames. ``check_array_api_input`` is skipped by scikit-learn itself unless
+``SCIPY_ARRAY_API=1`` is set.
 """
 
 import pickle

@@ -162,11 +162,12 @@ class KrigingRegressor(_PerOutputRegressor):
     Kernel (on standardised features): ``C * RBF(length_scale=[l_1 .. l_d]) + T * DotProduct +
     WhiteKernel`` (length scales within :data:`LENGTH_SCALE_BOUNDS`, the dot product's offset fixed
     at 1 so that the trend adds one hyperparameter, its variance ``T``). One length scale per
-    feature (ARD) lets the data say how smooth the response is along each feature and which
-    features hardly matter (their length scale runs to the upper bound); the dot-product term is a linear trend (universal Kriging), so that outside the data the
-    prediction follows the trend rather than reverting to the mean (with log features and a log
-    target a linear trend is a power law); the white-noise term absorbs the replicate noise of the
-    DEM means. Hyperparameters maximise the log marginal likelihood (L-BFGS-B) from the initial
+    feature (ARD) lets the data say how smooth the response is along each feature and which features
+    hardly matter (their length scale runs to the upper bound); the dot-product term is a linear
+    trend (universal Kriging), so that outside the data the prediction follows the trend rather than
+    reverting to the mean (with log features and a log target a linear trend is a power law); the
+    white-noise term absorbs the replicate noise of the DEM means. Hyperparameters maximise the log
+    marginal likelihood (L-BFGS-B) from the initial
     values and ``n_restarts_optimizer`` random starts drawn with ``random_state``; ``normalize_y``.
 
     Parameters

@@ -266,7 +266,8 @@ def build_report(
     parts += [
         "<h2>Surrogate (held-out DEM runs)</h2>",
         table_html(_metrics(metrics), 3),
-        f"<p>Selected: {escape(json.dumps(meta.get('best_params', meta.get('params', {}))))}; "
+        f"<p>Kernel source: {escape(str(meta.get('family')))} "
+        f"({escape(str(meta.get('cv_scores', {}).get('selection', '')))}); "
         f"training runs: {len(meta.get('training_point_ids', []))}.</p>",
         _image(parity, "surrogate parity"),
     ]

@@ -79,12 +79,14 @@ def _train(args) -> int:
         print(
             f"{name:9s} held-out R2(log10 c) {_fmt(s['pooled_r2_log10'])} (replicate noise floor "
             f"{_fmt(s['noise_floor_r2_log10'])})  MAE {_fmt(s['pooled_mae_log10'])} decades"
+            + (f"  90 % interval coverage {_fmt(s['coverage_90'])}" if s.get("coverage_90") is not None else "")
         )
     for name, s in meta["cv_scores"]["velocity_summary"].items():
         print(
             f"{name:9s} held-out median impact speed MAE {_fmt(s['pooled_mae_log10'])} decades, "
             f"bin-fraction distance (TV) {_fmt(s['pooled_tv_distance'])}"
         )
+    print(f"kernel source: {meta['family']} ({meta['cv_scores']['selection']})")
     print(f"wrote {args.out}/model.skops, model.json, metrics.csv, parity.png")
     return 0
 

@@ -60,6 +60,30 @@ def grouped_splits(
     return splits
 
 
+def n_weights(hidden_layer_sizes, n_features: int, n_outputs: int = 1) -> int:
+    """Weights and biases of an MLP with these hidden layers."""
+    widths = [int(n_features), *map(int, hidden_layer_sizes), int(n_outputs)]
+    return sum((a + 1) * b for a, b in zip(widths[:-1], widths[1:]))
+
+
+def one_standard_error_choice(cv_results: dict, n_features: int, n_splits: int) -> int:
+    """Index of the candidate chosen by the one-standard-error rule (Breiman et al. 1984).
+
+    Among the candidates whose mean grouped-CV score lies within one standard error (fold spread
+    / sqrt(folds)) of the best, the simplest: fewest weights, then the largest L2 penalty, then the
+    first. With a few DEM runs the candidates' scores often differ by less than their fold-to-fold
+    noise; taking the top score then lets a rounding difference (another BLAS kernel, a 1e-9 change
+    of the targets) flip the choice and with it the whole model.
+    """
+    mean = np.asarray(cv_results["mean_test_score"], float)
+    std = np.asarray(cv_results["std_test_score"], float)
+    best = int(np.argmax(mean))
+    se = std[best] / np.sqrt(max(1, n_splits)) if np.isfinite(std[best]) else 0.0
+    near = [k for k in range(len(mean)) if mean[k] >= mean[best] - se]
+    params = cv_results["params"]
+    return min(near, key=lambda k: (n_weights(params[k]["hidden_layer_sizes"], n_features), -params[k]["alpha"], k))
+
+
 def _object_array(values) -> np.ndarray:
     """1-d object array of the given values (tuples stay tuples, not a 2-d array)."""
     out = np.empty(len(values), dtype=object)
@@ -226,9 +250,11 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
                 warnings.simplefilter("always", ConvergenceWarning)
                 search.fit(X, y)
             n_conv += sum(issubclass(w.category, ConvergenceWarning) for w in caught)
-            best = dict(search.best_params_)
-            self.best_score_ = float(search.best_score_)
             self.cv_results_ = self._results(search.cv_results_, len(splits))
+            k_best = one_standard_error_choice(self.cv_results_, X.shape[1], len(splits))
+            chosen = self.cv_results_["params"][k_best]
+            best = {"mlp__hidden_layer_sizes": chosen["hidden_layer_sizes"], "mlp__alpha": chosen["alpha"]}
+            self.best_score_ = float(self.cv_results_["mean_test_score"][k_best])
             self.cv_folds_ = [sorted({str(g) for g in groups[test]}) for _, test in splits]
             rmse = np.sqrt(-self.cv_results_["mean_test_score"])
             for k, params in enumerate(self.cv_results_["params"]):

@@ -182,3 +182,24 @@ def test_replicate_mean_and_standard_error(tmp_path):
     assert grid["encounters"].tolist() == [4.0]
     assert grid["encounter_frequency_per_pair"].iloc[0] == pytest.approx(0.2)
     assert grid["encounter_frequency_per_pair_se"].iloc[0] == pytest.approx(0.1 / np.sqrt(3))
+
+
+def test_a_damaged_row_is_located_by_line_byte_and_frame(tmp_path):
+    text = "".join(SEQUENCE)
+    bad = text.replace("3 1 3e-06", "3 1 \x07\x9a", 1)  # frame 4 (step 115), its second row
+    path = tmp_path / "pairs.dump"
+    path.write_bytes(bad.encode("latin-1"))
+    line = text[: text.index("3 1 3e-06")].count("\n") + 1
+    byte = len(text[: text.index("3 1 3e-06")].encode())
+    with pytest.raises(DumpFormatError) as err:
+        read_dump(path, 3)
+    assert f"corrupt dump: {path}: line {line} (byte {byte}), frame 4 (step 115)" in str(err.value)
+    assert "an entry row of 3 finite numbers expected" in str(err.value)
+
+
+def test_find_damage_accepts_a_well_formed_dump_and_rejects_a_step_going_back(tmp_path):
+    from pbmdem.dem.dumps import find_damage
+
+    assert find_damage(write(tmp_path, "pairs.dump", SEQUENCE)) is None
+    path = write(tmp_path, "back.dump", [SEQUENCE[0], SEQUENCE[2], SEQUENCE[1]])
+    assert "time step 105 does not follow 110" in find_damage(path)

@@ -76,14 +76,16 @@ def read_dump(path: str | Path, columns: int) -> Snapshots:
                 skip_blank_lines=True,
             )
         except (ValueError, pd.errors.ParserError) as exc:
-            raise DumpFormatError(f"{path}: malformed entry rows ({exc})") from None
+            raise DumpFormatError(
+                f"corrupt dump: {find_damage(path) or f'{path}: malformed entry rows ({exc})'}"
+            ) from None
         data = frame.to_numpy()
     # a short last row (fewer fields than columns) is truncation; a literal 'nan' is caught below
     short_last = bool(total) and len(body.rstrip().rsplit(b"\n", 1)[-1].split()) < columns
     if len(data) != total or short_last:
         raise DumpFormatError(
-            f"{path}: truncated or inconsistent: headers announce {total} rows in {len(steps)} frames, "
-            f"found {len(data)} complete rows (the run was probably interrupted)"
+            f"corrupt dump: {find_damage(path) or path}: headers announce {total} rows in {len(steps)} frames, "
+            f"found {len(data)} complete rows"
         )
     offsets = np.concatenate([[0], np.cumsum(counts)])
     # 'nan' or 'inf' in any column (ids, overlaps, positions) would silently change the counts
@@ -102,6 +104,93 @@ def read_dump(path: str | Path, columns: int) -> Snapshots:
     if last_lines < counts[-1]:
         raise DumpFormatError(f"{path}: last frame (step {steps[-1]}) is truncated: {last_lines} of {counts[-1]} rows")
     return Snapshots(steps=steps, offsets=offsets, data=data)
+
+
+def find_damage(path: str | Path, expected_steps=None) -> str | None:
+    """Where the dump `path` stops being a well-formed LIGGGHTS dump, or None if it is one.
+
+    Every line is checked against the structure LIGGGHTS writes (TIMESTEP, step, NUMBER OF
+    ENTRIES/ATOMS, count, BOX BOUNDS and its three lines, the ENTRIES/ATOMS header with its column
+    names, then exactly `count` rows of as many finite numbers); steps must increase. With
+    `expected_steps` (the planned frame steps) a frame at an unplanned step, or a missing frame,
+    is damage too. The answer names the line, the byte offset and the frame. Slow (one Python
+    pass over the lines): for explaining a dump already found inconsistent, not for reading one."""
+    path = Path(path)
+    raw = path.read_bytes()
+    planned = None if expected_steps is None else [int(x) for x in expected_steps]
+    offset, line_no, frame, step, previous = 0, 0, 0, None, None
+    lines = raw.split(b"\n")
+    if lines and lines[-1] == b"":
+        lines.pop()
+    state, remaining, width = "item", 0, 0
+
+    def where(message: str, line: bytes) -> str:
+        at = f"frame {frame} (step {step})" if step is not None else f"frame {frame}"
+        after = "" if previous is None else f", after the frame at step {previous}"
+        return f"{path}: line {line_no} (byte {offset}), {at}{after}: {message}; found {line[:60]!r}"
+
+    for line in lines:
+        line_no += 1
+        if state == "item":
+            if line != b"ITEM: TIMESTEP":
+                return where("'ITEM: TIMESTEP' expected (a frame header)", line)
+            frame, previous, step = frame + 1, step, None
+            state = "step"
+        elif state == "step":
+            if not line.strip().isdigit():
+                return where("a time step (an integer) expected", line)
+            step = int(line)
+            if previous is not None and step <= previous:
+                return where(f"time step {step} does not follow {previous}", line)
+            if planned is not None:
+                if frame > len(planned):
+                    return where(f"more frames than the {len(planned)} planned", line)
+                if step != planned[frame - 1]:
+                    return where(f"frame {frame} should be at step {planned[frame - 1]} (a frame is missing)", line)
+            state = "count_item"
+        elif state == "count_item":
+            if line not in (b"ITEM: NUMBER OF ENTRIES", b"ITEM: NUMBER OF ATOMS"):
+                return where("'ITEM: NUMBER OF ENTRIES' expected", line)
+            state = "count"
+        elif state == "count":
+            if not line.strip().isdigit():
+                return where("a row count (an integer) expected", line)
+            remaining, state = int(line), "box_item"
+        elif state == "box_item":
+            if not line.startswith(b"ITEM: BOX BOUNDS"):
+                return where("'ITEM: BOX BOUNDS' expected", line)
+            state, box = "box", 0
+        elif state == "box":
+            if not _numbers(line, (2, 3)):
+                return where("a line of box bounds (2 or 3 finite numbers) expected", line)
+            box += 1
+            state = "box" if box < 3 else "rows_item"
+        elif state == "rows_item":
+            if not (line.startswith(b"ITEM: ENTRIES") or line.startswith(b"ITEM: ATOMS")):
+                return where("'ITEM: ENTRIES' or 'ITEM: ATOMS' expected", line)
+            width = len(line.split()) - 2
+            state = "rows" if remaining else "item"
+        elif state == "rows":
+            if not _numbers(line, (width,)):
+                return where(f"an entry row of {width} finite numbers expected", line)
+            remaining -= 1
+            state = "rows" if remaining else "item"
+        offset += len(line) + 1
+    if state != "item":
+        return where(f"truncated: the file ends inside a frame ({state.replace('_', ' ')} expected)", b"<end of file>")
+    if planned is not None and frame < len(planned):
+        return where(f"the file ends after {frame} of {len(planned)} planned frames", b"<end of file>")
+    return None
+
+
+def _numbers(line: bytes, widths: tuple[int, ...]) -> bool:
+    words = line.split()
+    if len(words) not in widths:
+        return False
+    try:
+        return all(np.isfinite(float(w)) for w in words)
+    except ValueError:
+        return False
 
 
 def read_classes(path: str | Path) -> tuple[np.ndarray, np.ndarray]:

@@ -267,24 +267,22 @@ def _edit_metadata(meta_path, edit):
     ],
 )
 def test_metadata_violations_name_the_file_and_the_key(saved, edit, key):
-    from pbmdem.surrogate.metadata import MetadataError
-
     model, meta_path = saved
     _edit_metadata(meta_path, edit)
-    with pytest.raises(MetadataError) as err:
+    with pytest.raises(IncompatibleVersionError) as err:
         load_surrogate(model)
     assert f"surrogate metadata {meta_path}" in str(err.value)
     assert key in str(err.value)
 
 
 def test_a_nan_range_in_the_metadata_is_refused(saved):
-    from pbmdem.surrogate.metadata import MetadataError
-
     model, meta_path = saved
     meta = json.loads(meta_path.read_text())
     meta["feature_ranges"]["d_large"][1] = float("nan")
     meta_path.write_text(json.dumps(meta))  # Python writes NaN, and its JSON reader accepts it
-    with pytest.raises(MetadataError, match=r"key feature_ranges\.d_large\[1\] = nan: every number must be finite"):
+    with pytest.raises(
+        IncompatibleVersionError, match=r"key feature_ranges\.d_large\[1\] = nan: every number must be finite"
+    ):
         load_surrogate(model)
 
 

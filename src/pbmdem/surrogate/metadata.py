@@ -124,6 +124,9 @@ SCHEMA = {
 _VALIDATOR = Draft202012Validator(SCHEMA)
 
 
+RETRAIN = " (the file was edited, damaged or written by another pbmdem version; retrain the surrogate)"
+
+
 class MetadataError(ValueError):
     """A surrogate's metadata file violates its contract; the message names the file and the key."""
 
@@ -146,31 +149,41 @@ def _non_finite(obj, path=()):
             yield from _non_finite(v, (*path, k))
 
 
-def check_metadata(meta, path: str | os.PathLike, fmt: str, version: int) -> dict:
-    """`meta` (the parsed ``model.json`` at `path`) if it fulfils the contract, else MetadataError
-    naming the file, the key, the value and what is allowed. Metadata of another format than `fmt`
-    or another format version than `version` is returned unchecked, for the loader to refuse with
-    its own message."""
+def check_metadata(meta, path: str | os.PathLike, fmt: str, version: int, error: type = MetadataError) -> dict:
+    """`meta` (the parsed ``model.json`` at `path`) if it fulfils the contract, else `error` (the
+    loader passes its IncompatibleVersionError) naming the file, the key, the value and what is
+    allowed. Metadata of another format than `fmt` or another format version than `version` is
+    returned unchecked, for the loader to refuse with its own message."""
+    try:
+        return _check(meta, path, fmt, version)
+    except MetadataError as exc:
+        if error is MetadataError:
+            raise
+        raise error(str(exc)) from None
+
+
+def _check(meta, path, fmt: str, version: int) -> dict:
     where = f"surrogate metadata {path}"
     if not isinstance(meta, dict):
         raise MetadataError(f"{where}: a JSON object is required, found {type(meta).__name__} {meta!r:.60}")
     if meta.get("format") != fmt or meta.get("format_version") != version:
         return meta
     for key, value in _non_finite(meta):
-        raise MetadataError(f"{where}: key {_key(key)} = {value!r}: every number must be finite")
+        raise MetadataError(f"{where}: key {_key(key)} = {value!r}: every number must be finite{RETRAIN}")
     errors = sorted(_VALIDATOR.iter_errors(meta), key=lambda e: list(map(str, e.absolute_path)))
     if errors:
         lines = [f"key {_key(e.absolute_path)} = {e.instance!r:.80}: {e.message:.200}" for e in errors[:10]]
         more = f" (and {len(errors) - 10} more)" if len(errors) > 10 else ""
-        raise MetadataError(f"{where}: " + "; ".join(lines) + more)
+        raise MetadataError(f"{where}: " + "; ".join(lines) + more + RETRAIN)
     ranges = meta["feature_ranges"]
     missing = [n for n in meta["feature_names"] if n not in ranges]
     if missing:
-        raise MetadataError(f"{where}: key feature_ranges lacks the training range of {missing}")
+        raise MetadataError(f"{where}: key feature_ranges lacks the training range of {missing}{RETRAIN}")
     for name in meta["feature_names"]:
         lo, hi = ranges[name]
         if not lo <= hi:
             raise MetadataError(
                 f"{where}: key feature_ranges.{name} = {[lo, hi]}: the lower bound must not exceed the upper one"
+                + RETRAIN
             )
     return meta

@@ -243,7 +243,7 @@ def read_metadata(metadata_path: str | os.PathLike) -> dict:
         meta = json.loads(Path(metadata_path).read_text(encoding="utf-8"))
     except (OSError, json.JSONDecodeError) as exc:
         raise SurrogateLoadError(f"cannot read surrogate metadata {metadata_path}: {exc}") from exc
-    meta = check_metadata(meta, metadata_path, FORMAT, FORMAT_VERSION)  # types, keys, finite ranges: metadata.py
+    meta = check_metadata(meta, metadata_path, FORMAT, FORMAT_VERSION, IncompatibleVersionError)  # metadata.py
     if meta.get("format") != FORMAT:
         raise SurrogateLoadError(f"{metadata_path} is not {FORMAT} metadata")
     if meta.get("format_version") != FORMAT_VERSION:

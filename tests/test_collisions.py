@@ -169,8 +169,16 @@ def test_replicate_mean_and_standard_error(tmp_path):
                 "class_j": 0,
                 "d_i": 0.002,
                 "d_j": 0.002,
+                "n_i": 10,
+                "n_j": 10,
+                "n_total": 10,
+                "collisions": 2 * enc,
+                "sampling_time": 1.0,
+                "frequency": 2 * enc,
+                "frequency_per_pair": 2 * f,
                 "encounters": enc,
                 "encounter_frequency_per_pair": f,
+                "impact_velocity_median": 0.5,
             }
         )
     paths = []

@@ -227,3 +227,57 @@ def test_a_dump_missing_its_last_frame_after_a_finished_log_is_corruption(tiny_r
     pairs.write_bytes(b"ITEM: TIMESTEP\n".join(frames[:-1]))
     with pytest.raises(DumpFormatError, match=r"corrupt: \S+pairs.dump is well-formed but holds \d+ frames"):
         check_finished(tiny_run["plan"], run)
+
+
+def test_a_cancelled_job_ends_within_killwait_even_if_the_engine_ignores_sigterm(tmp_path):
+    """Issue 25, item 5: `scancel` sends SIGTERM to every process of the job; an engine (or MPI
+    launcher) that ignores it must not keep the job step alive past the cluster's KillWait (after
+    which SLURM's SIGKILL misses processes re-parented to init). The engine and everything it
+    started are killed SIGNAL_KILL s after the signal, and the run is reported."""
+    from pbmdem.dem.engine import SIGNAL_KILL
+
+    pids = tmp_path / "pids"
+    fake = tmp_path / "stubborn-liggghts"
+    fake.write_text(
+        "#!/bin/bash\ntrap '' TERM INT\n"
+        "bash -c \"trap '' TERM INT; echo \\$\\$ >> $PIDS; sleep 300\" &\n"
+        "echo $$ >> $PIDS\nwait\n".replace("$PIDS", str(pids))
+    )
+    fake.chmod(0o755)
+    (tmp_path / "in.granulator").write_text("# not read\n")
+    code = "from pbmdem.dem import engine; engine.run('in.granulator', '.', timeout=600)"
+    env = dict(os.environ, PBMDEM_LIGGGHTS=str(fake))
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code],
+        cwd=tmp_path,
+        env=env,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
+    try:
+        t_wait = time.monotonic()
+        while not (pids.exists() and len(pids.read_text().split()) == 2):
+            assert time.monotonic() - t_wait < 30 and proc.poll() is None, proc.communicate()
+            time.sleep(0.05)
+        started = [int(p) for p in pids.read_text().split()]
+        t0 = time.monotonic()
+        os.killpg(proc.pid, signal.SIGTERM)  # as scancel: every process of the job
+        _, stderr = proc.communicate(timeout=60)
+        took = time.monotonic() - t0
+        assert proc.returncode != 0
+        assert took < SIGNAL_KILL + 3, took
+        assert f"killed: still running {SIGNAL_KILL:g} s after SIGTERM" in stderr, stderr
+        assert "interrupted by SIGTERM" in stderr
+        time.sleep(0.2)
+        alive = [p for p in started if psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE]
+        assert not alive, alive
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        for pid in [int(p) for p in pids.read_text().split()] if pids.exists() else []:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass

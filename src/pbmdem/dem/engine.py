@@ -133,17 +133,54 @@ def record_crash(workdir: Path, problems: list[str], **details) -> None:
     )
 
 
+#: seconds after a SIGINT/SIGTERM before it is passed on to a LIGGGHTS that is still running, and
+#: after which LIGGGHTS (with every process it started) is killed: a cancelled job ends well within
+#: a cluster's KillWait (SLURM's default 30 s; 10 s on the test cluster of scripts/slurm_cluster.sh),
+#: before SLURM's SIGKILL, which misses processes that were re-parented to init.
+SIGNAL_GRACE = 2.0
+SIGNAL_KILL = 5.0
+
+
+def descendants(pid: int) -> list[int]:
+    """PIDs of every process below `pid` (children first), from /proc (empty where unreadable)."""
+    children: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            text = stat.read_text()
+        except OSError:
+            continue
+        fields = text[text.rfind(")") + 2 :].split()
+        children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    out, todo = [], [pid]
+    while todo:
+        kids = children.get(todo.pop(), [])
+        out += kids
+        todo += kids
+    return out
+
+
+def kill_tree(proc: subprocess.Popen) -> None:
+    """SIGKILL `proc` and every process it started (an MPI launcher's ranks too), by PID."""
+    for pid in [*descendants(proc.pid), proc.pid]:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+
 class _PassSignals:
     """While LIGGGHTS runs, SIGINT/SIGTERM sent to this process are remembered instead of killing
     Python before it can record the interruption. A signal sent to the whole job (Ctrl-C, `scancel`,
     a time limit) reaches LIGGGHTS too; only if LIGGGHTS is still running `grace` seconds later is
-    the signal passed on (a second signal at once would make it quit without its restart file).
+    the signal passed on (a second signal at once would make it quit without its restart file), and
+    `run` kills it if it still runs SIGNAL_KILL seconds after the first signal (`deadline`).
     Only possible in the main thread; elsewhere nothing is changed."""
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
-    def __init__(self, proc: subprocess.Popen, grace: float = 5.0):
+    def __init__(self, proc: subprocess.Popen, grace: float = SIGNAL_GRACE):
         self.proc, self.grace, self.received, self.saved = proc, grace, [], {}
+        self.deadline: float | None = None
 
     def _forward(self, signum):
         if self.proc.poll() is None:
@@ -151,6 +188,8 @@ class _PassSignals:
 
     def _handler(self, signum, frame):
         self.received.append(signal.Signals(signum).name)
+        if self.deadline is None:
+            self.deadline = time.perf_counter() + SIGNAL_KILL
         if self.proc.poll() is None:
             timer = threading.Timer(self.grace, self._forward, args=(signum,))
             timer.daemon = True
@@ -200,14 +239,19 @@ def run(
                     break
                 except subprocess.TimeoutExpired:
                     if left is not None and left <= poll:
-                        proc.kill()
+                        kill_tree(proc)
                         stdout, _ = proc.communicate()
                         returncode, stderr = -9, f"timed out after {timeout} s"
+                        break
+                    if signals.deadline is not None and time.perf_counter() >= signals.deadline:
+                        kill_tree(proc)  # a cancelled job must end before the cluster's KillWait
+                        stdout, _ = proc.communicate()
+                        returncode, stderr = -9, f"killed: still running {SIGNAL_KILL:g} s after {signals.received[0]}"
                         break
                     if progress is not None:
                         progress.update()
         except BaseException:  # e.g. KeyboardInterrupt: do not leave the engine running
-            proc.kill()
+            kill_tree(proc)
             proc.communicate()
             raise
         finally:

@@ -13,7 +13,17 @@ import pytest
 
 from pbmdem.dem.grid_tables import aggregate
 from pbmdem.readers import InputFileError
-from pbmdem.tables import COMPARISON, GRID_PAIRS, INTERVALS, RUN_PAIRS, RUN_VELOCITIES, RUN_WALLS, RUNS
+from pbmdem.tables import (
+    COMPARISON,
+    GRID_PAIRS,
+    GRID_VELOCITIES,
+    GRID_WALLS,
+    INTERVALS,
+    RUN_PAIRS,
+    RUN_VELOCITIES,
+    RUN_WALLS,
+    RUNS,
+)
 
 
 def pair_rows(replicate: int, frequency: float = 0.1) -> list[dict]:
@@ -133,6 +143,9 @@ def test_a_missing_column_is_named(tmp_path):
 def test_wall_velocity_run_interval_and_comparison_tables_are_checked(tmp_path):
     cases = [
         (RUN_WALLS, "frequency_per_particle"),
+        (GRID_PAIRS, "encounter_frequency_per_pair_se"),
+        (GRID_WALLS, "encounters"),
+        (GRID_VELOCITIES, "encounters"),
         (RUN_VELOCITIES, "encounters"),
         (RUNS, "total_encounters"),
         (INTERVALS, "mean_frequency_per_pair"),

@@ -211,3 +211,18 @@ def test_find_damage_accepts_a_well_formed_dump_and_rejects_a_step_going_back(tm
     assert find_damage(write(tmp_path, "pairs.dump", SEQUENCE)) is None
     path = write(tmp_path, "back.dump", [SEQUENCE[0], SEQUENCE[2], SEQUENCE[1]])
     assert "time step 105 does not follow 110" in find_damage(path)
+
+
+@pytest.mark.parametrize("value", ["0", "2.5", "-3"])
+def test_an_impossible_particle_id_is_corruption_located_by_line_and_frame(tmp_path, value):
+    text = "".join(SEQUENCE)
+    at = text.index("2 4 1e-06")  # frame 3 (step 110), its second row
+    path = tmp_path / "pairs.dump"
+    path.write_text(text[:at] + f"{value} 4 1e-06" + text[at + len("2 4 1e-06") :])
+    line = text[:at].count("\n") + 1
+    with pytest.raises(DumpFormatError) as err:
+        read_dump(path, 3, ids=(0, 1))
+    assert f"corrupt dump: {path}: line {line} (byte {at}), frame 3 (step 110): column 1 = {float(value):g}" in str(
+        err.value
+    )
+    assert read_dump(path, 3).frames == 5  # the same rows without the id check: the check is what refuses them

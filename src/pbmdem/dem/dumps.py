@@ -43,8 +43,9 @@ class Snapshots:
         return np.repeat(np.arange(self.frames), np.diff(self.offsets))
 
 
-def read_dump(path: str | Path, columns: int) -> Snapshots:
-    """Read a LIGGGHTS `dump local` (or `dump custom`) text file with `columns` values per row."""
+def read_dump(path: str | Path, columns: int, ids: tuple[int, ...] = ()) -> Snapshots:
+    """Read a LIGGGHTS `dump local` (or `dump custom`) text file with `columns` values per row;
+    the 0-based columns `ids` hold particle ids (positive integers: anything else is corruption)."""
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -99,6 +100,21 @@ def read_dump(path: str | Path, columns: int) -> Snapshots:
             f"of the frame at step {steps[frame]} ({int(bad.sum())} non-finite value(s) in all); every value of a "
             "dump must be a finite number"
         )
+    for col in ids:
+        values = data[:, col]
+        impossible = (values < 1) | (values != np.round(values))
+        if impossible.any():
+            row = int(np.argmax(impossible))
+            frame = int(np.searchsorted(offsets, row, side="right") - 1)
+            at = headers[frame].end()
+            for _ in range(row - int(offsets[frame])):
+                at = raw.index(b"\n", at) + 1
+            line = raw.count(b"\n", 0, at) + 1
+            raise DumpFormatError(
+                f"corrupt dump: {path}: line {line} (byte {at}), frame {frame + 1} "
+                f"(step {steps[frame]}): column {col + 1} = {values[row]:g} is not a particle id (a positive "
+                f"integer); {int(impossible.sum())} such value(s) in all"
+            )
     # each frame's rows must be as many as its header says; a short last frame is truncation
     last_lines = bodies[-1].count(b"\n")
     if last_lines < counts[-1]:
@@ -195,7 +211,7 @@ def _numbers(line: bytes, widths: tuple[int, ...]) -> bool:
 
 def read_classes(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """Particle ids and 0-based size classes (atom type - 1) from the class-map dump's first frame."""
-    snaps = read_dump(path, 3)
+    snaps = read_dump(path, 3, ids=(0,))
     if snaps.frames == 0:
         raise DumpFormatError(f"{path}: no particle frame (no particles inserted?)")
     rows = snaps.data[snaps.offsets[0] : snaps.offsets[1]]
@@ -212,7 +228,7 @@ def read_trajectories(path: str | Path, n_particles: int):
     """Position snapshots (`dump custom ... id x y z vx vy vz`, sorted by id) as Trajectories."""
     from .encounters import Trajectories
 
-    snaps = read_dump(path, 7)
+    snaps = read_dump(path, 7, ids=(0,))
     counts = np.diff(snaps.offsets)
     if snaps.frames == 0 or (counts != n_particles).any():
         raise DumpFormatError(

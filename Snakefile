@@ -27,11 +27,14 @@ if not config:
 # cannot express, every error listed tidily (key, value, allowed). CFG is the typed config;
 # `config` is completed in place so that rule scripts read the same values.
 from pbmdem.config import Config, ConfigError, load_yaml
+from pbmdem.dem.plan import check_workflow_plans
 
 try:
     for _path in workflow.configfiles:
         load_yaml(_path, "config file")
     CFG = Config.from_mapping(config)
+    # every DEM run the workflow would start is planned and held to dem.limits before the DAG
+    check_workflow_plans(CFG)
 except ConfigError as _exc:
     print(f"pbmdem: error: {_exc}", file=sys.stderr)
     sys.exit(1)

@@ -8,6 +8,7 @@ configuration edits the completed mapping (`tiny_mapping`) and builds it with `c
 from __future__ import annotations
 
 import copy
+import os
 import shutil
 import sys
 from pathlib import Path
@@ -22,6 +23,71 @@ ROOT = Path(__file__).resolve().parents[1]
 def pytest_collection_modifyitems(config, items):
     if shutil.which("liggghts") is None:
         raise pytest.UsageError("LIGGGHTS is not installed: run scripts/bootstrap.sh first (README command 2)")
+
+
+def leftover_processes(folder: Path, children_of: int | None = None) -> list:
+    """Live processes (psutil) the tests started and left: those whose working directory or
+    command line lies under `folder` (e.g. the session's temporary folder: a process re-parented
+    to init is found too) and, with `children_of` (a PID), every descendant of that process."""
+    import psutil
+
+    me = psutil.Process()
+    found = {} if children_of is None else {p.pid: p for p in psutil.Process(children_of).children(recursive=True)}
+    base = str(folder)
+    for proc in psutil.process_iter(["pid", "cwd", "cmdline"]):
+        cwd, cmd = proc.info.get("cwd") or "", " ".join(proc.info.get("cmdline") or [])
+        if cwd.startswith(base) or base in cmd:
+            found[proc.pid] = proc
+    alive = []
+    for proc in found.values():
+        try:
+            if proc.pid != me.pid and proc.status() != psutil.STATUS_ZOMBIE:
+                alive.append(proc)
+        except psutil.Error:
+            pass
+    return alive
+
+
+def end_processes(procs: list) -> None:
+    """SIGTERM each process by PID, SIGKILL those still alive 3 s later."""
+    import psutil
+
+    for proc in procs:
+        try:
+            proc.terminate()
+        except psutil.Error:
+            pass
+    _, alive = psutil.wait_procs(procs, timeout=3)
+    for proc in alive:
+        try:
+            proc.kill()
+        except psutil.Error:
+            pass
+    psutil.wait_procs(alive, timeout=3)
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """The suite leaves no process behind: whatever a test started and left running (found by
+    `leftover_processes`) is ended by PID, named, and fails the run."""
+    factory = getattr(session.config, "_tmp_path_factory", None)
+    if factory is None or getattr(factory, "_basetemp", None) is None:
+        return
+    left = leftover_processes(factory.getbasetemp(), children_of=os.getpid())
+    if not left:
+        return
+    names = []
+    for proc in left:
+        try:
+            names.append(f"{proc.pid} {' '.join(proc.cmdline())[:200]}")
+        except Exception:
+            names.append(str(proc.pid))
+    end_processes(left)
+    reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+    message = "processes started by the tests were still running at the end (now ended):\n  " + "\n  ".join(names)
+    if reporter is not None:
+        reporter.ensure_newline()
+        reporter.write_line(message, red=True)
+    session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
 def config_of(mapping: dict) -> Config:

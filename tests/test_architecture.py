@@ -1,12 +1,12 @@
 """The structure of the library: no import circles, no upward imports, the stages as packages.
 
 The import graph is read from the source (every `import`, also those inside functions, which
-are dependencies all the same). Layers, lowest first: the shared helpers (atomic files, readers, job logs),
-the settings layer (`pbmdem.config`), the contracts (`pbmdem.impact`, then `pbmdem.frequency`), the
-stages (`pbmdem.dem`, `pbmdem.pbm`, `pbmdem.surrogate`, independent of each other), the coupling
-of the stages (`pbmdem.coupling`), the validation study (`pbmdem.validation`), the report, the
-command line. A module imports only from its
-own unit or from lower layers.
+are dependencies all the same). Layers, lowest first: the shared helpers (atomic files, readers,
+job logs), the table contracts (`pbmdem.tables`, read through the readers), the settings layer
+(`pbmdem.config`), the contracts (`pbmdem.impact`, then `pbmdem.frequency`), the stages
+(`pbmdem.dem`, `pbmdem.pbm`, `pbmdem.surrogate`, independent of each other), the coupling of the
+stages (`pbmdem.coupling`), the validation study (`pbmdem.validation`), the report, the command
+line. A module imports only from its own unit or from lower layers.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import pytest
 SRC = Path(__file__).resolve().parents[1] / "src"
 LAYERS = [
     {"atomic", "readers", "joblog", ""},
+    {"tables"},
     {"config"},
     {"impact"},
     {"frequency"},

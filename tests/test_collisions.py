@@ -169,8 +169,16 @@ def test_replicate_mean_and_standard_error(tmp_path):
                 "class_j": 0,
                 "d_i": 0.002,
                 "d_j": 0.002,
+                "n_i": 10,
+                "n_j": 10,
+                "n_total": 10,
+                "collisions": 2 * enc,
+                "sampling_time": 1.0,
+                "frequency": 2 * enc,
+                "frequency_per_pair": 2 * f,
                 "encounters": enc,
                 "encounter_frequency_per_pair": f,
+                "impact_velocity_median": 0.5,
             }
         )
     paths = []
@@ -182,3 +190,39 @@ def test_replicate_mean_and_standard_error(tmp_path):
     assert grid["encounters"].tolist() == [4.0]
     assert grid["encounter_frequency_per_pair"].iloc[0] == pytest.approx(0.2)
     assert grid["encounter_frequency_per_pair_se"].iloc[0] == pytest.approx(0.1 / np.sqrt(3))
+
+
+def test_a_damaged_row_is_located_by_line_byte_and_frame(tmp_path):
+    text = "".join(SEQUENCE)
+    bad = text.replace("3 1 3e-06", "3 1 \x07\x9a", 1)  # frame 4 (step 115), its second row
+    path = tmp_path / "pairs.dump"
+    path.write_bytes(bad.encode("latin-1"))
+    line = text[: text.index("3 1 3e-06")].count("\n") + 1
+    byte = len(text[: text.index("3 1 3e-06")].encode())
+    with pytest.raises(DumpFormatError) as err:
+        read_dump(path, 3)
+    assert f"corrupt dump: {path}: line {line} (byte {byte}), frame 4 (step 115)" in str(err.value)
+    assert "an entry row of 3 finite numbers expected" in str(err.value)
+
+
+def test_find_damage_accepts_a_well_formed_dump_and_rejects_a_step_going_back(tmp_path):
+    from pbmdem.dem.dumps import find_damage
+
+    assert find_damage(write(tmp_path, "pairs.dump", SEQUENCE)) is None
+    path = write(tmp_path, "back.dump", [SEQUENCE[0], SEQUENCE[2], SEQUENCE[1]])
+    assert "time step 105 does not follow 110" in find_damage(path)
+
+
+@pytest.mark.parametrize("value", ["0", "2.5", "-3"])
+def test_an_impossible_particle_id_is_corruption_located_by_line_and_frame(tmp_path, value):
+    text = "".join(SEQUENCE)
+    at = text.index("2 4 1e-06")  # frame 3 (step 110), its second row
+    path = tmp_path / "pairs.dump"
+    path.write_text(text[:at] + f"{value} 4 1e-06" + text[at + len("2 4 1e-06") :])
+    line = text[:at].count("\n") + 1
+    with pytest.raises(DumpFormatError) as err:
+        read_dump(path, 3, ids=(0, 1))
+    assert f"corrupt dump: {path}: line {line} (byte {at}), frame 3 (step 110): column 1 = {float(value):g}" in str(
+        err.value
+    )
+    assert read_dump(path, 3).frames == 5  # the same rows without the id check: the check is what refuses them

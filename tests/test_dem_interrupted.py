@@ -130,20 +130,154 @@ def test_sigterm_to_the_job_during_sampling_is_recorded(root, tmp_path):
             os.killpg(proc.pid, signal.SIGKILL)
 
 
-def test_a_run_cut_short_without_a_forced_restart_is_a_failure(tiny_run, tmp_path):
-    """The plan check alone (no restart line, exit code 0): a log and dumps that stop early fail."""
+def _copy_run(tiny_run, tmp_path, name: str) -> Path:
     import shutil
 
+    from pbmdem.dem.run import check_finished
+
+    run = tmp_path / name
+    shutil.copytree(tiny_run["dir"], run)
+    check_finished(tiny_run["plan"], run)  # the finished run passes
+    return run
+
+
+def _cut_log(run: Path) -> int:
+    """Cut log.liggghts before its last thermo row (as a run that stopped there); returns the
+    last step the cut log shows."""
+    from pbmdem.dem import engine
+
+    log = run / "log.liggghts"
+    lines = log.read_text().splitlines(keepends=True)
+    steps = engine.thermo_table(log)["Step"]
+    last_row = max(k for k, line in enumerate(lines) if line.split()[:1] == [f"{int(steps[-1])}"])
+    log.write_text("".join(lines[:last_row]))
+    return int(engine.thermo_table(log)["Step"][-1])
+
+
+def test_a_run_cut_short_without_a_forced_restart_is_a_failure(tiny_run, tmp_path):
+    """The plan check alone (no restart line, exit code 0): a log and dumps that stop early fail
+    as an unfinished run."""
     from pbmdem.dem import engine
     from pbmdem.dem.run import check_finished
 
-    run = tmp_path / "cut"
-    shutil.copytree(tiny_run["dir"], run)
+    run = _copy_run(tiny_run, tmp_path, "cut")
     plan = tiny_run["plan"]
-    check_finished(plan, run)  # the finished run passes
     pairs = run / "post" / "pairs.dump"
     frames = pairs.read_bytes().split(b"ITEM: TIMESTEP\n")
     pairs.write_bytes(b"ITEM: TIMESTEP\n".join(frames[:-1]))
-    with pytest.raises(engine.LiggghtsError, match="pairs.dump holds"):
+    last = _cut_log(run)
+    with pytest.raises(engine.LiggghtsError, match="pairs.dump holds") as err:
         check_finished(plan, run)
-    assert "pairs.dump" in json.loads((run / "crash.json").read_text())["problems"][0]
+    assert f"unfinished: the log's last thermo step is {last}, the plan has {plan.total_steps}" in str(err.value)
+    assert "corrupt" not in str(err.value)
+    assert "pairs.dump" in json.loads((run / "crash.json").read_text())["problems"][1]
+
+
+def test_a_short_log_with_complete_dumps_is_unfinished(tiny_run, tmp_path):
+    """Issue 25, 7b: every dump complete, but the log stops short of the planned step: refused."""
+    from pbmdem.dem import engine
+    from pbmdem.dem.run import check_finished
+
+    run = _copy_run(tiny_run, tmp_path, "short_log")
+    plan = tiny_run["plan"]
+    last = _cut_log(run)
+    assert last < plan.total_steps
+    with pytest.raises(engine.LiggghtsError) as err:
+        check_finished(plan, run)
+    assert f"unfinished: the log's last thermo step is {last}, the plan has {plan.total_steps} steps" in str(err.value)
+    assert "dump" not in " ".join(json.loads((run / "crash.json").read_text())["problems"])
+
+
+def test_random_bytes_in_a_dump_of_a_finished_run_are_corruption_not_an_unfinished_run(tiny_run, tmp_path):
+    """Issue 25, item 4: 4000 random bytes written into the middle of a finished run's pairs dump."""
+    import random
+
+    from pbmdem.dem import engine
+    from pbmdem.dem.dumps import DumpFormatError
+    from pbmdem.dem.run import check_finished
+
+    run = _copy_run(tiny_run, tmp_path, "corrupt")
+    pairs = run / "post" / "pairs.dump"
+    data = bytearray(pairs.read_bytes())
+    middle = len(data) // 2
+    data[middle : middle + 4000] = random.Random(25).randbytes(4000)
+    pairs.write_bytes(bytes(data))
+    with pytest.raises(DumpFormatError) as err:
+        check_finished(tiny_run["plan"], run)
+    text = str(err.value)
+    assert not isinstance(err.value, engine.LiggghtsError)
+    assert "unfinished" not in text and "LIGGGHTS failed" not in text
+    assert f"LIGGGHTS finished (its log reaches the planned step {tiny_run['plan'].total_steps})" in text
+    found = re.search(r"corrupt: (\S+pairs\.dump): line (\d+) \(byte (\d+)\), frame (\d+)", text)
+    assert found, text
+    line, byte = int(found.group(2)), int(found.group(3))
+    # the named line and byte are where the damage is: at or after the first damaged byte
+    assert middle - 200 <= byte <= middle + 4000
+    assert data[:byte].count(b"\n") == line - 1
+    assert "corrupt" in json.loads((run / "crash.json").read_text())["problems"][0]
+
+
+def test_a_dump_missing_its_last_frame_after_a_finished_log_is_corruption(tiny_run, tmp_path):
+    from pbmdem.dem.dumps import DumpFormatError
+    from pbmdem.dem.run import check_finished
+
+    run = _copy_run(tiny_run, tmp_path, "lost_frame")
+    pairs = run / "post" / "pairs.dump"
+    frames = pairs.read_bytes().split(b"ITEM: TIMESTEP\n")
+    pairs.write_bytes(b"ITEM: TIMESTEP\n".join(frames[:-1]))
+    with pytest.raises(DumpFormatError, match=r"corrupt: \S+pairs.dump is well-formed but holds \d+ frames"):
+        check_finished(tiny_run["plan"], run)
+
+
+def test_a_cancelled_job_ends_within_killwait_even_if_the_engine_ignores_sigterm(tmp_path):
+    """Issue 25, item 5: `scancel` sends SIGTERM to every process of the job; an engine (or MPI
+    launcher) that ignores it must not keep the job step alive past the cluster's KillWait (after
+    which SLURM's SIGKILL misses processes re-parented to init). The engine and everything it
+    started are killed SIGNAL_KILL s after the signal, and the run is reported."""
+    from pbmdem.dem.engine import SIGNAL_KILL
+
+    pids = tmp_path / "pids"
+    fake = tmp_path / "stubborn-liggghts"
+    fake.write_text(
+        "#!/bin/bash\ntrap '' TERM INT\n"
+        "bash -c \"trap '' TERM INT; echo \\$\\$ >> $PIDS; sleep 300\" &\n"
+        "echo $$ >> $PIDS\nwait\n".replace("$PIDS", str(pids))
+    )
+    fake.chmod(0o755)
+    (tmp_path / "in.granulator").write_text("# not read\n")
+    code = "from pbmdem.dem import engine; engine.run('in.granulator', '.', timeout=600)"
+    env = dict(os.environ, PBMDEM_LIGGGHTS=str(fake))
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code],
+        cwd=tmp_path,
+        env=env,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
+    try:
+        t_wait = time.monotonic()
+        while not (pids.exists() and len(pids.read_text().split()) == 2):
+            assert time.monotonic() - t_wait < 30 and proc.poll() is None, proc.communicate()
+            time.sleep(0.05)
+        started = [int(p) for p in pids.read_text().split()]
+        t0 = time.monotonic()
+        os.killpg(proc.pid, signal.SIGTERM)  # as scancel: every process of the job
+        _, stderr = proc.communicate(timeout=60)
+        took = time.monotonic() - t0
+        assert proc.returncode != 0
+        assert took < SIGNAL_KILL + 3, took
+        assert f"killed: still running {SIGNAL_KILL:g} s after SIGTERM" in stderr, stderr
+        assert "interrupted by SIGTERM" in stderr
+        time.sleep(0.2)
+        alive = [p for p in started if psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE]
+        assert not alive, alive
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        for pid in [int(p) for p in pids.read_text().split()] if pids.exists() else []:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass

@@ -140,3 +140,30 @@ def test_wall_gaps_and_impeller_velocity():
     ev = wall_events(traj, [1], [1], [5e-4], [2], [-1], 0.25, bowl, imp, lambda s: np.full(len(s), np.pi / 2), omega)
     assert ev.encounter[0]
     assert ev.velocity[0] == pytest.approx(omega * 0.015, rel=1e-9)  # the face moves at omega x r towards it
+
+
+def test_oblique_pair_impacts_at_its_normal_approach_speed_not_its_relative_speed():
+    """Issue 25, 7a: particle 3 slides past particle 7 at (-0.1, 0.3, 0) m/s and touches it when
+    their line of centres is the x axis. The impact speed is the normal approach speed (about
+    0.1 m/s, exactly -v.n at the last position snapshot before the contact), not the full relative
+    speed (0.316 m/s)."""
+    v = np.array([-0.1, 0.3, 0.0])
+    touch = 2001  # first step in contact
+    steps = np.arange(touch + 3)
+    rel = np.array([2 * R, 0.0, 0.0]) + np.outer((steps - touch + 1) * DT, v)  # |rel| = 2R just before `touch`
+    pos = np.zeros((len(steps), 2, 3))
+    vel = np.zeros((len(steps), 2, 3))
+    pos[:, 0] = rel  # row 0 = id 3 (moving), row 1 = id 7 at rest at the origin
+    vel[:, 0] = v
+    traj = Trajectories(steps=steps, ids=np.array([3, 7]), pos=pos, vel=vel)
+    counts = (steps >= touch).astype(int)
+    data = np.array([[7.0, 3.0, 1e-6]] * int(counts.sum()))
+    snaps = Snapshots(steps=steps, offsets=np.concatenate([[0], np.cumsum(counts)]), data=data)
+    s, ev = classify(snaps, traj)
+    assert len(s.step) == 1 and ev.encounter.all()
+    before = rel[touch - 1]
+    normal = before / np.linalg.norm(before)
+    expected = -float(v @ normal)  # the normal approach speed at the last snapshot before the contact
+    assert ev.velocity[0] == pytest.approx(expected, rel=1e-12)
+    assert expected == pytest.approx(0.1, rel=1e-2)
+    assert np.linalg.norm(v) == pytest.approx(0.316, rel=1e-2)  # what the full relative speed would give

@@ -111,9 +111,54 @@ def _cancel_in_sampling(proc: subprocess.Popen, workdir: Path, env: dict, timeou
 
 
 def test_tiny_workflow_through_the_slurm_profile(cluster, root, tmp_path):
-    env = dict(cluster["env"], PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+    """The steps 2-5 of the module docstring; every process the test started (the workflow, its
+    SLURM jobs and whatever they run under the work folder) is ended by PID at the end, also when
+    a step fails."""
     workdir = tmp_path / "wd"
     workdir.mkdir()
+    env = dict(cluster["env"], PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+    started: list[subprocess.Popen] = []
+    try:
+        _workflow_with_a_cancel(root, workdir, env, started)
+    except BaseException:
+        _end_everything(started, workdir, env, check=False)  # the step's own failure is the report
+        raise
+    _end_everything(started, workdir, env, check=True)
+
+
+def _end_everything(started: list, workdir: Path, env: dict, check: bool) -> None:
+    """End, by PID, the processes this test started: its workflow processes with everything below
+    them, its SLURM jobs (scancel by job id) and any process left under `workdir` (a job step
+    re-parented to init); with `check`, fail if one was still running once its jobs were gone."""
+    import psutil
+    from conftest import end_processes, leftover_processes
+
+    procs = []
+    for proc in started:
+        try:
+            procs += [psutil.Process(proc.pid), *psutil.Process(proc.pid).children(recursive=True)]
+        except psutil.Error:
+            pass
+    end_processes(procs)
+    for proc in started:
+        if proc.poll() is None:
+            proc.kill()
+        proc.communicate()
+    jobs = subprocess.run(["squeue", "-h", "-o", "%i"], env=env, capture_output=True, text=True, timeout=30)
+    for jobid in jobs.stdout.split():
+        subprocess.run(["scancel", jobid], env=env, capture_output=True, timeout=30)
+    t0 = time.monotonic()
+    while leftover_processes(workdir) and time.monotonic() - t0 < 20:  # the jobs end on SIGTERM
+        time.sleep(0.5)
+    left = leftover_processes(workdir)
+    names = [f"{p.pid} {' '.join(p.cmdline())[:200]}" for p in left]
+    end_processes(left)
+    assert not (check and names), (
+        "processes of the SLURM test were still running after its jobs were cancelled: " + "; ".join(names)
+    )
+
+
+def _workflow_with_a_cancel(root: Path, workdir: Path, env: dict, started: list) -> None:
     cfg = yaml.safe_load((root / "config" / "test.yaml").read_text())
     # a sampling window long enough to cancel a job inside it (the tiny one lasts ~0.3 s)
     cfg["dem"]["sampling_time"] = 0.08
@@ -133,6 +178,7 @@ def test_tiny_workflow_through_the_slurm_profile(cluster, root, tmp_path):
         stderr=subprocess.PIPE,
         text=True,
     )
+    started.append(proc)
     try:
         jobid = _cancel_in_sampling(proc, workdir, env)
         stdout, stderr = proc.communicate(timeout=600)

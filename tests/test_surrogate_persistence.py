@@ -240,3 +240,63 @@ def test_version_1_layout_rejected(fitted, saved):
     meta_path.write_text(json.dumps(meta))
     with pytest.raises(SurrogateLoadError, match="frequency and velocity pipelines"):
         load_surrogate(model)
+
+
+# --- the metadata contract (issue 25, item 3): every violation names model.json and the key
+def _edit_metadata(meta_path, edit):
+    meta = json.loads(meta_path.read_text())
+    meta = edit(meta)
+    meta_path.write_text(json.dumps(meta))
+
+
+@pytest.mark.parametrize(
+    "edit, key",
+    [
+        (lambda m: None, "a JSON object is required, found NoneType"),
+        (lambda m: m | {"versions": None}, "key versions = None"),
+        (
+            lambda m: m | {"feature_ranges": m["feature_ranges"] | {"d_large": [0.002, None]}},
+            "feature_ranges.d_large[1]",
+        ),
+        (lambda m: m | {"feature_ranges": m["feature_ranges"] | {"d_large": [0.004, 0.002]}}, "feature_ranges.d_large"),
+        (
+            lambda m: m | {"feature_ranges": {k: v for k, v in m["feature_ranges"].items() if k != "tip_speed"}},
+            "lacks the training range of ['tip_speed']",
+        ),
+        (lambda m: m | {"params": m["params"] | {"domain_margin": 1e300}}, "key params.domain_margin = 1e+300"),
+        (lambda m: m | {"params": m["params"] | {"impeller_radius": "wide"}}, "key params.impeller_radius = 'wide'"),
+        (lambda m: m | {"feature_names": None}, "key feature_names = None"),
+    ],
+)
+def test_metadata_violations_name_the_file_and_the_key(saved, edit, key):
+    model, meta_path = saved
+    _edit_metadata(meta_path, edit)
+    with pytest.raises(IncompatibleVersionError) as err:
+        load_surrogate(model)
+    assert f"surrogate metadata {meta_path}" in str(err.value)
+    assert key in str(err.value)
+
+
+def test_a_nan_range_in_the_metadata_is_refused(saved):
+    model, meta_path = saved
+    meta = json.loads(meta_path.read_text())
+    meta["feature_ranges"]["d_large"][1] = float("nan")
+    meta_path.write_text(json.dumps(meta))  # Python writes NaN, and its JSON reader accepts it
+    with pytest.raises(
+        IncompatibleVersionError, match=r"key feature_ranges\.d_large\[1\] = nan: every number must be finite"
+    ):
+        load_surrogate(model)
+
+
+def test_predict_with_null_versions_is_an_error_not_a_traceback(saved, capsys):
+    model, meta_path = saved
+    _edit_metadata(meta_path, lambda m: m | {"versions": None})
+    from pbmdem.cli import main
+
+    code = main(
+        ["surrogate", "predict", "--model", str(model), "--diameters", "0.002", "0.003"]
+        + ["--numbers", "100", "100", "--rpm", "600"]
+    )
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "model.json" in err and "key versions = None" in err and "Traceback" not in err

@@ -22,13 +22,14 @@ from pathlib import Path
 def _dem(args: argparse.Namespace) -> int:
     from pbmdem.config import check_rpm, load_config, point_id
     from pbmdem.dem import plan_point, run_point
+    from pbmdem.dem.plan import check_limits
 
     rpm = check_rpm(args.rpm, "--rpm")
     cfg = load_config(args.config)
     point = cfg.dem_point(args.distribution)
     if not 0 <= args.replicate < cfg.dem_replicates:
         raise ValueError(f"--replicate {args.replicate}: allowed 0 .. dem.replicates - 1 = {cfg.dem_replicates - 1}")
-    plan = plan_point(point, rpm, replicate=args.replicate)
+    plan = check_limits(plan_point(point, rpm, replicate=args.replicate), cfg.dem_execution.limits)
     if args.plan_only:
         print(json.dumps(plan.to_dict(), indent=2))
         return 0

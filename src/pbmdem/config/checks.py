@@ -61,6 +61,14 @@ def check(cfg) -> None:
                 f"{cfg.granulator.particle_diameter_limit:.4g} m (a third of the {bowl.height - top:.4g} m "
                 f"above the impeller, and half the bowl radius, {radius / 2:.4g} m)"
             )
+    grid = cfg.grid
+    if grid.count() > grid.max_points:
+        problems.append(
+            f"grid: {len(grid.impeller_rpm)} impeller_rpm x {len(grid.size_distributions)} size_distributions "
+            f"+ {len(grid.extra_points)} extra_points = {grid.count()} operating points, more than "
+            f"grid.max_points = {grid.max_points} (raise it if the grid is meant to be this large)"
+        )
+        raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
     defined = sorted(cfg.size_distributions)
     for name in cfg.grid.size_distributions:
         if name not in cfg.size_distributions:

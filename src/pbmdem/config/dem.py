@@ -36,12 +36,24 @@ class Dem(Settings):
 
 
 @dataclass(frozen=True)
+class DemLimits(Settings):
+    """Bounds on what one DEM run may cost (`dem.limits`): a plan above any of them is refused
+    before anything runs (`pbmdem.dem.plan.check_limits`). Guards, not settings of a result."""
+
+    max_steps: int
+    max_simulated_time: float
+    max_particle_steps: float
+
+
+@dataclass(frozen=True)
 class DemExecution(Settings):
-    """How DEM runs are executed (`dem.mpi_ranks`, `dem.timeout` in s): never part of a result,
-    so never part of a rule's params (changing them reruns nothing)."""
+    """How DEM runs are executed (`dem.mpi_ranks`, `dem.timeout` in s, the cost bounds
+    `dem.limits`): never part of a result, so never part of a rule's params (changing them
+    reruns nothing)."""
 
     mpi_ranks: int
     timeout: float
+    limits: DemLimits
 
     @classmethod
     def of_job(cls, config: dict, resources=None) -> DemExecution:
@@ -53,10 +65,11 @@ class DemExecution(Settings):
         tasks = resources.get("tasks") if resources is not None else None
         if tasks:
             ranks = int(tasks)
-        return cls(mpi_ranks=ranks, timeout=float(dem["timeout"]))
+        limits = DemLimits.from_dict(dem["limits"], "dem.limits")
+        return cls(mpi_ranks=ranks, timeout=float(dem["timeout"]), limits=limits)
 
 
 #: keys of the `dem:` section that are not in `Dem`
 BED_KEYS = ("bed_height", "packing_fraction")
-EXECUTION_KEYS = ("mpi_ranks", "timeout")
+EXECUTION_KEYS = ("mpi_ranks", "timeout", "limits")
 REPLICATES_KEY = "replicates"

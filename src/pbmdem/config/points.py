@@ -51,6 +51,12 @@ class OperatingGrid(Settings):
     impeller_rpm: tuple[float, ...]
     size_distributions: tuple[str, ...]
     extra_points: tuple[ExtraPoint, ...]
+    max_points: int
+
+    def count(self) -> int:
+        """Number of operating points of the full grid plus the extra points (an upper bound of
+        len(points()), computed without listing them)."""
+        return len(self.impeller_rpm) * len(self.size_distributions) + len(self.extra_points)
 
     def points(self) -> list[tuple[float, str]]:
         """Every operating point (rpm, distribution): the full grid, then the extra points not in it."""

@@ -20,7 +20,8 @@ import numpy as np
 from pbmdem.config import CoupledLoop, DemExecution
 from pbmdem.frequency import matrix_from_table, velocity_fractions_from_table
 from pbmdem.impact import EncounterRates
-from pbmdem.readers import read_json, read_table
+from pbmdem.readers import read_json
+from pbmdem.tables import RUN_PAIRS, RUN_VELOCITIES
 
 from .sample import DemSample
 
@@ -64,17 +65,9 @@ class DemProvider:
             reused_from, run_dir = earlier
             summary = read_json(run_dir / "summary.json", "DEM run summary of a coupling interval")
             info = {"dem_wall_time_s": 0.0, "dem_reused_from_interval": reused_from}
-        table = read_table(
-            run_dir / "collisions.csv",
-            "collision table of a coupling interval",
-            columns=("class_i", "class_j", "encounter_frequency_per_pair"),
-            finite=("encounter_frequency_per_pair",),
-        )
-        velocities = read_table(
-            run_dir / "impact_velocity.csv",
-            "impact-velocity table of a coupling interval",
-            columns=("class_i", "class_j", "v_lo", "encounters"),
-            finite=("encounters",),
+        table = RUN_PAIRS.read(run_dir / "collisions.csv", "collision table of a coupling interval")
+        velocities = RUN_VELOCITIES.read(
+            run_dir / "impact_velocity.csv", "impact-velocity table of a coupling interval"
         )
         k = len(sample.diameters)
         rates = EncounterRates(matrix_from_table(table, k), velocity_fractions_from_table(velocities, k))

@@ -12,8 +12,13 @@ import pandas as pd
 
 from pbmdem.atomic import atomic_path, write_csv
 from pbmdem.config import CoupledLoop, Sweep
+from pbmdem.readers import read_table
+from pbmdem.tables import INTERVALS
 
 from .methods import pbm_ann
+
+#: the columns of a PBM-ANN run's summary.csv the sweep reports
+SUMMARY_COLUMNS = ("time", "d10", "d50", "d90", "number_mean_diameter", "mass_mean_diameter", "total_number")
 
 log = logging.getLogger(__name__)
 
@@ -31,8 +36,10 @@ def rpm_sweep(
             t0 = time.perf_counter()
             pbm_ann(loop, model_path, rpm, folder)
             wall = time.perf_counter() - t0
-            summary = pd.read_csv(folder / "summary.csv")
-            ood = pd.read_csv(folder / "intervals.csv").get("out_of_domain_count", pd.Series([0]))
+            summary = read_table(
+                folder / "summary.csv", "PBM-ANN summary", columns=SUMMARY_COLUMNS, finite=SUMMARY_COLUMNS
+            )
+            ood = INTERVALS.read(folder / "intervals.csv").get("out_of_domain_count", pd.Series([0]))
             last = summary.iloc[-1]
             rows.append(
                 {

@@ -30,6 +30,8 @@ from pathlib import Path
 
 from pbmdem.atomic import write_json
 
+from .dumps import DumpFormatError, find_damage
+
 _ERROR_LINE = re.compile(r"^(ERROR|ERROR on proc \d+).*$", re.MULTILINE)
 _LOST = re.compile(r"Lost atoms|lost atoms", re.IGNORECASE)
 _FORCED_RESTART = re.compile(r"Forced restart written")
@@ -104,20 +106,23 @@ def _forced_restarts(workdir: Path) -> list[dict]:
     return removed
 
 
-def record_crash(workdir: Path, problems: list[str], **details) -> None:
-    """Write `workdir/crash.json` and raise LiggghtsError naming the problems and the log's tail."""
-    log = workdir / "log.liggghts"
-    restarts = _forced_restarts(workdir)
+def _write_crash(workdir: Path, problems: list[str], **details) -> None:
     write_json(
         workdir / "crash.json",
         {
             "problems": problems,
             **details,
-            "forced_restart_files": restarts,
-            "log_tail": tail(log, 40),
+            "forced_restart_files": _forced_restarts(workdir),
+            "log_tail": tail(workdir / "log.liggghts", 40),
             "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         },
     )
+
+
+def record_crash(workdir: Path, problems: list[str], **details) -> None:
+    """Write `workdir/crash.json` and raise LiggghtsError naming the problems and the log's tail."""
+    log = workdir / "log.liggghts"
+    _write_crash(workdir, problems, **details)
     stderr = details.get("stderr_tail") or ""
     err = details.get("error_line")
     raise LiggghtsError(
@@ -128,17 +133,54 @@ def record_crash(workdir: Path, problems: list[str], **details) -> None:
     )
 
 
+#: seconds after a SIGINT/SIGTERM before it is passed on to a LIGGGHTS that is still running, and
+#: after which LIGGGHTS (with every process it started) is killed: a cancelled job ends well within
+#: a cluster's KillWait (SLURM's default 30 s; 10 s on the test cluster of scripts/slurm_cluster.sh),
+#: before SLURM's SIGKILL, which misses processes that were re-parented to init.
+SIGNAL_GRACE = 2.0
+SIGNAL_KILL = 5.0
+
+
+def descendants(pid: int) -> list[int]:
+    """PIDs of every process below `pid` (children first), from /proc (empty where unreadable)."""
+    children: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            text = stat.read_text()
+        except OSError:
+            continue
+        fields = text[text.rfind(")") + 2 :].split()
+        children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    out, todo = [], [pid]
+    while todo:
+        kids = children.get(todo.pop(), [])
+        out += kids
+        todo += kids
+    return out
+
+
+def kill_tree(proc: subprocess.Popen) -> None:
+    """SIGKILL `proc` and every process it started (an MPI launcher's ranks too), by PID."""
+    for pid in [*descendants(proc.pid), proc.pid]:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+
 class _PassSignals:
     """While LIGGGHTS runs, SIGINT/SIGTERM sent to this process are remembered instead of killing
     Python before it can record the interruption. A signal sent to the whole job (Ctrl-C, `scancel`,
     a time limit) reaches LIGGGHTS too; only if LIGGGHTS is still running `grace` seconds later is
-    the signal passed on (a second signal at once would make it quit without its restart file).
+    the signal passed on (a second signal at once would make it quit without its restart file), and
+    `run` kills it if it still runs SIGNAL_KILL seconds after the first signal (`deadline`).
     Only possible in the main thread; elsewhere nothing is changed."""
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
-    def __init__(self, proc: subprocess.Popen, grace: float = 5.0):
+    def __init__(self, proc: subprocess.Popen, grace: float = SIGNAL_GRACE):
         self.proc, self.grace, self.received, self.saved = proc, grace, [], {}
+        self.deadline: float | None = None
 
     def _forward(self, signum):
         if self.proc.poll() is None:
@@ -146,6 +188,8 @@ class _PassSignals:
 
     def _handler(self, signum, frame):
         self.received.append(signal.Signals(signum).name)
+        if self.deadline is None:
+            self.deadline = time.perf_counter() + SIGNAL_KILL
         if self.proc.poll() is None:
             timer = threading.Timer(self.grace, self._forward, args=(signum,))
             timer.daemon = True
@@ -195,14 +239,19 @@ def run(
                     break
                 except subprocess.TimeoutExpired:
                     if left is not None and left <= poll:
-                        proc.kill()
+                        kill_tree(proc)
                         stdout, _ = proc.communicate()
                         returncode, stderr = -9, f"timed out after {timeout} s"
+                        break
+                    if signals.deadline is not None and time.perf_counter() >= signals.deadline:
+                        kill_tree(proc)  # a cancelled job must end before the cluster's KillWait
+                        stdout, _ = proc.communicate()
+                        returncode, stderr = -9, f"killed: still running {SIGNAL_KILL:g} s after {signals.received[0]}"
                         break
                     if progress is not None:
                         progress.update()
         except BaseException:  # e.g. KeyboardInterrupt: do not leave the engine running
-            proc.kill()
+            kill_tree(proc)
             proc.communicate()
             raise
         finally:
@@ -251,23 +300,49 @@ def dump_steps(path: str | Path) -> list[int]:
 def check_finished(workdir: str | Path, total_steps: int, dumps: dict[str, tuple[int, int]]) -> None:
     """Judge a run against its plan, not its exit code: the last thermo step of the log must be
     `total_steps` and each dump `name -> (frames, last step)` must hold exactly that many frames
-    ending at that step. Otherwise crash.json is written and LiggghtsError raised."""
+    ending at that step. Otherwise crash.json is written and an error raised, telling two cases
+    apart: a log that stops short of the plan is an **unfinished** engine run (LiggghtsError); a
+    log that reaches the planned step with a dump that does not match the plan is a **corrupt**
+    file (DumpFormatError naming the file, the line, the byte and the frame): the engine finished,
+    the file was damaged afterwards (disk, copy, edit), and rerunning the engine is not the cure."""
     workdir = Path(workdir)
     log = workdir / "log.liggghts"
-    problems = []
     steps = thermo_table(log).get("Step", []) if log.exists() else []
     last = int(steps[-1]) if steps else None
-    if last != total_steps:
-        problems.append(f"unfinished: the log's last thermo step is {last}, the plan has {total_steps} steps")
+    mismatched = {}
     for name, (frames, last_step) in dumps.items():
         found = dump_steps(workdir / name)
         if len(found) != frames or (found and found[-1] != last_step):
-            problems.append(
-                f"unfinished: {name} holds {len(found)} frames up to step "
-                f"{found[-1] if found else None}, the plan has {frames} up to step {last_step}"
-            )
-    if problems:
+            mismatched[name] = (found, frames, last_step)
+    if last != total_steps:
+        problems = [f"unfinished: the log's last thermo step is {last}, the plan has {total_steps} steps"]
+        problems += [
+            f"unfinished: {name} holds {len(found)} frames up to step {found[-1] if found else None}, "
+            f"the plan has {frames} up to step {last_step}"
+            for name, (found, frames, last_step) in mismatched.items()
+        ]
         record_crash(workdir, problems, last_thermo_step=last, planned_steps=total_steps)
+    if mismatched:
+        problems = [_corruption(workdir, name, *m) for name, m in mismatched.items()]
+        _write_crash(workdir, problems, last_thermo_step=last, planned_steps=total_steps)
+        raise DumpFormatError(
+            f"corrupt run in {workdir}: LIGGGHTS finished (its log reaches the planned step {total_steps}), "
+            f"but {'; '.join(problems)}. The file was damaged after the engine wrote it (check the disk "
+            f"and what else writes there); no tables were written; details in {workdir / 'crash.json'}."
+        )
+
+
+def _corruption(workdir: Path, name: str, found: list[int], frames: int, last_step: int) -> str:
+    """Where the dump `name` of a finished run departs from its plan (line, byte, frame)."""
+    damage = find_damage(workdir / name)
+    if damage is not None:
+        return f"corrupt: {damage}"
+    gaps = [k for k in range(1, len(found)) if found[k] - found[k - 1] > min(b - a for a, b in zip(found, found[1:]))]
+    at = f"; the first gap follows frame {gaps[0]} (step {found[gaps[0] - 1]})" if gaps else ""
+    return (
+        f"corrupt: {workdir / name} is well-formed but holds {len(found)} frames up to step "
+        f"{found[-1] if found else None}, the plan has {frames} up to step {last_step}{at}"
+    )
 
 
 def version_of_log(log: str | Path) -> str:

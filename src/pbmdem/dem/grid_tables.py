@@ -9,17 +9,11 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.atomic import write_csv
+from pbmdem.tables import KEYS, RUN_TABLES, SE_COLUMNS
 
-from .dumps import DumpFormatError
-
-POINT_KEYS = ["point_id", "rpm", "distribution"]
-# per key: columns averaged over replicates; the ones listed in SE_COLUMNS also get a standard error
-REPLICATE_KEYS = {
-    "pairs": POINT_KEYS + ["class_i", "class_j", "d_i", "d_j"],
-    "walls": POINT_KEYS + ["wall", "class_i", "d_i"],
-    "velocities": POINT_KEYS + ["class_i", "class_j", "v_lo", "v_hi"],
-}
-SE_COLUMNS = ("encounter_frequency_per_pair", "frequency_per_pair", "encounter_frequency_per_particle")
+# per kind (the contracts of pbmdem.tables): the keys of the replicate mean; every other column is
+# averaged over the replicates, the ones in SE_COLUMNS also get a standard error
+REPLICATE_KEYS = {kind: list(keys) for kind, keys in KEYS.items()}
 
 
 def replicate_mean(frame: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
@@ -38,11 +32,10 @@ def replicate_mean(frame: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
     return out[first + [c for c in out.columns if c not in first]]
 
 
-def read_tables(tables: list[str | Path]) -> pd.DataFrame:
-    """The per-run tables stacked into one frame (every replicate a row of its own)."""
-    from pbmdem.readers import read_table
-
-    frames = [read_table(p, "collision table", columns=("point_id", "replicate")) for p in tables]
+def read_tables(tables: list[str | Path], kind: str = "pairs") -> pd.DataFrame:
+    """The per-run tables of `kind` (pairs, walls or velocities) stacked into one frame (every
+    replicate a row of its own), each checked against its contract (pbmdem.tables)."""
+    frames = [RUN_TABLES[kind].read(p) for p in tables]
     if not frames:
         raise ValueError("no collision tables to aggregate")
     runs = pd.concat(frames, ignore_index=True)
@@ -53,11 +46,8 @@ def read_tables(tables: list[str | Path]) -> pd.DataFrame:
 def aggregate(tables: list[str | Path], out: str | Path, kind: str = "pairs") -> pd.DataFrame:
     """Replicate means of per-run tables (`kind`: pairs, walls or velocities), one row per point
     and class pair (or wall, or velocity bin), sorted and written atomically."""
-    runs = read_tables(tables)
+    runs = read_tables(tables, kind)
     keys = REPLICATE_KEYS[kind]
-    missing = [c for c in keys + ["replicate"] if c not in runs.columns]
-    if missing:
-        raise DumpFormatError(f"collision tables {[str(t) for t in tables[:3]]}...: missing columns {missing}")
     grid = replicate_mean(runs, keys)
     sort = [c for c in ("rpm", "distribution", "wall", "class_i", "class_j", "v_lo") if c in grid.columns]
     grid = grid.sort_values(sort, kind="stable").reset_index(drop=True)

@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from pbmdem.config import ConfigError, DemPoint, SizeDistribution, check_rpm, point_id
+from pbmdem.config.dem import DemLimits
 
 # Hertz contact duration t_c = 2.87 (m*^2 / (R* E*^2 v))^(1/5) (Johnson 1985); snapshots are
 # taken every t_c / SNAPSHOTS_PER_CONTACT so that a head-on contact between two of the smallest
@@ -175,3 +176,53 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
         replicate=int(replicate),
         seed=dem.seed + REPLICATE_SEED_STRIDE * int(replicate),
     )
+
+
+def limit_problems(plan: DemPlan, limits: DemLimits) -> list[str]:
+    """What in `plan` exceeds `limits` (dem.limits): one sentence, naming the point, each bound
+    exceeded (key, the plan's value, the bound) and what the plan is made of; empty if none."""
+    values = {
+        "max_steps": (plan.total_steps, "time steps"),
+        "max_simulated_time": (plan.total_steps * plan.timestep, "s simulated"),
+        "max_particle_steps": (plan.particle_steps, "particle-steps"),
+    }
+    over = [
+        f"{value:.4g} {what}, more than dem.limits.{key} = {getattr(limits, key):g}"
+        for key, (value, what) in values.items()
+        if value > getattr(limits, key)
+    ]
+    if not over:
+        return []
+    return [
+        f"operating point {plan.point_id}: the plan needs " + "; ".join(over) + f" (settling {plan.settle_steps}, "
+        f"spin-up {plan.spinup_steps} and sampling {plan.sampling_steps} steps of {plan.timestep:.3g} s, "
+        f"{plan.n_particles} particles, {plan.rpm:g} rpm); check the speed and the phase settings, or raise the bound"
+    ]
+
+
+def check_limits(plan: DemPlan, limits: DemLimits) -> DemPlan:
+    """`plan` if it stays within `limits` (dem.limits), else ConfigError naming each bound exceeded."""
+    problems = limit_problems(plan, limits)
+    if problems:
+        raise ConfigError("\n".join(problems))
+    return plan
+
+
+def check_workflow_plans(cfg) -> None:
+    """Plan every DEM run the workflow of `cfg` (a pbmdem.config.Config) would start: each grid
+    point (replicates differ only by their seeds) and each validation speed's coupled-loop call
+    (with the bed of its feed; a loop's samples hold at most dem.max_particles). ConfigError listing
+    every point beyond dem.limits (or that cannot be planned), before Snakemake builds its DAG."""
+    limits = cfg.dem_execution.limits
+    problems: list[str] = []
+    runs = [("grid", cfg.dem_point(dist), rpm, None) for rpm, dist in cfg.grid.points()]
+    loop = cfg.coupled_loop().dem_point()
+    largest = class_counts(cfg.dem.max_particles, loop.sizes.number_fractions)
+    runs += [("validation.rpm (a coupled loop's DEM call)", loop, rpm, largest) for rpm in cfg.validation.rpm]
+    for where, point, rpm, counts in runs:
+        try:
+            problems += [f"{where}: {p}" for p in limit_problems(plan_point(point, rpm, counts=counts), limits)]
+        except ConfigError as exc:
+            problems.append(f"{where}: {exc}")
+    if problems:
+        raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))

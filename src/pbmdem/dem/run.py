@@ -18,7 +18,7 @@ from pbmdem.config import DemExecution, DemPoint
 
 from . import engine, geometry
 from .deck import render_granulator
-from .plan import DemPlan, plan_point
+from .plan import DemPlan, check_limits, plan_point
 
 
 def prepare_run(point: DemPoint, plan: DemPlan, run_dir: str | Path, ranks: int) -> Path:
@@ -141,6 +141,7 @@ def run_point(
 
     run_dir = Path(run_dir)
     check_rpm(plan.rpm, f"operating point {plan.point_id}: impeller rpm")
+    check_limits(plan, execution.limits)
     render_granulator(point, plan, execution.mpi_ranks)  # raises on any bad value, before any I/O
     finished = is_finished(run_dir)
     if finished and not force:

@@ -284,10 +284,12 @@ class TableFrequency:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"{what} {path} does not exist")
-        from pbmdem.readers import InputFileError, read_table
+        from pbmdem.readers import InputFileError
+        from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES
 
+        contract = GRID_VELOCITIES if what == "impact-velocity table" else GRID_PAIRS
         try:
-            table = read_table(path, what)
+            table = contract.read(path, what, need=())  # the kernel checks the columns it uses
         except InputFileError as exc:
             raise PBMInputError(str(exc)) from None
         if distribution is not None:

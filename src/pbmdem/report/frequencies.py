@@ -19,6 +19,7 @@ import pandas as pd
 
 from pbmdem.frequency import upper_pairs
 from pbmdem.readers import InputFileError
+from pbmdem.tables import INTERVALS
 
 #: the interval columns these tables read
 INTERVAL_COLUMNS = (
@@ -36,10 +37,7 @@ def _intervals(run, what: str) -> pd.DataFrame:
     frame = run.intervals
     if frame is None:
         raise InputFileError(f"{what}: no intervals.csv (a coupled loop writes one)")
-    missing = [c for c in INTERVAL_COLUMNS if c not in frame.columns]
-    if missing:
-        raise InputFileError(f"{what} intervals.csv: missing column(s) {missing}; present: {list(frame.columns)}")
-    return frame
+    return INTERVALS.check(frame, f"({what}) intervals.csv", need=INTERVAL_COLUMNS)
 
 
 def interval_frequencies(speed, constant_timing_path: str | Path | None = None) -> pd.DataFrame:

@@ -14,6 +14,7 @@ import pandas as pd
 
 from pbmdem.atomic import write_text
 from pbmdem.readers import read_json, read_table
+from pbmdem.tables import COMPARISON, GRID_PAIRS, RUNS
 
 from .display import MM, number, shown, split_columns
 from .statements import out_of_domain_sentence, target_sentences
@@ -112,7 +113,7 @@ def _metrics(path) -> pd.DataFrame:
 
 
 def _runs(path) -> pd.DataFrame:
-    runs = read_table(path, "DEM run table", columns=("point_id",))
+    runs = RUNS.read(path, need=("point_id",))
     names = {
         "point_id": "operating point",
         "replicate": "replicate",
@@ -222,13 +223,13 @@ def build_report(
     (`settings`, `speeds`, `provenance`, `targets`, `comparison_d50`, `comparison_accuracy`,
     `comparison_cost`, `comparison_domain`); `speeds`: rpm -> {figure key of SPEED_FIGURES -> PNG,
     `out_of_domain` -> CSV}; the rest are the workflow's own tables and figures."""
-    table = read_table(comparison, "comparison table", columns=("rpm",))
+    table = COMPARISON.read(comparison, need=("rpm",))
     shown = {name: read_display(path, f"report table {name}") for name, path in tables.items()}
     domain = {
         rpm: read_display(files["out_of_domain"], f"out-of-domain table of {rpm} rpm") for rpm, files in speeds.items()
     }
     meta = read_json(metadata, "surrogate metadata")
-    coll = read_table(collisions, "collision table")
+    coll = GRID_PAIRS.read(collisions, need=())
     runs_shown = _runs(runs)
     parts = [
         "<h1>pbmdem: PBM-ANN against the coupled PBM-DEM model</h1>",

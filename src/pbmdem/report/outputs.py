@@ -124,10 +124,12 @@ def write_settings(
 def write_comparison(*, comparison, out: dict) -> None:
     """The comparison table in display form and the targets. `out`: comparison_<name>_csv and
     comparison_<name>_html for name in d50, accuracy, cost, domain; targets_csv, targets_html."""
-    from .statements import target_sentences, targets
-    from .tables import COMPARISON_COLUMNS, comparison_tables
+    from pbmdem.tables import COMPARISON
 
-    table = read_table(comparison, "comparison table", columns=COMPARISON_COLUMNS)
+    from .statements import target_sentences, targets
+    from .tables import comparison_tables
+
+    table = COMPARISON.read(comparison)
     titles = {
         "d50": "d50 at the start and the end of the batch",
         "accuracy": "Accuracy against PBM-DEM",

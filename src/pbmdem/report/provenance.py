@@ -51,9 +51,9 @@ def liggghts_versions(runs_table: str | Path) -> str:
     """The LIGGGHTS version(s) of the DEM runs, each with its number of runs: the DEM run table's
     column `liggghts_version`, which every DEM run reads from the header line "LIGGGHTS (Version
     ...)" of its log.liggghts (`pbmdem.dem.engine.version_of_log`)."""
-    from pbmdem.readers import read_table
+    from pbmdem.tables import RUNS
 
-    runs = read_table(runs_table, "DEM run table", columns=("point_id",))
+    runs = RUNS.read(runs_table, need=("point_id",))
     if "liggghts_version" not in runs.columns:
         return (
             f"not recorded in {runs_table} (DEM runs made before pbmdem recorded it; the first line of "

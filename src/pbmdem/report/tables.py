@@ -20,37 +20,6 @@ from .display import MM, PERCENT, number, percent, value_range, yes_no
 
 #: m3 -> mL
 ML = 1e6
-#: the comparison.csv columns `comparison_tables` shows
-COMPARISON_COLUMNS = (
-    "rpm",
-    "in_training_grid",
-    "n_dem_replicates",
-    "d50_start_mm",
-    "d50_end_dem_mm",
-    "d50_end_dem_sd_mm",
-    "d50_end_dem_min_mm",
-    "d50_end_dem_max_mm",
-    "d50_end_ann_mm",
-    "d50_end_constant_mm",
-    "ann_d50_rel_error_max",
-    "ann_d50_rel_error_end",
-    "ann_d50_outside_band_max",
-    "dem_replicate_d50_rel_error_max",
-    "constant_d50_rel_error_max",
-    "constant_d50_rel_error_end",
-    "constant_d50_outside_band_max",
-    "dem_calls",
-    "pbm_dem_wall_s",
-    "pbm_dem_liggghts_wall_s",
-    "pbm_ann_wall_s",
-    "pbm_ann_surrogate_wall_s",
-    "pbm_constant_wall_s",
-    "wall_time_ratio_dem_over_ann",
-    "ann_out_of_domain_intervals",
-    "ann_intervals",
-    "ann_out_of_domain_warnings",
-    "constant_calibration_out_of_domain_warnings",
-)
 SETTING_COLUMNS = ["setting", "value", "unit", "config key"]
 
 

@@ -104,9 +104,9 @@ def _predict(args) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", OutOfDomainWarning)
         if args.table is not None:
-            from pbmdem.readers import read_table
+            from pbmdem.tables import GRID_PAIRS
 
-            table = read_table(args.table, "collision table")
+            table = GRID_PAIRS.read(args.table, need=())  # the features' columns: checked by the model
             log_c, std = model.predict_log10(table, return_std=True)
             out = table.assign(predicted_encounter_frequency_per_pair=10.0**log_c, predicted_std_log10=std)
             if model.has_velocity_model():

@@ -42,6 +42,7 @@ from ._io import atomic_write
 from .ensemble import EnsembleMLPRegressorCV
 from .families import KrigingRegressor, ResponseSurface
 from .features import FEATURE_NAMES, TARGET_NAME
+from .metadata import check_metadata
 from .model import CollisionSurrogate
 
 #: The model families a saved surrogate may use, by their name in the metadata (``surrogate.model``).
@@ -253,6 +254,7 @@ def read_metadata(metadata_path: str | os.PathLike) -> dict:
         meta = json.loads(Path(metadata_path).read_text(encoding="utf-8"))
     except (OSError, json.JSONDecodeError) as exc:
         raise SurrogateLoadError(f"cannot read surrogate metadata {metadata_path}: {exc}") from exc
+    meta = check_metadata(meta, metadata_path, FORMAT, FORMAT_VERSION, IncompatibleVersionError)  # metadata.py
     if meta.get("format") != FORMAT:
         raise SurrogateLoadError(f"{metadata_path} is not {FORMAT} metadata")
     if meta.get("format_version") != FORMAT_VERSION:

@@ -25,13 +25,12 @@ def _write_csv(frame: pd.DataFrame, path: Path) -> None:
     atomic_write(path, lambda tmp: frame.to_csv(tmp, index=False, float_format="%.6g"))
 
 
-def _read_table(table, what: str, columns=()) -> tuple[pd.DataFrame, str]:
-    """A table given as a frame or a CSV path (errors name the file: pbmdem.readers)."""
-    from pbmdem.readers import read_table
-
+def _read_table(table, contract, need=()) -> tuple[pd.DataFrame, str]:
+    """A table given as a frame or a CSV path, read and checked against its contract
+    (pbmdem.tables; errors name the file, the row and the column)."""
     if isinstance(table, pd.DataFrame):
         return table, "<DataFrame>"
-    return read_table(table, what, columns=columns), str(table)
+    return contract.read(table, need=need), str(table)
 
 
 def train_and_report(
@@ -68,13 +67,15 @@ def train_and_report(
     metadata_path = Path(metadata_path) if metadata_path else model_path.with_suffix(".json")
     metrics_path = Path(metrics_path) if metrics_path else out / "metrics.csv"
     parity_path = Path(parity_path) if parity_path else out / "parity.png"
-    frame, source = _read_table(table, "collision table", columns=("point_id",))
+    from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES
+
+    frame, source = _read_table(table, GRID_PAIRS, need=("point_id",))
     if "point_id" not in frame:
         raise ValueError(f"collision table {source} lacks column 'point_id'")
     log.info("collision table %s: %d rows, %d runs", source, len(frame), frame["point_id"].nunique())
     vframe, velocity_source = None, None
     if velocity_table is not None:
-        vframe, velocity_source = _read_table(velocity_table, "impact-velocity table")
+        vframe, velocity_source = _read_table(velocity_table, GRID_VELOCITIES)
         log.info("impact-velocity table %s: %d rows", velocity_source, len(vframe))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -14,6 +14,7 @@ from pathlib import Path
 import pandas as pd
 
 from pbmdem.readers import read_json, read_table
+from pbmdem.tables import INTERVALS
 
 LABELS = {"pbm_dem": "PBM-DEM", "pbm_ann": "PBM-ANN", "pbm_constant": "PBM-constant"}
 
@@ -42,7 +43,11 @@ def load_run(folder: Path, what: str) -> Run:
     summary = read_table(
         folder / "summary.csv", what, columns=("time", "d10", "d50", "d90"), finite=("time", "d10", "d50", "d90")
     )
-    intervals = read_table(folder / "intervals.csv", what) if (folder / "intervals.csv").exists() else None
+    intervals = (
+        INTERVALS.read(folder / "intervals.csv", f"{what}: coupling-interval record", need=())
+        if (folder / "intervals.csv").exists()
+        else None
+    )
     return Run(
         summary,
         read_table(folder / "final_bins.csv", what),

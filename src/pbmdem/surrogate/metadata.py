@@ -1,0 +1,189 @@
+"""The contract of a surrogate's metadata file (``model.json``), checked when it is loaded.
+
+`check_metadata` validates the parsed file against `SCHEMA` (a declared JSON schema: types,
+required keys, signs and bounds) and then what a JSON schema cannot express: every number finite
+(Python's JSON reader accepts NaN and Infinity), one training range per feature name, each range
+finite with lower <= upper. Every violation is a `MetadataError` naming the file, the key and the
+value. Nothing in the file can switch off the domain check: the ranges are required and finite,
+and `params.domain_margin` (the slack around them) is bounded as in the config schema.
+
+Only the format and its version are left to the loader (`persistence.read_metadata`), which
+reports them with its own errors (a file of another format or version is not checked here).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+from jsonschema import Draft202012Validator
+
+#: the largest relative slack around a feature's training range (surrogate.domain_margin)
+MAX_DOMAIN_MARGIN = 1.0
+
+_NUMBER = {"type": "number"}
+_INT_LIST = {"type": "array", "items": {"type": "integer"}}
+_ENSEMBLE = {
+    "type": "object",
+    "required": ["hidden_layer_sizes", "alpha", "seeds"],
+    "properties": {
+        "hidden_layer_sizes": {
+            "type": "array",
+            "minItems": 1,
+            "items": {"type": "array", "minItems": 1, "items": {"type": "integer", "minimum": 1}},
+        },
+        "alpha": {"type": "array", "minItems": 1, "items": {"type": "number", "minimum": 0}},
+        "seeds": {"type": "array", "minItems": 1, "items": {"type": "integer"}},
+    },
+}
+_BEST = {
+    "type": "object",
+    "required": ["hidden_layer_sizes", "alpha"],
+    "properties": {
+        "hidden_layer_sizes": {"type": "array", "minItems": 1, "items": {"type": "integer", "minimum": 1}},
+        "alpha": {"type": "number", "minimum": 0},
+    },
+}
+_SEARCH = {
+    "type": "object",
+    "required": ["best_rmse_log10", "results"],
+    "properties": {
+        "best_rmse_log10": {"type": ["number", "null"], "minimum": 0},
+        "results": {"type": "array", "items": {"type": "object"}},
+    },
+}
+_FOLDS = {"type": "array", "items": {"type": "array"}}
+
+SCHEMA = {
+    "$schema": "https://json-schema.org/draft/2020-12/schema",
+    "title": "pbmdem surrogate metadata (model.json)",
+    "type": "object",
+    "required": [
+        "format",
+        "format_version",
+        "model_sha256",
+        "params",
+        "velocity_edges",
+        "velocity_best_params",
+        "velocity_search",
+        "velocity_search_cv_folds",
+        "n_velocity_rows",
+        "duplicated_features",
+        "feature_names",
+        "feature_ranges",
+        "best_params",
+        "training_point_ids",
+        "n_training_rows",
+        "search_cv_folds",
+        "search",
+        "versions",
+    ],
+    "properties": {
+        "format": {"type": "string"},
+        "format_version": {"type": "integer"},
+        "model_sha256": {"type": "string", "pattern": "^[0-9a-f]{64}$"},
+        "params": {
+            "type": "object",
+            "required": ["frequency_model", "velocity_model", "impeller_radius", "physics_offset", "domain_margin"],
+            "properties": {
+                "frequency_model": _ENSEMBLE,
+                "velocity_model": {"oneOf": [_ENSEMBLE, {"type": "null"}]},
+                "impeller_radius": {"type": "number", "exclusiveMinimum": 0, "maximum": 10},
+                "physics_offset": {"enum": ["cross_section", "none"]},
+                "domain_margin": {"type": "number", "minimum": 0, "maximum": MAX_DOMAIN_MARGIN},
+            },
+        },
+        "velocity_edges": {"type": "array", "minItems": 2, "items": _NUMBER},
+        "velocity_best_params": {"oneOf": [_BEST, {"type": "null"}]},
+        "velocity_search": _SEARCH,
+        "velocity_search_cv_folds": _FOLDS,
+        "n_velocity_rows": {"type": "integer", "minimum": 0},
+        "duplicated_features": {
+            "type": "array",
+            "items": {"type": "array", "minItems": 2, "maxItems": 2, "items": {"type": "string"}},
+        },
+        "feature_names": {"type": "array", "minItems": 1, "uniqueItems": True, "items": {"type": "string"}},
+        "feature_ranges": {
+            "type": "object",
+            "additionalProperties": {"type": "array", "minItems": 2, "maxItems": 2, "items": _NUMBER},
+        },
+        "best_params": _BEST,
+        "seeds": _INT_LIST,
+        "training_point_ids": {"type": "array", "minItems": 1, "items": {"type": "string"}},
+        "n_training_rows": {"type": "integer", "minimum": 1},
+        "search_cv_folds": _FOLDS,
+        "search": _SEARCH,
+        "versions": {
+            "type": "object",
+            "required": ["sklearn"],
+            "additionalProperties": {"type": "string"},
+        },
+    },
+}
+
+_VALIDATOR = Draft202012Validator(SCHEMA)
+
+
+RETRAIN = " (the file was edited, damaged or written by another pbmdem version; retrain the surrogate)"
+
+
+class MetadataError(ValueError):
+    """A surrogate's metadata file violates its contract; the message names the file and the key."""
+
+
+def _key(path) -> str:
+    out = ""
+    for part in path:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out or "(the whole file)"
+
+
+def _non_finite(obj, path=()):
+    if isinstance(obj, float) and not math.isfinite(obj):
+        yield path, obj
+    elif isinstance(obj, dict):
+        for k, v in obj.items():
+            yield from _non_finite(v, (*path, k))
+    elif isinstance(obj, list):
+        for k, v in enumerate(obj):
+            yield from _non_finite(v, (*path, k))
+
+
+def check_metadata(meta, path: str | os.PathLike, fmt: str, version: int, error: type = MetadataError) -> dict:
+    """`meta` (the parsed ``model.json`` at `path`) if it fulfils the contract, else `error` (the
+    loader passes its IncompatibleVersionError) naming the file, the key, the value and what is
+    allowed. Metadata of another format than `fmt` or another format version than `version` is
+    returned unchecked, for the loader to refuse with its own message."""
+    try:
+        return _check(meta, path, fmt, version)
+    except MetadataError as exc:
+        if error is MetadataError:
+            raise
+        raise error(str(exc)) from None
+
+
+def _check(meta, path, fmt: str, version: int) -> dict:
+    where = f"surrogate metadata {path}"
+    if not isinstance(meta, dict):
+        raise MetadataError(f"{where}: a JSON object is required, found {type(meta).__name__} {meta!r:.60}")
+    if meta.get("format") != fmt or meta.get("format_version") != version:
+        return meta
+    for key, value in _non_finite(meta):
+        raise MetadataError(f"{where}: key {_key(key)} = {value!r}: every number must be finite{RETRAIN}")
+    errors = sorted(_VALIDATOR.iter_errors(meta), key=lambda e: list(map(str, e.absolute_path)))
+    if errors:
+        lines = [f"key {_key(e.absolute_path)} = {e.instance!r:.80}: {e.message:.200}" for e in errors[:10]]
+        more = f" (and {len(errors) - 10} more)" if len(errors) > 10 else ""
+        raise MetadataError(f"{where}: " + "; ".join(lines) + more + RETRAIN)
+    ranges = meta["feature_ranges"]
+    missing = [n for n in meta["feature_names"] if n not in ranges]
+    if missing:
+        raise MetadataError(f"{where}: key feature_ranges lacks the training range of {missing}{RETRAIN}")
+    for name in meta["feature_names"]:
+        lo, hi = ranges[name]
+        if not lo <= hi:
+            raise MetadataError(
+                f"{where}: key feature_ranges.{name} = {[lo, hi]}: the lower bound must not exceed the upper one"
+                + RETRAIN
+            )
+    return meta

@@ -22,8 +22,8 @@ from jsonschema import Draft202012Validator
 MAX_DOMAIN_MARGIN = 1.0
 
 _NUMBER = {"type": "number"}
-_INT_LIST = {"type": "array", "items": {"type": "integer"}}
-_ENSEMBLE = {
+_FOLDS = {"type": "array", "items": {"type": "array"}}
+_MLP = {
     "type": "object",
     "required": ["hidden_layer_sizes", "alpha", "seeds"],
     "properties": {
@@ -36,23 +36,61 @@ _ENSEMBLE = {
         "seeds": {"type": "array", "minItems": 1, "items": {"type": "integer"}},
     },
 }
-_BEST = {
+_KRIGING = {
     "type": "object",
-    "required": ["hidden_layer_sizes", "alpha"],
+    "required": ["n_restarts_optimizer", "linear_trend", "random_state", "n_members"],
     "properties": {
-        "hidden_layer_sizes": {"type": "array", "minItems": 1, "items": {"type": "integer", "minimum": 1}},
-        "alpha": {"type": "number", "minimum": 0},
+        "n_restarts_optimizer": {"type": "integer", "minimum": 0},
+        "linear_trend": {"type": "boolean"},
+        "random_state": {"type": "integer"},
+        "n_members": {"type": "integer", "minimum": 1},
     },
 }
-_SEARCH = {
+_RSM = {
     "type": "object",
-    "required": ["best_rmse_log10", "results"],
+    "required": ["degree", "n_members"],
     "properties": {
-        "best_rmse_log10": {"type": ["number", "null"], "minimum": 0},
-        "results": {"type": "array", "items": {"type": "object"}},
+        "degree": {"type": "array", "minItems": 1, "items": {"type": "integer", "minimum": 1, "maximum": 4}},
+        "n_members": {"type": "integer", "minimum": 1},
     },
 }
-_FOLDS = {"type": "array", "items": {"type": "array"}}
+#: An inner model of the surrogate: its family and that family's parameters.
+_INNER = {
+    "type": "object",
+    "required": ["family", "params"],
+    "oneOf": [
+        {"properties": {"family": {"const": "mlp"}, "params": _MLP}},
+        {"properties": {"family": {"const": "kriging"}, "params": _KRIGING}},
+        {"properties": {"family": {"const": "rsm"}, "params": _RSM}},
+    ],
+}
+#: The fitted state of an inner model besides its pipelines (per family; the loader reads it).
+_STATE = {
+    "type": "object",
+    "required": ["n_outputs"],
+    "properties": {
+        "n_outputs": {"type": "integer", "minimum": 1},
+        "best_params": {
+            "type": "object",
+            "required": ["hidden_layer_sizes", "alpha"],
+            "properties": {
+                "hidden_layer_sizes": {"type": "array", "minItems": 1, "items": {"type": "integer", "minimum": 1}},
+                "alpha": {"type": "number", "minimum": 0},
+            },
+        },
+        "search": {
+            "type": "object",
+            "required": ["best_rmse_log10", "results"],
+            "properties": {
+                "best_rmse_log10": {"type": ["number", "null"], "minimum": 0},
+                "results": {"type": "array", "items": {"type": "object"}},
+            },
+        },
+        "search_cv_folds": _FOLDS,
+        "cv_mse": {"type": "array", "items": {"type": "object", "additionalProperties": _NUMBER}},
+    },
+}
+_SCALE = {"type": "number", "exclusiveMinimum": 0}
 
 SCHEMA = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
@@ -64,18 +102,15 @@ SCHEMA = {
         "model_sha256",
         "params",
         "velocity_edges",
-        "velocity_best_params",
-        "velocity_search",
-        "velocity_search_cv_folds",
+        "family",
+        "frequency_state",
+        "velocity_state",
         "n_velocity_rows",
         "duplicated_features",
         "feature_names",
         "feature_ranges",
-        "best_params",
         "training_point_ids",
         "n_training_rows",
-        "search_cv_folds",
-        "search",
         "versions",
     ],
     "properties": {
@@ -84,19 +119,31 @@ SCHEMA = {
         "model_sha256": {"type": "string", "pattern": "^[0-9a-f]{64}$"},
         "params": {
             "type": "object",
-            "required": ["frequency_model", "velocity_model", "impeller_radius", "physics_offset", "domain_margin"],
+            "required": [
+                "frequency_model",
+                "velocity_model",
+                "impeller_radius",
+                "physics_offset",
+                "domain_margin",
+                "feature_transform",
+                "uncertainty_scale",
+                "velocity_uncertainty_scale",
+            ],
             "properties": {
-                "frequency_model": _ENSEMBLE,
-                "velocity_model": {"oneOf": [_ENSEMBLE, {"type": "null"}]},
+                "frequency_model": _INNER,
+                "velocity_model": {"oneOf": [_INNER, {"type": "null"}]},
                 "impeller_radius": {"type": "number", "exclusiveMinimum": 0, "maximum": 10},
                 "physics_offset": {"enum": ["cross_section", "none"]},
                 "domain_margin": {"type": "number", "minimum": 0, "maximum": MAX_DOMAIN_MARGIN},
+                "feature_transform": {"enum": ["log", "none"]},
+                "uncertainty_scale": _SCALE,
+                "velocity_uncertainty_scale": _SCALE,
             },
         },
         "velocity_edges": {"type": "array", "minItems": 2, "items": _NUMBER},
-        "velocity_best_params": {"oneOf": [_BEST, {"type": "null"}]},
-        "velocity_search": _SEARCH,
-        "velocity_search_cv_folds": _FOLDS,
+        "family": {"enum": ["mlp", "kriging", "rsm"]},
+        "frequency_state": _STATE,
+        "velocity_state": {"oneOf": [_STATE, {"type": "null"}]},
         "n_velocity_rows": {"type": "integer", "minimum": 0},
         "duplicated_features": {
             "type": "array",
@@ -107,12 +154,8 @@ SCHEMA = {
             "type": "object",
             "additionalProperties": {"type": "array", "minItems": 2, "maxItems": 2, "items": _NUMBER},
         },
-        "best_params": _BEST,
-        "seeds": _INT_LIST,
         "training_point_ids": {"type": "array", "minItems": 1, "items": {"type": "string"}},
         "n_training_rows": {"type": "integer", "minimum": 1},
-        "search_cv_folds": _FOLDS,
-        "search": _SEARCH,
         "versions": {
             "type": "object",
             "required": ["sklearn"],

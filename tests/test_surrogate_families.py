@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
+import os
+import platform
+import subprocess
+import sys
 import warnings
 
 import numpy as np
@@ -254,3 +258,40 @@ def test_response_surface_chooses_its_degree_by_grouped_cv():
     assert ResponseSurface(degree=(2, 1)).fit(X, curved).degrees_ == [1]
     with pytest.raises(ValueError, match="degree"):
         ResponseSurface(degree=(0, 2)).fit(X, curved)
+
+
+REFIT = r"""
+import sys, warnings
+import numpy as np
+from pbmdem.surrogate import training_data
+from pbmdem.surrogate.settings import build_families
+from pbmdem.surrogate.synthetic import make_synthetic_tables
+from pbmdem.config import Surrogate
+R = 0.0265
+table, velocity = make_synthetic_tables(R, rpms=(300, 600, 1200), sample_velocities=True)
+data = training_data(table, R, velocity_table=velocity)
+settings = Surrogate.from_section({}).to_dict()  # the defaults
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")
+    for name in ("kriging", "rsm"):
+        model = build_families(settings, R)[name].fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
+        np.save(f"{sys.argv[1]}/{name}.npy", np.concatenate([
+            model.predict(data.X, check_domain=False), model.predict_velocity(data.X, check_domain=False)[0]]))
+"""
+
+
+@pytest.mark.skipif(platform.machine() != "x86_64", reason="OpenBLAS core types are named for x86-64")
+def test_closed_form_families_do_not_depend_on_the_blas_kernel(tmp_path):
+    # The MLP's lbfgs path does (docs/surrogate.md, "Reproducibility"); the default kernel source must
+    # not. Prescott is OpenBLAS' generic x86-64 kernel: every x86-64 processor runs it.
+    runs = {}
+    for kernel in ("Prescott", None):
+        env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE")}
+        if kernel:
+            env["OPENBLAS_CORETYPE"] = kernel
+        out = tmp_path / str(kernel)
+        out.mkdir()
+        subprocess.run([sys.executable, "-c", REFIT, str(out)], env=env, check=True)
+        runs[kernel] = {name: np.load(out / f"{name}.npy") for name in ("kriging", "rsm")}
+    for name in ("kriging", "rsm"):
+        np.testing.assert_allclose(runs["Prescott"][name], runs[None][name], rtol=1e-6, atol=0)

@@ -88,8 +88,8 @@ def parity_plot(
             ]
             if len(row):
                 title += (
-                    f"\nMAE {row['mae_log10'].iloc[0]:.3f} dec, bin-fraction TV distance "
-                    f"{row['tv_distance'].iloc[0]:.3f}"
+                    f"\nR2(log10) {row['r2_log10'].iloc[0]:.3f}, MAE {row['mae_log10'].iloc[0]:.3f} dec, "
+                    f"TV distance {row['tv_distance'].iloc[0]:.3f}"
                 )
         ax.set_title(title, fontsize=10)
         ax.grid(True, which="both", lw=0.3, alpha=0.5)
@@ -119,7 +119,7 @@ def parity_plot(
         ax.plot([lo, hi], [lo / 2, hi / 2], "k:", lw=0.6)
         _square_log_axes(ax, lo, hi)
         ax.set_xlabel("DEM encounter frequency per pair (1/s)")
-        ax.set_ylabel("predicted (held-out runs) (1/s)")
+        ax.set_ylabel("predicted (held-out runs) (1/s)" + (", +-1 std" if f"{m}_std_log10" in predictions else ""))
         title = MODEL_LABELS.get(m, m)
         if metrics is not None:
             row = metrics[(metrics["model"] == m) & (metrics["fold"] == "pooled")]

@@ -232,8 +232,8 @@ def test_targets_are_stated_met_or_not_met_with_the_measured_values():
         ]
     )
     rows = targets(table).set_index(["criterion", "speed (rpm)"])
-    assert rows.loc[("ann_d50_outside_band_max <= 2.00 %", "300"), "met"] == "met"
-    assert rows.loc[("ann_d50_outside_band_max <= 2.00 %", "900"), ["measured", "met"]].tolist() == [
+    assert rows.loc[("ann_d50_outside_band_max <= 1.00 %", "300"), "met"] == "met"
+    assert rows.loc[("ann_d50_outside_band_max <= 1.00 %", "900"), ["measured", "met"]].tolist() == [
         "3.10 %",
         "not met",
     ]

@@ -260,10 +260,15 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
     cfg = yaml.safe_load(configfile.read_text())
     res = workdir / "results"
     metrics = pd.read_csv(res / "surrogate" / "metrics.csv")
-    assert {"mlp", "hgb", "physical"} <= set(metrics.model)
+    assert set(metrics.model) == {"mlp", "kriging", "rsm", "hgb", "physical"}
     metrics = metrics[metrics.target == "encounter_frequency"]
     pooled = metrics[metrics.fold.astype(str) == "pooled"].set_index("model")
-    assert pooled.loc["mlp", "n_test"] == len(pd.read_csv(res / "dem" / "collisions.csv"))
+    assert (pooled["n_test"] == len(pd.read_csv(res / "dem" / "collisions.csv"))).all()
+    # the families side by side selected the kernel source by their held-out R2 (surrogate.model: auto)
+    meta = json.loads((res / "surrogate" / "model.json").read_text())
+    families = ["mlp", "kriging", "rsm"]
+    assert meta["family"] == meta["cv_scores"]["selected"] == pooled.loc[families, "r2_log10"].idxmax()
+    assert meta["params"]["uncertainty_scale"] == pytest.approx(pooled.loc[meta["family"], "uncertainty_scale"])
     surrogate = load_surrogate(res / "surrogate" / "model.skops")
     table = pd.read_csv(res / "dem" / "collisions.csv")
     run = table[table.point_id == table.point_id.iloc[0]]

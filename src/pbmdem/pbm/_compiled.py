@@ -1,14 +1,31 @@
-"""Compiled (numba) rates of the PBM: aggregation over the ordered class pairs, spraying and
-consolidation, and the small vector operations of the step control.
+"""The PBM's compiled backend (numba): every loop of the rate processes and of the time
+integration, written once. ``GranulationPBM`` calls these primitives for every kernel: a factored
+kernel (``Kernel.factors``: beta_ij = S_ij p(phi_i) p(phi_j)) is evaluated inside
+:func:`class_rates`, any other kernel is evaluated in Python and its matrix passed to the same
+:func:`class_rates` (success model ALWAYS); the Runge-Kutta stages are :func:`ssp_stage`, run in
+one compiled call by :func:`ssp_step` for a factored kernel and stage by stage (the kernel called
+between the stages) otherwise.
 
-At the default grid (37 pivots + 3 feed classes) an aggregation evaluation is 1600 ordered
-pairs: a few microseconds of arithmetic, but about 25 numpy calls of 1-2 us each on the sparse
-map of ``aggregation.PivotAggregation`` (kept as the reference, ``totals_numpy``;
-``tests/test_pbm_compiled.py`` compares the two). Every sum adds the same products in the same
-order as the sparse map's rows, so the two agree to the bit.
+| primitive | what it computes |
+| --- | --- |
+| :func:`success_probability` | p(phi) of the success models (also ``SuccessProbability.per_particle``) |
+| :func:`surface_fraction` | the surface-liquid fraction of every class |
+| :func:`aggregation_totals` | aggregation: deaths and births of the M classes over the M^2 ordered pairs |
+| :func:`add_processes` | binder spraying and consolidation |
+| :func:`class_rates` | all rates of a class state: flush, success, aggregation, spraying, consolidation |
+| :func:`ssp_stage`, :func:`ssp_step` | the stages of one SSP Runge-Kutta step |
+| the rest | the small vector operations of the step control (flush, depletion time, error norm) |
 
-It is imported by ``aggregation`` when an operator is built (so ``import pbmdem.pbm`` does not
-import numba), and its functions have explicit signatures: they are compiled, or loaded from
+A further rate process (e.g. breakage: a selection rate per class and a fragment distribution)
+is one more loop called from :func:`class_rates`, beside :func:`aggregation_totals`; every kernel
+and every stage then sees it.
+
+The slow numpy formulation of the same rates (the sparse map of ordered-pair rates, numpy
+spraying, consolidation and stages) is a test oracle, ``tests/pbm_oracle.py``; the compiled
+rates equal it to the bit (``tests/test_pbm_compiled.py``).
+
+It is imported when a model or an aggregation operator is built (so ``import pbmdem.pbm`` does
+not import numba), and its functions have explicit signatures: they are compiled, or loaded from
 numba's on-disk cache (``cache=True``, in ``__pycache__`` beside this file), when this module is
 imported, never inside a run.
 """
@@ -20,6 +37,8 @@ from numba import njit
 
 #: success models of a factored kernel (``Kernel.factors``): p = 1, the step, the logistic
 ALWAYS, STEP, LOGISTIC = 0, 1, 2
+#: the success models by name (``SuccessProbability.model``), their codes above
+SUCCESS_CODES = {"always": ALWAYS, "step": STEP, "logistic": LOGISTIC}
 
 _SIGNATURE = "f8(f8[:, ::1], f8[::1], b1, f8[:, ::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1])"
 
@@ -223,6 +242,20 @@ def all_nonnegative(u):
     return True
 
 
+@njit("void(i8, f8, f8, f8[::1], f8[::1])", cache=True, nogil=True)
+def success_probability(model, threshold, width, phi, p):
+    """p(phi) of the success ``model`` into ``p``: ALWAYS 1, STEP 1 if phi >= threshold else 0,
+    LOGISTIC 1 / (1 + exp(-(phi - threshold) / width)) (exponent clipped to +-700)."""
+    for k in range(phi.size):
+        if model == ALWAYS:
+            p[k] = 1.0
+        elif model == STEP:
+            p[k] = 1.0 if phi[k] >= threshold else 0.0
+        else:
+            z = min(max((phi[k] - threshold) / width, -700.0), 700.0)
+            p[k] = 1.0 / (1.0 + np.exp(-z))
+
+
 @njit(
     "f8(f8[::1], f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], "
     "f8[:, ::1], f8[:, ::1])",
@@ -230,9 +263,10 @@ def all_nonnegative(u):
     nogil=True,
 )
 def class_rates(u, beta, model, vectors, params, K, cell_average, target, weight, factors, work, pw, d):
-    """All rates ``d`` (3, M) of the class state u = [N, L, G] (3M,) with a factored kernel
-    beta_ij p(phi_i) p(phi_j) (success ``model``: ALWAYS, STEP or LOGISTIC), and the refused solid
-    rate (returned): one call for what ``GranulationPBM._rates`` does with a generic kernel.
+    """All rates ``d`` (3, M) of the class state u = [N, L, G] (3M,), and the refused solid rate
+    (returned): the one rate evaluation of the PBM. The kernel is beta_ij p(phi_i) p(phi_j)
+    (success ``model``: STEP or LOGISTIC, a factored kernel) or ``beta`` itself (ALWAYS: a
+    factored kernel without success model, or the matrix of a kernel called in Python).
 
     ``vectors`` (3, M): class volumes (x_0 units), spray weights, G_min per particle; ``params``:
     number flush level, volume flush level (0: none), success threshold and width, spray rate (0:
@@ -242,42 +276,84 @@ def class_rates(u, beta, model, vectors, params, K, cell_average, target, weight
     flush_v = params[1]
     if flush_n > 0:
         # entries below the flush level count as zero (as after every step)
-        tiny = False
         for k in range(3 * M):
             if 0.0 < u[k] < (flush_n if k < M else flush_v):
-                tiny = True
+                u = u.copy()
+                flush(u, M, flush_n, flush_v)
                 break
-        if tiny:
-            u = u.copy()
-            flush(u, M, flush_n, flush_v)
     nlg = u.reshape((3, M))
     phi = pw[0]
     p = pw[1]
     if model != ALWAYS:
         surface_fraction(nlg, vectors[0], phi)
-        threshold = params[2]
-        width = params[3]
-        for k in range(M):
-            if model == STEP:
-                p[k] = 1.0 if phi[k] >= threshold else 0.0
-            else:
-                z = min(max((phi[k] - threshold) / width, -700.0), 700.0)
-                p[k] = 1.0 / (1.0 + np.exp(-z))
+        success_probability(model, params[2], params[3], phi, p)
     refused = aggregation_totals(beta, p, model != ALWAYS, nlg, K, cell_average, target, weight, factors, work, d)
     add_processes(d, nlg, params[4], vectors[1], params[5], vectors[2])
     return refused
 
 
+@njit("b1(i8, i8, f8, f8[::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1])", cache=True, nogil=True)
+def ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
+    """Stage ``j`` (1, 2, 3) of one explicit SSP Runge-Kutta step of size ``dt`` from u, given
+    the rates ``k[0 .. j-1]`` (3, 3M) and refused rates ``r[0 .. j-1]`` (r: (4,)) of the stages
+    before.
+
+    Returns True if the step ends at this stage, with the new state in ``u_new`` (for ``order``
+    > 1 also the embedded lower-order state in ``u_low``) and the step's refused rate in
+    ``r[3]``; else False: the caller evaluates the rates ``k[j]``, ``r[j]`` at ``stage`` (at time t + dt for
+    j = 1, t + dt/2 for j = 2) and calls stage j + 1. Euler (``order`` 1), SSP-RK2 (Heun, with an
+    embedded Euler estimate) and SSP-RK3 (Shu & Osher 1988, with an embedded Heun estimate), in
+    increment forms (zero rates leave u unchanged to the bit). An intermediate stage with a
+    negative entry ends the step with that stage as ``u_new`` (the caller then halves the step)."""
+    n = u.size
+    k1 = k[0]
+    if j == 1:
+        for i in range(n):
+            stage[i] = u[i] + dt * k1[i]  # u1 (Euler)
+        if order == 1 or any_negative(stage):
+            for i in range(n):
+                u_new[i] = stage[i]
+            r[3] = r[0]
+            return True
+        return False
+    k2 = k[1]
+    if j == 2:
+        h = 0.5 * dt
+        if order == 2:
+            for i in range(n):
+                u_low[i] = stage[i]
+                u_new[i] = u[i] + h * (k1[i] + k2[i])  # Heun (SSP-RK2)
+            r[3] = 0.5 * (r[0] + r[1])
+            return True
+        q = 0.25 * dt
+        for i in range(n):
+            k12 = k1[i] + k2[i]
+            u_low[i] = u[i] + h * k12  # Heun: the embedded estimate
+            stage[i] = u[i] + q * k12  # u2 of SSP-RK3
+        if any_negative(stage):
+            for i in range(n):
+                u_new[i] = stage[i]
+            r[3] = r[0]
+            return True
+        return False
+    k3 = k[2]
+    c = dt / 6.0
+    for i in range(n):
+        u_new[i] = u[i] + c * ((k1[i] + k2[i]) + 4.0 * k3[i])
+    r[3] = (r[0] + r[1] + 4.0 * r[2]) / 6.0
+    return True
+
+
 @njit(
-    "Tuple((f8, b1))(f8[::1], f8[::1], f8, f8, i8, f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], "
-    "f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[:, ::1])",
+    "f8(f8[::1], f8[:, ::1], f8[::1], f8, i8, f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], "
+    "f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1])",
     cache=True,
     nogil=True,
 )
-def ssp_stages(
+def ssp_step(
     u,
-    k1,
-    r1,
+    k,
+    r,
     dt,
     order,
     beta,
@@ -294,43 +370,26 @@ def ssp_stages(
     u_new,
     u_low,
     stage,
-    k2,
-    k3,
 ):
-    """The stages of one explicit SSP Runge-Kutta step of size ``dt`` from u with rates ``k1``
-    (refused rate ``r1``), with the compiled rates of a factored kernel (:func:`class_rates`):
-    what ``GranulationPBM._stages`` does in numpy, the same operations in the same order (increment
-    forms; zero rates leave u unchanged to the bit). Writes the new state ``u_new`` and, for
-    ``order`` > 1, the embedded lower-order state ``u_low``; returns (refused rate of the step,
-    whether ``u_low`` was written). An intermediate stage with a negative entry ends the step
-    with that stage as ``u_new`` (the caller then halves the step). ``stage``, ``k2``, ``k3``: work."""
-    n = u.size
-    for i in range(n):
-        stage[i] = u[i] + dt * k1[i]  # u1 (Euler)
-    if order == 1 or any_negative(stage):
-        for i in range(n):
-            u_new[i] = stage[i]
-        return r1, False
-    r2 = class_rates(stage, beta, model, vectors, params, K, cell_average, target, weight, factors, work, pw, k2)
-    k2f = k2.reshape(n)
-    h = 0.5 * dt
-    if order == 2:
-        for i in range(n):
-            u_low[i] = stage[i]
-            u_new[i] = u[i] + h * (k1[i] + k2f[i])  # Heun (SSP-RK2)
-        return 0.5 * (r1 + r2), True
-    q = 0.25 * dt
-    for i in range(n):
-        k12 = k1[i] + k2f[i]
-        u_low[i] = u[i] + h * k12  # Heun: the embedded estimate
-        stage[i] = u[i] + q * k12  # u2 of SSP-RK3 (Shu & Osher 1988)
-    if any_negative(stage):
-        for i in range(n):
-            u_new[i] = stage[i]
-        return r1, True
-    r3 = class_rates(stage, beta, model, vectors, params, K, cell_average, target, weight, factors, work, pw, k3)
-    k3f = k3.reshape(n)
-    c = dt / 6.0
-    for i in range(n):
-        u_new[i] = u[i] + c * ((k1[i] + k2f[i]) + 4.0 * k3f[i])
-    return (r1 + r2 + 4.0 * r3) / 6.0, True
+    """One step of :func:`ssp_stage` with the rates of a factored kernel (:func:`class_rates`) in
+    one compiled call; ``k[0]``, ``r[0]``: the rates at u. Returns the refused rate of the step."""
+    M = vectors.shape[1]
+    for j in range(1, 4):
+        if ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
+            return r[3]
+        r[j] = class_rates(
+            stage,
+            beta,
+            model,
+            vectors,
+            params,
+            K,
+            cell_average,
+            target,
+            weight,
+            factors,
+            work,
+            pw,
+            k[j].reshape((3, M)),
+        )
+    return r[3]  # pragma: no cover - stage 3 always ends the step

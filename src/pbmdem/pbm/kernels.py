@@ -17,6 +17,7 @@ Collision-frequency sources share the interface of docs/architecture.md,
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -32,6 +33,7 @@ __all__ = [
     "ConstantFrequency",
     "ConstantKernel",
     "Kernel",
+    "KernelFactors",
     "KernelInput",
     "SuccessProbability",
     "SumKernel",
@@ -76,6 +78,17 @@ class KernelInput:
         return self.diameters[:K], self.numbers[:K] + self.numbers[K:] @ self.feed_weights
 
 
+class KernelFactors(NamedTuple):
+    """A kernel beta_ij = scaled_ij p(phi_i) p(phi_j) for the compiled rates (``Kernel.factors``):
+    ``scaled`` (M, M) fixed until the kernel's next ``prepare``, and p the success ``model`` of
+    :class:`SuccessProbability` ("always": p = 1) with its ``threshold`` and ``width``."""
+
+    scaled: np.ndarray
+    model: str = "always"
+    threshold: float = 0.0
+    width: float = 1.0
+
+
 class Kernel:
     """Base class: ``kernel(inp) -> (K, K)``; ``prepare(inp)`` is called once at the start of every
     time step (a kernel may refresh cached data there), ``reset()`` at the start of every run.
@@ -90,13 +103,11 @@ class Kernel:
     def __call__(self, inp: KernelInput) -> np.ndarray:  # pragma: no cover - interface
         raise NotImplementedError
 
-    def factors(self, inp: KernelInput):
-        """``(S, model, threshold, width)`` if this kernel is beta_ij = S_ij p(phi_i) p(phi_j) at
-        the step of ``inp`` (after ``prepare``), with S (M, M) fixed until the next ``prepare`` and
-        p the success model ``model`` of ``SuccessProbability`` ("always": p = 1) of the
-        surface-liquid fraction phi: the model then evaluates the kernel inside its compiled rates
-        instead of calling it. None (default): the model calls the kernel."""
-        return
+    def factors(self, inp: KernelInput) -> KernelFactors | None:
+        """The :class:`KernelFactors` of this kernel at the step of ``inp`` (after ``prepare``):
+        the model then evaluates the kernel inside its compiled rates instead of calling it. None
+        (default): the model calls the kernel and passes its matrix to the same compiled rates."""
+        return None
 
 
 class ConstantKernel(Kernel):
@@ -115,8 +126,8 @@ class ConstantKernel(Kernel):
             self._cache = (K, np.full((K, K), self.beta0))
         return self._cache[1]
 
-    def factors(self, inp: KernelInput):
-        return self(inp), "always", 0.0, 1.0
+    def factors(self, inp: KernelInput) -> KernelFactors:
+        return KernelFactors(self(inp))
 
     def analytical_solution(self, v, t, N0, mean_volume):
         """Number density n(v, t) (1/m3) for the exponential initial distribution (Scott 1968)."""
@@ -143,8 +154,8 @@ class SumKernel(Kernel):
             self._cache = (v.copy(), self.b * (v[:, None] + v[None, :]))
         return self._cache[1]
 
-    def factors(self, inp: KernelInput):
-        return self(inp), "always", 0.0, 1.0
+    def factors(self, inp: KernelInput) -> KernelFactors:
+        return KernelFactors(self(inp))
 
     def analytical_solution(self, v, t, N0, mean_volume):
         """Number density n(v, t) for the exponential initial distribution (Golovin; Scott 1968)."""
@@ -159,7 +170,7 @@ class SuccessProbability:
 
     ``model``: ``"step"`` p = 1 if phi >= threshold else 0 (default); ``"logistic"``
     p = 1 / (1 + exp(-(phi - threshold) / width)); ``"always"`` p = 1 (dry or pure-aggregation
-    tests). phi = surface liquid / granule volume (see ``model.surface_fraction``).
+    tests). phi = surface liquid / granule volume (see ``state.surface_fraction``).
 
     ``velocity``: optional impact-velocity criterion (``pbmdem.pbm.success.StokesCriterion``: it
     holds an impact iff its speed is below ``critical_velocity(d, phi)``, and ``success(d, phi,
@@ -206,13 +217,16 @@ class SuccessProbability:
         return liquid[:, :, None] * self.velocity.success(diameters, phi, velocities)
 
     def per_particle(self, phi: np.ndarray) -> np.ndarray:
+        """p(phi) of every granule: the compiled success model (``_compiled.success_probability``,
+        the one the model's rates use)."""
+        from . import _compiled
+
         phi = np.asarray(phi, float)
-        if self.model == "always":
-            return np.ones_like(phi)
-        if self.model == "step":
-            return (phi >= self.threshold).astype(float)
-        z = np.clip((phi - self.threshold) / self.width, -700, 700)
-        return 1.0 / (1.0 + np.exp(-z))
+        p = np.empty(phi.size)
+        _compiled.success_probability(
+            _compiled.SUCCESS_CODES[self.model], self.threshold, self.width, np.ascontiguousarray(phi).ravel(), p
+        )
+        return p.reshape(phi.shape)
 
     def __call__(self, phi: np.ndarray) -> np.ndarray:
         p = self.per_particle(phi)
@@ -428,13 +442,13 @@ class CollisionKernel(Kernel):
             self._beta_of, self._beta_key = c, None
         return self._scaled
 
-    def factors(self, inp: KernelInput):
+    def factors(self, inp: KernelInput) -> KernelFactors | None:
         """beta0 c_ij and the success model: beta_ij = beta0 c_ij p(phi_i) p(phi_j) (None with a
         velocity-dependent success, which the model evaluates by calling the kernel)."""
         if self.success.velocity_dependent:
             return None
         s = self.success
-        return self._scaled_classes(inp), s.model, s.threshold, s.width
+        return KernelFactors(self._scaled_classes(inp), s.model, s.threshold, s.width)
 
     def __call__(self, inp: KernelInput) -> np.ndarray:
         if self._c is None or self._class_c is None or self._class_c.shape[0] != inp.volumes.size:

@@ -12,7 +12,7 @@ integration.
 | `aggregation` | the cell-average and fixed-pivot aggregation schemes (their pair maps for the compiled rates) |
 | `kernels` | aggregation kernels and collision-frequency sources (with their analytical solutions) |
 | `table` | the DEM collision table as a collision-frequency source (`TableFrequency`, re-exported by `kernels`) |
-| `success` | the Stokes criterion of velocity-dependent success |
+| `success` | the success probability of a pair and the Stokes criterion of velocity-dependent success |
 | `processes` | liquid addition and consolidation |
 | `state` | the resumable state of a run |
 | `model` | the population balance and its time integration |

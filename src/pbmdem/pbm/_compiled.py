@@ -43,6 +43,61 @@ SUCCESS_CODES = {"always": ALWAYS, "step": STEP, "logistic": LOGISTIC}
 _SIGNATURE = "f8(f8[:, ::1], f8[::1], b1, f8[:, ::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1])"
 
 
+@njit("void(f8[:, ::1], i8, f8, f8, f8, f8)", cache=True, nogil=True)
+def _collect_births(born, t, h, RL, RG, moment):
+    """Cell average: an event (rate h, liquid RL, gas RG) is born in cell t; ``moment``: its
+    volume about the pivot, s/x_t - 1."""
+    born[0, t] += h
+    born[3, t] += h * moment
+    born[1, t] += RL
+    born[2, t] += RG
+
+
+@njit("void(f8[:, ::1], i8, f8, f8, f8, f8, f8)", cache=True, nogil=True)
+def _place_births(born, t, h, RL, RG, up_number, up_solid):
+    """Fixed pivot: an event (rate h, liquid RL, gas RG) is born on the pivots t and t + 1, the
+    upper one receiving ``up_number`` of the number and ``up_solid`` of the solid (liquid, gas)."""
+    born[0, t] += h * (1.0 - up_number)
+    born[0, t + 1] += h * up_number
+    born[1, t] += RL * (1.0 - up_solid)
+    born[1, t + 1] += RL * up_solid
+    born[2, t] += RG * (1.0 - up_solid)
+    born[2, t + 1] += RG * up_solid
+
+
+@njit("void(f8[:, ::1], f8[:, ::1], f8[:, ::1], i8)", cache=True, nogil=True)
+def _split_cells(born, factors, split, K):
+    """Cell average: the births B_c of every cell c, with first moment D_c about its pivot (in
+    units of x_c), move up (D_c > 0) or down (D_c < 0) so that number and solid are exact; liquid
+    and gas follow the solid each pivot receives. Replaces ``born[:3]`` by what every pivot
+    receives; ``split[b]`` / ``split[3 + b]``: what moves up / down of b."""
+    cu = factors[0]
+    ncd = factors[1]
+    ru = factors[2]
+    rd = factors[3]
+    for c in range(K):
+        D = born[3, c]
+        up = max(D, 0.0) * cu[c]
+        down = min(D, 0.0) * ncd[c]
+        V = born[0, c] + D  # solid born, units of x_c
+        inv = 1.0 / V if V > 0 else 0.0
+        split[0, c] = up
+        split[3, c] = down
+        fu = up * ru[c] * inv
+        fd = down * rd[c] * inv
+        for b in (1, 2):
+            split[b, c] = born[b, c] * fu
+            split[3 + b, c] = born[b, c] * fd
+    for b in range(3):
+        for c in range(K):
+            o = (born[b, c] - split[b, c]) - split[3 + b, c]
+            if c > 0:
+                o += split[b, c - 1]
+            if c < K - 1:
+                o += split[3 + b, c + 1]
+            born[b, c] = o
+
+
 @njit(_SIGNATURE, cache=True, nogil=True)
 def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, factors, work, d):
     """Rates of change ``d`` (3, M) of number, liquid and gas of the M classes, and the refused
@@ -66,7 +121,6 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
     """
     M = nlg.shape[1]
     born = work[:4]  # rows: number, liquid, gas born per cell, first moment D_c
-    split = work[4:]
     for r in range(4):
         for c in range(K):
             born[r, c] = 0.0
@@ -95,58 +149,19 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
             dN += R
             dL += RL
             dG += RG
+            # every ordered pair counts half an event
             if cell_average:
-                h = 0.5 * R  # every ordered pair counts half an event
-                born[0, t] += h
-                born[3, t] += h * weight[0, row + j]
-                born[1, t] += RL
-                born[2, t] += RG
+                _collect_births(born, t, 0.5 * R, RL, RG, weight[0, row + j])
             else:
-                h = 0.5 * R
-                up = weight[0, row + j]
-                us = weight[1, row + j]
-                born[0, t] += h * (1.0 - up)
-                born[0, t + 1] += h * up
-                born[1, t] += RL * (1.0 - us)
-                born[1, t + 1] += RL * us
-                born[2, t] += RG * (1.0 - us)
-                born[2, t + 1] += RG * us
+                _place_births(born, t, 0.5 * R, RL, RG, weight[0, row + j], weight[1, row + j])
         d[0, i] = -dN
         d[1, i] = -dL
         d[2, i] = -dG
-    if not cell_average:
-        for b in range(3):
-            for c in range(K):
-                d[b, c] += born[b, c]
-        return refused
-    # cell average: the births B_c of cell c, with first moment D_c about its pivot (in units of
-    # x_c), move up (D_c > 0) or down (D_c < 0) so that number and solid are exact; liquid and gas
-    # follow the solid each pivot receives. split[b] / split[3 + b]: what moves up / down of b.
-    cu = factors[0]
-    ncd = factors[1]
-    ru = factors[2]
-    rd = factors[3]
-    for c in range(K):
-        D = born[3, c]
-        up = max(D, 0.0) * cu[c]
-        down = min(D, 0.0) * ncd[c]
-        V = born[0, c] + D  # solid born, units of x_c
-        inv = 1.0 / V if V > 0 else 0.0
-        split[0, c] = up
-        split[3, c] = down
-        fu = up * ru[c] * inv
-        fd = down * rd[c] * inv
-        for b in (1, 2):
-            split[b, c] = born[b, c] * fu
-            split[3 + b, c] = born[b, c] * fd
+    if cell_average:
+        _split_cells(born, factors, work[4:], K)
     for b in range(3):
         for c in range(K):
-            o = (born[b, c] - split[b, c]) - split[3 + b, c]
-            if c > 0:
-                o += split[b, c - 1]
-            if c < K - 1:
-                o += split[3 + b, c + 1]
-            d[b, c] += o
+            d[b, c] += born[b, c]
     return refused
 
 

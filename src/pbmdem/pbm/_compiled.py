@@ -249,6 +249,15 @@ def any_negative(u):
 
 
 @njit("b1(f8[::1])", cache=True, nogil=True)
+def all_finite(u):
+    """True if no entry is NaN or infinite."""
+    for k in range(u.size):
+        if not np.isfinite(u[k]):
+            return False
+    return True
+
+
+@njit("b1(f8[::1])", cache=True, nogil=True)
 def all_nonnegative(u):
     """True if every entry is >= 0 (False for a NaN)."""
     for k in range(u.size):

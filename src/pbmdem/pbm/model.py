@@ -27,8 +27,6 @@ totals include them, put on the pivots by the lever rule as the initial distribu
 
 from __future__ import annotations
 
-from functools import partial
-
 import numpy as np
 
 from pbmdem.config import Solver
@@ -134,6 +132,7 @@ class GranulationPBM:
         self._pw = np.zeros((2, self._M))
         # work of the stages: the rates k (3, 3M) and refused rates r (4,) of the stages, a stage
         self._k, self._r, self._stage = np.empty((3, 3 * self._M)), np.zeros(4), np.empty(3 * self._M)
+        self._k_rows = [k.reshape(3, self._M) for k in self._k]  # the rates of stage j as (3, M)
         self._op_arrays = op.compiled_arrays()
 
     def _pivot_totals(self, u: np.ndarray) -> np.ndarray:
@@ -256,7 +255,7 @@ class GranulationPBM:
             self._params[1] if spraying else self._params[0],
             *self._op_arrays,
             self._pw,
-            self._k[j].reshape(3, self._M),
+            self._k_rows[j],
         )
 
     def _stages(self, t: float, u: np.ndarray, dt: float, order: int, spraying: bool):
@@ -404,10 +403,11 @@ class GranulationPBM:
         u = self._class_state(s)
         total_solid = float(np.sum(u[:M] * self._xc))  # x_0 units
         refused = s.refused_volume / x0
+        allowed_refused = opt.max_overflow_fraction * total_solid
         # error scale of entry k: rtol |u_k| + atol x total solid / w_k, where number entries count
         # by their solid volume (w = x_k / x_0) and liquid and gas as volumes (w = 1)
         floor = opt.atol * max(total_solid, 1e-300) / np.concatenate([self._xc, np.ones(2 * M)])
-        ctl = StepControl(opt, t_start, t_end, floor, self._raise_bad)
+        ctl = StepControl(opt, t_start, t_end, floor, self._stages, self._raise_bad)
         flush_n = self._flush_n = FLUSH * float(np.sum(s.number))
         flush_v = self._flush_v = FLUSH * total_solid
         self._flush_vec = np.concatenate([np.full(M, flush_n), np.full(2 * M, flush_v)])
@@ -424,10 +424,9 @@ class GranulationPBM:
             self._use_factors(inp)
             self._r[0] = self._rates(t, u, spraying, 0)
             k1 = self._k[0]
-            if not np.isfinite(k1).all():
+            if not jit.all_finite(k1):
                 self._raise_bad(t, np.where(np.isfinite(k1), u, np.nan), "non-finite rate")
-            stages = partial(self._stages, t, u, order=ctl.order, spraying=spraying)
-            u, dt, refused_rate = ctl.step(t, t_next, u, k1, stages)
+            u, dt, refused_rate = ctl.step(t, t_next, u, k1, spraying)
             capped = dt == t_next - t
             t = t_next if capped else t + dt
             jit.flush(u, M, flush_n, flush_v)
@@ -435,7 +434,8 @@ class GranulationPBM:
             refused += refused_rate * dt
             if spraying:
                 s.liquid_added += self.liquid.rate * dt
-            self._check_refused(t, refused, total_solid)
+            if refused > allowed_refused:
+                self._overflow(t, refused, total_solid)
             ctl.check_limits(t)
             if capped and (t in outs or t == t_end):
                 self._store(s, t, u, refused)
@@ -445,18 +445,17 @@ class GranulationPBM:
             ctl.limits["kernel_refreshes"] = int(self.kernel.evaluations - refresh0)
         return Result(self.grid, rec, s, self._info(ctl))
 
-    def _check_refused(self, t: float, refused: float, total_solid: float) -> None:
-        """GridOverflowError once the refused solid (x_0 units) exceeds the allowed fraction."""
+    def _overflow(self, t: float, refused: float, total_solid: float) -> None:
+        """GridOverflowError: the refused solid (x_0 units) exceeds the allowed fraction."""
         allowed = self.solver.max_overflow_fraction
-        if refused > allowed * total_solid:
-            x0 = self.grid.x[0]
-            raise GridOverflowError(
-                f"aggregation beyond the last bin (pivot {self.grid.x[-1]:.4g} m3, diameter "
-                f"{self.grid.d[-1]:.4g} m): by t = {t:.6g} s aggregates carrying {refused * x0:.4g} m3 of solid "
-                f"were refused, {refused / total_solid:.3g} of the total solid volume {total_solid * x0:.4g} m3; "
-                f"allowed: at most max_overflow_fraction = {allowed:g} of the total solid. "
-                "Raise the top of the grid (pbm.grid.max_diameter, or bins / ratio)"
-            )
+        x0 = self.grid.x[0]
+        raise GridOverflowError(
+            f"aggregation beyond the last bin (pivot {self.grid.x[-1]:.4g} m3, diameter "
+            f"{self.grid.d[-1]:.4g} m): by t = {t:.6g} s aggregates carrying {refused * x0:.4g} m3 of solid "
+            f"were refused, {refused / total_solid:.3g} of the total solid volume {total_solid * x0:.4g} m3; "
+            f"allowed: at most max_overflow_fraction = {allowed:g} of the total solid. "
+            "Raise the top of the grid (pbm.grid.max_diameter, or bins / ratio)"
+        )
 
     def _info(self, ctl: StepControl) -> dict:
         """``result.info`` of a run."""

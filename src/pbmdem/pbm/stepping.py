@@ -81,33 +81,34 @@ class StepControl:
     """The step sizes of one run on [t_start, t_end] with solver settings ``opt``.
 
     ``error_floor`` (3M,): atol x total solid / w_k, the absolute part of the error scale of
-    every entry (numbers count by their solid volume, liquid and gas as volumes); ``bad(t, u,
-    why)`` raises NegativePopulationError for the entry of u that is negative or not finite."""
+    every entry (numbers count by their solid volume, liquid and gas as volumes); ``stages(t, u,
+    dt, order, spraying)`` -> (new state, embedded lower-order state, refused rate) of a step of
+    size dt; ``bad(t, u, why)`` raises NegativePopulationError for the entry of u that is negative
+    or not finite."""
 
-    def __init__(self, opt: Solver, t_start: float, t_end: float, error_floor: np.ndarray, bad):
+    def __init__(self, opt: Solver, t_start: float, t_end: float, error_floor: np.ndarray, stages, bad):
         from . import _compiled
 
         self._jit = _compiled
         self.opt, self.t_start, self.t_end = opt, t_start, t_end
         self.order = ORDERS[opt.method]
         self.expo = 1.0 / self.order
-        self.error_floor, self.bad = error_floor, bad
+        self.error_floor, self.stages, self.bad = error_floor, stages, bad
         self.limits = dict.fromkeys(STEP_LIMITS, 0)
         self.dt_prop = opt.max_step
         self.taken = 0
         self.wall0 = _time.perf_counter()
 
-    def step(self, t: float, t_next: float, u: np.ndarray, k1: np.ndarray, stages):
-        """One accepted step from the state u at t with rates k1, not beyond t_next:
-        (new state, dt, refused rate of the step). ``stages(dt)`` -> (new state, embedded
-        lower-order state, refused rate) of a step of size dt."""
-        opt, jit = self.opt, self._jit
+    def step(self, t: float, t_next: float, u: np.ndarray, k1: np.ndarray, spraying: bool):
+        """One accepted step from the state u at t with rates k1, not beyond t_next: (new state,
+        dt, refused rate of the step)."""
+        opt, jit, stages, order = self.opt, self._jit, self.stages, self.order
         cands = (opt.safety * jit.depletion_time(u, k1), self.dt_prop, opt.max_step, t_next - t)
         dt = min(cands)
         why = cands.index(dt)
         rejected = 0
         for _ in range(MAX_HALVINGS + 1):
-            u_new, u_low, refused_rate = stages(dt)
+            u_new, u_low, refused_rate = stages(t, u, dt, order, spraying)
             err = 0.0
             if not jit.all_nonnegative(u_new):
                 if np.isnan(u_new).any():
@@ -140,14 +141,15 @@ class StepControl:
     def check_limits(self, t: float) -> None:
         """SolverLimitError if the run is not done at t and has used up max_steps or max_wall_time."""
         opt, taken = self.opt, self.taken
+        if t >= self.t_end or (taken < opt.max_steps and (taken % 64 or self.wall_time() <= opt.max_wall_time)):
+            return
         span = f"run stopped at t = {t:.6g} s of [{self.t_start:g}, {self.t_end:g}] s after {taken} steps"
-        if taken >= opt.max_steps and t < self.t_end:
+        if taken >= opt.max_steps:
             raise SolverLimitError(f"{span} (solver max_steps = {opt.max_steps}); step limits so far: {self.limits}")
-        if taken % 64 == 0 and t < self.t_end and self.wall_time() > opt.max_wall_time:
-            raise SolverLimitError(
-                f"{span} and {self.wall_time():.3g} s of wall time (solver max_wall_time = "
-                f"{opt.max_wall_time:g} s); step limits so far: {self.limits}"
-            )
+        raise SolverLimitError(
+            f"{span} and {self.wall_time():.3g} s of wall time (solver max_wall_time = "
+            f"{opt.max_wall_time:g} s); step limits so far: {self.limits}"
+        )
 
     def wall_time(self) -> float:
         return _time.perf_counter() - self.wall0

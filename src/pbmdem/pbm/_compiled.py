@@ -198,15 +198,6 @@ def surface_fraction(nlg, xc, out):
         out[k] = max(L - G, 0.0) / V if V > 0 else 0.0
 
 
-@njit("b1(f8[::1], f8[::1])", cache=True, nogil=True)
-def below_flush(u, level):
-    """True if an entry lies strictly between 0 and its flush level."""
-    for k in range(u.size):
-        if 0.0 < u[k] < level[k]:
-            return True
-    return False
-
-
 @njit("void(f8[::1], i8, f8, f8)", cache=True, nogil=True)
 def flush(u, M, flush_n, flush_v):
     """Zero (in place) the entries of u = [N, L, G] (3M,) below their flush level; a class whose
@@ -219,6 +210,18 @@ def flush(u, M, flush_n, flush_v):
     for k in range(M, 3 * M):
         if u[k] < flush_v:
             u[k] = 0.0
+
+
+@njit("f8[::1](f8[::1], i8, f8, f8)", cache=True, nogil=True)
+def flushed(u, M, flush_n, flush_v):
+    """u, or if an entry lies strictly between 0 and its flush level a copy of u with the
+    entries below their flush level zeroed (:func:`flush`)."""
+    for k in range(3 * M):
+        if 0.0 < u[k] < (flush_n if k < M else flush_v):
+            v = u.copy()
+            flush(v, M, flush_n, flush_v)
+            return v
+    return u
 
 
 @njit("f8(f8[::1], f8[::1])", cache=True, nogil=True)
@@ -299,12 +302,7 @@ def class_rates(u, beta, model, vectors, params, K, cell_average, target, weight
     flush_n = params[0]
     flush_v = params[1]
     if flush_n > 0:
-        # entries below the flush level count as zero (as after every step)
-        for k in range(3 * M):
-            if 0.0 < u[k] < (flush_n if k < M else flush_v):
-                u = u.copy()
-                flush(u, M, flush_n, flush_v)
-                break
+        u = flushed(u, M, flush_n, flush_v)  # entries below the flush level count as zero
     nlg = u.reshape((3, M))
     phi = pw[0]
     p = pw[1]

@@ -238,9 +238,8 @@ class GranulationPBM:
         """
         beta = self._factored
         if beta is None:
-            if self._flush_n > 0 and self._jit.below_flush(u, self._flush_vec):
-                u = u.copy()
-                self._jit.flush(u, self._M, self._flush_n, self._flush_v)  # a class flushed loses L, G too
+            if self._flush_n > 0:  # the kernel sees the state as the compiled rates do
+                u = self._jit.flushed(u, self._M, self._flush_n, self._flush_v)
             beta = np.ascontiguousarray(self.kernel(self._input(t, u.reshape(3, self._M))), dtype=float)
             if beta.shape != (self._M, self._M):
                 raise KernelShapeError(
@@ -410,7 +409,6 @@ class GranulationPBM:
         ctl = StepControl(opt, t_start, t_end, floor, self._stages, self._raise_bad)
         flush_n = self._flush_n = FLUSH * float(np.sum(s.number))
         flush_v = self._flush_v = FLUSH * total_solid
-        self._flush_vec = np.concatenate([np.full(M, flush_n), np.full(2 * M, flush_v)])
         jit.flush(u, M, flush_n, flush_v)
         refresh0 = getattr(self.kernel, "evaluations", None)
         t, ev = t_start, 0

@@ -358,3 +358,22 @@ def test_shapes_are_checked_before_the_compiled_code():
     state = model.initial_state(np.pi / 6 * np.array([2e-3]) ** 3, [100])
     with pytest.raises(KernelShapeError, match=r"factors of shape \(2, 2\); expected \(9, 9\) for the 9 classes"):
         model.run(0.0, 1.0, state)
+
+
+def test_rates_after_a_run_with_feed_classes_use_the_bins():
+    # a run leaves flush levels and classes of its own; rates() of per-bin totals afterwards are
+    # those of a fresh model (a called kernel sees the K bins, not the run's classes)
+    g = Grid.spanning(2e-3, 32e-3, 2.0 ** (1 / 3))
+    rng = np.random.default_rng(3)
+    N = rng.uniform(1.0, 100.0, g.bins)
+    L, G = N * g.x * 0.05, N * g.x * 0.3
+
+    def model():
+        kern = CollisionKernel(ConstantFrequency(0.12), 2e-4, SuccessProbability("logistic", 0.02, 0.005))
+        return GranulationPBM(g, _Unfactored(kern), LiquidAddition(5.8e-8, 0.0, 240.0), Consolidation(0.02, 0.2))
+
+    used = model()
+    state = used.initial_state(np.pi / 6 * np.array([2e-3, 3e-3]) ** 3, [900.0, 540.0], porosity=0.5)
+    used.run(0.0, 60.0, state)
+    for a, b in zip(used.rates(1.0, N, L, G, True), model().rates(1.0, N, L, G, True)):
+        np.testing.assert_array_equal(a, b)

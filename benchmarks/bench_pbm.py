@@ -13,8 +13,8 @@
 * the one-off cost of the first model build in a process (numba's import and the load of its
   compiled functions from the on-disk cache), and of a build with an empty cache (compiling);
 * variants of the default batch (4x finer grid, fixed pivot, lumped feed, Heun's method);
-* the time of one aggregation-rate evaluation: the compiled loop and the sparse-map numpy
-  reference (``totals_numpy``).
+* the time of one aggregation-rate evaluation: the compiled loop (the library's one
+  implementation) and the sparse-map numpy oracle of the tests (``tests/pbm_oracle.py``).
 
 ``--before REF`` (default ``1b77f4f``, the tree before the compiled PBM and the surrogate's array
 path) also measures the import, the default batch and the PBM-ANN loop of that git revision, in
@@ -300,6 +300,9 @@ def main():
     from pbmdem.pbm import SCHEMES, Grid
     from pbmdem.pbm.setup import run_batch
 
+    sys.path.insert(0, str(ROOT / "tests"))
+    import pbm_oracle  # the numpy oracle of the compiled rates
+
     print("\nvariants of the default batch (this tree):")
     ratio = cfg.pbm.grid.ratio
     for label, pbm in (
@@ -321,7 +324,7 @@ def main():
             f"d50 {s.d50.iloc[0] * 1e3:.2f} -> {s.d50.iloc[-1] * 1e3:.2f} mm"
         )
 
-    print("aggregation-rate evaluation (full (K,K) kernel, totals; compiled loop / numpy sparse map):")
+    print("aggregation-rate evaluation (full (K,K) kernel, totals; compiled loop / numpy sparse-map oracle):")
     rng = np.random.default_rng(0)
     for scheme, K in ((s, K) for s in SCHEMES for K in (40, 100, 200)):
         grid = Grid(K, 2.0 ** (34 / (K - 1)), v0=1.0)
@@ -333,7 +336,8 @@ def main():
         nlg = rng.random((3, K))
         n = 2000 if K < 150 else 300
         per = {}
-        for label, fn in (("compiled", op.totals_stacked), ("numpy", op.totals_numpy)):
+        oracle = partial(pbm_oracle.aggregation_totals, op, m=pbm_oracle.sparse_map(op))
+        for label, fn in (("compiled", op.totals_stacked), ("numpy", oracle)):
             fn(beta, nlg)
             best = []
             for _ in range(3):

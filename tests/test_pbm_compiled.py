@@ -1,6 +1,8 @@
-"""The compiled (numba) rate evaluation and the kernel caches of the fast PBM path: the same
-numbers as the numpy reference (the sparse map) and the same kernels as the formula, to the bit;
-spraying and consolidation as before to round-off; no numba on `import pbmdem.pbm`."""
+"""The compiled (numba) backend, the PBM's one implementation of its rates and stages, and the
+kernel caches: the same numbers as the numpy oracle (tests/pbm_oracle.py: the sparse map, the
+success models, spraying, consolidation, the SSP stages) and the same kernels as the formula, to
+the bit; a kernel called in Python and the same kernel factored give the same run to the bit; no
+numba on `import pbmdem.pbm`."""
 
 from __future__ import annotations
 
@@ -8,6 +10,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pbm_oracle as oracle
 import pytest
 
 from pbmdem.config import Solver
@@ -26,6 +29,7 @@ from pbmdem.pbm import (
     TableFrequency,
 )
 from pbmdem.pbm.errors import KernelShapeError
+from pbmdem.pbm.kernels import KernelFactors
 
 
 def random_totals(rng, M, empty=5):
@@ -41,17 +45,79 @@ def test_compiled_totals_equal_the_sparse_map_to_the_bit(scheme, K, extra):
     rng = np.random.default_rng(K)
     g = Grid(K, 2.0 ** (1 / 3), v0=1.0)
     op = SCHEMES[scheme](g.x, g.edges[1:-1], extra=extra)
+    m = oracle.sparse_map(op)
     for _ in range(5):
         beta = rng.random((op.M, op.M))
         beta = beta + beta.T
         nlg = random_totals(rng, op.M)
         d, refused = op.totals_stacked(beta, nlg)
-        d_ref, refused_ref = op.totals_numpy(beta, nlg)
+        d_ref, refused_ref = oracle.aggregation_totals(op, beta, nlg, m)
         # the same products summed in the same order: equal to the bit
         np.testing.assert_array_equal(d, d_ref)
         assert refused == refused_ref
         # the totals are a fresh array each time (the integrator keeps the stages' rates)
         assert op.totals_stacked(beta, nlg)[0] is not d
+
+
+def _compiled_rates(op, u, beta, model, threshold, width, vectors, spray_rate, consolidation_rate):
+    from pbmdem.pbm import _compiled
+
+    M = op.M
+    d = np.empty((3, M))
+    params = np.array([0.0, 0.0, threshold, width, spray_rate, consolidation_rate])
+    refused = _compiled.class_rates(
+        u, beta, _compiled.SUCCESS_CODES[model], vectors, params, *op.compiled_arrays(), np.zeros((2, M)), d
+    )
+    return d.reshape(-1), refused
+
+
+@pytest.mark.parametrize("scheme", sorted(SCHEMES))
+@pytest.mark.parametrize("model", ["always", "step", "logistic"])
+def test_compiled_class_rates_and_stages_equal_the_oracle(scheme, model):
+    # every process on: aggregation with a success model, spraying, consolidation; then the stages
+    # of one step of every order
+    from pbmdem.pbm import _compiled
+
+    rng = np.random.default_rng(7)
+    g = Grid(30, 2.0 ** (1 / 3), v0=1.0)
+    op = SCHEMES[scheme](g.x, g.edges[1:-1], extra=(1.5, 4.0))
+    M = op.M
+    xc = op.class_volumes
+    beta = rng.random((M, M)) * 1e-3
+    beta = beta + beta.T
+    N = rng.uniform(1.0, 100.0, M) * (np.arange(M) < M - 6)
+    N[-2:] = rng.uniform(1.0, 100.0, 2)  # the feed classes
+    u = np.concatenate([N, N * xc * rng.uniform(0.0, 0.08, M), N * xc * rng.uniform(0.0, 0.06, M)])
+    weight, gas_min = (xc ** (2 / 3)).copy(), 0.25 * xc
+    vectors = np.ascontiguousarray(np.stack([xc, weight, gas_min]))
+    args = (model, 0.02, 0.005)
+    Q, c = 3.0, 0.02
+
+    def oracle_rates(v):
+        return oracle.class_rates(op, v, beta, *args, spray=(Q, weight), consol=(c, gas_min))
+
+    d, refused = _compiled_rates(op, u, beta, *args, vectors, Q, c)
+    d_ref, refused_ref = oracle_rates(u)
+    # the same operations in the same order (numba's exp and numpy's may differ in the last digit)
+    exact = model != "logistic"
+    check = np.testing.assert_array_equal if exact else lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-12)
+    check(d, d_ref)
+    assert refused == refused_ref or not exact
+    params = np.array([0.0, 0.0, 0.02, 0.005, Q, c])
+    for order in (1, 2, 3):
+        dt = 0.3 * _compiled.depletion_time(u, d)
+        k, r = np.zeros((3, 3 * M)), np.zeros(4)
+        k[0], r[0] = d, refused
+        u_new, u_low, stage = np.empty(3 * M), np.empty(3 * M), np.empty(3 * M)
+        step_refused = _compiled.ssp_step(
+            u, k, r, dt, order, beta, _compiled.SUCCESS_CODES[model], vectors, params, *op.compiled_arrays(),
+            np.zeros((2, M)), u_new, u_low, stage,
+        )  # fmt: skip
+        ref_new, ref_low, ref_refused = oracle.ssp_step(oracle_rates, u, dt, order)
+        check(u_new, ref_new)
+        if order > 1:
+            check(u_low, ref_low)
+        assert step_refused == pytest.approx(ref_refused, rel=1e-12, abs=0.0)
 
 
 def test_compiled_totals_take_any_layout_of_the_kernel():
@@ -259,11 +325,8 @@ def test_factored_kernel_in_the_compiled_rates_equals_calling_the_kernel(kernel)
     assert fast.info["steps"] == generic.info["steps"]
     assert fast.info["step_limits"] == generic.info["step_limits"]
     for a, b in ((fast.number, generic.number), (fast.liquid, generic.liquid), (fast.gas, generic.gas)):
-        if kernel().__class__ is CollisionKernel and kernel().success.model == "logistic":
-            # numba's exp and numpy's may differ in the last digit
-            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12 * np.abs(b).max())
-        else:
-            np.testing.assert_array_equal(a, b)
+        # one implementation of the rates, the stages and the success model: equal to the bit
+        np.testing.assert_array_equal(a, b)
     assert fast.summary().d50.iloc[-1] > 1.2 * fast.summary().d50.iloc[0]  # it did granulate
 
 
@@ -289,9 +352,28 @@ def test_shapes_are_checked_before_the_compiled_code():
 
     class WrongFactors(ConstantKernel):
         def factors(self, inp):
-            return np.ones((2, 2)), "always", 0.0, 1.0
+            return KernelFactors(np.ones((2, 2)))
 
     model = GranulationPBM(Grid(8, 2.0, min_diameter=1e-3), WrongFactors(1e-4))
     state = model.initial_state(np.pi / 6 * np.array([2e-3]) ** 3, [100])
     with pytest.raises(KernelShapeError, match=r"factors of shape \(2, 2\); expected \(9, 9\) for the 9 classes"):
         model.run(0.0, 1.0, state)
+
+
+def test_rates_after_a_run_with_feed_classes_use_the_bins():
+    # a run leaves flush levels and classes of its own; rates() of per-bin totals afterwards are
+    # those of a fresh model (a called kernel sees the K bins, not the run's classes)
+    g = Grid.spanning(2e-3, 32e-3, 2.0 ** (1 / 3))
+    rng = np.random.default_rng(3)
+    N = rng.uniform(1.0, 100.0, g.bins)
+    L, G = N * g.x * 0.05, N * g.x * 0.3
+
+    def model():
+        kern = CollisionKernel(ConstantFrequency(0.12), 2e-4, SuccessProbability("logistic", 0.02, 0.005))
+        return GranulationPBM(g, _Unfactored(kern), LiquidAddition(5.8e-8, 0.0, 240.0), Consolidation(0.02, 0.2))
+
+    used = model()
+    state = used.initial_state(np.pi / 6 * np.array([2e-3, 3e-3]) ** 3, [900.0, 540.0], porosity=0.5)
+    used.run(0.0, 60.0, state)
+    for a, b in zip(used.rates(1.0, N, L, G, True), model().rates(1.0, N, L, G, True)):
+        np.testing.assert_array_equal(a, b)

@@ -9,14 +9,15 @@ integration.
 | module | concept |
 | --- | --- |
 | `grid` | the geometric solid-volume grid and the lever rule |
-| `aggregation` | the cell-average and fixed-pivot aggregation operators |
+| `aggregation` | the cell-average and fixed-pivot aggregation schemes (their pair maps for the compiled rates) |
 | `kernels` | aggregation kernels and collision-frequency sources (with their analytical solutions) |
 | `table` | the DEM collision table as a collision-frequency source (`TableFrequency`, re-exported by `kernels`) |
-| `success` | the Stokes criterion of velocity-dependent success |
+| `success` | the success probability of a pair and the Stokes criterion of velocity-dependent success |
 | `processes` | liquid addition and consolidation |
 | `state` | the resumable state of a run |
 | `model` | the population balance and its time integration |
-| `_compiled` | its compiled (numba) rates and stages, imported when a model is built |
+| `stepping` | the step control of the time integration (step sizes, rejections, limits, records) |
+| `_compiled` | the one implementation of the rates and stages (numba), imported when a model is built |
 | `results` | time series, size statistics, tables, plots |
 | `setup` | a model and a batch from the typed settings (pbmdem.config) |
 | `analytical` | closed-form solutions of pure aggregation |
@@ -40,6 +41,7 @@ from .kernels import (
     CollisionKernel,
     ConstantFrequency,
     ConstantKernel,
+    KernelFactors,
     KernelInput,
     SuccessProbability,
     SumKernel,
@@ -65,6 +67,7 @@ __all__ = [
     "TableFrequency",
     "SuccessProbability",
     "StokesCriterion",
+    "KernelFactors",
     "KernelInput",
     "GranulationPBM",
     "State",

@@ -1,14 +1,31 @@
-"""Compiled (numba) rates of the PBM: aggregation over the ordered class pairs, spraying and
-consolidation, and the small vector operations of the step control.
+"""The PBM's compiled backend (numba): every loop of the rate processes and of the time
+integration, written once. ``GranulationPBM`` calls these primitives for every kernel: a factored
+kernel (``Kernel.factors``: beta_ij = S_ij p(phi_i) p(phi_j)) is evaluated inside
+:func:`class_rates`, any other kernel is evaluated in Python and its matrix passed to the same
+:func:`class_rates` (success model ALWAYS); the Runge-Kutta stages are :func:`ssp_stage`, run in
+one compiled call by :func:`ssp_step` for a factored kernel and stage by stage (the kernel called
+between the stages) otherwise.
 
-At the default grid (37 pivots + 3 feed classes) an aggregation evaluation is 1600 ordered
-pairs: a few microseconds of arithmetic, but about 25 numpy calls of 1-2 us each on the sparse
-map of ``aggregation.PivotAggregation`` (kept as the reference, ``totals_numpy``;
-``tests/test_pbm_compiled.py`` compares the two). Every sum adds the same products in the same
-order as the sparse map's rows, so the two agree to the bit.
+| primitive | what it computes |
+| --- | --- |
+| :func:`success_probability` | p(phi) of the success models (also ``SuccessProbability.per_particle``) |
+| :func:`surface_fraction` | the surface-liquid fraction of every class |
+| :func:`aggregation_totals` | aggregation: deaths and births of the M classes over the M^2 ordered pairs |
+| :func:`add_processes` | binder spraying and consolidation |
+| :func:`class_rates` | all rates of a class state: flush, success, aggregation, spraying, consolidation |
+| :func:`ssp_stage`, :func:`ssp_step` | the stages of one SSP Runge-Kutta step |
+| the rest | the small vector operations of the step control (flush, depletion time, error norm) |
 
-It is imported by ``aggregation`` when an operator is built (so ``import pbmdem.pbm`` does not
-import numba), and its functions have explicit signatures: they are compiled, or loaded from
+A further rate process (e.g. breakage: a selection rate per class and a fragment distribution)
+is one more loop called from :func:`class_rates`, beside :func:`aggregation_totals`; every kernel
+and every stage then sees it.
+
+The slow numpy formulation of the same rates (the sparse map of ordered-pair rates, numpy
+spraying, consolidation and stages) is a test oracle, ``tests/pbm_oracle.py``; the compiled
+rates equal it to the bit (``tests/test_pbm_compiled.py``).
+
+It is imported when a model or an aggregation operator is built (so ``import pbmdem.pbm`` does
+not import numba), and its functions have explicit signatures: they are compiled, or loaded from
 numba's on-disk cache (``cache=True``, in ``__pycache__`` beside this file), when this module is
 imported, never inside a run.
 """
@@ -20,8 +37,65 @@ from numba import njit
 
 #: success models of a factored kernel (``Kernel.factors``): p = 1, the step, the logistic
 ALWAYS, STEP, LOGISTIC = 0, 1, 2
+#: the success models by name (``SuccessProbability.model``), their codes above
+SUCCESS_CODES = {"always": ALWAYS, "step": STEP, "logistic": LOGISTIC}
 
 _SIGNATURE = "f8(f8[:, ::1], f8[::1], b1, f8[:, ::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1])"
+
+
+@njit("void(f8[:, ::1], i8, f8, f8, f8, f8)", cache=True, nogil=True)
+def _collect_births(born, t, h, RL, RG, moment):
+    """Cell average: an event (rate h, liquid RL, gas RG) is born in cell t; ``moment``: its
+    volume about the pivot, s/x_t - 1."""
+    born[0, t] += h
+    born[3, t] += h * moment
+    born[1, t] += RL
+    born[2, t] += RG
+
+
+@njit("void(f8[:, ::1], i8, f8, f8, f8, f8, f8)", cache=True, nogil=True)
+def _place_births(born, t, h, RL, RG, up_number, up_solid):
+    """Fixed pivot: an event (rate h, liquid RL, gas RG) is born on the pivots t and t + 1, the
+    upper one receiving ``up_number`` of the number and ``up_solid`` of the solid (liquid, gas)."""
+    born[0, t] += h * (1.0 - up_number)
+    born[0, t + 1] += h * up_number
+    born[1, t] += RL * (1.0 - up_solid)
+    born[1, t + 1] += RL * up_solid
+    born[2, t] += RG * (1.0 - up_solid)
+    born[2, t + 1] += RG * up_solid
+
+
+@njit("void(f8[:, ::1], f8[:, ::1], f8[:, ::1], i8)", cache=True, nogil=True)
+def _split_cells(born, factors, split, K):
+    """Cell average: the births B_c of every cell c, with first moment D_c about its pivot (in
+    units of x_c), move up (D_c > 0) or down (D_c < 0) so that number and solid are exact; liquid
+    and gas follow the solid each pivot receives. Replaces ``born[:3]`` by what every pivot
+    receives; ``split[b]`` / ``split[3 + b]``: what moves up / down of b."""
+    cu = factors[0]
+    ncd = factors[1]
+    ru = factors[2]
+    rd = factors[3]
+    for c in range(K):
+        D = born[3, c]
+        up = max(D, 0.0) * cu[c]
+        down = min(D, 0.0) * ncd[c]
+        V = born[0, c] + D  # solid born, units of x_c
+        inv = 1.0 / V if V > 0 else 0.0
+        split[0, c] = up
+        split[3, c] = down
+        fu = up * ru[c] * inv
+        fd = down * rd[c] * inv
+        for b in (1, 2):
+            split[b, c] = born[b, c] * fu
+            split[3 + b, c] = born[b, c] * fd
+    for b in range(3):
+        for c in range(K):
+            o = (born[b, c] - split[b, c]) - split[3 + b, c]
+            if c > 0:
+                o += split[b, c - 1]
+            if c < K - 1:
+                o += split[3 + b, c + 1]
+            born[b, c] = o
 
 
 @njit(_SIGNATURE, cache=True, nogil=True)
@@ -47,7 +121,6 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
     """
     M = nlg.shape[1]
     born = work[:4]  # rows: number, liquid, gas born per cell, first moment D_c
-    split = work[4:]
     for r in range(4):
         for c in range(K):
             born[r, c] = 0.0
@@ -76,58 +149,19 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
             dN += R
             dL += RL
             dG += RG
+            # every ordered pair counts half an event
             if cell_average:
-                h = 0.5 * R  # every ordered pair counts half an event
-                born[0, t] += h
-                born[3, t] += h * weight[0, row + j]
-                born[1, t] += RL
-                born[2, t] += RG
+                _collect_births(born, t, 0.5 * R, RL, RG, weight[0, row + j])
             else:
-                h = 0.5 * R
-                up = weight[0, row + j]
-                us = weight[1, row + j]
-                born[0, t] += h * (1.0 - up)
-                born[0, t + 1] += h * up
-                born[1, t] += RL * (1.0 - us)
-                born[1, t + 1] += RL * us
-                born[2, t] += RG * (1.0 - us)
-                born[2, t + 1] += RG * us
+                _place_births(born, t, 0.5 * R, RL, RG, weight[0, row + j], weight[1, row + j])
         d[0, i] = -dN
         d[1, i] = -dL
         d[2, i] = -dG
-    if not cell_average:
-        for b in range(3):
-            for c in range(K):
-                d[b, c] += born[b, c]
-        return refused
-    # cell average: the births B_c of cell c, with first moment D_c about its pivot (in units of
-    # x_c), move up (D_c > 0) or down (D_c < 0) so that number and solid are exact; liquid and gas
-    # follow the solid each pivot receives. split[b] / split[3 + b]: what moves up / down of b.
-    cu = factors[0]
-    ncd = factors[1]
-    ru = factors[2]
-    rd = factors[3]
-    for c in range(K):
-        D = born[3, c]
-        up = max(D, 0.0) * cu[c]
-        down = min(D, 0.0) * ncd[c]
-        V = born[0, c] + D  # solid born, units of x_c
-        inv = 1.0 / V if V > 0 else 0.0
-        split[0, c] = up
-        split[3, c] = down
-        fu = up * ru[c] * inv
-        fd = down * rd[c] * inv
-        for b in (1, 2):
-            split[b, c] = born[b, c] * fu
-            split[3 + b, c] = born[b, c] * fd
+    if cell_average:
+        _split_cells(born, factors, work[4:], K)
     for b in range(3):
         for c in range(K):
-            o = (born[b, c] - split[b, c]) - split[3 + b, c]
-            if c > 0:
-                o += split[b, c - 1]
-            if c < K - 1:
-                o += split[3 + b, c + 1]
-            d[b, c] += o
+            d[b, c] += born[b, c]
     return refused
 
 
@@ -164,15 +198,6 @@ def surface_fraction(nlg, xc, out):
         out[k] = max(L - G, 0.0) / V if V > 0 else 0.0
 
 
-@njit("b1(f8[::1], f8[::1])", cache=True, nogil=True)
-def below_flush(u, level):
-    """True if an entry lies strictly between 0 and its flush level."""
-    for k in range(u.size):
-        if 0.0 < u[k] < level[k]:
-            return True
-    return False
-
-
 @njit("void(f8[::1], i8, f8, f8)", cache=True, nogil=True)
 def flush(u, M, flush_n, flush_v):
     """Zero (in place) the entries of u = [N, L, G] (3M,) below their flush level; a class whose
@@ -185,6 +210,18 @@ def flush(u, M, flush_n, flush_v):
     for k in range(M, 3 * M):
         if u[k] < flush_v:
             u[k] = 0.0
+
+
+@njit("f8[::1](f8[::1], i8, f8, f8)", cache=True, nogil=True)
+def flushed(u, M, flush_n, flush_v):
+    """u, or if an entry lies strictly between 0 and its flush level a copy of u with the
+    entries below their flush level zeroed (:func:`flush`)."""
+    for k in range(3 * M):
+        if 0.0 < u[k] < (flush_n if k < M else flush_v):
+            v = u.copy()
+            flush(v, M, flush_n, flush_v)
+            return v
+    return u
 
 
 @njit("f8(f8[::1], f8[::1])", cache=True, nogil=True)
@@ -215,12 +252,35 @@ def any_negative(u):
 
 
 @njit("b1(f8[::1])", cache=True, nogil=True)
+def all_finite(u):
+    """True if no entry is NaN or infinite."""
+    for k in range(u.size):
+        if not np.isfinite(u[k]):
+            return False
+    return True
+
+
+@njit("b1(f8[::1])", cache=True, nogil=True)
 def all_nonnegative(u):
     """True if every entry is >= 0 (False for a NaN)."""
     for k in range(u.size):
         if not u[k] >= 0:
             return False
     return True
+
+
+@njit("void(i8, f8, f8, f8[::1], f8[::1])", cache=True, nogil=True)
+def success_probability(model, threshold, width, phi, p):
+    """p(phi) of the success ``model`` into ``p``: ALWAYS 1, STEP 1 if phi >= threshold else 0,
+    LOGISTIC 1 / (1 + exp(-(phi - threshold) / width)) (exponent clipped to +-700)."""
+    for k in range(phi.size):
+        if model == ALWAYS:
+            p[k] = 1.0
+        elif model == STEP:
+            p[k] = 1.0 if phi[k] >= threshold else 0.0
+        else:
+            z = min(max((phi[k] - threshold) / width, -700.0), 700.0)
+            p[k] = 1.0 / (1.0 + np.exp(-z))
 
 
 @njit(
@@ -230,9 +290,10 @@ def all_nonnegative(u):
     nogil=True,
 )
 def class_rates(u, beta, model, vectors, params, K, cell_average, target, weight, factors, work, pw, d):
-    """All rates ``d`` (3, M) of the class state u = [N, L, G] (3M,) with a factored kernel
-    beta_ij p(phi_i) p(phi_j) (success ``model``: ALWAYS, STEP or LOGISTIC), and the refused solid
-    rate (returned): one call for what ``GranulationPBM._rates`` does with a generic kernel.
+    """All rates ``d`` (3, M) of the class state u = [N, L, G] (3M,), and the refused solid rate
+    (returned): the one rate evaluation of the PBM. The kernel is beta_ij p(phi_i) p(phi_j)
+    (success ``model``: STEP or LOGISTIC, a factored kernel) or ``beta`` itself (ALWAYS: a
+    factored kernel without success model, or the matrix of a kernel called in Python).
 
     ``vectors`` (3, M): class volumes (x_0 units), spray weights, G_min per particle; ``params``:
     number flush level, volume flush level (0: none), success threshold and width, spray rate (0:
@@ -241,43 +302,80 @@ def class_rates(u, beta, model, vectors, params, K, cell_average, target, weight
     flush_n = params[0]
     flush_v = params[1]
     if flush_n > 0:
-        # entries below the flush level count as zero (as after every step)
-        tiny = False
-        for k in range(3 * M):
-            if 0.0 < u[k] < (flush_n if k < M else flush_v):
-                tiny = True
-                break
-        if tiny:
-            u = u.copy()
-            flush(u, M, flush_n, flush_v)
+        u = flushed(u, M, flush_n, flush_v)  # entries below the flush level count as zero
     nlg = u.reshape((3, M))
     phi = pw[0]
     p = pw[1]
     if model != ALWAYS:
         surface_fraction(nlg, vectors[0], phi)
-        threshold = params[2]
-        width = params[3]
-        for k in range(M):
-            if model == STEP:
-                p[k] = 1.0 if phi[k] >= threshold else 0.0
-            else:
-                z = min(max((phi[k] - threshold) / width, -700.0), 700.0)
-                p[k] = 1.0 / (1.0 + np.exp(-z))
+        success_probability(model, params[2], params[3], phi, p)
     refused = aggregation_totals(beta, p, model != ALWAYS, nlg, K, cell_average, target, weight, factors, work, d)
     add_processes(d, nlg, params[4], vectors[1], params[5], vectors[2])
     return refused
 
 
+@njit("b1(i8, i8, f8, f8[::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1])", cache=True, nogil=True)
+def ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
+    """Stage ``j`` (1, 2, 3) of one explicit SSP Runge-Kutta step of size ``dt`` from u, given
+    the rates ``k[0 .. j-1]`` (3, 3M) and refused rates ``r[0 .. j-1]`` (r: (4,)) of the stages
+    before.
+
+    Returns True if the step ends at this stage, with the new state in ``u_new`` (for ``order``
+    > 1 also the embedded lower-order state in ``u_low``) and the step's refused rate in
+    ``r[3]``; else False: the caller evaluates the rates ``k[j]``, ``r[j]`` at ``stage`` (at time t + dt for
+    j = 1, t + dt/2 for j = 2) and calls stage j + 1. Euler (``order`` 1), SSP-RK2 (Heun, with an
+    embedded Euler estimate) and SSP-RK3 (Shu & Osher 1988, with an embedded Heun estimate), in
+    increment forms (zero rates leave u unchanged to the bit). An intermediate stage with a
+    negative entry ends the step with that stage as ``u_new`` (the caller then halves the step)."""
+    n = u.size
+    k1 = k[0]
+    if j == 1:
+        for i in range(n):
+            stage[i] = u[i] + dt * k1[i]  # u1 (Euler)
+        if order == 1 or any_negative(stage):
+            for i in range(n):
+                u_new[i] = stage[i]
+            r[3] = r[0]
+            return True
+        return False
+    k2 = k[1]
+    if j == 2:
+        h = 0.5 * dt
+        if order == 2:
+            for i in range(n):
+                u_low[i] = stage[i]
+                u_new[i] = u[i] + h * (k1[i] + k2[i])  # Heun (SSP-RK2)
+            r[3] = 0.5 * (r[0] + r[1])
+            return True
+        q = 0.25 * dt
+        for i in range(n):
+            k12 = k1[i] + k2[i]
+            u_low[i] = u[i] + h * k12  # Heun: the embedded estimate
+            stage[i] = u[i] + q * k12  # u2 of SSP-RK3
+        if any_negative(stage):
+            for i in range(n):
+                u_new[i] = stage[i]
+            r[3] = r[0]
+            return True
+        return False
+    k3 = k[2]
+    c = dt / 6.0
+    for i in range(n):
+        u_new[i] = u[i] + c * ((k1[i] + k2[i]) + 4.0 * k3[i])
+    r[3] = (r[0] + r[1] + 4.0 * r[2]) / 6.0
+    return True
+
+
 @njit(
-    "Tuple((f8, b1))(f8[::1], f8[::1], f8, f8, i8, f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], "
-    "f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[:, ::1])",
+    "f8(f8[::1], f8[:, ::1], f8[::1], f8, i8, f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], "
+    "f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1])",
     cache=True,
     nogil=True,
 )
-def ssp_stages(
+def ssp_step(
     u,
-    k1,
-    r1,
+    k,
+    r,
     dt,
     order,
     beta,
@@ -294,43 +392,26 @@ def ssp_stages(
     u_new,
     u_low,
     stage,
-    k2,
-    k3,
 ):
-    """The stages of one explicit SSP Runge-Kutta step of size ``dt`` from u with rates ``k1``
-    (refused rate ``r1``), with the compiled rates of a factored kernel (:func:`class_rates`):
-    what ``GranulationPBM._stages`` does in numpy, the same operations in the same order (increment
-    forms; zero rates leave u unchanged to the bit). Writes the new state ``u_new`` and, for
-    ``order`` > 1, the embedded lower-order state ``u_low``; returns (refused rate of the step,
-    whether ``u_low`` was written). An intermediate stage with a negative entry ends the step
-    with that stage as ``u_new`` (the caller then halves the step). ``stage``, ``k2``, ``k3``: work."""
-    n = u.size
-    for i in range(n):
-        stage[i] = u[i] + dt * k1[i]  # u1 (Euler)
-    if order == 1 or any_negative(stage):
-        for i in range(n):
-            u_new[i] = stage[i]
-        return r1, False
-    r2 = class_rates(stage, beta, model, vectors, params, K, cell_average, target, weight, factors, work, pw, k2)
-    k2f = k2.reshape(n)
-    h = 0.5 * dt
-    if order == 2:
-        for i in range(n):
-            u_low[i] = stage[i]
-            u_new[i] = u[i] + h * (k1[i] + k2f[i])  # Heun (SSP-RK2)
-        return 0.5 * (r1 + r2), True
-    q = 0.25 * dt
-    for i in range(n):
-        k12 = k1[i] + k2f[i]
-        u_low[i] = u[i] + h * k12  # Heun: the embedded estimate
-        stage[i] = u[i] + q * k12  # u2 of SSP-RK3 (Shu & Osher 1988)
-    if any_negative(stage):
-        for i in range(n):
-            u_new[i] = stage[i]
-        return r1, True
-    r3 = class_rates(stage, beta, model, vectors, params, K, cell_average, target, weight, factors, work, pw, k3)
-    k3f = k3.reshape(n)
-    c = dt / 6.0
-    for i in range(n):
-        u_new[i] = u[i] + c * ((k1[i] + k2f[i]) + 4.0 * k3f[i])
-    return (r1 + r2 + 4.0 * r3) / 6.0, True
+    """One step of :func:`ssp_stage` with the rates of a factored kernel (:func:`class_rates`) in
+    one compiled call; ``k[0]``, ``r[0]``: the rates at u. Returns the refused rate of the step."""
+    M = vectors.shape[1]
+    for j in range(1, 4):
+        if ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
+            return r[3]
+        r[j] = class_rates(
+            stage,
+            beta,
+            model,
+            vectors,
+            params,
+            K,
+            cell_average,
+            target,
+            weight,
+            factors,
+            work,
+            pw,
+            k[j].reshape((3, M)),
+        )
+    return r[3]  # pragma: no cover - stage 3 always ends the step

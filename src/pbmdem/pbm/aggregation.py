@@ -21,9 +21,9 @@ divides by a number or a volume of the state:
   grid: deaths (N_i sum_j beta_ij N_j and the same for L and G: each event removes one particle
   of each partner with its own liquid and gas), births and the refused solid rate. One compiled
   loop over the ordered pairs (numba, ``_compiled.aggregation_totals``) forms them, with the
-  target cell of every pair precomputed once per grid. The same sums as one precomputed sparse
-  map (scipy.sparse, block-diagonal over R, RL, RG) are kept as the numpy reference
-  (``totals_numpy``): the same products added in the same order, so the two agree to the bit.
+  target cell and weights of every pair precomputed once per grid by the scheme class here
+  (:meth:`PivotAggregation._pair_weights`). The same sums as one sparse map in numpy are the test
+  oracle (``tests/pbm_oracle.py``): the same products added in the same order, equal to the bit.
 
 Cell average, volumes in units of the cell's pivot: with B_c = sum R (number born in cell c) and
 D_c = sum R (s/x_c - 1) (first moment of the births about the pivot, in units of x_c), the mean
@@ -97,99 +97,48 @@ class PivotAggregation:
         tm[iu[valid], ju[valid]] = target[valid]
         tm[ju[valid], iu[valid]] = target[valid]
         self.target_matrix = tm
-        # ordered pairs (i, j), flattened row-major: column i * K + j of the maps
+        # ordered pairs (i, j), flattened row-major (index i M + j): aggregate volume and target
         I, J = np.divmod(np.arange(M * M), M)
-        S = vc[I] + vc[J]
-        ok = tm.ravel() >= 0
-        self._I, self._J, self._S, self._ok = I, J, S, ok
+        self._S = vc[I] + vc[J]
         self._T = tm.ravel()
+        self._ok = self._T >= 0
         self._build()
 
     def __repr__(self) -> str:
         extra = f", extra={np.round(self.extra / self.x[0], 6).tolist()} x_0" if self.extra.size else ""
         return f"{type(self).__name__}(K={self.K}{extra})"
 
-    # ----------------------------------------------------------------- sparse maps
-    def _number_rows(self):
-        """(rows, cols, values) of the scheme's map applied to R (rows 0 .. 2K-1)."""
-        raise NotImplementedError
-
-    def _liquid_rows(self):
-        """(rows, cols, values) of the scheme's map applied to RL and RG (rows 0 .. 2K-1)."""
-        raise NotImplementedError
-
     def _build(self):
         """The arrays of the compiled evaluation (numba, imported here: building an operator loads
         or compiles it, :mod:`._compiled`): the target cell or lower pivot of every ordered pair
-        (-1 beyond the grid) and its weights."""
+        (-1 beyond the grid), its weights, and the scheme's split factors."""
         from . import _compiled
 
         self._totals = _compiled.aggregation_totals
         target, weight = self._pair_weights()
         self._target = np.ascontiguousarray(target, dtype=np.int64)
         self._weight = np.ascontiguousarray(weight, dtype=float)
-        self._factors = np.zeros((4, self.K))
+        self._factors = np.ascontiguousarray(self._split_factors(), dtype=float)
         self._work = np.empty((10, self.K))
         self._no_p = np.ones(self.M)
-        self._map = None
-
-    def _build_map(self):
-        """The sparse map of :meth:`totals_numpy` (built on first use)."""
-        from scipy import sparse
-
-        K, M, I, ok = self.K, self.M, self._I, self._ok
-        cols = np.arange(M * M)
-        # every block (R, RL, RG) has 2K + M + 1 rows: [0, K) the scheme's first K rows (births),
-        # [K, 2K) its second K rows (cell average: D_c, R block only), [2K, 2K + M) the deaths of
-        # the M classes (row i collects beta_ij N_j x (N_i, L_i or G_i) over valid j; the pair
-        # (i, i) removes two particles at the event rate R_ii / 2), 2K + M the refused solid (R
-        # block only, x_0 units)
-        R = self.R = 2 * K + M + 1
-        dr, dc = 2 * K + I[ok], cols[ok]
-        refused = ~ok
-        blocks = []
-        for rows, cc, vals in (self._number_rows(), self._liquid_rows(), self._liquid_rows()):
-            if len(blocks) == 0:
-                extra_r = np.concatenate([dr, np.full(int(refused.sum()), 2 * K + M)])
-                extra_c = np.concatenate([dc, cols[refused]])
-                extra_v = np.concatenate([np.ones(dr.size), 0.5 * self._S[refused]])
-            else:
-                extra_r, extra_c, extra_v = dr, dc, np.ones(dr.size)
-            blocks.append(
-                sparse.csr_matrix(
-                    (np.concatenate([vals, extra_v]), (np.concatenate([rows, extra_r]), np.concatenate([cc, extra_c]))),
-                    shape=(R, M * M),
-                )
-            )
-        m = sparse.block_diag(blocks, format="csr")
-        m.sum_duplicates()
-        m.sort_indices()
-        self._map = m
-        self._y = np.zeros(3 * R)
-        self._U = np.empty((3, M, M))
-        try:  # the bare CSR kernel skips scipy's dispatch (~5 us)
-            from scipy.sparse import _sparsetools
-
-            self._matvec = _sparsetools.csr_matvec
-        except ImportError:  # pragma: no cover - other scipy layouts
-            self._matvec = None
 
     def _pair_weights(self) -> tuple[np.ndarray, np.ndarray]:
-        """(M^2,) target and (2, M^2) weights of the ordered pairs for the compiled evaluation."""
+        """(M^2,) target and (2, M^2) weights of the ordered pairs for the compiled evaluation
+        (``_compiled.aggregation_totals`` documents them per scheme)."""
         raise NotImplementedError
 
+    def _split_factors(self) -> np.ndarray:
+        """(4, K) factors of the cell-average split of the births of every cell (unused by the
+        fixed pivot)."""
+        return np.zeros((4, self.K))
+
     # ----------------------------------------------------------------- evaluation
-    def totals(self, beta: np.ndarray, N: np.ndarray, L: np.ndarray, G: np.ndarray):
-        """Aggregation rates from class totals: ``beta`` (M, M) symmetric, numbers ``N``, liquid
-        ``L`` and gas ``G`` totals per class (M,) in any unit of volume (M = K without extra
+    def totals_stacked(self, beta: np.ndarray, nlg: np.ndarray):
+        """Aggregation rates from class totals: ``beta`` (M, M) symmetric and ``nlg`` (3, M) the
+        numbers N, liquid L and gas G per class, in any unit of volume (M = K without extra
         classes). Returns ``(d, refused)``: ``d`` (3, M) the rates of N, L and G (in the units of
         L and G) and the refused solid-volume rate in units of the first pivot x_0 (multiply by
-        x_0)."""
-        return self.totals_stacked(beta, np.stack((N, L, G)))
-
-    def totals_stacked(self, beta: np.ndarray, nlg: np.ndarray):
-        """:meth:`totals` with N, L, G given as one (3, M) array: one compiled loop over the ordered
-        pairs, equal to the bit to :meth:`totals_numpy` (the sparse map)."""
+        x_0). One compiled loop over the ordered pairs (``_compiled.aggregation_totals``)."""
         M = self.M
         if np.shape(beta) != (M, M) or np.shape(nlg) != (3, M):
             raise ValueError(
@@ -217,24 +166,6 @@ class PivotAggregation:
         evaluations (``_compiled.aggregation_totals``, ``_compiled.class_rates``)."""
         return self.K, self._cell_average, self._target, self._weight, self._factors, self._work
 
-    def totals_numpy(self, beta: np.ndarray, nlg: np.ndarray):
-        """:meth:`totals_stacked` in numpy: the ordered-pair rates mapped by one sparse product (the
-        reference of the compiled evaluation; about 25 numpy calls instead of one)."""
-        if self._map is None:
-            self._build_map()
-        U = np.multiply(nlg[:, :, None], beta * nlg[0], out=self._U)  # R, RL, RG
-        m, y = self._map, self._y
-        if self._matvec is not None:
-            y.fill(0.0)
-            self._matvec(m.shape[0], m.shape[1], m.indptr, m.indices, m.data, U.reshape(-1), y)
-        else:
-            y = m @ U.reshape(-1)
-        Y = y.reshape(3, self.R)
-        K, M = self.K, self.M
-        d = -Y[:, 2 * K : 2 * K + M]
-        d[:, :K] += self._births(Y)
-        return d, float(Y[0, 2 * K + M])
-
     def rates(self, beta: np.ndarray, N: np.ndarray, l: np.ndarray, g: np.ndarray):
         """Aggregation rates of change from per-particle liquid ``l`` and gas ``g`` (K,).
 
@@ -242,12 +173,8 @@ class PivotAggregation:
         the solid-volume rate (in the unit of ``x``) of refused aggregates beyond the last bin.
         """
         N = np.asarray(N, float)
-        d, refused = self.totals(np.asarray(beta, float), N, N * l, N * g)
+        d, refused = self.totals_stacked(np.asarray(beta, float), np.stack((N, N * l, N * g)))
         return d[0], d[1], d[2], refused * self.x[0]
-
-    def _births(self, Y: np.ndarray) -> np.ndarray:
-        """(3, K) birth rates of number, liquid and gas from the mapped sums ``Y`` (3, 2K + M + 1)."""
-        raise NotImplementedError
 
 
 class CellAverageAggregation(PivotAggregation):
@@ -262,20 +189,6 @@ class CellAverageAggregation(PivotAggregation):
     name = "cell_average"
     _cell_average = True
 
-    def _number_rows(self):
-        K, T, ok, S, xr = self.K, self._T, self._ok, self._S, self.xr
-        cols = np.arange(self.M**2)[ok]
-        t = T[ok]
-        # rows 0..K-1: B_c (weight 1/2 per ordered pair); rows K..2K-1: D_c = sum R (s/x_c - 1)
-        rows = np.concatenate([t, K + t])
-        vals = np.concatenate([np.full(t.size, 0.5), 0.5 * (S[ok] / xr[t] - 1.0)])
-        return rows, np.concatenate([cols, cols]), vals
-
-    def _liquid_rows(self):
-        ok = self._ok
-        cols = np.arange(self.M**2)[ok]
-        return self._T[ok], cols, np.ones(cols.size)
-
     def _pair_weights(self):
         T, ok, S = self._T, self._ok, self._S
         w = np.zeros((2, T.size))
@@ -283,35 +196,18 @@ class CellAverageAggregation(PivotAggregation):
         w[0, ~ok] = S[~ok]  # refused: the aggregate's volume
         return np.where(ok, T, -1), w
 
-    def _build(self):
-        super()._build()
+    def _split_factors(self):
         xr = self.xr
         dx_up = np.append(xr[1:] - xr[:-1], np.inf)
         dx_down = np.insert(xr[1:] - xr[:-1], 0, np.inf)
-        self._cu = xr / dx_up  # n_up = D_c x_c / (x_(c+1) - x_c); 0 for the last cell
-        self._ncd = -xr / dx_down  # n_down = -D_c x_c / (x_c - x_(c-1)); 0 for the first cell
-        self._ru = np.append(xr[1:] / xr[:-1], 0.0)  # x_(c+1) / x_c
-        self._rd = np.insert(xr[:-1] / xr[1:], 0, 0.0)  # x_(c-1) / x_c
-        self._factors = np.ascontiguousarray(np.stack([self._cu, self._ncd, self._ru, self._rd]))
-
-    def _births(self, Y):
-        K = self.K
-        A = Y[:, :K]  # number, liquid, gas born per cell
-        B, D = A[0], Y[0, K : 2 * K]
-        up = np.maximum(D, 0.0) * self._cu
-        down = np.minimum(D, 0.0) * self._ncd
-        V = B + D  # solid born, units of x_c (>= B 2/(1+r))
-        inv = np.divide(1.0, V, out=np.zeros(K), where=V > 0)
-        mu = np.empty((3, K))
-        md = np.empty((3, K))
-        mu[0] = up
-        md[0] = down
-        np.multiply(A[1:], up * self._ru * inv, out=mu[1:])  # liquid and gas follow the solid
-        np.multiply(A[1:], down * self._rd * inv, out=md[1:])
-        out = A - mu - md
-        out[:, 1:] += mu[:, :-1]
-        out[:, :-1] += md[:, 1:]
-        return out
+        return np.stack(
+            [
+                xr / dx_up,  # n_up = D_c x_c / (x_(c+1) - x_c); 0 for the last cell
+                -xr / dx_down,  # n_down = -D_c x_c / (x_c - x_(c-1)); 0 for the first cell
+                np.append(xr[1:] / xr[:-1], 0.0),  # x_(c+1) / x_c
+                np.insert(xr[:-1] / xr[1:], 0, 0.0),  # x_(c-1) / x_c
+            ]
+        )
 
 
 class FixedPivotAggregation(PivotAggregation):
@@ -324,35 +220,17 @@ class FixedPivotAggregation(PivotAggregation):
 
     name = "fixed_pivot"
 
-    def _split(self):
+    def _pair_weights(self):
         K, ok, S, xr = self.K, self._ok, self._S, self.xr
         s = S[ok]
         lo = np.clip(np.searchsorted(xr, s, side="right") - 1, 0, K - 2)
         up_number = (s - xr[lo]) / (xr[lo + 1] - xr[lo])
-        up_solid = up_number * xr[lo + 1] / s
-        return np.arange(self.M**2)[ok], lo, up_number, up_solid
-
-    def _number_rows(self):
-        cols, lo, up, _ = self._split()
-        rows = np.concatenate([lo, lo + 1])
-        return rows, np.concatenate([cols, cols]), 0.5 * np.concatenate([1.0 - up, up])
-
-    def _liquid_rows(self):
-        cols, lo, _, up = self._split()
-        rows = np.concatenate([lo, lo + 1])
-        return rows, np.concatenate([cols, cols]), np.concatenate([1.0 - up, up])
-
-    def _births(self, Y):
-        return Y[:, : self.K]
-
-    def _pair_weights(self):
-        ok, S = self._ok, self._S
-        _, lo, up_number, up_solid = self._split()
         target = np.full(S.size, -1)
         target[ok] = lo
         w = np.zeros((2, S.size))
-        w[0, ok], w[1, ok] = up_number, up_solid
-        w[0, ~ok] = S[~ok]
+        w[0, ok] = up_number  # the upper pivot's share of the number
+        w[1, ok] = up_number * xr[lo + 1] / s  # and of the solid (liquid and gas follow it)
+        w[0, ~ok] = S[~ok]  # refused: the aggregate's volume
         return target, w
 
 

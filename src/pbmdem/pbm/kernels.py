@@ -17,11 +17,13 @@ Collision-frequency sources share the interface of docs/architecture.md,
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from . import analytical
 from .errors import KernelShapeError, PBMInputError, positive
+from .success import SuccessProbability
 from .table import FREQUENCY_COLUMN, VELOCITY_TABLE_COLUMNS, TableFrequency
 
 __all__ = [
@@ -32,6 +34,7 @@ __all__ = [
     "ConstantFrequency",
     "ConstantKernel",
     "Kernel",
+    "KernelFactors",
     "KernelInput",
     "SuccessProbability",
     "SumKernel",
@@ -76,6 +79,17 @@ class KernelInput:
         return self.diameters[:K], self.numbers[:K] + self.numbers[K:] @ self.feed_weights
 
 
+class KernelFactors(NamedTuple):
+    """A kernel beta_ij = scaled_ij p(phi_i) p(phi_j) for the compiled rates (``Kernel.factors``):
+    ``scaled`` (M, M) fixed until the kernel's next ``prepare``, and p the success ``model`` of
+    :class:`SuccessProbability` ("always": p = 1) with its ``threshold`` and ``width``."""
+
+    scaled: np.ndarray
+    model: str = "always"
+    threshold: float = 0.0
+    width: float = 1.0
+
+
 class Kernel:
     """Base class: ``kernel(inp) -> (K, K)``; ``prepare(inp)`` is called once at the start of every
     time step (a kernel may refresh cached data there), ``reset()`` at the start of every run.
@@ -90,13 +104,11 @@ class Kernel:
     def __call__(self, inp: KernelInput) -> np.ndarray:  # pragma: no cover - interface
         raise NotImplementedError
 
-    def factors(self, inp: KernelInput):
-        """``(S, model, threshold, width)`` if this kernel is beta_ij = S_ij p(phi_i) p(phi_j) at
-        the step of ``inp`` (after ``prepare``), with S (M, M) fixed until the next ``prepare`` and
-        p the success model ``model`` of ``SuccessProbability`` ("always": p = 1) of the
-        surface-liquid fraction phi: the model then evaluates the kernel inside its compiled rates
-        instead of calling it. None (default): the model calls the kernel."""
-        return
+    def factors(self, inp: KernelInput) -> KernelFactors | None:
+        """The :class:`KernelFactors` of this kernel at the step of ``inp`` (after ``prepare``):
+        the model then evaluates the kernel inside its compiled rates instead of calling it. None
+        (default): the model calls the kernel and passes its matrix to the same compiled rates."""
+        return None
 
 
 class ConstantKernel(Kernel):
@@ -115,8 +127,8 @@ class ConstantKernel(Kernel):
             self._cache = (K, np.full((K, K), self.beta0))
         return self._cache[1]
 
-    def factors(self, inp: KernelInput):
-        return self(inp), "always", 0.0, 1.0
+    def factors(self, inp: KernelInput) -> KernelFactors:
+        return KernelFactors(self(inp))
 
     def analytical_solution(self, v, t, N0, mean_volume):
         """Number density n(v, t) (1/m3) for the exponential initial distribution (Scott 1968)."""
@@ -143,8 +155,8 @@ class SumKernel(Kernel):
             self._cache = (v.copy(), self.b * (v[:, None] + v[None, :]))
         return self._cache[1]
 
-    def factors(self, inp: KernelInput):
-        return self(inp), "always", 0.0, 1.0
+    def factors(self, inp: KernelInput) -> KernelFactors:
+        return KernelFactors(self(inp))
 
     def analytical_solution(self, v, t, N0, mean_volume):
         """Number density n(v, t) for the exponential initial distribution (Golovin; Scott 1968)."""
@@ -152,71 +164,6 @@ class SumKernel(Kernel):
 
     def analytical_moments(self, t, N0, mean_volume):
         return analytical.sum_moments(t, self.b, N0, mean_volume)
-
-
-class SuccessProbability:
-    """psi_ij = p(phi_i) p(phi_j) from the surface-liquid volume fraction phi of both granules.
-
-    ``model``: ``"step"`` p = 1 if phi >= threshold else 0 (default); ``"logistic"``
-    p = 1 / (1 + exp(-(phi - threshold) / width)); ``"always"`` p = 1 (dry or pure-aggregation
-    tests). phi = surface liquid / granule volume (see ``model.surface_fraction``).
-
-    ``velocity``: optional impact-velocity criterion (``pbmdem.pbm.success.StokesCriterion``: it
-    holds an impact iff its speed is below ``critical_velocity(d, phi)``, and ``success(d, phi,
-    velocities)`` gives that step per speed); with it the success of an impact at speed v is
-    psi_ij(v) = p(phi_i) p(phi_j) x [criterion holds at v] (:meth:`resolved`), and
-    :class:`CollisionKernel` needs velocity-resolved encounter rates from its source. Without it
-    (default) the success is velocity-independent, as in the seed study.
-    """
-
-    MODELS = ("step", "logistic", "always")
-
-    def __init__(self, model: str = "step", threshold: float = 0.02, width: float = 0.005, velocity=None):
-        if velocity is not None and not (hasattr(velocity, "success") and hasattr(velocity, "critical_velocity")):
-            raise PBMInputError(
-                f"success velocity criterion {velocity!r} lacks success(d, phi, velocities) or "
-                "critical_velocity(d, phi); allowed: None or a pbmdem.pbm.success.StokesCriterion"
-            )
-        self.velocity = velocity
-        if model not in self.MODELS:
-            raise PBMInputError(f"success probability model = {model!r}; allowed: {list(self.MODELS)}")
-        self.model = model
-        self.threshold = positive("success threshold", threshold, allow_zero=True)
-        if self.threshold >= 1:
-            raise PBMInputError(
-                f"success threshold = {threshold!r}; allowed: 0 <= threshold < 1 (a surface-liquid volume fraction)"
-            )
-        self.width = positive("success width", width)
-
-    def __repr__(self) -> str:
-        vel = "" if self.velocity is None else f", velocity={self.velocity!r}"
-        return f"SuccessProbability({self.model!r}, threshold={self.threshold:g}, width={self.width:g}{vel})"
-
-    @property
-    def velocity_dependent(self) -> bool:
-        """True if the success also depends on the impact velocity (``velocity`` criterion set)."""
-        return self.velocity is not None
-
-    def resolved(self, diameters, phi, velocities) -> np.ndarray:
-        """(K, K, V) psi_ij(v_b): the surface-liquid condition times the velocity criterion
-        (``velocity.success(diameters, phi, velocities)``) at the speeds ``velocities`` (m/s)."""
-        liquid = self(phi)
-        if self.velocity is None:
-            return np.repeat(liquid[:, :, None], np.size(velocities), axis=2)
-        return liquid[:, :, None] * self.velocity.success(diameters, phi, velocities)
-
-    def per_particle(self, phi: np.ndarray) -> np.ndarray:
-        phi = np.asarray(phi, float)
-        if self.model == "always":
-            return np.ones_like(phi)
-        if self.model == "step":
-            return (phi >= self.threshold).astype(float)
-        z = np.clip((phi - self.threshold) / self.width, -700, 700)
-        return 1.0 / (1.0 + np.exp(-z))
-
-    def __call__(self, phi: np.ndarray) -> np.ndarray:
-        p = self.per_particle(phi)
-        return np.outer(p, p)
 
 
 def check_frequency_matrix(c, K: int, name: str) -> np.ndarray:
@@ -428,13 +375,13 @@ class CollisionKernel(Kernel):
             self._beta_of, self._beta_key = c, None
         return self._scaled
 
-    def factors(self, inp: KernelInput):
+    def factors(self, inp: KernelInput) -> KernelFactors | None:
         """beta0 c_ij and the success model: beta_ij = beta0 c_ij p(phi_i) p(phi_j) (None with a
         velocity-dependent success, which the model evaluates by calling the kernel)."""
         if self.success.velocity_dependent:
             return None
         s = self.success
-        return self._scaled_classes(inp), s.model, s.threshold, s.width
+        return KernelFactors(self._scaled_classes(inp), s.model, s.threshold, s.width)
 
     def __call__(self, inp: KernelInput) -> np.ndarray:
         if self._c is None or self._class_c is None or self._class_c.shape[0] != inp.volumes.size:

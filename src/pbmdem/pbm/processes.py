@@ -18,7 +18,10 @@ Technol. 124:195; as used by Barrasso & Ramachandran 2015, Chem. Eng. Res. Des. 
 so the intra-granular pore (gas) volume of every bin decays exponentially toward the value at
 which the porosity eps = G / (S + G) equals eps_min. Liquid fills pores first; liquid in excess of
 the pore volume is surface liquid, l_surf = max(l - g, 0), so consolidation squeezes liquid to the
-surface (see ``model.surface_fraction``).
+surface (see ``state.surface_fraction``).
+
+The classes here hold the settings; the rates themselves are computed with the other rate
+processes in the compiled backend (``_compiled.add_processes``).
 """
 
 from __future__ import annotations
@@ -59,13 +62,6 @@ class LiquidAddition:
         """Liquid volume sprayed between t0 and t1 (m3)."""
         return self.rate * max(0.0, min(t1, self.t_end) - max(t0, self.t_start))
 
-    def rates(self, N: np.ndarray, x: np.ndarray, d: np.ndarray) -> np.ndarray:
-        w = N * d * d if self.rule == "surface_area" else N * x
-        total = w.sum()
-        if total <= 0:
-            return np.zeros_like(N)
-        return self.rate * (w / total)
-
 
 class Consolidation:
     def __init__(self, rate: float, min_porosity: float):
@@ -77,9 +73,6 @@ class Consolidation:
 
     def __repr__(self) -> str:
         return f"Consolidation(rate={self.rate:g} 1/s, min_porosity={self.min_porosity:g})"
-
-    def rates(self, S: np.ndarray, G: np.ndarray) -> np.ndarray:
-        return -self.rate * (G - self.gas_per_solid * S)
 
     def gas(self, t: float, S: np.ndarray, G0: np.ndarray) -> np.ndarray:
         """Closed form without aggregation: G(t) = G_min + (G0 - G_min) exp(-c t)."""

@@ -14,11 +14,11 @@ from pbmdem.config import Pbm, PbmBatch
 
 from .errors import PBMInputError
 from .grid import Grid, volume_of
-from .kernels import CollisionKernel, ConstantFrequency, SuccessProbability
+from .kernels import CollisionKernel, ConstantFrequency
 from .model import GranulationPBM
 from .processes import Consolidation, LiquidAddition
 from .state import State
-from .success import StokesCriterion
+from .success import StokesCriterion, SuccessProbability
 
 
 def build_success(pbm: Pbm) -> SuccessProbability:

@@ -1,10 +1,14 @@
-"""The resumable state of a PBM run: per-bin totals and the feed granules not yet aggregated."""
+"""The resumable state of a PBM run: per-bin totals and the feed granules not yet aggregated,
+and the checks of a state against its grid."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+
+from .errors import NegativePopulationError, PBMInputError
+from .grid import Grid, diameter_of
 
 
 @dataclass
@@ -71,3 +75,56 @@ def surface_fraction(S: np.ndarray, L: np.ndarray, G: np.ndarray) -> np.ndarray:
     S, L, G = np.broadcast_arrays(*(np.asarray(a, float) for a in (S, L, G)))
     V = S + np.maximum(L, G)
     return np.divide(np.maximum(L - G, 0.0), V, out=np.zeros(V.shape), where=V > 0)
+
+
+def check_state(grid: Grid, s: State, where: str = "") -> None:
+    """NegativePopulationError naming the first entry of `s` that is negative or not finite."""
+    arrays = [("number", s.number, None), ("liquid", s.liquid, None), ("gas", s.gas, None)]
+    if s.feed is not None:
+        d = diameter_of(s.feed.volumes)
+        arrays += [("feed number", s.feed.number, d), ("feed liquid", s.feed.liquid, d), ("feed gas", s.feed.gas, d)]
+    for name, arr, d in arrays:
+        bad = ~np.isfinite(arr) | (arr < 0)
+        if bad.any():
+            k = int(np.argmax(bad))
+            where_k = (
+                f"bin {k} (diameter {grid.d[k]:.4g} m)" if d is None else f"the feed class of diameter {d[k]:.4g} m"
+            )
+            raise NegativePopulationError(
+                f"{name} of {where_k} is {float(arr[k])!r} at t = {s.t:.6g} s{where}; allowed: finite values >= 0"
+            )
+
+
+def feed_volumes(grid: Grid, s: State) -> np.ndarray:
+    """Volumes of the state's feed classes (checked: distinct, on the grid, shapes; their share
+    of every bin at most the bin's total); empty without feed classes."""
+    f = s.feed
+    if f is None:
+        return np.zeros(0)
+    g = grid
+    v = np.asarray(f.volumes, float)
+    P = v.size
+    if (
+        v.ndim != 1
+        or np.unique(v).size != P
+        or not np.all(np.isfinite(v))
+        or (P and (v.min() < g.x[0] * (1 - 1e-12) or v.max() > g.x[-1] * (1 + 1e-12)))
+    ):
+        raise PBMInputError(
+            f"state.feed.volumes = {v.tolist()}; allowed: distinct solid volumes within the "
+            f"grid, {g.x[0]:.4g} .. {g.x[-1]:.4g} (x_0 .. x_(K-1))"
+        )
+    for name in ("number", "liquid", "gas"):
+        if np.shape(getattr(f, name)) != (P,):
+            raise PBMInputError(f"state.feed.{name} has shape {np.shape(getattr(f, name))}; expected ({P},)")
+    wn, ws = g.lever_weights(v)
+    for name, w in (("number", wn), ("liquid", ws), ("gas", ws)):
+        part, total = np.asarray(getattr(f, name), float) @ w, getattr(s, name)
+        over = part > total * (1.0 + 1e-9) + 1e-300
+        if over.any():
+            k = int(np.argmax(over))
+            raise PBMInputError(
+                f"state.feed.{name} puts {part[k]!r} into bin {k}, more than the bin's total "
+                f"{total[k]!r}; the feed granules are part of the bin totals"
+            )
+    return v

@@ -1,4 +1,6 @@
-"""Velocity-dependent aggregation success: the viscous Stokes criterion of wet granule impacts.
+"""Aggregation success: the success probability of a pair from the surface liquid of both
+granules (:class:`SuccessProbability`) and, velocity-dependent, the viscous Stokes criterion of wet
+granule impacts (:class:`StokesCriterion`).
 
 Ennis, Tardos & Pfeffer (1991, Powder Technol. 65:257) and Liu, Litster, Iveson & Ennis (2000,
 AIChE J. 46:529): two granules covered by a binder layer of thickness h meet at relative normal
@@ -125,3 +127,71 @@ class StokesCriterion:
         """(K, K, V) 1 where an impact at velocities[b] (m/s) of the pair (i, j) is held, else 0."""
         w = np.asarray(velocities, float)
         return (w[None, None, :] < self.critical_velocity(d, phi)[:, :, None]).astype(float)
+
+
+class SuccessProbability:
+    """psi_ij = p(phi_i) p(phi_j) from the surface-liquid volume fraction phi of both granules.
+
+    ``model``: ``"step"`` p = 1 if phi >= threshold else 0 (default); ``"logistic"``
+    p = 1 / (1 + exp(-(phi - threshold) / width)); ``"always"`` p = 1 (dry or pure-aggregation
+    tests). phi = surface liquid / granule volume (see ``state.surface_fraction``).
+
+    ``velocity``: optional impact-velocity criterion (``pbmdem.pbm.success.StokesCriterion``: it
+    holds an impact iff its speed is below ``critical_velocity(d, phi)``, and ``success(d, phi,
+    velocities)`` gives that step per speed); with it the success of an impact at speed v is
+    psi_ij(v) = p(phi_i) p(phi_j) x [criterion holds at v] (:meth:`resolved`), and
+    :class:`CollisionKernel` needs velocity-resolved encounter rates from its source. Without it
+    (default) the success is velocity-independent, as in the seed study.
+    """
+
+    MODELS = ("step", "logistic", "always")
+
+    def __init__(self, model: str = "step", threshold: float = 0.02, width: float = 0.005, velocity=None):
+        if velocity is not None and not (hasattr(velocity, "success") and hasattr(velocity, "critical_velocity")):
+            raise PBMInputError(
+                f"success velocity criterion {velocity!r} lacks success(d, phi, velocities) or "
+                "critical_velocity(d, phi); allowed: None or a pbmdem.pbm.success.StokesCriterion"
+            )
+        self.velocity = velocity
+        if model not in self.MODELS:
+            raise PBMInputError(f"success probability model = {model!r}; allowed: {list(self.MODELS)}")
+        self.model = model
+        self.threshold = positive("success threshold", threshold, allow_zero=True)
+        if self.threshold >= 1:
+            raise PBMInputError(
+                f"success threshold = {threshold!r}; allowed: 0 <= threshold < 1 (a surface-liquid volume fraction)"
+            )
+        self.width = positive("success width", width)
+
+    def __repr__(self) -> str:
+        vel = "" if self.velocity is None else f", velocity={self.velocity!r}"
+        return f"SuccessProbability({self.model!r}, threshold={self.threshold:g}, width={self.width:g}{vel})"
+
+    @property
+    def velocity_dependent(self) -> bool:
+        """True if the success also depends on the impact velocity (``velocity`` criterion set)."""
+        return self.velocity is not None
+
+    def resolved(self, diameters, phi, velocities) -> np.ndarray:
+        """(K, K, V) psi_ij(v_b): the surface-liquid condition times the velocity criterion
+        (``velocity.success(diameters, phi, velocities)``) at the speeds ``velocities`` (m/s)."""
+        liquid = self(phi)
+        if self.velocity is None:
+            return np.repeat(liquid[:, :, None], np.size(velocities), axis=2)
+        return liquid[:, :, None] * self.velocity.success(diameters, phi, velocities)
+
+    def per_particle(self, phi: np.ndarray) -> np.ndarray:
+        """p(phi) of every granule: the compiled success model (``_compiled.success_probability``,
+        the one the model's rates use)."""
+        from . import _compiled
+
+        phi = np.asarray(phi, float)
+        p = np.empty(phi.size)
+        _compiled.success_probability(
+            _compiled.SUCCESS_CODES[self.model], self.threshold, self.width, np.ascontiguousarray(phi).ravel(), p
+        )
+        return p.reshape(phi.shape)
+
+    def __call__(self, phi: np.ndarray) -> np.ndarray:
+        p = self.per_particle(phi)
+        return np.outer(p, p)

@@ -1,7 +1,7 @@
 """The structure of the library: no import circles, no upward imports, the stages as packages.
 
 The import graph is read from the source (every `import`, also those inside functions, which
-are dependencies all the same). Layers, lowest first: the shared helpers (atomic files, readers, job logs),
+are dependencies all the same). Layers, lowest first: the shared helpers (atomic files, readers, job logs, plot axes),
 the settings layer (`pbmdem.config`), the contracts (`pbmdem.impact`, then `pbmdem.frequency`), the
 stages (`pbmdem.dem`, `pbmdem.pbm`, `pbmdem.surrogate`, independent of each other), the coupling
 of the stages (`pbmdem.coupling`), the validation study (`pbmdem.validation`), the report, the
@@ -18,7 +18,7 @@ import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 LAYERS = [
-    {"atomic", "readers", "joblog", ""},
+    {"atomic", "readers", "joblog", "plotting", ""},
     {"config"},
     {"impact"},
     {"frequency"},

@@ -459,6 +459,8 @@ def test_report_in_a_browser_opens_with_the_findings_and_shows_everything(tiny_w
     assert marker in proc.stdout, proc.stderr[-3000:]
     found = json.loads(proc.stdout[proc.stdout.rfind(marker) + len(marker) - 1 :].split("</pre>")[0])
     assert found["errors"] == [], found
+    # the page starts with its title in view (Snakemake centres a long description above the window)
+    assert found["title_top"] is not None and found["title_top"] >= 0, found
     assert found["landing_broken"] == [], found
     findings = [alt for alt in found["landing_alts"] if alt.startswith("final d10, d50, d90 against")]
     assert len(findings) == 2, found["landing_alts"]

@@ -50,6 +50,8 @@
     return new TextDecoder("utf-8").decode(bytes);
   }
   async function run() {
+    const title = document.querySelector("h1.title");
+    out.title_top = title ? Math.round(title.getBoundingClientRect().top) : null;
     document.querySelectorAll("img").forEach((img) => {
       out.landing_images += 1;
       out.landing_alts.push(img.alt || "");

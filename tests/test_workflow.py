@@ -100,7 +100,10 @@ def test_vtk_series_open_in_pyvista(tiny_workflow):
     for pvd in sorted((workdir / "results" / "dem").glob("*/rep*/post/particles.pvd")):
         reader = pyvista.get_reader(str(pvd))
         assert len(reader.time_values) >= 2
-        reader.set_active_time_value(reader.time_values[-1])  # the first frame precedes insertion
+        first = reader.read()  # the reader opens on the first frame: it holds particles (no empty t = 0)
+        first = first[0] if isinstance(first, pyvista.MultiBlock) else first
+        assert first.n_points > 0 and reader.time_values[0] > 0
+        reader.set_active_time_value(reader.time_values[-1])
         mesh = reader.read()
         mesh = mesh[0] if isinstance(mesh, pyvista.MultiBlock) else mesh
         assert mesh.n_points > 100 and "radius" in mesh.point_data

@@ -97,6 +97,9 @@ def test_findings_state_the_answers_with_their_numbers(tmp_path):
     page = rst_to_html(text)
     assert page.count("<img alt='final d10, d50, d90 against") == 2 and "src='data:image/png;base64," in page
     assert "<h2>Findings</h2>" in page and "<b>Impeller speed.</b>" in page
+    # the glossary closes the findings, in both reports
+    assert "<h2>Glossary</h2>" in page and "<li><b>PBM-ANN</b>: the PBM with the surrogate" in page
+    assert text.index("**How far to trust them.**") < text.index("Glossary\n--------")
 
 
 def test_findings_figures_name_axes_speed_feed_and_uncertainty():

@@ -7,7 +7,8 @@ distribution change granule growth, in plain words and one figure each, then how
 * `feed_figure`: the same against the feed (the grid's feeds and the blends between them), with
   the feed's own d50 for comparison;
 * `findings_rst`: the text (reStructuredText, included at the top of Snakemake's report and shown at
-  the top of report.html): the answers with their numbers, then the validation's verdicts.
+  the top of report.html): the answers with their numbers, then the validation's verdicts, then
+  the glossary of the terms the report uses.
 
 Sizes in mm. Inputs: the tables of `pbmdem.coupling.studies` and the comparison table.
 """
@@ -23,6 +24,41 @@ from .display import MM, PERCENT
 from .figures import pyplot
 
 STATS = (("d90", "^", "tab:red"), ("d50", "o", "black"), ("d10", "v", "tab:blue"))
+
+#: the terms the report uses, explained once (the end of the findings, in both reports)
+GLOSSARY = (
+    ("d10, d50, d90", "the granule diameters below which 10 %, 50 % (the median) and 90 % of the granule mass lie."),
+    ("feed", "the size distribution of the granules (primary particles) at the start of the batch."),
+    (
+        "encounter",
+        "an impact of two granules that were apart since their previous contact (DEM contacts that merely "
+        "persist or rattle are not counted); the collision frequency the PBM uses counts encounters.",
+    ),
+    ("collision frequency c_ij", "encounters per second per pair of granules of size classes i and j."),
+    (
+        "surrogate",
+        "the neural-network ensemble that predicts c_ij from the sizes, the size distribution and the "
+        "impeller speed, in place of a DEM run.",
+    ),
+    ("PBM", "population balance model: the granule size distribution over the batch, grown by aggregation."),
+    ("PBM-ANN", "the PBM with the surrogate's collision frequencies."),
+    ("PBM-DEM", "the same PBM with LIGGGHTS run at every coupling interval (the reference)."),
+    ("PBM-constant", "the same PBM with one collision frequency for every pair of granules."),
+    (
+        "training domain",
+        "the sizes, distributions and tip speeds the DEM grid covered; outside it the surrogate extrapolates.",
+    ),
+    ("ensemble members", "the separately trained networks of the surrogate; their disagreement is its uncertainty."),
+    (
+        "replicate band",
+        "the range (min-max) of PBM-DEM runs that differ only by their DEM insertion seeds: the reference's own noise.",
+    ),
+    ("noise floor", "how well one DEM replicate predicts another; no surrogate can be more accurate."),
+    (
+        "tip speed, Froude number",
+        "impeller tip speed (m/s) and the ratio of centrifugal to gravity acceleration at the tip.",
+    ),
+)
 
 
 def _band(ax, x, frame: pd.DataFrame, stat: str, color: str) -> None:
@@ -224,6 +260,11 @@ def findings_rst(
         "   :alt: final d10, d50, d90 against the feed size distribution",
         "",
         "**How far to trust them.** " + trust_words(comparison),
+        "",
+        "Glossary",
+        "--------",
+        "",
+        "\n".join(f"* **{term}**: {text}" for term, text in GLOSSARY),
         "",
     ]
     return "\n".join(lines) + "\n"

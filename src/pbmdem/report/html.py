@@ -75,9 +75,18 @@ def read_display(path: str | Path, what: str) -> pd.DataFrame:
     return read_table(path, what, dtype=str, keep_default_na=False)
 
 
+def inline(text: str) -> str:
+    """rst inline markup of the findings (**bold**, ``code``) as HTML, the rest escaped."""
+    import re
+
+    text = escape(text)
+    text = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", text)
+    return re.sub(r"``(.+?)``", r"<code>\1</code>", text)
+
+
 def rst_to_html(text: str) -> str:
-    """The findings' reStructuredText (paragraphs, a section title, **bold**, ``code`` and
-    `.. image:: data:...` blocks with `:alt:`) as HTML."""
+    """The findings' reStructuredText (paragraphs, section titles, bullet lists, **bold**, ``code``
+    and `.. image:: data:...` blocks with `:alt:`) as HTML."""
     import re
 
     out = []
@@ -93,11 +102,11 @@ def rst_to_html(text: str) -> str:
             out.append(f"<p><img alt='{escape(alt)}' src='{src}' style='max-width:100%'></p>")
         elif len(lines) == 2 and set(lines[1]) <= set("-=~") and len(lines[1]) >= len(lines[0]):
             out.append(f"<h2>{escape(lines[0])}</h2>")
+        elif lines[0].startswith("* "):
+            items = re.split(r"\n(?=\* )", "\n".join(lines))
+            out.append("<ul>" + "".join(f"<li>{inline(' '.join(i[2:].split()))}</li>" for i in items) + "</ul>")
         else:
-            para = escape(" ".join(lines))
-            para = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", para)
-            para = re.sub(r"``(.+?)``", r"<code>\1</code>", para)
-            out.append(f"<p>{para}</p>")
+            out.append(f"<p>{inline(' '.join(lines))}</p>")
     return "".join(out)
 
 

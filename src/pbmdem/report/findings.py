@@ -226,11 +226,13 @@ def findings_rst(
         f"{_mm(hi.d50)} ({PERCENT * change:+.1f} %); d10 goes from {_mm(lo.d10)} to {_mm(hi.d10)} and d90 from "
         f"{_mm(lo.d90)} to {_mm(hi.d90)}. "
         + (
-            "Faster impellers make the granules collide more often, but in this model growth is limited by the "
-            "binder (a collision only sticks when both granules carry enough surface liquid), so the speed "
-            "changes the final size little. "
+            "Over this range of speeds the final size changes by less than 5 %: faster impellers make the "
+            "granules collide more often, but a collision only grows a granule when both carry enough surface "
+            "liquid. "
             if abs(change) < 0.05
             else "Faster impellers make the granules collide more often, and more collisions make larger granules. "
+            if change > 0
+            else "The granules end smaller at higher speeds in this model. "
         )
         + _disagree(spread_speed)
         + _domain_words(s, "speed", "rpm"),

@@ -606,9 +606,12 @@ def test_deck_template_edit_reruns_every_dem_job_and_execution_settings_none(roo
     dem.mpi_ranks change."""
     project = tmp_path / "project"
     project.mkdir()
-    for name in ("Snakefile", "rules", "workflow", "liggghts_templates", "src", "profiles", "envs"):
+    for name in PROJECT_FILES:
         src = root / name
-        (shutil.copytree if src.is_dir() else shutil.copy2)(src, project / name)
+        if src.is_dir():  # links kept, as in a checkout: the package's deck template is the project's
+            shutil.copytree(src, project / name, symlinks=True)
+        else:
+            shutil.copy2(src, project / name)
     workdir = tmp_path / "wd"
     workdir.mkdir()
     cfg = yaml.safe_load((root / "config" / "test.yaml").read_text())

@@ -88,7 +88,8 @@ def test_findings_state_the_answers_with_their_numbers(tmp_path):
     assert "from 300 to 1200 rpm changes the granule size after the 8 min batch from d50 = 4.00 mm to 4.50 mm" in text
     assert "(+12.5 %)" in text and "disagree on the final d50 by at most 0.03 mm" in text
     assert "left its training domain at 1 of 3 speeds (1200 rpm)" in text
-    assert "from 4.00 mm for ``fine``" in text and "7.00 mm for ``coarse``" in text
+    assert "goes from 4.00 mm for the finest feed, ``fine``" in text and "7.00 mm for the coarsest, ``coarse``" in text
+    assert "a coarser feed gives larger granules at every step" in text
     assert "The blend between the grid's feeds (``fine+coarse``) was never run in DEM" in text
     assert "at 300 rpm (a speed of the DEM grid) PBM-ANN's final d50 is 4.01 mm against 4.00 mm" in text
     # the figures travel inside the text (Snakemake's report includes it), as data URIs
@@ -100,6 +101,18 @@ def test_findings_state_the_answers_with_their_numbers(tmp_path):
     # the glossary closes the findings, in both reports
     assert "<h2>Glossary</h2>" in page and "<li><b>PBM-ANN</b>: the PBM with the surrogate" in page
     assert text.index("**How far to trust them.**") < text.index("Glossary\n--------")
+
+
+def test_a_feed_that_breaks_the_trend_is_named():
+    feed = _study(
+        {"feed": ["fine", "fine+coarse", "coarse"], "feed_d50": [0.003, 0.004, 0.006]},
+        [0.0097, 0.0068, 0.0132],
+        in_grid=[True, False, True],
+    )
+    assert findings._feed_trend(feed) == (
+        "the final size does not simply follow the feed: it is smaller for ``fine+coarse`` than for the next "
+        "finer feed."
+    )
 
 
 def test_findings_figures_name_axes_speed_feed_and_uncertainty():

@@ -100,6 +100,8 @@ def speed_figure(study: pd.DataFrame, feed: str, batch_s: float):
             [], [], s=140, facecolors="none", edgecolors="tab:purple", label="surrogate outside its training domain"
         )
     ax.set_ylim(bottom=0.0)
+    if len(s) <= 12:
+        ax.set_xticks(s.rpm, [f"{v:g}" for v in s.rpm])
     ax.set(
         xlabel="impeller speed (rpm)   (| = speeds with DEM runs)",
         ylabel="final granule size (mm)",
@@ -166,6 +168,20 @@ def feed_figure(study: pd.DataFrame, rpm: float, batch_s: float):
 
 def _mm(v, decimals: int = 2) -> str:
     return "n/a" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{MM * float(v):.{decimals}f} mm"
+
+
+def _feed_trend(f: pd.DataFrame) -> str:
+    """Whether the final d50 follows the feed's own d50 (rises from each feed to the next coarser
+    one), and if not, which feeds break the trend."""
+    d50 = f.d50.to_numpy(float)
+    if np.all(np.diff(d50) > 0):
+        return "a coarser feed gives larger granules at every step."
+    dips = [f"``{f.feed.iloc[k + 1]}``" for k in range(len(d50) - 1) if d50[k + 1] <= d50[k]]
+    return (
+        "the final size does not simply follow the feed: it is smaller for "
+        + ", ".join(dips)
+        + " than for the next finer feed."
+    )
 
 
 def _disagree(spread: float) -> str:
@@ -241,10 +257,11 @@ def findings_rst(
         "   :width: 640px",
         "   :alt: final d10, d50, d90 against impeller speed",
         "",
-        f"**Feed size distribution.** At {feed_rpm:g} rpm the final d50 grows with the feed: from {_mm(f_lo.d50)} "
-        f"for ``{f_lo.feed}`` (feed d50 {_mm(f_lo.feed_d50)}) to {_mm(f_hi.d50)} for ``{f_hi.feed}`` (feed d50 "
-        f"{_mm(f_hi.feed_d50)}); the granules end {np.nanmin(growth):.2f} to {np.nanmax(growth):.2f} times as "
-        f"large as their feed. "
+        f"**Feed size distribution.** At {feed_rpm:g} rpm the final d50 goes from {_mm(f_lo.d50)} for the finest "
+        f"feed, ``{f_lo.feed}`` (feed d50 {_mm(f_lo.feed_d50)}), to {_mm(f_hi.d50)} for the coarsest, "
+        f"``{f_hi.feed}`` (feed d50 {_mm(f_hi.feed_d50)}); "
+        + _feed_trend(f)
+        + f" The granules end {np.nanmin(growth):.2f} to {np.nanmax(growth):.2f} times as large as their feed. "
         + (
             ("The blend " if len(blends) == 1 else f"The {len(blends)} blends ")
             + "between the grid's feeds ("

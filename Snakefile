@@ -44,6 +44,15 @@ config.update(CFG.to_dict())
 include: "rules/common.smk"
 
 
+# A dry run (-n) ends with an estimate of the DEM work it scheduled (grid runs and PBM-DEM
+# coupling intervals) from the measured throughput of the finished runs (results/dem/runs.csv) or
+# the reference machine's: the number to size a cluster job by. Printed at exit, after the job table.
+if dry_run_requested(sys.argv[1:]):
+    import atexit
+
+    atexit.register(print_runtime_estimate)
+
+
 wildcard_constraints:
     rpm=r"[0-9]+(\.[0-9]+)?",
     dist=r"[A-Za-z][A-Za-z0-9_-]*",

@@ -1,13 +1,55 @@
 # Shared helpers: the operating grid, the params of the rules (the settings each stage uses, from
 # the typed config CFG) and the list of final targets.
+import hashlib
 import os
 from pathlib import Path
 
 from pbmdem.config import rpm_text
 
 RESULTS = "results"
-TEMPLATE = os.path.join(workflow.basedir, "liggghts_templates", "granulator.in")
+# The LIGGGHTS deck template (package data, the project's liggghts_templates/) enters the DEM
+# rules as a param, its SHA-256, not as an input path: an edit reruns every DEM job, while moving
+# or copying the project (another absolute path) reruns nothing. Every input and output is a path
+# relative to the working directory, as Snakemake expects.
+from pbmdem.dem.deck import template_path
+
+DECK_SHA256 = hashlib.sha256(template_path().read_bytes()).hexdigest()
 MODEL = f"{RESULTS}/surrogate/model.skops"
+
+
+def dry_run_requested(argv):
+    """Whether Snakemake's command line asks for a dry run (-n, --dry-run, --dryrun, -np ...)."""
+    short = [a for a in argv if a.startswith("-") and not a.startswith("--")]
+    return any(a in ("--dry-run", "--dryrun", "--just-print") for a in argv) or any(
+        "n" in a[1:] and a[1:].isalpha() for a in short
+    )
+
+
+# the working directory, for the estimate printed at exit (Snakemake has left it by then)
+WORKDIR = os.getcwd()
+
+
+def print_runtime_estimate():
+    """The DEM work of the jobs the dry run scheduled, in wall time (see pbmdem.dem.estimate)."""
+    from pbmdem.dem.estimate import study_estimate
+
+    os.chdir(WORKDIR)
+    try:
+        jobs = list(workflow.dag.needrun_jobs(exclude_finished=False))
+    except Exception:  # no DAG was built (an error before it, --lint, ...): nothing to estimate
+        return
+    grid = [
+        (j.wildcards_dict["rpm"], j.wildcards_dict["dist"], j.wildcards_dict["rep"])
+        for j in jobs
+        if j.rule.name == "dem_point"
+    ]
+    loops = [
+        (j.wildcards_dict["rpm"], j.wildcards_dict["rep"])
+        for j in jobs
+        if j.rule.name == "pbm_dem_coupled"
+    ]
+    cores = workflow.resource_settings.cores or 1
+    print(study_estimate(CFG, grid, loops, RESULTS).text(cores), file=sys.stderr)
 
 
 def grid_points():
@@ -52,6 +94,8 @@ def pbm_outputs(kernel):
 DEM_RANKS = CFG.dem_execution.mpi_ranks
 
 # --- validation speeds and runs
+# the feed study's speed: the middle impeller speed of the DEM grid (a speed the surrogate was trained at)
+FEED_STUDY_RPM = sorted(CFG.grid.impeller_rpm)[(len(CFG.grid.impeller_rpm) - 1) // 2]
 VAL_RPMS = [rpm_text(r) for r in CFG.validation.rpm]
 VAL_REPS = list(range(CFG.validation.dem_replicates))
 RUN_FILES = ("summary.csv", "bins.csv", "final_bins.csv", "timing.json")
@@ -110,6 +154,15 @@ extra_targets = []
 from pbmdem.report.provenance import settings_mapping
 
 REPORT = f"{RESULTS}/report"
+# the report's categories, in the order a reader needs them (Snakemake's report sorts them by name):
+# the answers first, then how far to trust them, then the details
+CATEGORIES = {
+    "findings": "1. Findings",
+    "validation": "2. Validation: how far to trust them",
+    "surrogate": "3. Surrogate",
+    "dem": "4. DEM",
+    "settings": "5. Settings and provenance",
+}
 
 
 def speed_report_files(rpm="{rpm}"):
@@ -205,6 +258,11 @@ def report_inputs(wildcards):
         "sweep_plot": f"{RESULTS}/validation/rpm_sweep.png",
         "proposals": f"{RESULTS}/validation/proposals.csv",
         "comparison": f"{REPORT}/comparison.csv",
+        "findings_speed": f"{REPORT}/findings/speed.png",
+        "findings_feed": f"{REPORT}/findings/feed.png",
+        "findings_rst": f"{REPORT}/findings/findings.rst",
+        "speed_study": f"{RESULTS}/validation/speed_study.csv",
+        "feed_study": f"{RESULTS}/validation/feed_study.csv",
     }
     files.update({f"table_{name}": f"{REPORT}/tables/{name}.csv" for name in REPORT_TABLES})
     for k, rpm in enumerate(VAL_RPMS):

@@ -3,8 +3,6 @@
 
 
 rule dem_point:
-    input:
-        template=TEMPLATE,
     output:
         table=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/collisions.csv",
         walls=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/wall_collisions.csv",
@@ -21,6 +19,7 @@ rule dem_point:
     resources:
         tasks=DEM_RANKS,
     params:
+        deck_sha256=DECK_SHA256,
         point=dem_point_params,
         run_dir=lambda wc, output: os.path.dirname(output.table),
     script:
@@ -41,7 +40,7 @@ rule collision_tables:
         runs=report(
             f"{RESULTS}/dem/runs.csv",
             caption="../workflow/report/runs.rst",
-            category="DEM",
+            category=CATEGORIES["dem"],
         ),
     log:
         f"{RESULTS}/logs/dem/collision_tables.log",
@@ -62,12 +61,12 @@ rule speed_response:
         plot=report(
             f"{RESULTS}/dem/speed_response.png",
             caption="../workflow/report/speed_response.rst",
-            category="DEM",
+            category=CATEGORIES["dem"],
         ),
         velocity_plot=report(
             f"{RESULTS}/dem/impact_velocity.png",
             caption="../workflow/report/impact_velocity.rst",
-            category="DEM",
+            category=CATEGORIES["dem"],
         ),
     log:
         f"{RESULTS}/logs/dem/speed_response.log",

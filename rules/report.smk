@@ -7,6 +7,40 @@
 report: "../workflow/report/workflow.rst"
 
 
+# The findings the report opens with (category "1. Findings", and the text included at the top of
+# workflow/report/workflow.rst): final sizes against impeller speed and against the feed, in words
+# and one figure each, then how far to trust them (the comparison with PBM-DEM).
+rule report_findings:
+    input:
+        speed=f"{RESULTS}/validation/speed_study.csv",
+        feed=f"{RESULTS}/validation/feed_study.csv",
+        comparison=f"{REPORT}/comparison.csv",
+    output:
+        speed_png=registered(
+            f"{REPORT}/findings/speed.png",
+            "findings_speed",
+            CATEGORIES["findings"],
+            result="granule size against impeller speed",
+        ),
+        feed_png=registered(
+            f"{REPORT}/findings/feed.png",
+            "findings_feed",
+            CATEGORIES["findings"],
+            result="granule size against the feed",
+        ),
+        rst=f"{REPORT}/findings/findings.rst",
+    log:
+        f"{RESULTS}/logs/report/findings.log",
+    conda:
+        "../envs/validation.yaml"
+    params:
+        speed_feed=CFG.validation.distribution,
+        feed_rpm=FEED_STUDY_RPM,
+        batch_s=CFG.pbm.process.end,
+    script:
+        "../workflow/scripts/report_findings.py"
+
+
 rule report_speed:
     input:
         runs=lambda wc: speed_files(wc.rpm),
@@ -17,7 +51,7 @@ rule report_speed:
             key: registered(
                 path,
                 SPEED_CAPTIONS[key][0],
-                "Validation",
+                CATEGORIES["validation"],
                 "{rpm} rpm",
                 result=SPEED_CAPTIONS[key][1],
             )
@@ -37,7 +71,7 @@ rule report_speed:
 
 rule report_settings:
     output:
-        **registered_tables(("settings", "speeds"), "Settings and provenance"),
+        **registered_tables(("settings", "speeds"), CATEGORIES["settings"]),
     log:
         f"{RESULTS}/logs/report/settings.log",
     conda:
@@ -62,10 +96,10 @@ rule report_tables:
     input:
         comparison=f"{REPORT}/comparison.csv",
     output:
-        **registered_tables(("targets",), "Report"),
+        **registered_tables(("targets",), CATEGORIES["validation"], "targets"),
         **registered_tables(
             ("comparison_d50", "comparison_accuracy", "comparison_cost", "comparison_domain"),
-            "Validation",
+            CATEGORIES["validation"],
             "comparison",
         ),
     log:
@@ -78,7 +112,9 @@ rule report_tables:
 
 # The configuration hash is read from the job's completed config (like the execution settings of a
 # DEM job); the params are the settings without the execution settings, which rerun nothing. The
-# results are inputs, so that the table (git commit, versions) is rewritten whenever they are.
+# results are inputs, so that the table (git commit, versions) is rewritten whenever they are. Where
+# the project and the working directory are is written into the table, never a param: a moved or
+# copied project reruns nothing.
 rule report_provenance:
     input:
         runs=f"{RESULTS}/dem/runs.csv",
@@ -93,14 +129,14 @@ rule report_provenance:
         csv=registered(
             f"{REPORT}/tables/provenance.csv",
             "provenance",
-            "Settings and provenance",
+            CATEGORIES["settings"],
             table="provenance",
             format="CSV",
         ),
         html=registered(
             f"{REPORT}/tables/provenance.html",
             "provenance",
-            "Settings and provenance",
+            CATEGORIES["settings"],
             table="provenance",
             format="HTML",
         ),
@@ -110,7 +146,6 @@ rule report_provenance:
         "../envs/validation.yaml"
     params:
         settings=settings_mapping(CFG.to_dict()),
-        basedir=workflow.basedir,
     script:
         "../workflow/scripts/report_provenance.py"
 
@@ -120,7 +155,10 @@ rule report:
         unpack(report_inputs),
     output:
         html=registered(
-            f"{REPORT}/report.html", "report", "Report", result="the whole report as one page"
+            f"{REPORT}/report.html",
+            "report",
+            CATEGORIES["findings"],
+            result="the whole report as one page",
         ),
     log:
         f"{RESULTS}/logs/report.log",

@@ -13,12 +13,12 @@ rule train_surrogate:
         metrics=report(
             f"{RESULTS}/surrogate/metrics.csv",
             caption="../workflow/report/surrogate_metrics.rst",
-            category="Surrogate",
+            category=CATEGORIES["surrogate"],
         ),
         parity=report(
             f"{RESULTS}/surrogate/parity.png",
             caption="../workflow/report/parity.rst",
-            category="Surrogate",
+            category=CATEGORIES["surrogate"],
         ),
     log:
         f"{RESULTS}/logs/train_surrogate.log",

@@ -6,8 +6,6 @@
 
 
 rule pbm_dem_coupled:
-    input:
-        template=TEMPLATE,
     output:
         **run_outputs(f"{RESULTS}/validation/rpm{{rpm}}/pbm_dem/rep{{rep}}"),
     log:
@@ -18,6 +16,7 @@ rule pbm_dem_coupled:
     resources:
         tasks=DEM_RANKS,
     params:
+        deck_sha256=DECK_SHA256,
         loop=loop_params,
         method="dem",
         outdir=lambda wc, output: os.path.dirname(output.summary),
@@ -83,7 +82,7 @@ rule comparison:
         table=report(
             f"{RESULTS}/report/comparison.csv",
             caption="../workflow/report/comparison.rst",
-            category="Validation",
+            category=CATEGORIES["validation"],
         ),
     log:
         f"{RESULTS}/logs/validation/comparison.log",
@@ -107,7 +106,7 @@ rule propose_points:
         table=report(
             f"{RESULTS}/validation/proposals.csv",
             caption="../workflow/report/proposals.rst",
-            category="Validation",
+            category=CATEGORIES["validation"],
         ),
     log:
         f"{RESULTS}/logs/validation/propose_points.log",
@@ -131,7 +130,7 @@ rule rpm_sweep:
         plot=report(
             f"{RESULTS}/validation/rpm_sweep.png",
             caption="../workflow/report/rpm_sweep.rst",
-            category="Validation",
+            category=CATEGORIES["validation"],
         ),
     log:
         f"{RESULTS}/logs/validation/rpm_sweep.log",
@@ -146,3 +145,26 @@ rule rpm_sweep:
 
 extra_targets += [f"{RESULTS}/validation/rpm{rpm}/bands.csv" for rpm in VAL_RPMS]
 extra_targets += [f"{RESULTS}/report/comparison.csv", f"{RESULTS}/validation/proposals.yaml"]
+
+
+# The PBM-ANN studies the report's findings open with: final sizes against impeller speed (the
+# sweep's speeds, validation feed) and against the feed (the grid's feeds and 50:50 blends between
+# neighbours, at FEED_STUDY_RPM), each with the ensemble members' range and the domain status.
+rule pbm_ann_studies:
+    input:
+        model=MODEL,
+    output:
+        speed=f"{RESULTS}/validation/speed_study.csv",
+        feed=f"{RESULTS}/validation/feed_study.csv",
+    log:
+        f"{RESULTS}/logs/validation/pbm_ann_studies.log",
+    conda:
+        "../envs/validation.yaml"
+    params:
+        loop=loop_params,
+        speeds=lambda wc: CFG.validation.sweep.speeds(),
+        grid_speeds=CFG.grid.speeds(),
+        feed_rpm=FEED_STUDY_RPM,
+        feeds={name: CFG.distribution(name).to_dict() for name in CFG.grid.size_distributions},
+    script:
+        "../workflow/scripts/pbm_ann_studies.py"

@@ -2,6 +2,7 @@
 # Install what pbmdem needs on a Debian 12 machine (run as root), idempotently:
 #   - LIGGGHTS 3.8 and Open MPI from Debian (without recommends: no ParaView/desktop),
 #   - python3-venv if the system Python cannot create virtual environments,
+#   - Chromium (headless, for the test that renders the report as a browser shows it),
 #   - a virtual environment in .venv with the pinned dependencies and pbmdem itself.
 # A second run only checks and returns quickly.
 set -euo pipefail
@@ -11,6 +12,7 @@ need_apt=()
 command -v liggghts >/dev/null 2>&1 || need_apt+=(liggghts)
 command -v mpirun >/dev/null 2>&1 || need_apt+=(openmpi-bin)
 command -v python3 >/dev/null 2>&1 || need_apt+=(python3)
+command -v chromium >/dev/null 2>&1 || need_apt+=(chromium)
 if command -v python3 >/dev/null 2>&1 && ! python3 -c 'import ensurepip, venv' >/dev/null 2>&1; then
     need_apt+=(python3-venv)
 fi

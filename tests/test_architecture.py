@@ -2,8 +2,8 @@
 
 The import graph is read from the source (every `import`, also those inside functions, which
 are dependencies all the same). Layers, lowest first: the shared helpers (atomic files, readers,
-job logs), the table contracts (`pbmdem.tables`, read through the readers), the settings layer
-(`pbmdem.config`), the contracts (`pbmdem.impact`, then `pbmdem.frequency`), the stages
+job logs, plot axes), the table contracts (`pbmdem.tables`, read through the readers), the settings
+layer (`pbmdem.config`), the contracts (`pbmdem.impact`, then `pbmdem.frequency`), the stages
 (`pbmdem.dem`, `pbmdem.pbm`, `pbmdem.surrogate`, independent of each other), the coupling of the
 stages (`pbmdem.coupling`), the validation study (`pbmdem.validation`), the report, the command
 line. A module imports only from its own unit or from lower layers.
@@ -18,7 +18,7 @@ import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 LAYERS = [
-    {"atomic", "readers", "joblog", ""},
+    {"atomic", "readers", "joblog", "plotting", ""},
     {"tables"},
     {"config"},
     {"impact"},

@@ -290,15 +290,22 @@ def test_figures_have_units_legends_and_sizes_in_mm(tmp_path):
     line = next(ln for ln in d50.get_lines() if ln.get_label() == "PBM-DEM mean")
     np.testing.assert_allclose(line.get_ydata(), 1e3 * dem_mean)  # mm
     labels = [t.get_text() for t in fig.legends[0].get_texts()]
-    assert "PBM-DEM band (min-max of 2 replicates)" in labels
+    band = next(t for t in labels if t.startswith("PBM-DEM band"))
+    width = (bands[bands.statistic == "d50"].dem_max - bands[bands.statistic == "d50"].dem_min).max()
+    # the band's width is stated, so that a band thinner than a line is not taken for a missing one
+    assert band == f"PBM-DEM band (min-max of 2 replicates; up to {1e3 * width:.2g} mm wide in d50)", band
     assert "PBM-ANN band (min-max of the ensemble members)" in labels and "PBM-constant" in labels
     figures.pyplot().close(fig)
 
     bins = {name: _bins(0.05) for name in ("PBM-DEM replicate 0", "PBM-ANN", "PBM-constant")}
     fig = figures.psd_evolution(bins, process, RPM)
-    assert _labels(fig)[:2] == ["diameter (mm)", "mass fraction per unit ln d (-)"]
+    assert _labels(fig)[:2] == ["diameter (mm)", "mass finer than d (%)"]
     shown = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
-    assert shown == ["t = 0 s", "t = 2 s", "t = 7 s", "t = 12 s", "t = 20 s"]  # start, spray start/middle/end, end
+    # start, spray start/middle/end, end; the first three are the same distribution: one curve
+    assert shown == ["t = 0 = 2 = 7 s", "t = 12 s", "t = 20 s"]
+    for line in fig.axes[0].get_lines()[:3]:  # cumulative: smooth, from ~0 to 100 %, never falling
+        y = line.get_ydata()
+        assert np.all(np.diff(y) >= -1e-9) and y[-1] == pytest.approx(100.0) and y[0] < 10.0
     assert fig.axes[0].get_title().startswith("PBM-DEM replicate 0")
     figures.pyplot().close(fig)
 

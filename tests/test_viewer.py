@@ -21,11 +21,56 @@ def test_series_index_is_in_numeric_step_order(tiny_run):
     assert all(p.exists() for _, p in series)
 
 
+def test_series_opens_on_a_frame_with_particles(tiny_run):
+    """The t = 0 snapshot precedes the insertion (no points): the series leaves it out, so that
+    ParaView and pyvista's reader open on particles ("No points read!" otherwise)."""
+    import pyvista
+
+    post = tiny_run["dir"] / "post"
+    assert vtk_series.point_count(post / "particles_0.vtk") == 0
+    series = vtk_series.read_series(post / "particles.pvd")
+    assert series[0][0] > 0 and all(vtk_series.point_count(p) > 0 for _, p in series)
+    reader = pyvista.get_reader(str(post / "particles.pvd"))
+    mesh = reader.read()
+    mesh = mesh[0] if isinstance(mesh, pyvista.MultiBlock) else mesh
+    assert reader.time_values[0] == pytest.approx(series[0][0]) and mesh.n_points > 0
+
+
+def test_view_picks_a_time_in_seconds_and_names_it(tiny_run):
+    """--time in s: the nearest snapshot with particles; by default the first with particles; the
+    title names the point, speed, feed and time."""
+    run = tiny_run["dir"]
+    first = viewer.pick(run)
+    assert first.step > 0 and vtk_series.point_count(first.path) > 0
+    assert first.time == pytest.approx(first.step * tiny_run["plan"].timestep)
+    last = viewer.pick(run, "last")
+    assert viewer.pick(run, last.time * 0.999) == last and last.time > first.time
+    title = viewer.title(run, last)
+    assert title.startswith(f"{tiny_run['plan'].point_id} rep0: 600 rpm, feed small, t = {last.time:.3f} s"), title
+    with pytest.raises(viewer.ViewError, match=r"--time 99: allowed .* s"):
+        viewer.pick(run, 99)
+
+
+def test_view_by_operating_point(tiny_run, tmp_path, capsys):
+    """`pbmdem view --rpm R --distribution D` finds results/dem/<point>/rep<k>; an unknown point
+    is an error naming the flags and listing the runs there."""
+    results = tmp_path / "results"
+    (results / "dem" / "rpm600_small").mkdir(parents=True)
+    (results / "dem" / "rpm600_small" / "rep0").symlink_to(tiny_run["dir"])
+    out = tmp_path / "shot.png"
+    argv = ["view", "--results", str(results), "--rpm", "600", "--distribution", "small", "--time", "0.05"]
+    assert main([*argv, "--screenshot", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert main(["view", "--results", str(results), "--rpm", "900", "--distribution", "small"]) == 2
+    err = capsys.readouterr().err
+    assert "--rpm 900 --distribution small --replicate 0" in err and "dem/rpm600_small/rep0" in err, err
+
+
 def test_screenshot_shows_particles_coloured_by_size(tiny_run, tmp_path):
     import matplotlib.image
 
     out = tmp_path / "shot.png"
-    assert main(["view", str(tiny_run["dir"]), "--screenshot", str(out)]) == 0
+    assert main(["view", str(tiny_run["dir"]), "--time", "last", "--screenshot", str(out)]) == 0
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     img = matplotlib.image.imread(out)[..., :3]
     assert img.shape[0] > 200 and img.shape[1] > 200

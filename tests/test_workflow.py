@@ -100,7 +100,10 @@ def test_vtk_series_open_in_pyvista(tiny_workflow):
     for pvd in sorted((workdir / "results" / "dem").glob("*/rep*/post/particles.pvd")):
         reader = pyvista.get_reader(str(pvd))
         assert len(reader.time_values) >= 2
-        reader.set_active_time_value(reader.time_values[-1])  # the first frame precedes insertion
+        first = reader.read()  # the reader opens on the first frame: it holds particles (no empty t = 0)
+        first = first[0] if isinstance(first, pyvista.MultiBlock) else first
+        assert first.n_points > 0 and reader.time_values[0] > 0
+        reader.set_active_time_value(reader.time_values[-1])
         mesh = reader.read()
         mesh = mesh[0] if isinstance(mesh, pyvista.MultiBlock) else mesh
         assert mesh.n_points > 100 and "radius" in mesh.point_data
@@ -190,6 +193,44 @@ def test_execution_settings_rerun_nothing(tiny_workflow, root, tmp_path):
     reseeded.write_text(yaml.safe_dump(cfg))
     out = snakemake(root, workdir, reseeded, "-n", "--cores", "1", "--quiet", "rules").stdout
     assert "dem_point" in out and "pbm_dem_coupled" in out, out
+
+
+PROJECT_FILES = ("Snakefile", "rules", "workflow", "liggghts_templates", "src", "profiles", "envs")
+
+
+def test_a_copied_project_with_its_results_reruns_nothing(tiny_workflow, root, tmp_path):
+    """Moving or copying a finished project (its files, results/ and .snakemake/ in one folder, the
+    way a user copies a checkout) reruns nothing: no rule input or param holds an absolute path. A
+    real change in the copy (the deck template) is still seen, so the check is not vacuous."""
+    workdir, configfile = tiny_workflow
+    moved = tmp_path / "elsewhere" / "pbmdem"
+    shutil.copytree(workdir, moved, symlinks=True)  # copy2: results keep their time stamps
+    for name in PROJECT_FILES:
+        src = root / name
+        if src.is_dir():
+            shutil.copytree(src, moved / name, symlinks=True)  # src/pbmdem/data links stay relative
+        else:
+            shutil.copy2(src, moved / name)
+    dry = snakemake(moved, moved, moved / configfile.name, "-n", "--cores", "2")
+    out = dry.stdout + dry.stderr
+    assert "Nothing to be done" in out, out[-4000:]
+    assert "pbmdem runtime estimate: no DEM run left to do." in out, out[-2000:]
+    # provenance records where the project is without being a rerun trigger
+    provenance = pd.read_csv(workdir / "results" / "report" / "tables" / "provenance.csv").set_index("quantity")
+    assert provenance.loc["working directory", "value"] == str(workdir)
+    template = moved / "liggghts_templates" / "granulator.in"
+    template.write_text(template.read_text() + "# an edited deck\n")
+    dry = snakemake(moved, moved, moved / configfile.name, "-n", "--cores", "2", "--quiet", "rules")
+    assert "dem_point" in dry.stdout and "pbm_dem_coupled" in dry.stdout, dry.stdout
+    # the dry run's runtime estimate counts the scheduled DEM work, at the throughput measured
+    from pbmdem.config import load_config
+
+    cfg = load_config(configfile)
+    runs = len(cfg.grid.points()) * cfg.dem_replicates
+    intervals = len(cfg.validation.rpm) * cfg.validation.dem_replicates * cfg.validation.coupling_intervals
+    assert f"pbmdem runtime estimate: {runs} DEM grid run(s)" in dry.stderr, dry.stderr[-2000:]
+    assert f"and {intervals} PBM-DEM coupling interval(s)" in dry.stderr
+    assert f"from the throughput of the {runs} finished runs in results/dem/runs.csv" in dry.stderr
 
 
 def test_lint_is_clean(root, tiny_workflow):
@@ -291,8 +332,12 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
     for rep in (r for speed in replicates for r in speed):
         assert (pd.read_csv(rep / "intervals.csv").dem_collisions > 0).all(), rep
     html = (res / "report" / "report.html").read_text()
-    assert "PBM-ANN against the coupled PBM-DEM model" in html
-    assert html.count("data:image/png;base64,") == 4 * len(cfg["validation"]["rpm"]) + 4  # + sweep, parity, DEM x2
+    assert "how impeller speed and feed size change granule growth" in html
+    # the findings first (speed, feed, how far to trust them), then the validation
+    order = [html.find(p) for p in ("<b>Impeller speed.</b>", "<b>Feed size distribution.</b>", "<h3>Targets</h3>")]
+    assert -1 not in order and order == sorted(order), order
+    # per speed 4, + sweep, parity, DEM x2, + the two findings figures
+    assert html.count("data:image/png;base64,") == 4 * len(cfg["validation"]["rpm"]) + 6
     assert "encounter rate against impeller speed" in html
     response = pd.read_csv(res / "dem" / "speed_response.csv")
     assert len(response) == len(cfg["grid"]["impeller_rpm"]) * len(cfg["grid"]["size_distributions"])
@@ -368,11 +413,75 @@ def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
         "Every impeller speed of the DEM training grid",
         "Where the results come from.",
         "The targets of the validation at every speed",
-        "PBM-ANN against the coupled PBM-DEM model of",
+        "how impeller speed and feed size change granule growth",
+        "Granule size against impeller speed.",
+        "Granule size against the feed size distribution.",
         "The surrogate on DEM runs it never saw",
         "The whole report as one self-contained page",
     ):
         assert phrase in flat, phrase
+
+
+CHROMIUM_FLAGS = (
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--window-size=1280,1000",
+)
+
+
+def test_report_in_a_browser_opens_with_the_findings_and_shows_everything(tiny_workflow, root, tmp_path):
+    """Snakemake's report (`--report report.html`) in headless Chromium, as a reader opens it: the page
+    opens with the findings (speed, feed, then how far to trust them, then the glossary), every image
+    of the page and of every result loads, and no table of any HTML result (display tables,
+    report.html) is wider than a 1000 px page (tests/browser/check_report.js)."""
+    chromium = shutil.which("chromium")
+    assert chromium, "Chromium is not installed: run scripts/bootstrap.sh (README command 2)"
+    workdir, configfile = tiny_workflow
+    report = tmp_path / "report.html"
+    snakemake(root, workdir, configfile, "--report", str(report))
+    page = report.read_text()
+    check = (root / "tests" / "browser" / "check_report.js").read_text()
+    end = page.rfind("</body>")
+    checked = tmp_path / "checked.html"
+    checked.write_text(page[:end] + "<script>" + check + "</script>" + page[end:])
+    proc = subprocess.run(
+        [
+            chromium,
+            *CHROMIUM_FLAGS,
+            f"--user-data-dir={tmp_path / 'chromium'}",
+            "--virtual-time-budget=30000",
+            "--dump-dom",
+            checked.as_uri(),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    marker = '<pre id="pbmdem-check">{'
+    assert marker in proc.stdout, proc.stderr[-3000:]
+    found = json.loads(proc.stdout[proc.stdout.rfind(marker) + len(marker) - 1 :].split("</pre>")[0])
+    assert found["errors"] == [], found
+    # the page starts with its title in view (Snakemake centres a long description above the window)
+    assert found["title_top"] is not None and found["title_top"] >= 0, found
+    assert found["landing_broken"] == [], found
+    findings = [alt for alt in found["landing_alts"] if alt.startswith("final d10, d50, d90 against")]
+    assert len(findings) == 2, found["landing_alts"]
+    speeds = len(yaml.safe_load(configfile.read_text())["validation"]["rpm"])
+    # per speed 4; the sweep, parity, speed response, impact velocities; the two findings figures
+    assert found["images"] == 4 * speeds + 6 and found["broken"] == [], found
+    assert found["pages"] >= len(REPORT_TABLES) + 1 and found["page_broken"] == [] and found["overflow"] == [], found
+    # the findings come first: the answers, then how far to trust them, then the rest
+    text = re.sub(r"<[^>]+>", " ", proc.stdout[: proc.stdout.rfind(marker)])
+    order = [text.find(p) for p in ("Impeller speed.", "Feed size distribution.", "How far to trust them.", "Glossary")]
+    assert -1 not in order and order == sorted(order), order
+    categories = set(re.findall(r'"(\d\. [^"]+)"', page))  # the menu lists them sorted by name
+    assert sorted(categories)[:2] == ["1. Findings", "2. Validation: how far to trust them"], categories
 
 
 def test_report_provenance_of_the_tiny_workflow(tiny_workflow, root):
@@ -502,9 +611,12 @@ def test_deck_template_edit_reruns_every_dem_job_and_execution_settings_none(roo
     dem.mpi_ranks change."""
     project = tmp_path / "project"
     project.mkdir()
-    for name in ("Snakefile", "rules", "workflow", "liggghts_templates", "src", "profiles", "envs"):
+    for name in PROJECT_FILES:
         src = root / name
-        (shutil.copytree if src.is_dir() else shutil.copy2)(src, project / name)
+        if src.is_dir():  # links kept, as in a checkout: the package's deck template is the project's
+            shutil.copytree(src, project / name, symlinks=True)
+        else:
+            shutil.copy2(src, project / name)
     workdir = tmp_path / "wd"
     workdir.mkdir()
     cfg = yaml.safe_load((root / "config" / "test.yaml").read_text())

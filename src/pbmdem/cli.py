@@ -1,7 +1,7 @@
-"""The `pbmdem` command line.
+"""pbmdem: wet granulation in a high-shear granulator, from DEM collisions to granule sizes.
 
-    pbmdem dem --config config/config.yaml --rpm 600 --distribution fine [--replicate K] [--out DIR]
-    pbmdem view RUN_DIR [--step N] [--screenshot out.png]
+    pbmdem dem --config config/config.yaml --rpm 600 --distribution fine [--replicate K] [--plan-only]
+    pbmdem view --rpm 600 --distribution fine [--time 0.5] [--screenshot out.png]
     pbmdem pbm --config ... --kernel constant|table|ann --rpm 600 [--distribution fine] --out DIR
     pbmdem surrogate train|predict ...
 
@@ -31,7 +31,25 @@ def _dem(args: argparse.Namespace) -> int:
         raise ValueError(f"--replicate {args.replicate}: allowed 0 .. dem.replicates - 1 = {cfg.dem_replicates - 1}")
     plan = check_limits(plan_point(point, rpm, replicate=args.replicate), cfg.dem_execution.limits)
     if args.plan_only:
-        print(json.dumps(plan.to_dict(), indent=2))
+        from pbmdem.dem.estimate import duration_text, measured_throughput
+
+        throughput = measured_throughput(args.runs)
+        ranks = cfg.dem_execution.mpi_ranks
+        seconds = throughput.seconds(plan.particle_steps, plan.n_particles, ranks)
+        estimate = {
+            "wall_time_s": round(seconds, 1),
+            "particle_steps": plan.particle_steps,
+            "particle_steps_per_s": round(throughput.rate(plan.n_particles)),
+            "mpi_ranks": ranks,
+            "from": throughput.source,
+        }
+        print(json.dumps({**plan.to_dict(), "runtime_estimate": estimate}, indent=2))
+        print(
+            f"estimated LIGGGHTS wall time: {duration_text(seconds)} ({plan.particle_steps / 1e6:.0f} M "
+            f"particle-steps at {throughput.rate(plan.n_particles) / 1e6:.2f} M/s per rank, {ranks} rank(s); "
+            f"from {throughput.source})",
+            file=sys.stderr,
+        )
         return 0
     out = args.out or f"results/dem/{point_id(rpm, args.distribution)}/rep{args.replicate}"
     # progress: a bar on a terminal, plain log lines (at least every ~10 s) otherwise
@@ -123,17 +141,89 @@ def _table_source(batch, args):
     )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="pbmdem", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True)
+DESCRIPTION = """pbmdem models wet granulation in a high-shear granulator: LIGGGHTS DEM runs give
+collision frequencies between granule size classes, a neural-network surrogate learns them, and a
+population balance model (PBM) turns them into granule growth (d10/d50/d90 over the batch). The
+whole study runs with `snakemake --cores 2`; these commands do one step by hand."""
 
-    dem = sub.add_parser("dem", help="run one DEM operating point with LIGGGHTS")
+EXAMPLES = """examples:
+  pbmdem dem --config config/config.yaml --rpm 600 --distribution fine --plan-only
+  pbmdem view --rpm 600 --distribution fine --time 0.5 --screenshot shot.png
+  pbmdem pbm --config config/config.yaml --kernel ann --model results/surrogate/model.skops --rpm 900 --out out/
+  pbmdem surrogate predict --model results/surrogate/model.skops --table results/dem/collisions.csv
+
+Run `pbmdem COMMAND --help` for the options and examples of each command."""
+
+DEM_EXAMPLES = """examples:
+  pbmdem dem --config config/config.yaml --rpm 600 --distribution fine --plan-only   # plan and runtime estimate
+  pbmdem dem --config config/config.yaml --rpm 600 --distribution fine               # results/dem/rpm600_fine/rep0
+  pbmdem dem --config config/config.yaml --rpm 900 --distribution coarse --replicate 2 --out /tmp/run
+"""
+
+PBM_EXAMPLES = """examples:
+  pbmdem pbm --config config/config.yaml --kernel constant --rpm 600 --out out/constant
+  pbmdem pbm --config config/config.yaml --kernel table --table results/dem/collisions.csv \\
+      --velocity-table results/dem/impact_velocity.csv --rpm 600 --distribution fine --out out/table
+  pbmdem pbm --config config/config.yaml --kernel ann --model results/surrogate/model.skops \\
+      --rpm 900 --distribution medium --out out/ann
+"""
+
+SURROGATE_EXAMPLES = {
+    None: """examples:
+  pbmdem surrogate train --config config/config.yaml --table results/dem/collisions.csv \\
+      --velocity-table results/dem/impact_velocity.csv --out out/surrogate
+  pbmdem surrogate predict --model results/surrogate/model.skops --table results/dem/collisions.csv
+""",
+    "train": """examples:
+  pbmdem surrogate train --config config/config.yaml --table results/dem/collisions.csv \\
+      --velocity-table results/dem/impact_velocity.csv --out out/surrogate --jobs 2
+""",
+    "predict": """examples:
+  pbmdem surrogate predict --model results/surrogate/model.skops --table results/dem/collisions.csv --output pred.csv
+  pbmdem surrogate predict --model results/surrogate/model.skops --diameters 0.002 0.004 \\
+      --numbers 500 100 --rpm 900
+""",
+}
+
+
+def _with_examples(parser: argparse.ArgumentParser, examples: str) -> None:
+    """Show `examples` below the options of `parser` (kept as written)."""
+    parser.epilog = examples
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from pbmdem import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="pbmdem", description=DESCRIPTION, epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--version", action="version", version=f"pbmdem {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    dem = sub.add_parser(
+        "dem",
+        help="run one DEM operating point with LIGGGHTS (or only plan it, with a runtime estimate)",
+        description="Run LIGGGHTS for one operating point (impeller speed x size distribution) and "
+        "tabulate its collisions between size classes.",
+    )
+    _with_examples(dem, DEM_EXAMPLES)
     dem.add_argument("--config", required=True, help="workflow config (YAML)")
     dem.add_argument("--rpm", required=True, help="impeller speed (1/min), 0 < rpm <= 20000")
     dem.add_argument("--distribution", required=True, help="size distribution name from the config")
     dem.add_argument("--replicate", type=int, default=0, help="replicate (insertion seeds), 0 .. dem.replicates-1")
     dem.add_argument("--out", default=None, help="run folder (default results/dem/<point id>/rep<replicate>)")
-    dem.add_argument("--plan-only", action="store_true", help="print the run plan and stop")
+    dem.add_argument(
+        "--plan-only",
+        action="store_true",
+        help="print the run plan with an estimate of its wall time (from the measured throughput of "
+        "the finished runs in --runs, or the reference machine's) and stop",
+    )
+    dem.add_argument(
+        "--runs",
+        default="results/dem/runs.csv",
+        help="finished runs whose measured throughput sizes the estimate (default: results/dem/runs.csv)",
+    )
     dem.add_argument(
         "--force",
         action="store_true",
@@ -147,6 +237,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="run the population balance model of the batch granulator",
         description="Run the PBM for one impeller speed and size distribution.",
     )
+    _with_examples(pbm, PBM_EXAMPLES)
     pbm.add_argument("--config", required=True, type=Path, help="workflow config (YAML)")
     pbm.add_argument(
         "--kernel",
@@ -173,7 +264,11 @@ def build_parser() -> argparse.ArgumentParser:
     from pbmdem.surrogate import cli as surrogate_cli
 
     viewer.add_cli(sub)
-    surrogate_cli.add_cli(sub)
+    surrogate = surrogate_cli.add_cli(sub)
+    _with_examples(surrogate, SURROGATE_EXAMPLES[None])
+    for action in surrogate._subparsers._group_actions:
+        for name, child in action.choices.items():
+            _with_examples(child, SURROGATE_EXAMPLES[name])
     return parser
 
 

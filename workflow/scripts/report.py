@@ -35,6 +35,7 @@ build_report(
     runs=sm.input.runs,
     collisions=sm.input.collisions,
     proposals=sm.input.proposals,
+    findings=sm.input.findings_rst,
     speed_study={
         "table": sm.input.speed_response,
         "flow": sm.input.flow_development,

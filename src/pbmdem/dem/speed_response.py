@@ -132,8 +132,11 @@ def plot_speed_response(response: pd.DataFrame, path) -> None:
     axes[1].set(
         xlabel="impeller speed (rpm)", ylabel="new contacts per particle (1/s)", title="raw new contacts (diagnostic)"
     )
+    from pbmdem.plotting import log_ticks
+
     for ax in axes:
         ax.set_xscale("log")
+        log_ticks(ax, "x")
         ax.grid(alpha=0.3)
         ax.legend(title="feed")
     fig.tight_layout()
@@ -150,10 +153,16 @@ def plot_impact_velocities(velocities: pd.DataFrame, path) -> None:
     import matplotlib.pyplot as plt
 
     from pbmdem.atomic import atomic_path
+    from pbmdem.plotting import log_ticks
 
     feeds = sorted(velocities.distribution.unique())
-    fig, axes = plt.subplots(1, len(feeds), figsize=(4 * len(feeds), 3.6), squeeze=False)
-    for ax, dist in zip(axes[0], feeds):
+    # at most three panels a row, each as large as a single figure's panel (readable at page width)
+    ncols = min(3, len(feeds))
+    nrows = -(-len(feeds) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(5.0 * ncols, 4.0 * nrows), squeeze=False, sharey=True)
+    for ax in axes.ravel()[len(feeds) :]:
+        ax.axis("off")
+    for ax, dist in zip(axes.ravel(), feeds):
         sub = velocities[velocities.distribution == dist]
         for rpm, g in sub.groupby("rpm"):
             h = g.groupby(["v_lo", "v_hi"])["encounters"].sum().reset_index()
@@ -163,9 +172,10 @@ def plot_impact_velocities(velocities: pd.DataFrame, path) -> None:
                 continue
             centre = np.sqrt(h.v_lo * h.v_hi)
             ax.step(centre, h.encounters / total, where="mid", label=f"{rpm:g} rpm")
-        ax.set(xscale="log", xlabel="impact speed (m/s)", ylabel="fraction of encounters", title=f"feed {dist}")
+        ax.set(xscale="log", xlabel="impact speed (m/s)", ylabel="fraction of encounters (-)", title=f"feed {dist}")
+        log_ticks(ax, "x")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=9, title="impeller speed")
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")

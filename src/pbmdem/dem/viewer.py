@@ -1,67 +1,150 @@
 """Look at a DEM run: particles coloured by diameter, the impeller and the bowl, with pyvista.
 
-pbmdem view results/dem/rpm600_fine                 # interactive window
-pbmdem view results/dem/rpm600_fine --step 40000 --screenshot shot.png   # off-screen PNG
+A run is named by its operating point (impeller speed, size distribution, replicate) or by its
+folder, a moment by its time in seconds (the nearest snapshot; by default the first one that holds
+particles). The picture's title names the point, the speed, the feed and the time.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+from dataclasses import dataclass
 from pathlib import Path
 
 from pbmdem.atomic import atomic_path
 
-from .vtk_series import snapshots
+from .vtk_series import point_count, snapshots
+
+EXAMPLES = """examples:
+  pbmdem view --rpm 600 --distribution fine                   # first frame with particles, in a window
+  pbmdem view --rpm 600 --distribution fine --time 0.5 --screenshot shot.png
+  pbmdem view --rpm 600 --distribution fine --replicate 2 --time last
+  pbmdem view results/dem/rpm600_fine/rep0 --time 0.25        # a run folder instead of a point
+"""
 
 
 class ViewError(ValueError):
     """The run folder has no such snapshot."""
 
 
-def _pick(post: Path, kind: str, step: int | None) -> tuple[int, Path]:
-    snaps = snapshots(post, kind)
-    if not snaps:
-        raise ViewError(f"no {kind} snapshots in {post} (is this a finished pbmdem DEM run folder?)")
-    if step is None:
-        return snaps[-1]
-    for s, path in snaps:
-        if s == step:
-            return s, path
-    raise ViewError(f"no {kind} snapshot at step {step} in {post}; available steps: {[s for s, _ in snaps]}")
+@dataclass(frozen=True)
+class Frame:
+    """One snapshot of a run: its step, time (s) and particle file."""
+
+    step: int
+    time: float
+    path: Path
 
 
-def build_scene(run_dir: str | Path, step: int | None = None, off_screen: bool = False):
-    """A pyvista Plotter with the particles at `step` (default: last) and the impeller."""
-    import pyvista as pv
+def run_folder(results: str | Path, rpm: str, distribution: str, replicate: int = 0) -> Path:
+    """results/dem/rpm<rpm>_<distribution>/rep<replicate>, the folder of one operating point's run."""
+    from pbmdem.config import check_rpm, point_id
 
+    folder = Path(results) / "dem" / point_id(check_rpm(rpm, "--rpm"), distribution) / f"rep{replicate}"
+    if not folder.is_dir():
+        runs = sorted(str(p.relative_to(results)) for p in Path(results).glob("dem/rpm*/rep*") if p.is_dir())
+        shown = ", ".join(runs[:12]) + (" ..." if len(runs) > 12 else "") if runs else "none"
+        raise ViewError(
+            f"no DEM run of --rpm {rpm} --distribution {distribution} --replicate {replicate}: {folder} does not "
+            f"exist; runs under {results}: {shown}"
+        )
+    return folder
+
+
+def _plan(run_dir: Path) -> dict:
+    path = run_dir / "plan.json"
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def frames(run_dir: str | Path) -> list[Frame]:
+    """Every particle snapshot of a run that holds particles, in time order."""
     run_dir = Path(run_dir)
     post = run_dir / "post"
     if not post.is_dir():
         raise ViewError(f"{run_dir} has no post/ folder with VTK snapshots")
-    step, particle_file = _pick(post, "particles", step)
-    particles = pv.read(particle_file)
+    timestep = _plan(run_dir).get("timestep")
+    snaps = [(s, p) for s, p in snapshots(post, "particles") if point_count(p) != 0]
+    if not snaps:
+        raise ViewError(f"no particles snapshots in {post} (is this a finished pbmdem DEM run folder?)")
+    if timestep is None:
+        raise ViewError(f"{run_dir / 'plan.json'} is missing: the snapshots' times are unknown (use --step)")
+    return [Frame(s, s * float(timestep), p) for s, p in snaps]
+
+
+def pick(run_dir: str | Path, time: float | str | None = None, step: int | None = None) -> Frame:
+    """The frame at `time` (s, nearest snapshot; "last" for the last), or at engine `step`, or
+    the first frame with particles."""
+    found = frames(run_dir)
+    if step is not None:
+        for frame in found:
+            if frame.step == step:
+                return frame
+        raise ViewError(f"no particles snapshot at step {step}; available steps: {[f.step for f in found]}")
+    if time is None:
+        return found[0]
+    if time == "last":
+        return found[-1]
+    t = float(time)
+    first, last = found[0].time, found[-1].time
+    spacing = (last - first) / max(1, len(found) - 1)
+    if not first - spacing <= t <= last + spacing:
+        raise ViewError(f"--time {time}: allowed {first:.4g} .. {last:.4g} s (the snapshots with particles)")
+    return min(found, key=lambda f: abs(f.time - t))
+
+
+def title(run_dir: Path, frame: Frame) -> str:
+    """Point, speed, feed, replicate and time: 'rpm600_fine rep0: 600 rpm, feed fine, t = 0.500 s'."""
+    plan = _plan(run_dir)
+    point = plan.get("point_id", run_dir.parent.name)
+    parts = [f"{point} rep{plan.get('replicate', run_dir.name.removeprefix('rep'))}:"]
+    if "rpm" in plan:
+        parts.append(f"{float(plan['rpm']):g} rpm,")
+    if "distribution" in plan:
+        parts.append(f"feed {plan['distribution']},")
+    parts.append(f"t = {frame.time:.3f} s (step {frame.step})")
+    return " ".join(parts)
+
+
+def build_scene(
+    run_dir: str | Path,
+    time: float | str | None = None,
+    off_screen: bool = False,
+    step: int | None = None,
+):
+    """A pyvista Plotter with the particles of one frame (see `pick`), the impeller and the bowl."""
+    import pyvista as pv
+
+    run_dir = Path(run_dir)
+    frame = pick(run_dir, time, step)
+    particles = pv.read(frame.path)
     if particles.n_points == 0:
-        raise ViewError(f"{particle_file} holds no particles")
+        raise ViewError(f"{frame.path} holds no particles")
     particles["diameter (mm)"] = 2000.0 * particles["radius"]
     spheres = particles.glyph(
         scale="radius", factor=2.0, orient=False, geom=pv.Sphere(radius=0.5, theta_resolution=12, phi_resolution=12)
     )
     plotter = pv.Plotter(off_screen=off_screen, window_size=(900, 700))
     plotter.add_mesh(spheres, scalars="diameter (mm)", cmap="viridis", scalar_bar_args={"title": "diameter (mm)"})
-    impellers = dict(snapshots(post, "impeller"))
-    if step in impellers:
-        plotter.add_mesh(pv.read(impellers[step]), color="lightgrey")
+    impellers = dict(snapshots(run_dir / "post", "impeller"))
+    if frame.step in impellers:
+        plotter.add_mesh(pv.read(impellers[frame.step]), color="lightgrey")
     bowl = run_dir / "bowl.stl"
     if bowl.exists():
         plotter.add_mesh(pv.read(bowl), style="wireframe", color="black", opacity=0.25)
-    plotter.add_text(f"{run_dir.name}  step {step}", font_size=10)
+    plotter.add_text(title(run_dir, frame), font_size=11)
     plotter.camera_position = "iso"
-    return plotter, step
+    return plotter, frame
 
 
-def render_run(run_dir: str | Path, step: int | None = None, screenshot: str | Path | None = None) -> Path | None:
+def render_run(
+    run_dir: str | Path,
+    time: float | str | None = None,
+    screenshot: str | Path | None = None,
+    step: int | None = None,
+) -> Path | None:
     """Show the run interactively, or render it off-screen to `screenshot` (PNG)."""
-    plotter, _ = build_scene(run_dir, step, off_screen=screenshot is not None)
+    plotter, _ = build_scene(run_dir, time, off_screen=screenshot is not None, step=step)
     if screenshot is None:
         plotter.show()
         return None
@@ -72,16 +155,54 @@ def render_run(run_dir: str | Path, step: int | None = None, screenshot: str | P
     return screenshot
 
 
+def _time(text: str) -> float | str:
+    if text == "last":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: allowed a time in s (e.g. 0.5) or 'last'") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: allowed a time >= 0 s or 'last'")
+    return value
+
+
 def _view(args: argparse.Namespace) -> int:
-    out = render_run(args.run_dir, args.step, args.screenshot)
+    if args.run_dir is not None and (args.rpm is not None or args.distribution is not None):
+        raise ViewError("give a run folder or --rpm/--distribution, not both")
+    if args.run_dir is None:
+        if args.rpm is None or args.distribution is None:
+            raise ViewError("name the run: --rpm RPM --distribution NAME [--replicate K], or a run folder")
+        run_dir = run_folder(args.results, args.rpm, args.distribution, args.replicate)
+    else:
+        run_dir = Path(args.run_dir)
+    if args.time is not None and args.step is not None:
+        raise ViewError("give --time or --step, not both")
+    out = render_run(run_dir, args.time, args.screenshot, step=args.step)
     if out is not None:
         print(f"wrote {out}")
     return 0
 
 
 def add_cli(subparsers) -> None:
-    view = subparsers.add_parser("view", help="show a DEM run (particles coloured by size, impeller)")
-    view.add_argument("run_dir", help="a run folder, e.g. results/dem/rpm600_fine")
-    view.add_argument("--step", type=int, default=None, help="time step of the snapshot (default: last)")
+    view = subparsers.add_parser(
+        "view",
+        help="show a DEM run (particles coloured by size, impeller) at a time in seconds",
+        description=__doc__.split("\n\n")[1].strip(),
+        epilog=EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    view.add_argument("run_dir", nargs="?", default=None, help="a run folder, e.g. results/dem/rpm600_fine/rep0")
+    view.add_argument("--rpm", default=None, help="impeller speed (1/min) of the operating point")
+    view.add_argument("--distribution", default=None, help="size distribution (feed) name of the operating point")
+    view.add_argument("--replicate", type=int, default=0, help="replicate of the point (default 0)")
+    view.add_argument("--results", default="results", help="the workflow's results folder (default: results)")
+    view.add_argument(
+        "--time",
+        type=_time,
+        default=None,
+        help="time in s (nearest snapshot), or 'last' (default: the first snapshot with particles)",
+    )
+    view.add_argument("--step", type=int, default=None, help="an engine step instead of --time (expert use)")
     view.add_argument("--screenshot", default=None, help="render off-screen to this PNG instead of a window")
     view.set_defaults(func=_view)

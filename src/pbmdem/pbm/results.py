@@ -165,8 +165,20 @@ class Result:
         return {"summary": self.summary(), "bins": self.bins()}
 
     # ------------------------------------------------------------- plots and files
-    def plot_psd(self, path=None, n_curves: int = 7, ax=None):
-        """Mass density per ln d at up to ``n_curves`` times (PSD evolution)."""
+    def _where(self) -> str:
+        """'600 rpm, feed fine, ann kernel': the run's speed, feed and kernel, as far as recorded."""
+        parts = []
+        if self.info.get("rpm") is not None:
+            parts.append(f"{float(self.info['rpm']):g} rpm")
+        if self.info.get("distribution"):
+            parts.append(f"feed {self.info['distribution']}")
+        if self.info.get("kernel_source"):
+            parts.append(f"{self.info['kernel_source']} kernel")
+        return ", ".join(parts)
+
+    def plot_psd(self, path=None, n_curves: int = 6, ax=None):
+        """Cumulative mass size distribution (mass % finer than d) at up to ``n_curves`` times: smooth
+        where the density of the sectional grid zig-zags between neighbouring bins."""
         import matplotlib
 
         matplotlib.use("Agg", force=False)
@@ -174,23 +186,36 @@ class Result:
 
         own = ax is None
         if own:
-            fig, ax = plt.subplots(figsize=(6, 4), layout="constrained")
+            fig, ax = plt.subplots(figsize=(6.4, 4.4), layout="constrained")
         g = self.grid
-        dens = self.mass_fractions() / np.log(g.d_edges[1:] / g.d_edges[:-1])
+        mass = self.mass_fractions()
+        cum = 100.0 * np.cumsum(mass, axis=1) / np.maximum(mass.sum(axis=1, keepdims=True), 1e-300)
         idx = np.unique(np.linspace(0, self.times.size - 1, min(n_curves, self.times.size)).round().astype(int))
         cmap = plt.get_cmap("viridis")
+        styles = ("-", "--", "-.", ":")
         occupied = np.nonzero(self.number.max(axis=0) > 1e-6 * self.number.max())[0]
         lo, hi = occupied.min(), occupied.max()
         for n, i in enumerate(idx):
-            ax.step(
-                g.d * 1e3, dens[i], where="mid", color=cmap(n / max(1, len(idx) - 1)), label=f"t = {self.times[i]:g} s"
+            ax.plot(
+                g.d_edges[1:] * 1e3,
+                cum[i],
+                ls=styles[n % len(styles)],
+                lw=1.8,
+                color=cmap(0.85 * n / max(1, len(idx) - 1)),
+                label=f"t = {self.times[i]:g} s",
             )
         ax.set_xscale("log")
         ax.set_xlim(g.d_edges[max(lo - 1, 0)] * 1e3, g.d_edges[min(hi + 2, g.bins)] * 1e3)
+        ax.set_ylim(0, 100)
+        from pbmdem.plotting import log_ticks
+
+        log_ticks(ax, "x")
+        ax.grid(alpha=0.3, which="both")
         ax.set_xlabel("solid-equivalent diameter (mm)")
-        ax.set_ylabel("mass density q3(ln d)")
-        ax.set_title("PSD evolution")
-        ax.legend(fontsize=7)
+        ax.set_ylabel("mass finer than d (%)")
+        where = self._where()
+        ax.set_title("granule size distribution over the batch" + (f"\n{where}" if where else ""), fontsize=10)
+        ax.legend(fontsize=7, loc="lower right")
         if own and path is not None:
             self._savefig(fig, path)
             plt.close(fig)
@@ -204,22 +229,27 @@ class Result:
         import matplotlib.pyplot as plt
 
         s = self.summary()
-        fig, (a1, a2) = plt.subplots(2, 1, figsize=(6, 6), sharex=True, layout="constrained")
-        for col, style in (
-            ("d50", "-"),
-            ("d10", ":"),
-            ("d90", ":"),
-            ("number_mean_diameter", "--"),
-            ("mass_mean_diameter", "-."),
+        fig, (a1, a2) = plt.subplots(2, 1, figsize=(6.4, 6.4), sharex=True, layout="constrained")
+        for col, style, label in (
+            ("d90", "-", "d90 (90 % of the mass finer)"),
+            ("d50", "-", "d50 (median by mass)"),
+            ("d10", "-", "d10 (10 % of the mass finer)"),
+            ("mass_mean_diameter", "--", "mass-mean diameter"),
+            ("number_mean_diameter", ":", "number-mean diameter"),
         ):
-            a1.plot(s["time"], s[col] * 1e3, style, label=col)
-        a1.set_ylabel("diameter (mm)")
+            a1.plot(s["time"], s[col] * 1e3, style, lw=1.8, label=label)
+        a1.set_ylabel("granule diameter (mm)")
         a1.legend(fontsize=7)
-        a1.set_title("d50 vs time")
-        a2.plot(s["time"], s["mean_liquid_content"], label="liquid / solid volume")
-        a2.plot(s["time"], s["mean_porosity"], label="porosity")
-        a2.plot(s["time"], s["mean_surface_liquid_fraction"], label="surface-liquid fraction")
+        where = self._where()
+        a1.set_title("granule sizes over the batch" + (f", {where}" if where else ""), fontsize=10)
+        a1.grid(alpha=0.3)
+        a2.plot(s["time"], s["mean_liquid_content"], label="liquid / solid volume (mean)")
+        a2.plot(s["time"], s["mean_porosity"], label="porosity (mean)")
+        a2.plot(s["time"], s["mean_surface_liquid_fraction"], label="surface-liquid fraction (mean)")
         a2.set_xlabel("time (s)")
+        a2.set_ylabel("volume ratio or fraction (-)")
+        a2.set_title("liquid content and porosity", fontsize=10)
+        a2.grid(alpha=0.3)
         a2.legend(fontsize=7)
         if path is not None:
             self._savefig(fig, path)

@@ -3,8 +3,9 @@
 * `size_bands`: d10, d50 and d90 against time: the PBM-DEM replicate band (envelope of the
   `validation.dem_replicates` loops) with its mean, the PBM-ANN ensemble-member band with the
   ensemble-mean PBM-ANN, and PBM-constant (from the speed's `bands.csv`);
-* `psd_evolution`: the mass density per ln d at the start, the start, middle and end of the liquid
-  addition and the end of the batch, for PBM-DEM replicate 0, PBM-ANN and PBM-constant;
+* `psd_evolution`: the cumulative mass size distribution (mass % finer than d) at the start, the
+  start, middle and end of the liquid addition and the end of the batch, for PBM-DEM replicate 0,
+  PBM-ANN and PBM-constant;
 * `liquid_porosity`: the mean liquid content L/S and the mean porosity against time (bands as above);
 * `collision_frequency`: the pair-weighted mean collision frequency of every coupling interval, and
   the surrogate's c_ij against the DEM's on PBM-DEM's own samples.
@@ -29,7 +30,19 @@ STYLES = {
     "PBM-ANN": dict(color="tab:orange", ls="--", lw=2.0),
     "PBM-constant": dict(color="tab:blue", ls=":", lw=2.0),
 }
-BAND = {"PBM-DEM": dict(color="0.75", alpha=0.8), "PBM-ANN": dict(color="tab:orange", alpha=0.25)}
+# bands: filled, with a drawn edge, so that a band narrower than a line is still seen (as a thicker line)
+BAND = {
+    "PBM-DEM": dict(facecolor="0.55", edgecolor="0.35", lw=0.8, alpha=0.45),
+    "PBM-ANN": dict(facecolor="tab:orange", edgecolor="tab:orange", lw=0.8, alpha=0.3),
+}
+
+
+def _width_text(lo, hi) -> str:
+    """'at most 0.012 mm wide': how wide a band is, so that a reader knows why it may look thin."""
+    width = float(np.nanmax(np.asarray(hi, float) - np.asarray(lo, float))) if len(lo) else float("nan")
+    return f"up to {width:.2g} mm wide" if np.isfinite(width) else "width n/a"
+
+
 SPRAY = dict(color="tab:cyan", alpha=0.10, lw=0)
 STATISTICS = ("d10", "d50", "d90")
 DPI = 110
@@ -67,14 +80,10 @@ def _column(frame: pd.DataFrame, name: str, what: str) -> np.ndarray:
 
 
 def _plain_log(ax, axes: str = "x") -> None:
-    """Tick labels of log axes as plain numbers (2, 3, 4 rather than 2 x 10^0)."""
-    from matplotlib.ticker import FuncFormatter
+    """Readable log-axis tick labels (no overlapping minor labels): `pbmdem.plotting.log_ticks`."""
+    from pbmdem.plotting import log_ticks
 
-    plain = FuncFormatter(lambda v, _: f"{v:g}")
-    for name in axes:
-        axis = getattr(ax, f"{name}axis")
-        axis.set_major_formatter(plain)
-        axis.set_minor_formatter(plain)
+    log_ticks(ax, axes)
 
 
 def _figure_legend(fig, ax, ncol: int = 4) -> None:
@@ -96,7 +105,11 @@ def size_bands(bands: pd.DataFrame, process, rpm: str, what: str = "bands table"
         n = int(b["n_dem_replicates"].iloc[0])
         _spray(ax, process)
         ax.fill_between(
-            b.time, MM * b.dem_min, MM * b.dem_max, **BAND["PBM-DEM"], label=f"PBM-DEM band (min-max of {n} replicates)"
+            b.time,
+            MM * b.dem_min,
+            MM * b.dem_max,
+            **BAND["PBM-DEM"],
+            label=f"PBM-DEM band (min-max of {n} replicates)",
         )
         ax.plot(b.time, MM * b.dem_mean, **STYLES["PBM-DEM"], label="PBM-DEM mean")
         if {"ann_member_min", "ann_member_max"} <= set(b.columns):
@@ -112,7 +125,16 @@ def size_bands(bands: pd.DataFrame, process, rpm: str, what: str = "bands table"
             ax.plot(b.time, MM * b.constant, **STYLES["PBM-constant"], label="PBM-constant")
         ax.set(xlabel="time (s)", ylabel=f"{stat} (mm)", title=f"{stat}, {rpm} rpm")
         ax.grid(alpha=0.3)
-    _figure_legend(fig, axes[0], ncol=3)
+    # the band's width in the legend is that of the d50 panel
+    d50 = bands[bands["statistic"] == "d50"]
+    handles, labels = axes[0].get_legend_handles_labels()
+    labels = [
+        lab[:-1] + f"; {_width_text(MM * d50.dem_min, MM * d50.dem_max)} in d50)"
+        if lab.startswith("PBM-DEM band")
+        else lab
+        for lab in labels
+    ]
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.12, 1, 1))
     return fig
 
@@ -125,37 +147,71 @@ def snapshot_times(recorded, process) -> list[float]:
     return sorted({float(recorded[np.argmin(np.abs(recorded - t))]) for t in wanted})
 
 
+def cumulative_undersize(diameter: np.ndarray, density_lnd: np.ndarray) -> np.ndarray:
+    """Mass % finer than each bin's upper edge, from the mass density per ln d on a geometric grid
+    (the PBM's bins): the sum of density x d(ln d), normalised to 100 %. A cumulative curve is smooth
+    where the density of a sectional grid zig-zags between neighbouring bins."""
+    order = np.argsort(diameter)
+    d, q = diameter[order], np.clip(density_lnd[order], 0.0, None)
+    width = np.gradient(np.log(d)) if len(d) > 1 else np.ones_like(d)
+    mass = np.cumsum(q * width)
+    return PERCENT * mass / mass[-1] if mass[-1] > 0 else np.zeros_like(mass)
+
+
+#: line styles of the snapshot times, so that curves lying on each other stay distinguishable
+TIME_STYLES = ("-", "--", "-.", ":", (0, (5, 1, 1, 1, 1, 1)))
+
+
 def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str, what: dict[str, str] | None = None):
-    """Mass density per ln d against diameter (mm) at `snapshot_times`, one panel per model.
-    `bins`: panel title -> that run's bins.csv (time, diameter, mass_density_lnd)."""
+    """Cumulative mass undersize (%) against diameter (mm) at `snapshot_times`, one panel per model.
+    `bins`: panel title -> that run's bins.csv (time, diameter, mass_density_lnd). Times whose
+    distribution has not changed yet are drawn once, their label naming every such time."""
     plt = pyplot()
     what = what or {}
-    fig, axes = plt.subplots(1, len(bins), figsize=(4.2 * len(bins), 4.0), sharex=True, sharey=True, squeeze=False)
+    fig, axes = plt.subplots(1, len(bins), figsize=(4.4 * len(bins), 4.3), sharex=True, sharey=True, squeeze=False)
     axes = axes[0]
     first = next(iter(bins.values()))
     times = snapshot_times(_column(first, "time", what.get(next(iter(bins)), "bins table")), process)
-    colors = plt.get_cmap("viridis")(np.linspace(0.0, 0.9, len(times)))
-    shown = []  # diameters (m) that carry mass at some time, for the common x range
+    colors = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, len(times)))
+    shown = []  # diameters (m) where the mass is, for the common x range
     for ax, (title, frame) in zip(axes, bins.items()):
         label = what.get(title, f"{title} bins table")
         t = _column(frame, "time", label)
         d = _column(frame, "diameter", label)
         q = _column(frame, "mass_density_lnd", label)
-        for color, time in zip(colors, times):
+        curves = []  # (times, diameters, cumulative)
+        for time in times:
             at = np.isclose(t, time, rtol=0.0, atol=1e-9 * max(1.0, abs(time)))
             if not at.any():
                 continue  # a run that ended early shows what it has
             order = np.argsort(d[at])
-            ax.semilogx(MM * d[at][order], q[at][order], color=color, lw=1.8, label=f"t = {time:g} s")
-            carrying = q[at] > 1e-3 * max(float(q[at].max()), 1e-300)
-            shown += list(d[at][carrying])
+            dd, cum = d[at][order], cumulative_undersize(d[at][order], q[at][order])
+            if curves and len(curves[-1][1]) == len(dd) and np.allclose(curves[-1][2], cum, atol=0.2):
+                curves[-1][0].append(time)  # unchanged: one curve for both times
+                continue
+            curves.append(([time], dd, cum))
+            inside = (cum > 0.5) & (cum < 99.5)
+            shown += list(dd[inside])
+        for k, (ts, dd, cum) in enumerate(curves):
+            when = " = ".join(f"{x:g}" for x in ts)
+            ax.semilogx(
+                MM * dd,
+                cum,
+                color=colors[times.index(ts[0])],
+                ls=TIME_STYLES[k % len(TIME_STYLES)],
+                lw=2.0,
+                label=f"t = {when} s",
+            )
+        ax.axhline(50.0, color="0.6", lw=0.8)
         ax.set(xlabel="diameter (mm)", title=f"{title}, {rpm} rpm")
         ax.grid(alpha=0.3, which="both")
-        _plain_log(ax, "x")
+        ax.legend(fontsize=7, loc="lower right")
     if shown:  # the grid runs far beyond the granules: show where the mass is
-        axes[0].set_xlim(MM * min(shown) / 1.5, MM * max(shown) * 1.5)
-    axes[0].set_ylabel("mass fraction per unit ln d (-)")
-    axes[0].legend(fontsize=8)
+        axes[0].set_xlim(MM * min(shown) / 1.3, MM * max(shown) * 1.3)
+    for ax in axes:
+        _plain_log(ax, "x")
+    axes[0].set_ylabel("mass finer than d (%)")
+    axes[0].set_ylim(0, 100)
     fig.tight_layout()
     return fig
 

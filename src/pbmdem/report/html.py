@@ -76,6 +76,68 @@ def read_display(path: str | Path, what: str) -> pd.DataFrame:
     return read_table(path, what, dtype=str, keep_default_na=False)
 
 
+def inline(text: str) -> str:
+    """rst inline markup of the findings (**bold**, ``code``) as HTML, the rest escaped."""
+    import re
+
+    text = escape(text)
+    text = re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", text)
+    return re.sub(r"``(.+?)``", r"<code>\1</code>", text)
+
+
+def rst_to_html(text: str) -> str:
+    """The findings' reStructuredText (paragraphs, section titles, bullet lists, **bold**, ``code``
+    and `.. image:: data:...` blocks with `:alt:`) as HTML."""
+    import re
+
+    out = []
+    for block in text.strip().split("\n\n"):
+        lines = block.strip().splitlines()
+        if not lines:
+            continue
+        if lines[0].startswith(".. image:: data:image/png;base64,"):
+            src = lines[0].split("::", 1)[1].strip() + "".join(
+                ln.strip() for ln in lines[1:] if not ln.strip().startswith(":")
+            )
+            alt = next((ln.split(":alt:", 1)[1].strip() for ln in lines[1:] if ":alt:" in ln), "figure")
+            out.append(f"<p><img alt='{escape(alt)}' src='{src}' style='max-width:100%'></p>")
+        elif len(lines) == 2 and set(lines[1]) <= set("-=~") and len(lines[1]) >= len(lines[0]):
+            out.append(f"<h2>{escape(lines[0])}</h2>")
+        elif lines[0].startswith("* "):
+            items = re.split(r"\n(?=\* )", "\n".join(lines))
+            out.append("<ul>" + "".join(f"<li>{inline(' '.join(i[2:].split()))}</li>" for i in items) + "</ul>")
+        else:
+            out.append(f"<p>{inline(' '.join(lines))}</p>")
+    return "".join(out)
+
+
+HYPERPARAMETER_NAMES = {
+    "hidden_layer_sizes": "hidden layers (neurons per layer)",
+    "alpha": "L2 penalty alpha",
+    "activation": "activation",
+    "learning_rate_init": "initial learning rate",
+}
+
+
+def hyperparameters(params) -> str:
+    """Selected hyperparameters in words: 'hidden layers (neurons per layer) 8 x 8, L2 penalty alpha 0.1'
+    (per target when the metadata holds one mapping per target)."""
+    if not isinstance(params, dict) or not params:
+        return "not recorded"
+    if all(isinstance(v, dict) for v in params.values()):
+        return "; ".join(f"{target}: {hyperparameters(v)}" for target, v in params.items())
+
+    def value(v):
+        if isinstance(v, (list, tuple)):
+            return " x ".join(str(x) for x in v)
+        return f"{v:g}" if isinstance(v, float) else str(v)
+
+    return ", ".join(
+        f"{HYPERPARAMETER_NAMES.get(k.split('__')[-1], k.split('__')[-1].replace('_', ' '))} {value(v)}"
+        for k, v in params.items()
+    )
+
+
 def _verdicts(sentences: list[str]) -> str:
     items = []
     for s in sentences:
@@ -152,6 +214,10 @@ def _speed_response(paths: dict) -> list[str]:
         "half_z": "difference / SE (-)",
         "within_error": "within 2 SE",
     }
+    flow = flow.assign(
+        rpm=flow.rpm.map(lambda v: f"{v:g}"),
+        within_error=flow.within_error.map(lambda v: "yes" if str(v).strip().lower() in ("true", "1") else "no"),
+    )
     flow_shown = shown(flow, flow_cols, ".3g")
     ok = int(flow.within_error.astype(bool).sum())
     return [
@@ -218,6 +284,7 @@ def build_report(
     collisions,
     speed_study: dict,
     proposals,
+    findings=None,
 ) -> None:
     """Write the self-contained report page. `tables`: name -> CSV of the display tables
     (`settings`, `speeds`, `provenance`, `targets`, `comparison_d50`, `comparison_accuracy`,
@@ -232,12 +299,14 @@ def build_report(
     coll = GRID_PAIRS.read(collisions, need=())
     runs_shown = _runs(runs)
     parts = [
-        "<h1>pbmdem: PBM-ANN against the coupled PBM-DEM model</h1>",
+        "<h1>pbmdem: how impeller speed and feed size change granule growth</h1>",
+        rst_to_html(Path(findings).read_text()) if findings is not None else "",
+        "<h2>Validation: how far to trust them</h2>",
         "<p>Written by the <code>report</code> rule from the result files of this workflow run (the same files "
         "<code>snakemake --report report.zip</code> collects). PBM-DEM is the mean and envelope of "
         "<code>validation.dem_replicates</code> coupled loops that differ only by their DEM insertion seeds. "
         "Sizes in mm; wall times measured in this run on this machine.</p>",
-        "<h2>Targets</h2>",
+        "<h3>Targets</h3>",
         _verdicts(target_sentences(table)),
         table_html(shown["targets"], 3),
         "<h2>Surrogate training domain</h2>",
@@ -267,8 +336,12 @@ def build_report(
     parts += [
         "<h2>Surrogate (held-out DEM runs)</h2>",
         table_html(_metrics(metrics), 3),
+<<<<<<< HEAD
         f"<p>Kernel source: {escape(str(meta.get('family')))} "
         f"({escape(str(meta.get('cv_scores', {}).get('selection', '')))}); "
+=======
+        f"<p>Selected hyperparameters: {escape(hyperparameters(meta.get('best_params', meta.get('params', {}))))}; "
+>>>>>>> user-view
         f"training runs: {len(meta.get('training_point_ids', []))}.</p>",
         _image(parity, "surrogate parity"),
     ]

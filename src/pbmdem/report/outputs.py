@@ -143,14 +143,15 @@ def write_comparison(*, comparison, out: dict) -> None:
     )
 
 
-def write_provenance(*, config: dict, settings: dict, basedir, runs, metadata, out: dict) -> None:
+def write_provenance(*, config: dict, settings: dict, basedir, runs, metadata, out: dict, workdir=None) -> None:
     """The provenance table. `config`: the completed configuration of the job (for its
-    `Config.sha256()`); `settings`: the same without the execution settings. `out`: csv, html."""
+    `Config.sha256()`); `settings`: the same without the execution settings; `basedir`: the
+    project; `workdir`: where the workflow ran (recorded, not compared). `out`: csv, html."""
     from pbmdem.config import Config
 
     from .provenance import provenance
 
-    table = provenance(Config.from_mapping(config).sha256(), settings, basedir, runs, metadata)
+    table = provenance(Config.from_mapping(config).sha256(), settings, basedir, runs, metadata, workdir=workdir)
     write_table(
         out["csv"],
         out["html"],
@@ -158,3 +159,30 @@ def write_provenance(*, config: dict, settings: dict, basedir, runs, metadata, o
         "Provenance",
         "Configuration hashes, the workflow's git commit and the versions of the software.",
     )
+
+
+def write_findings(*, speed, feed, comparison, speed_feed: str, feed_rpm: float, batch_s: float, out: dict) -> None:
+    """The findings: the two figures (speed, feed) and their text (rst), atomically. `speed`, `feed`:
+    the PBM-ANN study tables; `comparison`: the validation's comparison table; `out`: speed_png,
+    feed_png, rst."""
+    from pbmdem.atomic import write_text
+
+    from .figures import save
+    from .findings import feed_figure, findings_rst, speed_figure
+
+    speed_table = read_table(speed, "PBM-ANN speed study", columns=("rpm", "d10", "d50", "d90"))
+    feed_table = read_table(feed, "PBM-ANN feed study", columns=("feed", "feed_d50", "d10", "d50", "d90"))
+    comparison_table = read_table(comparison, "comparison table", columns=("rpm",))
+    save(speed_figure(speed_table, speed_feed, batch_s), out["speed_png"])
+    save(feed_figure(feed_table, feed_rpm, batch_s), out["feed_png"])
+    text = findings_rst(
+        speed_table,
+        feed_table,
+        comparison_table,
+        speed_feed=speed_feed,
+        feed_rpm=feed_rpm,
+        batch_s=batch_s,
+        speed_png=str(out["speed_png"]),
+        feed_png=str(out["feed_png"]),
+    )
+    write_text(out["rst"], text)

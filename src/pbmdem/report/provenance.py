@@ -107,6 +107,7 @@ def provenance(
     basedir: str | Path,
     runs_table: str | Path,
     surrogate_metadata: str | Path | None = None,
+    workdir: str | Path | None = None,
 ):
     """The provenance table (a DataFrame): quantity, value, source. `settings`: the completed
     configuration without the execution settings (`settings_mapping`)."""
@@ -124,6 +125,9 @@ def provenance(
         ),
         ("git commit", commit, f"git rev-parse HEAD in {basedir}"),
     ]
+    rows.append(("project", str(basedir), "the workflow's folder when this table was written"))
+    if workdir is not None:
+        rows.append(("working directory", str(workdir), "where Snakemake ran (a record; moving it reruns nothing)"))
     if commit != NOT_GIT:
         rows.append(("git working tree", state, "git status --porcelain --untracked-files=no"))
     rows.append(

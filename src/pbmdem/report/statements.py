@@ -111,8 +111,8 @@ def _messages(value) -> str:
 
 def out_of_domain(speed) -> pd.DataFrame:
     """Interval by interval: model, interval, start (s), end (s), sample classes (mm), sample
-    particles, outside the training domain, warnings (count), what lay outside. Every PBM-ANN
-    interval, every ensemble member, and the constant kernel's calibration are rows."""
+    particles, outside the training domain, warnings (count), what lay outside (left out when nothing
+    did). Every PBM-ANN interval, every ensemble member, and the constant kernel's calibration are rows."""
     ann = speed.ann.intervals
     rows = []
     recorded = ann is not None and "out_of_domain_count" in ann.columns
@@ -169,7 +169,10 @@ def out_of_domain(speed) -> pd.DataFrame:
             "what lay outside": _messages(timing.get("out_of_domain")),
         }
     )
-    return pd.DataFrame(rows)
+    frame = pd.DataFrame(rows)
+    if not frame["what lay outside"].astype(bool).any():  # nothing lay outside: no empty column
+        frame = frame.drop(columns="what lay outside")
+    return frame
 
 
 def out_of_domain_sentence(rpm: str, table: pd.DataFrame) -> str:
@@ -185,7 +188,7 @@ def out_of_domain_sentence(rpm: str, table: pd.DataFrame) -> str:
     elif len(outside):
         where = "; ".join(
             f"interval {r['interval']} ({r['start (s)']}-{r['end (s)']} s, {r['warnings (count)']} "
-            f"warnings): {r['what lay outside']}"
+            f"warnings): {r.get('what lay outside', '') or 'not recorded'}"
             for _, r in outside.iterrows()
         )
         text = (

@@ -1,0 +1,124 @@
+"""How long DEM runs will take: a run's particle-steps divided by the engine's measured throughput.
+
+The throughput (particle-steps per second of LIGGGHTS on one MPI rank) is read from the finished
+runs of a study (`results/dem/runs.csv`, columns `n_particles` and `particle_steps_per_s`) and
+interpolated in the particle number, which sets it (small runs spend more of each step outside the
+contact loop). Without finished runs the reference measurement below stands in for it; the
+estimate says which of the two it used.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+# Reference throughput (particles, particle-steps/s on one rank, two runs at once on 2 cores),
+# measured on the project's 2-core reference machine with the default grid (runs.csv of a default
+# run; benchmarks/bench_dem.py measures one point). A machine's own runs.csv replaces it.
+REFERENCE_THROUGHPUT = ((273, 1.4e6), (2342, 3.0e6))
+REFERENCE_SOURCE = "the reference machine's throughput (1.4-3.0 M particle-steps/s, no runs.csv yet)"
+
+
+@dataclass(frozen=True)
+class Throughput:
+    """Particle-steps per second against particle number (log-linear between measured points)."""
+
+    points: tuple[tuple[float, float], ...]
+    source: str
+
+    def rate(self, n_particles: float) -> float:
+        pts = sorted(self.points)
+        if len(pts) == 1 or n_particles <= pts[0][0]:
+            return pts[0][1]
+        if n_particles >= pts[-1][0]:
+            return pts[-1][1]
+        for (n0, r0), (n1, r1) in zip(pts, pts[1:], strict=False):
+            if n0 <= n_particles <= n1:
+                if n1 == n0:
+                    return r0
+                w = (math.log(n_particles) - math.log(n0)) / (math.log(n1) - math.log(n0))
+                return r0 + w * (r1 - r0)
+        return pts[-1][1]
+
+    def seconds(self, particle_steps: float, n_particles: float, ranks: int = 1) -> float:
+        """Wall time of a run of `particle_steps` (no speed-up assumed beyond the ranks)."""
+        return particle_steps / self.rate(n_particles) / max(1, ranks)
+
+
+def measured_throughput(runs_csv: str | Path | None = None) -> Throughput:
+    """The throughput of the finished runs in `runs_csv` (median per particle number), or the
+    reference if the file is missing or holds no usable rows."""
+    if runs_csv is not None and Path(runs_csv).is_file():
+        import pandas as pd
+
+        try:
+            runs = pd.read_csv(runs_csv, usecols=["n_particles", "particle_steps_per_s"]).dropna()
+        except ValueError:
+            runs = None
+        if runs is not None and len(runs):
+            runs = runs[runs["particle_steps_per_s"] > 0]
+            med = runs.groupby("n_particles")["particle_steps_per_s"].median()
+            if len(med):
+                return Throughput(
+                    tuple((float(n), float(r)) for n, r in med.items()),
+                    f"the throughput of the {len(runs)} finished runs in {runs_csv}",
+                )
+    return Throughput(REFERENCE_THROUGHPUT, REFERENCE_SOURCE)
+
+
+def duration_text(seconds: float) -> str:
+    """A wall time in words: '45 s', '12 min', '3.4 h'."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 90 * 60:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+@dataclass(frozen=True)
+class StudyEstimate:
+    """The DEM work a study has left: grid runs and coupled-loop intervals, and their wall time."""
+
+    grid_runs: int
+    grid_seconds: float
+    loop_intervals: int
+    loop_seconds: float
+    ranks: int
+    source: str
+
+    def text(self, cores: int = 2) -> str:
+        total = self.grid_seconds + self.loop_seconds
+        if not self.grid_runs and not self.loop_intervals:
+            return "pbmdem runtime estimate: no DEM run left to do."
+        parallel = max(1, cores // max(1, self.ranks))
+        return (
+            f"pbmdem runtime estimate: {self.grid_runs} DEM grid run(s), {duration_text(self.grid_seconds)}, and "
+            f"{self.loop_intervals} PBM-DEM coupling interval(s), {duration_text(self.loop_seconds)} (an upper "
+            f"bound: granules grow, so later intervals hold fewer particles); {duration_text(total)} of LIGGGHTS "
+            f"on {self.ranks} rank(s) per run, about {duration_text(total / parallel)} with {parallel} run(s) at "
+            f"once on {cores} cores; from {self.source}. The PBM, surrogate and report add minutes."
+        )
+
+
+def study_estimate(cfg, grid_runs, loops, results: str | Path = "results") -> StudyEstimate:
+    """The wall time of the DEM runs a workflow run will do: `grid_runs`, (rpm, distribution,
+    replicate) of the grid's DEM jobs, and `loops`, (rpm, replicate) of the PBM-DEM coupled loops
+    (one DEM run per coupling interval), on `cfg` (a pbmdem Config); the throughput from the
+    finished runs in `results`."""
+    from .plan import plan_point
+
+    throughput = measured_throughput(Path(results) / "dem" / "runs.csv")
+    ranks = cfg.dem_execution.mpi_ranks
+    grid_seconds = 0.0
+    for rpm, dist, rep in grid_runs:
+        plan = plan_point(cfg.dem_point(dist), float(rpm), replicate=int(rep))
+        grid_seconds += throughput.seconds(plan.particle_steps, plan.n_particles, ranks)
+    loop = cfg.coupled_loop()
+    loop_seconds = 0.0
+    for rpm, rep in loops:
+        plan = plan_point(loop.dem_point(), float(rpm), replicate=int(rep))
+        loop_seconds += loop.coupling_intervals * throughput.seconds(plan.particle_steps, plan.n_particles, ranks)
+    return StudyEstimate(
+        len(grid_runs), grid_seconds, len(loops) * loop.coupling_intervals, loop_seconds, ranks, throughput.source
+    )

@@ -1,0 +1,41 @@
+"""Shared matplotlib helpers of every stage's figures (the bottom layer: any stage may use them).
+
+`log_ticks` labels a log axis so that labels never overlap: plain numbers (0.05, 2, 300) at the
+decades; on an axis shorter than two decades also at 2 and 5 times a decade, and on one shorter
+than half a decade at every minor tick (else the minor ticks stay unlabelled). matplotlib's
+default labels the minor ticks of short log axes in its own width-blind way, and the labels run
+together ("0.050.060.07...").
+"""
+
+from __future__ import annotations
+
+import math
+
+
+def _plain(value: float) -> str:
+    return f"{value:g}"
+
+
+def log_ticks(ax, axes: str = "x") -> None:
+    """Readable tick labels on the log axes `axes` ("x", "y" or "xy") of `ax`; call after the limits are set."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    for name in axes:
+        axis = getattr(ax, f"{name}axis")
+        lo, hi = sorted(getattr(ax, f"get_{name}lim")())
+        span = math.log10(hi / lo) if lo > 0 and hi > 0 else 99.0
+        axis.set_major_locator(LogLocator(base=10.0, numticks=12))
+        axis.set_major_formatter(FuncFormatter(lambda v, _: _plain(v)))
+        axis.set_minor_locator(LogLocator(base=10.0, subs=tuple(range(2, 10)), numticks=12))
+        if span < 0.5:
+            axis.set_minor_formatter(FuncFormatter(lambda v, _: _plain(v)))
+        elif span < 2.0:
+            axis.set_minor_formatter(FuncFormatter(lambda v, _: _plain(v) if _mantissa(v) in (2, 5) else ""))
+        else:
+            axis.set_minor_formatter(NullFormatter())
+
+
+def _mantissa(value: float) -> int:
+    if value <= 0:
+        return 0
+    return round(value / 10.0 ** math.floor(math.log10(value) + 1e-9))

@@ -1,0 +1,164 @@
+"""The findings the report opens with (feed blends, the PBM-ANN study tables in words and figures)
+and the report's display fixes: readable log ticks, hyperparameters in words."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pbmdem.config import SizeDistribution
+from pbmdem.coupling.studies import blend, feed_cases, mass_median
+from pbmdem.report import findings
+from pbmdem.report.html import hyperparameters, rst_to_html
+
+FINE = SizeDistribution((0.002, 0.003, 0.004), (0.5, 0.3, 0.2))
+COARSE = SizeDistribution((0.0032, 0.005, 0.008), (0.3, 0.4, 0.3))
+
+
+def test_a_blend_holds_each_feed_by_mass_and_lies_between_them():
+    mix = blend(FINE, COARSE, 0.5)
+    assert list(mix.diameters) == sorted(set(FINE.diameters) | set(COARSE.diameters))
+    assert sum(mix.number_fractions) == pytest.approx(1.0)
+    mass = np.asarray(mix.number_fractions) * np.asarray(mix.diameters) ** 3
+    from_fine = sum(m for d, m in zip(mix.diameters, mass) if d in FINE.diameters)
+    assert from_fine / mass.sum() == pytest.approx(0.5)
+    assert mass_median(FINE) < mass_median(mix) < mass_median(COARSE)
+    with pytest.raises(ValueError, match="allowed 0 < share < 1"):
+        blend(FINE, COARSE, 1.0)
+
+
+def test_feed_cases_put_a_blend_between_neighbours():
+    cases = feed_cases({"coarse": COARSE, "fine": FINE})
+    assert [(name, in_grid) for name, _, in_grid in cases] == [
+        ("fine", True),
+        ("fine+coarse", False),
+        ("coarse", True),
+    ]
+
+
+def _study(x, d50, **extra) -> pd.DataFrame:
+    d50 = np.asarray(d50, float)
+    frame = pd.DataFrame({**x, "d10": 0.7 * d50, "d50": d50, "d90": 1.3 * d50, "out_of_domain_intervals": 0})
+    for s in ("d10", "d50", "d90"):
+        frame[f"{s}_member_min"] = frame[s] - 1e-5
+        frame[f"{s}_member_max"] = frame[s] + 2e-5
+    return frame.assign(**extra)
+
+
+def test_findings_state_the_answers_with_their_numbers(tmp_path):
+    speed = _study({"rpm": [300.0, 600.0, 1200.0]}, [0.004, 0.0042, 0.0045], in_grid_range=True, dem_speed=True)
+    speed.loc[2, "out_of_domain_intervals"] = 1
+    feed = _study(
+        {"feed": ["fine", "fine+coarse", "coarse"], "feed_d50": [0.003, 0.004, 0.006]},
+        [0.0040, 0.0050, 0.0070],
+        in_grid=[True, False, True],
+    )
+    comparison = pd.DataFrame(
+        [
+            {
+                "rpm": 300.0,
+                "in_training_grid": True,
+                "n_dem_replicates": 3,
+                "d50_end_ann_mm": 4.01,
+                "d50_end_dem_mm": 4.0,
+                "d50_end_dem_min_mm": 3.98,
+                "d50_end_dem_max_mm": 4.02,
+                "ann_d50_outside_band_max": 0.003,
+                "wall_time_ratio_dem_over_ann": 5000.0,
+            }
+        ]
+    )
+    for name in ("speed.png", "feed.png"):
+        fig = (
+            findings.speed_figure(speed, "fine", 480.0) if name == "speed.png" else findings.feed_figure(feed, 600, 480)
+        )
+        fig.savefig(tmp_path / name)
+        findings.pyplot().close(fig)
+    text = findings.findings_rst(
+        speed,
+        feed,
+        comparison,
+        speed_feed="fine",
+        feed_rpm=600.0,
+        batch_s=480.0,
+        speed_png=tmp_path / "speed.png",
+        feed_png=tmp_path / "feed.png",
+    )
+    assert "from 300 to 1200 rpm changes the granule size after the 8 min batch from d50 = 4.00 mm to 4.50 mm" in text
+    assert "(+12.5 %)" in text and "disagree on the final d50 by at most 0.03 mm" in text
+    assert "left its training domain at 1 of 3 speeds (1200 rpm)" in text
+    assert "goes from 4.00 mm for the finest feed, ``fine``" in text and "7.00 mm for the coarsest, ``coarse``" in text
+    assert "a coarser feed gives larger granules at every step" in text
+    assert "The blend between the grid's feeds (``fine+coarse``) was never run in DEM" in text
+    assert "at 300 rpm (a speed of the DEM grid) PBM-ANN's final d50 is 4.01 mm against 4.00 mm" in text
+    # the figures travel inside the text (Snakemake's report includes it), as data URIs
+    assert text.count(".. image:: data:image/png;base64,") == 2
+    # the same text in report.html
+    page = rst_to_html(text)
+    assert page.count("<img alt='final d10, d50, d90 against") == 2 and "src='data:image/png;base64," in page
+    assert "<h2>Findings</h2>" in page and "<b>Impeller speed.</b>" in page
+    # the glossary closes the findings, in both reports
+    assert "<h2>Glossary</h2>" in page and "<li><b>PBM-ANN</b>: the PBM with the surrogate" in page
+    assert text.index("**How far to trust them.**") < text.index("Glossary\n--------")
+
+
+def test_a_feed_that_breaks_the_trend_is_named():
+    feed = _study(
+        {"feed": ["fine", "fine+coarse", "coarse"], "feed_d50": [0.003, 0.004, 0.006]},
+        [0.0097, 0.0068, 0.0132],
+        in_grid=[True, False, True],
+    )
+    assert findings._feed_trend(feed) == (
+        "the final size does not simply follow the feed: it is smaller for ``fine+coarse`` than for the next "
+        "finer feed."
+    )
+
+
+def test_findings_figures_name_axes_speed_feed_and_uncertainty():
+    speed = _study({"rpm": [300.0, 750.0, 1200.0]}, [0.004, 0.0042, 0.0045], in_grid_range=True, dem_speed=[1, 0, 1])
+    fig = findings.speed_figure(speed, "fine", 480.0)
+    ax = fig.axes[0]
+    assert ax.get_ylabel() == "final granule size (mm)" and ax.get_xlabel().startswith("impeller speed (rpm)")
+    assert "feed fine" in ax.get_title() and "8 min" in ax.get_title()
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "range of the surrogate's ensemble members" in labels
+    findings.pyplot().close(fig)
+
+
+@pytest.mark.parametrize("limits", [(0.045, 0.095), (0.03, 0.9), (0.02, 3.0), (1e-3, 10.0), (200.0, 1300.0)])
+def test_log_tick_labels_never_overlap(limits):
+    """matplotlib labels every minor tick of a short log axis, and the labels run together
+    ("0.050.060.07..."); with log_ticks the drawn labels never overlap, at least two are shown,
+    and they are plain numbers."""
+    from pbmdem.plotting import log_ticks
+    from pbmdem.report.figures import pyplot
+
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(4.0, 3.0))
+    ax.loglog(limits, limits)
+    ax.set_xlim(*limits)
+    log_ticks(ax, "x")
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    lo, hi = ax.get_xlim()
+    ticks = list(zip(ax.xaxis.get_majorticklocs(), ax.xaxis.get_majorticklabels())) + list(
+        zip(ax.xaxis.get_minorticklocs(), ax.xaxis.get_minorticklabels())
+    )
+    drawn = sorted((loc, t) for loc, t in ticks if lo <= loc <= hi and t.get_text())
+    assert len(drawn) >= 2, [t.get_text() for _, t in drawn]
+    boxes = [t.get_window_extent(renderer) for _, t in drawn]
+    for (a, ta), (b, tb) in zip(zip(boxes, drawn), zip(boxes[1:], drawn[1:])):
+        assert a.x1 <= b.x0, (ta[1].get_text(), tb[1].get_text())
+    assert all("$" not in t.get_text() and "e" not in t.get_text() for _, t in drawn)
+    plt.close(fig)
+
+
+def test_hyperparameters_in_words():
+    assert hyperparameters({"hidden_layer_sizes": [8, 8], "alpha": 0.1}) == (
+        "hidden layers (neurons per layer) 8 x 8, L2 penalty alpha 0.1"
+    )
+    assert hyperparameters({}) == "not recorded"
+    nested = hyperparameters({"frequency": {"alpha": 1.0}, "velocity": {"mlp__alpha": 0.01}})
+    assert nested == "frequency: L2 penalty alpha 1; velocity: L2 penalty alpha 0.01"
+    assert "{" not in nested

@@ -1,0 +1,16 @@
+"""Snakemake rule report_findings: the figures and words the report opens with (thin)."""
+
+from pbmdem.joblog import log_job
+from pbmdem.report.outputs import write_findings
+
+sm = snakemake  # noqa: F821
+log_job(sm.log[0])
+write_findings(
+    speed=sm.input.speed,
+    feed=sm.input.feed,
+    comparison=sm.input.comparison,
+    speed_feed=sm.params.speed_feed,
+    feed_rpm=sm.params.feed_rpm,
+    batch_s=sm.params.batch_s,
+    out={"speed_png": sm.output.speed_png, "feed_png": sm.output.feed_png, "rst": sm.output.rst},
+)

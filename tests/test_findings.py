@@ -10,7 +10,7 @@ import pytest
 from pbmdem.config import SizeDistribution
 from pbmdem.coupling.studies import blend, feed_cases, mass_median
 from pbmdem.report import findings
-from pbmdem.report.html import hyperparameters, rst_to_html
+from pbmdem.report.html import hyperparameters, kernel_source, rst_to_html
 
 FINE = SizeDistribution((0.002, 0.003, 0.004), (0.5, 0.3, 0.2))
 COARSE = SizeDistribution((0.0032, 0.005, 0.008), (0.3, 0.4, 0.3))
@@ -152,6 +152,21 @@ def test_log_tick_labels_never_overlap(limits):
         assert a.x1 <= b.x0, (ta[1].get_text(), tb[1].get_text())
     assert all("$" not in t.get_text() and "e" not in t.get_text() for _, t in drawn)
     plt.close(fig)
+
+
+def test_kernel_source_in_words():
+    mlp = {
+        "family": "mlp",
+        "cv_scores": {"selection": "surrogate.model = mlp"},
+        "frequency_state": {"n_outputs": 1, "best_params": {"hidden_layer_sizes": [8], "alpha": 0.1}},
+    }
+    assert kernel_source(mlp) == (
+        "Kernel source: mlp (surrogate.model = mlp); selected hyperparameters hidden layers (neurons per layer) 8, "
+        "L2 penalty alpha 0.1"
+    )
+    kriging = {"family": "kriging", "cv_scores": {"selection": "auto"}, "frequency_state": {"fitted": ["1**2 * RBF"]}}
+    assert kernel_source(kriging) == "Kernel source: kriging (auto); fitted 1**2 * RBF"
+    assert kernel_source({}) == "Kernel source: not recorded (not recorded); fitted not recorded"
 
 
 def test_hyperparameters_in_words():

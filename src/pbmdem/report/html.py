@@ -119,6 +119,17 @@ HYPERPARAMETER_NAMES = {
 }
 
 
+def kernel_source(meta: dict) -> str:
+    """The surrogate family PBM-ANN uses, why, and what was fitted, in words (from ``model.json``)."""
+    state = meta.get("frequency_state") or {}
+    if isinstance(state.get("best_params"), dict):
+        fitted = "selected hyperparameters " + hyperparameters(state["best_params"])
+    else:
+        fitted = "fitted " + ("; ".join(map(str, state.get("fitted") or [])) or "not recorded")
+    selection = (meta.get("cv_scores") or {}).get("selection") or "not recorded"
+    return f"Kernel source: {meta.get('family', 'not recorded')} ({selection}); {fitted}"
+
+
 def hyperparameters(params) -> str:
     """Selected hyperparameters in words: 'hidden layers (neurons per layer) 8 x 8, L2 penalty alpha 0.1'
     (per target when the metadata holds one mapping per target)."""
@@ -336,13 +347,7 @@ def build_report(
     parts += [
         "<h2>Surrogate (held-out DEM runs)</h2>",
         table_html(_metrics(metrics), 3),
-<<<<<<< HEAD
-        f"<p>Kernel source: {escape(str(meta.get('family')))} "
-        f"({escape(str(meta.get('cv_scores', {}).get('selection', '')))}); "
-=======
-        f"<p>Selected hyperparameters: {escape(hyperparameters(meta.get('best_params', meta.get('params', {}))))}; "
->>>>>>> user-view
-        f"training runs: {len(meta.get('training_point_ids', []))}.</p>",
+        f"<p>{escape(kernel_source(meta))}; training runs: {len(meta.get('training_point_ids', []))}.</p>",
         _image(parity, "surrogate parity"),
     ]
     parts += _speed_response(speed_study)

@@ -8,6 +8,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pbmdem.plotting import log_ticks
+
 from ._io import atomic_write
 from .features import TARGET_NAME
 
@@ -20,15 +22,6 @@ MODEL_LABELS = {
 }
 
 
-def _plain_log_ticks(ax) -> None:
-    """Major tick labels only on log axes (minor labels overlap on short ranges)."""
-    from matplotlib.ticker import LogFormatterSciNotation, NullFormatter
-
-    for axis in (ax.xaxis, ax.yaxis):
-        axis.set_major_formatter(LogFormatterSciNotation(labelOnlyBase=False, minor_thresholds=(0, 0)))
-        axis.set_minor_formatter(NullFormatter())
-
-
 def _square_log_axes(ax, lo: float, hi: float) -> None:
     """Log-log parity axes with the same range on both."""
     ax.set_xscale("log")
@@ -36,7 +29,7 @@ def _square_log_axes(ax, lo: float, hi: float) -> None:
     ax.set_xlim(lo, hi)
     ax.set_ylim(lo, hi)
     ax.set_aspect("equal")
-    _plain_log_ticks(ax)
+    log_ticks(ax, "xy")
 
 
 def parity_plot(

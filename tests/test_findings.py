@@ -122,7 +122,7 @@ def test_findings_figures_name_axes_speed_feed_and_uncertainty():
     assert ax.get_ylabel() == "final granule size (mm)" and ax.get_xlabel().startswith("impeller speed (rpm)")
     assert "feed fine" in ax.get_title() and "8 min" in ax.get_title()
     labels = [t.get_text() for t in fig.legends[0].get_texts()]
-    assert "range of the surrogate's ensemble members" in labels
+    assert "range of the surrogate's members" in labels
     findings.pyplot().close(fig)
 
 

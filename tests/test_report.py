@@ -294,7 +294,7 @@ def test_figures_have_units_legends_and_sizes_in_mm(tmp_path):
     width = (bands[bands.statistic == "d50"].dem_max - bands[bands.statistic == "d50"].dem_min).max()
     # the band's width is stated, so that a band thinner than a line is not taken for a missing one
     assert band == f"PBM-DEM band (min-max of 2 replicates; up to {1e3 * width:.2g} mm wide in d50)", band
-    assert "PBM-ANN band (min-max of the ensemble members)" in labels and "PBM-constant" in labels
+    assert "PBM-ANN band (min-max of the surrogate's members)" in labels and "PBM-constant" in labels
     figures.pyplot().close(fig)
 
     bins = {name: _bins(0.05) for name in ("PBM-DEM replicate 0", "PBM-ANN", "PBM-constant")}

@@ -118,9 +118,9 @@ def size_bands(bands: pd.DataFrame, process, rpm: str, what: str = "bands table"
                 MM * b.ann_member_min,
                 MM * b.ann_member_max,
                 **BAND["PBM-ANN"],
-                label="PBM-ANN band (min-max of the ensemble members)",
+                label="PBM-ANN band (min-max of the surrogate's members)",
             )
-        ax.plot(b.time, MM * b.ann, **STYLES["PBM-ANN"], label="PBM-ANN (ensemble mean)")
+        ax.plot(b.time, MM * b.ann, **STYLES["PBM-ANN"], label="PBM-ANN (mean prediction)")
         if "constant" in b.columns:
             ax.plot(b.time, MM * b.constant, **STYLES["PBM-constant"], label="PBM-constant")
         ax.set(xlabel="time (s)", ylabel=f"{stat} (mm)", title=f"{stat}, {rpm} rpm")
@@ -254,9 +254,12 @@ def liquid_porosity(speed, process, rpm: str):
             per = [g.sort_values("time") for _, g in members.groupby("member")]
             lo = np.min([np.interp(t_ann, g.time, g[column]) for g in per], axis=0) * scale
             hi = np.max([np.interp(t_ann, g.time, g[column]) for g in per], axis=0) * scale
-            ax.fill_between(t_ann, lo, hi, **BAND["PBM-ANN"], label="PBM-ANN band (min-max of the ensemble members)")
+            ax.fill_between(t_ann, lo, hi, **BAND["PBM-ANN"], label="PBM-ANN band (min-max of the surrogate's members)")
         ax.plot(
-            t_ann, scale * _column(ann, column, "PBM-ANN summary"), **STYLES["PBM-ANN"], label="PBM-ANN (ensemble mean)"
+            t_ann,
+            scale * _column(ann, column, "PBM-ANN summary"),
+            **STYLES["PBM-ANN"],
+            label="PBM-ANN (mean prediction)",
         )
         con = speed.constant.summary
         ax.plot(

@@ -37,8 +37,9 @@ GLOSSARY = (
     ("collision frequency c_ij", "encounters per second per pair of granules of size classes i and j."),
     (
         "surrogate",
-        "the neural-network ensemble that predicts c_ij from the sizes, the size distribution and the "
-        "impeller speed, in place of a DEM run.",
+        "the regression model that predicts c_ij from the sizes, the size distribution and the impeller "
+        "speed, in place of a DEM run: of the seed study's model families (a neural-network ensemble, "
+        "Kriging, a response surface), the one with the smallest error on held-out DEM runs.",
     ),
     ("PBM", "population balance model: the granule size distribution over the batch, grown by aggregation."),
     ("PBM-ANN", "the PBM with the surrogate's collision frequencies."),
@@ -48,7 +49,11 @@ GLOSSARY = (
         "training domain",
         "the sizes, distributions and tip speeds the DEM grid covered; outside it the surrogate extrapolates.",
     ),
-    ("ensemble members", "the separately trained networks of the surrogate; their disagreement is its uncertainty."),
+    (
+        "surrogate members",
+        "predictions spread as the surrogate's held-out-calibrated uncertainty (the networks of the "
+        "ensemble, or quantiles of Kriging's posterior); their disagreement is its uncertainty.",
+    ),
     (
         "replicate band",
         "the range (min-max) of PBM-DEM runs that differ only by their DEM insertion seeds: the reference's own noise.",
@@ -89,7 +94,7 @@ def speed_figure(study: pd.DataFrame, feed: str, batch_s: float):
     for stat, marker, color in STATS:
         _band(ax, s.rpm, s, stat, color)
         ax.plot(s.rpm, MM * s[stat], marker=marker, color=color, lw=1.8, label=f"final {stat}")
-    ax.fill_between([], [], [], color="0.5", alpha=0.25, label="range of the surrogate's ensemble members")
+    ax.fill_between([], [], [], color="0.5", alpha=0.25, label="range of the surrogate's members")
     dem = s[s.dem_speed.astype(bool)]
     ax.scatter(dem.rpm, np.full(len(dem), 0.0), marker="|", s=300, color="0.3", clip_on=False, zorder=6)
     outside_range = s[~s.in_grid_range.astype(bool)]
@@ -146,7 +151,7 @@ def feed_figure(study: pd.DataFrame, rpm: float, batch_s: float):
             color=color,
             lw=1.8,
             capsize=4,
-            label=f"final {stat} (bars: ensemble members' range)",
+            label=f"final {stat} (bars: surrogate members' range)",
         )
     ax.plot(x, MM * s.feed_d50, "s", color="0.55", ms=7, label="feed d50 (before granulation)")
     if _domain_marks(ax, x, s):
@@ -186,8 +191,8 @@ def _feed_trend(f: pd.DataFrame) -> str:
 
 def _disagree(spread: float) -> str:
     if not spread < 5e-6:  # NaN included
-        return f"The surrogate's ensemble members disagree on the final d50 by at most {_mm(spread)}. "
-    return "The surrogate's ensemble members agree on the final d50 to within 0.005 mm. "
+        return f"The surrogate's members disagree on the final d50 by at most {_mm(spread)}. "
+    return "The surrogate's members agree on the final d50 to within 0.005 mm. "
 
 
 def _spread(row) -> float:

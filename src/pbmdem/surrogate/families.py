@@ -118,9 +118,15 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
     def n_members_(self) -> int:
         return int(self.n_members)
 
-    def _mean_std(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        with single_threaded():
-            out = [est.predict(X, return_std=True) for est in self.estimators_]
+    def _predict(self, X: np.ndarray, return_std: bool):
+        """Mean (and with ``return_std`` the standard deviation) of every output; the standard
+        deviation costs the most, so it is computed only when asked for."""
+        # no thread limit here: a prediction is a few small products that OpenBLAS runs on one
+        # thread anyway, and setting up the limit cost tens of ms on the PBM's first call
+        if not return_std:
+            mean = np.column_stack([est.predict(X) for est in self.estimators_])
+            return mean[:, 0] if self.n_outputs_ == 1 else mean
+        out = [est.predict(X, return_std=True) for est in self.estimators_]
         mean = np.column_stack([m for m, _ in out])
         std = np.column_stack([s for _, s in out])
         if self.n_outputs_ == 1:
@@ -131,8 +137,7 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
         """Predictive mean (units of ``y``); with ``return_std`` also the predictive standard deviation."""
         check_is_fitted(self)
         X = validate_data(self, X, reset=False, dtype=np.float64)
-        mean, std = self._mean_std(X)
-        return (mean, std) if return_std else mean
+        return self._predict(X, return_std)
 
     def predict_array(self, X: np.ndarray, return_std: bool = False):
         """:meth:`predict` on a trusted float64 array in the training feature order, without
@@ -142,8 +147,7 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
         if X.ndim != 2 or X.shape[1] != self.n_features_in_:
             raise ValueError(f"predict_array: X must be (n, {self.n_features_in_}), got shape {X.shape}")
         with config_context(assume_finite=True, skip_parameter_validation=True):
-            mean, std = self._mean_std(X)
-        return (mean, std) if return_std else mean
+            return self._predict(X, return_std)
 
     def predict_members(self, X) -> np.ndarray:
         """(n_members, n[, n_outputs]): ``mean + z_k std`` for the quantiles of :func:`member_quantiles`."""

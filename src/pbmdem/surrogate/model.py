@@ -382,7 +382,8 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         """
         check_is_fitted(self)
         F, iu, ju, k = self._pairs(diameters, numbers, rpm, check_domain)
-        mean, std = self._pair_log10(F, return_std=True)
+        out = self._pair_log10(F, return_std=return_std)
+        mean, std = out if return_std else (out, None)
         c = np.empty((k, k))
         c[iu, ju] = 10.0**mean
         c[ju, iu] = 10.0**mean

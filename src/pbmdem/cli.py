@@ -142,9 +142,10 @@ def _table_source(batch, args):
 
 
 DESCRIPTION = """pbmdem models wet granulation in a high-shear granulator: LIGGGHTS DEM runs give
-collision frequencies between granule size classes, a neural-network surrogate learns them, and a
-population balance model (PBM) turns them into granule growth (d10/d50/d90 over the batch). The
-whole study runs with `snakemake --cores 2`; these commands do one step by hand."""
+collision frequencies between granule size classes, a surrogate (the best of a neural-network
+ensemble, Kriging and a response surface on held-out runs) learns them, and a population balance
+model (PBM) turns them into granule growth (d10/d50/d90 over the batch). The whole study runs with
+`snakemake --cores 2`; these commands do one step by hand."""
 
 EXAMPLES = """examples:
   pbmdem dem --config config/config.yaml --rpm 600 --distribution fine --plan-only

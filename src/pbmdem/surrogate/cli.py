@@ -16,7 +16,7 @@ def add_cli(subparsers) -> argparse.ArgumentParser:
     """Register ``surrogate`` with subcommands ``train`` and ``predict`` on an argparse subparsers."""
     parser = subparsers.add_parser(
         "surrogate",
-        help="MLP encounter surrogate",
+        help="encounter surrogate: train the model families, predict",
         description="Train or query the encounter surrogate (encounter frequency "
         "and impact-velocity distribution per class pair).",
     )

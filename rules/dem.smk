@@ -10,6 +10,9 @@ rule dem_point:
         summary=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/summary.json",
     log:
         f"{RESULTS}/logs/dem/rpm{{rpm}}_{{dist}}_rep{{rep}}.log",
+    # the grid's runs before the validation's PBM-DEM loops: the surrogate (which needs the whole
+    # grid) then trains while the loops still run, instead of after them
+    priority: 2
     conda:
         "../envs/dem.yaml"
     # MPI ranks of LIGGGHTS: dem.mpi_ranks (threads, for a local run), or the `tasks` resource a
@@ -44,6 +47,7 @@ rule collision_tables:
         ),
     log:
         f"{RESULTS}/logs/dem/collision_tables.log",
+    priority: 2
     conda:
         "../envs/dem.yaml"
     script:

@@ -22,9 +22,11 @@ rule train_surrogate:
         ),
     log:
         f"{RESULTS}/logs/train_surrogate.log",
+    priority: 2
     conda:
         "../envs/surrogate.yaml"
-    threads: 2
+    # one thread: it runs beside a PBM-DEM loop on the other core (every fit is single-threaded)
+    threads: 1
     params:
         training=lambda wildcards: CFG.surrogate_training().to_dict(),
     script:

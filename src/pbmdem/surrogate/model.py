@@ -375,7 +375,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
 
         One vectorised predict over the K (K + 1) / 2 unordered class pairs. ``numbers`` are
         particle numbers on the DEM scale (the run's ``n_total`` is their sum). With
-        ``return_std`` also the (K, K) ensemble spread in decades. A surrogate fitted on the
+        ``return_std`` also the (K, K) calibrated predictive standard deviation in decades. A surrogate fitted on the
         feature frame predicts from a feature array (:func:`~.features.pair_features`,
         :meth:`EnsembleMLPRegressorCV.predict_array`): the same numbers as :meth:`predict_log10`
         on the pairs' collision table, without its DataFrames.

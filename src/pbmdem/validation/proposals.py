@@ -137,7 +137,7 @@ def propose(
     (`distributions`: name -> SizeDistribution, compared as rounded here) proposes that
     distribution at those speeds, and is skipped if every such point exists already; any other
     sample proposes a new distribution. Columns: name, kind ('distribution' or 'point'), rpm,
-    interval, reason, out-of-domain features, ensemble spread, diameters (m) and fractions (JSON),
+    interval, reason, out-of-domain features, surrogate uncertainty, diameters (m) and fractions (JSON),
     points_rpm (JSON list of the speeds to run it at), capped_at_granulator_limit."""
     ranked = sorted(
         assessments, key=lambda a: (not a.is_out_of_domain, -max(a.out_of_domain.values(), default=0.0), -a.spread)
@@ -159,7 +159,7 @@ def propose(
             "outside the training domain in "
             + ", ".join(f"{k} (by {v:.2g} of its range)" for k, v in sorted(a.out_of_domain.items()))
             if a.is_out_of_domain
-            else f"largest ensemble spread ({a.spread:.3g} decades)"
+            else f"largest surrogate uncertainty (calibrated std) ({a.spread:.3g} decades)"
         )
         match = known.get(key) or next((n for k, n in known.items() if similar(key, k)), None)
         if match is not None:

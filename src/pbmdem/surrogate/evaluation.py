@@ -59,12 +59,17 @@ def interval_z(level: float = COVERAGE_LEVEL) -> float:
     return float(norm.ppf(0.5 + level / 2))
 
 
+def _usable(y, mean, std):
+    """The three as float arrays and the mask of rows with finite values and a positive std."""
+    y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
+    return y, mean, std, np.isfinite(y) & np.isfinite(mean) & np.isfinite(std) & (std > 0)
+
+
 def coverage(y, mean, std, scale: float | np.ndarray = 1.0, level: float = COVERAGE_LEVEL) -> float:
     """Share of rows with ``|y - mean| <= z scale std``: the observed coverage of the nominal
     ``level`` normal interval (rows with a non-finite or zero std are left out; NaN if none)."""
-    y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
+    y, mean, std, ok = _usable(y, mean, std)
     scale = np.broadcast_to(np.asarray(scale, float), y.shape)
-    ok = np.isfinite(y) & np.isfinite(mean) & np.isfinite(std) & (std > 0)
     if not ok.any():
         return float("nan")
     return float(np.mean(np.abs(y[ok] - mean[ok]) <= interval_z(level) * scale[ok] * std[ok]))
@@ -73,8 +78,7 @@ def coverage(y, mean, std, scale: float | np.ndarray = 1.0, level: float = COVER
 def calibration_scale(y, mean, std, level: float = COVERAGE_LEVEL) -> float:
     """Factor on ``std`` that makes the nominal ``level`` interval cover that share of the rows:
     the ``level`` quantile of ``|y - mean| / std`` over ``z``. NaN without usable rows."""
-    y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
-    ok = np.isfinite(y) & np.isfinite(mean) & np.isfinite(std) & (std > 0)
+    y, mean, std, ok = _usable(y, mean, std)
     if ok.sum() < 2:
         return float("nan")
     ratio = np.abs(y[ok] - mean[ok]) / std[ok]

@@ -7,8 +7,8 @@ from sklearn.base import clone
 
 from pbmdem.config import Surrogate
 
-from .baselines import HGBBaseline, PhysicalScaling
 from .ensemble import EnsembleMLPRegressorCV
+from .evaluation import default_baselines
 from .families import KrigingRegressor, ResponseSurface
 from .features import check_impeller_radius
 from .model import CollisionSurrogate
@@ -75,4 +75,4 @@ def build_families(settings: dict, impeller_radius: float, n_jobs: int | None = 
 
 def build_baselines(settings: dict) -> dict:
     """The baselines of the evaluation (``hgb`` seeded with ``random_state``, ``physical``)."""
-    return {"hgb": HGBBaseline(random_state=int(settings["random_state"])), "physical": PhysicalScaling()}
+    return default_baselines(int(settings["random_state"]))

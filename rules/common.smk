@@ -62,7 +62,7 @@ def dem_outputs(name):
     return [
         f"{RESULTS}/dem/rpm{rpm}_{dist}/rep{rep}/{name}"
         for rpm, dist in grid_points()
-        for rep in range(CFG.dem_replicates)
+        for rep in range(CFG.point_replicates(dist))
     ]
 
 

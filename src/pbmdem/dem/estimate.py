@@ -103,7 +103,8 @@ class StudyEstimate:
 
 def study_estimate(cfg, grid_runs, loops, results: str | Path = "results") -> StudyEstimate:
     """The wall time of the DEM runs a workflow run will do: `grid_runs`, (rpm, distribution,
-    replicate) of the grid's DEM jobs (each from a settled bed, one per distribution and replicate), and `loops`, (rpm, replicate) of the PBM-DEM coupled loops
+    replicate) of the grid's DEM jobs (each from a settled bed, one per distribution and
+    replicate), and `loops`, (rpm, replicate) of the PBM-DEM coupled loops
     (one DEM run per coupling interval), on `cfg` (a pbmdem Config); the throughput from the
     finished runs in `results`."""
     from .plan import plan_point

@@ -52,8 +52,8 @@ class OperatingGrid(Settings):
     size_distributions: tuple[str, ...]
     extra_points: tuple[ExtraPoint, ...]
     max_points: int
-    design_distributions: tuple[str, ...] = ()
-    design_replicates: int | None = None
+    design_distributions: tuple[str, ...]
+    design_replicates: int | None
 
     def full_distributions(self) -> list[str]:
         """The distributions run at every speed: the named ones, then the design's not among them."""

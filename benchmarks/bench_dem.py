@@ -106,8 +106,9 @@ def run_profile(run_dir: Path) -> dict:
     summary = json.loads((run_dir / "summary.json").read_text())
     blocks = engine.loop_times(run_dir / "log.liggghts")
     bed = plan.get("settled_bed")
-    if bed:
-        (settle,) = engine.loop_times(Path(bed).parent / "log.liggghts") if Path(bed).parent.exists() else [{}]
+    if bed:  # the grid's layout: <dem>/<point>/rep<k>/ and <dem>/beds/<distribution>/rep<k>/
+        bed_log = run_dir.parent.parent / "beds" / plan["distribution"] / f"rep{plan['replicate']}" / "log.liggghts"
+        (settle,) = engine.loop_times(bed_log) if bed_log.exists() else [{}]
         spin, record = blocks
     else:
         settle, spin, record = blocks

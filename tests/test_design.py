@@ -4,6 +4,8 @@ import copy
 import math
 
 import pytest
+import yaml
+from conftest import ROOT
 
 from pbmdem.config import Config, ConfigError
 from pbmdem.dem.design import DesignSpace, design_distributions, design_names
@@ -36,26 +38,38 @@ def test_the_design_fills_its_space():
     assert min(first) < 0.2 and max(first) > 0.5
 
 
-def test_the_default_config_holds_the_documented_design(default_config):
-    names = default_config.grid.design_distributions
+@pytest.fixture(scope="module")
+def coverage_config(default_config):
+    """config/config.yaml with config/coverage.yaml laid over it (as Snakemake merges them)."""
+    mapping = copy.deepcopy(default_config.to_dict())
+    overlay = yaml.safe_load((ROOT / "config" / "coverage.yaml").read_text())
+    for section, values in overlay.items():
+        mapping[section].update(values)
+    return Config.from_mapping(mapping)
+
+
+def test_the_config_holds_the_documented_design(coverage_config):
+    names = coverage_config.grid.design_distributions
     assert names == tuple(design_names(len(names)))
     for name, dist in zip(names, design_distributions(len(names), seed=20141)):
-        sizes = default_config.size_distributions[name]
+        sizes = coverage_config.size_distributions[name]
         assert list(sizes.diameters) == pytest.approx(dist["diameters"])
         assert list(sizes.number_fractions) == pytest.approx(dist["number_fractions"])
 
 
-def test_design_distributions_run_at_every_speed_with_their_own_replicates(default_config):
-    grid = default_config.grid
+def test_design_distributions_run_at_every_speed_with_their_own_replicates(coverage_config):
+    cfg = coverage_config
+    grid = cfg.grid
     points = grid.points()
     for rpm in grid.impeller_rpm:
         for name in (*grid.size_distributions, *grid.design_distributions):
             assert (rpm, name) in points
     assert min(grid.impeller_rpm) == 150 and len(grid.impeller_rpm) >= 4
-    assert default_config.point_replicates(grid.design_distributions[0]) == grid.design_replicates
-    assert default_config.point_replicates("fine") == default_config.dem_replicates
+    assert cfg.point_replicates(grid.design_distributions[0]) == grid.design_replicates == 1
+    assert cfg.point_replicates("fine") == cfg.dem_replicates
     for point in grid.extra_points:
-        assert default_config.point_replicates(point.distribution) == default_config.dem_replicates
+        assert cfg.point_replicates(point.distribution) == cfg.dem_replicates
+    assert cfg.validation.sweep.start == 150
 
 
 def test_an_undefined_design_distribution_is_refused(default_config):

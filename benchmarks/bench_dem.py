@@ -237,15 +237,18 @@ def bench_acceptance(args) -> None:
             f"{cn.wall_total:.1f} / {cn.cpu_total:.1f} | {co.steps_total:.0f} / {cn.steps_total:.0f} | "
             f"{co.wall_total / cn.cpu_total:.1f}x |"
         )
-    total_old, total_new = cost_old.wall_total.sum(), cost_new.cpu_total.sum()
+    common = sorted(set(table.point_id))
+    total_old, total_new = cost_old.loc[common, "wall_total"].sum(), cost_new.loc[common, "cpu_total"].sum()
     print(
         f"\npairs within the frequency criterion: {int(table.freq_ok.sum())} of {len(table)}; median impact "
         f"speed within 5 %: {int(table.v_ok.sum())} of {len(table)} (within max(5 %, 2 combined SE): "
         f"{int(table.v_ok_noise.sum())}); flow check passing at "
-        f"{int(flow.within_error.sum())} of {len(flow)} points (old settings: {int(flow_old.within_error.sum())})"
+        f"{int(flow.within_error.sum())} of {len(flow)} points (old settings: "
+        f"{int(flow_old.loc[flow.index.intersection(flow_old.index)].within_error.sum())})"
     )
     print(
-        f"LIGGGHTS time of one replicate of every point: old {total_old:.0f} s (wall), new {total_new:.0f} s (CPU) "
+        f"LIGGGHTS time of one replicate of the {len(common)} points: old {total_old:.0f} s (wall), new "
+        f"{total_new:.0f} s (CPU) "
         f"= {total_old / total_new:.1f}x"
     )
 

@@ -80,30 +80,21 @@ class BedPlan:
         return asdict(self)
 
 
-@dataclass
-class DemPlan:
+@dataclass(frozen=True)
+class DemPlan(BedPlan):
+    """One run: its settled bed (the fields of `BedPlan`) and what follows at its speed."""
+
     point_id: str
     rpm: float
-    distribution: str
-    diameters: list[float]
-    number_fractions: list[float]
-    counts: list[int]
-    n_particles: int
-    timestep: float
-    rayleigh_time: float
     contact_time: float
     collision_interval: int
-    settle_steps: int
     spinup_steps: int
     sampling_steps: int
-    vtk_every: int
     tip_speed: float
     history_steps: int
     position_interval: int
     encounter_gap_fraction: float
     omega: float
-    replicate: int
-    seed: int
 
     @property
     def sampling_time(self) -> float:
@@ -214,28 +205,18 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
             f"window must be shorter than the spin-up ({spinup_steps * dt:.4g} s at {rpm:g} rpm)"
         )
     return DemPlan(
+        **{f: getattr(bed, f) for f in BedPlan.__dataclass_fields__},
         point_id=pid,
         rpm=float(rpm),
-        distribution=bed.distribution,
-        diameters=bed.diameters,
-        number_fractions=bed.number_fractions,
-        counts=bed.counts,
-        n_particles=bed.n_particles,
-        timestep=dt,
-        rayleigh_time=bed.rayleigh_time,
         contact_time=t_c,
         collision_interval=int(interval),
-        settle_steps=bed.settle_steps,
         spinup_steps=spinup_steps,
         sampling_steps=sampling_steps,
-        vtk_every=bed.vtk_every,
         tip_speed=tip_speed,
         history_steps=history_steps,
         position_interval=int(position_interval),
         encounter_gap_fraction=dem.encounter_gap_fraction,
         omega=float(granulator.angular_speed(rpm)),
-        replicate=bed.replicate,
-        seed=bed.seed,
     )
 
 

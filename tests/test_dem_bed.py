@@ -120,3 +120,32 @@ def test_the_logs_time_each_phase(bed_runs):
             assert sum(block.get(k, 0.0) for k in ("Pair", "Neigh", "Comm", "Outpt", "Other")) <= 1.01 * block["wall"]
     fresh = engine.loop_times(root / "fresh" / "log.liggghts")
     assert [b["steps"] for b in fresh][0] == bed.settle_steps and len(fresh) == 3
+
+
+def test_a_bed_that_fails_leaves_its_crash_record_and_no_bed(tiny_config, tmp_path, monkeypatch):
+    """LIGGGHTS stops with an error in the bed's deck: the job fails naming the bed folder, which
+    holds crash.json and the log, and no bed.json (so no run can start from it)."""
+    import sys
+
+    real = engine.executable()
+    wrapper = tmp_path / "liggghts-broken"
+    wrapper.write_text(
+        f"#!{sys.executable}\n"
+        "import os, sys\n"
+        "args = sys.argv[1:]\n"
+        "deck = args[args.index('-in') + 1]\n"
+        "text = open(deck).read().replace('write_restart', 'fix broken all no/such/style\\nwrite_restart')\n"
+        "open('broken.in', 'w').write(text)\n"
+        "args[args.index('-in') + 1] = 'broken.in'\n"
+        f"os.execv({real!r}, [{real!r}, *args])\n"
+    )
+    wrapper.chmod(0o755)
+    monkeypatch.setenv("PBMDEM_LIGGGHTS", str(wrapper))
+    point = tiny_config.dem_point("small")
+    bed_dir = tmp_path / "bed"
+    with pytest.raises(engine.LiggghtsError, match=str(bed_dir)):
+        settle_bed(point, plan_bed(point), bed_dir, tiny_config.dem_execution)
+    crash = json.loads((bed_dir / "crash.json").read_text())
+    assert "no/such/style" in crash["log_tail"]
+    assert not (bed_dir / BED_RECORD).exists() and not (bed_dir / BED_FILE).exists()
+    assert not list(tmp_path.glob(".*staging"))

@@ -95,10 +95,17 @@ def settle_bed(point: DemPoint, bed: BedPlan, bed_dir: str | Path, execution: De
     (stage / "post").mkdir(parents=True)
     geometry.write_granulator(point.granulator, stage)
     write_text(stage / "in.bed", render_bed(point, bed, execution.mpi_ranks))
-    result = engine.run("in.bed", stage, ranks=execution.mpi_ranks, timeout=execution.timeout)
-    engine.check_finished(stage, bed.settle_steps, {})
-    if not (stage / BED_FILE).exists():
-        engine.record_crash(stage, [f"LIGGGHTS finished but wrote no {BED_FILE}"])
+    try:
+        result = engine.run("in.bed", stage, ranks=execution.mpi_ranks, timeout=execution.timeout)
+        engine.check_finished(stage, bed.settle_steps, {})
+        if not (stage / BED_FILE).exists():
+            engine.record_crash(stage, [f"LIGGGHTS finished but wrote no {BED_FILE}"])
+    except BaseException as exc:
+        if not (bed_dir / BED_RECORD).exists():  # nothing finished to protect: crash.json and logs in bed_dir
+            _move_bed(stage, bed_dir)
+            if len(exc.args) == 1 and isinstance(exc.args[0], str):
+                exc.args = (exc.args[0].replace(str(stage), str(bed_dir)),)
+        raise
     record = key | {
         "liggghts_wall_time_s": result.wall_time,
         "liggghts_cpu_time_s": result.cpu_time,
@@ -106,15 +113,21 @@ def settle_bed(point: DemPoint, bed: BedPlan, bed_dir: str | Path, execution: De
         "liggghts_version": engine.version_of_log(result.log),
     }
     write_json(stage / BED_RECORD, record)
+    _move_bed(stage, bed_dir)
+    return record
+
+
+def _move_bed(stage: Path, bed_dir: Path) -> None:
+    """Move a settled (or crashed) bed from `stage` into `bed_dir`: the old bed.json goes first, the
+    new one (the finished marker) comes last."""
     bed_dir.mkdir(parents=True, exist_ok=True)
     (bed_dir / BED_RECORD).unlink(missing_ok=True)
+    (bed_dir / "crash.json").unlink(missing_ok=True)
     for item in sorted(stage.iterdir(), key=lambda p: p.name == BED_RECORD):
-        target = bed_dir / item.name
-        if target.is_dir() and not target.is_symlink():
-            shutil.rmtree(target)
-        os.replace(item, target)
+        if (bed_dir / item.name).exists():
+            _remove(bed_dir / item.name)
+        os.replace(item, bed_dir / item.name)
     stage.rmdir()
-    return record
 
 
 class FinishedRunError(ValueError):

@@ -77,7 +77,8 @@ def prepare_run(
         shutil.copyfile(check_bed(point, plan, bed_dir), run_dir / BED_FILE)
     deck = render_granulator(point, plan, ranks, from_bed=bed_dir is not None)
     write_text(run_dir / "in.granulator", deck)
-    bed = {"settled_bed": str(Path(bed_dir) / BED_FILE) if bed_dir is not None else None}
+    # a run from a settled bed names it; a fresh run's plan.json is its plan (coupled loops compare them)
+    bed = {"settled_bed": str(Path(bed_dir) / BED_FILE)} if bed_dir is not None else {}
     write_json(run_dir / "plan.json", plan.to_dict() | {"mpi_ranks": ranks} | bed)
     return run_dir / "in.granulator"
 

@@ -1,21 +1,32 @@
-"""DEM-stage benchmark: engine speed, parse cost and snapshot-interval convergence.
+"""DEM-stage benchmark: where a run's time goes, old against new settings, parse cost.
 
-Runs one operating point of a config with the real LIGGGHTS (contact dumps kept), then times the
-vectorised parser against a naive line-by-line reader and counts collisions at 1x, 2x and 4x the
-snapshot interval. Prints figures; asserts nothing (timings on a shared machine are noisy).
+Prints figures; asserts nothing (timings on a shared machine are noisy; CPU times are given where
+the runs recorded them).
 
-    .venv/bin/python benchmarks/bench_dem.py [--config config/config.yaml] [--rpm 600] [--distribution fine]
+    # one point with the real LIGGGHTS: engine speed, parser against a naive reader, snapshot interval
+    .venv/bin/python benchmarks/bench_dem.py point [--config config/config.yaml] [--rpm 600] [--distribution fine]
+    # per-phase profile (settling, spin-up, history + sampling) of the finished runs of a results/dem
+    .venv/bin/python benchmarks/bench_dem.py profile results/dem [more results/dem ...]
+    # acceptance of new DEM settings against old ones, every point and class pair (docs/dem.md, "Cost")
+    .venv/bin/python benchmarks/bench_dem.py acceptance OLD/results/dem NEW/results/dem
+    # one point with the settings before issue 20 and with the current ones, side by side (same load)
+    .venv/bin/python benchmarks/bench_dem.py cost [--rpm 600] [--distribution fine] [--speeds 4] [--out DIR]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
+
 from pbmdem.config import load_config
-from pbmdem.dem import collisions
+from pbmdem.dem import collisions, engine
 from pbmdem.dem.plan import plan_point
 from pbmdem.dem.run import run_point
 
@@ -45,12 +56,7 @@ def naive_parse(path: Path) -> int:
     return new
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--config", default="config/config.yaml")
-    parser.add_argument("--rpm", type=float, default=600.0)
-    parser.add_argument("--distribution", default="fine")
-    args = parser.parse_args()
+def bench_point(args) -> None:
     cfg = load_config(args.config)
     point = cfg.dem_point(args.distribution)
     point = point.replace(dem=point.dem.replace(keep_contact_dumps=True))
@@ -87,6 +93,257 @@ def main() -> None:
             f"({100 * (c - counts[1]) / counts[1]:+.2f} %)"
         )
     print(f"total in table            {int(tables.pairs['collisions'].sum())}")
+
+
+# ------------------------------------------------------------------------------ profile
+def _run_dirs(dem: Path) -> list[Path]:
+    return sorted(p.parent for p in dem.glob("rpm*/rep*/summary.json"))
+
+
+def run_profile(run_dir: Path) -> dict:
+    """Per-phase LIGGGHTS wall time of one finished run (and its settled bed, if it had one)."""
+    plan = json.loads((run_dir / "plan.json").read_text())
+    summary = json.loads((run_dir / "summary.json").read_text())
+    blocks = engine.loop_times(run_dir / "log.liggghts")
+    bed = plan.get("settled_bed")
+    if bed:  # plan.json names the settled bed's restart file; its log lies beside it
+        bed_log = Path(bed).parent / "log.liggghts"
+        (settle,) = engine.loop_times(bed_log) if bed_log.exists() else [{}]
+        spin, record = blocks
+    else:
+        settle, spin, record = blocks
+    history_share = plan["history_steps"] / (plan["history_steps"] + plan["sampling_steps"])
+    return {
+        "point_id": plan["point_id"],
+        "replicate": plan["replicate"],
+        "particles": plan["n_particles"],
+        "dt": plan["timestep"],
+        "settling_s": settle.get("wall", math.nan),
+        "spinup_s": spin["wall"],
+        "history_s": history_share * record["wall"],  # one `run` records both; split by steps
+        "sampling_s": (1 - history_share) * record["wall"],
+        "dumps_s": record.get("Outpt", 0.0) + spin.get("Outpt", 0.0),
+        "parse_s": summary["parse_time_s"],
+        "steps": plan["settle_steps"] + plan["spinup_steps"] + plan["sampling_steps"],
+        "run_steps": summary.get("run_steps", summary["steps"]),
+        "from_bed": bool(bed),
+        "wall_s": summary["liggghts_wall_time_s"],
+        "cpu_s": summary.get("liggghts_cpu_time_s", math.nan),
+        "psteps_per_s": summary["particle_steps_per_s"],
+        "psteps_per_cpu_s": summary.get("particle_steps_per_cpu_s", math.nan),
+    }
+
+
+def profile_table(dem: Path) -> pd.DataFrame:
+    rows = [run_profile(d) for d in _run_dirs(dem)]
+    return pd.DataFrame(rows).groupby("point_id", sort=False).mean(numeric_only=True).reset_index()
+
+
+def bench_profile(args) -> None:
+    pd.set_option("display.width", 250)
+    for dem in args.dem:
+        table = profile_table(Path(dem))
+        print(f"\n{dem}: LIGGGHTS wall time per phase (s, mean over replicates); the settled bed's time is")
+        print("shared by every speed that starts from it; dumps = Output time of the spin-up and recording")
+        cols = ["particles", "dt", "settling_s", "spinup_s", "history_s", "sampling_s", "dumps_s", "parse_s"]
+        cols += ["wall_s", "cpu_s", "psteps_per_s", "psteps_per_cpu_s"]
+        print(table.set_index("point_id")[cols].to_string(float_format=lambda v: f"{v:.3g}"))
+
+
+# --------------------------------------------------------------------------- acceptance
+def _points(dem: Path) -> pd.DataFrame:
+    """Per point and class pair: the grid table's frequency (mean, SE) and median impact speed,
+    with the standard error of that median over the replicates (collisions_replicates.csv)."""
+    keys = ["point_id", "class_i", "class_j"]
+    table = pd.read_csv(dem / "collisions.csv")
+    runs = pd.read_csv(dem / "collisions_replicates.csv").groupby(keys)["impact_velocity_median"]
+    se = (runs.std(ddof=1) / np.sqrt(runs.count())).rename("impact_velocity_median_se").reset_index()
+    cols = ["n_replicates", "encounter_frequency_per_pair", "encounter_frequency_per_pair_se", "impact_velocity_median"]
+    return table[keys + cols].merge(se, on=keys)
+
+
+def _cost(dem: Path) -> pd.DataFrame:
+    """Per point: LIGGGHTS time and steps of a run (mean over replicates) with its share of the
+    settled bed (the bed's time and steps over the number of grid speeds that start from it)."""
+    runs = pd.read_csv(dem / "runs.csv")
+    nan = pd.Series(np.nan, index=runs.index)
+    zero = pd.Series(0.0, index=runs.index)
+    share = runs["distribution"].map(runs.groupby("distribution")["rpm"].nunique())
+    run_steps = runs.get("run_steps", runs["steps"])
+    runs = runs.assign(
+        wall_total=runs["liggghts_wall_time_s"] + runs.get("bed_liggghts_wall_time_s", zero) / share,
+        cpu_total=runs.get("liggghts_cpu_time_s", nan) + runs.get("bed_liggghts_cpu_time_s", zero) / share,
+        steps_total=run_steps + (runs["steps"] - run_steps) / share,
+    )
+    return runs.groupby("point_id")[["wall_total", "cpu_total", "steps_total", "timestep"]].mean()
+
+
+def acceptance_table(old: Path, new: Path) -> pd.DataFrame:
+    """Every point and class pair: the encounter frequency per pair (mean +- SE over replicates)
+    and the median impact speed of both settings, and whether they agree: frequencies within
+    max(2 combined SE, 3 %), median impact speeds within 5 %."""
+    both = _points(old).merge(_points(new), on=["point_id", "class_i", "class_j"], suffixes=("_old", "_new"))
+    f_old, f_new = both["encounter_frequency_per_pair_old"], both["encounter_frequency_per_pair_new"]
+    se = np.hypot(both["encounter_frequency_per_pair_se_old"], both["encounter_frequency_per_pair_se_new"])
+    both["freq_change"] = f_new / f_old - 1
+    both["freq_z"] = (f_new - f_old) / se
+    both["freq_ok"] = (f_new - f_old).abs() <= np.maximum(2 * se, 0.03 * f_old)
+    v_old, v_new = both["impact_velocity_median_old"], both["impact_velocity_median_new"]
+    both["v_change"] = v_new / v_old - 1
+    both["v_ok"] = both["v_change"].abs() <= 0.05
+    # the median of a pair with few encounters scatters more than 5 % between replicates of one
+    # setting: the same test with the replicate error of the medians as the floor
+    v_se = np.hypot(both["impact_velocity_median_se_old"], both["impact_velocity_median_se_new"])
+    both["v_z"] = (v_new - v_old) / v_se
+    both["v_ok_noise"] = (v_new - v_old).abs() <= np.maximum(2 * v_se, 0.05 * v_old)
+    return both
+
+
+def bench_acceptance(args) -> None:
+    old, new = Path(args.old), Path(args.new)
+    table = acceptance_table(old, new)
+    flow = pd.read_csv(new / "flow_development.csv").set_index("point_id")
+    flow_old = pd.read_csv(old / "flow_development.csv").set_index("point_id")
+    cost_old, cost_new = _cost(old), _cost(new)
+    print(
+        "| point | pair | freq. per pair old (1/s) | new | change | z | ok | median impact speed old (m/s) "
+        "| new | change | z | within 5 % | within max(5 %, 2 SE) |"
+    )
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for r in table.itertuples():
+        print(
+            f"| {r.point_id} | {r.class_i}-{r.class_j} | {r.encounter_frequency_per_pair_old:.4g} +- "
+            f"{r.encounter_frequency_per_pair_se_old:.2g} | {r.encounter_frequency_per_pair_new:.4g} +- "
+            f"{r.encounter_frequency_per_pair_se_new:.2g} | {100 * r.freq_change:+.1f} % | {r.freq_z:+.1f} | "
+            f"{'yes' if r.freq_ok else '**no**'} | {r.impact_velocity_median_old:.3g} | "
+            f"{r.impact_velocity_median_new:.3g} | {100 * r.v_change:+.1f} % | {r.v_z:+.1f} | "
+            f"{'yes' if r.v_ok else '**no**'} | {'yes' if r.v_ok_noise else '**no**'} |"
+        )
+    print()
+    print(
+        "| point | pairs ok (freq. / speed 5 % / speed 2 SE) | flow check old / new (halves, z) "
+        "| LIGGGHTS s per run old (wall) | new (wall / CPU, with bed share) | steps old / new "
+        "| speed-up (old wall / new CPU) |"
+    )
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for point, rows in table.groupby("point_id", sort=False):
+        fo, fn = flow_old.loc[point], flow.loc[point]
+        co, cn = cost_old.loc[point], cost_new.loc[point]
+        print(
+            f"| {point} | {int(rows.freq_ok.sum())} / {int(rows.v_ok.sum())} / {int(rows.v_ok_noise.sum())} "
+            f"of {len(rows)} | "
+            f"{100 * fo.half_difference:+.1f} % ({fo.half_z:+.1f}) / {100 * fn.half_difference:+.1f} % "
+            f"({fn.half_z:+.1f}){'' if fn.within_error else ' **fails**'} | {co.wall_total:.1f} | "
+            f"{cn.wall_total:.1f} / {cn.cpu_total:.1f} | {co.steps_total:.0f} / {cn.steps_total:.0f} | "
+            f"{co.wall_total / cn.cpu_total:.1f}x |"
+        )
+    common = sorted(set(table.point_id))
+    total_old, total_new = cost_old.loc[common, "wall_total"].sum(), cost_new.loc[common, "cpu_total"].sum()
+    print(
+        f"\npairs within the frequency criterion: {int(table.freq_ok.sum())} of {len(table)}; median impact "
+        f"speed within 5 %: {int(table.v_ok.sum())} of {len(table)} (within max(5 %, 2 combined SE): "
+        f"{int(table.v_ok_noise.sum())}); flow check passing at "
+        f"{int(flow.within_error.sum())} of {len(flow)} points (old settings: "
+        f"{int(flow_old.loc[flow.index.intersection(flow_old.index)].within_error.sum())})"
+    )
+    print(
+        f"LIGGGHTS time of one replicate of the {len(common)} points: old {total_old:.0f} s (wall), new "
+        f"{total_new:.0f} s (CPU) "
+        f"= {total_old / total_new:.1f}x"
+    )
+
+
+# --------------------------------------------------------------------------------- cost
+#: the DEM settings before issue 20: E = 1e7 Pa, two contact snapshots per contact time, positions
+#: every fourth snapshot, every run settling its own bed
+OLD_YOUNGS_MODULUS = 1.0e7
+OLD_SNAPSHOTS_PER_CONTACT = 2
+OLD_POSITION_EVERY = 4
+
+
+def _old_point(point, rpm):
+    """`point` with the settings before issue 20 (its snapshot interval as the old rule made it)."""
+    old = point.replace(material=point.material.replace(youngs_modulus=OLD_YOUNGS_MODULUS))
+    plan = plan_point(old, rpm)
+    interval = max(1, int(plan.contact_time / (OLD_SNAPSHOTS_PER_CONTACT * plan.timestep)))
+    return old.replace(dem=old.dem.replace(collision_interval=interval, position_every=OLD_POSITION_EVERY))
+
+
+def _cost_job(job):
+    """One side of `cost`, in its own process (its CPU time is its own LIGGGHTS children's)."""
+    from pbmdem.dem.plan import plan_bed
+    from pbmdem.dem.run import settle_bed
+
+    side, config, rpm, dist, out = job
+    cfg = load_config(config)
+    point = cfg.dem_point(dist)
+    out = Path(out) / side
+    if side == "old":
+        point = _old_point(point, rpm)
+        summary = run_point(point, plan_point(point, rpm), out / "run", cfg.dem_execution, force=True)
+        return side, summary, None
+    bed = settle_bed(point, plan_bed(point), out / "bed", cfg.dem_execution)
+    summary = run_point(point, plan_point(point, rpm), out / "run", cfg.dem_execution, force=True, bed_dir=out / "bed")
+    return side, summary, bed
+
+
+def bench_cost(args) -> None:
+    from multiprocessing import Pool
+
+    jobs = [(side, args.config, args.rpm, args.distribution, args.out) for side in ("old", "new")]
+    with Pool(2) as pool:
+        results = {side: (summary, bed) for side, summary, bed in pool.map(_cost_job, jobs)}
+    rows = []
+    for side, (summary, bed) in results.items():
+        prof = run_profile(Path(args.out) / side / "run")
+        bed_cpu = bed["liggghts_cpu_time_s"] / args.speeds if bed else 0.0
+        if bed:
+            (settle,) = engine.loop_times(Path(args.out) / side / "bed" / "log.liggghts")
+            prof["settling_s"] = settle["wall"] / args.speeds
+        rows.append(
+            prof
+            | {
+                "side": side,
+                "cpu_with_bed_s": summary["liggghts_cpu_time_s"] + bed_cpu,
+                "encounters": summary["total_encounters"],
+            }
+        )
+    table = pd.DataFrame(rows).set_index("side")
+    cols = ["particles", "dt", "steps", "run_steps", "settling_s", "spinup_s", "history_s", "sampling_s", "dumps_s"]
+    cols += ["parse_s", "wall_s", "cpu_s", "cpu_with_bed_s", "psteps_per_cpu_s", "encounters"]
+    print(f"{args.distribution} at {args.rpm:g} rpm, old and new DEM settings run at the same time (same load);")
+    print(f"the new run's settled bed is shared by {args.speeds} speeds (its settling time divided by that)")
+    print(table[cols].T.to_string(float_format=lambda v: f"{v:.3g}"))
+    old, new = table.loc["old"], table.loc["new"]
+    with_parse = (old.cpu_s + old.parse_s, new.cpu_with_bed_s + new.parse_s)
+    print(
+        f"speed-up per point: LIGGGHTS CPU {old.cpu_s:.1f} s -> {new.cpu_with_bed_s:.1f} s = "
+        f"{old.cpu_s / new.cpu_with_bed_s:.2f}x; with parsing {with_parse[0]:.1f} s -> {with_parse[1]:.1f} s = "
+        f"{with_parse[0] / with_parse[1]:.2f}x"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    point = sub.add_parser("point", help="one point with the real LIGGGHTS: speed, parse cost, snapshot interval")
+    point.add_argument("--config", default="config/config.yaml")
+    point.add_argument("--rpm", type=float, default=600.0)
+    point.add_argument("--distribution", default="fine")
+    profile = sub.add_parser("profile", help="per-phase LIGGGHTS time of the finished runs of a results/dem")
+    profile.add_argument("dem", nargs="+")
+    accept = sub.add_parser("acceptance", help="old against new DEM settings, every point and pair")
+    accept.add_argument("old")
+    accept.add_argument("new")
+    cost = sub.add_parser("cost", help="one point with the old and the new DEM settings side by side")
+    cost.add_argument("--config", default="config/config.yaml")
+    cost.add_argument("--rpm", type=float, default=600.0)
+    cost.add_argument("--distribution", default="fine")
+    cost.add_argument("--speeds", type=int, default=4, help="speeds that share one settled bed")
+    cost.add_argument("--out", default="results/bench_dem_cost")
+    args = parser.parse_args()
+    commands = {"point": bench_point, "profile": bench_profile, "acceptance": bench_acceptance, "cost": bench_cost}
+    commands[args.command](args)
 
 
 if __name__ == "__main__":

@@ -65,7 +65,7 @@ def dem_outputs(name):
     return [
         f"{layout.dem_run(rpm, dist, rep)}/{name}"
         for rpm, dist in grid_points()
-        for rep in range(CFG.dem_replicates)
+        for rep in range(CFG.point_replicates(dist))
     ]
 
 

@@ -1,8 +1,31 @@
-# DEM stage: one LIGGGHTS run per operating point and replicate (insertion seed), then the
-# grid's collision tables (replicate means and standard errors).
+# DEM stage: one settled bed per size distribution and replicate (insertion seed), one LIGGGHTS
+# run per operating point and replicate from that bed, then the grid's collision tables
+# (replicate means and standard errors).
+
+
+rule dem_bed:
+    output:
+        restart=f"{layout.dem_bed()}/bed.restart",
+        record=f"{layout.dem_bed()}/bed.json",
+    log:
+        layout.log("dem/bed_{dist}_rep{rep}.log"),
+    priority: 3
+    conda:
+        "../envs/dem.yaml"
+    threads: DEM_RANKS
+    resources:
+        tasks=DEM_RANKS,
+    params:
+        deck_sha256=DECK_SHA256,
+        point=dem_point_params,
+        bed_dir=lambda wc, output: os.path.dirname(output.record),
+    script:
+        "../workflow/scripts/dem_bed.py"
 
 
 rule dem_point:
+    input:
+        bed=f"{layout.dem_bed()}/bed.json",
     output:
         table=f"{DEM_RUN}/collisions.csv",
         walls=f"{DEM_RUN}/wall_collisions.csv",
@@ -25,6 +48,7 @@ rule dem_point:
         deck_sha256=DECK_SHA256,
         point=dem_point_params,
         run_dir=lambda wc, output: os.path.dirname(output.table),
+        bed_dir=lambda wc, input: os.path.dirname(input.bed),
     script:
         "../workflow/scripts/dem_point.py"
 

@@ -6,7 +6,7 @@ import pytest
 
 from pbmdem.dem import deck
 from pbmdem.dem.deck import DeckValueError
-from pbmdem.dem.plan import plan_point
+from pbmdem.dem.plan import SNAPSHOTS_PER_CONTACT, plan_point
 
 
 @pytest.mark.parametrize("value", ["1\nshell rm -rf /", "0.1", None, True, math.nan, math.inf, [1]])
@@ -71,8 +71,10 @@ def test_timestep_from_rayleigh_time(tiny_config):
     t_r = math.pi * r * math.sqrt(mat.density / g) / (0.1631 * mat.poisson_ratio + 0.8766)
     assert plan.rayleigh_time == pytest.approx(t_r)
     assert plan.timestep == pytest.approx(tiny_config.dem.timestep_fraction * t_r)
-    # snapshots at least twice per Hertz contact of the smallest particles at tip speed
-    assert plan.collision_interval * plan.timestep <= plan.contact_time / 2
+    # a snapshot at least once per Hertz contact of the smallest particles at tip speed (the
+    # shortest contact), and not less than half a contact apart (the interval is the largest
+    # whole number of steps within one contact time)
+    assert plan.contact_time / 2 < plan.collision_interval * plan.timestep <= plan.contact_time / SNAPSHOTS_PER_CONTACT
 
 
 def test_particle_count_fills_the_bed(default_config):

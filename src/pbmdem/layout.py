@@ -7,6 +7,7 @@ text (Snakemake wants paths relative to its working directory) under `root` (def
 ``{rep}``), so that the same function names one file and a rule's output pattern.
 
     <root>/dem/rpm<rpm>_<dist>/rep<k>/     one DEM run (dem_run); the grid's tables in <root>/dem/
+    <root>/dem/beds/<dist>/rep<k>/          the settled bed every speed's run starts from (dem_bed)
     <root>/surrogate/                       the surrogate (model.skops, model.json, metrics, parity)
     <root>/pbm/<kernel>/rpm<rpm>_<dist>/    one PBM batch (pbm_run)
     <root>/validation/rpm<rpm>/             one validation speed: pbm_dem/rep<k>/, pbm_ann/,
@@ -35,6 +36,11 @@ def dem(name: str = "", root: str = RESULTS) -> str:
 def dem_run(rpm="{rpm}", dist="{dist}", rep="{rep}", root: str = RESULTS) -> str:
     """The folder of one DEM run: <root>/dem/rpm<rpm>_<dist>/rep<rep>."""
     return f"{root}/dem/rpm{rpm}_{dist}/rep{rep}"
+
+
+def dem_bed(dist="{dist}", rep="{rep}", root: str = RESULTS) -> str:
+    """The folder of one settled bed: <root>/dem/beds/<dist>/rep<rep>."""
+    return f"{root}/dem/beds/{dist}/rep{rep}"
 
 
 def surrogate(name: str, root: str = RESULTS) -> str:

@@ -19,6 +19,7 @@ summary = run_operating_point(
     float(snakemake.wildcards.rpm),
     snakemake.params.run_dir,  # noqa: F821
     execution,
-    replicate=int(snakemake.wildcards.rep),
+    replicate=int(snakemake.wildcards.rep),  # noqa: F821
+    bed_dir=snakemake.params.bed_dir,  # noqa: F821
 )  # noqa: F821
 logging.info("finished %s", summary)

@@ -64,7 +64,8 @@ def check(cfg) -> None:
     grid = cfg.grid
     if grid.count() > grid.max_points:
         problems.append(
-            f"grid: {len(grid.impeller_rpm)} impeller_rpm x {len(grid.size_distributions)} size_distributions "
+            f"grid: {len(grid.impeller_rpm)} impeller_rpm x {len(grid.full_distributions())} size_distributions "
+            f"and design_distributions "
             f"+ {len(grid.extra_points)} extra_points = {grid.count()} operating points, more than "
             f"grid.max_points = {grid.max_points} (raise it if the grid is meant to be this large)"
         )
@@ -73,6 +74,9 @@ def check(cfg) -> None:
     for name in cfg.grid.size_distributions:
         if name not in cfg.size_distributions:
             problems.append(f"grid.size_distributions: {name!r} is not defined; defined names: {defined}")
+    for name in cfg.grid.design_distributions:
+        if name not in cfg.size_distributions:
+            problems.append(f"grid.design_distributions: {name!r} is not defined; defined names: {defined}")
     for k, point in enumerate(cfg.grid.extra_points):
         if point.distribution not in cfg.size_distributions:
             problems.append(

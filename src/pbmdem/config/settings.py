@@ -152,6 +152,10 @@ class Config:
         )
 
     # ------------------------------------------------------------------ stage settings
+    def point_replicates(self, distribution: str) -> int:
+        """DEM runs (insertion seeds) per operating point of `distribution`."""
+        return self.grid.replicates(distribution, self.dem_replicates)
+
     def distribution(self, name: str) -> SizeDistribution:
         if name not in self.size_distributions:
             raise ConfigError(

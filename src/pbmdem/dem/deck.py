@@ -20,11 +20,20 @@ from pathlib import Path
 
 from pbmdem.config import DemPoint
 
-from .plan import DemPlan, next_prime
+from .plan import BedPlan, DemPlan, next_prime
 from .progress import thermo_interval
 
 #: the deck of a granulator run
 GRANULATOR_TEMPLATE = "granulator.in"
+#: the sections of granulator.in (lines "#=== section <name>") that make each kind of deck: a
+#: fresh run settles its own bed; a bed run settles one and writes it to bed.restart; a run from
+#: a bed reads it and goes on with the spin-up (docs/dem.md, "One settled bed for every speed")
+DECKS = {
+    "fresh": ("header", "box", "model", "settle", "sample"),
+    "bed": ("header", "box", "model", "settle", "write_bed"),
+    "from_bed": ("header", "restart", "model", "sample"),
+}
+_SECTION = re.compile(r"^#=== section (\w+)\n", re.MULTILINE)
 
 _IDENTIFIER = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,63}$")
 
@@ -89,8 +98,18 @@ def numbers(name: str, values, **limits) -> str:
     return " ".join(number(f"{name}[{k}]", v, **limits) for k, v in enumerate(values))
 
 
-def render(template_name: str, values: dict[str, str]) -> str:
-    """Fill `liggghts_templates/<template_name>` with already-validated text values.
+def sections(template_name: str) -> dict[str, str]:
+    """The sections of a template, by name (a template without section lines is one section, "all")."""
+    text = (template_dir() / template_name).read_text()
+    parts = _SECTION.split(text)
+    if len(parts) == 1:
+        return {"all": text}
+    return dict(zip(parts[1::2], parts[2::2]))
+
+
+def render(template_name: str, values: dict[str, str], kind: str | None = None) -> str:
+    """Fill `liggghts_templates/<template_name>` (only the sections of deck `kind` of DECKS, if
+    given) with already-validated text values.
 
     Values must come from `number`, `numbers` or `known_name` (or be built only from them);
     a value containing a line break or a LIGGGHTS comment/variable character is refused as a
@@ -103,7 +122,11 @@ def render(template_name: str, values: dict[str, str]) -> str:
             continue  # multi-line blocks are assembled from validated numbers by the caller
         if any(ch in text for ch in "\n\r#$&;\"'`"):
             raise DeckValueError(f"deck value {key} = {text!r} contains a character not allowed in a deck")
-    text = (template_dir() / template_name).read_text()
+    if kind is None:
+        text = "".join(sections(template_name).values())
+    else:
+        parts = sections(template_name)
+        text = "".join(parts[name] for name in DECKS[known_name("deck kind", kind, set(DECKS))])
     try:
         return string.Template(text).substitute(values)
     except KeyError as exc:
@@ -114,18 +137,19 @@ def _matrix(name: str, value: float, n: int) -> str:
     return " ".join([number(name, value, minimum=0.0)] * (n * n))
 
 
-def granulator_values(point: DemPoint, plan: DemPlan, ranks: int) -> dict[str, str]:
-    """Validated text for every placeholder of liggghts_templates/granulator.in: the run `plan` of
-    `point` on `ranks` MPI ranks."""
+def bed_values(point: DemPoint, bed: BedPlan, ranks: int, name: str | None = None) -> dict[str, str]:
+    """Validated text for the speed-independent placeholders of liggghts_templates/granulator.in
+    (box, material, insertion and settling): the settled bed `bed` of `point` on `ranks` MPI
+    ranks. `name` (default: the bed's id) heads the deck."""
     num = number
     mat = point.material
     bowl, imp = point.granulator.bowl, point.granulator.impeller
-    n = len(plan.diameters)
-    d_max = max(plan.diameters)
+    n = len(bed.diameters)
+    d_max = max(bed.diameters)
     margin = 0.05 * bowl.diameter
     templates = []
-    seed = next_prime(plan.seed)
-    for k, d in enumerate(plan.diameters):
+    seed = next_prime(bed.seed)
+    for k, d in enumerate(bed.diameters):
         seed = next_prime(seed + 1)
         templates.append(
             f"fix             pts{k + 1} all particletemplate/sphere {num('seed', seed, integer=True)} "
@@ -134,16 +158,17 @@ def granulator_values(point: DemPoint, plan: DemPlan, ranks: int) -> dict[str, s
         )
     weights = " ".join(
         f"pts{k + 1} {num(f'number_fractions[{k}]', w, minimum=0.0, maximum=1.0)}"
-        for k, w in enumerate(plan.number_fractions)
+        for k, w in enumerate(bed.number_fractions)
     )
     fill_zlo = imp.top + d_max
     fill_zhi = bowl.height - d_max
     # insert in small batches over the first 60 % of the settling phase, so that the fill region
     # never saturates (a saturated region inserts the large templates first and skews the PSD)
-    insert_time = 0.6 * plan.settle_steps * plan.timestep
-    insert_every = max(1, int(0.002 / plan.timestep))
+    insert_time = 0.6 * bed.settle_steps * bed.timestep
+    insert_every = max(1, int(0.002 / bed.timestep))
+    every = thermo_interval(bed.n_particles, bed.vtk_every)
     return {
-        "point_id": known_name("point_id", plan.point_id.replace(".", "p")),
+        "point_id": known_name("point_id", (name or bed.bed_id).replace(".", "p")),
         "processors": f"{num('mpi_ranks', ranks, integer=True, minimum=1)} 1 1",
         "box_xlo": num("box", -bowl.radius - margin),
         "box_xhi": num("box", bowl.radius + margin),
@@ -160,12 +185,12 @@ def granulator_values(point: DemPoint, plan: DemPlan, ranks: int) -> dict[str, s
         "restitution_matrix": _matrix("material.restitution", mat.restitution, n),
         "friction_matrix": _matrix("material.friction", mat.friction, n),
         "rolling_matrix": _matrix("material.rolling_friction", mat.rolling_friction, n),
-        "timestep": num("timestep", plan.timestep, exclusive_minimum=True, minimum=0.0),
+        "timestep": num("timestep", bed.timestep, exclusive_minimum=True, minimum=0.0),
         "bowl_stl": "bowl.stl",
         "impeller_stl": "impeller.stl",
         "post_dir": "post",
         # thermo reads fix check/timestep/gran, so both run at the same interval (LIGGGHTS requires it)
-        "check_every": num("check_every", thermo_interval(plan.n_particles, plan.vtk_every), integer=True, minimum=1),
+        "check_every": num("check_every", every, integer=True, minimum=1),
         "particle_templates_block": "\n".join(templates),
         "seed_dist": num("seed", next_prime(seed + 1), integer=True),
         "distribution_weights": weights,
@@ -173,12 +198,20 @@ def granulator_values(point: DemPoint, plan: DemPlan, ranks: int) -> dict[str, s
         "fill_zlo": num("fill_zlo", fill_zlo, minimum=0.0),
         "fill_zhi": num("fill_zhi", fill_zhi, exclusive_minimum=True, minimum=fill_zlo),
         "seed_insert": num("seed", next_prime(seed + 100), integer=True),
-        "n_particles": num("n_particles", plan.n_particles, integer=True, minimum=1),
-        "insert_rate": num("insert_rate", plan.n_particles / insert_time, exclusive_minimum=True, minimum=0.0),
+        "n_particles": num("n_particles", bed.n_particles, integer=True, minimum=1),
+        "insert_rate": num("insert_rate", bed.n_particles / insert_time, exclusive_minimum=True, minimum=0.0),
         "insert_every": num("insert_every", insert_every, integer=True, minimum=1),
-        "thermo_every": num("thermo_every", thermo_interval(plan.n_particles, plan.vtk_every), integer=True, minimum=1),
-        "vtk_every": num("vtk_every", plan.vtk_every, integer=True, minimum=1),
-        "settle_steps": num("settle_steps", plan.settle_steps, integer=True, minimum=1),
+        "thermo_every": num("thermo_every", every, integer=True, minimum=1),
+        "vtk_every": num("vtk_every", bed.vtk_every, integer=True, minimum=1),
+        "settle_steps": num("settle_steps", bed.settle_steps, integer=True, minimum=1),
+    }
+
+
+def granulator_values(point: DemPoint, plan: DemPlan, ranks: int) -> dict[str, str]:
+    """Validated text for every placeholder of liggghts_templates/granulator.in: the run `plan` of
+    `point` on `ranks` MPI ranks."""
+    num = number
+    return bed_values(point, plan.bed, ranks, name=plan.point_id) | {
         "spinup_steps": num("spinup_steps", plan.spinup_steps, integer=True, minimum=1),
         "sampling_steps": num("sampling_steps", plan.sampling_steps, integer=True, minimum=1),
         "spinup_pre_steps": num("spinup_pre_steps", plan.spinup_steps - plan.history_steps, integer=True, minimum=1),
@@ -189,6 +222,12 @@ def granulator_values(point: DemPoint, plan: DemPlan, ranks: int) -> dict[str, s
     }
 
 
-def render_granulator(point: DemPoint, plan: DemPlan, ranks: int) -> str:
-    """The granulator deck of a run, every value validated (raises DeckValueError before any I/O)."""
-    return render(GRANULATOR_TEMPLATE, granulator_values(point, plan, ranks))
+def render_granulator(point: DemPoint, plan: DemPlan, ranks: int, *, from_bed: bool = False) -> str:
+    """The granulator deck of a run, every value validated (raises DeckValueError before any I/O):
+    a fresh run that settles its own bed, or (`from_bed`) one that starts from bed.restart."""
+    return render(GRANULATOR_TEMPLATE, granulator_values(point, plan, ranks), "from_bed" if from_bed else "fresh")
+
+
+def render_bed(point: DemPoint, bed: BedPlan, ranks: int) -> str:
+    """The deck that inserts and settles the bed `bed` and writes it to bed.restart."""
+    return render(GRANULATOR_TEMPLATE, bed_values(point, bed, ranks), "bed")

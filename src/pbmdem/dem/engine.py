@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import re
+import resource
 import shlex
 import shutil
 import signal
@@ -49,6 +50,9 @@ class LiggghtsRun:
     log: Path
     wall_time: float
     returncode: int
+    #: CPU time (user + system) of LIGGGHTS and every process it started (its MPI ranks): on a
+    #: shared machine the cost of a run, where the wall time also counts the other users' load
+    cpu_time: float = float("nan")
 
 
 def executable() -> str:
@@ -225,6 +229,7 @@ def run(
     cmd = command(deck_name, ranks)
     log = workdir / "log.liggghts"
     t0 = time.perf_counter()
+    cpu0 = _children_cpu()
     env = dict(os.environ, OMP_NUM_THREADS="1")
     proc = subprocess.Popen(
         cmd, cwd=workdir, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, errors="replace", env=env
@@ -258,6 +263,7 @@ def run(
             if progress is not None:
                 progress.close()
     wall = time.perf_counter() - t0
+    cpu = _children_cpu() - cpu0
     screen = workdir / "screen.liggghts"
     screen.write_text(stdout)
     log_text = log.read_text(errors="replace") if log.exists() else ""
@@ -285,7 +291,13 @@ def run(
             stderr_tail=stderr[-4000:],
             error_line=err.group(0).strip() if err else None,
         )
-    return LiggghtsRun(log=log, wall_time=wall, returncode=returncode)
+    return LiggghtsRun(log=log, wall_time=wall, returncode=returncode, cpu_time=cpu)
+
+
+def _children_cpu() -> float:
+    """User + system CPU seconds of this process's finished, waited-for children."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 def dump_steps(path: str | Path) -> list[int]:
@@ -384,3 +396,23 @@ def thermo_table(log: str | Path) -> dict[str, list[float]]:
         for name, value in zip(header, values):
             columns.setdefault(name, []).append(value)
     return columns
+
+
+_LOOP = re.compile(r"^Loop time of (?P<wall>[\d.eE+-]+) on (?P<procs>\d+) procs for (?P<steps>\d+) steps")
+_PART = re.compile(r"^(?P<name>Pair|Neigh|Comm|Outpt|Modfy|Other)\s+time \(%\) = (?P<seconds>[\d.eE+-]+)")
+
+
+def loop_times(log: str | Path) -> list[dict[str, float]]:
+    """The timing block LIGGGHTS writes after each `run` command of a log, in order: `wall` (s),
+    `steps`, `procs`, and the seconds of its parts (`Pair`, `Neigh`, `Comm`, `Outpt` (dumps),
+    `Other`: fixes such as the mesh walls, integration, thermo), as far as the log has them."""
+    blocks: list[dict[str, float]] = []
+    for line in Path(log).read_text(errors="replace").splitlines():
+        loop = _LOOP.match(line)
+        if loop:
+            blocks.append({k: float(v) for k, v in loop.groupdict().items()})
+            continue
+        part = _PART.match(line)
+        if part and blocks:
+            blocks[-1][part.group("name")] = float(part.group("seconds"))
+    return blocks

@@ -105,7 +105,8 @@ class StudyEstimate:
 
 def study_estimate(cfg, grid_runs, loops, results: str | Path = layout.RESULTS) -> StudyEstimate:
     """The wall time of the DEM runs a workflow run will do: `grid_runs`, (rpm, distribution,
-    replicate) of the grid's DEM jobs, and `loops`, (rpm, replicate) of the PBM-DEM coupled loops
+    replicate) of the grid's DEM jobs (each from a settled bed, one per distribution and
+    replicate), and `loops`, (rpm, replicate) of the PBM-DEM coupled loops
     (one DEM run per coupling interval), on `cfg` (a pbmdem Config); the throughput from the
     finished runs in `results`."""
     from .plan import plan_point
@@ -113,9 +114,14 @@ def study_estimate(cfg, grid_runs, loops, results: str | Path = layout.RESULTS) 
     throughput = measured_throughput(layout.dem("runs.csv", str(results)))
     ranks = cfg.dem_execution.mpi_ranks
     grid_seconds = 0.0
+    beds = set()
     for rpm, dist, rep in grid_runs:
         plan = plan_point(cfg.dem_point(dist), float(rpm), replicate=int(rep))
-        grid_seconds += throughput.seconds(plan.particle_steps, plan.n_particles, ranks)
+        # a grid run starts from its settled bed, which is settled once for all speeds
+        grid_seconds += throughput.seconds(float(plan.n_particles) * plan.run_steps, plan.n_particles, ranks)
+        if (dist, int(rep)) not in beds:
+            beds.add((dist, int(rep)))
+            grid_seconds += throughput.seconds(float(plan.n_particles) * plan.settle_steps, plan.n_particles, ranks)
     loop = cfg.coupled_loop()
     loop_seconds = 0.0
     for rpm, rep in loops:

@@ -1,10 +1,12 @@
 """The plan of one DEM run: particle numbers, time step, phases and snapshot intervals.
 
-`plan_point` turns the settings of an operating point (`pbmdem.config.DemPoint`), its impeller
-speed and replicate into a `DemPlan`: particle numbers per class (the bed's solid volume divided
-by the mean particle volume), the time step (a fraction of the Rayleigh time of the smallest
-particle), the steps of each phase, the contact-snapshot interval (a fraction of the Hertz
-contact duration) and the insertion seeds.
+`plan_bed` turns the settings of an operating point (`pbmdem.config.DemPoint`) and its replicate
+into a `BedPlan`, everything that does not depend on the impeller speed: particle numbers per class
+(the bed's solid volume divided by the mean particle volume), the time step (a fraction of the
+Rayleigh time of the smallest particle), the settling steps and the insertion seeds. One settled
+bed serves every speed (docs/dem.md, "One settled bed for every speed"). `plan_point` adds the
+speed: the spin-up and sampling steps and the contact-snapshot interval (a fraction of the Hertz
+contact duration).
 """
 
 from __future__ import annotations
@@ -17,12 +19,13 @@ import numpy as np
 from pbmdem.config import ConfigError, DemPoint, SizeDistribution, check_rpm, point_id
 from pbmdem.config.dem import DemLimits
 
-# Hertz contact duration t_c = 2.87 (m*^2 / (R* E*^2 v))^(1/5) (Johnson 1985); snapshots are
-# taken every t_c / SNAPSHOTS_PER_CONTACT so that a head-on contact between two of the smallest
-# particles at the impeller tip speed is seen at least this many times (measured here: counts change
-# by 0.4 % when this interval is halved, 1.9 % when doubled). Measured convergence is
-# reported per run (counts with every snapshot vs every second one).
-SNAPSHOTS_PER_CONTACT = 2
+# Hertz contact duration t_c = 2.87 (m*^2 / (R* E*^2 v))^(1/5) (Johnson 1985); contact snapshots
+# are taken every t_c / SNAPSHOTS_PER_CONTACT, t_c of a head-on contact between two of the smallest
+# particles at the impeller tip speed (the shortest contact of a run). One snapshot per contact
+# time: over the 36 runs of the default grid, snapshots every t_c instead of t_c / 2 changed the
+# encounters by -0.1 to -0.3 % (the raw new contacts, a diagnostic, by -0.6 to -1.5 %), and every
+# run reports the change for twice its own interval (`encounter_change_when_interval_doubled`).
+SNAPSHOTS_PER_CONTACT = 1
 #: replicate r runs with insertion seeds derived from dem.seed + r x this prime
 REPLICATE_SEED_STRIDE = 7919
 #: impact speed (m/s) below which the contact time is not evaluated (an impeller at rest)
@@ -52,10 +55,10 @@ def next_prime(n: int) -> int:
         n += 1
 
 
-@dataclass
-class DemPlan:
-    point_id: str
-    rpm: float
+@dataclass(frozen=True)
+class BedPlan:
+    """The speed-independent part of a run: the bed that is inserted and settled at rest."""
+
     distribution: str
     diameters: list[float]
     number_fractions: list[float]
@@ -63,19 +66,35 @@ class DemPlan:
     n_particles: int
     timestep: float
     rayleigh_time: float
+    settle_steps: int
+    vtk_every: int
+    replicate: int
+    seed: int
+
+    @property
+    def bed_id(self) -> str:
+        """`<distribution>_rep<k>`: the bed's name in paths and decks."""
+        return f"{self.distribution}_rep{self.replicate}"
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class DemPlan(BedPlan):
+    """One run: its settled bed (the fields of `BedPlan`) and what follows at its speed."""
+
+    point_id: str
+    rpm: float
     contact_time: float
     collision_interval: int
-    settle_steps: int
     spinup_steps: int
     sampling_steps: int
-    vtk_every: int
     tip_speed: float
     history_steps: int
     position_interval: int
     encounter_gap_fraction: float
     omega: float
-    replicate: int
-    seed: int
 
     @property
     def sampling_time(self) -> float:
@@ -94,6 +113,16 @@ class DemPlan:
     def particle_steps(self) -> float:
         return float(self.n_particles) * self.total_steps
 
+    @property
+    def run_steps(self) -> int:
+        """Steps after the settling: what a run from a settled bed simulates."""
+        return self.spinup_steps + self.sampling_steps
+
+    @property
+    def bed(self) -> BedPlan:
+        """The settled bed this run starts from (the same for every speed)."""
+        return BedPlan(**{f: getattr(self, f) for f in BedPlan.__dataclass_fields__})
+
     def to_dict(self) -> dict:
         return asdict(self) | {"sampling_time": self.sampling_time}
 
@@ -111,50 +140,25 @@ def bed_particle_count(bed_solid_volume: float, sizes: SizeDistribution) -> int:
     return int(round(bed_solid_volume / sizes.mean_particle_volume))
 
 
-def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[int] | None = None) -> DemPlan:
-    """Plan one run of `point` at `rpm`. `replicate` selects the insertion seeds (replicates of
-    one point differ only by them). `counts` (particles per class) replaces the count derived
-    from the bed's solid volume: the coupled PBM-DEM loop hands its own sample this way."""
-    rpm = check_rpm(rpm, f"operating point {point.distribution}: impeller rpm")
+def plan_bed(point: DemPoint, *, replicate: int = 0, counts: list[int] | None = None) -> BedPlan:
+    """Plan the settled bed of `point`: particles, time step, settling and seeds. `replicate`
+    selects the insertion seeds (replicates of one point differ only by them). `counts`
+    (particles per class) replaces the count derived from the bed's solid volume: the coupled
+    PBM-DEM loop hands its own sample this way."""
     sizes, mat, dem, granulator = point.sizes, point.material, point.dem, point.granulator
-    pid = point_id(rpm, point.distribution)
+    where = f"distribution {point.distribution}"
     if counts is None:
         n_particles = bed_particle_count(granulator.bed_solid_volume, sizes)
     else:
         n_particles = int(sum(counts))
     if n_particles > dem.max_particles:
-        raise ConfigError(
-            f"operating point {pid} needs {n_particles} particles, more than dem.max_particles = {dem.max_particles}"
-        )
+        raise ConfigError(f"{where} needs {n_particles} particles, more than dem.max_particles = {dem.max_particles}")
     if n_particles < 2:
-        raise ConfigError(f"operating point {pid}: the bed holds {n_particles} particles; raise dem.bed_height")
+        raise ConfigError(f"{where}: the bed holds {n_particles} particles; raise dem.bed_height")
     counts = class_counts(n_particles, sizes.number_fractions) if counts is None else [int(c) for c in counts]
-    r_min = 0.5 * min(sizes.diameters)
-    t_r = rayleigh_time(r_min, mat.density, mat.youngs_modulus, mat.poisson_ratio)
+    t_r = rayleigh_time(0.5 * min(sizes.diameters), mat.density, mat.youngs_modulus, mat.poisson_ratio)
     dt = dem.timestep_fraction * t_r
-    tip_speed = float(granulator.tip_speed(rpm))
-    t_c = hertz_contact_time(
-        r_min, mat.density, mat.youngs_modulus, mat.poisson_ratio, max(tip_speed, MIN_CONTACT_SPEED)
-    )
-    interval = dem.collision_interval
-    if interval == "auto":
-        interval = max(1, int(t_c / (SNAPSHOTS_PER_CONTACT * dt)))
-    position_interval = dem.position_every * interval
-
-    def steps(seconds: float) -> int:
-        return max(1, int(math.ceil(seconds / dt)))
-
-    sampling_steps = int(math.ceil(steps(dem.phase_time("sampling", rpm)) / position_interval) * position_interval)
-    spinup_steps = steps(dem.phase_time("spinup", rpm))
-    history_steps = int(math.ceil(steps(dem.history_time) / position_interval) * position_interval)
-    if history_steps >= spinup_steps:
-        raise ConfigError(
-            f"dem.history_time = {dem.history_time} s: the position history before the sampling "
-            f"window must be shorter than the spin-up ({spinup_steps * dt:.4g} s at {rpm:g} rpm)"
-        )
-    return DemPlan(
-        point_id=pid,
-        rpm=float(rpm),
+    return BedPlan(
         distribution=point.distribution,
         diameters=list(sizes.diameters),
         number_fractions=list(sizes.number_fractions),
@@ -162,19 +166,57 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
         n_particles=int(sum(counts)),
         timestep=dt,
         rayleigh_time=t_r,
+        settle_steps=_steps(dem.settle_time, dt),
+        vtk_every=_steps(dem.vtk_interval, dt),
+        replicate=int(replicate),
+        seed=dem.seed + REPLICATE_SEED_STRIDE * int(replicate),
+    )
+
+
+def _steps(seconds: float, dt: float) -> int:
+    return max(1, int(math.ceil(seconds / dt)))
+
+
+def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[int] | None = None) -> DemPlan:
+    """Plan one run of `point` at `rpm`: its bed (`plan_bed`, same `replicate` and `counts`), then
+    the spin-up and the sampling window at this speed."""
+    rpm = check_rpm(rpm, f"operating point {point.distribution}: impeller rpm")
+    pid = point_id(rpm, point.distribution)
+    try:
+        bed = plan_bed(point, replicate=replicate, counts=counts)
+    except ConfigError as exc:
+        raise ConfigError(str(exc).replace(f"distribution {point.distribution}", f"operating point {pid}", 1)) from None
+    mat, dem, granulator = point.material, point.dem, point.granulator
+    dt = bed.timestep
+    tip_speed = float(granulator.tip_speed(rpm))
+    t_c = hertz_contact_time(
+        0.5 * min(bed.diameters), mat.density, mat.youngs_modulus, mat.poisson_ratio, max(tip_speed, MIN_CONTACT_SPEED)
+    )
+    interval = dem.collision_interval
+    if interval == "auto":
+        interval = max(1, int(t_c / (SNAPSHOTS_PER_CONTACT * dt)))
+    position_interval = dem.position_every * interval
+    sampling_steps = int(math.ceil(_steps(dem.phase_time("sampling", rpm), dt) / position_interval) * position_interval)
+    spinup_steps = _steps(dem.phase_time("spinup", rpm), dt)
+    history_steps = int(math.ceil(_steps(dem.history_time, dt) / position_interval) * position_interval)
+    if history_steps >= spinup_steps:
+        raise ConfigError(
+            f"dem.history_time = {dem.history_time} s: the position history before the sampling "
+            f"window must be shorter than the spin-up ({spinup_steps * dt:.4g} s at {rpm:g} rpm)"
+        )
+    return DemPlan(
+        **{f: getattr(bed, f) for f in BedPlan.__dataclass_fields__},
+        point_id=pid,
+        rpm=float(rpm),
         contact_time=t_c,
         collision_interval=int(interval),
-        settle_steps=steps(dem.settle_time),
         spinup_steps=spinup_steps,
         sampling_steps=sampling_steps,
-        vtk_every=steps(dem.vtk_interval),
         tip_speed=tip_speed,
         history_steps=history_steps,
         position_interval=int(position_interval),
         encounter_gap_fraction=dem.encounter_gap_fraction,
         omega=float(granulator.angular_speed(rpm)),
-        replicate=int(replicate),
-        seed=dem.seed + REPLICATE_SEED_STRIDE * int(replicate),
     )
 
 

@@ -4,37 +4,138 @@
 folder, runs LIGGGHTS, judges the run against its plan (the exit code proves nothing), parses the
 contact snapshots into collision tables and writes the VTK series index; only then is the run
 moved into place, its finished markers last. A failure never removes a finished run.
+
+`settle_bed` inserts and settles the bed of a `BedPlan` once and writes it to `bed.restart`
+(with `bed.json`, which names the bed); `run_point(..., bed_dir=...)` then starts from that bed
+instead of settling its own, after checking that the bed is the one its plan would settle.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import shutil
 import time
 from pathlib import Path
 
 from pbmdem.atomic import write_json, write_text
-from pbmdem.config import DemExecution, DemPoint
+from pbmdem.config import ConfigError, DemExecution, DemPoint
+from pbmdem.readers import InputFileError, read_json
 
 from . import engine, geometry
-from .deck import render_granulator
-from .plan import DemPlan, check_limits, plan_point
+from .deck import render_bed, render_granulator
+from .plan import BedPlan, DemPlan, check_limits, plan_point
+
+#: the settled bed in a bed folder and in a run folder that starts from it
+BED_FILE = "bed.restart"
+#: what names a bed: the deck that settled it (1 rank) and its plan
+BED_RECORD = "bed.json"
 
 
-def prepare_run(point: DemPoint, plan: DemPlan, run_dir: str | Path, ranks: int, deck: str | None = None) -> Path:
+def bed_key(point: DemPoint, bed: BedPlan) -> dict:
+    """What makes two beds the same: the plan and the deck that settles it (on one rank; the rank
+    count changes the floating-point order, not what the bed is)."""
+    deck = render_bed(point, bed, 1)
+    return {"bed": bed.to_dict(), "deck_sha256": hashlib.sha256(deck.encode()).hexdigest()}
+
+
+def check_bed(point: DemPoint, plan: DemPlan, bed_dir: str | Path) -> Path:
+    """The restart file of the settled bed in `bed_dir`, after checking that `bed.json` names the
+    bed `plan` would settle (ConfigError naming the file and the first value that differs)."""
+    bed_dir = Path(bed_dir)
+    record = bed_dir / BED_RECORD
+    restart = bed_dir / BED_FILE
+    if not restart.exists():
+        raise InputFileError(f"settled bed {restart} does not exist (run the bed first: pbmdem.dem.run.settle_bed)")
+    found = read_json(record, "settled-bed record")
+    want = bed_key(point, plan.bed)
+    for key in (*(f"bed.{k}" for k in want["bed"]), "deck_sha256"):
+        have = found.get("bed", {}).get(key[4:]) if key.startswith("bed.") else found.get(key)
+        need = want["bed"][key[4:]] if key.startswith("bed.") else want[key]
+        if have != need:
+            raise ConfigError(
+                f"{record}: {key} = {have!r}, but the run {plan.point_id} (replicate {plan.replicate}) needs the "
+                f"bed with {key} = {need!r}; settle its bed again"
+            )
+    return restart
+
+
+def prepare_run(
+    point: DemPoint,
+    plan: DemPlan,
+    run_dir: str | Path,
+    ranks: int,
+    bed_dir: str | Path | None = None,
+    deck: str | None = None,
+) -> Path:
     """Write geometry, deck and plan into `run_dir` (emptied of any earlier attempt's output);
+    with `bed_dir`, a copy of its settled bed (checked against the plan) for the deck to read;
     `deck`: the rendered deck, if the caller has it already."""
     run_dir = Path(run_dir)
     post = run_dir / "post"
     if post.exists():
         shutil.rmtree(post)
     post.mkdir(parents=True)
-    for stale in ("crash.json", "log.liggghts"):
+    for stale in ("crash.json", "log.liggghts", BED_FILE):
         (run_dir / stale).unlink(missing_ok=True)
     geometry.write_granulator(point.granulator, run_dir)
-    write_text(run_dir / "in.granulator", render_granulator(point, plan, ranks) if deck is None else deck)
-    write_json(run_dir / "plan.json", plan.to_dict() | {"mpi_ranks": ranks})
+    if bed_dir is not None:
+        shutil.copyfile(check_bed(point, plan, bed_dir), run_dir / BED_FILE)
+    if deck is None:
+        deck = render_granulator(point, plan, ranks, from_bed=bed_dir is not None)
+    write_text(run_dir / "in.granulator", deck)
+    # a run from a settled bed names it; a fresh run's plan.json is its plan (coupled loops compare them)
+    bed = {"settled_bed": str(Path(bed_dir) / BED_FILE)} if bed_dir is not None else {}
+    write_json(run_dir / "plan.json", plan.to_dict() | {"mpi_ranks": ranks} | bed)
     return run_dir / "in.granulator"
+
+
+def settle_bed(point: DemPoint, bed: BedPlan, bed_dir: str | Path, execution: DemExecution) -> dict:
+    """Insert and settle the bed `bed` of `point` in `bed_dir` and write it to `bed.restart`, then
+    `bed.json` (the bed's plan, the deck's hash, the wall time), last, as the finished marker.
+    Made in a staging folder and moved into place only when LIGGGHTS reached the planned step."""
+    bed_dir = Path(bed_dir)
+    key = bed_key(point, bed)  # raises on any bad value, before any I/O
+    where = bed_dir.resolve()
+    stage = where.parent / f".{where.name}.staging"
+    if stage.exists():
+        shutil.rmtree(stage)
+    (stage / "post").mkdir(parents=True)
+    geometry.write_granulator(point.granulator, stage)
+    write_text(stage / "in.bed", render_bed(point, bed, execution.mpi_ranks))
+    try:
+        result = engine.run("in.bed", stage, ranks=execution.mpi_ranks, timeout=execution.timeout)
+        engine.check_finished(stage, bed.settle_steps, {})
+        if not (stage / BED_FILE).exists():
+            engine.record_crash(stage, [f"LIGGGHTS finished but wrote no {BED_FILE}"])
+    except BaseException as exc:
+        if not (bed_dir / BED_RECORD).exists():  # nothing finished to protect: crash.json and logs in bed_dir
+            _move_bed(stage, bed_dir)
+            if len(exc.args) == 1 and isinstance(exc.args[0], str):
+                exc.args = (exc.args[0].replace(str(stage), str(bed_dir)),)
+        raise
+    record = key | {
+        "liggghts_wall_time_s": result.wall_time,
+        "liggghts_cpu_time_s": result.cpu_time,
+        "particle_steps": float(bed.n_particles) * bed.settle_steps,
+        "liggghts_version": engine.version_of_log(result.log),
+    }
+    write_json(stage / BED_RECORD, record)
+    _move_bed(stage, bed_dir)
+    return record
+
+
+def _move_bed(stage: Path, bed_dir: Path) -> None:
+    """Move a settled (or crashed) bed from `stage` into `bed_dir`: the old bed.json goes first, the
+    new one (the finished marker) comes last."""
+    bed_dir.mkdir(parents=True, exist_ok=True)
+    (bed_dir / BED_RECORD).unlink(missing_ok=True)
+    (bed_dir / "crash.json").unlink(missing_ok=True)
+    for item in sorted(stage.iterdir(), key=lambda p: p.name == BED_RECORD):
+        if (bed_dir / item.name).exists():
+            _remove(bed_dir / item.name)
+        os.replace(item, bed_dir / item.name)
+    stage.rmdir()
 
 
 class FinishedRunError(ValueError):
@@ -58,6 +159,7 @@ RUN_PRODUCTS = (
     "log.liggghts",
     "screen.liggghts",
     "crash.json",
+    BED_FILE,
     "post",
     "wall_collisions.csv",
     "impact_velocity.csv",
@@ -115,7 +217,8 @@ def planned_dumps(plan: DemPlan) -> dict[str, tuple[int, int]]:
 
 def check_finished(plan: DemPlan, run_dir: str | Path) -> None:
     """Raise LiggghtsError (and write crash.json) unless the run reached every planned step and
-    contact snapshot. LIGGGHTS exits 0 when interrupted, so the exit code proves nothing."""
+    contact snapshot. LIGGGHTS exits 0 when interrupted, so the exit code proves nothing. (A run
+    from a settled bed goes on from the bed's last step, so its plan's steps are the same.)"""
     engine.check_finished(run_dir, plan.total_steps, planned_dumps(plan))
 
 
@@ -127,8 +230,11 @@ def run_point(
     *,
     force: bool = False,
     progress_bar: bool = False,
+    bed_dir: str | Path | None = None,
 ) -> dict:
     """Run LIGGGHTS for `plan` in `run_dir`, then tabulate collisions and index the VTK files.
+    With `bed_dir` (a folder written by `settle_bed` for `plan.bed`) the run starts from that
+    settled bed instead of settling its own.
 
     Everything is validated before any file is touched: the plan against `execution.limits` and
     the whole deck (rendered once, here; the speed was checked when the plan was made), and a
@@ -141,7 +247,10 @@ def run_point(
     """
     run_dir = Path(run_dir)
     check_limits(plan, execution.limits)
-    deck = render_granulator(point, plan, execution.mpi_ranks)  # raises on any bad value, before any I/O
+    # raises on any bad value, before any I/O
+    deck = render_granulator(point, plan, execution.mpi_ranks, from_bed=bed_dir is not None)
+    if bed_dir is not None:
+        check_bed(point, plan, bed_dir)
     finished = is_finished(run_dir)
     if finished and not force:
         markers = ", ".join(n for n in FINISHED_MARKERS if (run_dir / n).exists())
@@ -156,7 +265,7 @@ def run_point(
         shutil.rmtree(stage)
     stage.mkdir(parents=True)
     try:
-        summary = _run_in(point, plan, stage, run_dir, execution, deck, progress_bar)
+        summary = _run_in(point, plan, stage, run_dir, execution, deck, progress_bar, bed_dir)
     except BaseException as exc:
         if not finished:  # nothing to protect: keep the crash and the logs in the run folder
             _move_into(stage, run_dir)
@@ -177,20 +286,23 @@ def _run_in(
     execution: DemExecution,
     deck: str,
     progress_bar: bool = False,
+    bed_dir: str | Path | None = None,
 ) -> dict:
     """run_point's work in the (staging) folder `run_dir`; paths in the summary name `final_dir`."""
     from . import collisions, vtk_series  # local: keep this module light to import
     from .progress import ThermoProgress
 
-    deck_path = prepare_run(point, plan, run_dir, execution.mpi_ranks, deck)
+    deck_path = prepare_run(point, plan, run_dir, execution.mpi_ranks, bed_dir, deck)
+    phases = [("spin-up", plan.spinup_steps), ("sampling", plan.sampling_steps)]
     watcher = ThermoProgress(
         run_dir / "log.liggghts",
-        [("settling", plan.settle_steps), ("spin-up", plan.spinup_steps), ("sampling", plan.sampling_steps)],
+        phases if bed_dir is not None else [("settling", plan.settle_steps), *phases],
         label=f"DEM {plan.point_id}",
         bar=progress_bar,
     )
     result = engine.run(deck_path, run_dir, ranks=execution.mpi_ranks, timeout=execution.timeout, progress=watcher)
     check_finished(plan, run_dir)
+    (run_dir / BED_FILE).unlink(missing_ok=True)  # a copy; the bed stays in bed_dir
     t0 = time.perf_counter()
     tables = collisions.tabulate_run(run_dir / "post", plan, point.granulator.bowl, point.granulator.impeller)
     parse_time = time.perf_counter() - t0
@@ -215,9 +327,7 @@ def _run_in(
         "steps": plan.total_steps,
         "mpi_ranks": execution.mpi_ranks,
         "liggghts_version": engine.version_of_log(result.log),
-        "particle_steps": plan.particle_steps,
-        "liggghts_wall_time_s": result.wall_time,
-        "particle_steps_per_s": plan.particle_steps / result.wall_time,
+        **_cost(plan, result, bed_dir),
         "parse_time_s": parse_time,
         "parse_cost_ratio": parse_time / result.wall_time,
         "collision_interval": plan.collision_interval,
@@ -233,8 +343,34 @@ def _run_in(
     return summary
 
 
+def _cost(plan: DemPlan, result: engine.LiggghtsRun, bed_dir: str | Path | None) -> dict:
+    """What the run cost: its own steps (without the settling when it started from a settled bed),
+    particle-steps, LIGGGHTS wall and CPU time, particle-steps per second, and the settled bed's
+    own cost (shared by every speed that starts from it)."""
+    steps = plan.run_steps if bed_dir is not None else plan.total_steps
+    particle_steps = float(plan.n_particles) * steps
+    bed = read_json(Path(bed_dir) / BED_RECORD, "settled-bed record") if bed_dir is not None else {}
+    return {
+        "run_steps": steps,
+        "particle_steps": particle_steps,
+        "liggghts_wall_time_s": result.wall_time,
+        "liggghts_cpu_time_s": result.cpu_time,
+        "particle_steps_per_s": particle_steps / result.wall_time,
+        "particle_steps_per_cpu_s": particle_steps / max(result.cpu_time, 1e-9),
+        "from_settled_bed": bed_dir is not None,
+        "bed_liggghts_wall_time_s": bed.get("liggghts_wall_time_s", 0.0),
+        "bed_liggghts_cpu_time_s": bed.get("liggghts_cpu_time_s", 0.0),
+    }
+
+
 def run_operating_point(
-    point: DemPoint, rpm: float, run_dir: str | Path, execution: DemExecution, replicate: int = 0
+    point: DemPoint,
+    rpm: float,
+    run_dir: str | Path,
+    execution: DemExecution,
+    replicate: int = 0,
+    bed_dir: str | Path | None = None,
 ) -> dict:
-    """Plan and run one replicate of a grid point (the Snakemake rule's entry point)."""
-    return run_point(point, plan_point(point, rpm, replicate=replicate), run_dir, execution)
+    """Plan and run one replicate of a grid point (the Snakemake rule's entry point), from the
+    settled bed in `bed_dir` if given."""
+    return run_point(point, plan_point(point, rpm, replicate=replicate), run_dir, execution, bed_dir=bed_dir)

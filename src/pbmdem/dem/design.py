@@ -1,0 +1,94 @@
+"""A space-filling design of size distributions for the DEM grid.
+
+The surrogate learns the encounter frequency of a class pair from the pair's diameters, the number
+fractions of its two classes, the bed's particle count and the tip speed
+(`pbmdem.surrogate.features.FEATURE_NAMES`). The named feeds place a few beds in that space; the
+PBM's states lie between them. `design_distributions` fills the space between with three-class
+distributions from a scrambled Sobol sequence (scipy.stats.qmc, seeded) over five coordinates:
+
+* the smallest diameter, log-uniform in `d_min_range`;
+* the largest over the smallest, log-uniform from `min_span` to what keeps the largest within
+  `d_max_limit`;
+* the middle class's place between them on a log scale, uniform in `middle_range`;
+* the number fractions, uniform on the simplex above a floor `min_fraction` for each class.
+
+The particle count follows from the bed's solid volume (`pbmdem.dem.plan.bed_particle_count`), the
+tip speed from the grid's speeds, at which every design distribution runs. Diameters are rounded to
+0.1 mm and fractions to 0.01, so that the config holds the design as plain numbers.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class DesignSpace:
+    """The ranges of the design (m for diameters). The defaults span the feeds and the active
+    learning's points of the default grid: smallest classes 2-3.2 mm, largest up to 8.1 mm, size
+    ratios largest / smallest from 1.5 (narrower than any feed) to 4, every class at least 10 % of
+    the particles (a smaller class has too few pairs for a frequency: docs/validation.md)."""
+
+    d_min_range: tuple[float, float] = (0.0020, 0.0032)
+    min_span: float = 1.5
+    d_max_limit: float = 0.0081
+    middle_range: tuple[float, float] = (0.3, 0.7)
+    min_fraction: float = 0.10
+    max_span: float = 4.0
+
+
+def _fractions(u: float, v: float, floor: float) -> list[float]:
+    """A point of the simplex (three fractions >= floor) from two uniform numbers (uniform on it)."""
+    r = math.sqrt(u)
+    simplex = (1.0 - r, r * (1.0 - v), r * v)
+    raw = [floor + (1.0 - 3.0 * floor) * s for s in simplex]
+    rounded = [round(f, 2) for f in raw[:2]]
+    return [*rounded, round(1.0 - sum(rounded), 2)]
+
+
+def design_distributions(n: int, seed: int, space: DesignSpace = DesignSpace()) -> list[dict]:
+    """`n` three-class distributions `{"diameters": [...], "number_fractions": [...]}` (m, ascending;
+    sum 1) from the first `n` points of a scrambled Sobol sequence seeded with `seed`."""
+    from scipy.stats import qmc
+
+    if n < 1:
+        raise ValueError(f"n = {n!r}: at least one distribution is needed")
+    points = qmc.Sobol(d=5, scramble=True, seed=seed).random(n)
+    out = []
+    lo, hi = space.d_min_range
+    for a, b, c, u, v in points:
+        d_min = lo * (hi / lo) ** a
+        top = min(space.max_span, space.d_max_limit / d_min)
+        span = space.min_span * (top / space.min_span) ** b
+        t = space.middle_range[0] + (space.middle_range[1] - space.middle_range[0]) * c
+        diameters = [d_min, d_min * span**t, d_min * span]
+        out.append(
+            {
+                "diameters": [round(float(d), 4) for d in diameters],
+                "number_fractions": _fractions(float(u), float(v), space.min_fraction),
+            }
+        )
+    return out
+
+
+def design_names(n: int, prefix: str = "sf") -> list[str]:
+    """The config names of the design's distributions: sf01, sf02, ..."""
+    width = max(2, len(str(n)))
+    return [f"{prefix}{k + 1:0{width}d}" for k in range(n)]
+
+
+def design_yaml(n: int, seed: int) -> str:
+    """The design as `size_distributions` entries for config/config.yaml."""
+    lines = []
+    for name, dist in zip(design_names(n), design_distributions(n, seed)):
+        d = ", ".join(f"{x:g}" for x in dist["diameters"])
+        f = ", ".join(f"{x:.2f}" for x in dist["number_fractions"])
+        lines += [f"  {name}:", f"    diameters: [{d}]", f"    number_fractions: [{f}]"]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":  # pragma: no cover - prints the config entries
+    import sys
+
+    print(design_yaml(int(sys.argv[1]), int(sys.argv[2])))

@@ -274,11 +274,11 @@ def _cost_job(job):
     from pbmdem.dem.plan import plan_bed
     from pbmdem.dem.run import settle_bed
 
-    side, config, rpm, dist, out = job
-    cfg = load_config(config)
+    side, config, rpm, dist, out, baseline = job
+    cfg = load_config(baseline if side == "old" and baseline else config)
     point = cfg.dem_point(dist)
     out = Path(out) / side
-    if side == "old":
+    if side == "old" and not baseline:
         point = _old_point(point, rpm)
         summary = run_point(point, plan_point(point, rpm), out / "run", cfg.dem_execution, force=True)
         return side, summary, None
@@ -290,7 +290,7 @@ def _cost_job(job):
 def bench_cost(args) -> None:
     from multiprocessing import Pool
 
-    jobs = [(side, args.config, args.rpm, args.distribution, args.out) for side in ("old", "new")]
+    jobs = [(side, args.config, args.rpm, args.distribution, args.out, args.baseline) for side in ("old", "new")]
     with Pool(2) as pool:
         results = {side: (summary, bed) for side, summary, bed in pool.map(_cost_job, jobs)}
     rows = []
@@ -313,12 +313,14 @@ def bench_cost(args) -> None:
     cols += ["parse_s", "wall_s", "cpu_s", "cpu_with_bed_s", "psteps_per_cpu_s", "encounters"]
     print(f"{args.distribution} at {args.rpm:g} rpm, old and new DEM settings run at the same time (same load);")
     print(f"the new run's settled bed is shared by {args.speeds} speeds (its settling time divided by that)")
+    if args.baseline:
+        print(f"old side: {args.baseline}, from its own settled bed, shared likewise")
     print(table[cols].T.to_string(float_format=lambda v: f"{v:.3g}"))
     old, new = table.loc["old"], table.loc["new"]
-    with_parse = (old.cpu_s + old.parse_s, new.cpu_with_bed_s + new.parse_s)
+    with_parse = (old.cpu_with_bed_s + old.parse_s, new.cpu_with_bed_s + new.parse_s)
     print(
-        f"speed-up per point: LIGGGHTS CPU {old.cpu_s:.1f} s -> {new.cpu_with_bed_s:.1f} s = "
-        f"{old.cpu_s / new.cpu_with_bed_s:.2f}x; with parsing {with_parse[0]:.1f} s -> {with_parse[1]:.1f} s = "
+        f"speed-up per point: LIGGGHTS CPU {old.cpu_with_bed_s:.1f} s -> {new.cpu_with_bed_s:.1f} s = "
+        f"{old.cpu_with_bed_s / new.cpu_with_bed_s:.2f}x; with parsing {with_parse[0]:.1f} s -> {with_parse[1]:.1f} s = "
         f"{with_parse[0] / with_parse[1]:.2f}x"
     )
 
@@ -341,6 +343,10 @@ def main() -> None:
     cost.add_argument("--distribution", default="fine")
     cost.add_argument("--speeds", type=int, default=4, help="speeds that share one settled bed")
     cost.add_argument("--out", default="results/bench_dem_cost")
+    cost.add_argument(
+        "--baseline",
+        help="config of the old side (run like the new side, from its own settled bed); default: the settings before issue 20",
+    )
     args = parser.parse_args()
     commands = {"point": bench_point, "profile": bench_profile, "acceptance": bench_acceptance, "cost": bench_cost}
     commands[args.command](args)

@@ -1,0 +1,110 @@
+"""Breakage selection from impacts (pbmdem.pbm.impact_breakage): hand-made impacts with known
+speeds give the selection rate the Stokes deformation criterion predicts."""
+
+import numpy as np
+import pytest
+
+from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, EncounterRates, ImpactRates, WallRates, fraction_above
+from pbmdem.pbm.errors import PBMInputError
+from pbmdem.pbm.impact_breakage import ImpactSelection, critical_speed
+from pbmdem.pbm.kernels import KernelInput
+
+RHO, Y, ST = 1000.0, 1.0e4, 0.2  # v* = sqrt(2 * 1e4 * 0.2 / 1000) = 2 m/s
+
+
+def one_bin(shape, speed):
+    """Fractions with every impact in the bin of `speed`."""
+    f = np.zeros((*shape, N_VELOCITY_BINS))
+    f[..., int(np.searchsorted(VELOCITY_EDGES, speed, side="right") - 1)] = 1.0
+    return f
+
+
+class HandMadeSource:
+    """Impacts with known speeds: pairs at `pair_speed`, the impeller at `impeller_speed`, the
+    bowl at `bowl_speed`; frequencies given per pair and per granule."""
+
+    def __init__(self, c, f_impeller, f_bowl, pair_speed, impeller_speed, bowl_speed):
+        self.c, self.f = np.asarray(c, float), np.array([f_bowl, f_impeller], float)
+        self.speeds = (pair_speed, impeller_speed, bowl_speed)
+        self.calls = 0
+
+    def impacts(self, diameters, numbers, rpm):
+        self.calls += 1
+        K = len(diameters)
+        pair_speed, impeller_speed, bowl_speed = self.speeds
+        walls = np.stack([one_bin((K,), bowl_speed), one_bin((K,), impeller_speed)])
+        return ImpactRates(EncounterRates(self.c[:K, :K], one_bin((K, K), pair_speed)), WallRates(self.f[:, :K], walls))
+
+
+def kernel_input(numbers, d=(0.002, 0.004)):
+    d = np.asarray(d, float)
+    return KernelInput(0.0, np.pi / 6 * d**3, d, np.asarray(numbers, float), np.zeros(d.size), rpm=600.0)
+
+
+def test_critical_speed_of_the_stokes_criterion():
+    assert critical_speed(RHO, Y, ST) == pytest.approx(2.0)
+    assert critical_speed(1500.0, 3.0e4, 0.1) == pytest.approx(np.sqrt(2 * 3.0e4 * 0.1 / 1500.0))
+
+
+def test_fraction_above_splits_a_straddling_bin_evenly_in_log_speed():
+    above = fraction_above(2.0)
+    b = int(np.searchsorted(VELOCITY_EDGES, 2.0, side="right") - 1)
+    lo, hi = VELOCITY_EDGES[b], VELOCITY_EDGES[b + 1]
+    assert above[b] == pytest.approx(np.log(hi / 2.0) / np.log(hi / lo))
+    assert np.all(above[:b] == 0.0) and np.all(above[b + 1 :] == 1.0)
+    assert fraction_above(0.0).tolist() == [1.0] * N_VELOCITY_BINS
+    assert fraction_above(5e-4)[0] == pytest.approx(0.5)  # bin 0 is [0, 1 mm/s), even in v
+
+
+def test_only_impacts_faster_than_the_critical_speed_break():
+    c = np.array([[1e-3, 2e-3], [2e-3, 4e-3]])
+    # pairs at 0.5 m/s and the bowl at 0.3 m/s cannot break (v* = 2 m/s); the impeller at 4 m/s can
+    source = HandMadeSource(
+        c, f_impeller=[3.0, 5.0], f_bowl=[7.0, 9.0], pair_speed=0.5, impeller_speed=4.0, bowl_speed=0.3
+    )
+    sel = ImpactSelection(source, RHO, Y, ST)
+    inp = kernel_input([100, 50])
+    sel.prepare(inp)
+    np.testing.assert_allclose(sel(inp), [3.0, 5.0])
+    parts = sel.contributions(inp)
+    np.testing.assert_allclose(parts["pairs"], 0.0)
+    np.testing.assert_allclose(parts["bowl"], 0.0)
+
+
+def test_pair_impacts_count_every_partner_but_not_the_granule_itself():
+    c = np.array([[1e-3, 2e-3], [2e-3, 4e-3]])
+    source = HandMadeSource(c, [0.0, 0.0], [0.0, 0.0], pair_speed=4.0, impeller_speed=0.1, bowl_speed=0.1)
+    sel = ImpactSelection(source, RHO, Y, ST)
+    inp = kernel_input([100, 50])
+    s = sel(inp)
+    np.testing.assert_allclose(s, [1e-3 * 99 + 2e-3 * 50, 2e-3 * 100 + 4e-3 * 49])
+    # the pair term follows the current numbers without asking the source again
+    calls = source.calls
+    np.testing.assert_allclose(sel(kernel_input([10, 5])), [1e-3 * 9 + 2e-3 * 5, 2e-3 * 10 + 4e-3 * 4])
+    assert source.calls == calls
+
+
+def test_walls_and_pairs_can_be_switched_off_and_a_stronger_granule_breaks_less():
+    c = np.full((2, 2), 1e-3)
+    source = HandMadeSource(c, [3.0, 5.0], [7.0, 9.0], pair_speed=4.0, impeller_speed=4.0, bowl_speed=4.0)
+    inp = kernel_input([100, 50])
+    only_bowl = ImpactSelection(source, RHO, Y, ST, walls=("bowl",), pairs=False)
+    np.testing.assert_allclose(only_bowl(inp), [7.0, 9.0])
+    # Y x 4 doubles v* to 4 m/s, inside the bin of the impacts: only the part above 4 m/s breaks
+    strong = ImpactSelection(source, RHO, 4 * Y, ST, walls=("bowl",), pairs=False)
+    assert strong.speed == pytest.approx(4.0)
+    b = int(np.searchsorted(VELOCITY_EDGES, 4.0, side="right") - 1)
+    split = np.log(VELOCITY_EDGES[b + 1] / 4.0) / np.log(VELOCITY_EDGES[b + 1] / VELOCITY_EDGES[b])
+    np.testing.assert_allclose(strong(inp), np.array([7.0, 9.0]) * split)
+    # Y x 100: v* = 20 m/s beyond every bin, nothing breaks
+    assert np.all(ImpactSelection(source, RHO, 100 * Y, ST)(inp) == 0.0)
+
+
+def test_bad_settings_and_sources_are_refused_by_name():
+    source = HandMadeSource(np.eye(2), [0, 0], [0, 0], 1.0, 1.0, 1.0)
+    with pytest.raises(PBMInputError, match="yield strength"):
+        ImpactSelection(source, RHO, -1.0, ST)
+    with pytest.raises(PBMInputError, match="lid"):
+        ImpactSelection(source, RHO, Y, ST, walls=("lid",))
+    with pytest.raises(PBMInputError, match="impacts"):
+        ImpactSelection(object(), RHO, Y, ST)

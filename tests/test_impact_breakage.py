@@ -108,3 +108,101 @@ def test_bad_settings_and_sources_are_refused_by_name():
         ImpactSelection(source, RHO, Y, ST, walls=("lid",))
     with pytest.raises(PBMInputError, match="impacts"):
         ImpactSelection(object(), RHO, Y, ST)
+
+
+def grid_tables(speed_of_rpm):
+    """Hand-made grid tables of one distribution at 300 and 1200 rpm: classes 2 and 4 mm, every
+    wall encounter of a point at the one speed `speed_of_rpm[rpm]` (m/s), impeller encounters
+    2 and 4 per granule and second, bowl 10 and 20; pairs at 0.1 m/s."""
+    import pandas as pd
+
+    from pbmdem.impact import velocity_bin
+
+    pairs, pair_v, walls, wall_v = [], [], [], []
+    for rpm, speed in speed_of_rpm.items():
+        pid = f"rpm{rpm}_feed"
+        for i, j in ((0, 0), (0, 1), (1, 1)):
+            pairs.append(
+                dict(
+                    point_id=pid,
+                    rpm=rpm,
+                    distribution="feed",
+                    class_i=i,
+                    class_j=j,
+                    d_i=0.002 * (1 + i),
+                    d_j=0.002 * (1 + j),
+                    encounter_frequency_per_pair=1e-3,
+                )
+            )
+            pair_v.append(
+                dict(
+                    point_id=pid,
+                    rpm=rpm,
+                    distribution="feed",
+                    class_i=i,
+                    class_j=j,
+                    b=velocity_bin(0.1),
+                    encounters=5.0,
+                )
+            )
+        for wall, rate in (("bowl", 10.0), ("impeller", 2.0)):
+            for c in (0, 1):
+                walls.append(
+                    dict(
+                        point_id=pid,
+                        rpm=rpm,
+                        distribution="feed",
+                        wall=wall,
+                        class_i=c,
+                        d_i=0.002 * (1 + c),
+                        encounter_frequency_per_particle=rate * (1 + c),
+                    )
+                )
+                wall_v.append(
+                    dict(
+                        point_id=pid,
+                        rpm=rpm,
+                        distribution="feed",
+                        wall=wall,
+                        class_i=c,
+                        b=velocity_bin(speed),
+                        encounters=7.0,
+                    )
+                )
+
+    def bins(rows):
+        frame = pd.DataFrame(rows)
+        return frame.assign(v_lo=VELOCITY_EDGES[frame.b], v_hi=VELOCITY_EDGES[frame.b + 1]).drop(columns="b")
+
+    return pd.DataFrame(pairs), bins(pair_v), pd.DataFrame(walls), bins(wall_v)
+
+
+def test_selection_from_hand_made_dem_tables_breaks_only_above_the_critical_speed():
+    from pbmdem.pbm.table import TableFrequency
+    from pbmdem.pbm.wall_table import WallTable
+
+    pairs, pair_v, walls, wall_v = grid_tables({300: 0.5, 1200: 3.0})  # v* = 2 m/s between them
+    source = TableFrequency(pairs, velocity_table=pair_v)
+    source.walls = WallTable(walls, wall_v)
+    sel = ImpactSelection(source, RHO, Y, ST)
+    b = int(np.searchsorted(VELOCITY_EDGES, 3.0, side="right") - 1)
+    above = fraction_above(2.0)[b]
+    d = np.array([0.002, 0.004])
+    for rpm, expected in ((300.0, [0.0, 0.0]), (1200.0, np.array([12.0, 24.0]) * above)):
+        inp = KernelInput(0.0, np.pi / 6 * d**3, d, np.array([100.0, 50.0]), np.zeros(2), rpm=rpm)
+        sel.prepare(inp)
+        np.testing.assert_allclose(sel(inp), expected, rtol=1e-12)
+    # between the table speeds the wall rates and the fractions mix linearly (here 50 / 50)
+    rates = source.impacts(d, [100, 50], 750.0)
+    np.testing.assert_allclose(rates.walls.of("impeller")[0], [2.0, 4.0])
+    assert rates.walls.of("bowl")[1][0, b] == pytest.approx(0.5)
+
+
+def test_wall_rates_of_one_run_are_read_per_class_and_wall():
+    from pbmdem.frequency import wall_rates_from_tables
+
+    _, _, walls, wall_v = grid_tables({600: 2.5})
+    rates = wall_rates_from_tables(walls, wall_v, 2)
+    np.testing.assert_allclose(rates.of("bowl")[0], [10.0, 20.0])
+    np.testing.assert_allclose(rates.of("impeller")[1].sum(axis=1), 1.0)
+    assert rates.of("impeller")[1][0].argmax() == np.searchsorted(VELOCITY_EDGES, 2.5, side="right") - 1

@@ -22,7 +22,7 @@ import pandas as pd
 from pbmdem.atomic import write_csv, write_json
 from pbmdem.config import CoupledLoop
 from pbmdem.frequency import pair_weighted_mean, pairs_of
-from pbmdem.impact import EncounterRates
+from pbmdem.impact import EncounterRates, ImpactRates
 
 from . import intervals
 from .class_source import ClassFrequencySource
@@ -103,7 +103,8 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
             ) from exc
         provider_wall = time.perf_counter() - t_provider
         model.kernel.set_source(ClassFrequencySource(sample.diameters, rates, f"{provider.name} interval {k}"))
-        matrix = rates.frequency if isinstance(rates, EncounterRates) else np.asarray(rates, float)
+        pairs = rates.pairs if isinstance(rates, ImpactRates) else rates
+        matrix = pairs.frequency if isinstance(pairs, EncounterRates) else np.asarray(pairs, float)
         t_pbm = time.perf_counter()
         result = model.run(t0, t1, state, output_times=output_times(pbm, t0, t1))
         pbm_wall = time.perf_counter() - t_pbm

@@ -100,7 +100,7 @@ def calibrated_frequency(loop: CoupledLoop, model_path: str | Path, rpm: float) 
     from pbmdem.surrogate import load_surrogate
     from pbmdem.surrogate.domain import out_of_domain_recorded
 
-    model = build_model(loop.batch.pbm, ConstantFrequency(1.0), rpm=rpm)
+    model = build_model(loop.batch.pbm, ConstantFrequency(1.0), rpm=rpm, selection=constant_selection(loop))
     state = initial_state(loop.batch, model)
     sample = representative_sample(*model.particle_classes(state), loop.sample)
     surrogate = load_surrogate(model_path)
@@ -109,8 +109,17 @@ def calibrated_frequency(loop: CoupledLoop, model_path: str | Path, rpm: float) 
     return pair_weighted_mean(c, sample.counts), found
 
 
+def constant_selection(loop: CoupledLoop):
+    """PBM-constant's breakage selection: pbm.breakage.constant_rate for every aggregate (used
+    only with pbm.breakage.enabled)."""
+    from pbmdem.pbm.breakage import ConstantSelection
+
+    return ConstantSelection(loop.batch.pbm.breakage.constant_rate)
+
+
 def pbm_constant(loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: str | Path) -> LoopOutcome:
-    """PBM-constant at `rpm`: c for every pair = the calibrated frequency, for the whole batch."""
+    """PBM-constant at `rpm`: c for every pair = the calibrated frequency, and with breakage the
+    selection rate pbm.breakage.constant_rate for every aggregate, for the whole batch."""
     from pbmdem.pbm.kernels import ConstantFrequency
     from pbmdem.pbm.setup import run_batch
 
@@ -118,7 +127,7 @@ def pbm_constant(loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: 
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    result = run_batch(loop.batch, ConstantFrequency(frequency), rpm)
+    result = run_batch(loop.batch, ConstantFrequency(frequency), rpm, selection=constant_selection(loop))
     wall = time.perf_counter() - t0
     totals = {
         "method": "pbm_constant",

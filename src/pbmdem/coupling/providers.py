@@ -117,8 +117,10 @@ class SurrogateProvider:
         self.member = member
         self.model_path = Path(model_path)
         self.rpm = float(rpm)
-        # with a velocity model the provider also hands over impact-velocity fractions (one call)
+        # with a velocity model the provider also hands over impact-velocity fractions (one call),
+        # with wall models also the wall impacts (breakage)
         self.velocity_resolved = bool(self.model.has_velocity_model())
+        self.walls = self.velocity_resolved and bool(getattr(self.model, "wall_models_", None))
 
     def fingerprint(self) -> dict:
         return {
@@ -134,7 +136,9 @@ class SurrogateProvider:
         t0 = time.perf_counter()
         d, n = np.asarray(sample.diameters), np.asarray(sample.counts, float)
         with out_of_domain_recorded(f"{self.name} at rpm {self.rpm:g}, interval {index}") as found:
-            if self.velocity_resolved:
+            if self.walls:
+                rates = self.model.impacts(d, n, self.rpm)
+            elif self.velocity_resolved:
                 rates = self.model.encounters(d, n, self.rpm)
             else:
                 rates = np.asarray(self.model.frequency_matrix(d, n, self.rpm), float)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pbmdem.config import Pbm
 from pbmdem.impact import WALLS, ImpactRates, fraction_above
 
 from .errors import PBMInputError, positive
@@ -62,8 +63,9 @@ class ImpactSelection:
     ``density`` (kg/m3) the granule density, ``yield_strength`` Y (Pa) the granule's dynamic yield
     strength, ``critical_stokes`` St_def*; ``walls`` the walls whose impacts can break a granule
     (of "impeller", "bowl"); ``pairs`` whether granule-granule encounters can. :meth:`prepare`
-    asks the source once for the impacts of the current bins; a call weights them with the
-    current numbers (the pair term)."""
+    (at every step) asks the source for the impacts only when the pivots, the speed or the source
+    (:meth:`set_source`, a coupling interval's) changed; a call weights them with the current
+    numbers (the pair term)."""
 
     def __init__(
         self,
@@ -92,23 +94,30 @@ class ImpactSelection:
         )
 
     def set_source(self, source) -> None:
-        """Use ``source`` from the next :meth:`prepare` on (a coupling interval's impacts)."""
-        if not callable(getattr(source, "impacts", None)):
+        """Use ``source`` from the next :meth:`prepare` on (a coupling interval's impacts; None:
+        none yet, the loop sets it before the first step)."""
+        if source is not None and not callable(getattr(source, "impacts", None)):
             raise PBMInputError(
                 f"breakage from impacts needs a source with impacts(diameters, numbers, rpm); {source!r} has none"
             )
         self.source = source
         self._rates = None
+        self._key = None
 
     def prepare(self, inp: KernelInput) -> None:
-        """Fetch the impacts of the bins' pivots from the source."""
+        """Fetch the impacts of the bins' pivots from the source, unless it gave them already."""
+        if self.source is None:
+            raise PBMInputError("ImpactSelection has no source of impacts yet (set_source)")
         d, n = inp.per_bin()
+        key = (np.asarray(d, float).tobytes(), float(inp.rpm))
+        if self._rates is not None and key == self._key:
+            return
         rates = self.source.impacts(d, n, inp.rpm)
         if not isinstance(rates, ImpactRates) or rates.pairs.frequency.shape[0] != d.size:
             raise PBMInputError(
                 f"{self.source!r}.impacts gave {type(rates).__name__}, not ImpactRates of {d.size} bins"
             )
-        self._rates = rates
+        self._rates, self._key = rates, key
 
     def contributions(self, inp: KernelInput) -> dict[str, np.ndarray]:
         """Per kind of impact (pairs, each wall): (K,) breaking impacts per granule and second."""
@@ -120,3 +129,15 @@ class ImpactSelection:
     def __call__(self, inp: KernelInput) -> np.ndarray:
         parts = self.contributions(inp)
         return np.sum(list(parts.values()), axis=0) if parts else np.zeros(inp.pivots)
+
+
+def impact_selection(pbm: Pbm, source=None) -> ImpactSelection | None:
+    """The ImpactSelection of the ``pbm.breakage`` settings (Y, St_def*, walls, pairs) on
+    ``source`` (None: set later), with the granule density of the Stokes success model
+    (``pbm.aggregation.success.granule_density``, the DEM particle density); None when breakage
+    is off."""
+    brk = pbm.breakage
+    if not brk.enabled:
+        return None
+    density = pbm.aggregation.success.granule_density
+    return ImpactSelection(source, density, brk.yield_strength, brk.critical_stokes, brk.walls, brk.pairs)

@@ -268,34 +268,23 @@ class TableFrequency:
 
     @classmethod
     def from_csv(
-        cls,
-        path,
-        distribution: str | None = None,
-        velocity_path=None,
-        wall_path=None,
-        wall_velocity_path=None,
-        **kwargs,
+        cls, path, distribution: str | None = None, velocity_path=None, walls=None, **kwargs
     ) -> TableFrequency:
         """Read a collision table CSV; ``distribution`` keeps only that distribution's rows;
         ``velocity_path``: the impact-velocity table CSV (results/dem/impact_velocity.csv) that
-        enables :meth:`encounters`; ``wall_path`` and ``wall_velocity_path``: the wall tables
-        (results/dem/wall_collisions.csv, wall_impact_velocity.csv) that enable :meth:`impacts`."""
-        from .wall_table import WallTable
-
+        enables :meth:`encounters`; ``walls``: the wall impacts
+        (:meth:`pbmdem.pbm.wall_table.WallTable.from_csv`) that enable :meth:`impacts`."""
         table = cls._read(path, distribution, "collision table")
         velocity_table = None
         if velocity_path is not None:
             velocity_table = cls._read(velocity_path, distribution, "impact-velocity table")
-        paths = [p for p in (path, velocity_path, wall_path, wall_velocity_path) if p is not None]
         try:
             source = cls(table, velocity_table=velocity_table, **kwargs)
-            if wall_path is not None:
-                walls = cls._read(wall_path, distribution, "wall-collision table")
-                wall_velocities = cls._read(wall_velocity_path, distribution, "wall impact-velocity table")
-                source.walls = WallTable(walls, wall_velocities)
-            return source
         except PBMInputError as err:
-            raise PBMInputError(f"{' / '.join(map(str, paths))}: {err}") from None
+            names = str(path) + ("" if velocity_path is None else f" / {velocity_path}")
+            raise PBMInputError(f"{names}: {err}") from None
+        source.walls = walls
+        return source
 
     @staticmethod
     def _read(path, distribution: str | None, what: str) -> pd.DataFrame:
@@ -382,7 +371,7 @@ class TableFrequency:
         if self.walls is None:
             raise PBMInputError(
                 "TableFrequency.impacts needs the wall tables (results/dem/wall_collisions.csv and "
-                "wall_impact_velocity.csv: from_csv(wall_path=..., wall_velocity_path=...))"
+                "wall_impact_velocity.csv: from_csv(walls=WallTable.from_csv(...)))"
             )
         return ImpactRates(self.encounters(diameters, numbers, rpm), self.walls.rates(diameters, rpm))
 

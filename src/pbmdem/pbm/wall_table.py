@@ -19,7 +19,7 @@ import pandas as pd
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, WALLS, WallRates
 
 from .errors import PBMInputError, positive
-from .table import speed_weights
+from .table import TableFrequency, speed_weights
 
 #: Column of the wall table the breakage selection is built on (impacts of granules that were apart).
 WALL_FREQUENCY_COLUMN = "encounter_frequency_per_particle"
@@ -103,6 +103,17 @@ class WallTable:
             fractions = np.where(total > 0, counts / np.where(total > 0, total, 1.0), everything)
             out[wall] = (np.log(pooled.size().index.to_numpy(float)), pooled["log_f"].mean().to_numpy(), fractions)
         return out
+
+    @classmethod
+    def from_csv(cls, path, velocity_path, distribution: str | None = None) -> WallTable:
+        """The grid's wall tables (results/dem/wall_collisions.csv, wall_impact_velocity.csv), read
+        through their contracts; ``distribution`` keeps only that distribution's rows."""
+        walls = TableFrequency._read(path, distribution, "wall-collision table")
+        velocities = TableFrequency._read(velocity_path, distribution, "wall impact-velocity table")
+        try:
+            return cls(walls, velocities)
+        except PBMInputError as err:
+            raise PBMInputError(f"{path} / {velocity_path}: {err}") from None
 
     def __repr__(self) -> str:
         return f"WallTable(rpm=[{','.join(f'{r:g}' for r in self.rpms)}])"

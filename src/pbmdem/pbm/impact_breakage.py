@@ -134,10 +134,10 @@ class ImpactSelection:
 def impact_selection(pbm: Pbm, source=None) -> ImpactSelection | None:
     """The ImpactSelection of the ``pbm.breakage`` settings (Y, St_def*, walls, pairs) on
     ``source`` (None: set later), with the granule density of the Stokes success model
-    (``pbm.aggregation.success.granule_density``, the DEM particle density); None when breakage
+    (``pbm.aggregation.success.stokes.granule_density``, the DEM particle density); None when breakage
     is off."""
     brk = pbm.breakage
     if not brk.enabled:
         return None
-    density = pbm.aggregation.success.granule_density
+    density = pbm.aggregation.success.stokes.granule_density
     return ImpactSelection(source, density, brk.yield_strength, brk.critical_stokes, brk.walls, brk.pairs)

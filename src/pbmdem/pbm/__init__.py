@@ -12,6 +12,8 @@ integration.
 | `aggregation` | the cell-average and fixed-pivot aggregation schemes (their pair maps for the compiled rates) |
 | `kernels` | aggregation kernels and collision-frequency sources (with their analytical solutions) |
 | `table` | the DEM collision table as a collision-frequency source (`TableFrequency`, re-exported by `kernels`) |
+| `wall_table` | the DEM's wall impacts per granule and their speeds, interpolated in size and speed (`WallTable`) |
+| `impact_breakage` | breakage selection from impacts: the Stokes deformation criterion (`ImpactSelection`) |
 | `success` | the success probability of a pair and the Stokes criterion of velocity-dependent success |
 | `processes` | liquid addition and consolidation |
 | `state` | the resumable state of a run |

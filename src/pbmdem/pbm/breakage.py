@@ -172,6 +172,16 @@ class Breakage:
         return tab
 
 
+def breakage_arrays(breakage: Breakage | None, x: np.ndarray, edges: np.ndarray) -> tuple:
+    """The breakage's arguments of the compiled rates on the grid of pivots ``x`` and cell
+    ``edges`` (:meth:`Breakage.compiled_arrays`); None: an empty selection, no breakage."""
+    if breakage is None:
+        return np.zeros(0), np.zeros((3, 0, 0)), np.zeros((4, 0))
+    if not isinstance(breakage, Breakage):
+        raise PBMInputError(f"breakage = {breakage!r}; allowed: a pbmdem.pbm.breakage.Breakage or None")
+    return breakage.compiled_arrays(x, edges)
+
+
 def _fragments_of(fragments: str, u: float, xr: np.ndarray, inner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(number, solid volume) of the fragments of one granule of volume ``u`` (units of x_0) in
     each cell of pivots ``xr`` with inner bounds ``inner`` (K - 1,), cell i spanning [inner[i-1],

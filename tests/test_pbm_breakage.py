@@ -381,3 +381,17 @@ def test_pbm_constant_breaks_at_the_constant_rate(tiny_config, tiny_mapping, tmp
     assert np.abs(solid / solid[0] - 1).max() < 1e-13
     assert res.state.number.sum() > plain.state.number.sum()
     assert res.summary()["d50"].iloc[-1] < plain.summary()["d50"].iloc[-1]
+
+
+def test_one_breakage_serves_models_on_different_grids():
+    # the selection array belongs to each model: a second model built with the same Breakage does
+    # not take it from the first
+    brk = Breakage(ConstantSelection(0.05), "binary")
+    runs = []
+    for bins in (30, 35):
+        g = Grid(bins, 2.0 ** (1 / 3), min_diameter=2e-3)
+        model = GranulationPBM(g, ver.NoAggregation(), breakage=brk, separate_feed=False)
+        runs.append((g, model, model.initial_state(np.pi / 6 * np.array([5e-3]) ** 3, [100.0])))
+    for _, model, state in runs:
+        res = model.run(0.0, 10.0, state)
+        assert res.state.number.sum() > 1.2 * state.number.sum()

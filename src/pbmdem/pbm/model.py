@@ -293,7 +293,7 @@ class GranulationPBM:
         self.kernel.prepare(inp)
         self._use_factors(inp)
         if self.breakage is not None:
-            self.breakage.prepare(inp, getattr(self.kernel, "update_interval", 0.0))
+            self.breakage.prepare(inp, self._brk_arrays[0], getattr(self.kernel, "update_interval", 0.0))
 
     def _use_factors(self, inp: KernelInput) -> None:
         """Ask the kernel for its factors at this step (after ``prepare``): the compiled rates use

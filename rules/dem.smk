@@ -7,6 +7,7 @@ rule dem_point:
         table=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/collisions.csv",
         walls=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/wall_collisions.csv",
         velocities=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/impact_velocity.csv",
+        wall_velocities=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/wall_impact_velocity.csv",
         summary=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/summary.json",
     log:
         f"{RESULTS}/logs/dem/rpm{{rpm}}_{{dist}}_rep{{rep}}.log",
@@ -34,11 +35,13 @@ rule collision_tables:
         tables=dem_outputs("collisions.csv"),
         walls=dem_outputs("wall_collisions.csv"),
         velocities=dem_outputs("impact_velocity.csv"),
+        wall_velocities=dem_outputs("wall_impact_velocity.csv"),
         summaries=dem_outputs("summary.json"),
     output:
         table=f"{RESULTS}/dem/collisions.csv",
         walls=f"{RESULTS}/dem/wall_collisions.csv",
         velocities=f"{RESULTS}/dem/impact_velocity.csv",
+        wall_velocities=f"{RESULTS}/dem/wall_impact_velocity.csv",
         replicates=f"{RESULTS}/dem/collisions_replicates.csv",
         runs=report(
             f"{RESULTS}/dem/runs.csv",

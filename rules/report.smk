@@ -14,6 +14,7 @@ rule report_findings:
     input:
         speed=f"{RESULTS}/validation/speed_study.csv",
         feed=f"{RESULTS}/validation/feed_study.csv",
+        breakage=f"{RESULTS}/validation/breakage_study.csv",
         comparison=f"{REPORT}/comparison.csv",
     output:
         speed_png=registered(
@@ -27,6 +28,12 @@ rule report_findings:
             "findings_feed",
             CATEGORIES["findings"],
             result="granule size against the feed",
+        ),
+        breakage_png=registered(
+            f"{REPORT}/findings/breakage.png",
+            "findings_breakage",
+            CATEGORIES["findings"],
+            result="granule size against impeller speed with breakage",
         ),
         rst=f"{REPORT}/findings/findings.rst",
     log:

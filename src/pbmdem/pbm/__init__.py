@@ -13,6 +13,8 @@ positivity-preserving explicit integration.
 | `kernels` | aggregation kernels and collision-frequency sources (with their analytical solutions) |
 | `breakage` | breakage: selection rates, fragment distributions and their cell-average tables |
 | `table` | the DEM collision table as a collision-frequency source (`TableFrequency`, re-exported by `kernels`) |
+| `wall_table` | the DEM's wall impacts per granule and their speeds, interpolated in size and speed (`WallTable`) |
+| `impact_breakage` | breakage selection from impacts: the Stokes deformation criterion (`ImpactSelection`) |
 | `success` | the success probability of a pair and the Stokes criterion of velocity-dependent success |
 | `processes` | liquid addition and consolidation |
 | `state` | the resumable state of a run |

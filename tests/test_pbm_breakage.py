@@ -2,16 +2,18 @@
 against the integrals of b(v|u) over the cells, the compiled rates against the numpy oracle,
 conservation of solid, liquid and gas to round-off in SI and scaled volumes, the number
 produced exactly, pure breakage against Ziff & McGrady (1985) with the observed order, aggregation
-with breakage against the Riccati number and the steady state, and the selection rate's checks
-and refresh."""
+with breakage against the Riccati number and the steady state, the selection rate's checks and
+refresh, the settings and PBM-constant with breakage."""
 
 from __future__ import annotations
 
 import numpy as np
 import pbm_oracle as oracle
 import pytest
+from conftest import config_of
 from scipy import integrate
 
+from pbmdem.config import ConfigError
 from pbmdem.pbm import (
     SCHEMES,
     CollisionKernel,
@@ -26,6 +28,7 @@ from pbmdem.pbm import (
 from pbmdem.pbm import analytical as an
 from pbmdem.pbm import verification as ver
 from pbmdem.pbm.breakage import FRAGMENTS, Breakage, ConstantSelection, PowerLawSelection
+from pbmdem.pbm.setup import build_model
 
 X_MAX = 60.0  # top of the verification grids (units of the initial mean volume): e^-60 beyond
 
@@ -325,3 +328,70 @@ def test_bad_breakage_arguments_are_named():
         GranulationPBM(Grid(5, 2.0, v0=1.0), ConstantKernel(1.0), breakage="yes")
     inp = KernelInput(0.0, np.array([1.0, 2.0]), np.ones(2), np.ones(2), np.zeros(2), 0.0)
     np.testing.assert_array_equal(PowerLawSelection(3.0, 2.0)(inp), [3.0, 12.0])
+
+
+# ----------------------------------------------------------------------------- settings and PBM-constant
+def _with_breakage(mapping, **breakage):
+    mapping["pbm"]["breakage"].update(enabled=True, **breakage)
+    return config_of(mapping)
+
+
+def test_breakage_is_off_by_default_and_one_setting_away(default_config, default_mapping):
+    assert default_config.pbm.breakage.enabled is False
+    assert build_model(default_config.pbm).breakage is None  # aggregation only: the model before
+    cfg = _with_breakage(default_mapping, fragments="uniform")
+    model = build_model(cfg.pbm)
+    assert (
+        repr(model.breakage)
+        == f"Breakage(ConstantSelection(rate={cfg.pbm.breakage.constant_rate:g}), fragments='uniform')"
+    )
+    own = PowerLawSelection(1.0, 1.0)
+    assert build_model(cfg.pbm, ConstantFrequency(0.1), selection=own).breakage.selection is own
+    with pytest.raises(PBMInputError, match=r"pbm.breakage.enabled = true with the collision-frequency source"):
+        build_model(cfg.pbm, ConstantFrequency(0.1))
+
+
+@pytest.mark.parametrize(
+    "key, value, match",
+    [
+        ("fragments", "ternary", r"pbm.breakage.fragments.*'ternary'.*binary.*uniform"),
+        ("walls", ["lid"], r"pbm.breakage.walls\[0\].*'lid'"),
+        ("constant_rate", -1.0, r"pbm.breakage.constant_rate = -1.0"),
+        ("yield_strength", 0.0, r"pbm.breakage.yield_strength = 0.0"),
+    ],
+)
+def test_bad_breakage_settings_name_the_key(default_mapping, key, value, match):
+    default_mapping["pbm"]["breakage"][key] = value
+    with pytest.raises(ConfigError, match=match):
+        config_of(default_mapping)
+
+
+def test_pbm_constant_breaks_at_the_constant_rate(tiny_config, tiny_mapping, tmp_path, monkeypatch):
+    # PBM-constant with breakage: the selection pbm.breakage.constant_rate for every aggregate; the
+    # calibration of its collision frequency (the surrogate's, tested with the validation) is fixed here
+    from pbmdem.coupling import methods
+
+    monkeypatch.setattr(methods, "calibrated_frequency", lambda loop, path, rpm: (0.12, []))
+    plain = methods.pbm_constant(tiny_config.coupled_loop(), "unused", 600.0, tmp_path / "plain").result
+    tiny_mapping["pbm"]["breakage"].update(enabled=True, constant_rate=0.05)
+    loop = config_of(tiny_mapping).coupled_loop()
+    res = methods.pbm_constant(loop, "unused", 600.0, tmp_path / "broken").result
+    assert "ConstantSelection(rate=0.05)" in res.info["breakage"] and plain.info["breakage"] == "None"
+    solid = res.moments()[:, 1]
+    assert np.abs(solid / solid[0] - 1).max() < 1e-13
+    assert res.state.number.sum() > plain.state.number.sum()
+    assert res.summary()["d50"].iloc[-1] < plain.summary()["d50"].iloc[-1]
+
+
+def test_one_breakage_serves_models_on_different_grids():
+    # the selection array belongs to each model: a second model built with the same Breakage does
+    # not take it from the first
+    brk = Breakage(ConstantSelection(0.05), "binary")
+    runs = []
+    for bins in (30, 35):
+        g = Grid(bins, 2.0 ** (1 / 3), min_diameter=2e-3)
+        model = GranulationPBM(g, ver.NoAggregation(), breakage=brk, separate_feed=False)
+        runs.append((g, model, model.initial_state(np.pi / 6 * np.array([5e-3]) ** 3, [100.0])))
+    for _, model, state in runs:
+        res = model.run(0.0, 10.0, state)
+        assert res.state.number.sum() > 1.2 * state.number.sum()

@@ -108,6 +108,7 @@ class Breakage:
             )
         self.selection = selection
         self.fragments = fragments
+        self._t_eval: float | None = None  # time of the last evaluation of the selection in a run
 
     def __repr__(self) -> str:
         return f"Breakage({self.selection!r}, fragments={self.fragments!r})"
@@ -117,22 +118,20 @@ class Breakage:
         compiled rates (``_compiled.breakage_totals``) on the grid of pivots ``x`` and cell
         ``edges``; :meth:`prepare` refreshes the selection array in place."""
         x = np.asarray(x, float)
-        self._sel = np.zeros(x.size)
-        self._t_eval: float | None = None
         tab = np.ascontiguousarray(self.fragment_tables(x, edges))
-        return self._sel, tab, np.ascontiguousarray(cell_average_factors(x / x[0]))
+        return np.zeros(x.size), tab, np.ascontiguousarray(cell_average_factors(x / x[0]))
 
     def reset(self) -> None:
         """Start of a run: the next :meth:`prepare` evaluates the selection."""
         self._t_eval = None
 
-    def prepare(self, inp: KernelInput, interval: float = 0.0) -> None:
-        """Once per step: the selection's own ``prepare``, and its rates evaluated again (into the
-        array of :meth:`compiled_arrays`) at the first step of a run and then once ``interval``
-        seconds have passed (the aggregation kernel's frequency update interval)."""
+    def prepare(self, inp: KernelInput, out: np.ndarray, interval: float = 0.0) -> None:
+        """Once per step: the selection's own ``prepare``, and its rates evaluated again into
+        ``out`` (the selection array of :meth:`compiled_arrays`) at the first step of a run and
+        then once ``interval`` seconds have passed (the aggregation kernel's update interval)."""
         self.selection.prepare(inp)
         if self._t_eval is None or inp.t >= self._t_eval + interval:
-            self._sel[:] = self.rates(inp)
+            out[:] = self.rates(inp)
             self._t_eval = inp.t
 
     def rates(self, inp: KernelInput) -> np.ndarray:
@@ -170,6 +169,16 @@ class Breakage:
             tab[1, :, k] = solid / xr - number
             tab[2, :, k] = solid / xr[k]
         return tab
+
+
+def breakage_arrays(breakage: Breakage | None, x: np.ndarray, edges: np.ndarray) -> tuple:
+    """The breakage's arguments of the compiled rates on the grid of pivots ``x`` and cell
+    ``edges`` (:meth:`Breakage.compiled_arrays`); None: an empty selection, no breakage."""
+    if breakage is None:
+        return np.zeros(0), np.zeros((3, 0, 0)), np.zeros((4, 0))
+    if not isinstance(breakage, Breakage):
+        raise PBMInputError(f"breakage = {breakage!r}; allowed: a pbmdem.pbm.breakage.Breakage or None")
+    return breakage.compiled_arrays(x, edges)
 
 
 def _fragments_of(fragments: str, u: float, xr: np.ndarray, inner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

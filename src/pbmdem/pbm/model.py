@@ -2,14 +2,11 @@
 
 State: numbers N_k, liquid L_k and gas (pore) G_k volume totals per bin of a :class:`Grid`
 (solid S_k = N_k x_k). Balances (aggregation A: a scheme of ``aggregation.SCHEMES``, by default
-the cell-average technique):
+the cell average; breakage B, optional: ``breakage.Breakage``):
 
     dN_k/dt = A_N,k + B_N,k
     dL_k/dt = A_L,k + B_L,k + Q w_k [t_start <= t < t_end]
     dG_k/dt = A_G,k + B_G,k - c (G_k - eps_min / (1 - eps_min) S_k)
-
-with the optional breakage B (``breakage.Breakage``: cell average on the same grid, fragments
-carrying their parent's liquid and gas per solid volume).
 
 Time integration: strong-stability-preserving explicit Runge-Kutta, ``"ssp3"`` (SSP-RK3 with
 an embedded Heun estimate, default), ``"heun"`` (SSP-RK2 with an embedded Euler estimate) or
@@ -21,11 +18,9 @@ collision-frequency source between intervals.
 Every rate and every stage is computed by the compiled backend (``_compiled``): a factored
 kernel (``Kernel.factors``) inside it, any other kernel called here and its matrix passed in.
 
-Feed granules (``separate_feed=True``, default): the feed granules that have not aggregated yet
-are classes of their own (:class:`FeedGranules`): at their own solid volume (not split onto the
-pivots), with their own number, liquid and gas, so that aggregates born near a feed size do not
-share their liquid with the feed granules (docs/pbm.md, "Feed granules"). The State's per-bin
-totals include them, put on the pivots by the lever rule as the initial distribution is.
+Feed granules (``separate_feed=True``, default): the feed granules not yet aggregated are classes
+of their own (:class:`FeedGranules`, docs/pbm.md, "Feed granules"), in the State's per-bin totals
+by the lever rule.
 """
 
 from __future__ import annotations
@@ -35,7 +30,7 @@ import numpy as np
 from pbmdem.config import Solver
 
 from .aggregation import SCHEMES
-from .breakage import Breakage
+from .breakage import Breakage, breakage_arrays
 from .errors import GridOverflowError, KernelShapeError, NegativePopulationError, PBMInputError, positive
 from .grid import Grid, diameter_of
 from .kernels import Kernel, KernelInput
@@ -81,15 +76,8 @@ class GranulationPBM:
         if not isinstance(separate_feed, (bool, np.bool_)):
             raise PBMInputError(f"separate_feed = {separate_feed!r}; allowed: true or false")
         self.separate_feed = bool(separate_feed)
-        if breakage is not None and not isinstance(breakage, Breakage):
-            raise PBMInputError(f"breakage = {breakage!r}; allowed: a pbmdem.pbm.breakage.Breakage or None")
         self.breakage = breakage
-        # the breakage's arguments of the compiled rates (an empty selection: no breakage)
-        self._brk_arrays = (
-            breakage.compiled_arrays(grid.x, grid.edges)
-            if breakage is not None
-            else (np.zeros(0), np.zeros((3, 0, 0)), np.zeros((4, 0)))
-        )
+        self._brk_arrays = breakage_arrays(breakage, grid.x, grid.edges)  # None: an empty selection
         # building the operator imports the compiled evaluation (numba, ``_compiled``): it is loaded
         # from numba's cache, or compiled, here and not in a run
         self.aggregation = SCHEMES[scheme](grid.x, grid.edges[1:-1])
@@ -243,8 +231,8 @@ class GranulationPBM:
     def _rates(self, t: float, u: np.ndarray, spraying: bool, j: int) -> float:
         """Rates of the scaled class state u = [N, L/x_0, G/x_0] (M classes: the K pivots and the
         feed classes of the run, :meth:`_use_classes`) into ``self._k[j]`` (3M,); returns the
-        refused solid rate (x_0 units). One compiled call (``_compiled.class_rates``: flush,
-        kernel, aggregation, spraying, consolidation); a kernel without factors is called here,
+        refused solid rate (x_0 units). One compiled call (``_compiled.class_rates``: flush, kernel,
+        aggregation, breakage, spraying, consolidation); a kernel without factors is called here,
         at the flushed state, and its matrix passed in.
 
         Volumes enter only as ratios to the first pivot x_0, so the same problem in m3, mm3 or
@@ -301,12 +289,11 @@ class GranulationPBM:
         self._params[1][4] = self._spray_rate
 
     def _prepare(self, inp: KernelInput) -> None:
-        """Start of a step: the kernel's ``prepare`` and factors, the breakage's selection (at the
-        kernel's frequency update interval)."""
+        """Start of a step: the kernel's prepare and factors, the selection (at its update interval)."""
         self.kernel.prepare(inp)
         self._use_factors(inp)
         if self.breakage is not None:
-            self.breakage.prepare(inp, getattr(self.kernel, "update_interval", 0.0))
+            self.breakage.prepare(inp, self._brk_arrays[0], getattr(self.kernel, "update_interval", 0.0))
 
     def _use_factors(self, inp: KernelInput) -> None:
         """Ask the kernel for its factors at this step (after ``prepare``): the compiled rates use

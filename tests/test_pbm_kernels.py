@@ -255,9 +255,9 @@ def test_cli_table_needs_a_table(tmp_path, root, capsys):
 
 
 def test_cli_table_run(tmp_path, root):
-    from pbmdem.cli import main
-
     import yaml
+
+    from pbmdem.cli import main
 
     table = tmp_path / "collisions.csv"
     make_table().to_csv(table, index=False)

@@ -12,32 +12,32 @@ report: "../workflow/report/workflow.rst"
 # and one figure each, then how far to trust them (the comparison with PBM-DEM).
 rule report_findings:
     input:
-        speed=f"{RESULTS}/validation/speed_study.csv",
-        feed=f"{RESULTS}/validation/feed_study.csv",
-        breakage=f"{RESULTS}/validation/breakage_study.csv",
-        comparison=f"{REPORT}/comparison.csv",
+        speed=layout.validation("speed_study.csv"),
+        feed=layout.validation("feed_study.csv"),
+        breakage=layout.validation("breakage_study.csv"),
+        comparison=layout.report("comparison.csv"),
     output:
         speed_png=registered(
-            f"{REPORT}/findings/speed.png",
+            layout.report("findings/speed.png"),
             "findings_speed",
             CATEGORIES["findings"],
             result="granule size against impeller speed",
         ),
         feed_png=registered(
-            f"{REPORT}/findings/feed.png",
+            layout.report("findings/feed.png"),
             "findings_feed",
             CATEGORIES["findings"],
             result="granule size against the feed",
         ),
         breakage_png=registered(
-            f"{REPORT}/findings/breakage.png",
+            layout.report("findings/breakage.png"),
             "findings_breakage",
             CATEGORIES["findings"],
             result="granule size against impeller speed with breakage",
         ),
-        rst=f"{REPORT}/findings/findings.rst",
+        rst=layout.report("findings/findings.rst"),
     log:
-        f"{RESULTS}/logs/report/findings.log",
+        layout.log("report/findings.log"),
     conda:
         "../envs/validation.yaml"
     params:
@@ -51,7 +51,7 @@ rule report_findings:
 rule report_speed:
     input:
         runs=lambda wc: speed_files(wc.rpm),
-        bands=f"{RESULTS}/validation/rpm{{rpm}}/bands.csv",
+        bands=f"{SPEED}/bands.csv",
         model=MODEL,
     output:
         **{
@@ -65,11 +65,11 @@ rule report_speed:
             for key, path in speed_report_files().items()
         },
     log:
-        f"{RESULTS}/logs/report/speed_rpm{{rpm}}.log",
+        layout.log("report/speed_rpm{rpm}.log"),
     conda:
         "../envs/validation.yaml"
     params:
-        validation_dir=validation_dir_of_bands,
+        validation_dir=lambda wc, input: layout.validation_dir_of(input[0]),
         replicates=CFG.validation.dem_replicates,
         process=CFG.pbm.process.to_dict(),
     script:
@@ -80,7 +80,7 @@ rule report_settings:
     output:
         **registered_tables(("settings", "speeds"), CATEGORIES["settings"]),
     log:
-        f"{RESULTS}/logs/report/settings.log",
+        layout.log("report/settings.log"),
     conda:
         "../envs/validation.yaml"
     params:
@@ -101,7 +101,7 @@ rule report_settings:
 
 rule report_tables:
     input:
-        comparison=f"{REPORT}/comparison.csv",
+        comparison=layout.report("comparison.csv"),
     output:
         **registered_tables(("targets",), CATEGORIES["validation"], "targets"),
         **registered_tables(
@@ -110,7 +110,7 @@ rule report_tables:
             "comparison",
         ),
     log:
-        f"{RESULTS}/logs/report/tables.log",
+        layout.log("report/tables.log"),
     conda:
         "../envs/validation.yaml"
     script:
@@ -124,31 +124,31 @@ rule report_tables:
 # copied project reruns nothing.
 rule report_provenance:
     input:
-        runs=f"{RESULTS}/dem/runs.csv",
-        metadata=f"{RESULTS}/surrogate/model.json",
+        runs=layout.dem("runs.csv"),
+        metadata=layout.surrogate("model.json"),
         results=[
-            f"{REPORT}/comparison.csv",
-            f"{RESULTS}/surrogate/metrics.csv",
-            f"{RESULTS}/validation/rpm_sweep.csv",
-            f"{RESULTS}/validation/proposals.csv",
+            layout.report("comparison.csv"),
+            layout.surrogate("metrics.csv"),
+            layout.validation("rpm_sweep.csv"),
+            layout.validation("proposals.csv"),
         ],
     output:
         csv=registered(
-            f"{REPORT}/tables/provenance.csv",
+            layout.report("tables/provenance.csv"),
             "provenance",
             CATEGORIES["settings"],
             table="provenance",
             format="CSV",
         ),
         html=registered(
-            f"{REPORT}/tables/provenance.html",
+            layout.report("tables/provenance.html"),
             "provenance",
             CATEGORIES["settings"],
             table="provenance",
             format="HTML",
         ),
     log:
-        f"{RESULTS}/logs/report/provenance.log",
+        layout.log("report/provenance.log"),
     conda:
         "../envs/validation.yaml"
     params:
@@ -162,13 +162,13 @@ rule report:
         unpack(report_inputs),
     output:
         html=registered(
-            f"{REPORT}/report.html",
+            layout.report("report.html"),
             "report",
             CATEGORIES["findings"],
             result="the whole report as one page",
         ),
     log:
-        f"{RESULTS}/logs/report.log",
+        layout.log("report.log"),
     conda:
         "../envs/validation.yaml"
     params:
@@ -177,4 +177,4 @@ rule report:
         "../workflow/scripts/report.py"
 
 
-extra_targets.append(f"{REPORT}/report.html")
+extra_targets.append(layout.report("report.html"))

@@ -433,8 +433,8 @@ def test_table_encounters_from_csv(tmp_path):
 @pytest.mark.parametrize(
     "mutate,match",
     [
-        (lambda v: v.drop(columns=["encounters"]), r"impact-velocity table lacks columns \['encounters'\]"),
-        (lambda v: v.assign(encounters=-1.0), r"encounters has values \[-1\."),
+        (lambda v: v.drop(columns=["encounters"]), r"impact-velocity table: missing column\(s\) \['encounters'\]"),
+        (lambda v: v.assign(encounters=-1.0), r"column 'encounters' = -1.0: a finite number >= 0 is required"),
         (lambda v: v.assign(v_lo=v.v_lo * 1.5), r"is not one of the project's velocity bins"),
         (lambda v: v.assign(point_id="rpm600_fine"), r"has no rows for the collision table's points"),
         (lambda v: v.assign(class_j=np.where(v.class_j == 1, 2, v.class_j)), r"has no row in the collision table"),
@@ -515,6 +515,11 @@ def test_cli_table_run_with_velocity_table(tmp_path, root, capsys):
     ]
     assert main(base) == 2
     assert "needs --velocity-table PATH" in capsys.readouterr().err
+    # breakage (on by default) takes its selection from the wall tables too
+    assert main(base + ["--velocity-table", str(pv)]) == 2
+    assert "--wall-table PATH" in capsys.readouterr().err
+    cfg["pbm"]["breakage"]["enabled"] = False  # aggregation's velocity table is what this test is about
+    cfg_path.write_text(yaml.safe_dump(cfg))
     assert main(base + ["--velocity-table", str(pv)]) == 0
     s = pd.read_csv(tmp_path / "out" / "summary.csv")
     assert s["total_solid_volume"].iloc[-1] == pytest.approx(s["total_solid_volume"].iloc[0], rel=1e-13)

@@ -339,8 +339,9 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
     # the findings first (speed, feed, how far to trust them), then the validation
     order = [html.find(p) for p in ("<b>Impeller speed.</b>", "<b>Feed size distribution.</b>", "<h3>Targets</h3>")]
     assert -1 not in order and order == sorted(order), order
-    # per speed 4, + sweep, parity, DEM x2, + the two findings figures
-    assert html.count("data:image/png;base64,") == 4 * len(cfg["validation"]["rpm"]) + 6
+    # per speed 4, + sweep, parity, DEM x2, + the three findings figures (speed, feed, breakage)
+    assert html.count("data:image/png;base64,") == 4 * len(cfg["validation"]["rpm"]) + 7
+    assert "<b>Breakage.</b>" in html
     assert "encounter rate against impeller speed" in html
     response = pd.read_csv(res / "dem" / "speed_response.csv")
     assert len(response) == len(cfg["grid"]["impeller_rpm"]) * len(cfg["grid"]["size_distributions"])

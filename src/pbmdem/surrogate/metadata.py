@@ -92,27 +92,24 @@ _STATE = {
 }
 _SCALE = {"type": "number", "exclusiveMinimum": 0}
 
+#: The fields of one fitted model (the pair model's, or a wall model's under ``walls``).
+_MODEL_KEYS = (
+    "params",
+    "family",
+    "frequency_state",
+    "velocity_state",
+    "n_velocity_rows",
+    "duplicated_features",
+    "feature_names",
+    "feature_ranges",
+    "training_point_ids",
+    "n_training_rows",
+)
 SCHEMA = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
     "title": "pbmdem surrogate metadata (model.json)",
     "type": "object",
-    "required": [
-        "format",
-        "format_version",
-        "model_sha256",
-        "params",
-        "velocity_edges",
-        "family",
-        "frequency_state",
-        "velocity_state",
-        "n_velocity_rows",
-        "duplicated_features",
-        "feature_names",
-        "feature_ranges",
-        "training_point_ids",
-        "n_training_rows",
-        "versions",
-    ],
+    "required": ["format", "format_version", "model_sha256", "velocity_edges", *_MODEL_KEYS, "versions"],
     "properties": {
         "format": {"type": "string"},
         "format_version": {"type": "integer"},
@@ -170,19 +167,6 @@ SCHEMA = {
     },
 }
 
-#: The fields of one fitted model (the pair model's, or a wall model's under ``walls``).
-_MODEL_KEYS = (
-    "params",
-    "family",
-    "frequency_state",
-    "velocity_state",
-    "n_velocity_rows",
-    "duplicated_features",
-    "feature_names",
-    "feature_ranges",
-    "training_point_ids",
-    "n_training_rows",
-)
 #: ``walls``: per wall (pbmdem.impact.WALLS) the wall model of pbmdem.surrogate.walls (optional:
 #: a surrogate trained without the wall tables has none).
 SCHEMA["properties"]["walls"] = {

@@ -230,33 +230,3 @@ REPORT_TABLES = (
     "comparison_cost",
     "comparison_domain",
 )
-
-
-def report_inputs(wildcards):
-    """Every file the page shows: the display tables (table_<name>), the files of each validation
-    speed (speed<k>_<name>, k in the order of validation.rpm) and the workflow's own tables and
-    figures."""
-    files = {
-        "runs": layout.dem("runs.csv"),
-        "collisions": layout.dem("collisions.csv"),
-        "speed_response": layout.dem("speed_response.csv"),
-        "flow_development": layout.dem("flow_development.csv"),
-        "speed_plot": layout.dem("speed_response.png"),
-        "velocity_plot": layout.dem("impact_velocity.png"),
-        "metrics": layout.surrogate("metrics.csv"),
-        "parity": layout.surrogate("parity.png"),
-        "metadata": layout.surrogate("model.json"),
-        "sweep": layout.validation("rpm_sweep.csv"),
-        "sweep_plot": layout.validation("rpm_sweep.png"),
-        "proposals": layout.validation("proposals.csv"),
-        "comparison": layout.report("comparison.csv"),
-        "findings_speed": layout.report("findings/speed.png"),
-        "findings_feed": layout.report("findings/feed.png"),
-        "findings_rst": layout.report("findings/findings.rst"),
-        "speed_study": layout.validation("speed_study.csv"),
-        "feed_study": layout.validation("feed_study.csv"),
-    }
-    files.update({f"table_{name}": layout.report(f"tables/{name}.csv") for name in REPORT_TABLES})
-    for k, rpm in enumerate(VAL_RPMS):
-        files.update({f"speed{k}_{name}": path for name, path in speed_report_files(rpm).items()})
-    return files

@@ -1,7 +1,7 @@
 """The files of the report rules, one function per rule (rules/report.smk): each reads its inputs
 (errors name the file), builds the figures and tables of `figures`, `tables`, `statements` and
-`provenance`, and writes them atomically; a table as CSV and as an HTML page (Snakemake's report
-shows HTML inline and offers CSV for download).
+`provenance`, and writes them atomically; a table as CSV and as an HTML page (`display.write_table`:
+Snakemake's report shows HTML inline and offers CSV for download).
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from pathlib import Path
 from pbmdem.readers import InputFileError, read_table
 
 from . import figures
-from .html import write_table
+from .display import write_table
 
 #: summary.csv columns the figures of a speed read
 SUMMARY_COLUMNS = ("time", "d10", "d50", "d90", "mean_liquid_content", "mean_porosity")
@@ -168,8 +168,8 @@ def write_findings(
     text (rst), atomically. `speed`, `feed`, `breakage`: the PBM-ANN study tables; `comparison`: the
     validation's comparison table; `out`: speed_png, feed_png, breakage_png, rst."""
     from pbmdem.atomic import write_text
+    from pbmdem.plotting import save_figure as save
 
-    from .figures import save
     from .findings import feed_figure, findings_rst, speed_figure
 
     speed_table = read_table(speed, "PBM-ANN speed study", columns=("rpm", "d10", "d50", "d90"))

@@ -130,28 +130,29 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
             **extra,
         }
         intervals.save(folder, result, sample, matrix, info)
+        what, warned = "DEM" if provider.name == "pbm_dem" else "provider", int(extra.get("out_of_domain_count", 0))
         log.info(
             "%s at rpm %g: interval %d of %d (%.4g-%.4g s) done: %s wall time %.2f s, PBM wall time %.3f s, "
             "%d surrogate out-of-domain warning(s)",
-            provider.name,
-            rpm,
-            k + 1,
-            n_intervals,
-            t0,
-            t1,
-            "DEM" if provider.name == "pbm_dem" else "provider",
-            provider_wall,
-            pbm_wall,
-            int(extra.get("out_of_domain_count", 0)),
+            *(provider.name, rpm, k + 1, n_intervals, t0, t1, what, provider_wall, pbm_wall, warned),
         )
         results.append(result)
         rows.append(info)
         state = result.state
+    totals = _totals(provider.name, rpm, loop, rows)
+    full = Result.concat(results)
+    write_outputs(outdir, full, rows, totals)
+    return LoopOutcome(full, rows, totals)
+
+
+def _totals(method: str, rpm: float, loop: CoupledLoop, rows: list[dict]) -> dict:
+    """The loop's totals (timing.json): wall times, and the out-of-domain warnings over its
+    intervals (logged as a warning when there were any)."""
     totals = {
-        "method": provider.name,
+        "method": method,
         "rpm": rpm,
         "distribution": loop.batch.distribution,
-        "intervals": n_intervals,
+        "intervals": loop.coupling_intervals,
         "provider_wall_time_s": float(sum(r["provider_wall_time_s"] for r in rows)),
         "pbm_wall_time_s": float(sum(r["pbm_wall_time_s"] for r in rows)),
     }
@@ -163,13 +164,11 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
             log.warning(
                 "%s at rpm %g: the surrogate was outside its training domain in %d of %d intervals "
                 "(%d warnings; see intervals.csv)",
-                provider.name,
+                method,
                 rpm,
                 totals["out_of_domain_intervals"],
                 len(rows),
                 totals["out_of_domain_count"],
             )
     totals["total_wall_time_s"] = totals["provider_wall_time_s"] + totals["pbm_wall_time_s"]
-    full = Result.concat(results)
-    write_outputs(outdir, full, rows, totals)
-    return LoopOutcome(full, rows, totals)
+    return totals

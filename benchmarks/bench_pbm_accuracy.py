@@ -24,8 +24,16 @@ false``, the model before), spraying by solid volume, the logistic success proba
 d10 / d50 / d90 at 480 s, their deviation from the 4x finer grid and from q = 24, and the liquid
 content and surface-liquid fraction of the 4 mm feed granules at the end.
 
-Run: .venv/bin/python benchmarks/bench_pbm_accuracy.py [--quick] [--fixed-pivot] [--grid]
-(about 2-3 min; --grid alone about 1 min)
+Breakage (``--breakage``, also printed after the aggregation cases): the cell average's breakage
+on grids of ratio 2^(1/q) from 1e-6 to 60 initial mean volumes, exponential start, against
+Ziff & McGrady (1985): uniform daughters with S = v (t = 9: the number grows 10x) and S = v^2
+(t = 10: 3.7x); binary equal fragments with S = v (number only: M0 = 1 + t); and constant
+aggregation (beta = 1) with uniform-daughter breakage S = 2 v at t = 12 (the number against the
+Riccati solution, the PSD against the steady state n = 4 e^(-2 v)). Printed as the aggregation
+cases, with the observed orders of |M0 error|, |M2 error| and L1.
+
+Run: .venv/bin/python benchmarks/bench_pbm_accuracy.py [--quick] [--fixed-pivot] [--grid] [--breakage]
+(about 2-3 min; --grid alone about 1 min, --breakage alone about 30 s)
 """
 
 from __future__ import annotations
@@ -41,6 +49,7 @@ from pbmdem.config import Solver
 from pbmdem.pbm import ConstantKernel, GranulationPBM, Grid, GridOverflowError, State, SumKernel, surface_fraction
 from pbmdem.pbm import analytical as an
 from pbmdem.pbm import verification as ver
+from pbmdem.pbm.breakage import Breakage, PowerLawSelection
 from pbmdem.pbm.kernels import Kernel
 
 
@@ -224,17 +233,71 @@ def grid_convergence(qs=GRID_QS):
     print("(* the default ratio 2^(1/3); criterion: d10, d50 and d90 within 1 % of the 4x finer grid)")
 
 
+#: the breakage cases: (label, fragments, selection (a, p) of S = a v^p, aggregation beta or None, t_end)
+BREAKAGE_CASES = (
+    ("uniform daughters, S = v", "uniform", (1.0, 1), None, 9.0),
+    ("uniform daughters, S = v^2", "uniform", (1.0, 2), None, 10.0),
+    ("binary equal fragments, S = v", "binary", (1.0, 1), None, 9.0),
+    ("aggregation beta = 1 + uniform daughters, S = 2 v", "uniform", (2.0, 1), 1.0, 12.0),
+)
+
+
+def _breakage_reference(fragments, sel, beta, t):
+    """(exact (M0, M1, M2) with NaN where none is known, number density or None) of a case."""
+    a, p = sel
+    if beta is not None:  # the number (Riccati) and the steady density
+        M0 = an.aggregation_breakage_number(t, beta, a, 1.0, 1.0)
+        return np.array([M0, 1.0, np.nan]), lambda v: an.aggregation_breakage_steady_density(v, beta, a, 1.0)
+    if fragments == "binary":  # two fragments per breakage, S = a v: M0 = 1 + a t
+        return np.array([1.0 + a * t, 1.0, np.nan]), None
+    return np.array(an.breakage_moments(t, a, p, 1.0, 1.0)), lambda v: an.breakage_number_density(v, t, a, p, 1.0, 1.0)
+
+
+def breakage_accuracy(qs):
+    """The breakage cases on the grids 2^(1/q): moments, L1 of the cell numbers, PSD, orders."""
+    for label, fragments, sel, beta, t in BREAKAGE_CASES:
+        print(f"\nbreakage: {label} (t = {t:g})")
+        print("   ratio  bins    M0 err     M1 err     M2 err   |  L1 cells  | PSD (Q3) | steps  wall")
+        exact, density = _breakage_reference(fragments, sel, beta, t)
+        cols = {"M0": [], "M2": [], "L1": []}
+        for q in qs:
+            grid = ver.geometric_grid(q, x0=1e-6, x_max=60.0)
+            t0 = time.perf_counter()
+            res = ver.simulate_breakage(
+                Breakage(PowerLawSelection(*sel), fragments),
+                t,
+                grid,
+                kernel=None if beta is None else ConstantKernel(beta),
+            )
+            wall = time.perf_counter() - t0
+            err = res.moments()[-1] / exact - 1.0
+            l1, psd = ver.density_errors(density, grid, res.state.number) if density else (np.nan, np.nan)
+            for key, value in zip(cols, (err[0], err[2], l1)):
+                cols[key].append(value)
+            fmt = [("    -    " if np.isnan(e) else f"{e:+.2e}") for e in err]
+            l1s, psds = (("    -   " if np.isnan(e) else f"{e:.2e}") for e in (l1, psd))
+            print(
+                f"  {grid.ratio:6.4f} {grid.bins:5d}  {fmt[0]}  {fmt[1]}  {fmt[2]} |  {l1s}  | {psds} |"
+                f" {res.info['steps']:5d} {wall:5.2f} s"
+            )
+        print("  observed order per halving of ln r: " + "; ".join(f"|{k}| {_orders(qs, v)}" for k, v in cols.items()))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="q = 1, 2, 4 only")
     ap.add_argument("--fixed-pivot", action="store_true", help="also the fixed pivot scheme")
     ap.add_argument("--grid", action="store_true", help="only the grid convergence of the default batch")
+    ap.add_argument("--breakage", action="store_true", help="only the breakage cases")
     args = ap.parse_args()
     warnings.simplefilter("ignore", IntegrationWarning)
+    qs = (1, 2, 4) if args.quick else (1, 2, 3, 4, 8)
     if args.grid:
         grid_convergence()
         return
-    qs = (1, 2, 4) if args.quick else (1, 2, 3, 4, 8)
+    if args.breakage:
+        breakage_accuracy(qs)
+        return
     schemes = ("cell_average", "fixed_pivot") if args.fixed_pivot else ("cell_average",)
     t_all = time.perf_counter()
     for scheme in schemes:
@@ -267,6 +330,7 @@ def main():
                             f"  {l1s_}  | {psd_} | {res.info['steps']:5d} {wall:5.2f} s{note}"
                         )
                     print(f"  observed order per halving of ln r: |M2 err| {_orders(qs, m2s)}; L1 {_orders(qs, l1s)}")
+    breakage_accuracy(qs)
     grid_convergence((1, 2, 3, 4, 8, 12, 16) if args.quick else GRID_QS)
     print(f"\ntotal {time.perf_counter() - t_all:.0f} s")
 

@@ -30,6 +30,7 @@ rule dem_point:
         table=f"{DEM_RUN}/collisions.csv",
         walls=f"{DEM_RUN}/wall_collisions.csv",
         velocities=f"{DEM_RUN}/impact_velocity.csv",
+        wall_velocities=f"{DEM_RUN}/wall_impact_velocity.csv",
         summary=f"{DEM_RUN}/summary.json",
     log:
         layout.log("dem/rpm{rpm}_{dist}_rep{rep}.log"),
@@ -58,11 +59,13 @@ rule collision_tables:
         tables=dem_outputs("collisions.csv"),
         walls=dem_outputs("wall_collisions.csv"),
         velocities=dem_outputs("impact_velocity.csv"),
+        wall_velocities=dem_outputs("wall_impact_velocity.csv"),
         summaries=dem_outputs("summary.json"),
     output:
         table=layout.dem("collisions.csv"),
         walls=layout.dem("wall_collisions.csv"),
         velocities=layout.dem("impact_velocity.csv"),
+        wall_velocities=layout.dem("wall_impact_velocity.csv"),
         replicates=layout.dem("collisions_replicates.csv"),
         runs=report(
             layout.dem("runs.csv"),

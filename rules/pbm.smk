@@ -6,7 +6,8 @@
 #
 # Rule pbm_table runs the same batch with the DEM grid's collision table as the frequency source
 # (encounter frequency per pair, interpolated in size and rpm) and its impact-velocity table
-# (needed by pbm.aggregation.success.velocity_model: stokes). It is not a default target: ask for
+# (needed by pbm.aggregation.success.velocity_model: stokes), and the wall tables (breakage from
+# impacts, pbm.breakage). It is not a default target: ask for
 # results/pbm/table/rpm<rpm>_<dist>/summary.csv.
 
 
@@ -33,6 +34,8 @@ rule pbm_table:
     input:
         table=layout.dem("collisions.csv"),
         velocities=layout.dem("impact_velocity.csv"),
+        walls=layout.dem("wall_collisions.csv"),
+        wall_velocities=layout.dem("wall_impact_velocity.csv"),
     output:
         **pbm_outputs("table"),
     log:

@@ -14,6 +14,7 @@ rule report_findings:
     input:
         speed=layout.validation("speed_study.csv"),
         feed=layout.validation("feed_study.csv"),
+        breakage=layout.validation("breakage_study.csv"),
         comparison=layout.report("comparison.csv"),
     output:
         speed_png=registered(
@@ -27,6 +28,12 @@ rule report_findings:
             "findings_feed",
             CATEGORIES["findings"],
             result="granule size against the feed",
+        ),
+        breakage_png=registered(
+            layout.report("findings/breakage.png"),
+            "findings_breakage",
+            CATEGORIES["findings"],
+            result="granule size against impeller speed with breakage",
         ),
         rst=layout.report("findings/findings.rst"),
     log:

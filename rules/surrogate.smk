@@ -1,5 +1,6 @@
 # Reduced-order model: MLP encounter surrogate (encounter frequency and impact-velocity
-# distribution per class pair) trained on the DEM grid's tables. Its params are the surrogate
+# distribution per class pair, and per wall the impacts per granule and their speeds) trained on
+# the DEM grid's tables. Its params are the surrogate
 # settings and the granulator (the tip-speed feature): changing them retrains it.
 
 
@@ -7,6 +8,8 @@ rule train_surrogate:
     input:
         table=layout.dem("collisions.csv"),
         velocity=layout.dem("impact_velocity.csv"),
+        walls=layout.dem("wall_collisions.csv"),
+        wall_velocities=layout.dem("wall_impact_velocity.csv"),
     output:
         model=MODEL,
         metadata=layout.surrogate("model.json"),

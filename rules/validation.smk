@@ -149,13 +149,15 @@ extra_targets += [layout.report("comparison.csv"), layout.validation("proposals.
 
 # The PBM-ANN studies the report's findings open with: final sizes against impeller speed (the
 # sweep's speeds, validation feed) and against the feed (the grid's feeds and 50:50 blends between
-# neighbours, at FEED_STUDY_RPM), each with the ensemble members' range and the domain status.
+# neighbours, at FEED_STUDY_RPM), each with the ensemble members' range and the domain status; and
+# the speed study without breakage, with it and with its criterion's Y and St_def* halved and doubled.
 rule pbm_ann_studies:
     input:
         model=MODEL,
     output:
         speed=layout.validation("speed_study.csv"),
         feed=layout.validation("feed_study.csv"),
+        breakage=layout.validation("breakage_study.csv"),
     log:
         layout.log("validation/pbm_ann_studies.log"),
     conda:

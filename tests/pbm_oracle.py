@@ -5,6 +5,8 @@
   block-diagonal over the ordered-pair rates R_ij = beta_ij N_i N_j, RL_ij = beta_ij L_i N_j,
   RG_ij = beta_ij G_i N_j) followed by the scheme's placement of the births. It adds the same
   products in the same order as the compiled loop, so the two agree to the bit.
+* :func:`breakage_totals`: the breakage rates as matrix products with the fragment tables,
+  births placed by the same cell-average split (equal to the compiled loop to round-off).
 * :func:`success`, :func:`spraying`, :func:`consolidation`: the success models and the other
   rate processes as their formulas.
 * :func:`class_rates` and :func:`ssp_step`: the rates of a class state and one SSP Runge-Kutta
@@ -14,6 +16,8 @@ This was the library's own numpy path before the compiled backend became the onl
 """
 
 from __future__ import annotations
+
+from types import SimpleNamespace
 
 import numpy as np
 from scipy import sparse
@@ -122,6 +126,21 @@ def aggregation_totals(op, beta, nlg, m=None):
     return d, float(Y[0, 2 * K + M])
 
 
+def breakage_totals(xr, sel, tab, nlg):
+    """(3, M) breakage rates of the class totals ``nlg`` (3, M) on the pivots ``xr`` (K,, units of
+    x_0): the K pivot classes die at the selection rates ``sel`` (K,) with their liquid and gas;
+    the fragments of ``tab`` (3, K, K: number, first moment about x_i, solid share per parent)
+    are born per cell and placed by the cell-average split."""
+    K = xr.size
+    R = sel * nlg[:, :K]  # events, and the liquid and gas they carry
+    Y = np.zeros((3, 2 * K))
+    Y[0, :K], Y[0, K:] = tab[0] @ R[0], tab[1] @ R[0]
+    Y[1:, :K] = R[1:] @ tab[2].T
+    d = np.zeros(nlg.shape)
+    d[:, :K] = _cell_average_births(SimpleNamespace(K=K, xr=xr), Y) - R
+    return d
+
+
 def success(model, threshold, width, phi):
     """p(phi) of the success models."""
     phi = np.asarray(phi, float)
@@ -152,14 +171,19 @@ def consolidation(nlg, rate, gas_min):
     return -rate * (nlg[2] - gas_min * nlg[0])
 
 
-def class_rates(op, u, beta, model="always", threshold=0.0, width=1.0, xc=None, spray=(0.0, None), consol=(0.0, None)):
+def class_rates(
+    op, u, beta, model="always", threshold=0.0, width=1.0, xc=None, spray=(0.0, None), consol=(0.0, None), brk=None
+):
     """Rates (3M,) and refused rate of the class state u = [N, L, G] (3M,) with the kernel beta_ij
-    p(phi_i) p(phi_j) (``model``), spraying (rate, weights) and consolidation (rate, G_min)."""
+    p(phi_i) p(phi_j) (``model``), spraying (rate, weights), consolidation (rate, G_min) and
+    breakage ``brk`` (selection (K,), fragment tables) or None."""
     nlg = u.reshape(3, op.M)
     if model != "always":
         p = success(model, threshold, width, surface_fraction(nlg, op.class_volumes if xc is None else xc))
         beta = beta * np.outer(p, p)
     d, refused = aggregation_totals(op, beta, nlg)
+    if brk is not None:
+        d += breakage_totals(op.xr, *brk, nlg)
     if spray[0] > 0:
         d[1] += spraying(nlg, *spray)
     if consol[0] > 0:

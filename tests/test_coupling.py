@@ -250,3 +250,46 @@ def test_velocity_fractions_of_a_dem_interval_reach_the_pbm_bins():
     rates = source.encounters(np.array([1.9e-3, 2.1e-3, 3.9e-3]), np.ones(3), 300.0)
     assert rates.velocity_fractions[0, 2, 5] == 1.0 and rates.velocity_fractions[0, 1, 3] == pytest.approx(0.5)
     np.testing.assert_allclose(rates.frequency, source(np.array([1.9e-3, 2.1e-3, 3.9e-3]), np.ones(3), 300.0))
+
+
+class _ImpactProvider(_FixedProvider):
+    """Fixed pair frequencies and wall impacts (100 per granule and second on the impeller, none
+    on the bowl), every impact at `speed` (m/s): the loop's breakage bookkeeping, not the DEM."""
+
+    name = "impacts"
+
+    def __init__(self, value, speed):
+        super().__init__(value)
+        self.speed = speed
+
+    def fingerprint(self):
+        return {"name": self.name, "value": self.value, "speed": self.speed}
+
+    def __call__(self, sample, interval_dir, index):
+        from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, EncounterRates, ImpactRates, WallRates
+
+        matrix, info = super().__call__(sample, interval_dir, index)
+        k = len(sample.diameters)
+        fractions = np.zeros((k, k, N_VELOCITY_BINS))
+        fractions[..., int(np.searchsorted(VELOCITY_EDGES, self.speed, side="right") - 1)] = 1.0
+        walls = WallRates(np.array([np.zeros(k), np.full(k, 100.0)]), np.stack([fractions[0], fractions[0]]))
+        return ImpactRates(EncounterRates(matrix, fractions), walls), info
+
+
+def test_breakage_from_each_intervals_impacts_breaks_only_above_the_critical_speed(tiny_config, tmp_path):
+    """With breakage on, the loop hands each interval's impacts to the selection: impacts below the
+    critical speed (2 m/s with Y = 1e4 Pa, St_def* = 0.2, 1000 kg/m3) change nothing, impacts above
+    it make the granules smaller; solid and liquid stay those of the batch without breakage (the
+    gas follows the consolidation of the granules, which depends on their sizes)."""
+    loop = tiny_config.coupled_loop().replace(coupling_intervals=2)
+    pbm = loop.batch.pbm
+    brk = pbm.breakage.replace(enabled=True, yield_strength=1.0e4, critical_stokes=0.2, walls=("impeller",))
+    on = loop.replace(batch=loop.batch.replace(pbm=pbm.replace(breakage=brk)))
+    off = loop.replace(batch=loop.batch.replace(pbm=pbm.replace(breakage=brk.replace(enabled=False))))
+    plain = coupling.run_loop(off, _FixedProvider(2.0), 600.0, tmp_path / "off").result.summary()
+    slow = coupling.run_loop(on, _ImpactProvider(2.0, 0.5), 600.0, tmp_path / "slow").result.summary()
+    fast = coupling.run_loop(on, _ImpactProvider(2.0, 4.0), 600.0, tmp_path / "fast").result.summary()
+    np.testing.assert_allclose(slow.d50, plain.d50, rtol=1e-12)
+    assert fast.d50.iloc[-1] < 0.9 * plain.d50.iloc[-1]
+    for column in ("total_solid_volume", "total_liquid_volume"):
+        np.testing.assert_allclose(fast[column], plain[column], rtol=1e-9)

@@ -59,14 +59,18 @@ def test_compiled_totals_equal_the_sparse_map_to_the_bit(scheme, K, extra):
         assert op.totals_stacked(beta, nlg)[0] is not d
 
 
-def _compiled_rates(op, u, beta, model, threshold, width, vectors, spray_rate, consolidation_rate):
+#: the breakage arguments of the compiled rates without breakage (an empty selection)
+NO_BREAKAGE = (np.zeros(0), np.zeros((3, 0, 0)), np.zeros((4, 0)))
+
+
+def _compiled_rates(op, u, beta, model, threshold, width, vectors, spray_rate, consolidation_rate, brk=NO_BREAKAGE):
     from pbmdem.pbm import _compiled
 
     M = op.M
     d = np.empty((3, M))
     params = np.array([0.0, 0.0, threshold, width, spray_rate, consolidation_rate])
     refused = _compiled.class_rates(
-        u, beta, _compiled.SUCCESS_CODES[model], vectors, params, *op.compiled_arrays(), np.zeros((2, M)), d
+        u, beta, _compiled.SUCCESS_CODES[model], vectors, params, *op.compiled_arrays(), *brk, np.zeros((2, M)), d
     )
     return d.reshape(-1), refused
 
@@ -111,7 +115,7 @@ def test_compiled_class_rates_and_stages_equal_the_oracle(scheme, model):
         u_new, u_low, stage = np.empty(3 * M), np.empty(3 * M), np.empty(3 * M)
         step_refused = _compiled.ssp_step(
             u, k, r, dt, order, beta, _compiled.SUCCESS_CODES[model], vectors, params, *op.compiled_arrays(),
-            np.zeros((2, M)), u_new, u_low, stage,
+            *NO_BREAKAGE, np.zeros((2, M)), u_new, u_low, stage,
         )  # fmt: skip
         ref_new, ref_low, ref_refused = oracle.ssp_step(oracle_rates, u, dt, order)
         check(u_new, ref_new)

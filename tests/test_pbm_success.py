@@ -515,6 +515,11 @@ def test_cli_table_run_with_velocity_table(tmp_path, root, capsys):
     ]
     assert main(base) == 2
     assert "needs --velocity-table PATH" in capsys.readouterr().err
+    # breakage (on by default) takes its selection from the wall tables too
+    assert main(base + ["--velocity-table", str(pv)]) == 2
+    assert "--wall-table PATH" in capsys.readouterr().err
+    cfg["pbm"]["breakage"]["enabled"] = False  # aggregation's velocity table is what this test is about
+    cfg_path.write_text(yaml.safe_dump(cfg))
     assert main(base + ["--velocity-table", str(pv)]) == 0
     s = pd.read_csv(tmp_path / "out" / "summary.csv")
     assert s["total_solid_volume"].iloc[-1] == pytest.approx(s["total_solid_volume"].iloc[0], rel=1e-13)

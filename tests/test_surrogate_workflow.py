@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from pbmdem.config import ConfigError, Surrogate, load_config, section_defaults
-from pbmdem.impact import N_VELOCITY_BINS
+from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES
 from pbmdem.surrogate import load_surrogate
 from pbmdem.surrogate.cli import add_cli, main
 from pbmdem.surrogate.features import check_impeller_radius
@@ -306,3 +306,43 @@ def test_single_run_table_still_trains(tmp_path):
         meta = train_and_report(table, out / "model.skops", settings=tiny_settings(), impeller_radius=R)
     assert meta["training_point_ids"] == ["rpm600_mixed"]
     assert len(pd.read_csv(out / "metrics.csv")) == 0 and (out / "parity.png").exists()
+
+
+def test_wall_models_learn_the_wall_impacts_with_the_same_held_out_evaluation(tmp_path):
+    from pbmdem.surrogate.synthetic import make_synthetic_wall_tables, wall_law
+
+    table, velocity = make_synthetic_tables(R, rpms=(300, 600, 900), seed=11)
+    walls, wall_velocity = make_synthetic_wall_tables(table, R, seed=12)
+    out = tmp_path / "surrogate"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        meta = train_and_report(
+            table,
+            out / "model.skops",
+            settings=tiny_settings(),
+            impeller_radius=R,
+            velocity_table=velocity,
+            wall_table=walls,
+            wall_velocity_table=wall_velocity,
+        )
+    metrics = pd.read_csv(out / "metrics.csv", dtype={"fold": str})
+    for wall in ("bowl", "impeller"):
+        for target in ("encounter_frequency", "impact_velocity"):
+            rows = metrics[(metrics["target"] == f"{wall}_{target}") & (metrics["fold"] == "pooled")]
+            # the same candidates on the same folds as the pair model
+            assert set(rows["model"]) == set(
+                metrics[(metrics["target"] == target) & (metrics["fold"] == "pooled")]["model"]
+            )
+        assert meta["cv_scores"]["wall_summary"][wall]["frequency"]["mlp"]["pooled_r2_log10"] > 0.8
+    model = load_surrogate(out / "model.skops")
+    d, n = np.array([0.002, 0.003, 0.004]), np.array([900.0, 600.0, 300.0])
+    rates = model.impacts(d, n, 600.0)
+    for wall in ("bowl", "impeller"):
+        rate, mu, _ = wall_law(wall, d, 600.0, R)
+        frequency, fractions = rates.walls.of(wall)
+        np.testing.assert_allclose(frequency, rate, rtol=0.3)
+        np.testing.assert_allclose(fractions.sum(axis=1), 1.0)
+        median = VELOCITY_EDGES[np.argmax(np.cumsum(fractions, axis=1) >= 0.5, axis=1)]
+        assert np.all(np.abs(np.log10(median) - mu) < 0.35)  # within about a bin of the law's median
+    member = model.member(1).impacts(d, n, 600.0)
+    assert member.walls.frequency.shape == (2, 3) and not np.allclose(member.walls.frequency, rates.walls.frequency)

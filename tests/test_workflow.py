@@ -341,7 +341,9 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
         findings.find(p) for p in ("**Impeller speed.**", "**Feed size distribution.**", "**How far to trust them.**")
     ]
     assert -1 not in order and order == sorted(order), order
-    assert findings.count(".. image:: data:image/png;base64,") == 2
+    # the three findings figures (speed, feed, and with pbm.breakage on the breakage study)
+    assert findings.count(".. image:: data:image/png;base64,") == 3
+    assert "**Breakage.**" in findings
     response = pd.read_csv(res / "dem" / "speed_response.csv")
     assert len(response) == len(cfg["grid"]["impeller_rpm"]) * len(cfg["grid"]["size_distributions"])
     assert (response.n_replicates == cfg["dem"]["replicates"]).all()
@@ -473,8 +475,9 @@ def test_report_in_a_browser_opens_with_the_findings_and_shows_everything(tiny_w
     findings = [alt for alt in found["landing_alts"] if alt.startswith("final d10, d50, d90 against")]
     assert len(findings) == 2, found["landing_alts"]
     speeds = len(yaml.safe_load(configfile.read_text())["validation"]["rpm"])
-    # per speed 4; the sweep, parity, speed response, impact velocities; the two findings figures
-    assert found["images"] == 4 * speeds + 6 and found["broken"] == [], found
+    # per speed 4; the sweep, parity, speed response, impact velocities; the three findings figures
+    # (speed, feed, and with pbm.breakage on the breakage study)
+    assert found["images"] == 4 * speeds + 7 and found["broken"] == [], found
     # the display tables and each speed's out-of-domain table
     assert found["pages"] == len(REPORT_TABLES) + speeds and found["page_broken"] == [] and found["overflow"] == [], (
         found

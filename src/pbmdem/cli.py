@@ -73,6 +73,8 @@ def _pbm(args: argparse.Namespace) -> int:
     for flag, value, kernels in (
         ("--table", args.table, ("table",)),
         ("--velocity-table", args.velocity_table, ("table",)),
+        ("--wall-table", args.wall_table, ("table",)),
+        ("--wall-velocity-table", args.wall_velocity_table, ("table",)),
         ("--model", args.model, ("ann",)),
     ):
         if value is not None and args.kernel not in kernels:
@@ -99,10 +101,12 @@ def _pbm(args: argparse.Namespace) -> int:
             )
         info["surrogate_domain"] = {k: totals.get(k, 0) for k in ("out_of_domain_count", "out_of_domain_intervals")}
     else:
+        from pbmdem.pbm.impact_breakage import impact_selection
         from pbmdem.pbm.setup import run_batch
 
         source = _table_source(batch, args) if args.kernel == "table" else None
-        result = run_batch(batch, source, rpm)
+        selection = impact_selection(batch.pbm, source) if source is not None else None
+        result = run_batch(batch, source, rpm, selection=selection)
     result.info.update(info)
     paths = result.save(args.out)
     last = result.summary().iloc[-1]
@@ -125,6 +129,7 @@ def _pbm(args: argparse.Namespace) -> int:
 def _table_source(batch, args):
     from pbmdem.pbm.errors import PBMInputError
     from pbmdem.pbm.kernels import TableFrequency
+    from pbmdem.pbm.wall_table import WallTable
 
     success = batch.pbm.aggregation.success
     if args.table is None:
@@ -134,11 +139,20 @@ def _table_source(batch, args):
             f"pbm.aggregation.success.velocity_model = {success.velocity_model!r} needs impact "
             "velocities: --kernel table needs --velocity-table PATH (results/dem/impact_velocity.csv)"
         )
+    if batch.pbm.breakage.enabled and (args.wall_table is None or args.wall_velocity_table is None):
+        raise PBMInputError(
+            "pbm.breakage.enabled = true: --kernel table needs --wall-table PATH and --wall-velocity-table "
+            "PATH (results/dem/wall_collisions.csv, wall_impact_velocity.csv) for the selection from impacts"
+        )
+    walls = None
+    if batch.pbm.breakage.enabled:
+        walls = WallTable.from_csv(args.wall_table, args.wall_velocity_table, batch.distribution)
     # one distribution's rows: the grid's distributions have different class sizes
     return TableFrequency.from_csv(
         args.table,
         distribution=batch.distribution,
         velocity_path=args.velocity_table,
+        walls=walls,
         extrapolation=batch.pbm.aggregation.table_extrapolation,
     )
 
@@ -257,6 +271,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="impact-velocity table CSV (results/dem/impact_velocity.csv; with --kernel table); "
         "needed when pbm.aggregation.success.velocity_model is not 'none'",
     )
+    for flag, name in (("--wall-table", "wall_collisions.csv"), ("--wall-velocity-table", "wall_impact_velocity.csv")):
+        pbm.add_argument(
+            flag,
+            type=Path,
+            default=None,
+            help=f"results/dem/{name} (with --kernel table); needed when pbm.breakage.enabled is true",
+        )
     pbm.add_argument("--model", type=Path, help="surrogate model file (with --kernel ann)")
     pbm.add_argument("--rpm", required=True, help="impeller speed (1/min), 0 < rpm <= 20000")
     pbm.add_argument("--distribution", default=None, help="size distribution name (default: first of the grid)")

@@ -85,3 +85,22 @@ def velocity_fractions_from_table(velocities, k: int) -> np.ndarray:
     upper[pairs["class_i"].to_numpy(), pairs["class_j"].to_numpy()] = counts
     strictly_upper = np.triu(np.ones((k, k)), 1)[:, :, None] * upper
     return fractions_with_fallback(upper + np.transpose(strictly_upper, (1, 0, 2)), upper.sum(axis=(0, 1)))
+
+
+def wall_rates_from_tables(walls, velocities, k: int):
+    """:class:`pbmdem.impact.WallRates` of K classes from one DEM run's wall_collisions.csv (rows
+    wall, class_i, encounter_frequency_per_particle) and wall_impact_velocity.csv (rows wall,
+    class_i, v_lo, encounters); a class without wall encounters gets the wall's pooled speeds."""
+    from pbmdem.impact import N_VELOCITY_BINS, WALLS, WallRates, velocity_bin
+
+    frequency = np.zeros((len(WALLS), k))
+    counts = np.zeros((len(WALLS), k, N_VELOCITY_BINS))
+    w = np.array([WALLS.index(x) for x in walls["wall"]], int)
+    frequency[w, walls["class_i"].to_numpy(int)] = np.nan_to_num(
+        walls["encounter_frequency_per_particle"].to_numpy(float)
+    )
+    wv = np.array([WALLS.index(x) for x in velocities["wall"]], int)
+    b = velocity_bin(velocities["v_lo"].to_numpy(float))
+    np.add.at(counts, (wv, velocities["class_i"].to_numpy(int), b), velocities["encounters"].to_numpy(float))
+    fractions = np.stack([fractions_with_fallback(counts[i], counts[i].sum(axis=0)) for i in range(len(WALLS))])
+    return WallRates(frequency, fractions)

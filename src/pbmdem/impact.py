@@ -75,6 +75,79 @@ class EncounterRates:
         return self.frequency[:, :, None] * self.velocity_fractions
 
 
+#: The walls a granule can hit, in the order of the DEM deck's meshes (pbmdem.dem.collisions).
+WALLS = ("bowl", "impeller")
+
+
+def fraction_above(speed: float) -> np.ndarray:
+    """(N_VELOCITY_BINS,) fraction of each bin's impacts faster than ``speed`` (m/s).
+
+    A bin wholly above ``speed`` counts 1, wholly below 0. In a bin that straddles it, impacts are
+    taken as spread evenly in log v (the bins are log-spaced, and the measured speed distributions
+    are close to log-normal, pbmdem.surrogate.velocity), so the fraction above is
+    log(v_hi / speed) / log(v_hi / v_lo); in bin 0, [0, 1 mm/s), evenly in v. The last bin, which
+    also holds impacts above 10 m/s, is treated as ending at 10 m/s.
+    """
+    s = float(speed)
+    if not (np.isfinite(s) and s >= 0):
+        raise ValueError(f"critical impact speed {speed!r} m/s: allowed are finite speeds >= 0")
+    lo, hi = VELOCITY_EDGES[:-1], VELOCITY_EDGES[1:]
+    inside = (lo < s) & (s < hi)
+    out = np.where(s <= lo, 1.0, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_part = np.log(hi / s) / np.log(hi / np.where(lo > 0, lo, 1.0))
+    linear_part = (hi - s) / hi
+    return np.where(inside, np.where(lo > 0, log_part, linear_part), out)
+
+
+@dataclass(frozen=True)
+class WallRates:
+    """Velocity-resolved wall impacts of K size classes.
+
+    frequency: (W, K) impacts per granule of each class on each wall of ``walls`` (1/s);
+    velocity_fractions: (W, K, N_VELOCITY_BINS) fraction of them in each velocity bin (rows sum to
+    1, or to 0 where a class has no data). Speeds are normal approach speeds relative to the wall.
+    """
+
+    frequency: np.ndarray
+    velocity_fractions: np.ndarray
+    walls: tuple[str, ...] = WALLS
+
+    def __post_init__(self):
+        W = len(self.walls)
+        if self.frequency.ndim != 2 or self.frequency.shape[0] != W:
+            raise ValueError(
+                f"wall impact frequency must be ({W}, K) for walls {self.walls}, got {self.frequency.shape}"
+            )
+        K = self.frequency.shape[1]
+        if self.velocity_fractions.shape != (W, K, N_VELOCITY_BINS):
+            raise ValueError(
+                f"wall velocity fractions must be ({W}, {K}, {N_VELOCITY_BINS}), got {self.velocity_fractions.shape}"
+            )
+
+    def of(self, wall: str) -> tuple[np.ndarray, np.ndarray]:
+        """(K,) frequency and (K, V) fractions of one wall (KeyError naming the walls present)."""
+        if wall not in self.walls:
+            raise KeyError(f"wall {wall!r}: the impacts hold {list(self.walls)}")
+        w = self.walls.index(wall)
+        return self.frequency[w], self.velocity_fractions[w]
+
+
+@dataclass(frozen=True)
+class ImpactRates:
+    """Every impact a granule of each class suffers: encounters with other granules (per pair)
+    and impacts on the walls (per granule), each with its impact-velocity fractions. What a
+    breakage selection function needs (pbmdem.pbm.impact_breakage)."""
+
+    pairs: EncounterRates
+    walls: WallRates
+
+    def __post_init__(self):
+        K = self.pairs.frequency.shape[0]
+        if self.walls.frequency.shape[1] != K:
+            raise ValueError(f"wall impacts of {self.walls.frequency.shape[1]} classes beside pair encounters of {K}")
+
+
 #: the columns of an impact-velocity table (results/dem/impact_velocity.csv) that name one bin of one class pair
 VELOCITY_KEYS = ("point_id", "class_i", "class_j")
 

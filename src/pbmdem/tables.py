@@ -3,11 +3,12 @@
 One owner per table: each `Table` below declares its columns (type, sign, where an empty cell is
 allowed) and `read(path)` checks a file against it; every stage reads these tables through it.
 
-* `RUN_PAIRS`, `RUN_WALLS`, `RUN_VELOCITIES`: one DEM run's collisions.csv, wall_collisions.csv,
-  impact_velocity.csv (results/dem/<point>/rep<k>/); `RUN_PAIRS` is also the stacked
-  results/dem/collisions_replicates.csv.
-* `GRID_PAIRS`, `GRID_WALLS`, `GRID_VELOCITIES`: their replicate means with `n_replicates` and
-  standard errors (results/dem/collisions.csv, wall_collisions.csv, impact_velocity.csv).
+* `RUN_PAIRS`, `RUN_WALLS`, `RUN_VELOCITIES`, `RUN_WALL_VELOCITIES`: one DEM run's collisions.csv,
+  wall_collisions.csv, impact_velocity.csv, wall_impact_velocity.csv (results/dem/<point>/rep<k>/);
+  `RUN_PAIRS` is also the stacked results/dem/collisions_replicates.csv.
+* `GRID_PAIRS`, `GRID_WALLS`, `GRID_VELOCITIES`, `GRID_WALL_VELOCITIES`: their replicate means with
+  `n_replicates` and standard errors (results/dem/collisions.csv, wall_collisions.csv,
+  impact_velocity.csv, wall_impact_velocity.csv).
 * `RUNS`: results/dem/runs.csv, one row per DEM run.
 * `INTERVALS`: a coupled loop's intervals.csv; `COMPARISON`: results/report/comparison.csv.
 
@@ -206,11 +207,24 @@ RUN_VELOCITIES = Table(
         Column("encounters", "int"),
     ),
 )
+RUN_WALL_VELOCITIES = Table(
+    "per-run wall impact-velocity table",
+    (
+        *POINT,
+        REPLICATE,
+        _text("wall"),
+        Column("class_i", "int"),
+        Column("v_lo"),
+        Column("v_hi", sign="positive"),
+        Column("encounters", "int"),
+    ),
+)
 #: per table kind: the columns that are keys of the replicate mean (not averaged)
 KEYS = {
     "pairs": ("point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j"),
     "walls": ("point_id", "rpm", "distribution", "wall", "class_i", "d_i"),
     "velocities": ("point_id", "rpm", "distribution", "class_i", "class_j", "v_lo", "v_hi"),
+    "wall_velocities": ("point_id", "rpm", "distribution", "wall", "class_i", "v_lo", "v_hi"),
 }
 #: columns of which the grid tables also carry a standard error `<column>_se`
 SE_COLUMNS = ("encounter_frequency_per_pair", "frequency_per_pair", "encounter_frequency_per_particle")
@@ -232,7 +246,13 @@ def _grid(table: Table, what: str, keys) -> Table:
 GRID_PAIRS = _grid(RUN_PAIRS, "collision table", KEYS["pairs"])
 GRID_WALLS = _grid(RUN_WALLS, "wall-collision table", KEYS["walls"])
 GRID_VELOCITIES = _grid(RUN_VELOCITIES, "impact-velocity table", KEYS["velocities"])
-RUN_TABLES = {"pairs": RUN_PAIRS, "walls": RUN_WALLS, "velocities": RUN_VELOCITIES}
+GRID_WALL_VELOCITIES = _grid(RUN_WALL_VELOCITIES, "wall impact-velocity table", KEYS["wall_velocities"])
+RUN_TABLES = {
+    "pairs": RUN_PAIRS,
+    "walls": RUN_WALLS,
+    "velocities": RUN_VELOCITIES,
+    "wall_velocities": RUN_WALL_VELOCITIES,
+}
 
 RUNS = Table(
     "DEM run table",

@@ -12,5 +12,11 @@ write_findings(
     speed_feed=sm.params.speed_feed,
     feed_rpm=sm.params.feed_rpm,
     batch_s=sm.params.batch_s,
-    out={"speed_png": sm.output.speed_png, "feed_png": sm.output.feed_png, "rst": sm.output.rst},
+    breakage=sm.input.breakage,
+    out={
+        "speed_png": sm.output.speed_png,
+        "feed_png": sm.output.feed_png,
+        "breakage_png": sm.output.breakage_png,
+        "rst": sm.output.rst,
+    },
 )

@@ -18,4 +18,6 @@ train_and_report(
     impeller_radius=training.granulator.impeller.tip_radius,
     n_jobs=snakemake.threads,  # noqa: F821
     velocity_table=snakemake.input.velocity,  # noqa: F821
+    wall_table=snakemake.input.walls,  # noqa: F821
+    wall_velocity_table=snakemake.input.wall_velocities,  # noqa: F821
 )

@@ -94,6 +94,22 @@ class AggregationSettings(Settings):
 
 
 @dataclass(frozen=True)
+class BreakageSettings(Settings):
+    """Breakage of aggregates (docs/pbm.md, "Breakage"): on or off, the fragment distribution,
+    PBM-constant's selection rate (1/s per granule), and the impact criterion of PBM-DEM and
+    PBM-ANN: dynamic yield strength Y (Pa), critical Stokes deformation number, the walls and
+    whether granule-granule impacts break granules."""
+
+    enabled: bool
+    fragments: str
+    constant_rate: float
+    yield_strength: float
+    critical_stokes: float
+    walls: tuple[str, ...]
+    pairs: bool
+
+
+@dataclass(frozen=True)
 class Solver(Settings):
     """Time integration of the PBM (pbmdem.pbm.model): method, positivity safety factor, local
     error tolerances, largest step (s), refused-solid fraction, step and wall-time guards. Its
@@ -129,6 +145,7 @@ class Pbm(Settings):
     liquid_addition: LiquidAdditionSettings
     consolidation: ConsolidationSettings
     aggregation: AggregationSettings
+    breakage: BreakageSettings
     solver: Solver
     output: OutputSettings
 

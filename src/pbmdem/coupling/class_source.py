@@ -4,7 +4,10 @@ The DEM (or the surrogate) gives per-pair encounter frequencies between the K cl
 representative sample. `ClassFrequencySource` holds them for one interval and interpolates them
 onto any PBM bins: a power law in size (bilinear in log d_i, log d_j of log c), constant beyond the
 smallest and largest class (`pbmdem.pbm.kernels.TableFrequency` with clamping); with impact-velocity
-fractions, a bin takes those of the class nearest to it in log diameter.
+fractions, a bin takes those of the class nearest to it in log diameter. With wall impacts
+(`ImpactRates`, for breakage) a bin's impacts per granule on each wall are interpolated linearly in
+log d between the classes (constant beyond them; a class without wall impacts may have a zero
+rate, which log f could not hold), their speeds those of the nearest class.
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.frequency import upper_pairs
-from pbmdem.impact import EncounterRates
+from pbmdem.impact import EncounterRates, ImpactRates, WallRates
 from pbmdem.pbm.kernels import TableFrequency
 
 
@@ -28,12 +31,17 @@ class ClassFrequencySource:
     """Hold class frequencies for an interval and interpolate them onto any PBM bins.
 
     `rates` is the (K, K) encounter frequency per class pair, or an EncounterRates whose velocity
-    fractions then make the source velocity-resolved (:meth:`encounters`)."""
+    fractions then make the source velocity-resolved (:meth:`encounters`), or an ImpactRates whose
+    wall impacts also make it a source for breakage (:meth:`impacts`)."""
 
     def __init__(self, diameters, rates, label: str):
 
         self.diameters = list(map(float, diameters))
         self.fractions = None
+        self.walls = None
+        if isinstance(rates, ImpactRates):
+            self.walls = rates.walls
+            rates = rates.pairs
         if isinstance(rates, EncounterRates):
             self.fractions = np.asarray(rates.velocity_fractions, float)
             rates = rates.frequency
@@ -52,12 +60,25 @@ class ClassFrequencySource:
     def __repr__(self) -> str:
         return f"ClassFrequencySource({self.label}, classes={len(self.diameters)})"
 
+    def _nearest(self, diameters) -> np.ndarray:
+        d = np.log(np.atleast_1d(np.asarray(diameters, float)))
+        return np.abs(d[:, None] - np.log(np.asarray(self.diameters))[None, :]).argmin(axis=1)
+
     def encounters(self, diameters, numbers, rpm) -> EncounterRates:
         if self.fractions is None:
             raise ValueError(f"{self.label}: no impact-velocity distribution for a velocity-dependent success model")
-        d = np.log(np.atleast_1d(np.asarray(diameters, float)))
-        nearest = np.abs(d[:, None] - np.log(np.asarray(self.diameters))[None, :]).argmin(axis=1)
+        nearest = self._nearest(diameters)
         return EncounterRates(self(diameters, numbers, rpm), self.fractions[np.ix_(nearest, nearest)])
+
+    def impacts(self, diameters, numbers, rpm) -> ImpactRates:
+        """Pair encounters (:meth:`encounters`) and wall impacts of the bins (needs ImpactRates)."""
+        if self.walls is None:
+            raise ValueError(f"{self.label}: no wall impacts for breakage from impacts")
+        ld = np.log(np.atleast_1d(np.asarray(diameters, float)))
+        lx = np.log(np.asarray(self.diameters))
+        frequency = np.stack([np.interp(ld, lx, row) for row in self.walls.frequency])
+        fractions = self.walls.velocity_fractions[:, self._nearest(diameters)]
+        return ImpactRates(self.encounters(diameters, numbers, rpm), WallRates(frequency, fractions, self.walls.walls))
 
     def __call__(self, diameters, numbers, rpm) -> np.ndarray:
         # within an interval the class frequencies are fixed and the PBM bins do not move, so the

@@ -22,7 +22,8 @@ import pandas as pd
 from pbmdem.atomic import write_csv, write_json
 from pbmdem.config import CoupledLoop
 from pbmdem.frequency import pair_weighted_mean, pairs_of
-from pbmdem.impact import EncounterRates
+from pbmdem.impact import EncounterRates, ImpactRates
+from pbmdem.pbm.impact_breakage import impact_selection
 from pbmdem.pbm.kernels import ConstantFrequency
 from pbmdem.pbm.results import Result
 from pbmdem.pbm.setup import build_model, initial_state, output_times
@@ -77,7 +78,8 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
     n_intervals = loop.coupling_intervals
     intervals.discard_stale(outdir, {"loop": loop.to_dict(), "rpm": float(rpm), "provider": provider.fingerprint()})
     pbm = loop.batch.pbm
-    model = build_model(pbm, ConstantFrequency(1.0), rpm=rpm)  # the source is set per interval
+    selection = impact_selection(pbm)  # breakage from each interval's impacts (None: aggregation only)
+    model = build_model(pbm, ConstantFrequency(1.0), rpm=rpm, selection=selection)  # sources set per interval
     state = initial_state(loop.batch, model)
     bounds = interval_bounds(loop)
     results, rows = [], []
@@ -101,8 +103,12 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
                 f"Intervals 0..{k - 1} are kept in {outdir}; rerun to resume."
             ) from exc
         provider_wall = time.perf_counter() - t_provider
-        model.kernel.set_source(ClassFrequencySource(sample.diameters, rates, f"{provider.name} interval {k}"))
-        matrix = rates.frequency if isinstance(rates, EncounterRates) else np.asarray(rates, float)
+        source = ClassFrequencySource(sample.diameters, rates, f"{provider.name} interval {k}")
+        model.kernel.set_source(source)
+        if selection is not None:
+            selection.set_source(source)
+        pairs = rates.pairs if isinstance(rates, ImpactRates) else rates
+        matrix = pairs.frequency if isinstance(pairs, EncounterRates) else np.asarray(pairs, float)
         t_pbm = time.perf_counter()
         result = model.run(t0, t1, state, output_times=output_times(pbm, t0, t1))
         pbm_wall = time.perf_counter() - t_pbm

@@ -22,6 +22,7 @@ import pandas as pd
 
 from pbmdem.config import CoupledLoop, DemExecution
 from pbmdem.frequency import pair_weighted_mean
+from pbmdem.pbm.breakage import ConstantSelection
 from pbmdem.pbm.errors import PBMError
 from pbmdem.pbm.kernels import ConstantFrequency
 from pbmdem.pbm.setup import build_model, initial_state, run_batch
@@ -99,7 +100,7 @@ def calibrated_frequency(loop: CoupledLoop, model_path: str | Path, rpm: float) 
     from pbmdem.surrogate import load_surrogate
     from pbmdem.surrogate.domain import out_of_domain_recorded
 
-    model = build_model(loop.batch.pbm, ConstantFrequency(1.0), rpm=rpm)
+    model = build_model(loop.batch.pbm, ConstantFrequency(1.0), rpm=rpm, selection=constant_selection(loop))
     state = initial_state(loop.batch, model)
     sample = representative_sample(*model.particle_classes(state), loop.sample)
     surrogate = load_surrogate(model_path)
@@ -108,13 +109,20 @@ def calibrated_frequency(loop: CoupledLoop, model_path: str | Path, rpm: float) 
     return pair_weighted_mean(c, sample.counts), found
 
 
+def constant_selection(loop: CoupledLoop):
+    """PBM-constant's breakage selection: pbm.breakage.constant_rate for every aggregate (used
+    only with pbm.breakage.enabled)."""
+    return ConstantSelection(loop.batch.pbm.breakage.constant_rate)
+
+
 def pbm_constant(loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: str | Path) -> LoopOutcome:
-    """PBM-constant at `rpm`: c for every pair = the calibrated frequency, for the whole batch."""
+    """PBM-constant at `rpm`: c for every pair = the calibrated frequency, and with breakage the
+    selection rate pbm.breakage.constant_rate for every aggregate, for the whole batch."""
     frequency, found = calibrated_frequency(loop, model_path, rpm)
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    result = run_batch(loop.batch, ConstantFrequency(frequency), rpm)
+    result = run_batch(loop.batch, ConstantFrequency(frequency), rpm, selection=constant_selection(loop))
     wall = time.perf_counter() - t0
     totals = {
         "method": "pbm_constant",

@@ -2,7 +2,8 @@
 or from the trained surrogate (PBM-ANN).
 
 A provider is called as `provider(sample, interval_dir, index) -> (rates, info)`: `rates` is the
-(K, K) encounter frequency per class pair or an `EncounterRates` with impact-velocity fractions,
+(K, K) encounter frequency per class pair, an `EncounterRates` with impact-velocity fractions, or
+an `ImpactRates` that adds the wall impacts per granule (what breakage from impacts needs),
 `info` the figures recorded for the interval (wall times, DEM particle and encounter counts,
 out-of-domain warnings). `fingerprint()` names what its rates depend on, so that finished
 intervals of a changed provider are not reused.
@@ -21,10 +22,10 @@ from pathlib import Path
 import numpy as np
 
 from pbmdem.config import CoupledLoop, DemExecution
-from pbmdem.frequency import matrix_from_table, velocity_fractions_from_table
-from pbmdem.impact import EncounterRates
+from pbmdem.frequency import matrix_from_table, velocity_fractions_from_table, wall_rates_from_tables
+from pbmdem.impact import EncounterRates, ImpactRates
 from pbmdem.readers import read_json
-from pbmdem.tables import RUN_PAIRS, RUN_VELOCITIES
+from pbmdem.tables import RUN_PAIRS, RUN_VELOCITIES, RUN_WALL_VELOCITIES, RUN_WALLS
 
 from .sample import DemSample
 
@@ -72,8 +73,15 @@ class DemProvider:
         velocities = RUN_VELOCITIES.read(
             run_dir / "impact_velocity.csv", "impact-velocity table of a coupling interval"
         )
+        walls = RUN_WALLS.read(run_dir / "wall_collisions.csv", "wall-collision table of a coupling interval")
+        wall_velocities = RUN_WALL_VELOCITIES.read(
+            run_dir / "wall_impact_velocity.csv", "wall impact-velocity table of a coupling interval"
+        )
         k = len(sample.diameters)
-        rates = EncounterRates(matrix_from_table(table, k), velocity_fractions_from_table(velocities, k))
+        rates = ImpactRates(
+            EncounterRates(matrix_from_table(table, k), velocity_fractions_from_table(velocities, k)),
+            wall_rates_from_tables(walls, wall_velocities, k),
+        )
         return rates, {
             **info,
             "dem_particles": summary["n_particles"],
@@ -112,8 +120,10 @@ class SurrogateProvider:
         self.member = member
         self.model_path = Path(model_path)
         self.rpm = float(rpm)
-        # with a velocity model the provider also hands over impact-velocity fractions (one call)
+        # with a velocity model the provider also hands over impact-velocity fractions (one call),
+        # with wall models also the wall impacts (breakage)
         self.velocity_resolved = bool(self.model.has_velocity_model())
+        self.walls = self.velocity_resolved and bool(getattr(self.model, "wall_models_", None))
 
     def fingerprint(self) -> dict:
         return {
@@ -129,7 +139,9 @@ class SurrogateProvider:
         t0 = time.perf_counter()
         d, n = np.asarray(sample.diameters), np.asarray(sample.counts, float)
         with out_of_domain_recorded(f"{self.name} at rpm {self.rpm:g}, interval {index}") as found:
-            if self.velocity_resolved:
+            if self.walls:
+                rates = self.model.impacts(d, n, self.rpm)
+            elif self.velocity_resolved:
                 rates = self.model.encounters(d, n, self.rpm)
             else:
                 rates = np.asarray(self.model.frequency_matrix(d, n, self.rpm), float)

@@ -148,3 +148,45 @@ def feed_study(
         row["in_grid"] = in_grid
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def breakage_variants(pbm) -> dict:
+    """The breakage settings the breakage study compares (name -> pbm.breakage): breakage off
+    (aggregation only), the configured criterion, and the dynamic yield strength Y and the critical
+    Stokes deformation number St_def* each halved and doubled (v* ~ sqrt(Y St_def*))."""
+    brk = pbm.breakage.replace(enabled=True)
+    return {
+        "off": pbm.breakage.replace(enabled=False),
+        "default": brk,
+        "Y/2": brk.replace(yield_strength=0.5 * brk.yield_strength),
+        "Yx2": brk.replace(yield_strength=2.0 * brk.yield_strength),
+        "St*/2": brk.replace(critical_stokes=0.5 * brk.critical_stokes),
+        "St*x2": brk.replace(critical_stokes=2.0 * brk.critical_stokes),
+    }
+
+
+def breakage_study(loop: CoupledLoop, model_path: str | Path, speeds, grid_speeds) -> pd.DataFrame:
+    """:func:`speed_study` once per breakage variant (:func:`breakage_variants`): final sizes against
+    impeller speed without breakage, with it, and with the criterion's parameters halved and
+    doubled; columns ``variant``, ``yield_strength``, ``critical_stokes``, ``critical_speed``
+    (m/s, v* = sqrt(2 Y St_def* / rho)) beside the speed study's."""
+    from pbmdem.pbm.impact_breakage import critical_speed
+
+    pbm = loop.batch.pbm
+    frames = []
+    for name, brk in breakage_variants(pbm).items():
+        case = loop.replace(batch=loop.batch.replace(pbm=pbm.replace(breakage=brk)))
+        frame = speed_study(case, model_path, speeds, grid_speeds)
+        v = critical_speed(pbm.aggregation.success.stokes.granule_density, brk.yield_strength, brk.critical_stokes)
+        frames.append(
+            frame.assign(
+                variant=name,
+                breakage=brk.enabled,
+                yield_strength=brk.yield_strength,
+                critical_stokes=brk.critical_stokes,
+                critical_speed=v if brk.enabled else float("nan"),
+            )
+        )
+    out = pd.concat(frames, ignore_index=True)
+    first = ["variant", "breakage", "yield_strength", "critical_stokes", "critical_speed"]
+    return out[first + [c for c in out.columns if c not in first]]

@@ -178,6 +178,27 @@ def velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
     )
 
 
+def wall_velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
+    """Wall encounters per wall, class and impact-velocity bin (long format, docs/architecture.md)."""
+    from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES
+
+    walls, k = tally.raw.shape
+    w, c = np.repeat(np.arange(walls), k), np.tile(np.arange(k), walls)
+    return pd.DataFrame(
+        {
+            "point_id": meta["point_id"],
+            "rpm": meta["rpm"],
+            "distribution": meta["distribution"],
+            "replicate": meta["replicate"],
+            "wall": np.repeat(np.asarray(WALL_NAMES)[w], N_VELOCITY_BINS),
+            "class_i": np.repeat(c, N_VELOCITY_BINS),
+            "v_lo": np.tile(VELOCITY_EDGES[:-1], len(w)),
+            "v_hi": np.tile(VELOCITY_EDGES[1:], len(w)),
+            "encounters": tally.histogram[w, c].ravel(),
+        }
+    )
+
+
 def wall_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, meta: dict) -> pd.DataFrame:
     rows = []
     for w, wall in enumerate(WALL_NAMES):
@@ -212,6 +233,7 @@ class RunTables:
     pairs: pd.DataFrame
     walls: pd.DataFrame
     velocities: pd.DataFrame
+    wall_velocities: pd.DataFrame
     diagnostics: dict = field(default_factory=dict)
 
 
@@ -336,6 +358,7 @@ class RunAnalysis:
             pairs=pair_table(pair_tally, self.n, plan.diameters, self.sampling_time, meta),
             walls=wall_table(wall_tally, self.n, plan.diameters, self.sampling_time, meta),
             velocities=velocity_table(pair_tally, meta),
+            wall_velocities=wall_velocity_table(wall_tally, meta),
             diagnostics=diagnostics,
         )
 
@@ -349,4 +372,5 @@ def write_tables(tables: RunTables, run_dir: str | Path) -> None:
     run_dir = Path(run_dir)
     write_csv(run_dir / "wall_collisions.csv", tables.walls)
     write_csv(run_dir / "impact_velocity.csv", tables.velocities)
+    write_csv(run_dir / "wall_impact_velocity.csv", tables.wall_velocities)
     write_csv(run_dir / "collisions.csv", tables.pairs)  # last: its presence marks a finished run

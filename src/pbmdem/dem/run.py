@@ -163,6 +163,7 @@ RUN_PRODUCTS = (
     "post",
     "wall_collisions.csv",
     "impact_velocity.csv",
+    "wall_impact_velocity.csv",
     *FINISHED_MARKERS,
 )
 
@@ -186,7 +187,9 @@ def _move_into(stage: Path, run_dir: Path) -> None:
         if not (stage / name).exists() and (run_dir / name).exists():
             _remove(run_dir / name)
     last = [
-        stage / n for n in ("wall_collisions.csv", "impact_velocity.csv", *FINISHED_MARKERS) if (stage / n).exists()
+        stage / n
+        for n in ("wall_collisions.csv", "impact_velocity.csv", "wall_impact_velocity.csv", *FINISHED_MARKERS)
+        if (stage / n).exists()
     ]
     for item in [p for p in sorted(stage.iterdir()) if p not in last] + last:
         target = run_dir / item.name

@@ -3,15 +3,18 @@
 Solid volume on a geometric grid, liquid and gas lumped per bin (the feed granules as classes of
 their own); aggregation by the cell-average (default) or fixed pivot technique with kernel
 beta0 * c_ij * psi_ij (c_ij from a pluggable collision-frequency source), binder addition during a
-spray window, consolidation toward a minimum porosity, adaptive positivity-preserving explicit
-integration.
+spray window, consolidation toward a minimum porosity, optional breakage, adaptive
+positivity-preserving explicit integration.
 
 | module | concept |
 | --- | --- |
 | `grid` | the geometric solid-volume grid and the lever rule |
 | `aggregation` | the cell-average and fixed-pivot aggregation schemes (their pair maps for the compiled rates) |
 | `kernels` | aggregation kernels and collision-frequency sources (with their analytical solutions) |
+| `breakage` | breakage: selection rates, fragment distributions and their cell-average tables |
 | `table` | the DEM collision table as a collision-frequency source (`TableFrequency`, re-exported by `kernels`) |
+| `wall_table` | the DEM's wall impacts per granule and their speeds, interpolated in size and speed (`WallTable`) |
+| `impact_breakage` | breakage selection from impacts: the Stokes deformation criterion (`ImpactSelection`) |
 | `success` | the success probability of a pair and the Stokes criterion of velocity-dependent success |
 | `processes` | liquid addition and consolidation |
 | `state` | the resumable state of a run |
@@ -20,7 +23,7 @@ integration.
 | `_compiled` | the one implementation of the rates and stages (numba), imported when a model is built |
 | `results` | time series, size statistics, tables, plots |
 | `setup` | a model and a batch from the typed settings (pbmdem.config) |
-| `analytical` | closed-form solutions of pure aggregation |
+| `analytical` | closed-form solutions of pure aggregation, pure breakage and both |
 | `verification` | the harness that checks the model against them |
 | `errors` | the PBM's exceptions |
 
@@ -28,6 +31,7 @@ integration.
 """
 
 from .aggregation import SCHEMES, CellAverageAggregation, FixedPivotAggregation
+from .breakage import FRAGMENTS, Breakage, ConstantSelection, PowerLawSelection
 from .errors import (
     GridOverflowError,
     GridRangeError,
@@ -70,6 +74,10 @@ __all__ = [
     "KernelFactors",
     "KernelInput",
     "GranulationPBM",
+    "Breakage",
+    "ConstantSelection",
+    "PowerLawSelection",
+    "FRAGMENTS",
     "State",
     "FeedGranules",
     "surface_fraction",

@@ -11,14 +11,16 @@ between the stages) otherwise.
 | :func:`success_probability` | p(phi) of the success models (also ``SuccessProbability.per_particle``) |
 | :func:`surface_fraction` | the surface-liquid fraction of every class |
 | :func:`aggregation_totals` | aggregation: deaths and births of the M classes over the M^2 ordered pairs |
+| :func:`breakage_totals` | breakage: deaths of the pivot classes and the cell-average births of their fragments |
 | :func:`add_processes` | binder spraying and consolidation |
-| :func:`class_rates` | all rates of a class state: flush, success, aggregation, spraying, consolidation |
+| :func:`class_rates` | all rates of a class state: flush, success, aggregation, breakage, spraying, consolidation |
 | :func:`ssp_stage`, :func:`ssp_step` | the stages of one SSP Runge-Kutta step |
 | the rest | the small vector operations of the step control (flush, depletion time, error norm) |
 
-A further rate process (e.g. breakage: a selection rate per class and a fragment distribution)
-is one more loop called from :func:`class_rates`, beside :func:`aggregation_totals`; every kernel
-and every stage then sees it.
+Breakage (a selection rate per pivot and the fragment tables of ``breakage.Breakage``) is one
+more loop called from :func:`class_rates`, after :func:`aggregation_totals`; every kernel and
+every stage sees it, and without breakage (an empty selection) the rates are those of
+aggregation alone, to the bit.
 
 The slow numpy formulation of the same rates (the sparse map of ordered-pair rates, numpy
 spraying, consolidation and stages) is a test oracle, ``tests/pbm_oracle.py``; the compiled
@@ -165,6 +167,39 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
     return refused
 
 
+@njit("void(f8[::1], f8[:, ::1], i8, f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1])", cache=True, nogil=True)
+def breakage_totals(sel, nlg, K, tab, factors, work, d):
+    """Add breakage to the rates ``d`` (3, M) of the class totals ``nlg`` (3, M): the granules of
+    pivot k (k < K; feed classes do not break) break at the selection rate ``sel[k]`` (1/s),
+    each breakage removing one granule with its liquid and gas; its fragments are born in the
+    cells i <= k as ``tab`` (3, K, K) gives them (``Breakage.fragment_tables``: number, first
+    moment about x_i, share of the parent's solid, which is also the share of its liquid and
+    gas), and the births of every cell are split onto the pivots by the cell average
+    (:func:`_split_cells`, ``factors`` of ``aggregation.cell_average_factors``), so that number
+    and solid volume are exact. ``work`` (10, K): work array."""
+    born = work[:4]  # rows: number, liquid, gas born per cell, first moment D_c
+    for r in range(4):
+        for c in range(K):
+            born[r, c] = 0.0
+    for k in range(K):
+        s = sel[k]
+        R = s * nlg[0, k]
+        RL = s * nlg[1, k]
+        RG = s * nlg[2, k]
+        d[0, k] -= R
+        d[1, k] -= RL
+        d[2, k] -= RG
+        for i in range(k + 1):
+            born[0, i] += R * tab[0, i, k]
+            born[3, i] += R * tab[1, i, k]
+            born[1, i] += RL * tab[2, i, k]
+            born[2, i] += RG * tab[2, i, k]
+    _split_cells(born, factors, work[4:], K)
+    for b in range(3):
+        for c in range(K):
+            d[b, c] += born[b, c]
+
+
 @njit("void(f8[:, ::1], f8[:, ::1], f8, f8[::1], f8, f8[::1])", cache=True, nogil=True)
 def add_processes(d, nlg, spray_rate, spray_weight, consolidation_rate, gas_min):
     """Add to the rates ``d`` (3, M) the binder spraying (``spray_rate`` shared in proportion to
@@ -285,11 +320,11 @@ def success_probability(model, threshold, width, phi, p):
 
 @njit(
     "f8(f8[::1], f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], "
-    "f8[:, ::1], f8[:, ::1])",
+    "f8[::1], f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1])",
     cache=True,
     nogil=True,
 )
-def class_rates(u, beta, model, vectors, params, K, cell_average, target, weight, factors, work, pw, d):
+def class_rates(u, beta, model, vectors, params, K, cell_average, target, weight, factors, work, sel, tab, bf, pw, d):
     """All rates ``d`` (3, M) of the class state u = [N, L, G] (3M,), and the refused solid rate
     (returned): the one rate evaluation of the PBM. The kernel is beta_ij p(phi_i) p(phi_j)
     (success ``model``: STEP or LOGISTIC, a factored kernel) or ``beta`` itself (ALWAYS: a
@@ -297,7 +332,9 @@ def class_rates(u, beta, model, vectors, params, K, cell_average, target, weight
 
     ``vectors`` (3, M): class volumes (x_0 units), spray weights, G_min per particle; ``params``:
     number flush level, volume flush level (0: none), success threshold and width, spray rate (0:
-    not spraying), consolidation rate (0: none); ``pw`` (2, M): work (phi, p)."""
+    not spraying), consolidation rate (0: none); ``sel`` (K,), ``tab``, ``bf``: the breakage's
+    selection rates, fragment tables and split factors (:func:`breakage_totals`; ``sel`` empty:
+    no breakage); ``pw`` (2, M): work (phi, p)."""
     M = vectors.shape[1]
     flush_n = params[0]
     flush_v = params[1]
@@ -310,6 +347,8 @@ def class_rates(u, beta, model, vectors, params, K, cell_average, target, weight
         surface_fraction(nlg, vectors[0], phi)
         success_probability(model, params[2], params[3], phi, p)
     refused = aggregation_totals(beta, p, model != ALWAYS, nlg, K, cell_average, target, weight, factors, work, d)
+    if sel.size > 0:
+        breakage_totals(sel, nlg, K, tab, bf, work, d)
     add_processes(d, nlg, params[4], vectors[1], params[5], vectors[2])
     return refused
 
@@ -368,7 +407,8 @@ def ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
 
 @njit(
     "f8(f8[::1], f8[:, ::1], f8[::1], f8, i8, f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], "
-    "f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1])",
+    "f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], "
+    "f8[::1])",
     cache=True,
     nogil=True,
 )
@@ -388,6 +428,9 @@ def ssp_step(
     weight,
     factors,
     work,
+    sel,
+    tab,
+    bf,
     pw,
     u_new,
     u_low,
@@ -411,6 +454,9 @@ def ssp_step(
             weight,
             factors,
             work,
+            sel,
+            tab,
+            bf,
             pw,
             k[j].reshape((3, M)),
         )

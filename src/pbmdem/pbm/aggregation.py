@@ -197,17 +197,7 @@ class CellAverageAggregation(PivotAggregation):
         return np.where(ok, T, -1), w
 
     def _split_factors(self):
-        xr = self.xr
-        dx_up = np.append(xr[1:] - xr[:-1], np.inf)
-        dx_down = np.insert(xr[1:] - xr[:-1], 0, np.inf)
-        return np.stack(
-            [
-                xr / dx_up,  # n_up = D_c x_c / (x_(c+1) - x_c); 0 for the last cell
-                -xr / dx_down,  # n_down = -D_c x_c / (x_c - x_(c-1)); 0 for the first cell
-                np.append(xr[1:] / xr[:-1], 0.0),  # x_(c+1) / x_c
-                np.insert(xr[:-1] / xr[1:], 0, 0.0),  # x_(c-1) / x_c
-            ]
-        )
+        return cell_average_factors(self.xr)
 
 
 class FixedPivotAggregation(PivotAggregation):
@@ -232,6 +222,21 @@ class FixedPivotAggregation(PivotAggregation):
         w[1, ok] = up_number * xr[lo + 1] / s  # and of the solid (liquid and gas follow it)
         w[0, ~ok] = S[~ok]  # refused: the aggregate's volume
         return target, w
+
+
+def cell_average_factors(xr: np.ndarray) -> np.ndarray:
+    """(4, K) factors of the cell-average split of the births of every cell of the pivots ``xr``
+    (units of x_0), for aggregation and breakage alike (``_compiled._split_cells``)."""
+    dx_up = np.append(xr[1:] - xr[:-1], np.inf)
+    dx_down = np.insert(xr[1:] - xr[:-1], 0, np.inf)
+    return np.stack(
+        [
+            xr / dx_up,  # n_up = D_c x_c / (x_(c+1) - x_c); 0 for the last cell
+            -xr / dx_down,  # n_down = -D_c x_c / (x_c - x_(c-1)); 0 for the first cell
+            np.append(xr[1:] / xr[:-1], 0.0),  # x_(c+1) / x_c
+            np.insert(xr[:-1] / xr[1:], 0, 0.0),  # x_(c-1) / x_c
+        ]
+    )
 
 
 #: the aggregation schemes by config name

@@ -1,4 +1,5 @@
-"""Closed-form solutions of pure aggregation from an exponential initial distribution.
+"""Closed-form solutions of pure aggregation, pure breakage and aggregation with breakage from an
+exponential initial distribution.
 
 Initial number density n(v, 0) = (N0 / m) exp(-v / m) (mean volume m, total volume N0 m).
 
@@ -9,6 +10,22 @@ Constant kernel beta (Scott 1968, J. Atmos. Sci. 25:54; Smoluchowski), with T = 
 Sum (Golovin) kernel beta(u, v) = b (u + v) (Golovin 1963; Scott 1968), tau = 1 - exp(-b N0 m t):
     n(v, t) = N0 (1 - tau) / (v sqrt(tau)) exp(-(1 + tau) v / m) I1(2 v sqrt(tau) / m)
     M0 = N0 (1 - tau),  M1 = N0 m,  M2 = 2 N0 m^2 / (1 - tau)^2.
+
+Breakage with uniform daughters b(v|u) = 2/u and selection S(v) = a v^p (Ziff & McGrady 1985,
+J. Phys. A 18:3027), with x = v/m and tau = a m^p t:
+    p = 1: n(v, t) = N0 / m (1 + tau)^2 exp(-(1 + tau) x);  M0 = N0 (1 + tau), M2 = 2 N0 m^2 / (1 + tau)
+    p = 2: n(v, t) = N0 / m exp(-tau x^2 - x) (1 + 2 tau (1 + x));  M0 = N0 (1 + 2 tau J0),
+           M2 = N0 m^2 (J0 + J1), with J_k = int_0^inf x^k exp(-tau x^2 - x) dx
+    (J0 = sqrt(pi / (4 tau)) erfcx(1 / (2 sqrt(tau))), J1 = (1 - J0) / (2 tau)); M1 = N0 m.
+Both satisfy dn/dt = -S(v) n + int_v^inf S(u) b(v|u) n(u) du (tests/test_pbm_breakage.py checks
+it by quadrature).
+
+Constant aggregation beta with linear selection S = s v and any binary fragments: the number obeys
+dM0/dt = s M1 - beta M0^2 / 2, so M0(t) = A (M0(0) + A tanh(theta)) / (A + M0(0) tanh(theta)) with
+A = sqrt(2 s M1 / beta), theta = A beta t / 2. With uniform daughters the steady state is
+n(v) = (2 s / beta) exp(-lambda v), lambda = sqrt(2 s / (beta M1)) (an exponential: aggregation
+births (beta/2) A^2 v e^(-lambda v) balance breakage deaths s v A e^(-lambda v); Patil & Andrews
+1998, Chem. Eng. Sci. 53:599; Lage 2002, Chem. Eng. Sci. 57:4253).
 """
 
 from __future__ import annotations
@@ -53,6 +70,56 @@ def sum_number_density(v, t, b, N0, m):
 def sum_moments(t, b, N0, m):
     tau = sum_tau(t, b, N0, m)
     return N0 * (1.0 - tau), N0 * m, 2.0 * N0 * m * m / (1.0 - tau) ** 2
+
+
+#: selection exponents p of the Ziff-McGrady solutions (S = a v^p, uniform daughters)
+BREAKAGE_EXPONENTS = (1, 2)
+
+
+def _breakage_tau(t, a, exponent, m):
+    if exponent not in BREAKAGE_EXPONENTS:
+        raise ValueError(f"breakage selection exponent {exponent!r}; allowed: {list(BREAKAGE_EXPONENTS)}")
+    return a * m**exponent * t
+
+
+def breakage_number_density(v, t, a, exponent, N0, m):
+    """n(v, t) of pure breakage with uniform daughters and S = a v^exponent (exponent 1 or 2)
+    from the exponential n(v, 0) = N0/m exp(-v/m) (Ziff & McGrady 1985)."""
+    tau = _breakage_tau(t, a, exponent, m)
+    x = np.asarray(v, float) / m
+    if exponent == 1:
+        return N0 / m * (1.0 + tau) ** 2 * np.exp(-(1.0 + tau) * x)
+    return N0 / m * np.exp(-tau * x * x - x) * (1.0 + 2.0 * tau * (1.0 + x))
+
+
+def breakage_moments(t, a, exponent, N0, m):
+    """(M0, M1, M2) of :func:`breakage_number_density`."""
+    from scipy.special import erfcx
+
+    tau = _breakage_tau(t, a, exponent, m)
+    if exponent == 1:
+        return N0 * (1.0 + tau), N0 * m, 2.0 * N0 * m * m / (1.0 + tau)
+    if tau == 0:
+        return N0, N0 * m, 2.0 * N0 * m * m
+    J0 = np.sqrt(np.pi / (4.0 * tau)) * erfcx(0.5 / np.sqrt(tau))
+    J1 = (1.0 - J0) / (2.0 * tau)
+    return N0 * (1.0 + 2.0 * tau * J0), N0 * m, N0 * m * m * (J0 + J1)
+
+
+def aggregation_breakage_number(t, beta, s, M0, M1):
+    """Total number at t of constant aggregation ``beta`` with binary breakage at the linear
+    selection S = s v, from M0 particles carrying the volume M1: the Riccati solution of
+    dM0/dt = s M1 - beta M0^2 / 2."""
+    A = np.sqrt(2.0 * s * M1 / beta)
+    th = np.tanh(0.5 * A * beta * t)
+    return A * (M0 + A * th) / (A + M0 * th)
+
+
+def aggregation_breakage_steady_density(v, beta, s, M1):
+    """The steady number density of constant aggregation ``beta`` with uniform-daughter breakage at
+    S = s v, for the total volume M1: (2 s / beta) exp(-lambda v), lambda = sqrt(2 s / (beta M1))."""
+    lam = np.sqrt(2.0 * s / (beta * M1))
+    return 2.0 * s / beta * np.exp(-lam * np.asarray(v, float))
 
 
 def cell_integrals(density, edges):

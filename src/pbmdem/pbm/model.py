@@ -2,11 +2,11 @@
 
 State: numbers N_k, liquid L_k and gas (pore) G_k volume totals per bin of a :class:`Grid`
 (solid S_k = N_k x_k). Balances (aggregation A: a scheme of ``aggregation.SCHEMES``, by default
-the cell-average technique):
+the cell average; breakage B, optional: ``breakage.Breakage``):
 
-    dN_k/dt = A_N,k
-    dL_k/dt = A_L,k + Q w_k [t_start <= t < t_end]
-    dG_k/dt = A_G,k - c (G_k - eps_min / (1 - eps_min) S_k)
+    dN_k/dt = A_N,k + B_N,k
+    dL_k/dt = A_L,k + B_L,k + Q w_k [t_start <= t < t_end]
+    dG_k/dt = A_G,k + B_G,k - c (G_k - eps_min / (1 - eps_min) S_k)
 
 Time integration: strong-stability-preserving explicit Runge-Kutta, ``"ssp3"`` (SSP-RK3 with
 an embedded Heun estimate, default), ``"heun"`` (SSP-RK2 with an embedded Euler estimate) or
@@ -18,11 +18,9 @@ collision-frequency source between intervals.
 Every rate and every stage is computed by the compiled backend (``_compiled``): a factored
 kernel (``Kernel.factors``) inside it, any other kernel called here and its matrix passed in.
 
-Feed granules (``separate_feed=True``, default): the feed granules that have not aggregated yet
-are classes of their own (:class:`FeedGranules`): at their own solid volume (not split onto the
-pivots), with their own number, liquid and gas, so that aggregates born near a feed size do not
-share their liquid with the feed granules (docs/pbm.md, "Feed granules"). The State's per-bin
-totals include them, put on the pivots by the lever rule as the initial distribution is.
+Feed granules (``separate_feed=True``, default): the feed granules not yet aggregated are classes
+of their own (:class:`FeedGranules`, docs/pbm.md, "Feed granules"), in the State's per-bin totals
+by the lever rule.
 """
 
 from __future__ import annotations
@@ -32,6 +30,7 @@ import numpy as np
 from pbmdem.config import Solver
 
 from .aggregation import SCHEMES
+from .breakage import Breakage, breakage_arrays
 from .errors import GridOverflowError, KernelShapeError, NegativePopulationError, PBMInputError, positive
 from .grid import Grid, diameter_of
 from .kernels import Kernel, KernelInput
@@ -44,13 +43,14 @@ __all__ = ["GranulationPBM", "check_solver"]
 
 
 class GranulationPBM:
-    """Batch granulator PBM: aggregation (+ optional liquid addition and consolidation).
+    """Batch granulator PBM: aggregation (+ optional liquid addition, consolidation, breakage).
 
     ``kernel``: any :class:`Kernel`; ``liquid``/``consolidation``: the processes or None (off);
     ``rpm``: impeller speed handed to the kernel's collision-frequency source; ``scheme``: the
     aggregation discretisation, ``"cell_average"`` (default) or ``"fixed_pivot"``;
     ``separate_feed``: :meth:`initial_state` keeps the feed granules apart from the aggregates
-    of their bins (:class:`FeedGranules`; default True), False: they share the bin's liquid and gas.
+    of their bins (:class:`FeedGranules`; default True), False: they share the bin's liquid and gas;
+    ``breakage``: a :class:`Breakage` or None (aggregation only).
     """
 
     def __init__(
@@ -63,6 +63,7 @@ class GranulationPBM:
         rpm: float = 0.0,
         scheme: str = "cell_average",
         separate_feed: bool = True,
+        breakage: Breakage | None = None,
     ):
         self.grid = grid
         self.kernel = kernel
@@ -75,6 +76,8 @@ class GranulationPBM:
         if not isinstance(separate_feed, (bool, np.bool_)):
             raise PBMInputError(f"separate_feed = {separate_feed!r}; allowed: true or false")
         self.separate_feed = bool(separate_feed)
+        self.breakage = breakage
+        self._brk_arrays = breakage_arrays(breakage, grid.x, grid.edges)  # None: an empty selection
         # building the operator imports the compiled evaluation (numba, ``_compiled``): it is loaded
         # from numba's cache, or compiled, here and not in a run
         self.aggregation = SCHEMES[scheme](grid.x, grid.edges[1:-1])
@@ -93,7 +96,7 @@ class GranulationPBM:
         return (
             f"GranulationPBM({self.grid!r}, {self.kernel!r}, liquid={self.liquid!r}, "
             f"consolidation={self.consolidation!r}, rpm={self.rpm:g}, scheme={self.aggregation.name!r}, "
-            f"separate_feed={self.separate_feed})"
+            f"separate_feed={self.separate_feed}, breakage={self.breakage!r})"
         )
 
     def _use_classes(self, feed_volumes: np.ndarray) -> None:
@@ -219,8 +222,7 @@ class GranulationPBM:
         x0 = self.grid.x[0]
         u = np.concatenate([N, np.asarray(L, float) / x0, np.asarray(G, float) / x0])
         inp = self.kernel_input(t, N, L, G)
-        self.kernel.prepare(inp)
-        self._use_factors(inp)
+        self._prepare(inp)
         refused = self._rates(t, u, spraying, 0)
         d = self._k[0].copy()
         K = self.grid.bins
@@ -229,8 +231,8 @@ class GranulationPBM:
     def _rates(self, t: float, u: np.ndarray, spraying: bool, j: int) -> float:
         """Rates of the scaled class state u = [N, L/x_0, G/x_0] (M classes: the K pivots and the
         feed classes of the run, :meth:`_use_classes`) into ``self._k[j]`` (3M,); returns the
-        refused solid rate (x_0 units). One compiled call (``_compiled.class_rates``: flush,
-        kernel, aggregation, spraying, consolidation); a kernel without factors is called here,
+        refused solid rate (x_0 units). One compiled call (``_compiled.class_rates``: flush, kernel,
+        aggregation, breakage, spraying, consolidation); a kernel without factors is called here,
         at the flushed state, and its matrix passed in.
 
         Volumes enter only as ratios to the first pivot x_0, so the same problem in m3, mm3 or
@@ -253,6 +255,7 @@ class GranulationPBM:
             self._vectors,
             self._params[1] if spraying else self._params[0],
             *self._op_arrays,
+            *self._brk_arrays,
             self._pw,
             self._k_rows[j],
         )
@@ -269,7 +272,7 @@ class GranulationPBM:
         if self._factored is not None:
             refused = jit.ssp_step(
                 u, k, r, dt, order, self._factored, self._success_code, self._vectors, params, *self._op_arrays,
-                self._pw, u_new, u_low, stage,
+                *self._brk_arrays, self._pw, u_new, u_low, stage,
             )  # fmt: skip
             return u_new, u_low, refused
         for j, at in ((1, t + dt), (2, t + 0.5 * dt), (3, t)):
@@ -284,6 +287,13 @@ class GranulationPBM:
         self._params[0][:] = base
         self._params[1][:] = base
         self._params[1][4] = self._spray_rate
+
+    def _prepare(self, inp: KernelInput) -> None:
+        """Start of a step: the kernel's prepare and factors, the selection (at its update interval)."""
+        self.kernel.prepare(inp)
+        self._use_factors(inp)
+        if self.breakage is not None:
+            self.breakage.prepare(inp, self._brk_arrays[0], getattr(self.kernel, "update_interval", 0.0))
 
     def _use_factors(self, inp: KernelInput) -> None:
         """Ask the kernel for its factors at this step (after ``prepare``): the compiled rates use
@@ -359,6 +369,8 @@ class GranulationPBM:
         check_state(self.grid, s, " (start of run)")
         self._use_classes(volumes)
         self.kernel.reset()
+        if self.breakage is not None:
+            self.breakage.reset()
         return s
 
     def _class_state(self, s: State) -> np.ndarray:
@@ -417,9 +429,7 @@ class GranulationPBM:
                 ev += 1
             t_next = events[ev]
             spraying = self.liquid is not None and self.liquid.active(t)
-            inp = self._input(t, u.reshape(3, M))
-            self.kernel.prepare(inp)
-            self._use_factors(inp)
+            self._prepare(self._input(t, u.reshape(3, M)))
             self._r[0] = self._rates(t, u, spraying, 0)
             k1 = self._k[0]
             if not jit.all_finite(k1):
@@ -461,6 +471,7 @@ class GranulationPBM:
             "kernel": repr(self.kernel),
             "liquid_addition": repr(self.liquid),
             "consolidation": repr(self.consolidation),
+            "breakage": repr(self.breakage),
             "rpm": self.rpm,
             "steps": ctl.taken,
             "wall_time_s": ctl.wall_time(),

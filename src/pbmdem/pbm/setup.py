@@ -12,6 +12,7 @@ import numpy as np
 
 from pbmdem.config import Pbm, PbmBatch
 
+from .breakage import Breakage, ConstantSelection
 from .errors import PBMInputError
 from .grid import Grid, volume_of
 from .kernels import CollisionKernel, ConstantFrequency
@@ -63,13 +64,31 @@ def constant_source(pbm: Pbm) -> ConstantFrequency:
     return ConstantFrequency(agg.constant_frequency, agg.constant_impact_velocity)
 
 
-def build_model(pbm: Pbm, source=None, rpm: float = 0.0) -> GranulationPBM:
+def build_breakage(pbm: Pbm, selection=None) -> Breakage | None:
+    """The breakage of `pbm.breakage`: None if not enabled; else the fragment distribution with
+    the selection rate `selection` (a SelectionRate, e.g. from impact statistics), by default
+    PBM-constant's ConstantSelection(constant_rate)."""
+    brk = pbm.breakage
+    if not brk.enabled:
+        return None
+    return Breakage(ConstantSelection(brk.constant_rate) if selection is None else selection, brk.fragments)
+
+
+def build_model(pbm: Pbm, source=None, rpm: float = 0.0, selection=None) -> GranulationPBM:
     """GranulationPBM of the `pbm:` settings; `source` (collision-frequency source) defaults to
-    the constant one of `pbm.aggregation`."""
+    the constant one of `pbm.aggregation`. With `pbm.breakage.enabled`, the breakage's selection
+    rate is `selection`; None: PBM-constant's constant rate, allowed only with the constant
+    source (a DEM or surrogate source needs the selection from its impact statistics)."""
     grid = build_grid(pbm)
     agg = pbm.aggregation
     if source is None:
         source = constant_source(pbm)
+    elif selection is None and pbm.breakage.enabled:
+        raise PBMInputError(
+            f"pbm.breakage.enabled = true with the collision-frequency source {source!r} needs the "
+            "selection rate from that source's impact statistics (build_model(..., selection=...)); "
+            "allowed: pbm.breakage.enabled = false, or a selection"
+        )
     kernel = CollisionKernel(source, agg.beta0, build_success(pbm), update_interval=agg.frequency_update_interval)
     process = pbm.process
     liquid = LiquidAddition(
@@ -77,7 +96,15 @@ def build_model(pbm: Pbm, source=None, rpm: float = 0.0) -> GranulationPBM:
     )
     cons = Consolidation(pbm.consolidation.rate, pbm.consolidation.min_porosity)
     return GranulationPBM(
-        grid, kernel, liquid, cons, pbm.solver, rpm=rpm, scheme=agg.scheme, separate_feed=pbm.grid.separate_feed
+        grid,
+        kernel,
+        liquid,
+        cons,
+        pbm.solver,
+        rpm=rpm,
+        scheme=agg.scheme,
+        separate_feed=pbm.grid.separate_feed,
+        breakage=build_breakage(pbm, selection),
     )
 
 
@@ -111,11 +138,14 @@ def output_times(pbm: Pbm, t_start: float, t_end: float) -> np.ndarray:
     return times[(times >= t_start) & (times <= t_end)]
 
 
-def run_batch(batch: PbmBatch, source=None, rpm: float = 0.0, *, t_end: float | None = None, times=None):
+def run_batch(
+    batch: PbmBatch, source=None, rpm: float = 0.0, *, t_end: float | None = None, times=None, selection=None
+):
     """Run the batch granulation of `batch` at impeller speed `rpm` (the source's input) with the
     collision-frequency source `source` (default: the constant one) until `t_end` (default: the
-    end of the batch), recording at `times` (default: every pbm.output.interval). Returns a Result."""
-    model = build_model(batch.pbm, source, rpm)
+    end of the batch), recording at `times` (default: every pbm.output.interval), with the breakage
+    selection rate `selection` (build_model). Returns a Result."""
+    model = build_model(batch.pbm, source, rpm, selection)
     state = initial_state(batch, model)
     t_end = batch.pbm.process.end if t_end is None else float(t_end)
     times = output_times(batch.pbm, 0.0, t_end) if times is None else times

@@ -7,6 +7,8 @@ negative entry is repeated with half the step; after ``MAX_HALVINGS`` the run st
 NegativePopulationError. A step whose embedded error estimate exceeds 1 is repeated with a
 smaller step. What limited each step is counted (``STEP_LIMITS``, ``result.info["step_limits"]``).
 The stages of a step are the model's (``GranulationPBM._stages``, compiled in ``_compiled``).
+The rates are those of every process at once (aggregation, breakage, spraying, consolidation),
+so the deaths of breakage limit the step and trigger the halvings as those of aggregation do.
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ from scipy.interpolate import RegularGridInterpolator
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_KEYS, EncounterRates, binned_counts
 from pbmdem.readers import InputFileError
-from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES
+from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES, GRID_WALL_VELOCITIES, GRID_WALLS
 
 from .errors import PBMInputError, positive
 
@@ -76,6 +76,7 @@ class TableFrequency:
         velocity_table: pd.DataFrame | None = None,
     ):
         self._set_options(extrapolation, zero_floor, column)
+        self.walls = None  # the wall impacts (pbmdem.pbm.wall_table.WallTable), for impacts()
         missing = [c for c in ("d_i", "d_j", column) if c not in table.columns]
         if missing:
             raise PBMInputError(
@@ -142,6 +143,7 @@ class TableFrequency:
             return cls(table, extrapolation=extrapolation, zero_floor=zero_floor, column=column)
         self = cls.__new__(cls)
         self._set_options(extrapolation, zero_floor, column)
+        self.walls = None
         _check_diameters(d, "d_i")
         iu, ju = np.triu_indices(d.size)
         f = _checked_frequencies(m[iu, ju], column)
@@ -232,26 +234,35 @@ class TableFrequency:
         return f"TableFrequency(rpm=[{speeds}], extrapolation={self.extrapolation!r}{vel})"
 
     @classmethod
-    def from_csv(cls, path, distribution: str | None = None, velocity_path=None, **kwargs) -> TableFrequency:
+    def from_csv(
+        cls, path, distribution: str | None = None, velocity_path=None, walls=None, **kwargs
+    ) -> TableFrequency:
         """Read a collision table CSV; ``distribution`` keeps only that distribution's rows;
         ``velocity_path``: the impact-velocity table CSV (results/dem/impact_velocity.csv) that
-        enables :meth:`encounters`."""
+        enables :meth:`encounters`; ``walls``: the wall impacts
+        (:meth:`pbmdem.pbm.wall_table.WallTable.from_csv`) that enable :meth:`impacts`."""
         table = cls._read(path, distribution, "collision table")
         velocity_table = None
         if velocity_path is not None:
             velocity_table = cls._read(velocity_path, distribution, "impact-velocity table")
         try:
-            return cls(table, velocity_table=velocity_table, **kwargs)
+            source = cls(table, velocity_table=velocity_table, **kwargs)
         except PBMInputError as err:
             names = str(path) + ("" if velocity_path is None else f" / {velocity_path}")
             raise PBMInputError(f"{names}: {err}") from None
+        source.walls = walls
+        return source
 
     @staticmethod
     def _read(path, distribution: str | None, what: str) -> pd.DataFrame:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"{what} {path} does not exist")
-        contract = GRID_VELOCITIES if what == "impact-velocity table" else GRID_PAIRS
+        contract = {
+            "impact-velocity table": GRID_VELOCITIES,
+            "wall-collision table": GRID_WALLS,
+            "wall impact-velocity table": GRID_WALL_VELOCITIES,
+        }.get(what, GRID_PAIRS)
         try:
             table = contract.read(path, what, need=())  # the kernel checks the columns it uses
         except InputFileError as exc:
@@ -285,19 +296,7 @@ class TableFrequency:
         return F / F.sum(axis=2, keepdims=True)
 
     def _speed_weights(self, rpm) -> list[tuple[int, float]]:
-        """[(table speed index, weight)] of the interpolation in rpm."""
-        if self.rpms.size == 1 or np.isnan(self.rpms).all():
-            return [(0, 1.0)]
-        rpm = float(rpm)
-        if rpm <= self.rpms[0]:
-            return [(0, 1.0)]
-        if rpm >= self.rpms[-1]:
-            return [(self.rpms.size - 1, 1.0)]
-        k = int(np.searchsorted(self.rpms, rpm, side="right") - 1)
-        if rpm == self.rpms[k]:
-            return [(k, 1.0)]
-        w = (rpm - self.rpms[k]) / (self.rpms[k + 1] - self.rpms[k])
-        return [(k, 1.0 - w), (k + 1, w)]
+        return speed_weights(self.rpms, rpm)
 
     @staticmethod
     def _diameters(diameters) -> np.ndarray:
@@ -324,6 +323,36 @@ class TableFrequency:
         freq = np.exp(sum(w * self._log_matrix(k, d) for k, w in weights))
         fractions = sum(w * self._fractions(k, d) for k, w in weights)
         return EncounterRates(freq, fractions)
+
+    def impacts(self, diameters, numbers, rpm):
+        """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall impacts of the
+        DEM's wall tables (``walls``: a :class:`pbmdem.pbm.wall_table.WallTable`, from_csv's
+        ``wall_path`` and ``wall_velocity_path``), what breakage from impacts needs."""
+        from pbmdem.impact import ImpactRates
+
+        if self.walls is None:
+            raise PBMInputError(
+                "TableFrequency.impacts needs the wall tables (results/dem/wall_collisions.csv and "
+                "wall_impact_velocity.csv: from_csv(walls=WallTable.from_csv(...)))"
+            )
+        return ImpactRates(self.encounters(diameters, numbers, rpm), self.walls.rates(diameters, rpm))
+
+
+def speed_weights(rpms: np.ndarray, rpm) -> list[tuple[int, float]]:
+    """[(table speed index, weight)] of the interpolation in rpm between the ascending table speeds
+    ``rpms``: linear between neighbours, the nearest speed outside them (one speed, or NaN: any)."""
+    if rpms.size == 1 or np.isnan(rpms).all():
+        return [(0, 1.0)]
+    rpm = float(rpm)
+    if rpm <= rpms[0]:
+        return [(0, 1.0)]
+    if rpm >= rpms[-1]:
+        return [(rpms.size - 1, 1.0)]
+    k = int(np.searchsorted(rpms, rpm, side="right") - 1)
+    if rpm == rpms[k]:
+        return [(k, 1.0)]
+    w = (rpm - rpms[k]) / (rpms[k + 1] - rpms[k])
+    return [(k, 1.0 - w), (k + 1, w)]
 
 
 def _check_diameters(d: np.ndarray, column: str) -> None:

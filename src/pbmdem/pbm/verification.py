@@ -1,9 +1,10 @@
 """The verification harness: the PBM against the closed-form solutions of `analytical`.
 
 Discretised initial distributions, the verification grids of the tests and benchmarks, a pure
-aggregation run from an exponential start, and the errors of a result against the analytical
-solution integrated over the cells. It sits beside the kernels (which carry their own analytical
-solutions, `ConstantKernel.analytical_solution`, ...) and the model, and is imported by neither.
+aggregation run and a breakage run (with or without aggregation) from an exponential start, and
+the errors of a result against the analytical solution integrated over the cells. It sits
+beside the kernels (which carry their own analytical solutions, `ConstantKernel.
+analytical_solution`, ...) and the model, and is imported by neither.
 """
 
 from __future__ import annotations
@@ -13,7 +14,9 @@ import numpy as np
 from pbmdem.config import Solver
 
 from . import analytical
+from .breakage import Breakage
 from .grid import Grid
+from .kernels import Kernel, KernelFactors, KernelInput
 from .model import GranulationPBM
 from .state import State
 
@@ -64,8 +67,50 @@ def cell_errors(kernel, grid, number, t, N0: float = 1.0, m: float = 1.0):
     solution integrated over the cells (first cell from 0, last to infinity): the L1 error of the
     cell numbers relative to the total number, and the largest error of the cumulative mass
     (solid-volume) fraction over the bins."""
+    return density_errors(lambda v: kernel.analytical_solution(v, t, N0, m), grid, number)
+
+
+class NoAggregation(Kernel):
+    """beta = 0: the kernel of the pure-breakage cases."""
+
+    def __repr__(self) -> str:
+        return "NoAggregation()"
+
+    def __call__(self, inp: KernelInput) -> np.ndarray:
+        M = inp.volumes.size
+        return np.zeros((M, M))
+
+    def factors(self, inp: KernelInput) -> KernelFactors:
+        return KernelFactors(self(inp))
+
+
+def simulate_breakage(
+    breakage: Breakage,
+    t_end: float,
+    grid,
+    kernel=None,
+    N0: float = 1.0,
+    m: float = 1.0,
+    rtol: float = 1e-6,
+    atol: float = 1e-12,
+    output_times=None,
+):
+    """Breakage (with aggregation by ``kernel``; default none) from the discretised exponential
+    n(v, 0) = N0/m e^(-v/m) to ``t_end``, liquid and gas 0.3 and 0.1 of the solid of every bin:
+    the Result."""
+    N = discretise_exponential(grid, N0, m)
+    solver = Solver.defaults().replace(rtol=rtol, atol=atol, max_step=np.inf)
+    model = GranulationPBM(grid, NoAggregation() if kernel is None else kernel, solver=solver, breakage=breakage)
+    S = N * grid.x
+    return model.run(0.0, t_end, State(0.0, N, 0.3 * S, 0.1 * S), output_times=output_times)
+
+
+def density_errors(density, grid, number):
+    """Errors of the numbers per bin ``number`` against the number density ``density(v)``
+    integrated over the cells (first cell from 0, last to infinity): the L1 error of the cell
+    numbers relative to the total number, and the largest error of the cumulative mass fraction."""
     edges = np.concatenate([[0.0], grid.edges[1:-1], [np.inf]])
-    num, vol = analytical.cell_integrals(lambda v: kernel.analytical_solution(v, t, N0, m), edges)
+    num, vol = analytical.cell_integrals(density, edges)
     number = np.asarray(number, float)
     l1 = np.abs(number - num).sum() / num.sum()
     Q = np.cumsum(number * grid.x) / np.sum(number * grid.x)

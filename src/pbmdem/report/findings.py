@@ -225,10 +225,12 @@ def findings_rst(
     batch_s: float,
     speed_png: str,
     feed_png: str,
+    extra: tuple[str, ...] = (),
 ) -> str:
     """The findings as reStructuredText: the two answers with their figures (the PNGs at
     `speed_png`, `feed_png` embedded as data URIs, so that the text shows them wherever it is
-    included: Snakemake's own `embeddedimage` directive does not embed), then how far to trust them."""
+    included: Snakemake's own `embeddedimage` directive does not embed), then `extra` (further
+    findings, lines of rst), then how far to trust them."""
     s = speed.sort_values("rpm")
     lo, hi = s.iloc[0], s.iloc[-1]
     change = (hi.d50 - lo.d50) / lo.d50 if lo.d50 else float("nan")
@@ -284,6 +286,7 @@ def findings_rst(
         "   :width: 640px",
         "   :alt: final d10, d50, d90 against the feed size distribution",
         "",
+        *extra,
         "**How far to trust them.** " + trust_words(comparison),
         "",
         "Glossary",

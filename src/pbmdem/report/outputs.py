@@ -161,10 +161,12 @@ def write_provenance(*, config: dict, settings: dict, basedir, runs, metadata, o
     )
 
 
-def write_findings(*, speed, feed, comparison, speed_feed: str, feed_rpm: float, batch_s: float, out: dict) -> None:
-    """The findings: the two figures (speed, feed) and their text (rst), atomically. `speed`, `feed`:
-    the PBM-ANN study tables; `comparison`: the validation's comparison table; `out`: speed_png,
-    feed_png, rst."""
+def write_findings(
+    *, speed, feed, comparison, speed_feed: str, feed_rpm: float, batch_s: float, out: dict, breakage=None
+) -> None:
+    """The findings: the figures (speed, feed, and with `breakage` the breakage study) and their
+    text (rst), atomically. `speed`, `feed`, `breakage`: the PBM-ANN study tables; `comparison`: the
+    validation's comparison table; `out`: speed_png, feed_png, breakage_png, rst."""
     from pbmdem.atomic import write_text
     from pbmdem.plotting import save_figure as save
 
@@ -175,6 +177,14 @@ def write_findings(*, speed, feed, comparison, speed_feed: str, feed_rpm: float,
     comparison_table = read_table(comparison, "comparison table", columns=("rpm",))
     save(speed_figure(speed_table, speed_feed, batch_s), out["speed_png"])
     save(feed_figure(feed_table, feed_rpm, batch_s), out["feed_png"])
+    extra: tuple[str, ...] = ()
+    if breakage is not None:
+        from .breakage import breakage_figure, breakage_words
+        from .findings import _image_directive
+
+        study = read_table(breakage, "PBM-ANN breakage study", columns=("variant", "rpm", "d50", "critical_speed"))
+        save(breakage_figure(study), out["breakage_png"])
+        extra = (breakage_words(study), "", _image_directive(out["breakage_png"]), "   :width: 640px", "")
     text = findings_rst(
         speed_table,
         feed_table,
@@ -184,5 +194,6 @@ def write_findings(*, speed, feed, comparison, speed_feed: str, feed_rpm: float,
         batch_s=batch_s,
         speed_png=str(out["speed_png"]),
         feed_png=str(out["feed_png"]),
+        extra=extra,
     )
     write_text(out["rst"], text)

@@ -92,27 +92,24 @@ _STATE = {
 }
 _SCALE = {"type": "number", "exclusiveMinimum": 0}
 
+#: The fields of one fitted model (the pair model's, or a wall model's under ``walls``).
+_MODEL_KEYS = (
+    "params",
+    "family",
+    "frequency_state",
+    "velocity_state",
+    "n_velocity_rows",
+    "duplicated_features",
+    "feature_names",
+    "feature_ranges",
+    "training_point_ids",
+    "n_training_rows",
+)
 SCHEMA = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
     "title": "pbmdem surrogate metadata (model.json)",
     "type": "object",
-    "required": [
-        "format",
-        "format_version",
-        "model_sha256",
-        "params",
-        "velocity_edges",
-        "family",
-        "frequency_state",
-        "velocity_state",
-        "n_velocity_rows",
-        "duplicated_features",
-        "feature_names",
-        "feature_ranges",
-        "training_point_ids",
-        "n_training_rows",
-        "versions",
-    ],
+    "required": ["format", "format_version", "model_sha256", "velocity_edges", *_MODEL_KEYS, "versions"],
     "properties": {
         "format": {"type": "string"},
         "format_version": {"type": "integer"},
@@ -147,7 +144,13 @@ SCHEMA = {
         "n_velocity_rows": {"type": "integer", "minimum": 0},
         "duplicated_features": {
             "type": "array",
-            "items": {"type": "array", "minItems": 2, "maxItems": 2, "items": {"type": "string"}},
+            # (feature, feature, Pearson r) as CollisionSurrogate.duplicated_features_ holds them
+            "items": {
+                "type": "array",
+                "minItems": 2,
+                "maxItems": 3,
+                "prefixItems": [{"type": "string"}, {"type": "string"}, _NUMBER],
+            },
         },
         "feature_names": {"type": "array", "minItems": 1, "uniqueItems": True, "items": {"type": "string"}},
         "feature_ranges": {
@@ -161,6 +164,18 @@ SCHEMA = {
             "required": ["sklearn"],
             "additionalProperties": {"type": "string"},
         },
+    },
+}
+
+#: ``walls``: per wall (pbmdem.impact.WALLS) the wall model of pbmdem.surrogate.walls (optional:
+#: a surrogate trained without the wall tables has none).
+SCHEMA["properties"]["walls"] = {
+    "type": "object",
+    "propertyNames": {"enum": ["bowl", "impeller"]},
+    "additionalProperties": {
+        "type": "object",
+        "required": list(_MODEL_KEYS),
+        "properties": {k: SCHEMA["properties"][k] for k in _MODEL_KEYS},
     },
 }
 

@@ -413,6 +413,16 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         v[ju, iu] = fractions
         return EncounterRates(frequency=c, velocity_fractions=v)
 
+    def impacts(self, diameters, numbers, rpm: float, check_domain: bool = True):
+        """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall impacts per granule
+        of the wall models (``wall_models_``, :mod:`pbmdem.surrogate.walls`), for breakage."""
+        from pbmdem.impact import ImpactRates
+
+        from .walls import wall_rates
+
+        pairs = self.encounters(diameters, numbers, rpm, check_domain=check_domain)
+        return ImpactRates(pairs, wall_rates(self, diameters, numbers, rpm, check_domain=check_domain))
+
     def __call__(self, diameters, numbers, rpm: float):
         """Collision-frequency source interface of ``pbmdem.pbm`` (docs/architecture.md)."""
         return self.frequency_matrix(diameters, numbers, rpm)
@@ -438,6 +448,8 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         out.frequency_model_ = CalibratedMember(self.frequency_model_, int(k), self.uncertainty_scale)
         if self.velocity_model_ is not None:
             out.velocity_model_ = CalibratedMember(self.velocity_model_, int(k), self.velocity_uncertainty_scale)
+        walls = getattr(self, "wall_models_", None) or {}
+        out.wall_models_ = {wall: model.member(int(k) % model.n_members) for wall, model in walls.items()}
         return out
 
 

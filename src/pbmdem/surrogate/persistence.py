@@ -168,6 +168,32 @@ def _surrogate_params(surrogate: CollisionSurrogate) -> dict:
     return params
 
 
+def _fitted_parts(surrogate: CollisionSurrogate) -> dict:
+    """What the skops file holds of one fitted surrogate: its inner models' fitted pipelines."""
+    vel = surrogate.velocity_model_
+    return {
+        "frequency": surrogate.frequency_model_.fitted_parts(),
+        "velocity": [] if vel is None else vel.fitted_parts(),
+    }
+
+
+def _model_metadata(surrogate: CollisionSurrogate) -> dict:
+    """The metadata that rebuilds one fitted surrogate around its stored parts (_from_metadata)."""
+    freq, vel = surrogate.frequency_model_, surrogate.velocity_model_
+    return {
+        "params": _surrogate_params(surrogate),
+        "family": family_name(freq),
+        "frequency_state": freq.fitted_state(),
+        "velocity_state": None if vel is None else vel.fitted_state(),
+        "n_velocity_rows": surrogate.n_velocity_rows_,
+        "duplicated_features": [list(p) for p in surrogate.duplicated_features_],
+        "feature_names": [str(n) for n in surrogate.feature_names_in_],
+        "feature_ranges": {k: list(v) for k, v in surrogate.feature_ranges().items()},
+        "training_point_ids": list(surrogate.training_point_ids_),
+        "n_training_rows": surrogate.n_training_rows_,
+    }
+
+
 def save_surrogate(
     surrogate: CollisionSurrogate,
     model_path: str | os.PathLike,
@@ -186,9 +212,10 @@ def save_surrogate(
         )
     model_path = Path(model_path)
     metadata_path = metadata_path_for(model_path) if metadata_path is None else Path(metadata_path)
-    freq, vel = surrogate.frequency_model_, surrogate.velocity_model_
-    velocity = [] if vel is None else vel.fitted_parts()
-    atomic_write(model_path, lambda tmp: sio.dump({"frequency": freq.fitted_parts(), "velocity": velocity}, tmp))
+    walls = getattr(surrogate, "wall_models_", None) or {}
+    parts = {"walls": {wall: _fitted_parts(model) for wall, model in walls.items()}, **_fitted_parts(surrogate)}
+    atomic_write(model_path, lambda tmp: sio.dump(parts, tmp))
+    vel = surrogate.velocity_model_
     meta = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -196,7 +223,6 @@ def save_surrogate(
         "model_file": model_path.name,
         "model_sha256": sha256_file(model_path),
         "estimator": "pbmdem.surrogate.CollisionSurrogate",
-        "params": _surrogate_params(surrogate),
         "target": f"{TARGET_NAME} (fitted in log10 space; frequency_matrix returns 1/s per particle pair)",
         "velocity_target": (
             "log-normal impact-speed law per pair: [log10 median speed (m/s) minus the "
@@ -206,15 +232,9 @@ def save_surrogate(
             else None
         ),
         "velocity_edges": [float(e) for e in VELOCITY_EDGES],
-        "family": family_name(freq),
-        "frequency_state": freq.fitted_state(),
-        "velocity_state": None if vel is None else vel.fitted_state(),
-        "n_velocity_rows": surrogate.n_velocity_rows_,
-        "duplicated_features": [list(p) for p in surrogate.duplicated_features_],
-        "feature_names": names,
-        "feature_ranges": {k: list(v) for k, v in surrogate.feature_ranges().items()},
-        "training_point_ids": list(surrogate.training_point_ids_),
-        "n_training_rows": surrogate.n_training_rows_,
+        **_model_metadata(surrogate),
+        # per wall: the same fields of its CollisionSurrogate (pbmdem.surrogate.walls)
+        "walls": {wall: _model_metadata(model) for wall, model in walls.items()},
         "cv_scores": cv_scores or {},
         "versions": library_versions(),
     }
@@ -309,7 +329,12 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
         )
 
     try:
-        return _from_metadata(stored, meta, metadata_path)
+        surrogate = _from_metadata(stored, meta, metadata_path)
+        surrogate.wall_models_ = {
+            wall: _from_metadata(stored["walls"][wall], wall_meta, metadata_path)
+            for wall, wall_meta in meta.get("walls", {}).items()
+        }
+        return surrogate
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         what = f"missing field {exc}" if isinstance(exc, KeyError) else str(exc)
         raise IncompatibleVersionError(

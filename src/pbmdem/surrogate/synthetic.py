@@ -163,3 +163,54 @@ def make_synthetic_tables(
 def make_synthetic_table(impeller_radius: float, *args, **kwargs) -> pd.DataFrame:
     """The collision table of :func:`make_synthetic_tables` (same arguments)."""
     return make_synthetic_tables(impeller_radius, *args, **kwargs)[0]
+
+
+#: Reference wall laws of the synthetic wall tables: wall -> (impacts per granule and second at
+#: d = 3 mm and 600 rpm, median impact speed / tip speed); rate ~ d^2 rpm, spread 0.3 decades.
+WALL_LAWS = {"bowl": (5.0, 0.15), "impeller": (2.0, 0.5)}
+
+
+def wall_law(wall: str, d, rpm, impeller_radius: float):
+    """``(rate, mu, sigma)`` of the synthetic wall table: impacts per granule (1/s), log10 of the
+    median impact speed (m/s) and the spread of log10 v (decades)."""
+    rate0, speed = WALL_LAWS[wall]
+    d, rpm = np.asarray(d, float), np.asarray(rpm, float)
+    return rate0 * (d / 0.003) ** 2 * rpm / 600.0, np.log10(speed * tip_speed(rpm, impeller_radius)), 0.3
+
+
+def make_synthetic_wall_tables(collisions: pd.DataFrame, impeller_radius: float, seed: int = 0):
+    """``(wall_collisions, wall_impact_velocity)`` grid tables of the runs and classes of a synthetic
+    collision table (:func:`make_synthetic_tables`), following :func:`wall_law` with 3 % log noise."""
+    rng = np.random.default_rng(seed)
+    classes = collisions[collisions["class_i"] == collisions["class_j"]]
+    rows, vrows = [], []
+    for wall in WALL_LAWS:
+        for r in classes.itertuples():
+            rate, mu, sigma = wall_law(wall, r.d_i, r.rpm, impeller_radius)
+            rate = float(rate) * 10.0 ** rng.normal(0.0, 0.03)
+            encounters = rate * r.n_i * r.sampling_time
+            key = {"point_id": r.point_id, "rpm": r.rpm, "distribution": r.distribution, "class_i": r.class_i}
+            rows.append(
+                key
+                | {
+                    "d_i": r.d_i,
+                    "n_i": r.n_i,
+                    "n_total": r.n_total,
+                    "wall": wall,
+                    "collisions": CONTACTS_PER_ENCOUNTER * encounters,
+                    "sampling_time": r.sampling_time,
+                    "frequency": CONTACTS_PER_ENCOUNTER * encounters / r.sampling_time,
+                    "frequency_per_particle": CONTACTS_PER_ENCOUNTER * rate,
+                    "encounters": encounters,
+                    "encounter_frequency_per_particle": rate,
+                    "impact_velocity_median": 10.0**mu,
+                    "n_replicates": r.n_replicates,
+                    "encounter_frequency_per_particle_se": 0.03 * rate,
+                }
+            )
+            counts = encounters * lognormal_fractions(mu, sigma)[0]
+            for b, n in enumerate(counts):
+                vrows.append(
+                    key | {"wall": wall, "v_lo": VELOCITY_EDGES[b], "v_hi": VELOCITY_EDGES[b + 1], "encounters": n}
+                )
+    return pd.DataFrame(rows), pd.DataFrame(vrows)

@@ -35,6 +35,39 @@ def _read_table(table, contract, need=()) -> tuple[pd.DataFrame, str]:
     return contract.read(table, need=need), str(table)
 
 
+def _train_walls(surrogate, selected: str, metrics, tables, settings, impeller_radius, n_jobs):
+    """The wall models (pbmdem.surrogate.walls) of the wall ``tables`` (collisions, impact
+    velocities) into ``surrogate.wall_models_``: (``metrics`` with theirs appended, their summary);
+    without wall tables (None) ``metrics`` and no summary."""
+    from pbmdem.tables import GRID_WALL_VELOCITIES, GRID_WALLS
+
+    from .walls import train_wall_models
+
+    wall_table, wall_velocity_table = tables
+    if wall_table is None:
+        return metrics, {}
+    walls, source = _read_table(wall_table, GRID_WALLS)
+    velocities, _ = _read_table(wall_velocity_table, GRID_WALL_VELOCITIES)
+    log.info("wall tables %s: %d rows", source, len(walls))
+    candidates = {**build_families(settings, impeller_radius, n_jobs=n_jobs), **build_baselines(settings)}
+    models, wall_metrics, summary = train_wall_models(
+        walls, velocities, candidates[selected], candidates, settings, impeller_radius
+    )
+    for wall, s in summary.items():
+        for target, per_model in s.items():
+            for name, row in per_model.items():
+                log.info(
+                    "%s wall, %-8s held-out %s: R2(log10) %.3f, MAE %.3f decades",
+                    wall,
+                    name,
+                    target,
+                    row["pooled_r2_log10"],
+                    row["pooled_mae_log10"],
+                )
+    surrogate.wall_models_ = models
+    return pd.concat([metrics, wall_metrics], ignore_index=True), summary
+
+
 def train_and_report(
     table: str | os.PathLike | pd.DataFrame,
     model_path: str | os.PathLike,
@@ -46,6 +79,8 @@ def train_and_report(
     impeller_radius: float,
     n_jobs: int | None = None,
     velocity_table: str | os.PathLike | pd.DataFrame | None = None,
+    wall_table: str | os.PathLike | pd.DataFrame | None = None,
+    wall_velocity_table: str | os.PathLike | pd.DataFrame | None = None,
 ) -> dict:
     """Grouped CV of the model families and baselines, choice of the kernel source, final fit on
     every run, then write the outputs.
@@ -58,8 +93,10 @@ def train_and_report(
 
     ``table`` is the collision table (``results/dem/collisions.csv``), ``velocity_table`` the
     impact-velocity table (``results/dem/impact_velocity.csv``); without it the surrogate learns
-    the encounter frequency only (with a warning). ``settings`` is the complete ``surrogate:``
-    section (``pbmdem.config``: ``cfg.surrogate.to_dict()``); ``impeller_radius`` (m, required) is
+    the encounter frequency only (with a warning). ``wall_table``, ``wall_velocity_table``: the wall
+    models (:mod:`pbmdem.surrogate.walls`, same folds; metrics rows with the wall in ``target``).
+    ``settings`` is the complete ``surrogate:`` section (``pbmdem.config``:
+    ``cfg.surrogate.to_dict()``); ``impeller_radius`` (m, required) is
     ``granulator.impeller.blade_length``, for the tip-speed feature. Output paths default to siblings of
     ``model_path``: ``model.json``, ``metrics.csv``, ``parity.png``.
     Returns the metadata written to ``model.json``.
@@ -78,6 +115,8 @@ def train_and_report(
     surrogate = _calibrated(families[selected], selected, summary, velocity_summary)
     t0 = time.perf_counter()
     _logged(surrogate.fit, data.X, data.y, groups=data.groups, velocity=data.velocity)
+    metrics, wall_summary = _train_walls(surrogate, selected, metrics, (wall_table, wall_velocity_table), settings,
+                                         impeller_radius, n_jobs)  # fmt: skip
     t_fit = time.perf_counter() - t0
     state = surrogate.frequency_model_.fitted_state()
     fitted = state.get("best_params", state.get("fitted"))
@@ -93,6 +132,7 @@ def train_and_report(
             "outer_summary": summary,
             "noise_floor_r2_log10": (next(iter(summary.values()))["noise_floor_r2_log10"] if summary else None),
             "velocity_summary": velocity_summary,
+            "wall_summary": wall_summary,
             "outer_folds": metrics[~metrics["fold"].isin(["pooled", "mean"])].to_dict(orient="records"),
         },
         extra={

@@ -1,0 +1,207 @@
+"""Breakage of granules: the selection rate, the fragment distribution and their cell-average
+form on the aggregation grid (docs/pbm.md, "Breakage").
+
+The continuous breakage term of the number density n(v, t) is
+
+    dn/dt (v) = -S(v) n(v) + int_v^inf S(u) b(v|u) n(u) du
+
+with the selection rate S(u) (1/s per granule) and the fragment distribution b(v|u) (fragments
+of volume v per breakage of a granule of volume u; int v b(v|u) dv = u). Provided fragment
+distributions (``FRAGMENTS``):
+
+* ``binary``: two equal fragments, b(v|u) = 2 delta(v - u/2);
+* ``uniform``: binary breakage with uniform daughters, b(v|u) = 2/u on (0, u) (Ziff & McGrady
+  1985, J. Phys. A 18:3027): two fragments on average, any split equally likely; it also makes
+  small fragments (attrition-like fines) at the rate of large ones.
+
+Selection rates implement the protocol of the aggregation kernels: ``prepare(inp)`` at every
+step and ``selection(inp) -> (K,)`` the rate of each grid pivot, >= 0, for the classes of a
+:class:`~pbmdem.pbm.kernels.KernelInput`. :class:`ConstantSelection` (PBM-constant) and
+:class:`PowerLawSelection` (S = a v^p, the analytical cases) live here; the selection from the DEM's
+impact statistics is ``pbm.impact_breakage.ImpactSelection``.
+
+Discretisation: the cell-average technique for breakage (Kumar J., Peglow M., Warnecke G.,
+Heinrich S. 2008, Powder Technol. 182:81; Kumar J. et al. 2009, Powder Technol. 189:218), on the
+same grid and with the same split of the births of a cell onto the neighbouring pivots as
+aggregation (:func:`pbmdem.pbm.aggregation.cell_average_factors`). For a granule of pivot k that
+breaks, the fragments born in each cell i (their number and first moment about x_i) come from
+b(v|x_k) over the cell, up to x_k itself (:meth:`Breakage.fragment_tables`); the births of a cell
+are then moved to the pivots so that number and solid volume are exact. Fragments smaller than
+the first pivot x_0 would leave the grid: they are counted as granules of x_0 with their solid
+volume (solid exact, number not; with the first pivot at the smallest feed granule these are
+fragments smaller than any granule the batch started with). The rates themselves are computed
+by the compiled backend (``_compiled.breakage_totals``).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from .aggregation import cell_average_factors
+from .errors import PBMInputError, positive
+from .kernels import KernelInput
+
+#: fragment distributions b(v|u) by config name (``pbm.breakage.fragments``)
+FRAGMENTS = ("binary", "uniform")
+
+
+class SelectionRate(Protocol):
+    """What a selection rate provides: ``prepare(inp)`` once per step (it may refresh cached data
+    there), ``selection(inp)`` the rate (1/s per granule) of each of the K grid pivots, >= 0."""
+
+    def prepare(self, inp: KernelInput) -> None: ...
+
+    def __call__(self, inp: KernelInput) -> np.ndarray: ...
+
+
+class ConstantSelection:
+    """S = ``rate`` (1/s per granule) for every pivot."""
+
+    def __init__(self, rate: float):
+        self.rate = positive("breakage selection rate (1/s)", rate, allow_zero=True)
+
+    def __repr__(self) -> str:
+        return f"ConstantSelection(rate={self.rate:g})"
+
+    def prepare(self, inp: KernelInput) -> None:
+        pass
+
+    def __call__(self, inp: KernelInput) -> np.ndarray:
+        return np.full(inp.pivots, self.rate)
+
+
+class PowerLawSelection:
+    """S = ``coefficient`` x v^``exponent`` with v the pivot's solid volume (m3, or the unit of
+    the grid): exponent 1 and 2 are the linear and quadratic cases of Ziff & McGrady (1985)."""
+
+    def __init__(self, coefficient: float, exponent: float):
+        self.coefficient = positive("breakage selection coefficient", coefficient, allow_zero=True)
+        if not np.isfinite(exponent):
+            raise PBMInputError(f"breakage selection exponent = {exponent!r}; allowed: a finite number")
+        self.exponent = float(exponent)
+
+    def __repr__(self) -> str:
+        return f"PowerLawSelection(coefficient={self.coefficient:g}, exponent={self.exponent:g})"
+
+    def prepare(self, inp: KernelInput) -> None:
+        pass
+
+    def __call__(self, inp: KernelInput) -> np.ndarray:
+        return self.coefficient * np.asarray(inp.volumes[: inp.pivots], float) ** self.exponent
+
+
+class Breakage:
+    """Breakage with a selection rate (:class:`SelectionRate`) and a fragment distribution
+    (``fragments``, one of ``FRAGMENTS``). Only the granules at the grid's pivots break: with
+    feed granules kept apart (docs/pbm.md, "Feed granules") those are the aggregates, and a feed
+    granule, the unit the aggregates are made of, does not break."""
+
+    def __init__(self, selection: SelectionRate, fragments: str = "binary"):
+        if fragments not in FRAGMENTS:
+            raise PBMInputError(f"breakage fragments = {fragments!r}; allowed: {list(FRAGMENTS)}")
+        if not (callable(selection) and callable(getattr(selection, "prepare", None))):
+            raise PBMInputError(
+                f"breakage selection = {selection!r}; allowed: an object with prepare(inp) and "
+                "__call__(inp) -> (K,) rates (pbmdem.pbm.breakage.SelectionRate)"
+            )
+        self.selection = selection
+        self.fragments = fragments
+        self._t_eval: float | None = None  # time of the last evaluation of the selection in a run
+
+    def __repr__(self) -> str:
+        return f"Breakage({self.selection!r}, fragments={self.fragments!r})"
+
+    def compiled_arrays(self, x: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(selection (K,), fragment tables (3, K, K), split factors (4, K)): the arguments of the
+        compiled rates (``_compiled.breakage_totals``) on the grid of pivots ``x`` and cell
+        ``edges``; :meth:`prepare` refreshes the selection array in place."""
+        x = np.asarray(x, float)
+        tab = np.ascontiguousarray(self.fragment_tables(x, edges))
+        return np.zeros(x.size), tab, np.ascontiguousarray(cell_average_factors(x / x[0]))
+
+    def reset(self) -> None:
+        """Start of a run: the next :meth:`prepare` evaluates the selection."""
+        self._t_eval = None
+
+    def prepare(self, inp: KernelInput, out: np.ndarray, interval: float = 0.0) -> None:
+        """Once per step: the selection's own ``prepare``, and its rates evaluated again into
+        ``out`` (the selection array of :meth:`compiled_arrays`) at the first step of a run and
+        then once ``interval`` seconds have passed (the aggregation kernel's update interval)."""
+        self.selection.prepare(inp)
+        if self._t_eval is None or inp.t >= self._t_eval + interval:
+            out[:] = self.rates(inp)
+            self._t_eval = inp.t
+
+    def rates(self, inp: KernelInput) -> np.ndarray:
+        """The selection rate (1/s) of each of the K pivots at ``inp``, checked: shape (K,),
+        finite and >= 0 (PBMInputError naming the selection and the pivot)."""
+        K = inp.pivots
+        S = np.asarray(self.selection(inp), dtype=float)
+        if S.shape != (K,):
+            raise PBMInputError(
+                f"breakage selection {self.selection!r} returned shape {S.shape}; expected ({K},), one "
+                "rate per grid pivot"
+            )
+        bad = ~np.isfinite(S) | (S < 0)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise PBMInputError(
+                f"breakage selection {self.selection!r} gave {float(S[k])!r} 1/s for the pivot of diameter "
+                f"{float(inp.diameters[k]):.4g} m at t = {inp.t:.6g} s; allowed: finite rates >= 0"
+            )
+        return S
+
+    def fragment_tables(self, x: np.ndarray, edges: np.ndarray) -> np.ndarray:
+        """(3, K, K) per breakage of one granule of pivot k (column k): the fragments born in
+        cell i (row i) as [number, first moment sum (v/x_i - 1), share of the parent's solid],
+        for pivots ``x`` (K,) and cell ``edges`` (K + 1,) in any unit of volume. Fragments below
+        the first pivot count as granules of x_0 carrying their solid volume."""
+        x = np.asarray(x, float)
+        K = x.size
+        xr = x / x[0]
+        e = np.asarray(edges, float)[1:-1] / x[0]  # inner cell bounds, x_0 units
+        tab = np.zeros((3, K, K))
+        for k in range(K):
+            number, solid = _fragments_of(self.fragments, xr[k], xr, e)
+            tab[0, :, k] = number
+            tab[1, :, k] = solid / xr - number
+            tab[2, :, k] = solid / xr[k]
+        return tab
+
+
+def breakage_arrays(breakage: Breakage | None, x: np.ndarray, edges: np.ndarray) -> tuple:
+    """The breakage's arguments of the compiled rates on the grid of pivots ``x`` and cell
+    ``edges`` (:meth:`Breakage.compiled_arrays`); None: an empty selection, no breakage."""
+    if breakage is None:
+        return np.zeros(0), np.zeros((3, 0, 0)), np.zeros((4, 0))
+    if not isinstance(breakage, Breakage):
+        raise PBMInputError(f"breakage = {breakage!r}; allowed: a pbmdem.pbm.breakage.Breakage or None")
+    return breakage.compiled_arrays(x, edges)
+
+
+def _fragments_of(fragments: str, u: float, xr: np.ndarray, inner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(number, solid volume) of the fragments of one granule of volume ``u`` (units of x_0) in
+    each cell of pivots ``xr`` with inner bounds ``inner`` (K - 1,), cell i spanning [inner[i-1],
+    inner[i]) and the fragments of cell k (u's own cell) reaching up to u. Fragments below x_0 = 1
+    are put in cell 0 as number = solid volume / x_0."""
+    K = xr.size
+    number, solid = np.zeros(K), np.zeros(K)
+    if fragments == "binary":
+        h = 0.5 * u
+        if h < 1.0:
+            number[0], solid[0] = u, u  # two fragments below x_0: u / x_0 granules of x_0
+        else:
+            i = int(np.searchsorted(inner, h, side="right"))
+            number[i], solid[i] = 2.0, u
+        return number, solid
+    # uniform daughters b(v|u) = 2/u on (0, u): number 2 (b - a)/u, solid (b^2 - a^2)/u in [a, b]
+    low = min(1.0, u)
+    solid[0] = number[0] = low * low / u  # the fragments below x_0, as granules of x_0
+    lower = np.concatenate([[1.0], inner])
+    upper = np.minimum(np.append(inner, np.inf), u)
+    a, b = lower, np.maximum(upper, lower)
+    number += 2.0 * (b - a) / u
+    solid += (b - a) * (b + a) / u
+    return number, solid

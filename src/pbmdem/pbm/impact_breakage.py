@@ -1,0 +1,143 @@
+"""Breakage selection from the DEM's impacts: :class:`ImpactSelection`.
+
+A granule breaks in an impact that deforms it beyond what its binder can hold. The Stokes
+deformation number of an impact at normal speed v,
+
+    St_def = rho v^2 / (2 Y),
+
+is the impact's kinetic energy per granule volume over the granule's dynamic yield strength Y
+(Tardos, Khan & Mort 1997, Powder Technol. 94, 245-258; Iveson, Litster, Hapgood & Ennis 2001,
+Powder Technol. 117, 3-39); granules break when St_def exceeds a critical St_def*, i.e. when v
+exceeds the critical speed v* = sqrt(2 Y St_def* / rho). The selection rate of a granule of
+class i (1/s) sums, over the kinds of impact k it suffers, its impact rate of that kind times
+the fraction of those impacts faster than v*:
+
+    S_i = sum_j c_ij (N_j - delta_ij) P_ij  +  sum_w f_wi P_wi,
+
+with c_ij the encounter frequency per pair, N_j the granules of class j, f_wi the impacts per
+granule on wall w (impeller, bowl) and P the fraction of the impact-velocity distribution above v*
+(:func:`pbmdem.impact.fraction_above`: impacts spread evenly in log v inside a bin). The impact
+statistics come from the frequency source's ``impacts(diameters, numbers, rpm)`` (DEM tables,
+a coupling interval's DEM run or the surrogate), evaluated at the bins' pivots.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pbmdem.config import Pbm
+from pbmdem.impact import WALLS, ImpactRates, fraction_above
+
+from .errors import PBMInputError, positive
+from .kernels import KernelInput
+
+
+def critical_speed(density: float, yield_strength: float, critical_stokes: float) -> float:
+    """v* = sqrt(2 Y St_def* / rho) (m/s): the slowest impact with St_def above St_def*."""
+    return float(np.sqrt(2.0 * yield_strength * critical_stokes / density))
+
+
+def selection_rates(
+    rates: ImpactRates, numbers, speed: float, walls=WALLS, pairs: bool = True
+) -> dict[str, np.ndarray]:
+    """(K,) breaking impacts per granule and second of each class, per kind of impact: ``pairs``
+    (summed over the partner classes) and each wall of ``walls``; ``speed`` is v* (m/s)."""
+    above = fraction_above(speed)
+    n = np.asarray(numbers, float)
+    K = n.size
+    out: dict[str, np.ndarray] = {}
+    if pairs:
+        breaking = rates.pairs.velocity_fractions @ above  # (K, K) fraction of each pair's impacts
+        partners = np.maximum(n[None, :] - np.eye(K), 0.0)  # a granule does not meet itself
+        out["pairs"] = (rates.pairs.frequency * breaking * partners).sum(axis=1)
+    for wall in walls:
+        frequency, fractions = rates.walls.of(wall)
+        out[wall] = frequency * (fractions @ above)
+    return out
+
+
+class ImpactSelection:
+    """Selection rate S_i (1/s per granule) of each bin's pivot from the impacts of ``source``.
+
+    ``source`` offers ``impacts(diameters, numbers, rpm) -> pbmdem.impact.ImpactRates``;
+    ``density`` (kg/m3) the granule density, ``yield_strength`` Y (Pa) the granule's dynamic yield
+    strength, ``critical_stokes`` St_def*; ``walls`` the walls whose impacts can break a granule
+    (of "impeller", "bowl"); ``pairs`` whether granule-granule encounters can. :meth:`prepare`
+    (at every step) asks the source for the impacts only when the pivots, the speed or the source
+    (:meth:`set_source`, a coupling interval's) changed; a call weights them with the current
+    numbers (the pair term)."""
+
+    def __init__(
+        self,
+        source,
+        density: float,
+        yield_strength: float,
+        critical_stokes: float,
+        walls=("impeller", "bowl"),
+        pairs: bool = True,
+    ):
+        self.density = positive("granule density (kg/m3)", density)
+        self.yield_strength = positive("granule dynamic yield strength Y (Pa)", yield_strength)
+        self.critical_stokes = positive("critical Stokes deformation number St_def*", critical_stokes)
+        unknown = [w for w in walls if w not in WALLS]
+        if unknown:
+            raise PBMInputError(f"breakage walls {list(walls)}: {unknown} unknown; allowed: {list(WALLS)}")
+        self.walls = tuple(walls)
+        self.pairs = bool(pairs)
+        self.speed = critical_speed(self.density, self.yield_strength, self.critical_stokes)
+        self.set_source(source)
+
+    def __repr__(self) -> str:
+        return (
+            f"ImpactSelection(Y={self.yield_strength:g} Pa, St_def*={self.critical_stokes:g}, "
+            f"v*={self.speed:.3g} m/s, walls={list(self.walls)}, pairs={self.pairs}, source={self.source!r})"
+        )
+
+    def set_source(self, source) -> None:
+        """Use ``source`` from the next :meth:`prepare` on (a coupling interval's impacts; None:
+        none yet, the loop sets it before the first step)."""
+        if source is not None and not callable(getattr(source, "impacts", None)):
+            raise PBMInputError(
+                f"breakage from impacts needs a source with impacts(diameters, numbers, rpm); {source!r} has none"
+            )
+        self.source = source
+        self._rates = None
+        self._key = None
+
+    def prepare(self, inp: KernelInput) -> None:
+        """Fetch the impacts of the bins' pivots from the source, unless it gave them already."""
+        if self.source is None:
+            raise PBMInputError("ImpactSelection has no source of impacts yet (set_source)")
+        d, n = inp.per_bin()
+        key = (np.asarray(d, float).tobytes(), float(inp.rpm))
+        if self._rates is not None and key == self._key:
+            return
+        rates = self.source.impacts(d, n, inp.rpm)
+        if not isinstance(rates, ImpactRates) or rates.pairs.frequency.shape[0] != d.size:
+            raise PBMInputError(
+                f"{self.source!r}.impacts gave {type(rates).__name__}, not ImpactRates of {d.size} bins"
+            )
+        self._rates, self._key = rates, key
+
+    def contributions(self, inp: KernelInput) -> dict[str, np.ndarray]:
+        """Per kind of impact (pairs, each wall): (K,) breaking impacts per granule and second."""
+        if self._rates is None:
+            self.prepare(inp)
+        _, n = inp.per_bin()
+        return selection_rates(self._rates, n, self.speed, self.walls, self.pairs)
+
+    def __call__(self, inp: KernelInput) -> np.ndarray:
+        parts = self.contributions(inp)
+        return np.sum(list(parts.values()), axis=0) if parts else np.zeros(inp.pivots)
+
+
+def impact_selection(pbm: Pbm, source=None) -> ImpactSelection | None:
+    """The ImpactSelection of the ``pbm.breakage`` settings (Y, St_def*, walls, pairs) on
+    ``source`` (None: set later), with the granule density of the Stokes success model
+    (``pbm.aggregation.success.stokes.granule_density``, the DEM particle density); None when breakage
+    is off."""
+    brk = pbm.breakage
+    if not brk.enabled:
+        return None
+    density = pbm.aggregation.success.stokes.granule_density
+    return ImpactSelection(source, density, brk.yield_strength, brk.critical_stokes, brk.walls, brk.pairs)

@@ -1,0 +1,132 @@
+"""The DEM's wall impacts as a source for breakage: :class:`WallTable`.
+
+Per wall (bowl, impeller), the encounters per granule and second of each size class
+(``encounter_frequency_per_particle`` of results/dem/wall_collisions.csv) and their impact-speed
+distribution (results/dem/wall_impact_velocity.csv, counts per bin of pbmdem.impact.VELOCITY_EDGES),
+interpolated onto any class diameters and impeller speed the way :class:`~pbmdem.pbm.table.TableFrequency`
+interpolates the pair table: per speed, rows of one diameter (several distributions) are pooled
+(frequencies averaged, counts added), log f is interpolated linearly in log d and clamped at the
+table's sizes, zero frequencies are floored at ``zero_floor`` x the smallest positive one; the
+fractions are interpolated linearly in log d (clamped); over rpm, log f and the fractions are
+mixed with the weights of :func:`pbmdem.pbm.table.speed_weights`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, WALLS, WallRates
+
+from .errors import PBMInputError, positive
+from .table import TableFrequency, speed_weights
+
+#: Column of the wall table the breakage selection is built on (impacts of granules that were apart).
+WALL_FREQUENCY_COLUMN = "encounter_frequency_per_particle"
+
+
+def _bin_of(lo: np.ndarray, hi: np.ndarray, what: str) -> np.ndarray:
+    """Velocity bin of every [v_lo, v_hi) row; refuses bins that are not the project's."""
+    b = np.clip(np.searchsorted(VELOCITY_EDGES[:-1], lo), 0, N_VELOCITY_BINS - 1)
+    ok = np.isclose(VELOCITY_EDGES[:-1][b], lo, rtol=1e-6, atol=0.0) & np.isclose(VELOCITY_EDGES[1:][b], hi, rtol=1e-6)
+    if not ok.all():
+        k = int(np.argmin(ok))
+        raise PBMInputError(
+            f"{what} row {k}: bin [{lo[k]!r}, {hi[k]!r}) m/s is not one of pbmdem.impact.VELOCITY_EDGES' bins"
+        )
+    return b
+
+
+class WallTable:
+    """Wall impacts per granule interpolated from the DEM's wall tables.
+
+    ``walls``: the grid wall-collision table (columns rpm, wall, class_i, d_i, point_id and
+    ``encounter_frequency_per_particle``); ``velocities``: the wall impact-velocity table (point_id,
+    wall, class_i, v_lo, v_hi, encounters). A class with wall encounters but no velocity counts
+    is refused (the tables come from different runs)."""
+
+    def __init__(self, walls: pd.DataFrame, velocities: pd.DataFrame, zero_floor: float = 1e-3):
+        self.zero_floor = positive("wall table zero_floor", zero_floor)
+        need = ["point_id", "rpm", "wall", "class_i", "d_i", WALL_FREQUENCY_COLUMN]
+        missing = [c for c in need if c not in walls.columns]
+        missing += [
+            c for c in ("point_id", "wall", "class_i", "v_lo", "v_hi", "encounters") if c not in velocities.columns
+        ]
+        if missing:
+            raise PBMInputError(f"wall tables lack columns {missing}")
+        t = walls[walls["wall"].isin(WALLS)].copy()
+        if t.empty:
+            raise PBMInputError(f"wall-collision table has no rows for the walls {list(WALLS)}")
+        f = t[WALL_FREQUENCY_COLUMN].to_numpy(float)
+        if not np.all(np.isfinite(f) & (f >= 0)) or not (f > 0).any():
+            raise PBMInputError(f"wall-collision table {WALL_FREQUENCY_COLUMN}: allowed finite values >= 0, one > 0")
+        floor = self.zero_floor * f[f > 0].min()
+        t["log_f"] = np.log(np.maximum(f, floor))
+        t = t.join(self._counts(t, velocities))
+        self.rpms = np.array(sorted(t["rpm"].astype(float).unique()))
+        self._grids = [self._speed_grid(g) for _, g in t.groupby("rpm", sort=True)]
+
+    @staticmethod
+    def _counts(t: pd.DataFrame, velocities: pd.DataFrame) -> pd.DataFrame:
+        """(rows of t, V) wall encounters per velocity bin, as columns 0..V-1 on t's index."""
+        v = velocities[velocities["point_id"].astype(str).isin(set(t["point_id"].astype(str)))]
+        b = _bin_of(v["v_lo"].to_numpy(float), v["v_hi"].to_numpy(float), "wall impact-velocity table")
+        keys = ["point_id", "wall", "class_i"]
+        wide = (
+            v.assign(bin=b, point_id=v["point_id"].astype(str), class_i=v["class_i"].astype(int))
+            .pivot_table(index=keys, columns="bin", values="encounters", aggfunc="sum", fill_value=0.0)
+            .reindex(columns=range(N_VELOCITY_BINS), fill_value=0.0)
+        )
+        index = pd.MultiIndex.from_arrays([t["point_id"].astype(str), t["wall"], t["class_i"].astype(int)], names=keys)
+        counts = wide.reindex(index).to_numpy(float)
+        lacking = (t[WALL_FREQUENCY_COLUMN].to_numpy(float) > 0) & ~(np.nan_to_num(counts).sum(axis=1) > 0)
+        if lacking.any():
+            k = int(np.argmax(lacking))
+            raise PBMInputError(
+                f"wall-collision table: {tuple(index[k])} has wall encounters but no row in the wall "
+                "impact-velocity table; both tables must come from the same DEM runs"
+            )
+        return pd.DataFrame(np.nan_to_num(counts), index=t.index)
+
+    @staticmethod
+    def _speed_grid(g: pd.DataFrame) -> dict:
+        """Per wall: table log d, log f and fractions (n, V) of one speed's rows."""
+        out = {}
+        for wall in WALLS:
+            rows = g[g["wall"] == wall]
+            if rows.empty:
+                raise PBMInputError(f"wall-collision table at rpm {g['rpm'].iloc[0]:g}: no rows for the {wall}")
+            pooled = rows.groupby("d_i", sort=True)
+            counts = pooled[list(range(N_VELOCITY_BINS))].sum().to_numpy(float)
+            total = counts.sum(axis=1, keepdims=True)
+            everything = counts.sum(axis=0) / max(counts.sum(), 1e-300)
+            fractions = np.where(total > 0, counts / np.where(total > 0, total, 1.0), everything)
+            out[wall] = (np.log(pooled.size().index.to_numpy(float)), pooled["log_f"].mean().to_numpy(), fractions)
+        return out
+
+    @classmethod
+    def from_csv(cls, path, velocity_path, distribution: str | None = None) -> WallTable:
+        """The grid's wall tables (results/dem/wall_collisions.csv, wall_impact_velocity.csv), read
+        through their contracts; ``distribution`` keeps only that distribution's rows."""
+        walls = TableFrequency._read(path, distribution, "wall-collision table")
+        velocities = TableFrequency._read(velocity_path, distribution, "wall impact-velocity table")
+        try:
+            return cls(walls, velocities)
+        except PBMInputError as err:
+            raise PBMInputError(f"{path} / {velocity_path}: {err}") from None
+
+    def __repr__(self) -> str:
+        return f"WallTable(rpm=[{','.join(f'{r:g}' for r in self.rpms)}])"
+
+    def rates(self, diameters, rpm) -> WallRates:
+        """:class:`pbmdem.impact.WallRates` of classes of these diameters (m) at ``rpm``."""
+        ld = np.log(np.atleast_1d(np.asarray(diameters, float)))
+        log_f = np.zeros((len(WALLS), ld.size))
+        fractions = np.zeros((len(WALLS), ld.size, N_VELOCITY_BINS))
+        for k, w in speed_weights(self.rpms, rpm):
+            for i, wall in enumerate(WALLS):
+                lx, lf, fr = self._grids[k][wall]
+                x = np.clip(ld, lx[0], lx[-1])
+                log_f[i] += w * np.interp(x, lx, lf)
+                fractions[i] += w * np.stack([np.interp(x, lx, fr[:, b]) for b in range(N_VELOCITY_BINS)], axis=1)
+        return WallRates(np.exp(log_f), fractions / fractions.sum(axis=2, keepdims=True))

@@ -1,0 +1,129 @@
+"""Wall impacts in the surrogate: per wall (bowl, impeller), the impacts per granule of each class
+and their impact-speed law, learned like the pair model (what breakage from impacts needs).
+
+A wall row of the DEM's tables (point, class i, wall) is put into the collision table's form as the
+diagonal pair (i, i): the same features (d_small = d_large = d_i, frac_small = frac_large = the
+class's number fraction, n_total, tip speed), the target ``encounter_frequency_per_pair`` taken from
+the wall table's ``encounter_frequency_per_particle`` (and its replicate standard error), and the
+velocity bins of results/dem/wall_impact_velocity.csv. :func:`~pbmdem.surrogate.features.training_data`,
+the held-out evaluation (:func:`~pbmdem.surrogate.evaluation.cross_validate_models`, the same
+grouped folds) and :class:`~pbmdem.surrogate.model.CollisionSurrogate` then apply unchanged: one
+fitted ``CollisionSurrogate`` per wall, of the family chosen for the pairs, held in the pair
+model's ``wall_models_``. With ``physics_offset = cross_section`` the wall model learns the
+residual after log10 (2 d)^2 (a granule's target area; the wall's is fixed) and the speed law
+after the tip speed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from pbmdem.impact import N_VELOCITY_BINS, WALLS, WallRates
+
+from .features import pair_features
+
+#: wall-table columns -> collision-table columns of the diagonal pair
+_RENAME = {"encounter_frequency_per_particle": "encounter_frequency_per_pair"}
+
+
+def wall_collision_table(walls: pd.DataFrame, wall: str) -> pd.DataFrame:
+    """The grid wall-collision table's rows of ``wall`` in the collision table's form (see above)."""
+    rows = walls[walls["wall"].astype(str) == wall].copy()
+    if rows.empty:
+        raise ValueError(
+            f"wall-collision table has no rows for the {wall}; walls present: {sorted(set(walls['wall']))}"
+        )
+    rows = rows.rename(columns=_RENAME | {f"{k}_se": f"{v}_se" for k, v in _RENAME.items()})
+    rows["class_j"], rows["d_j"], rows["n_j"] = rows["class_i"], rows["d_i"], rows["n_i"]
+    # a wall row is one granule's impacts: never "no pairs" for a class of one granule
+    rows.loc[rows["n_i"] < 2, ["n_i", "n_j"]] = 2
+    return rows.drop(columns=["wall"]).reset_index(drop=True)
+
+
+def wall_velocity_table(velocities: pd.DataFrame, wall: str) -> pd.DataFrame:
+    """The wall impact-velocity table's rows of ``wall`` in the pair velocity table's form."""
+    rows = velocities[velocities["wall"].astype(str) == wall].copy()
+    rows["class_j"] = rows["class_i"]
+    return rows.drop(columns=["wall"]).reset_index(drop=True)
+
+
+def wall_training_data(walls, velocities, wall: str, impeller_radius: float, zero_policy: str):
+    """:class:`~pbmdem.surrogate.features.TrainingData` of one wall."""
+    from .features import training_data
+
+    return training_data(
+        wall_collision_table(walls, wall),
+        impeller_radius,
+        zero_policy,
+        velocity_table=wall_velocity_table(velocities, wall),
+        velocity_source=f"wall impact-velocity table ({wall})",
+    )
+
+
+def diagonal_features(diameters, numbers, rpm: float, impeller_radius: float) -> np.ndarray:
+    """Feature rows (K, n_features) of the diagonal pairs (i, i): one per class."""
+    X, iu, ju = pair_features(diameters, numbers, rpm, impeller_radius)
+    return X[iu == ju]
+
+
+def wall_rates(surrogate, diameters, numbers, rpm: float, check_domain: bool = True) -> WallRates:
+    """:class:`pbmdem.impact.WallRates` of the classes from the surrogate's wall models (every
+    wall of :data:`pbmdem.impact.WALLS`; ValueError naming the missing ones)."""
+    models = getattr(surrogate, "wall_models_", None) or {}
+    missing = [w for w in WALLS if w not in models]
+    if missing:
+        raise ValueError(
+            f"this surrogate has no wall model for {missing}: retrain it with the wall tables "
+            "(results/dem/wall_collisions.csv, wall_impact_velocity.csv) to predict wall impacts"
+        )
+    X = diagonal_features(diameters, numbers, rpm, surrogate.impeller_radius)
+    frequency = np.empty((len(WALLS), len(X)))
+    fractions = np.empty((len(WALLS), len(X), N_VELOCITY_BINS))
+    frame = pd.DataFrame(X, columns=surrogate._feature_names())
+    for w, wall in enumerate(WALLS):
+        model = models[wall]
+        frequency[w] = 10.0 ** model.predict(frame, check_domain=check_domain)
+        fractions[w] = model.velocity_fractions(frame, check_domain=False)
+    return WallRates(frequency, fractions)
+
+
+def train_wall_models(walls, velocities, template, candidates: dict, settings: dict, impeller_radius: float):
+    """Per wall of :data:`pbmdem.impact.WALLS`: the held-out evaluation of ``candidates`` (the
+    families and baselines, name -> unfitted estimator) on the grouped folds of ``settings["cv"]``
+    (as the pair model's), and the final wall model, a clone of ``template`` (the family chosen
+    for the pairs) with its uncertainty calibrated on its own held-out coverage, fitted on every run.
+
+    Returns ``(models, metrics, summaries)``: wall -> fitted CollisionSurrogate; the metric rows
+    with ``target`` prefixed by the wall (``impeller_encounter_frequency``, ...); wall -> the
+    pooled held-out summary of the frequency and the speed law (:func:`~.evaluation.summarise`).
+    """
+    import warnings
+
+    from sklearn.base import clone
+
+    from .evaluation import cross_validate_models, summarise
+
+    family = next(name for name, model in candidates.items() if model is template)
+    models, frames, summaries = {}, [], {}
+    for wall in WALLS:
+        data = wall_training_data(walls, velocities, wall, impeller_radius, settings["zero_collisions"])
+        metrics, _ = cross_validate_models(
+            data,
+            {name: clone(m) for name, m in candidates.items()},
+            settings["cv"]["strategy"],
+            settings["cv"]["n_splits"],
+        )
+        frequency, speed = summarise(metrics), summarise(metrics, "impact_velocity")
+        summaries[wall] = {"frequency": frequency, "impact_velocity": speed}
+        scales = {}
+        for key, s in (("uncertainty_scale", frequency), ("velocity_uncertainty_scale", speed)):
+            scale = s.get(family, {}).get("uncertainty_scale", float("nan"))
+            scales[key] = float(scale) if np.isfinite(scale) and scale > 0 else 1.0
+        model = clone(template).set_params(**scales)
+        with warnings.catch_warnings():
+            # on the diagonal d_small = d_large and frac_small = frac_large by construction
+            warnings.filterwarnings("ignore", message="features (d_small and d_large|frac_small and frac_large) are")
+            models[wall] = model.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
+        frames.append(metrics.assign(target=wall + "_" + metrics["target"]))
+    return models, pd.concat(frames, ignore_index=True), summaries

@@ -1,0 +1,208 @@
+"""Breakage selection from impacts (pbmdem.pbm.impact_breakage): hand-made impacts with known
+speeds give the selection rate the Stokes deformation criterion predicts."""
+
+import numpy as np
+import pytest
+
+from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, EncounterRates, ImpactRates, WallRates, fraction_above
+from pbmdem.pbm.errors import PBMInputError
+from pbmdem.pbm.impact_breakage import ImpactSelection, critical_speed
+from pbmdem.pbm.kernels import KernelInput
+
+RHO, Y, ST = 1000.0, 1.0e4, 0.2  # v* = sqrt(2 * 1e4 * 0.2 / 1000) = 2 m/s
+
+
+def one_bin(shape, speed):
+    """Fractions with every impact in the bin of `speed`."""
+    f = np.zeros((*shape, N_VELOCITY_BINS))
+    f[..., int(np.searchsorted(VELOCITY_EDGES, speed, side="right") - 1)] = 1.0
+    return f
+
+
+class HandMadeSource:
+    """Impacts with known speeds: pairs at `pair_speed`, the impeller at `impeller_speed`, the
+    bowl at `bowl_speed`; frequencies given per pair and per granule."""
+
+    def __init__(self, c, f_impeller, f_bowl, pair_speed, impeller_speed, bowl_speed):
+        self.c, self.f = np.asarray(c, float), np.array([f_bowl, f_impeller], float)
+        self.speeds = (pair_speed, impeller_speed, bowl_speed)
+        self.calls = 0
+
+    def impacts(self, diameters, numbers, rpm):
+        self.calls += 1
+        K = len(diameters)
+        pair_speed, impeller_speed, bowl_speed = self.speeds
+        walls = np.stack([one_bin((K,), bowl_speed), one_bin((K,), impeller_speed)])
+        return ImpactRates(EncounterRates(self.c[:K, :K], one_bin((K, K), pair_speed)), WallRates(self.f[:, :K], walls))
+
+
+def kernel_input(numbers, d=(0.002, 0.004)):
+    d = np.asarray(d, float)
+    return KernelInput(0.0, np.pi / 6 * d**3, d, np.asarray(numbers, float), np.zeros(d.size), rpm=600.0)
+
+
+def test_critical_speed_of_the_stokes_criterion():
+    assert critical_speed(RHO, Y, ST) == pytest.approx(2.0)
+    assert critical_speed(1500.0, 3.0e4, 0.1) == pytest.approx(np.sqrt(2 * 3.0e4 * 0.1 / 1500.0))
+
+
+def test_fraction_above_splits_a_straddling_bin_evenly_in_log_speed():
+    above = fraction_above(2.0)
+    b = int(np.searchsorted(VELOCITY_EDGES, 2.0, side="right") - 1)
+    lo, hi = VELOCITY_EDGES[b], VELOCITY_EDGES[b + 1]
+    assert above[b] == pytest.approx(np.log(hi / 2.0) / np.log(hi / lo))
+    assert np.all(above[:b] == 0.0) and np.all(above[b + 1 :] == 1.0)
+    assert fraction_above(0.0).tolist() == [1.0] * N_VELOCITY_BINS
+    assert fraction_above(5e-4)[0] == pytest.approx(0.5)  # bin 0 is [0, 1 mm/s), even in v
+
+
+def test_only_impacts_faster_than_the_critical_speed_break():
+    c = np.array([[1e-3, 2e-3], [2e-3, 4e-3]])
+    # pairs at 0.5 m/s and the bowl at 0.3 m/s cannot break (v* = 2 m/s); the impeller at 4 m/s can
+    source = HandMadeSource(
+        c, f_impeller=[3.0, 5.0], f_bowl=[7.0, 9.0], pair_speed=0.5, impeller_speed=4.0, bowl_speed=0.3
+    )
+    sel = ImpactSelection(source, RHO, Y, ST)
+    inp = kernel_input([100, 50])
+    sel.prepare(inp)
+    np.testing.assert_allclose(sel(inp), [3.0, 5.0])
+    parts = sel.contributions(inp)
+    np.testing.assert_allclose(parts["pairs"], 0.0)
+    np.testing.assert_allclose(parts["bowl"], 0.0)
+
+
+def test_pair_impacts_count_every_partner_but_not_the_granule_itself():
+    c = np.array([[1e-3, 2e-3], [2e-3, 4e-3]])
+    source = HandMadeSource(c, [0.0, 0.0], [0.0, 0.0], pair_speed=4.0, impeller_speed=0.1, bowl_speed=0.1)
+    sel = ImpactSelection(source, RHO, Y, ST)
+    inp = kernel_input([100, 50])
+    s = sel(inp)
+    np.testing.assert_allclose(s, [1e-3 * 99 + 2e-3 * 50, 2e-3 * 100 + 4e-3 * 49])
+    # the pair term follows the current numbers without asking the source again
+    calls = source.calls
+    np.testing.assert_allclose(sel(kernel_input([10, 5])), [1e-3 * 9 + 2e-3 * 5, 2e-3 * 10 + 4e-3 * 4])
+    assert source.calls == calls
+
+
+def test_walls_and_pairs_can_be_switched_off_and_a_stronger_granule_breaks_less():
+    c = np.full((2, 2), 1e-3)
+    source = HandMadeSource(c, [3.0, 5.0], [7.0, 9.0], pair_speed=4.0, impeller_speed=4.0, bowl_speed=4.0)
+    inp = kernel_input([100, 50])
+    only_bowl = ImpactSelection(source, RHO, Y, ST, walls=("bowl",), pairs=False)
+    np.testing.assert_allclose(only_bowl(inp), [7.0, 9.0])
+    # Y x 4 doubles v* to 4 m/s, inside the bin of the impacts: only the part above 4 m/s breaks
+    strong = ImpactSelection(source, RHO, 4 * Y, ST, walls=("bowl",), pairs=False)
+    assert strong.speed == pytest.approx(4.0)
+    b = int(np.searchsorted(VELOCITY_EDGES, 4.0, side="right") - 1)
+    split = np.log(VELOCITY_EDGES[b + 1] / 4.0) / np.log(VELOCITY_EDGES[b + 1] / VELOCITY_EDGES[b])
+    np.testing.assert_allclose(strong(inp), np.array([7.0, 9.0]) * split)
+    # Y x 100: v* = 20 m/s beyond every bin, nothing breaks
+    assert np.all(ImpactSelection(source, RHO, 100 * Y, ST)(inp) == 0.0)
+
+
+def test_bad_settings_and_sources_are_refused_by_name():
+    source = HandMadeSource(np.eye(2), [0, 0], [0, 0], 1.0, 1.0, 1.0)
+    with pytest.raises(PBMInputError, match="yield strength"):
+        ImpactSelection(source, RHO, -1.0, ST)
+    with pytest.raises(PBMInputError, match="lid"):
+        ImpactSelection(source, RHO, Y, ST, walls=("lid",))
+    with pytest.raises(PBMInputError, match="impacts"):
+        ImpactSelection(object(), RHO, Y, ST)
+
+
+def grid_tables(speed_of_rpm):
+    """Hand-made grid tables of one distribution at 300 and 1200 rpm: classes 2 and 4 mm, every
+    wall encounter of a point at the one speed `speed_of_rpm[rpm]` (m/s), impeller encounters
+    2 and 4 per granule and second, bowl 10 and 20; pairs at 0.1 m/s."""
+    import pandas as pd
+
+    from pbmdem.impact import velocity_bin
+
+    pairs, pair_v, walls, wall_v = [], [], [], []
+    for rpm, speed in speed_of_rpm.items():
+        pid = f"rpm{rpm}_feed"
+        for i, j in ((0, 0), (0, 1), (1, 1)):
+            pairs.append(
+                dict(
+                    point_id=pid,
+                    rpm=rpm,
+                    distribution="feed",
+                    class_i=i,
+                    class_j=j,
+                    d_i=0.002 * (1 + i),
+                    d_j=0.002 * (1 + j),
+                    encounter_frequency_per_pair=1e-3,
+                )
+            )
+            pair_v.append(
+                dict(
+                    point_id=pid,
+                    rpm=rpm,
+                    distribution="feed",
+                    class_i=i,
+                    class_j=j,
+                    b=velocity_bin(0.1),
+                    encounters=5.0,
+                )
+            )
+        for wall, rate in (("bowl", 10.0), ("impeller", 2.0)):
+            for c in (0, 1):
+                walls.append(
+                    dict(
+                        point_id=pid,
+                        rpm=rpm,
+                        distribution="feed",
+                        wall=wall,
+                        class_i=c,
+                        d_i=0.002 * (1 + c),
+                        encounter_frequency_per_particle=rate * (1 + c),
+                    )
+                )
+                wall_v.append(
+                    dict(
+                        point_id=pid,
+                        rpm=rpm,
+                        distribution="feed",
+                        wall=wall,
+                        class_i=c,
+                        b=velocity_bin(speed),
+                        encounters=7.0,
+                    )
+                )
+
+    def bins(rows):
+        frame = pd.DataFrame(rows)
+        return frame.assign(v_lo=VELOCITY_EDGES[frame.b], v_hi=VELOCITY_EDGES[frame.b + 1]).drop(columns="b")
+
+    return pd.DataFrame(pairs), bins(pair_v), pd.DataFrame(walls), bins(wall_v)
+
+
+def test_selection_from_hand_made_dem_tables_breaks_only_above_the_critical_speed():
+    from pbmdem.pbm.table import TableFrequency
+    from pbmdem.pbm.wall_table import WallTable
+
+    pairs, pair_v, walls, wall_v = grid_tables({300: 0.5, 1200: 3.0})  # v* = 2 m/s between them
+    source = TableFrequency(pairs, velocity_table=pair_v)
+    source.walls = WallTable(walls, wall_v)
+    sel = ImpactSelection(source, RHO, Y, ST)
+    b = int(np.searchsorted(VELOCITY_EDGES, 3.0, side="right") - 1)
+    above = fraction_above(2.0)[b]
+    d = np.array([0.002, 0.004])
+    for rpm, expected in ((300.0, [0.0, 0.0]), (1200.0, np.array([12.0, 24.0]) * above)):
+        inp = KernelInput(0.0, np.pi / 6 * d**3, d, np.array([100.0, 50.0]), np.zeros(2), rpm=rpm)
+        sel.prepare(inp)
+        np.testing.assert_allclose(sel(inp), expected, rtol=1e-12)
+    # between the table speeds the wall rates and the fractions mix linearly (here 50 / 50)
+    rates = source.impacts(d, [100, 50], 750.0)
+    np.testing.assert_allclose(rates.walls.of("impeller")[0], [2.0, 4.0])
+    assert rates.walls.of("bowl")[1][0, b] == pytest.approx(0.5)
+
+
+def test_wall_rates_of_one_run_are_read_per_class_and_wall():
+    from pbmdem.frequency import wall_rates_from_tables
+
+    _, _, walls, wall_v = grid_tables({600: 2.5})
+    rates = wall_rates_from_tables(walls, wall_v, 2)
+    np.testing.assert_allclose(rates.of("bowl")[0], [10.0, 20.0])
+    np.testing.assert_allclose(rates.of("impeller")[1].sum(axis=1), 1.0)
+    assert rates.of("impeller")[1][0].argmax() == np.searchsorted(VELOCITY_EDGES, 2.5, side="right") - 1

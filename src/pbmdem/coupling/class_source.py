@@ -17,6 +17,7 @@ import pandas as pd
 
 from pbmdem.frequency import upper_pairs
 from pbmdem.impact import EncounterRates, ImpactRates, WallRates
+from pbmdem.pbm.kernels import TableFrequency
 
 
 def class_table(diameters, matrix) -> pd.DataFrame:
@@ -34,7 +35,6 @@ class ClassFrequencySource:
     wall impacts also make it a source for breakage (:meth:`impacts`)."""
 
     def __init__(self, diameters, rates, label: str):
-        from pbmdem.pbm.kernels import TableFrequency
 
         self.diameters = list(map(float, diameters))
         self.fractions = None

@@ -23,6 +23,10 @@ from pbmdem.atomic import write_csv, write_json
 from pbmdem.config import CoupledLoop
 from pbmdem.frequency import pair_weighted_mean, pairs_of
 from pbmdem.impact import EncounterRates, ImpactRates
+from pbmdem.pbm.impact_breakage import impact_selection
+from pbmdem.pbm.kernels import ConstantFrequency
+from pbmdem.pbm.results import Result
+from pbmdem.pbm.setup import build_model, initial_state, output_times
 
 from . import intervals
 from .class_source import ClassFrequencySource
@@ -69,11 +73,6 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
     Writes `outdir/interval_NN/` per interval, then `summary.csv`, `intervals.csv` (per interval:
     classes, frequencies, wall times, out-of-domain warnings), `final_bins.csv` and `timing.json`.
     """
-    from pbmdem.pbm.impact_breakage import impact_selection
-    from pbmdem.pbm.kernels import ConstantFrequency
-    from pbmdem.pbm.results import Result
-    from pbmdem.pbm.setup import build_model, initial_state, output_times
-
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     n_intervals = loop.coupling_intervals

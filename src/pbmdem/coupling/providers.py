@@ -7,6 +7,9 @@ an `ImpactRates` that adds the wall impacts per granule (what breakage from impa
 `info` the figures recorded for the interval (wall times, DEM particle and encounter counts,
 out-of-domain warnings). `fingerprint()` names what its rates depend on, so that finished
 intervals of a changed provider are not reused.
+
+The DEM stage and the surrogate are imported where a provider uses them: a PBM-ANN job does not
+load the DEM stage, a PBM-DEM job not scikit-learn.
 """
 
 from __future__ import annotations

@@ -19,6 +19,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+from .design import Calibration, DesignSpace
 from .dem import BED_KEYS, EXECUTION_KEYS, REPLICATES_KEY, Dem, DemExecution
 from .errors import ConfigError
 from .granulator import Bed, Bowl, Granulator, Impeller, Material
@@ -93,6 +94,8 @@ class Config:
     pbm: Pbm
     surrogate: Surrogate
     validation: Validation
+    design_space: DesignSpace
+    calibration: Calibration
     mapping: dict  # the completed configuration mapping (defaults filled in), for provenance
 
     # ------------------------------------------------------------------ construction
@@ -137,6 +140,12 @@ class Config:
             sweep["start"] = min(grid.impeller_rpm)
         if sweep["stop"] is None:
             sweep["stop"] = max(grid.impeller_rpm)
+        design = json.loads(json.dumps(full["design_space"]))
+        speeds = design["impeller_rpm"]
+        if speeds["start"] is None:
+            speeds["start"] = min(grid.impeller_rpm)
+        if speeds["stop"] is None:
+            speeds["stop"] = max(grid.impeller_rpm)
         return cls(
             granulator=granulator,
             material=Material.from_dict(full["material"], "material"),
@@ -148,6 +157,8 @@ class Config:
             pbm=Pbm.from_dict(pbm_section, "pbm"),
             surrogate=Surrogate.from_dict(full["surrogate"], "surrogate"),
             validation=Validation.from_dict(val_section, "validation"),
+            design_space=DesignSpace.from_dict(design, "design_space"),
+            calibration=Calibration.from_dict(full["calibration"], "calibration"),
             mapping=full,
         )
 

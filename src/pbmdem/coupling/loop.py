@@ -62,29 +62,35 @@ def write_outputs(outdir: Path, result, rows: list[dict], totals: dict) -> None:
     write_json(outdir / "timing.json", totals)
 
 
-def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> LoopOutcome:
+def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None) -> LoopOutcome:
     """Run the PBM of `loop` at `rpm` over its coupling intervals, asking
     `provider(sample, interval_dir, index) -> (rates, info)` for the frequencies of each.
 
     Writes `outdir/interval_NN/` per interval, then `summary.csv`, `intervals.csv` (per interval:
     classes, frequencies, wall times, out-of-domain warnings), `final_bins.csv` and `timing.json`.
+    With `outdir=None` the loop runs in memory (nothing written, nothing resumed): the many short
+    PBM-ANN batches of the design space and the calibration, whose time would otherwise go to
+    writing files (`interval_dir` is then None; only the surrogate provider accepts that).
     """
     from pbmdem.pbm.kernels import ConstantFrequency
     from pbmdem.pbm.results import Result
     from pbmdem.pbm.setup import build_model, initial_state, output_times
 
-    outdir = Path(outdir)
-    outdir.mkdir(parents=True, exist_ok=True)
     n_intervals = loop.coupling_intervals
-    intervals.discard_stale(outdir, {"loop": loop.to_dict(), "rpm": float(rpm), "provider": provider.fingerprint()})
+    if outdir is not None:
+        outdir = Path(outdir)
+        outdir.mkdir(parents=True, exist_ok=True)
+        intervals.discard_stale(
+            outdir, {"loop": loop.to_dict(), "rpm": float(rpm), "provider": provider.fingerprint()}
+        )
     pbm = loop.batch.pbm
     model = build_model(pbm, ConstantFrequency(1.0), rpm=rpm)  # the source is set per interval
     state = initial_state(loop.batch, model)
     bounds = interval_bounds(loop)
     results, rows = [], []
     for k in range(n_intervals):
-        folder = outdir / f"interval_{k:02d}"
-        if intervals.is_finished(folder):
+        folder = None if outdir is None else outdir / f"interval_{k:02d}"
+        if folder is not None and intervals.is_finished(folder):
             result, info, _ = intervals.load(folder, model.grid)
             log.info("interval %d of %s: resumed from %s", k, provider.name, folder)
             results.append(result)
@@ -123,8 +129,10 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
             "pbm_wall_time_s": pbm_wall,
             **extra,
         }
-        intervals.save(folder, result, sample, matrix, info)
-        log.info(
+        if folder is not None:
+            intervals.save(folder, result, sample, matrix, info)
+        log.log(
+            logging.INFO if folder is not None else logging.DEBUG,
             "%s at rpm %g: interval %d of %d (%.4g-%.4g s) done: %s wall time %.2f s, PBM wall time %.3f s, "
             "%d surrogate out-of-domain warning(s)",
             provider.name,
@@ -154,7 +162,9 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
         totals["out_of_domain_count"] = int(sum(per_interval))
         totals["out_of_domain_intervals"] = int(sum(c > 0 for c in per_interval))
         if totals["out_of_domain_count"]:
-            log.warning(
+            # a loop in memory hands its counts to the caller, which reports them (design space)
+            log.log(
+                logging.WARNING if outdir is not None else logging.INFO,
                 "%s at rpm %g: the surrogate was outside its training domain in %d of %d intervals "
                 "(%d warnings; see intervals.csv)",
                 provider.name,
@@ -165,5 +175,6 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
             )
     totals["total_wall_time_s"] = totals["provider_wall_time_s"] + totals["pbm_wall_time_s"]
     full = Result.concat(results)
-    write_outputs(outdir, full, rows, totals)
+    if outdir is not None:
+        write_outputs(outdir, full, rows, totals)
     return LoopOutcome(full, rows, totals)

@@ -68,7 +68,7 @@ rule calibration_check:
     threads: 2
     params:
         loop=loop_params,
-        validation_dir=f"{RESULTS}/validation",
+        validation_dir=lambda wc, input: validation_dir_of(input.dem),
         rpms=VAL_RPMS,
         replicates=CFG.validation.dem_replicates,
         calibration=CFG.calibration.to_dict(),

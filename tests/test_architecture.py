@@ -6,7 +6,8 @@ job logs, plot axes), the table contracts (`pbmdem.tables`, read through the rea
 layer (`pbmdem.config`), the contracts (`pbmdem.impact`, then `pbmdem.frequency`), the stages
 (`pbmdem.dem`, `pbmdem.pbm`, `pbmdem.surrogate`, independent of each other), the coupling of the
 stages (`pbmdem.coupling`), the validation study (`pbmdem.validation`), what the fast model is for
-(`pbmdem.design`: design space, calibration), the report, the command line. A module imports only from its own unit or from lower layers.
+(`pbmdem.design`: design space, calibration), the report, the command line. A module imports
+only from its own unit or from lower layers.
 """
 
 from __future__ import annotations

@@ -19,8 +19,8 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from .design import Calibration, DesignSpace
 from .dem import BED_KEYS, EXECUTION_KEYS, REPLICATES_KEY, Dem, DemExecution
+from .design import Calibration, DesignSpace
 from .errors import ConfigError
 from .granulator import Bed, Bowl, Granulator, Impeller, Material
 from .pbm import Pbm

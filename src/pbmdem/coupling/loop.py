@@ -80,9 +80,7 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
     if outdir is not None:
         outdir = Path(outdir)
         outdir.mkdir(parents=True, exist_ok=True)
-        intervals.discard_stale(
-            outdir, {"loop": loop.to_dict(), "rpm": float(rpm), "provider": provider.fingerprint()}
-        )
+        intervals.discard_stale(outdir, {"loop": loop.to_dict(), "rpm": float(rpm), "provider": provider.fingerprint()})
     pbm = loop.batch.pbm
     model = build_model(pbm, ConstantFrequency(1.0), rpm=rpm)  # the source is set per interval
     state = initial_state(loop.batch, model)

@@ -4,8 +4,8 @@ A `Case` is one batch: impeller speed, the pbm settings it changes (config key -
 its collision-frequency source: the surrogate's ensemble mean or one member (PBM-ANN, the one
 definition in `pbmdem.coupling.methods.pbm_ann`, run in memory), or the constant kernel of
 `pbm.aggregation` (PBM-constant). `run_cases` runs a list of cases, in order, over `n_jobs`
-processes: each process loads the surrogate once and runs its share of the cases one after the
-other. A case's result does not depend on the process that ran it or on `n_jobs` (every batch is
+processes forked from the caller (which has loaded the surrogate once) that run their share of
+the cases one after the other. A case's result does not depend on the process that ran it or on `n_jobs` (every batch is
 deterministic), so the same cases give the same table on any machine.
 
 Where the time goes (benchmarks/bench_design_space.py): a PBM-ANN batch of the default
@@ -130,17 +130,27 @@ def _run_chunk(loop: CoupledLoop, model_path, cases: list[Case]) -> list[Outcome
 
 
 def run_cases(loop: CoupledLoop, model_path, cases: list[Case], n_jobs: int = 1) -> list[Outcome]:
-    """The outcomes of `cases` (in their order), over `n_jobs` processes."""
+    """The outcomes of `cases` (in their order), over `n_jobs` processes.
+
+    The processes are forked from this one after it has loaded the surrogate (and compiled the
+    PBM), so that they start in milliseconds with both, and they end with the call: nothing is
+    left running."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
     cases = list(cases)
     if n_jobs <= 1 or len(cases) < 2:
         return _run_chunk(loop, model_path, cases)
-    from joblib import Parallel, delayed
-
+    if model_path is not None and any(c.kernel == "ann" for c in cases):
+        _surrogate(str(model_path), Path(model_path).stat().st_mtime)
+    _run_chunk(loop, model_path, cases[:1])  # compiles the PBM's kernels here, once, not in every process
     # a few chunks per process: the load stays balanced and each chunk pays one transfer
     n_chunks = min(len(cases), 4 * n_jobs)
     bounds = np.linspace(0, len(cases), n_chunks + 1).astype(int)
     chunks = [cases[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
-    done = Parallel(n_jobs=n_jobs, backend="loky")(delayed(_run_chunk)(loop, model_path, c) for c in chunks)
+    context = multiprocessing.get_context("fork")
+    with ProcessPoolExecutor(max_workers=min(n_jobs, n_chunks), mp_context=context) as pool:
+        done = list(pool.map(_run_chunk, [loop] * len(chunks), [model_path] * len(chunks), chunks))
     return [outcome for chunk in done for outcome in chunk]
 
 

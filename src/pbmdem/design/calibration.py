@@ -112,28 +112,47 @@ class Residuals:
         return np.column_stack([(s - base) / LN_STEP for s in shifted])
 
 
-def fit(residuals: Residuals, x0: np.ndarray, max_factor: float) -> tuple[np.ndarray, np.ndarray, dict]:
-    """(ln theta estimate, Jacobian there, optimiser figures) of the least-squares fit from `x0`."""
+def screen(residuals: Residuals, x0: np.ndarray, lower: np.ndarray, upper: np.ndarray, keep: int) -> list[np.ndarray]:
+    """The `keep` best of `x0` and a scrambled Sobol sample of the search box (seeded: the same
+    points on every machine; 8 per parameter, at least 16), by their sum of squares: the starts
+    of the local fits. The sum of squares of a PBM in its parameters can have more than one
+    valley (a larger beta0 with a higher threshold grows the granules later but faster)."""
+    from scipy.stats import qmc
+
+    n = 2 ** max(4, math.ceil(math.log2(8 * x0.size)))
+    sample = qmc.scale(qmc.Sobol(x0.size, scramble=True, seed=0).random(n), lower, upper)
+    points = [x0, *sample]
+    costs = [float(np.sum(r**2)) for r in residuals._evaluate(points)]
+    return [points[k] for k in np.argsort(costs, kind="stable")[:keep]]
+
+
+def fit(residuals: Residuals, x0: np.ndarray, max_factor: float, starts: int = 3):
+    """(ln theta estimate, Jacobian there, optimiser figures) of the least-squares fit: local fits
+    from the `starts` best points of `screen` (from `x0` alone if `starts` is 1), the lowest kept."""
     from scipy.optimize import least_squares
 
     span = math.log(max_factor)
     lower, upper = x0 - span, x0 + span
-    result = least_squares(
-        residuals,
-        x0,
-        jac=residuals.jacobian,
-        bounds=(lower, upper),
-        method="trf",
-        x_scale=1.0,
-        diff_step=None,
-        xtol=1e-4,
-        ftol=1e-6,
-        max_nfev=60,
-    )
+    candidates = [x0] if starts <= 1 else screen(residuals, x0, lower, upper, starts)
+    results = [
+        least_squares(
+            residuals, c, jac=residuals.jacobian, bounds=(lower, upper), method="trf", xtol=1e-4, ftol=1e-6, max_nfev=60
+        )
+        for c in candidates
+    ]
+    result = min(results, key=lambda r: r.cost)
     jac = residuals.jacobian(result.x)
     at_bound = (np.isclose(result.x, lower, atol=1e-3) | np.isclose(result.x, upper, atol=1e-3)).tolist()
-    return result.x, jac, {"cost": float(2 * result.cost), "nfev": int(result.nfev), "status": int(result.status),
-                           "message": str(result.message), "at_bound": at_bound}
+    info = {
+        "cost": float(2 * result.cost),
+        "nfev": int(sum(r.nfev for r in results)),
+        "status": int(result.status),
+        "message": str(result.message),
+        "at_bound": at_bound,
+        "starts": len(candidates),
+        "local_minima_costs": sorted(round(float(2 * r.cost), 3) for r in results),
+    }
+    return result.x, jac, info
 
 
 def measurement_covariance(jac: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -189,7 +208,7 @@ def _member_estimates(model: Model, data, settings: Calibration, x: np.ndarray, 
     for k in range(n_members):
         member = Model(model.loop, model.model_path, model.keys, model.kernel, k, model.fixed, model.n_jobs)
         res = Residuals(member, data, settings.statistics, settings.relative_error_floor)
-        xk, _, info = fit(res, x, settings.max_factor)
+        xk, _, info = fit(res, x, settings.max_factor, starts=1)
         log.info("calibration with ensemble member %d: %s (%d evaluations)", k, np.exp(xk), info["nfev"])
         estimates.append(xk)
     return np.array(estimates)
@@ -219,8 +238,9 @@ def calibrate(model: Model, data: pd.DataFrame, settings: Calibration, start: di
             "parameter": keys,
             "start": np.exp(x0),
             "estimate": np.exp(x),
-            "ci_low": np.exp(x - z * sd),
-            "ci_high": np.exp(x + z * sd),
+            # an unidentifiable parameter's interval runs to 0 and infinity (exp of +-700 is the float range)
+            "ci_low": np.exp(np.clip(x - z * sd, -700.0, 700.0)),
+            "ci_high": np.exp(np.clip(x + z * sd, -700.0, 700.0)),
             "sd_ln_total": sd,
             "sd_ln_measurement": np.sqrt(np.diag(cov_meas)),
             "sd_ln_surrogate": np.sqrt(np.diag(cov_surr)),
@@ -231,10 +251,18 @@ def calibrate(model: Model, data: pd.DataFrame, settings: Calibration, start: di
     pairs = unidentifiable_pairs(keys, corr, settings.identifiability_correlation, full_rank)
     chi2 = float(np.sum(residuals(x) ** 2))
     dof = max(residuals.measured.size - len(keys), 1)
-    info.update(chi2=chi2, dof=dof, chi2_reduced=chi2 / dof, full_rank=full_rank, confidence=settings.confidence,
-                evaluations=residuals.evaluations, members=len(members))
-    return Estimate(keys, table, pd.DataFrame(corr, index=keys, columns=keys), pairs,
-                    _residual_table(residuals, x), info)
+    info.update(
+        chi2=chi2,
+        dof=dof,
+        chi2_reduced=chi2 / dof,
+        full_rank=full_rank,
+        confidence=settings.confidence,
+        evaluations=residuals.evaluations,
+        members=len(members),
+    )
+    return Estimate(
+        keys, table, pd.DataFrame(corr, index=keys, columns=keys), pairs, _residual_table(residuals, x), info
+    )
 
 
 def _z(confidence: float) -> float:
@@ -249,6 +277,15 @@ def _residual_table(residuals: Residuals, x: np.ndarray) -> pd.DataFrame:
     for j, (rpm, t) in enumerate(zip(residuals.data.rpm, residuals.data.time, strict=True)):
         for i, s in enumerate(residuals.statistics):
             measured, sd = residuals.measured[j, i], residuals.sd[j, i]
-            rows.append({"rpm": rpm, "time": t, "statistic": s, "measured": measured, "sd": sd,
-                         "model": measured + r[j, i] * sd, "residual": r[j, i]})
+            rows.append(
+                {
+                    "rpm": rpm,
+                    "time": t,
+                    "statistic": s,
+                    "measured": measured,
+                    "sd": sd,
+                    "model": measured + r[j, i] * sd,
+                    "residual": r[j, i],
+                }
+            )
     return pd.DataFrame(rows)

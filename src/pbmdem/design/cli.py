@@ -45,11 +45,14 @@ def _design_space(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     _logging()
     table = write_design_space(
-        cfg.coupled_loop(), _model_path(args.model), design, out / "design_space.csv",
-        out / "design_space.png", out / "design_space.json",
+        cfg.coupled_loop(),
+        _model_path(args.model),
+        design,
+        out / "design_space.csv",
+        out / "design_space.png",
+        out / "design_space.json",
     )
-    print(json.dumps({"out": str(out), "points": len(table),
-                      **table.spec_status.value_counts().to_dict()}, indent=2))
+    print(json.dumps({"out": str(out), "points": len(table), **table.spec_status.value_counts().to_dict()}, indent=2))
     return 0
 
 
@@ -110,7 +113,9 @@ def add_cli(sub) -> None:
     cal.add_argument("--config", required=True, type=Path, help="workflow config (YAML)")
     cal.add_argument("--model", required=True, type=Path, help="saved surrogate (results/surrogate/model.skops)")
     cal.add_argument("--data", required=True, type=Path, help="measured size table (CSV, docs/calibration.md)")
-    cal.add_argument("--parameters", nargs="+", default=None, help="config keys to estimate (default: calibration.parameters)")
+    cal.add_argument(
+        "--parameters", nargs="+", default=None, help="config keys to estimate (default: calibration.parameters)"
+    )
     cal.add_argument("--out", required=True, type=Path, help="output folder")
     cal.add_argument("--jobs", type=int, default=2, help="processes (default 2)")
     cal.set_defaults(func=_calibrate)

@@ -25,9 +25,7 @@ STYLE = {
 def _grid(panel: pd.DataFrame, column: str):
     x = np.sort(panel.rpm.unique())
     y = np.sort(panel.liquid_rate.unique())
-    z = panel.pivot_table(index="liquid_rate", columns="rpm", values=column, dropna=False).reindex(
-        index=y, columns=x
-    )
+    z = panel.pivot_table(index="liquid_rate", columns="rpm", values=column, dropna=False).reindex(index=y, columns=x)
     return x, 1e6 * 60 * y, z.to_numpy(float)  # binder rate in mL/min
 
 

@@ -60,8 +60,15 @@ def plot_fit(cases: dict[str, pd.DataFrame], path: str | Path) -> None:
         for col, (rpm, at_rpm) in enumerate(frame.groupby("rpm")):
             ax = axes[row, col]
             for stat, sel in at_rpm.groupby("statistic"):
-                ax.errorbar(sel.time, 1e3 * sel.measured, yerr=1.96e3 * sel.sd, fmt=MARKERS.get(stat, "o"), ms=4,
-                            capsize=2, label=f"{stat} measured (95 %)")
+                ax.errorbar(
+                    sel.time,
+                    1e3 * sel.measured,
+                    yerr=1.96e3 * sel.sd,
+                    fmt=MARKERS.get(stat, "o"),
+                    ms=4,
+                    capsize=2,
+                    label=f"{stat} measured (95 %)",
+                )
                 ax.plot(sel.time, 1e3 * sel.model, "-", lw=1.2, label=f"{stat} fitted")
             ax.set_title(f"{name}: {rpm:g} rpm", fontsize=9)
             ax.set_xlabel("time (s)")
@@ -88,8 +95,9 @@ def write_design_space(loop, model_path, design, table_path, maps_path, info_pat
     table, info = design_space(loop, model_path, design)
     write_csv(table_path, table)
     plot_design_space(table, design.third_factor.key, design.specification, maps_path)
-    write_json(info_path, {**info, "specification": design.specification.to_dict(),
-                           "third_factor": design.third_factor.key})
+    write_json(
+        info_path, {**info, "specification": design.specification.to_dict(), "third_factor": design.third_factor.key}
+    )
     return table
 
 
@@ -111,7 +119,13 @@ def write_calibration_check(loop, model_path, validation_dir, rpms, replicates, 
         log.log(
             logging.INFO if row["recovered"] else logging.WARNING,
             "calibration check %s: %s true %.4g, estimate %.4g, %g %% interval [%.4g, %.4g]: %s",
-            row["case"], row["parameter"], row["true"], row["estimate"], 100 * settings.confidence,
-            row["ci_low"], row["ci_high"], "recovered" if row["recovered"] else "NOT recovered",
+            row["case"],
+            row["parameter"],
+            row["true"],
+            row["estimate"],
+            100 * settings.confidence,
+            row["ci_low"],
+            row["ci_high"],
+            "recovered" if row["recovered"] else "NOT recovered",
         )
     return table

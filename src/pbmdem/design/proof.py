@@ -82,7 +82,12 @@ def recovery_rows(case: str, estimate: Estimate, truth: dict[str, float]) -> lis
 
 
 def calibration_check(
-    loop: CoupledLoop, model_path: str | Path, validation_dir, rpms, replicates: int, settings: Calibration,
+    loop: CoupledLoop,
+    model_path: str | Path,
+    validation_dir,
+    rpms,
+    replicates: int,
+    settings: Calibration,
     n_jobs: int = 1,
 ) -> tuple[pd.DataFrame, dict[str, Estimate], dict[str, pd.DataFrame]]:
     """(recovery table, estimate per case, measured table per case) of both cases."""

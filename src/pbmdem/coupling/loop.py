@@ -160,9 +160,10 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
         totals["out_of_domain_count"] = int(sum(per_interval))
         totals["out_of_domain_intervals"] = int(sum(c > 0 for c in per_interval))
         if totals["out_of_domain_count"]:
-            # a loop in memory hands its counts to the caller, which reports them (design space)
+            # a loop in memory hands its counts to the caller, which reports them (the design
+            # space marks each point and warns with the number of such points)
             log.log(
-                logging.WARNING if outdir is not None else logging.INFO,
+                logging.WARNING if outdir is not None else logging.DEBUG,
                 "%s at rpm %g: the surrogate was outside its training domain in %d of %d intervals "
                 "(%d warnings; see intervals.csv)",
                 provider.name,

@@ -2,6 +2,7 @@
 estimation (recovery of known parameters, non-identifiable pairs, measured-data errors)."""
 
 import warnings
+from functools import partial
 
 import numpy as np
 import pandas as pd
@@ -198,15 +199,21 @@ def test_batches_do_not_depend_on_the_number_of_processes(tiny_config):
 # --------------------------------------------------------------------------- design space with a surrogate
 @pytest.fixture(scope="module")
 def tiny_surrogate(tmp_path_factory, tiny_config):
-    """A small MLP surrogate trained on synthetic tables at 600-900 rpm for the tiny granulator."""
+    """A small MLP surrogate trained on synthetic tables at 600-900 rpm for the tiny granulator, with
+    frequencies near the tiny config's constant kernel (~3 1/s per pair for its ~300 granules)."""
     from pbmdem.surrogate import CollisionSurrogate, EnsembleMLPRegressorCV, save_surrogate, training_data
-    from pbmdem.surrogate.synthetic import make_synthetic_tables
+    from pbmdem.surrogate.synthetic import make_synthetic_tables, power_law
     from pbmdem.surrogate.velocity import attach_velocity_bins
 
     radius = tiny_config.granulator.impeller.blade_length
     table = attach_velocity_bins(
         *make_synthetic_tables(
-            radius, rpms=(600, 750, 900), diameters=(0.0015, 0.003, 0.006), n_total_range=(20, 2000), seed=2
+            radius,
+            rpms=(600, 750, 900),
+            diameters=(0.0015, 0.003, 0.006),
+            n_total_range=(20, 2000),
+            seed=2,
+            law=partial(power_law, c0=0.6),
         )
     )
     data = training_data(table, radius)
@@ -246,3 +253,28 @@ def test_design_space_marks_points_outside_the_training_domain(tiny_config, tiny
     ok = table[table.failed_cases == 0]
     assert (ok.d50_member_min <= ok.d50_member_max).all() and (ok.d10 <= ok.d50).all() and (ok.d50 <= ok.d90).all()
     assert "outside its training domain" in caplog.text
+
+
+def test_calibration_with_pbm_ann_adds_the_surrogates_uncertainty(tiny_config, tiny_surrogate):
+    """PBM-ANN's own output (ensemble mean, 1 % measurement sd) at 600 and 750 rpm, calibrated with
+    PBM-ANN from 50 % off: the truth is recovered, and the interval holds a surrogate part from the
+    per-member refits (two members) beside the measurement part."""
+    loop = tiny_config.coupled_loop()
+    settings = tiny_config.calibration
+    keys = settings.parameters
+    truth = {k: pbm_value(loop.batch.pbm, k) for k in keys}
+    outcomes = run_cases(loop, tiny_surrogate, [Case(600.0), Case(750.0)])
+    assert all(o.out_of_domain_intervals == 0 and not o.failed for o in outcomes)
+    series = {o.case.rpm: [pd.DataFrame(o.sizes, columns=list(STATISTICS)).assign(time=o.times)] for o in outcomes}
+    data = measured_from_series(series, np.arange(2.0, 20.1, 2.0))
+    start = {k: 1.5 * v for k, v in truth.items()}
+    est = calibrate(Model(loop, tiny_surrogate, keys, "ann"), data, settings, start)
+    table = est.table.set_index("parameter")
+    assert est.info["members"] == 2 and est.info["out_of_domain_intervals"] == 0
+    for key, true in truth.items():
+        assert table.loc[key, "ci_low"] <= true <= table.loc[key, "ci_high"], (key, table.loc[key].to_dict())
+        assert table.loc[key, "sd_ln_surrogate"] > 0, table.to_dict()
+        assert table.loc[key, "sd_ln_total"] ** 2 == pytest.approx(
+            table.loc[key, "sd_ln_measurement"] ** 2 + table.loc[key, "sd_ln_surrogate"] ** 2
+        )
+        assert len(table.loc[key, "member_estimates"].split()) == 2

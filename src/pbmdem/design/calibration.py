@@ -78,6 +78,7 @@ class Residuals:
         self.measured = measured
         self.sd = np.maximum(sd, floor * measured)
         self._cache: dict[bytes, np.ndarray] = {}
+        self.out_of_domain: dict[bytes, int] = {}  # coupling intervals outside the training domain
         self.evaluations = 0
 
     def predicted(self, outcomes) -> np.ndarray:
@@ -99,7 +100,9 @@ class Residuals:
         self.evaluations += len(todo)
         n = len(self.rpms)
         for k, x in enumerate(todo):
-            self._cache[x.tobytes()] = self._normalised(self.predicted(outcomes[k * n : (k + 1) * n]))
+            mine = outcomes[k * n : (k + 1) * n]
+            self._cache[x.tobytes()] = self._normalised(self.predicted(mine))
+            self.out_of_domain[x.tobytes()] = sum(o.out_of_domain_intervals for o in mine)
         return [self._cache[x.tobytes()] for x in points]
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
@@ -250,8 +253,16 @@ def calibrate(model: Model, data: pd.DataFrame, settings: Calibration, start: di
     )
     pairs = unidentifiable_pairs(keys, corr, settings.identifiability_correlation, full_rank)
     chi2 = float(np.sum(residuals(x) ** 2))
+    ood = residuals.out_of_domain.get(np.asarray(x, float).tobytes(), 0)
+    if ood:
+        log.warning(
+            "calibration: at the estimate PBM-ANN left the surrogate's training domain in %d coupling interval(s) "
+            "over the measured speeds: the fit extrapolates the surrogate",
+            ood,
+        )
     dof = max(residuals.measured.size - len(keys), 1)
     info.update(
+        out_of_domain_intervals=int(ood),
         chi2=chi2,
         dof=dof,
         chi2_reduced=chi2 / dof,

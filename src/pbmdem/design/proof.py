@@ -75,6 +75,7 @@ def recovery_rows(case: str, estimate: Estimate, truth: dict[str, float]) -> lis
                 "sd_ln_measurement": rec["sd_ln_measurement"],
                 "sd_ln_surrogate": rec["sd_ln_surrogate"],
                 "chi2_reduced": estimate.info["chi2_reduced"],
+                "out_of_domain_intervals": estimate.info["out_of_domain_intervals"],
                 "unidentifiable": "; ".join(f"{a} ~ {b} ({r:+.2f})" for a, b, r in estimate.unidentifiable),
             }
         )

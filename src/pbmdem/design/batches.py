@@ -96,7 +96,7 @@ def run_case(loop: CoupledLoop, model_path: str | Path | None, case: Case) -> Ou
     from pbmdem.pbm.errors import PBMError
     from pbmdem.pbm.setup import run_batch
 
-    case_loop = case.loop(loop)
+    case_loop = case.loop(loop)  # a bad config key raises here, not as a failed case
     try:
         if case.kernel == "constant":
             result = run_batch(case_loop.batch, None, case.rpm)
@@ -110,7 +110,9 @@ def run_case(loop: CoupledLoop, model_path: str | Path | None, case: Case) -> Ou
             result, totals = outcome.result, outcome.totals
         else:
             raise ValueError(f"case kernel {case.kernel!r}: allowed 'ann', 'constant'")
-    except (PBMError, CouplingError) as exc:
+    except (PBMError, CouplingError, ValueError) as exc:
+        # ValueError: a bed the granules outgrew so far that no representative DEM sample is left
+        # (pbmdem.coupling.sample); the settings were checked before (case.loop)
         return Outcome(case, failed=str(exc))
     summary = result.summary()
     return Outcome(

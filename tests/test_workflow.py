@@ -399,6 +399,10 @@ def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
         "metrics.csv",
         "runs.csv",
         "report.html",
+        "design_space.png",
+        "design_space.csv",
+        "calibration_check.csv",
+        "calibration_check.png",
     ):
         assert files[name] == 1, (name, files)
     assert page == (workdir / "results" / "report" / "report.html").read_bytes()
@@ -421,6 +425,8 @@ def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
         "Granule size against the feed size distribution.",
         "The surrogate on DEM runs it never saw",
         "The whole report as one self-contained page",
+        "PBM-ANN design space",
+        "Parameter estimation on data of known parameters",
     ):
         assert phrase in flat, phrase
 
@@ -695,3 +701,26 @@ def test_adding_the_proposed_points_removes_the_out_of_domain_intervals(tiny_wor
         f"out-of-domain intervals {int((before.out_of_domain_count > 0).sum())} -> "
         f"{int((after.out_of_domain_count > 0).sum())}"
     )
+
+
+def test_design_space_and_calibration_check_of_the_tiny_workflow(tiny_workflow):
+    """The default targets hold the design space (every grid point judged or marked) and the
+    calibration check (both cases, every parameter, true against estimated with an interval)."""
+    from pbmdem.config import load_config
+    from pbmdem.design.space import STATUSES
+    from pbmdem.tables import MEASURED
+
+    workdir, configfile = tiny_workflow
+    cfg = load_config(configfile)
+    design = pd.read_csv(workdir / "results/design/design_space.csv")
+    ds = cfg.design_space
+    assert len(design) == ds.impeller_rpm.num * ds.liquid_rate.num * len(ds.third_factor.values)
+    assert set(design.spec_status) <= set(STATUSES)
+    assert (design.spec_status[design.out_of_domain_intervals > 0] == "out_of_domain").all()
+    check = pd.read_csv(workdir / "results/design/calibration_check.csv")
+    assert set(check.case) == {"pbm_dem", "pbm_constant_noise"}
+    assert set(check.parameter) == set(cfg.calibration.parameters)
+    assert (check.ci_low <= check.estimate).all() and (check.estimate <= check.ci_high).all()
+    assert (check.recovered == ((check.ci_low <= check.true) & (check.true <= check.ci_high))).all()
+    measured = MEASURED.read(workdir / "results/design/measured_pbm_dem.csv")
+    assert set(measured.rpm) == {float(r) for r in cfg.validation.rpm}

@@ -223,6 +223,15 @@ def calibrate(model: Model, data: pd.DataFrame, settings: Calibration, start: di
     x0 = start_values(model.loop, keys, start)
     residuals = Residuals(model, data, settings.statistics, settings.relative_error_floor)
     x, jac, info = fit(residuals, x0, settings.max_factor)
+    log.info(
+        "calibration (%s, %s): %s from %d start(s), sum of squares %.4g (local minima %s)",
+        model.kernel,
+        "ensemble mean" if model.member is None else f"member {model.member}",
+        dict(zip(keys, (f"{v:.4g}" for v in np.exp(x)), strict=True)),
+        info["starts"],
+        info["cost"],
+        info["local_minima_costs"],
+    )
     cov_meas, full_rank = measurement_covariance(jac)
     cov_surr = np.zeros_like(cov_meas)
     members = np.empty((0, len(keys)))

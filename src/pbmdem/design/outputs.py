@@ -13,6 +13,7 @@ from pbmdem.atomic import atomic_path, write_csv, write_json
 from .calibration import Estimate
 
 MARKERS = {"d10": "^", "d50": "o", "d90": "s"}
+COLORS = {"d10": "tab:blue", "d50": "tab:green", "d90": "tab:purple"}
 
 
 def estimate_summary(estimate: Estimate) -> dict:
@@ -65,11 +66,12 @@ def plot_fit(cases: dict[str, pd.DataFrame], path: str | Path) -> None:
                     1e3 * sel.measured,
                     yerr=1.96e3 * sel.sd,
                     fmt=MARKERS.get(stat, "o"),
+                    color=COLORS.get(stat),
                     ms=4,
                     capsize=2,
                     label=f"{stat} measured (95 %)",
                 )
-                ax.plot(sel.time, 1e3 * sel.model, "-", lw=1.2, label=f"{stat} fitted")
+                ax.plot(sel.time, 1e3 * sel.model, "-", color=COLORS.get(stat), lw=1.2, label=f"{stat} fitted")
             ax.set_title(f"{name}: {rpm:g} rpm", fontsize=9)
             ax.set_xlabel("time (s)")
             ax.set_ylabel("size (mm)")

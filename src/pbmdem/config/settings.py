@@ -135,17 +135,13 @@ class Config:
         if pbm_section["grid"]["min_diameter"] is None:
             pbm_section["grid"]["min_diameter"] = min(min(d.diameters) for d in dists.values())
         val_section = json.loads(json.dumps(full["validation"]))
-        sweep = val_section["sweep"]
-        if sweep["start"] is None:
-            sweep["start"] = min(grid.impeller_rpm)
-        if sweep["stop"] is None:
-            sweep["stop"] = max(grid.impeller_rpm)
         design = json.loads(json.dumps(full["design_space"]))
-        speeds = design["impeller_rpm"]
-        if speeds["start"] is None:
-            speeds["start"] = min(grid.impeller_rpm)
-        if speeds["stop"] is None:
-            speeds["stop"] = max(grid.impeller_rpm)
+        # the speed ranges of the PBM-ANN sweep and of the design space: null ends are the grid's
+        for span in (val_section["sweep"], design["impeller_rpm"]):
+            if span["start"] is None:
+                span["start"] = min(grid.impeller_rpm)
+            if span["stop"] is None:
+                span["stop"] = max(grid.impeller_rpm)
         return cls(
             granulator=granulator,
             material=Material.from_dict(full["material"], "material"),

@@ -85,6 +85,12 @@ def _calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _common(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", required=True, type=Path, help="workflow config (YAML)")
+    parser.add_argument("--model", required=True, type=Path, help="saved surrogate (results/surrogate/model.skops)")
+    parser.add_argument("--out", required=True, type=Path, help="output folder")
+
+
 def add_cli(sub) -> None:
     """Register `design-space` and `calibrate` on the subcommand parsers `sub`."""
     design = sub.add_parser(
@@ -95,9 +101,7 @@ def add_cli(sub) -> None:
         epilog=DESIGN_EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    design.add_argument("--config", required=True, type=Path, help="workflow config (YAML)")
-    design.add_argument("--model", required=True, type=Path, help="saved surrogate (results/surrogate/model.skops)")
-    design.add_argument("--out", required=True, type=Path, help="output folder")
+    _common(design)
     design.add_argument("--jobs", type=int, default=None, help="processes (default: design_space.n_jobs)")
     design.set_defaults(func=_design_space)
 
@@ -110,12 +114,10 @@ def add_cli(sub) -> None:
         epilog=CALIBRATE_EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    cal.add_argument("--config", required=True, type=Path, help="workflow config (YAML)")
-    cal.add_argument("--model", required=True, type=Path, help="saved surrogate (results/surrogate/model.skops)")
+    _common(cal)
     cal.add_argument("--data", required=True, type=Path, help="measured size table (CSV, docs/calibration.md)")
     cal.add_argument(
         "--parameters", nargs="+", default=None, help="config keys to estimate (default: calibration.parameters)"
     )
-    cal.add_argument("--out", required=True, type=Path, help="output folder")
     cal.add_argument("--jobs", type=int, default=2, help="processes (default 2)")
     cal.set_defaults(func=_calibrate)

@@ -278,3 +278,39 @@ def test_calibration_with_pbm_ann_adds_the_surrogates_uncertainty(tiny_config, t
             table.loc[key, "sd_ln_measurement"] ** 2 + table.loc[key, "sd_ln_surrogate"] ** 2
         )
         assert len(table.loc[key, "member_estimates"].split()) == 2
+
+
+def test_calibrate_command(tiny_config, tiny_surrogate, root, tmp_path, capsys):
+    """`pbmdem calibrate` on PBM-ANN's own output: estimates with intervals printed, the files
+    written; a bad data file or parameter key: one line naming it, exit status 2."""
+    from pbmdem.cli import main
+
+    loop = tiny_config.coupled_loop()
+    outcomes = run_cases(loop, tiny_surrogate, [Case(600.0), Case(750.0)])
+    series = {o.case.rpm: [pd.DataFrame(o.sizes, columns=list(STATISTICS)).assign(time=o.times)] for o in outcomes}
+    data = tmp_path / "measured.csv"
+    measured_from_series(series, np.arange(2.0, 20.1, 2.0)).to_csv(data, index=False)
+    common = [
+        "--config",
+        str(root / "config/test.yaml"),
+        "--model",
+        str(tiny_surrogate),
+        "--out",
+        str(tmp_path / "out"),
+    ]
+    args = ["calibrate", *common, "--data", str(data), "--parameters", "pbm.aggregation.beta0", "--jobs", "1"]
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    assert "pbm.aggregation.beta0" in printed and "ci_low" in printed
+    for name in ("estimates.csv", "correlation.csv", "residuals.csv", "calibration.json", "fit.png"):
+        assert (tmp_path / "out" / name).stat().st_size > 0
+    estimates = pd.read_csv(tmp_path / "out" / "estimates.csv")
+    assert estimates.ci_low[0] <= 2e-4 <= estimates.ci_high[0]
+
+    bad = tmp_path / "bad.csv"
+    bad.write_text(HEADER + "600,4,0.002,0.0027,0.0033,1e-5,1e-5,1e-5\n600,2,0.002,0.0026,0.0032,1e-5,1e-5,1e-5\n")
+    assert main(["calibrate", *common, "--data", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert str(bad) in err and "row 2, column 'time'" in err
+    assert main(["calibrate", *common, "--data", str(data), "--parameters", "pbm.grid.separate_feed"]) == 2
+    assert "--parameters: config key 'pbm.grid.separate_feed'" in capsys.readouterr().err

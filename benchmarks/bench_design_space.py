@@ -62,7 +62,7 @@ def parts(loop, model) -> None:
     total = time.perf_counter() - t0
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        pbm_ann(loop, loaded, 620.0, Path(tmp) / "run")
+        pbm_ann(loop, model, 620.0, Path(tmp) / "run")  # from the file, as the validation rules run it
         on_disk = time.perf_counter() - t0
     t = outcome.totals
     print(
@@ -71,8 +71,8 @@ def parts(loop, model) -> None:
         f"{1e3 * (total - t['total_wall_time_s']):.1f} ms"
     )
     print(
-        f"avoided per batch: loading the surrogate {1e3 * load:.0f} ms; writing the loop's files "
-        f"{1e3 * (on_disk - total):.0f} ms (the same batch with an output folder: {1e3 * on_disk:.1f} ms)"
+        f"avoided per batch: loading the surrogate {1e3 * load:.0f} ms; loading it and writing the loop's "
+        f"files {1e3 * (on_disk - total):.0f} ms (from the file, with an output folder: {1e3 * on_disk:.1f} ms)"
     )
 
 

@@ -2,11 +2,14 @@
 # the typed config CFG) and the list of final targets.
 import hashlib
 import os
-from pathlib import Path
 
+from pbmdem import layout
 from pbmdem.config import rpm_text
 
-RESULTS = "results"
+# every path comes from pbmdem.layout, the one owner of the results folder's layout; DEM_RUN and
+# SPEED are the folders of one DEM run and one validation speed with their wildcards
+DEM_RUN = layout.dem_run()
+SPEED = layout.speed()
 # The LIGGGHTS deck template (package data, the project's liggghts_templates/) enters the DEM
 # rules as a param, its SHA-256, not as an input path: an edit reruns every DEM job, while moving
 # or copying the project (another absolute path) reruns nothing. Every input and output is a path
@@ -14,7 +17,7 @@ RESULTS = "results"
 from pbmdem.dem.deck import template_path
 
 DECK_SHA256 = hashlib.sha256(template_path().read_bytes()).hexdigest()
-MODEL = f"{RESULTS}/surrogate/model.skops"
+MODEL = layout.MODEL
 
 
 def dry_run_requested(argv):
@@ -49,7 +52,7 @@ def print_runtime_estimate():
         if j.rule.name == "pbm_dem_coupled"
     ]
     cores = workflow.resource_settings.cores or 1
-    print(study_estimate(CFG, grid, loops, RESULTS).text(cores), file=sys.stderr)
+    print(study_estimate(CFG, grid, loops, layout.RESULTS).text(cores), file=sys.stderr)
 
 
 def grid_points():
@@ -60,7 +63,7 @@ def grid_points():
 def dem_outputs(name):
     """One file per operating point and replicate."""
     return [
-        f"{RESULTS}/dem/rpm{rpm}_{dist}/rep{rep}/{name}"
+        f"{layout.dem_run(rpm, dist, rep)}/{name}"
         for rpm, dist in grid_points()
         for rep in range(CFG.dem_replicates)
     ]
@@ -80,7 +83,7 @@ def loop_params(wildcards=None):
 
 
 def pbm_outputs(kernel):
-    folder = f"{RESULTS}/pbm/{kernel}/rpm{{rpm}}_{{dist}}"
+    folder = layout.pbm_run(kernel)
     return {
         "summary": f"{folder}/summary.csv",
         "bins": f"{folder}/bins.csv",
@@ -98,7 +101,7 @@ DEM_RANKS = CFG.dem_execution.mpi_ranks
 FEED_STUDY_RPM = sorted(CFG.grid.impeller_rpm)[(len(CFG.grid.impeller_rpm) - 1) // 2]
 VAL_RPMS = [rpm_text(r) for r in CFG.validation.rpm]
 VAL_REPS = list(range(CFG.validation.dem_replicates))
-RUN_FILES = ("summary.csv", "bins.csv", "final_bins.csv", "timing.json")
+RUN_FILES = layout.RUN_FILES
 
 
 def run_outputs(folder, loop=True):
@@ -109,15 +112,15 @@ def run_outputs(folder, loop=True):
 
 def dem_replicate_files(name, rpm="{rpm}"):
     """One file of every PBM-DEM replicate of a validation speed."""
-    return [f"{RESULTS}/validation/rpm{rpm}/pbm_dem/rep{rep}/{name}" for rep in VAL_REPS]
+    return [f"{layout.validation_run('pbm_dem', rpm, rep)}/{name}" for rep in VAL_REPS]
 
 
 def speed_files(rpm="{rpm}"):
     """Every run file of one validation speed (all replicates, PBM-ANN with its members, PBM-constant)."""
-    folder = f"{RESULTS}/validation/rpm{rpm}"
+    ann = layout.validation_run("pbm_ann", rpm)
     files = [f for name in RUN_FILES + ("intervals.csv",) for f in dem_replicate_files(name, rpm)]
-    files += list(run_outputs(f"{folder}/pbm_ann").values()) + [f"{folder}/pbm_ann/members.csv"]
-    files += list(run_outputs(f"{folder}/pbm_constant", loop=False).values())
+    files += list(run_outputs(ann).values()) + [f"{ann}/members.csv"]
+    files += list(run_outputs(layout.validation_run("pbm_constant", rpm), loop=False).values())
     return files
 
 
@@ -125,22 +128,17 @@ def all_speed_files():
     return [f for rpm in VAL_RPMS for f in speed_files(rpm)]
 
 
-def validation_dir_of(files):
-    """results/validation, from the first file of speed_files() (.../rpm<rpm>/pbm_dem/rep0/summary.csv)."""
-    return str(Path(files[0]).parents[3])
-
-
 def all_targets():
     targets = [
-        f"{RESULTS}/dem/collisions.csv",
-        f"{RESULTS}/dem/wall_collisions.csv",
-        f"{RESULTS}/dem/impact_velocity.csv",
-        f"{RESULTS}/dem/runs.csv",
-        f"{RESULTS}/dem/speed_response.csv",
-        f"{RESULTS}/dem/flow_development.csv",
+        layout.dem("collisions.csv"),
+        layout.dem("wall_collisions.csv"),
+        layout.dem("impact_velocity.csv"),
+        layout.dem("runs.csv"),
+        layout.dem("speed_response.csv"),
+        layout.dem("flow_development.csv"),
         MODEL,
-        f"{RESULTS}/surrogate/metrics.csv",
-        f"{RESULTS}/surrogate/parity.png",
+        layout.surrogate("metrics.csv"),
+        layout.surrogate("parity.png"),
     ]
     targets += extra_targets
     return targets
@@ -153,7 +151,6 @@ extra_targets = []
 # --- the report (rules/report.smk): its files, and registering them with Snakemake's report()
 from pbmdem.report.provenance import settings_mapping
 
-REPORT = f"{RESULTS}/report"
 # the report's categories, in the order a reader needs them (Snakemake's report sorts them by name):
 # the answers first, then how far to trust them, then the details
 CATEGORIES = {
@@ -167,7 +164,7 @@ CATEGORIES = {
 
 def speed_report_files(rpm="{rpm}"):
     """The report files of one validation speed: name -> path."""
-    folder = f"{REPORT}/rpm{rpm}"
+    folder = layout.report(f"rpm{rpm}")
     return {
         "sizes": f"{folder}/size_statistics.png",
         "psd": f"{folder}/psd_evolution.png",
@@ -181,7 +178,7 @@ def speed_report_files(rpm="{rpm}"):
 def table_files(*names):
     """<name>_csv and <name>_html of display tables in results/report/tables/."""
     return {
-        f"{name}_{kind}": f"{REPORT}/tables/{name}.{kind}"
+        f"{name}_{kind}": layout.report(f"tables/{name}.{kind}")
         for name in names
         for kind in ("csv", "html")
     }
@@ -223,11 +220,6 @@ SPEED_CAPTIONS = {
 }
 
 
-def validation_dir_of_bands(wildcards, input):
-    """results/validation, from .../rpm<rpm>/bands.csv."""
-    return os.path.dirname(os.path.dirname(input.bands))
-
-
 REPORT_TABLES = (
     "settings",
     "speeds",
@@ -237,34 +229,6 @@ REPORT_TABLES = (
     "comparison_accuracy",
     "comparison_cost",
     "comparison_domain",
+    "design_space_table",
+    "calibration_check",
 )
-
-
-def report_inputs(wildcards):
-    """Every file the page shows: the display tables (table_<name>), the files of each validation
-    speed (speed<k>_<name>, k in the order of validation.rpm) and the workflow's own tables and
-    figures."""
-    files = {
-        "runs": f"{RESULTS}/dem/runs.csv",
-        "collisions": f"{RESULTS}/dem/collisions.csv",
-        "speed_response": f"{RESULTS}/dem/speed_response.csv",
-        "flow_development": f"{RESULTS}/dem/flow_development.csv",
-        "speed_plot": f"{RESULTS}/dem/speed_response.png",
-        "velocity_plot": f"{RESULTS}/dem/impact_velocity.png",
-        "metrics": f"{RESULTS}/surrogate/metrics.csv",
-        "parity": f"{RESULTS}/surrogate/parity.png",
-        "metadata": f"{RESULTS}/surrogate/model.json",
-        "sweep": f"{RESULTS}/validation/rpm_sweep.csv",
-        "sweep_plot": f"{RESULTS}/validation/rpm_sweep.png",
-        "proposals": f"{RESULTS}/validation/proposals.csv",
-        "comparison": f"{REPORT}/comparison.csv",
-        "findings_speed": f"{REPORT}/findings/speed.png",
-        "findings_feed": f"{REPORT}/findings/feed.png",
-        "findings_rst": f"{REPORT}/findings/findings.rst",
-        "speed_study": f"{RESULTS}/validation/speed_study.csv",
-        "feed_study": f"{RESULTS}/validation/feed_study.csv",
-    }
-    files.update({f"table_{name}": f"{REPORT}/tables/{name}.csv" for name in REPORT_TABLES})
-    for k, rpm in enumerate(VAL_RPMS):
-        files.update({f"speed{k}_{name}": path for name, path in speed_report_files(rpm).items()})
-    return files

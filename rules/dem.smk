@@ -4,12 +4,12 @@
 
 rule dem_point:
     output:
-        table=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/collisions.csv",
-        walls=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/wall_collisions.csv",
-        velocities=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/impact_velocity.csv",
-        summary=f"{RESULTS}/dem/rpm{{rpm}}_{{dist}}/rep{{rep}}/summary.json",
+        table=f"{DEM_RUN}/collisions.csv",
+        walls=f"{DEM_RUN}/wall_collisions.csv",
+        velocities=f"{DEM_RUN}/impact_velocity.csv",
+        summary=f"{DEM_RUN}/summary.json",
     log:
-        f"{RESULTS}/logs/dem/rpm{{rpm}}_{{dist}}_rep{{rep}}.log",
+        layout.log("dem/rpm{rpm}_{dist}_rep{rep}.log"),
     # the grid's runs before the validation's PBM-DEM loops: the surrogate (which needs the whole
     # grid) then trains while the loops still run, instead of after them
     priority: 2
@@ -36,17 +36,17 @@ rule collision_tables:
         velocities=dem_outputs("impact_velocity.csv"),
         summaries=dem_outputs("summary.json"),
     output:
-        table=f"{RESULTS}/dem/collisions.csv",
-        walls=f"{RESULTS}/dem/wall_collisions.csv",
-        velocities=f"{RESULTS}/dem/impact_velocity.csv",
-        replicates=f"{RESULTS}/dem/collisions_replicates.csv",
+        table=layout.dem("collisions.csv"),
+        walls=layout.dem("wall_collisions.csv"),
+        velocities=layout.dem("impact_velocity.csv"),
+        replicates=layout.dem("collisions_replicates.csv"),
         runs=report(
-            f"{RESULTS}/dem/runs.csv",
+            layout.dem("runs.csv"),
             caption="../workflow/report/runs.rst",
             category=CATEGORIES["dem"],
         ),
     log:
-        f"{RESULTS}/logs/dem/collision_tables.log",
+        layout.log("dem/collision_tables.log"),
     priority: 2
     conda:
         "../envs/dem.yaml"
@@ -56,24 +56,24 @@ rule collision_tables:
 
 rule speed_response:
     input:
-        replicates=f"{RESULTS}/dem/collisions_replicates.csv",
-        runs=f"{RESULTS}/dem/runs.csv",
-        velocities=f"{RESULTS}/dem/impact_velocity.csv",
+        replicates=layout.dem("collisions_replicates.csv"),
+        runs=layout.dem("runs.csv"),
+        velocities=layout.dem("impact_velocity.csv"),
     output:
-        table=f"{RESULTS}/dem/speed_response.csv",
-        flow=f"{RESULTS}/dem/flow_development.csv",
+        table=layout.dem("speed_response.csv"),
+        flow=layout.dem("flow_development.csv"),
         plot=report(
-            f"{RESULTS}/dem/speed_response.png",
+            layout.dem("speed_response.png"),
             caption="../workflow/report/speed_response.rst",
             category=CATEGORIES["dem"],
         ),
         velocity_plot=report(
-            f"{RESULTS}/dem/impact_velocity.png",
+            layout.dem("impact_velocity.png"),
             caption="../workflow/report/impact_velocity.rst",
             category=CATEGORIES["dem"],
         ),
     log:
-        f"{RESULTS}/logs/dem/speed_response.log",
+        layout.log("dem/speed_response.log"),
     conda:
         "../envs/dem.yaml"
     script:

@@ -1,30 +1,25 @@
 # What the fast model is for (docs/design.md, docs/calibration.md): the PBM-ANN design space over
 # impeller speed x binder rate x a third pbm setting with the specification region, and the check
 # of the parameter estimation on data of known parameters (PBM-DEM's own output; PBM-constant's
-# output with known noise). Both run many in-memory PBM batches over the job's threads.
+# output with known noise). Both run many in-memory PBM batches over the job's threads; their
+# tables reach the report in display form through rule report_design.
 
 
 rule design_space:
     input:
         model=MODEL,
     output:
-        table=registered(
-            f"{RESULTS}/design/design_space.csv",
-            "design_space_table",
-            CATEGORIES["findings"],
-            "design space",
-            result="design-space table",
-        ),
+        table=layout.design("design_space.csv"),
         maps=registered(
-            f"{RESULTS}/design/design_space.png",
+            layout.design("design_space.png"),
             "design_space",
             CATEGORIES["findings"],
             "design space",
             result="design-space maps",
         ),
-        info=f"{RESULTS}/design/design_space.json",
+        info=layout.design("design_space.json"),
     log:
-        f"{RESULTS}/logs/design/design_space.log",
+        layout.log("design/design_space.log"),
     conda:
         "../envs/validation.yaml"
     threads: CFG.design_space.n_jobs
@@ -45,30 +40,24 @@ rule calibration_check:
             for f in dem_replicate_files(name, rpm)
         ],
     output:
-        table=registered(
-            f"{RESULTS}/design/calibration_check.csv",
-            "calibration_check",
-            CATEGORIES["findings"],
-            "parameter estimation",
-            result="recovery of known parameters",
-        ),
+        table=layout.design("calibration_check.csv"),
         figure=registered(
-            f"{RESULTS}/design/calibration_check.png",
+            layout.design("calibration_check.png"),
             "calibration_fit",
             CATEGORIES["findings"],
             "parameter estimation",
             result="fits of the recovery check",
         ),
-        measured=f"{RESULTS}/design/measured_pbm_dem.csv",
-        summary=f"{RESULTS}/design/calibration_check.json",
+        measured=layout.design("measured_pbm_dem.csv"),
+        summary=layout.design("calibration_check.json"),
     log:
-        f"{RESULTS}/logs/design/calibration_check.log",
+        layout.log("design/calibration_check.log"),
     conda:
         "../envs/validation.yaml"
     threads: 2
     params:
         loop=loop_params,
-        validation_dir=lambda wc, input: validation_dir_of(input.dem),
+        validation_dir=lambda wc, input: layout.validation_dir_of(input.dem[0]),
         rpms=VAL_RPMS,
         replicates=CFG.validation.dem_replicates,
         calibration=CFG.calibration.to_dict(),
@@ -76,4 +65,4 @@ rule calibration_check:
         "../workflow/scripts/calibration_check.py"
 
 
-extra_targets += [f"{RESULTS}/design/design_space.png", f"{RESULTS}/design/calibration_check.csv"]
+extra_targets += [layout.design("design_space.png"), layout.design("calibration_check.png")]

@@ -14,7 +14,7 @@ rule pbm_constant:
     output:
         **pbm_outputs("constant"),
     log:
-        f"{RESULTS}/logs/pbm/constant/rpm{{rpm}}_{{dist}}.log",
+        layout.log("pbm/constant/rpm{rpm}_{dist}.log"),
     conda:
         "../envs/pbm.yaml"
     params:
@@ -25,18 +25,18 @@ rule pbm_constant:
 
 
 extra_targets += [
-    f"{RESULTS}/pbm/constant/rpm{rpm}_{dist}/summary.csv" for rpm, dist in grid_points()
+    f"{layout.pbm_run('constant', rpm, dist)}/summary.csv" for rpm, dist in grid_points()
 ]
 
 
 rule pbm_table:
     input:
-        table=f"{RESULTS}/dem/collisions.csv",
-        velocities=f"{RESULTS}/dem/impact_velocity.csv",
+        table=layout.dem("collisions.csv"),
+        velocities=layout.dem("impact_velocity.csv"),
     output:
         **pbm_outputs("table"),
     log:
-        f"{RESULTS}/logs/pbm/table/rpm{{rpm}}_{{dist}}.log",
+        layout.log("pbm/table/rpm{rpm}_{dist}.log"),
     conda:
         "../envs/pbm.yaml"
     params:

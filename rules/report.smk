@@ -1,9 +1,9 @@
-# The report of the study. Every figure and table is registered with report() (captions in
-# workflow/report/*.rst), so that `snakemake --report report.zip` holds the whole study;
-# results/report/report.html is the same content as one self-contained page, assembled from the
-# same files. Rules: report_speed (figures and out-of-domain table of one validation speed),
-# report_settings (process settings, impeller speeds), report_tables (comparison in display
-# form, targets), report_provenance (config hashes, git commit, versions) and report (the page).
+# The report of the study is Snakemake's report: every figure and table is registered with report()
+# (captions in workflow/report/*.rst), so that `snakemake --report report.html` (or report.zip)
+# holds the whole study. Rules: report_findings (the answers the report opens with), report_speed
+# (figures and out-of-domain table of one validation speed), report_settings (process settings,
+# impeller speeds), report_tables (comparison in display form, targets), report_provenance (config
+# hashes, git commit, versions, the surrogate's kernel source).
 report: "../workflow/report/workflow.rst"
 
 
@@ -12,25 +12,25 @@ report: "../workflow/report/workflow.rst"
 # and one figure each, then how far to trust them (the comparison with PBM-DEM).
 rule report_findings:
     input:
-        speed=f"{RESULTS}/validation/speed_study.csv",
-        feed=f"{RESULTS}/validation/feed_study.csv",
-        comparison=f"{REPORT}/comparison.csv",
+        speed=layout.validation("speed_study.csv"),
+        feed=layout.validation("feed_study.csv"),
+        comparison=layout.report("comparison.csv"),
     output:
         speed_png=registered(
-            f"{REPORT}/findings/speed.png",
+            layout.report("findings/speed.png"),
             "findings_speed",
             CATEGORIES["findings"],
             result="granule size against impeller speed",
         ),
         feed_png=registered(
-            f"{REPORT}/findings/feed.png",
+            layout.report("findings/feed.png"),
             "findings_feed",
             CATEGORIES["findings"],
             result="granule size against the feed",
         ),
-        rst=f"{REPORT}/findings/findings.rst",
+        rst=layout.report("findings/findings.rst"),
     log:
-        f"{RESULTS}/logs/report/findings.log",
+        layout.log("report/findings.log"),
     conda:
         "../envs/validation.yaml"
     params:
@@ -44,7 +44,7 @@ rule report_findings:
 rule report_speed:
     input:
         runs=lambda wc: speed_files(wc.rpm),
-        bands=f"{RESULTS}/validation/rpm{{rpm}}/bands.csv",
+        bands=f"{SPEED}/bands.csv",
         model=MODEL,
     output:
         **{
@@ -58,11 +58,11 @@ rule report_speed:
             for key, path in speed_report_files().items()
         },
     log:
-        f"{RESULTS}/logs/report/speed_rpm{{rpm}}.log",
+        layout.log("report/speed_rpm{rpm}.log"),
     conda:
         "../envs/validation.yaml"
     params:
-        validation_dir=validation_dir_of_bands,
+        validation_dir=lambda wc, input: layout.validation_dir_of(input[0]),
         replicates=CFG.validation.dem_replicates,
         process=CFG.pbm.process.to_dict(),
     script:
@@ -73,7 +73,7 @@ rule report_settings:
     output:
         **registered_tables(("settings", "speeds"), CATEGORIES["settings"]),
     log:
-        f"{RESULTS}/logs/report/settings.log",
+        layout.log("report/settings.log"),
     conda:
         "../envs/validation.yaml"
     params:
@@ -94,7 +94,7 @@ rule report_settings:
 
 rule report_tables:
     input:
-        comparison=f"{REPORT}/comparison.csv",
+        comparison=layout.report("comparison.csv"),
     output:
         **registered_tables(("targets",), CATEGORIES["validation"], "targets"),
         **registered_tables(
@@ -103,11 +103,31 @@ rule report_tables:
             "comparison",
         ),
     log:
-        f"{RESULTS}/logs/report/tables.log",
+        layout.log("report/tables.log"),
     conda:
         "../envs/validation.yaml"
     script:
         "../workflow/scripts/report_tables.py"
+
+
+# The design space and the calibration check in display form (sizes in mm, the recovery table with
+# its intervals), next to their figures in "1. Findings".
+rule report_design:
+    input:
+        design=layout.design("design_space.csv"),
+        check=layout.design("calibration_check.csv"),
+    output:
+        **registered_tables(("design_space_table",), CATEGORIES["findings"], "design space"),
+        **registered_tables(("calibration_check",), CATEGORIES["findings"], "parameter estimation"),
+    log:
+        layout.log("report/design.log"),
+    conda:
+        "../envs/validation.yaml"
+    params:
+        third_key=CFG.design_space.third_factor.key,
+        confidence=CFG.calibration.confidence,
+    script:
+        "../workflow/scripts/report_design.py"
 
 
 # The configuration hash is read from the job's completed config (like the execution settings of a
@@ -117,31 +137,31 @@ rule report_tables:
 # copied project reruns nothing.
 rule report_provenance:
     input:
-        runs=f"{RESULTS}/dem/runs.csv",
-        metadata=f"{RESULTS}/surrogate/model.json",
+        runs=layout.dem("runs.csv"),
+        metadata=layout.surrogate("model.json"),
         results=[
-            f"{REPORT}/comparison.csv",
-            f"{RESULTS}/surrogate/metrics.csv",
-            f"{RESULTS}/validation/rpm_sweep.csv",
-            f"{RESULTS}/validation/proposals.csv",
+            layout.report("comparison.csv"),
+            layout.surrogate("metrics.csv"),
+            layout.validation("rpm_sweep.csv"),
+            layout.validation("proposals.csv"),
         ],
     output:
         csv=registered(
-            f"{REPORT}/tables/provenance.csv",
+            layout.report("tables/provenance.csv"),
             "provenance",
             CATEGORIES["settings"],
             table="provenance",
             format="CSV",
         ),
         html=registered(
-            f"{REPORT}/tables/provenance.html",
+            layout.report("tables/provenance.html"),
             "provenance",
             CATEGORIES["settings"],
             table="provenance",
             format="HTML",
         ),
     log:
-        f"{RESULTS}/logs/report/provenance.log",
+        layout.log("report/provenance.log"),
     conda:
         "../envs/validation.yaml"
     params:
@@ -150,24 +170,6 @@ rule report_provenance:
         "../workflow/scripts/report_provenance.py"
 
 
-rule report:
-    input:
-        unpack(report_inputs),
-    output:
-        html=registered(
-            f"{REPORT}/report.html",
-            "report",
-            CATEGORIES["findings"],
-            result="the whole report as one page",
-        ),
-    log:
-        f"{RESULTS}/logs/report.log",
-    conda:
-        "../envs/validation.yaml"
-    params:
-        rpms=VAL_RPMS,
-    script:
-        "../workflow/scripts/report.py"
-
-
-extra_targets.append(f"{REPORT}/report.html")
+# the report's files (what `snakemake --report` collects)
+extra_targets += [layout.report("findings/findings.rst"), *table_files(*REPORT_TABLES).values()]
+extra_targets += [f for rpm in VAL_RPMS for f in speed_report_files(rpm).values()]

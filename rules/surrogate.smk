@@ -5,23 +5,23 @@
 
 rule train_surrogate:
     input:
-        table=f"{RESULTS}/dem/collisions.csv",
-        velocity=f"{RESULTS}/dem/impact_velocity.csv",
+        table=layout.dem("collisions.csv"),
+        velocity=layout.dem("impact_velocity.csv"),
     output:
         model=MODEL,
-        metadata=f"{RESULTS}/surrogate/model.json",
+        metadata=layout.surrogate("model.json"),
         metrics=report(
-            f"{RESULTS}/surrogate/metrics.csv",
+            layout.surrogate("metrics.csv"),
             caption="../workflow/report/surrogate_metrics.rst",
             category=CATEGORIES["surrogate"],
         ),
         parity=report(
-            f"{RESULTS}/surrogate/parity.png",
+            layout.surrogate("parity.png"),
             caption="../workflow/report/parity.rst",
             category=CATEGORIES["surrogate"],
         ),
     log:
-        f"{RESULTS}/logs/train_surrogate.log",
+        layout.log("train_surrogate.log"),
     priority: 2
     conda:
         "../envs/surrogate.yaml"

@@ -7,9 +7,9 @@
 
 rule pbm_dem_coupled:
     output:
-        **run_outputs(f"{RESULTS}/validation/rpm{{rpm}}/pbm_dem/rep{{rep}}"),
+        **run_outputs(layout.validation_run("pbm_dem", rep="{rep}")),
     log:
-        f"{RESULTS}/logs/validation/pbm_dem_rpm{{rpm}}_rep{{rep}}.log",
+        layout.log("validation/pbm_dem_rpm{rpm}_rep{rep}.log"),
     conda:
         "../envs/validation.yaml"
     threads: DEM_RANKS
@@ -28,10 +28,10 @@ rule pbm_ann_coupled:
     input:
         model=MODEL,
     output:
-        **run_outputs(f"{RESULTS}/validation/rpm{{rpm}}/pbm_ann"),
-        members=f"{RESULTS}/validation/rpm{{rpm}}/pbm_ann/members.csv",
+        **run_outputs(layout.validation_run("pbm_ann")),
+        members=f"{SPEED}/pbm_ann/members.csv",
     log:
-        f"{RESULTS}/logs/validation/pbm_ann_rpm{{rpm}}.log",
+        layout.log("validation/pbm_ann_rpm{rpm}.log"),
     conda:
         "../envs/validation.yaml"
     params:
@@ -46,9 +46,9 @@ rule pbm_constant_calibrated:
     input:
         model=MODEL,
     output:
-        **run_outputs(f"{RESULTS}/validation/rpm{{rpm}}/pbm_constant", loop=False),
+        **run_outputs(layout.validation_run("pbm_constant"), loop=False),
     log:
-        f"{RESULTS}/logs/validation/pbm_constant_rpm{{rpm}}.log",
+        layout.log("validation/pbm_constant_rpm{rpm}.log"),
     conda:
         "../envs/validation.yaml"
     params:
@@ -63,13 +63,13 @@ rule validation_bands:
     input:
         lambda wc: speed_files(wc.rpm),
     output:
-        bands=f"{RESULTS}/validation/rpm{{rpm}}/bands.csv",
+        bands=f"{SPEED}/bands.csv",
     log:
-        f"{RESULTS}/logs/validation/bands_rpm{{rpm}}.log",
+        layout.log("validation/bands_rpm{rpm}.log"),
     conda:
         "../envs/validation.yaml"
     params:
-        validation_dir=lambda wc, input: validation_dir_of(input),
+        validation_dir=lambda wc, input: layout.validation_dir_of(input[0]),
         replicates=CFG.validation.dem_replicates,
     script:
         "../workflow/scripts/validation_bands.py"
@@ -80,16 +80,16 @@ rule comparison:
         all_speed_files(),
     output:
         table=report(
-            f"{RESULTS}/report/comparison.csv",
+            layout.report("comparison.csv"),
             caption="../workflow/report/comparison.rst",
             category=CATEGORIES["validation"],
         ),
     log:
-        f"{RESULTS}/logs/validation/comparison.log",
+        layout.log("validation/comparison.log"),
     conda:
         "../envs/validation.yaml"
     params:
-        validation_dir=lambda wc, input: validation_dir_of(input),
+        validation_dir=lambda wc, input: layout.validation_dir_of(input[0]),
         rpms=VAL_RPMS,
         grid_rpm=list(CFG.grid.impeller_rpm),
         replicates=CFG.validation.dem_replicates,
@@ -100,16 +100,16 @@ rule comparison:
 rule propose_points:
     input:
         model=MODEL,
-        intervals=expand(f"{RESULTS}/validation/rpm{{rpm}}/pbm_ann/intervals.csv", rpm=VAL_RPMS),
+        intervals=expand(f"{SPEED}/pbm_ann/intervals.csv", rpm=VAL_RPMS),
     output:
-        fragment=f"{RESULTS}/validation/proposals.yaml",
+        fragment=layout.validation("proposals.yaml"),
         table=report(
-            f"{RESULTS}/validation/proposals.csv",
+            layout.validation("proposals.csv"),
             caption="../workflow/report/proposals.rst",
             category=CATEGORIES["validation"],
         ),
     log:
-        f"{RESULTS}/logs/validation/propose_points.log",
+        layout.log("validation/propose_points.log"),
     conda:
         "../envs/validation.yaml"
     params:
@@ -126,14 +126,14 @@ rule rpm_sweep:
     input:
         model=MODEL,
     output:
-        table=f"{RESULTS}/validation/rpm_sweep.csv",
+        table=layout.validation("rpm_sweep.csv"),
         plot=report(
-            f"{RESULTS}/validation/rpm_sweep.png",
+            layout.validation("rpm_sweep.png"),
             caption="../workflow/report/rpm_sweep.rst",
             category=CATEGORIES["validation"],
         ),
     log:
-        f"{RESULTS}/logs/validation/rpm_sweep.log",
+        layout.log("validation/rpm_sweep.log"),
     conda:
         "../envs/validation.yaml"
     params:
@@ -143,8 +143,8 @@ rule rpm_sweep:
         "../workflow/scripts/rpm_sweep.py"
 
 
-extra_targets += [f"{RESULTS}/validation/rpm{rpm}/bands.csv" for rpm in VAL_RPMS]
-extra_targets += [f"{RESULTS}/report/comparison.csv", f"{RESULTS}/validation/proposals.yaml"]
+extra_targets += [f"{layout.speed(rpm)}/bands.csv" for rpm in VAL_RPMS]
+extra_targets += [layout.report("comparison.csv"), layout.validation("proposals.yaml")]
 
 
 # The PBM-ANN studies the report's findings open with: final sizes against impeller speed (the
@@ -154,10 +154,10 @@ rule pbm_ann_studies:
     input:
         model=MODEL,
     output:
-        speed=f"{RESULTS}/validation/speed_study.csv",
-        feed=f"{RESULTS}/validation/feed_study.csv",
+        speed=layout.validation("speed_study.csv"),
+        feed=layout.validation("feed_study.csv"),
     log:
-        f"{RESULTS}/logs/validation/pbm_ann_studies.log",
+        layout.log("validation/pbm_ann_studies.log"),
     conda:
         "../envs/validation.yaml"
     params:

@@ -2,8 +2,9 @@
 
 The import graph is read from the source (every `import`, also those inside functions, which
 are dependencies all the same). Layers, lowest first: the shared helpers (atomic files, readers,
-job logs, plot axes), the table contracts (`pbmdem.tables`, read through the readers), the settings
-layer (`pbmdem.config`), the contracts (`pbmdem.impact`, then `pbmdem.frequency`), the stages
+the results layout, job logs), the figures' helpers (written through the atomic files), the table
+contracts (`pbmdem.tables`, read through the readers), the settings layer (`pbmdem.config`), the
+contracts (`pbmdem.impact`, then `pbmdem.frequency`), the stages
 (`pbmdem.dem`, `pbmdem.pbm`, `pbmdem.surrogate`, independent of each other), the coupling of the
 stages (`pbmdem.coupling`), the validation study (`pbmdem.validation`), what the fast model is for
 (`pbmdem.design`: design space, calibration), the report, the command line. A module imports
@@ -19,7 +20,8 @@ import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 LAYERS = [
-    {"atomic", "readers", "joblog", "plotting", ""},
+    {"atomic", "readers", "joblog", "layout", ""},
+    {"plotting"},
     {"tables"},
     {"config"},
     {"impact"},

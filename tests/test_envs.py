@@ -54,7 +54,7 @@ STAGE_MODULES = {
         "pbmdem.report.outputs",
         "pbmdem.report.figures",
         "pbmdem.report.frequencies",
-        "pbmdem.report.html",
+        "pbmdem.report.display",
         "pbmdem.report.provenance",
         "pbmdem.report.statements",
         "pbmdem.report.tables",

@@ -199,8 +199,7 @@ def test_process_settings_and_speeds_from_the_typed_config(tiny_config):
 
 
 def test_wide_tables_are_split_with_their_key_repeated():
-    from pbmdem.report.display import split_columns
-    from pbmdem.report.html import table_html
+    from pbmdem.report.display import split_columns, table_html
 
     frame = pd.DataFrame({f"c{k} (mm)": [k] for k in range(12)})
     parts = split_columns(frame, keys=1, max_columns=8)

@@ -215,7 +215,7 @@ def _workflow_with_a_cancel(root: Path, workdir: Path, env: dict, started: list)
     second = time.perf_counter() - t1
     assert rerun.returncode == 0, (rerun.stdout + rerun.stderr)[-5000:]
     assert (cancelled / "collisions.csv").exists() and not (cancelled / "crash.json").exists()
-    assert (res / "report" / "report.html").exists()
+    assert (res / "report" / "tables" / "provenance.csv").exists()
     # another executor (local) sees nothing to do: the executor and its resources are not params
     local = _run(snakemake_command(workdir, "-n", "--cores", "2", configfile=configfile), env, 120, workdir)
     assert "Nothing to be done" in local.stdout + local.stderr, local.stdout + local.stderr

@@ -215,7 +215,7 @@ def test_attach_velocity_bins():
     m2 = attach_velocity_bins(t, sparse)
     assert m2[list(VELOCITY_COUNT_COLUMNS)].iloc[0].isna().all()
     assert np.isfinite(m2[list(VELOCITY_COUNT_COLUMNS)].iloc[1:].to_numpy()).all()
-    with pytest.raises(CollisionTableError, match="lacks column"):
+    with pytest.raises(CollisionTableError, match="missing column"):
         attach_velocity_bins(t, v.drop(columns=["v_hi"]))
     wrong = v.copy()
     wrong.loc[wrong.index[3], "v_lo"] = 0.0042

@@ -280,15 +280,20 @@ def test_add_cli_registers_subcommands():
 def test_rule_declares_contract_paths():
     text = (REPO / "rules" / "surrogate.smk").read_text()
     assert "rule train_surrogate" in text
-    for path in (
-        "/dem/collisions.csv",
-        "/dem/impact_velocity.csv",
-        "/surrogate/model.json",
-        "/surrogate/metrics.csv",
-        "/surrogate/parity.png",
-        "../workflow/scripts/train_surrogate.py",
+    from pbmdem import layout
+
+    # the paths of docs/architecture.md, named through pbmdem.layout
+    for stage, name in (
+        ("dem", "collisions.csv"),
+        ("dem", "impact_velocity.csv"),
+        ("surrogate", "model.json"),
+        ("surrogate", "metrics.csv"),
+        ("surrogate", "parity.png"),
     ):
-        assert path in text
+        assert f'layout.{stage}("{name}")' in text
+        assert getattr(layout, stage)(name) == f"results/{stage}/{name}"
+    assert "model=MODEL" in text and layout.MODEL == "results/surrogate/model.skops"
+    assert "../workflow/scripts/train_surrogate.py" in text
     script = (REPO / "workflow" / "scripts" / "train_surrogate.py").read_text()
     assert "velocity_table=snakemake.input.velocity" in script
 

@@ -334,14 +334,14 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
     assert [len(r) for r in replicates] == [n_replicates] * len(cfg["validation"]["rpm"])
     for rep in (r for speed in replicates for r in speed):
         assert (pd.read_csv(rep / "intervals.csv").dem_collisions > 0).all(), rep
-    html = (res / "report" / "report.html").read_text()
-    assert "how impeller speed and feed size change granule growth" in html
-    # the findings first (speed, feed, how far to trust them), then the validation
-    order = [html.find(p) for p in ("<b>Impeller speed.</b>", "<b>Feed size distribution.</b>", "<h3>Targets</h3>")]
+    findings = (res / "report" / "findings" / "findings.rst").read_text()
+    assert "Findings" in findings
+    # the findings first (speed, feed), then how far to trust them, each figure inside the text
+    order = [
+        findings.find(p) for p in ("**Impeller speed.**", "**Feed size distribution.**", "**How far to trust them.**")
+    ]
     assert -1 not in order and order == sorted(order), order
-    # per speed 4, + sweep, parity, DEM x2, + the two findings figures
-    assert html.count("data:image/png;base64,") == 4 * len(cfg["validation"]["rpm"]) + 6
-    assert "encounter rate against impeller speed" in html
+    assert findings.count(".. image:: data:image/png;base64,") == 2
     response = pd.read_csv(res / "dem" / "speed_response.csv")
     assert len(response) == len(cfg["grid"]["impeller_rpm"]) * len(cfg["grid"]["size_distributions"])
     assert (response.n_replicates == cfg["dem"]["replicates"]).all()
@@ -361,14 +361,15 @@ REPORT_TABLES = (
     "comparison_accuracy",
     "comparison_cost",
     "comparison_domain",
+    "design_space_table",
+    "calibration_check",
 )
 
 
 def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
     """`snakemake --report report.zip` of the finished tiny workflow holds every figure and table of
     the study (each validation speed's figures and out-of-domain table, the settings, provenance,
-    targets and comparison tables, the DEM and surrogate results, the page report.html), with their
-    captions rendered."""
+    targets and comparison tables, the DEM and surrogate results), with their captions rendered."""
     import zipfile
     from collections import Counter
 
@@ -383,7 +384,7 @@ def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
         files = Counter(Path(n).name for n in z.namelist() if "/data/raw/" in n)
         index = z.read("report/report.html").decode()
         settings = z.read(raw["settings.html"]).decode()
-        page = z.read(raw["report.html"])
+        provenance = z.read(raw["provenance.html"]).decode()
     speeds = len(cfg["validation"]["rpm"])
     for name in (*REPORT_FIGURES, "out_of_domain.csv", "out_of_domain.html"):
         assert files[name] == speeds, (name, files)
@@ -398,14 +399,11 @@ def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
         "parity.png",
         "metrics.csv",
         "runs.csv",
-        "report.html",
         "design_space.png",
-        "design_space.csv",
-        "calibration_check.csv",
         "calibration_check.png",
     ):
         assert files[name] == 1, (name, files)
-    assert page == (workdir / "results" / "report" / "report.html").read_bytes()
+    assert "surrogate kernel source" in provenance and "Kernel source: " in provenance
     assert "aggregation rate constant beta0" in settings and "<table" in settings
     # the captions, with their wildcards and params filled in, and the workflow description
     flat = re.sub(r"(\\n|\s)+", " ", index)
@@ -424,7 +422,6 @@ def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
         "Granule size against impeller speed.",
         "Granule size against the feed size distribution.",
         "The surrogate on DEM runs it never saw",
-        "The whole report as one self-contained page",
         "PBM-ANN design space",
         "Parameter estimation on data of known parameters",
     ):
@@ -447,8 +444,8 @@ CHROMIUM_FLAGS = (
 def test_report_in_a_browser_opens_with_the_findings_and_shows_everything(tiny_workflow, root, tmp_path):
     """Snakemake's report (`--report report.html`) in headless Chromium, as a reader opens it: the page
     opens with the findings (speed, feed, then how far to trust them, then the glossary), every image
-    of the page and of every result loads, and no table of any HTML result (display tables,
-    report.html) is wider than a 1000 px page (tests/browser/check_report.js)."""
+    of the page and of every result loads, and no table of any HTML result (the display tables) is
+    wider than a 1000 px page (tests/browser/check_report.js)."""
     chromium = shutil.which("chromium")
     assert chromium, "Chromium is not installed: run scripts/bootstrap.sh (README command 2)"
     workdir, configfile = tiny_workflow
@@ -482,9 +479,13 @@ def test_report_in_a_browser_opens_with_the_findings_and_shows_everything(tiny_w
     findings = [alt for alt in found["landing_alts"] if alt.startswith("final d10, d50, d90 against")]
     assert len(findings) == 2, found["landing_alts"]
     speeds = len(yaml.safe_load(configfile.read_text())["validation"]["rpm"])
-    # per speed 4; the sweep, parity, speed response, impact velocities; the two findings figures
-    assert found["images"] == 4 * speeds + 6 and found["broken"] == [], found
-    assert found["pages"] >= len(REPORT_TABLES) + 1 and found["page_broken"] == [] and found["overflow"] == [], found
+    # per speed 4; the sweep, parity, speed response, impact velocities; the two findings figures;
+    # the design-space maps and the calibration check's fits
+    assert found["images"] == 4 * speeds + 8 and found["broken"] == [], found
+    # the display tables and each speed's out-of-domain table
+    assert found["pages"] == len(REPORT_TABLES) + speeds and found["page_broken"] == [] and found["overflow"] == [], (
+        found
+    )
     # the findings come first: the answers, then how far to trust them, then the rest
     text = re.sub(r"<[^>]+>", " ", proc.stdout[: proc.stdout.rfind(marker)])
     order = [text.find(p) for p in ("Impeller speed.", "Feed size distribution.", "How far to trust them.", "Glossary")]

@@ -20,9 +20,11 @@ import logging
 import sys
 from pathlib import Path
 
+from pbmdem import layout
+
 
 def _dem(args: argparse.Namespace) -> int:
-    from pbmdem.config import check_rpm, load_config, point_id
+    from pbmdem.config import check_rpm, load_config, rpm_text
     from pbmdem.dem import plan_point, run_point
     from pbmdem.dem.plan import check_limits
 
@@ -53,7 +55,7 @@ def _dem(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 0
-    out = args.out or f"results/dem/{point_id(rpm, args.distribution)}/rep{args.replicate}"
+    out = args.out or layout.dem_run(rpm_text(rpm), args.distribution, args.replicate)
     # progress: a bar on a terminal, plain log lines (at least every ~10 s) otherwise
     bar = sys.stderr.isatty()
     if not bar:

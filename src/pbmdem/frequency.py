@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from pbmdem.impact import N_VELOCITY_BINS, binned_counts
+
 
 def upper_pairs(k: int) -> tuple[np.ndarray, np.ndarray]:
     """Row and column index (i <= j) of the K (K + 1) / 2 unordered class pairs, row-major."""
@@ -76,15 +78,10 @@ def fractions_with_fallback(counts: np.ndarray, pooled: np.ndarray) -> np.ndarra
 
 def velocity_fractions_from_table(velocities, k: int) -> np.ndarray:
     """(K, K, V) fraction of each class pair's encounters per impact-velocity bin, from one DEM
-    run's impact_velocity.csv (rows class_i <= class_j, v_lo, encounters)."""
-    from pbmdem.impact import N_VELOCITY_BINS, velocity_bin
-
+    run's impact_velocity.csv (rows class_i <= class_j, v_lo, v_hi, encounters; read by
+    `pbmdem.impact.binned_counts`)."""
+    pairs, counts = binned_counts(velocities, keys=("class_i", "class_j"))
     upper = np.zeros((k, k, N_VELOCITY_BINS))
-    b = velocity_bin(velocities["v_lo"].to_numpy(float))
-    np.add.at(
-        upper,
-        (velocities["class_i"].to_numpy(int), velocities["class_j"].to_numpy(int), b),
-        velocities["encounters"].to_numpy(float),
-    )
+    upper[pairs["class_i"].to_numpy(), pairs["class_j"].to_numpy()] = counts
     strictly_upper = np.triu(np.ones((k, k)), 1)[:, :, None] * upper
     return fractions_with_fallback(upper + np.transpose(strictly_upper, (1, 0, 2)), upper.sum(axis=(0, 1)))

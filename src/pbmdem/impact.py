@@ -15,9 +15,13 @@ PBM's success probability all speak about the same bins:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+import pandas as pd
+
+from pbmdem.readers import InputFileError
+from pbmdem.tables import GRID_VELOCITIES
 
 BINS_PER_DECADE = 4
 V_MIN = 1.0e-3  # m/s, lower edge of the first log-spaced bin
@@ -69,3 +73,49 @@ class EncounterRates:
     def resolved(self) -> np.ndarray:
         """(K, K, N_VELOCITY_BINS) encounter frequency per pair in each velocity bin (1/s)."""
         return self.frequency[:, :, None] * self.velocity_fractions
+
+
+#: the columns of an impact-velocity table (results/dem/impact_velocity.csv) that name one bin of one class pair
+VELOCITY_KEYS = ("point_id", "class_i", "class_j")
+
+
+def velocity_bins_of(v_lo, v_hi, source: str = "impact-velocity table") -> np.ndarray:
+    """The bin index of every row's [v_lo, v_hi) (m/s); InputFileError naming `source`, the 1-based
+    row and the bin if a row's bin is not one of VELOCITY_EDGES (edges equal to rtol 1e-6)."""
+    lo, hi = np.asarray(v_lo, float), np.asarray(v_hi, float)
+    b = np.clip(np.searchsorted(VELOCITY_EDGES[:-1], lo), 0, N_VELOCITY_BINS - 1)
+    ok = np.isclose(VELOCITY_EDGES[b], lo, rtol=1e-6, atol=0.0) & np.isclose(
+        VELOCITY_EDGES[b + 1], hi, rtol=1e-6, atol=0.0
+    )
+    if not ok.all():
+        k = int(np.argmin(ok))
+        raise InputFileError(
+            f"{source}: row {k + 1}, velocity bin [v_lo, v_hi) = [{lo[k]!r}, {hi[k]!r}) m/s is not one of the "
+            f"project's velocity bins; allowed: consecutive edges of pbmdem.impact.VELOCITY_EDGES "
+            f"{np.round(VELOCITY_EDGES, 6).tolist()}"
+        )
+    return b
+
+
+def binned_counts(velocity: pd.DataFrame, source: str = "impact-velocity table", keys=VELOCITY_KEYS):
+    """The one reading of an impact-velocity table (long: one row per class pair and bin).
+
+    Returns ``(pairs, counts)``: a frame of the distinct `keys` of its class pairs (sorted) and their
+    (pairs, N_VELOCITY_BINS) encounter counts (bins a pair does not list count 0). The columns are
+    checked against the contract `pbmdem.tables.GRID_VELOCITIES` (numbers finite, encounters
+    >= 0), every bin against VELOCITY_EDGES, and a bin listed twice for a pair is refused; every
+    violation is an InputFileError naming `source`.
+    """
+    replace(GRID_VELOCITIES, what=source).check(velocity, "", need=(*keys, "v_lo", "v_hi", "encounters"))
+    b = velocity_bins_of(velocity["v_lo"], velocity["v_hi"], source)
+    frame = velocity.loc[:, list(keys)].astype({k: (str if k == "point_id" else int) for k in keys})
+    frame = frame.assign(bin=b).reset_index(drop=True)
+    twice = frame.duplicated()
+    if twice.any():
+        k = int(np.argmax(twice.to_numpy()))
+        raise InputFileError(f"{source}: row {k + 1}, bin listed twice for {frame.iloc[k][list(keys)].to_dict()}")
+    pair_index = frame.groupby(list(keys), sort=True).ngroup().to_numpy()
+    counts = np.zeros((int(pair_index.max(initial=-1)) + 1, N_VELOCITY_BINS))
+    counts[pair_index, b] = pd.to_numeric(velocity["encounters"]).to_numpy(float)
+    pairs = frame.loc[:, list(keys)].drop_duplicates().sort_values(list(keys)).reset_index(drop=True)
+    return pairs, counts

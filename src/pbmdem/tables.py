@@ -85,11 +85,13 @@ class Table:
     def check(self, frame: pd.DataFrame, source, need=None) -> pd.DataFrame:
         """`frame` if it fulfils the contract, else InputFileError naming `source`, row and column.
         `need`: the columns that must be present (default: every required column of the
-        contract); every column of the contract that is present is checked."""
+        contract); every column of the contract that is present is checked. `source` (a path, or
+        empty for a frame in memory) follows the table's name in messages."""
+        label = f"{self.what} {source}".strip()
         needed = [c.name for c in self.columns if c.required] if need is None else list(need)
         missing = [name for name in needed if name not in frame.columns]
         if missing:
-            raise InputFileError(f"{self.what} {source}: missing column(s) {missing}; present: {list(frame.columns)}")
+            raise InputFileError(f"{label}: missing column(s) {missing}; present: {list(frame.columns)}")
         for column in self.columns:
             if column.name not in frame.columns:
                 continue
@@ -98,9 +100,7 @@ class Table:
                 row, requirement = found
                 value = frame[column.name].iloc[row]
                 value = value.item() if hasattr(value, "item") else value  # a numpy scalar as plain Python
-                raise InputFileError(
-                    f"{self.what} {source}: row {row + 1}, column {column.name!r} = {value!r}: {requirement}"
-                )
+                raise InputFileError(f"{label}: row {row + 1}, column {column.name!r} = {value!r}: {requirement}")
         return frame
 
     def read(self, path: str | Path, what: str | None = None, need=None) -> pd.DataFrame:

@@ -3,7 +3,7 @@
 // <pre id="pbmdem-check"> for `chromium --dump-dom`:
 //  - every <img> of the landing page (the workflow description with the findings) has loaded,
 //  - every image result of the report decodes (naturalWidth > 0),
-//  - every HTML result (the display tables, report.html), laid out WIDTH px wide, has no table
+//  - every HTML result (the display tables), laid out WIDTH px wide, has no table
 //    wider than the page and no image that failed to load.
 (function () {
   const WIDTH = 1000;

@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pbmdem.atomic import atomic_path, write_csv
+from pbmdem.atomic import write_csv
 from pbmdem.config import CoupledLoop, Sweep
+from pbmdem.plotting import pyplot, save_figure
 from pbmdem.readers import read_table
 from pbmdem.tables import INTERVALS
 
@@ -73,11 +74,7 @@ def rpm_sweep(
 
 
 def plot_sweep(table: pd.DataFrame, curves: list, path: str | Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
     cmap = plt.get_cmap("viridis")
     for k, (rpm, t, d50) in enumerate(curves):
@@ -94,6 +91,4 @@ def plot_sweep(table: pd.DataFrame, curves: list, path: str | Path) -> None:
     ax2.set_title("PBM-ANN: final sizes vs impeller speed")
     ax2.legend()
     fig.tight_layout()
-    with atomic_path(path) as tmp_png:
-        fig.savefig(tmp_png, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)

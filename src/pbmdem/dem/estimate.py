@@ -13,6 +13,8 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from pbmdem import layout
+
 # Reference throughput (particles, particle-steps/s on one rank, two runs at once on 2 cores),
 # measured on the project's 2-core reference machine with the default grid (runs.csv of a default
 # run; benchmarks/bench_dem.py measures one point). A machine's own runs.csv replaces it.
@@ -101,14 +103,14 @@ class StudyEstimate:
         )
 
 
-def study_estimate(cfg, grid_runs, loops, results: str | Path = "results") -> StudyEstimate:
+def study_estimate(cfg, grid_runs, loops, results: str | Path = layout.RESULTS) -> StudyEstimate:
     """The wall time of the DEM runs a workflow run will do: `grid_runs`, (rpm, distribution,
     replicate) of the grid's DEM jobs, and `loops`, (rpm, replicate) of the PBM-DEM coupled loops
     (one DEM run per coupling interval), on `cfg` (a pbmdem Config); the throughput from the
     finished runs in `results`."""
     from .plan import plan_point
 
-    throughput = measured_throughput(Path(results) / "dem" / "runs.csv")
+    throughput = measured_throughput(layout.dem("runs.csv", str(results)))
     ranks = cfg.dem_execution.mpi_ranks
     grid_seconds = 0.0
     for rpm, dist, rep in grid_runs:

@@ -21,8 +21,9 @@ from .deck import render_granulator
 from .plan import DemPlan, check_limits, plan_point
 
 
-def prepare_run(point: DemPoint, plan: DemPlan, run_dir: str | Path, ranks: int) -> Path:
-    """Write geometry, deck and plan into `run_dir` (emptied of any earlier attempt's output)."""
+def prepare_run(point: DemPoint, plan: DemPlan, run_dir: str | Path, ranks: int, deck: str | None = None) -> Path:
+    """Write geometry, deck and plan into `run_dir` (emptied of any earlier attempt's output);
+    `deck`: the rendered deck, if the caller has it already."""
     run_dir = Path(run_dir)
     post = run_dir / "post"
     if post.exists():
@@ -31,7 +32,7 @@ def prepare_run(point: DemPoint, plan: DemPlan, run_dir: str | Path, ranks: int)
     for stale in ("crash.json", "log.liggghts"):
         (run_dir / stale).unlink(missing_ok=True)
     geometry.write_granulator(point.granulator, run_dir)
-    write_text(run_dir / "in.granulator", render_granulator(point, plan, ranks))
+    write_text(run_dir / "in.granulator", render_granulator(point, plan, ranks) if deck is None else deck)
     write_json(run_dir / "plan.json", plan.to_dict() | {"mpi_ranks": ranks})
     return run_dir / "in.granulator"
 
@@ -129,7 +130,8 @@ def run_point(
 ) -> dict:
     """Run LIGGGHTS for `plan` in `run_dir`, then tabulate collisions and index the VTK files.
 
-    Everything is validated before any file is touched: the speed and the whole deck, and a
+    Everything is validated before any file is touched: the plan against `execution.limits` and
+    the whole deck (rendered once, here; the speed was checked when the plan was made), and a
     finished run in `run_dir` is refused unless `force`. The run is made in a staging folder
     beside `run_dir` and moved into place only after it succeeded, so a failure (or a signal)
     never removes a finished run. Returns a summary dict (also `run_dir/summary.json`). Raises
@@ -137,12 +139,9 @@ def run_point(
     holds a finished run, in the staging folder named in the message) and no collision table.
     `execution`: MPI ranks and wall-time limit (s).
     """
-    from pbmdem.config import check_rpm
-
     run_dir = Path(run_dir)
-    check_rpm(plan.rpm, f"operating point {plan.point_id}: impeller rpm")
     check_limits(plan, execution.limits)
-    render_granulator(point, plan, execution.mpi_ranks)  # raises on any bad value, before any I/O
+    deck = render_granulator(point, plan, execution.mpi_ranks)  # raises on any bad value, before any I/O
     finished = is_finished(run_dir)
     if finished and not force:
         markers = ", ".join(n for n in FINISHED_MARKERS if (run_dir / n).exists())
@@ -157,7 +156,7 @@ def run_point(
         shutil.rmtree(stage)
     stage.mkdir(parents=True)
     try:
-        summary = _run_in(point, plan, stage, run_dir, execution, progress_bar)
+        summary = _run_in(point, plan, stage, run_dir, execution, deck, progress_bar)
     except BaseException as exc:
         if not finished:  # nothing to protect: keep the crash and the logs in the run folder
             _move_into(stage, run_dir)
@@ -171,13 +170,19 @@ def run_point(
 
 
 def _run_in(
-    point: DemPoint, plan: DemPlan, run_dir: Path, final_dir: Path, execution: DemExecution, progress_bar: bool = False
+    point: DemPoint,
+    plan: DemPlan,
+    run_dir: Path,
+    final_dir: Path,
+    execution: DemExecution,
+    deck: str,
+    progress_bar: bool = False,
 ) -> dict:
     """run_point's work in the (staging) folder `run_dir`; paths in the summary name `final_dir`."""
     from . import collisions, vtk_series  # local: keep this module light to import
     from .progress import ThermoProgress
 
-    deck_path = prepare_run(point, plan, run_dir, execution.mpi_ranks)
+    deck_path = prepare_run(point, plan, run_dir, execution.mpi_ranks, deck)
     watcher = ThermoProgress(
         run_dir / "log.liggghts",
         [("settling", plan.settle_steps), ("spin-up", plan.spinup_steps), ("sampling", plan.sampling_steps)],

@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.frequency import pair_counts
+from pbmdem.plotting import log_ticks, pyplot, save_figure
 
 
 def _mean_se(frame: pd.DataFrame, keys: list[str], columns: list[str]) -> pd.DataFrame:
@@ -98,13 +99,7 @@ def flow_development(runs: pd.DataFrame) -> pd.DataFrame:
 def plot_speed_response(response: pd.DataFrame, path) -> None:
     """Encounters per particle and second against impeller speed, one line per feed, with
     replicate standard errors; the raw new-contact rate on a second panel."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from pbmdem.atomic import atomic_path
-
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     for dist, g in response.groupby("distribution"):
         g = g.sort_values("rpm")
@@ -132,29 +127,18 @@ def plot_speed_response(response: pd.DataFrame, path) -> None:
     axes[1].set(
         xlabel="impeller speed (rpm)", ylabel="new contacts per particle (1/s)", title="raw new contacts (diagnostic)"
     )
-    from pbmdem.plotting import log_ticks
-
     for ax in axes:
         ax.set_xscale("log")
         log_ticks(ax, "x")
         ax.grid(alpha=0.3)
         ax.legend(title="feed")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def plot_impact_velocities(velocities: pd.DataFrame, path) -> None:
     """Distribution of impact speeds (all class pairs pooled) per speed, one panel per feed."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from pbmdem.atomic import atomic_path
-    from pbmdem.plotting import log_ticks
-
+    plt = pyplot()
     feeds = sorted(velocities.distribution.unique())
     # at most three panels a row, each as large as a single figure's panel (readable at page width)
     ncols = min(3, len(feeds))
@@ -177,6 +161,4 @@ def plot_impact_velocities(velocities: pd.DataFrame, path) -> None:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=9, title="impeller speed")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save_figure(fig, path)

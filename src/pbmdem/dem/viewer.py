@@ -12,6 +12,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+from pbmdem import layout
 from pbmdem.atomic import atomic_path
 
 from .vtk_series import point_count, snapshots
@@ -39,9 +40,9 @@ class Frame:
 
 def run_folder(results: str | Path, rpm: str, distribution: str, replicate: int = 0) -> Path:
     """results/dem/rpm<rpm>_<distribution>/rep<replicate>, the folder of one operating point's run."""
-    from pbmdem.config import check_rpm, point_id
+    from pbmdem.config import check_rpm, rpm_text
 
-    folder = Path(results) / "dem" / point_id(check_rpm(rpm, "--rpm"), distribution) / f"rep{replicate}"
+    folder = Path(layout.dem_run(rpm_text(check_rpm(rpm, "--rpm")), distribution, replicate, str(results)))
     if not folder.is_dir():
         runs = sorted(str(p.relative_to(results)) for p in Path(results).glob("dem/rpm*/rep*") if p.is_dir())
         shown = ", ".join(runs[:12]) + (" ..." if len(runs) > 12 else "") if runs else "none"

@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pbmdem.atomic import atomic_path
 from pbmdem.config import Specification
 
 #: marker and colour of each specification status
@@ -49,10 +48,9 @@ def _spec_text(spec: Specification) -> str:
 
 def plot_design_space(table: pd.DataFrame, third_key: str, spec: Specification, path: str | Path) -> None:
     """The maps of `table` (`space.design_space`) as a PNG at `path`."""
-    import matplotlib
+    from pbmdem.plotting import pyplot, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     thirds = sorted(table[third_key].unique())
     fig, axes = plt.subplots(2, len(thirds), figsize=(4.2 * len(thirds) + 1, 7.5), squeeze=False)
@@ -88,6 +86,4 @@ def plot_design_space(table: pd.DataFrame, third_key: str, spec: Specification, 
         fontsize=9,
     )
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pbmdem.atomic import atomic_path, write_csv, write_json
+from pbmdem.atomic import write_csv, write_json
 
 from .calibration import Estimate
 
@@ -50,10 +50,9 @@ def write_estimate(estimate: Estimate, outdir: str | Path, title: str = "calibra
 def plot_fit(cases: dict[str, pd.DataFrame], path: str | Path) -> None:
     """Measured d10/d50/d90 with their sd (error bars) and the fitted model, one row per case
     (name -> residual table), one column per impeller speed."""
-    import matplotlib
+    from pbmdem.plotting import pyplot, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     n_cols = max(frame.rpm.nunique() for frame in cases.values())
     fig, axes = plt.subplots(len(cases), n_cols, figsize=(3.6 * n_cols, 3.2 * len(cases)), squeeze=False)
@@ -79,9 +78,7 @@ def plot_fit(cases: dict[str, pd.DataFrame], path: str | Path) -> None:
             axes[row, col].axis("off")
     axes[0, 0].legend(fontsize=6, ncol=2)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def residual_rms(residuals: pd.DataFrame) -> float:

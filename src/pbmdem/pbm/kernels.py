@@ -24,12 +24,11 @@ import numpy as np
 from . import analytical
 from .errors import KernelShapeError, PBMInputError, positive
 from .success import SuccessProbability
-from .table import FREQUENCY_COLUMN, VELOCITY_TABLE_COLUMNS, TableFrequency
+from .table import FREQUENCY_COLUMN, TableFrequency
 
 __all__ = [
     "FREQUENCY_COLUMN",
     "SYMMETRY_RTOL",
-    "VELOCITY_TABLE_COLUMNS",
     "CollisionKernel",
     "ConstantFrequency",
     "ConstantKernel",

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from pbmdem.atomic import atomic_path
+from pbmdem.plotting import log_ticks, pyplot, save_figure
 
 from .grid import Grid
 from .state import State, surface_fraction
@@ -179,11 +180,7 @@ class Result:
     def plot_psd(self, path=None, n_curves: int = 6, ax=None):
         """Cumulative mass size distribution (mass % finer than d) at up to ``n_curves`` times: smooth
         where the density of the sectional grid zig-zags between neighbouring bins."""
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
-        import matplotlib.pyplot as plt
-
+        plt = pyplot()
         own = ax is None
         if own:
             fig, ax = plt.subplots(figsize=(6.4, 4.4), layout="constrained")
@@ -207,8 +204,6 @@ class Result:
         ax.set_xscale("log")
         ax.set_xlim(g.d_edges[max(lo - 1, 0)] * 1e3, g.d_edges[min(hi + 2, g.bins)] * 1e3)
         ax.set_ylim(0, 100)
-        from pbmdem.plotting import log_ticks
-
         log_ticks(ax, "x")
         ax.grid(alpha=0.3, which="both")
         ax.set_xlabel("solid-equivalent diameter (mm)")
@@ -223,11 +218,7 @@ class Result:
 
     def plot_sizes(self, path=None):
         """d10/d50/d90, number- and mass-mean diameter, liquid content and porosity vs time."""
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
-        import matplotlib.pyplot as plt
-
+        plt = pyplot()
         s = self.summary()
         fig, (a1, a2) = plt.subplots(2, 1, figsize=(6.4, 6.4), sharex=True, layout="constrained")
         for col, style, label in (
@@ -257,8 +248,7 @@ class Result:
 
     @staticmethod
     def _savefig(fig, path):
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=120)
+        save_figure(fig, path, dpi=120)
 
     def save(self, outdir) -> dict[str, Path]:
         """Write summary.csv, bins.csv, run.json, psd.png and d50.png into ``outdir`` (atomically)."""

@@ -9,21 +9,23 @@ it; docs/pbm.md, "Collision frequency c_ij").
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
+import pandas as pd
+from scipy.interpolate import RegularGridInterpolator
+
+from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_KEYS, EncounterRates, binned_counts
+from pbmdem.readers import InputFileError
+from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES
 
 from .errors import PBMInputError, positive
 
-if TYPE_CHECKING:  # pragma: no cover - annotations only
-    import pandas as pd
+_KEY_TYPES = {"point_id": str, "class_i": int, "class_j": int}
 
 
 #: The DEM table column the PBM kernel is built on (docs/architecture.md: encounters, i.e. impacts of
 #: granules that were apart, not every contact that begins).
 FREQUENCY_COLUMN = "encounter_frequency_per_pair"
-#: Columns of results/dem/impact_velocity.csv that TableFrequency reads.
-VELOCITY_TABLE_COLUMNS = ("point_id", "class_i", "class_j", "v_lo", "v_hi", "encounters")
 
 
 class TableFrequency:
@@ -73,9 +75,6 @@ class TableFrequency:
         column: str = FREQUENCY_COLUMN,
         velocity_table: pd.DataFrame | None = None,
     ):
-        import pandas as pd
-        from scipy.interpolate import RegularGridInterpolator
-
         self._set_options(extrapolation, zero_floor, column)
         missing = [c for c in ("d_i", "d_j", column) if c not in table.columns]
         if missing:
@@ -134,8 +133,6 @@ class TableFrequency:
         (K,) and the symmetric (K, K) per-pair frequency ``matrix``: what the constructor makes
         of the upper-triangle table (d_i, d_j, ``column``), without DataFrames (a coupling
         interval's classes). Diameters that are not strictly ascending go through the table."""
-        import pandas as pd
-
         d = np.asarray(diameters, float)
         m = np.asarray(matrix, float)
         if d.ndim != 1 or d.size < 2 or m.shape != (d.size, d.size) or not np.all(np.diff(d) > 0):
@@ -143,8 +140,6 @@ class TableFrequency:
             m2 = np.atleast_2d(m)
             table = pd.DataFrame({"d_i": d[iu], "d_j": d[ju], column: m2[iu, ju]})
             return cls(table, extrapolation=extrapolation, zero_floor=zero_floor, column=column)
-        from scipy.interpolate import RegularGridInterpolator
-
         self = cls.__new__(cls)
         self._set_options(extrapolation, zero_floor, column)
         _check_diameters(d, "d_i")
@@ -170,70 +165,42 @@ class TableFrequency:
 
     @staticmethod
     def _velocity_counts(t: pd.DataFrame, velocity_table: pd.DataFrame) -> np.ndarray:
-        """(rows of t, V) encounter counts per velocity bin of every collision-table row."""
-        import pandas as pd
-
-        from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES
-
-        missing = [c for c in VELOCITY_TABLE_COLUMNS if c not in velocity_table.columns]
-        if missing:
-            raise PBMInputError(
-                f"impact-velocity table lacks columns {missing}; required: "
-                f"{list(VELOCITY_TABLE_COLUMNS)}; present: {list(velocity_table.columns)}"
-            )
-        keys = ["point_id", "class_i", "class_j"]
+        """(rows of t, V) encounter counts per velocity bin of every collision-table row (the
+        velocity table read by `pbmdem.impact.binned_counts`, joined on its VELOCITY_KEYS)."""
+        keys = list(VELOCITY_KEYS)
         missing = [c for c in keys if c not in t.columns]
         if missing:
             raise PBMInputError(
                 f"collision table lacks columns {missing}, needed to join the impact-velocity "
                 f"table on {keys}; present: {list(t.columns)}"
             )
-        # rows of other DEM points (e.g. the grid's velocity table beside one point's collision table)
-        points = set(t["point_id"].astype(str))
-        vt = velocity_table[velocity_table["point_id"].astype(str).isin(points)]
-        if vt.empty:
-            raise PBMInputError(
-                f"impact-velocity table has no rows for the collision table's points "
-                f"{sorted(points)[:5]}; both tables must come from the same DEM runs"
-            )
-        n = vt["encounters"].to_numpy(float)
-        if not np.all(np.isfinite(n) & (n >= 0)):
-            raise PBMInputError(
-                f"impact-velocity table encounters has values {n[~(np.isfinite(n) & (n >= 0))][:5]}; "
-                "allowed: finite counts >= 0"
-            )
-        lo, hi = vt["v_lo"].to_numpy(float), vt["v_hi"].to_numpy(float)
-        b = np.searchsorted(VELOCITY_EDGES[:-1], lo)
-        b_ok = np.clip(b, 0, N_VELOCITY_BINS - 1)
-        ok = (b < N_VELOCITY_BINS) & np.isclose(VELOCITY_EDGES[:-1][b_ok], lo, rtol=1e-6, atol=0.0)
-        ok &= np.isclose(VELOCITY_EDGES[1:][b_ok], hi, rtol=1e-6, atol=0.0) | (
-            (b_ok == N_VELOCITY_BINS - 1) & np.isinf(hi)
-        )
-        if not ok.all():
-            k = int(np.argmin(ok))
-            raise PBMInputError(
-                f"impact-velocity table row {k}: bin [v_lo, v_hi) = [{lo[k]!r}, {hi[k]!r}) m/s is "
-                "not one of the project's velocity bins; allowed: consecutive edges of "
-                f"pbmdem.impact.VELOCITY_EDGES {np.round(VELOCITY_EDGES, 6).tolist()}"
-            )
-        row = pd.Series(
-            np.arange(len(t)),
-            index=pd.MultiIndex.from_frame(t[keys].astype({"point_id": str, "class_i": int, "class_j": int})),
-        )
+        if "point_id" in velocity_table.columns:
+            # rows of other DEM points (e.g. the grid's velocity table beside one point's collision table)
+            points = set(t["point_id"].astype(str))
+            velocity_table = velocity_table[velocity_table["point_id"].astype(str).isin(points)]
+            if velocity_table.empty:
+                raise PBMInputError(
+                    f"impact-velocity table has no rows for the collision table's points "
+                    f"{sorted(points)[:5]}; both tables must come from the same DEM runs"
+                )
+        try:
+            pairs, counts = binned_counts(velocity_table)
+        except InputFileError as exc:
+            raise PBMInputError(str(exc)) from None
+        row = pd.Series(np.arange(len(t)), index=pd.MultiIndex.from_frame(t[keys].astype(_KEY_TYPES)))
         if row.index.duplicated().any():
             dup = row.index[row.index.duplicated()][0]
             raise PBMInputError(f"collision table has several rows for (point_id, class_i, class_j) = {dup}")
-        vkeys = pd.MultiIndex.from_frame(vt[keys].astype({"point_id": str, "class_i": int, "class_j": int}))
-        idx = row.reindex(vkeys).to_numpy()
-        if np.isnan(idx.astype(float)).any():
-            k = int(np.argmax(np.isnan(idx.astype(float))))
+        idx = row.reindex(pd.MultiIndex.from_frame(pairs)).to_numpy(float)
+        if np.isnan(idx).any():
+            k = int(np.argmax(np.isnan(idx)))
             raise PBMInputError(
-                f"impact-velocity table row {k}: (point_id, class_i, class_j) = {tuple(vkeys[k])} "
+                f"impact-velocity table: (point_id, class_i, class_j) = {tuple(pairs.iloc[k])} "
                 "has no row in the collision table; both tables must come from the same DEM runs"
             )
-        counts = np.zeros((len(t), N_VELOCITY_BINS))
-        np.add.at(counts, (idx.astype(int), b_ok), n)
-        return counts
+        out = np.zeros((len(t), N_VELOCITY_BINS))
+        out[idx.astype(int)] = counts
+        return out
 
     def _fraction_grid(self, g: pd.DataFrame, counts: np.ndarray, u: np.ndarray, rpm) -> np.ndarray:
         """(n, n, V) velocity fractions on the table sizes u of one speed's rows g."""
@@ -284,9 +251,6 @@ class TableFrequency:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"{what} {path} does not exist")
-        from pbmdem.readers import InputFileError
-        from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES
-
         contract = GRID_VELOCITIES if what == "impact-velocity table" else GRID_PAIRS
         try:
             table = contract.read(path, what, need=())  # the kernel checks the columns it uses
@@ -349,8 +313,6 @@ class TableFrequency:
     def encounters(self, diameters, numbers, rpm):
         """:class:`pbmdem.impact.EncounterRates` at the bins' diameters: the frequency of
         ``__call__`` and the interpolated velocity fractions (needs ``velocity_table``)."""
-        from pbmdem.impact import EncounterRates
-
         if not self._frac_interp:
             raise PBMInputError(
                 "TableFrequency.encounters needs the impact-velocity table "

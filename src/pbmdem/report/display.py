@@ -1,14 +1,21 @@
-"""Units and number formats of the report, and tables split so that they fit a page.
+"""Units and number formats of the report, tables split so that they fit a page, and a display
+table written as CSV and as an HTML page.
 
 The result files are in SI units (sizes in m); the report shows sizes in mm, fractions in %, and
 names every column with its unit, e.g. "d50 at end (mm)". Missing values (NaN) read "n/a".
+Snakemake's report shows a result inline only if it is an image, a PDF or HTML (a CSV is a
+download), so a display table is written twice: the CSV holds the values, the HTML page shows them.
 """
 
 from __future__ import annotations
 
+import html
 import math
+from pathlib import Path
 
 import pandas as pd
+
+from pbmdem.atomic import write_csv, write_text
 
 #: m -> mm
 MM = 1e3
@@ -67,3 +74,35 @@ def split_columns(frame: pd.DataFrame, keys: int = 1, max_columns: int = MAX_COL
     rest = list(frame.columns[keys:])
     per_part = max(1, max_columns - keys)
     return [frame[key_cols + rest[k : k + per_part]] for k in range(0, len(rest), per_part)]
+
+
+STYLE = (
+    "body{font-family:sans-serif;max-width:1100px;margin:1.5em auto;padding:0 1em;line-height:1.4}"
+    "table.t{border-collapse:collapse;font-size:12px;margin:0.4em 0 1em 0;max-width:100%}"
+    "table.t td,table.t th{padding:2px 6px;border-bottom:1px solid #ddd;text-align:left;vertical-align:top}"
+    "table.t th{background:#f3f3f3;max-width:14em}table.t td{max-width:40em;overflow-wrap:anywhere}"
+)
+
+
+def table_html(frame: pd.DataFrame, keys: int = 1) -> str:
+    """`frame` as HTML tables of at most MAX_COLUMNS columns each (the first `keys` columns
+    repeated in each part), values as they are (display tables hold strings)."""
+    return "".join(
+        part.to_html(index=False, border=0, classes="t", na_rep="n/a", escape=True)
+        for part in split_columns(frame, keys)
+    )
+
+
+def write_table(
+    csv_path: str | Path, html_path: str | Path, frame: pd.DataFrame, title: str, intro: str = "", keys: int = 1
+) -> None:
+    """A display table as CSV and as an HTML page (its title, an introduction, the table), atomically."""
+    write_csv(csv_path, frame)
+    body = (
+        f"<h2>{html.escape(title)}</h2>" + (f"<p>{html.escape(intro)}</p>" if intro else "") + table_html(frame, keys)
+    )
+    write_text(
+        html_path,
+        f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+        f"<style>{STYLE}</style></head><body>{body}</body></html>\n",
+    )

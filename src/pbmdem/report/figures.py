@@ -15,12 +15,10 @@ The liquid-addition window is shaded in every time plot. `save` writes a figure 
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 
-from pbmdem.atomic import atomic_path
+from pbmdem.plotting import pyplot, save_figure
 from pbmdem.readers import InputFileError
 
 from .display import MM, PERCENT
@@ -45,28 +43,9 @@ def _width_text(lo, hi) -> str:
 
 SPRAY = dict(color="tab:cyan", alpha=0.10, lw=0)
 STATISTICS = ("d10", "d50", "d90")
-DPI = 110
 
 
-def pyplot():
-    """matplotlib.pyplot on the Agg backend (no display needed)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def save(fig, path: str | Path) -> Path:
-    """Write `fig` to `path` (format from the suffix) atomically and close it."""
-    plt = pyplot()
-    try:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=DPI)
-    finally:
-        plt.close(fig)
-    return Path(path)
+save = save_figure  # the report's figures are written like every other figure
 
 
 def _spray(ax, process) -> None:

@@ -6,8 +6,8 @@ distribution change granule growth, in plain words and one figure each, then how
   surrogate's training domain marked);
 * `feed_figure`: the same against the feed (the grid's feeds and the blends between them), with
   the feed's own d50 for comparison;
-* `findings_rst`: the text (reStructuredText, included at the top of Snakemake's report and shown at
-  the top of report.html): the answers with their numbers, then the validation's verdicts, then
+* `findings_rst`: the text (reStructuredText, included at the top of Snakemake's report): the
+  answers with their numbers, then the validation's verdicts, then
   the glossary of the terms the report uses.
 
 Sizes in mm. Inputs: the tables of `pbmdem.coupling.studies` and the comparison table.
@@ -20,8 +20,9 @@ import math
 import numpy as np
 import pandas as pd
 
+from pbmdem.plotting import pyplot
+
 from .display import MM, PERCENT
-from .figures import pyplot
 
 STATS = (("d90", "^", "tab:red"), ("d50", "o", "black"), ("d10", "v", "tab:blue"))
 

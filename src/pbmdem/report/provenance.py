@@ -101,6 +101,44 @@ def library_versions() -> dict[str, str]:
     return out
 
 
+HYPERPARAMETER_NAMES = {
+    "hidden_layer_sizes": "hidden layers (neurons per layer)",
+    "alpha": "L2 penalty alpha",
+    "activation": "activation",
+    "learning_rate_init": "initial learning rate",
+}
+
+
+def kernel_source(meta: dict) -> str:
+    """The surrogate family PBM-ANN uses, why, and what was fitted, in words (from ``model.json``)."""
+    state = meta.get("frequency_state") or {}
+    if isinstance(state.get("best_params"), dict):
+        fitted = "selected hyperparameters " + hyperparameters(state["best_params"])
+    else:
+        fitted = "fitted " + ("; ".join(map(str, state.get("fitted") or [])) or "not recorded")
+    selection = (meta.get("cv_scores") or {}).get("selection") or "not recorded"
+    return f"Kernel source: {meta.get('family', 'not recorded')} ({selection}); {fitted}"
+
+
+def hyperparameters(params) -> str:
+    """Selected hyperparameters in words: 'hidden layers (neurons per layer) 8 x 8, L2 penalty alpha 0.1'
+    (per target when the metadata holds one mapping per target)."""
+    if not isinstance(params, dict) or not params:
+        return "not recorded"
+    if all(isinstance(v, dict) for v in params.values()):
+        return "; ".join(f"{target}: {hyperparameters(v)}" for target, v in params.items())
+
+    def value(v):
+        if isinstance(v, (list, tuple)):
+            return " x ".join(str(x) for x in v)
+        return f"{v:g}" if isinstance(v, float) else str(v)
+
+    return ", ".join(
+        f"{HYPERPARAMETER_NAMES.get(k.split('__')[-1], k.split('__')[-1].replace('_', ' '))} {value(v)}"
+        for k, v in params.items()
+    )
+
+
 def provenance(
     config_sha256: str,
     settings: dict,
@@ -144,6 +182,7 @@ def provenance(
         rows.append(("surrogate model sha256", str(meta["model_sha256"]), str(surrogate_metadata)))
         if "created_utc" in meta:
             rows.append(("surrogate trained (UTC)", str(meta["created_utc"]), str(surrogate_metadata)))
+        rows.append(("surrogate kernel source", kernel_source(meta), str(surrogate_metadata)))
         if isinstance(meta.get("versions"), dict):
             rows.append(
                 (

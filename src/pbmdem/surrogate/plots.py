@@ -8,9 +8,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pbmdem.plotting import log_ticks
+from pbmdem.plotting import log_ticks, pyplot, save_figure
 
-from ._io import atomic_write
 from .features import TARGET_NAME
 
 MODEL_LABELS = {
@@ -40,11 +39,7 @@ def parity_plot(
     dpi: int = 120,
 ) -> Path:
     """Write a PNG with one panel per model: held-out DEM vs predicted frequency per pair."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     models = [m for m in models if f"{m}_log10" in predictions]
     obs = 10.0 ** predictions[TARGET_NAME].to_numpy(float)
     rpms = np.sort(predictions["rpm"].unique())
@@ -130,25 +125,12 @@ def parity_plot(
         fontsize=10,
     )
 
-    try:
-        atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png"))
-    finally:
-        plt.close(fig)
-    return Path(path)
+    return save_figure(fig, path, dpi=dpi)
 
 
 def empty_plot(path: str | os.PathLike, message: str) -> Path:
     """A placeholder PNG with a message (e.g. when no held-out evaluation was possible)."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(5, 2))
+    fig, ax = pyplot().subplots(figsize=(5, 2))
     ax.axis("off")
     ax.text(0.5, 0.5, message, ha="center", va="center")
-    try:
-        atomic_write(path, lambda tmp: fig.savefig(tmp, format="png"))
-    finally:
-        plt.close(fig)
-    return Path(path)
+    return save_figure(fig, path, dpi=100)

@@ -18,7 +18,7 @@ import pandas as pd
 from pbmdem.impact import VELOCITY_EDGES
 
 from .features import TABLE_COLUMNS, tip_speed
-from .velocity import VELOCITY_TABLE_COLUMNS, lognormal_fractions
+from .velocity import lognormal_fractions
 
 #: Raw new contacts per encounter in the synthetic tables (re-contacts of a pair that bounces).
 CONTACTS_PER_ENCOUNTER = 1.6
@@ -153,7 +153,7 @@ def make_synthetic_tables(
                                 "encounters": counts[b],
                             }
                         )
-    return (pd.DataFrame(rows, columns=list(TABLE_COLUMNS)), pd.DataFrame(vrows, columns=list(VELOCITY_TABLE_COLUMNS)))
+    return (pd.DataFrame(rows, columns=list(TABLE_COLUMNS)), pd.DataFrame(vrows))
 
 
 def make_synthetic_table(impeller_radius: float, *args, **kwargs) -> pd.DataFrame:

@@ -21,12 +21,10 @@ import pandas as pd
 from scipy.optimize import minimize
 from scipy.special import log_ndtr, ndtr
 
-from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, representative_velocities
+from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, VELOCITY_KEYS, binned_counts, representative_velocities
+from pbmdem.readers import InputFileError
 
 from .errors import CollisionTableError
-
-#: Columns of the impact-velocity table contract (docs/architecture.md).
-VELOCITY_TABLE_COLUMNS = ("point_id", "rpm", "distribution", "class_i", "class_j", "v_lo", "v_hi", "encounters")
 
 #: Wide columns holding a pair's encounter counts per velocity bin once attached to the collision table.
 VELOCITY_COUNT_COLUMNS = tuple(f"vbin{b:02d}" for b in range(N_VELOCITY_BINS))
@@ -46,53 +44,20 @@ def attach_velocity_bins(
 ) -> pd.DataFrame:
     """The collision table with one column per velocity bin (:data:`VELOCITY_COUNT_COLUMNS`).
 
-    ``velocity`` is the impact-velocity table (long format, one row per run, pair and bin). Bins a
-    pair lacks count 0; pairs of the collision table without any row in ``velocity`` get NaN (no
-    velocity data). The bins must be those of :data:`pbmdem.impact.VELOCITY_EDGES`.
+    ``velocity`` is the impact-velocity table (long format, one row per run, pair and bin), read by
+    :func:`pbmdem.impact.binned_counts`. Bins a pair lacks count 0; pairs of the collision table
+    without any row in ``velocity`` get NaN (no velocity data).
     """
-    missing = [c for c in VELOCITY_TABLE_COLUMNS if c not in velocity.columns]
-    if missing:
-        raise CollisionTableError(f"{source} lacks column(s) {missing}; expected {list(VELOCITY_TABLE_COLUMNS)}")
-    v = velocity.copy()
-    for col in ("class_i", "class_j", "v_lo", "v_hi", "encounters"):
-        v[col] = pd.to_numeric(v[col], errors="coerce")
-    bad = [c for c in ("class_i", "class_j", "v_lo", "encounters") if v[c].isna().any()]
-    if bad:
-        raise CollisionTableError(f"{source}: non-numeric or missing values in column(s) {bad}")
-    if (v["encounters"] < 0).any():
-        raise CollisionTableError(
-            f"{source}: column 'encounters' must be >= 0, got {v.loc[v['encounters'] < 0, 'encounters'].iloc[0]!r}"
-        )
-    lo = v["v_lo"].to_numpy(float)
-    b = np.searchsorted(VELOCITY_EDGES[:-1], lo)
-    b = np.clip(b, 0, N_VELOCITY_BINS - 1)
-    ok_lo = np.isclose(VELOCITY_EDGES[b], lo, rtol=1e-6, atol=1e-12)
-    hi = v["v_hi"].to_numpy(float)
-    ok_hi = np.isclose(VELOCITY_EDGES[b + 1], hi, rtol=1e-6, atol=1e-12) | ((b == N_VELOCITY_BINS - 1) & np.isinf(hi))
-    if not (ok_lo & ok_hi).all():
-        k = int(np.flatnonzero(~(ok_lo & ok_hi))[0])
-        raise CollisionTableError(
-            f"{source}: velocity bin [{lo[k]!r}, {hi[k]!r}) m/s is not a bin of pbmdem.impact.VELOCITY_EDGES "
-            f"(allowed: [0, 1e-3) then 4 log bins per decade up to 10 m/s)"
-        )
-    v["bin"] = b
-    v["point_id"] = v["point_id"].astype(str)
-    key = ["point_id", "class_i", "class_j"]
-    dup = v.duplicated(key + ["bin"])
-    if dup.any():
-        raise CollisionTableError(f"{source}: bin listed twice for {v.loc[dup, key + ['bin']].iloc[0].to_dict()}")
-    wide = v.pivot_table(index=key, columns="bin", values="encounters", aggfunc="sum", fill_value=0.0)
-    wide = wide.reindex(columns=range(N_VELOCITY_BINS), fill_value=0.0)
-    wide.columns = list(VELOCITY_COUNT_COLUMNS)
-    wide = wide.reset_index()
-    wide["class_i"] = wide["class_i"].astype(int)
-    wide["class_j"] = wide["class_j"].astype(int)
+    key = list(VELOCITY_KEYS)
+    try:
+        pairs, counts = binned_counts(velocity, source)
+    except InputFileError as exc:
+        raise CollisionTableError(str(exc)) from None
+    wide = pd.concat([pairs, pd.DataFrame(counts, columns=list(VELOCITY_COUNT_COLUMNS))], axis=1)
     out = table.drop(columns=[c for c in VELOCITY_COUNT_COLUMNS if c in table.columns]).copy()
-    out_key = out[key].assign(
-        point_id=out["point_id"].astype(str), class_i=out["class_i"].astype(int), class_j=out["class_j"].astype(int)
-    )
+    out_key = out[key].astype({"point_id": str, "class_i": int, "class_j": int})
     known = set(map(tuple, out_key.to_numpy().tolist()))
-    extra = [k for k in map(tuple, wide[key].to_numpy().tolist()) if k not in known]
+    extra = [k for k in map(tuple, pairs.to_numpy().tolist()) if k not in known]
     if extra:
         raise CollisionTableError(
             f"{source}: pair(s) {extra[:3]} (point_id, class_i, class_j) are not in the collision table"

@@ -1,7 +1,7 @@
 """Reading the validation's results of one speed: the PBM-DEM replicates, PBM-ANN (and its
 ensemble members), PBM-constant, with errors that name the file.
 
-Layout (docs/architecture.md, "Validation"): `results/validation/rpm<rpm>/pbm_dem/rep<k>/`,
+Layout (`pbmdem.layout`, docs/architecture.md, "Validation"): `results/validation/rpm<rpm>/pbm_dem/rep<k>/`,
 `.../pbm_ann/` (with `members.csv`), `.../pbm_constant/`; each run folder holds summary.csv,
 bins.csv, final_bins.csv, timing.json and, for the loops, intervals.csv.
 """
@@ -13,19 +13,16 @@ from pathlib import Path
 
 import pandas as pd
 
+from pbmdem import layout
 from pbmdem.readers import read_json, read_table
 from pbmdem.tables import INTERVALS
 
 LABELS = {"pbm_dem": "PBM-DEM", "pbm_ann": "PBM-ANN", "pbm_constant": "PBM-constant"}
 
 
-def speed_folder(validation_dir: str | Path, rpm: str) -> Path:
-    return Path(validation_dir) / f"rpm{rpm}"
-
-
 def run_folder(validation_dir: str | Path, rpm: str, method: str, replicate: int | None = None) -> Path:
-    folder = speed_folder(validation_dir, rpm) / method
-    return folder if replicate is None else folder / f"rep{replicate}"
+    """One run's folder (`pbmdem.layout.validation_run`) under the validation folder `validation_dir`."""
+    return Path(layout.validation_run(method, rpm, replicate, validation_dir))
 
 
 @dataclass

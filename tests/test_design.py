@@ -314,3 +314,24 @@ def test_calibrate_command(tiny_config, tiny_surrogate, root, tmp_path, capsys):
     assert str(bad) in err and "row 2, column 'time'" in err
     assert main(["calibrate", *common, "--data", str(data), "--parameters", "pbm.grid.separate_feed"]) == 2
     assert "--parameters: config key 'pbm.grid.separate_feed'" in capsys.readouterr().err
+
+
+def test_design_space_command(tiny_surrogate, root, tmp_path, capsys):
+    """`pbmdem design-space` writes the table, the maps and the figures of merit and prints the
+    points of each status."""
+    import json
+
+    from pbmdem.cli import main
+
+    out = tmp_path / "design"
+    args = ["design-space", "--config", str(root / "config/test.yaml"), "--model", str(tiny_surrogate)]
+    assert main([*args, "--out", str(out), "--jobs", "1"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    table = pd.read_csv(out / "design_space.csv")
+    assert printed["points"] == len(table) == 18
+    assert sum(v for k, v in printed.items() if k not in ("out", "points")) == 18
+    assert (out / "design_space.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    info = json.loads((out / "design_space.json").read_text())
+    assert info["batches"] == 54 and info["n_jobs"] == 1
+    assert main([*args, "--out", str(out), "--jobs", "0"]) == 2
+    assert "--jobs 0: allowed 1 or more processes" in capsys.readouterr().err

@@ -9,7 +9,8 @@ log_job(sm.log[0])
 write_design_space(
     CoupledLoop.from_dict(sm.params.loop),
     sm.input.model,
-    DesignSpace.from_dict(sm.params.design),
+    # as many processes as the job's threads (the results do not depend on it)
+    DesignSpace.from_dict(sm.params.design).replace(n_jobs=sm.threads),
     sm.output.table,
     sm.output.maps,
     sm.output.info,

@@ -23,6 +23,12 @@ The measured table (docs/calibration.md): columns rpm, time (s), d10, d50, d90 (
 d50_sd, d90_sd (m), one row per speed and time, times ascending per speed."""
 
 
+def _jobs(jobs: int | None) -> int | None:
+    if jobs is not None and jobs < 1:
+        raise ValueError(f"--jobs {jobs}: allowed 1 or more processes")
+    return jobs
+
+
 def _model_path(path: Path) -> Path:
     if not path.is_file():
         raise FileNotFoundError(f"--model {path}: no such file (a saved surrogate, results/surrogate/model.skops)")
@@ -40,7 +46,8 @@ def _design_space(args: argparse.Namespace) -> int:
     from .outputs import write_design_space
 
     cfg = load_config(args.config)
-    design = cfg.design_space if args.jobs is None else cfg.design_space.replace(n_jobs=args.jobs)
+    jobs = _jobs(args.jobs)
+    design = cfg.design_space if jobs is None else cfg.design_space.replace(n_jobs=jobs)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     _logging()
@@ -76,7 +83,7 @@ def _calibrate(args: argparse.Namespace) -> int:
             raise ValueError(f"--parameters: {exc}") from None
     data = read_measured(args.data, loop.batch.pbm.process.end)
     _logging()
-    model = Model(loop, _model_path(args.model), settings.parameters, "ann", n_jobs=args.jobs)
+    model = Model(loop, _model_path(args.model), settings.parameters, "ann", n_jobs=_jobs(args.jobs))
     estimate = calibrate(model, data, settings)
     write_estimate(estimate, args.out, title=str(args.data.name))
     print(estimate.table[["parameter", "estimate", "ci_low", "ci_high"]].to_string(index=False))

@@ -86,7 +86,13 @@ def test_config_refuses_bad_parameter_keys_and_ranges(tiny_mapping):
         config_of(tiny_mapping)
     text = str(err.value)
     assert "calibration.parameters[0]" in text and "pbm.aggregation.scheme" in text
-    assert "design_space.liquid_rate: stop = 1e-07 must be greater than start = 2e-07" in text
+    assert "design_space.liquid_rate: stop = 1e-07 must not be below start = 2e-07" in text
+    # a grid of one speed: the design space's speed range is that speed
+    tiny_mapping.pop("calibration")
+    tiny_mapping["design_space"] = {}
+    tiny_mapping["grid"]["impeller_rpm"] = [600]
+    tiny_mapping["validation"]["sweep"] = {"start": 600, "stop": 900}
+    assert config_of(tiny_mapping).design_space.impeller_rpm.values() == [600.0]
 
 
 # --------------------------------------------------------------------------- measured data
@@ -335,3 +341,23 @@ def test_design_space_command(tiny_surrogate, root, tmp_path, capsys):
     assert info["batches"] == 54 and info["n_jobs"] == 1
     assert main([*args, "--out", str(out), "--jobs", "0"]) == 2
     assert "--jobs 0: allowed 1 or more processes" in capsys.readouterr().err
+
+
+def test_maps_are_drawn_for_a_grid_of_one_speed_and_for_failed_points(tmp_path):
+    """Contours need two values on each axis: a grid of one speed (a DEM grid of one speed) gets
+    the status markers only; NaN sizes of failed points are left blank."""
+    from pbmdem.design.maps import plot_design_space
+
+    spec = Specification(0.008, 0.010, 0.014)
+    rows = []
+    for rpm in (600.0, 900.0):
+        for rate in (1e-7, 1.2e-7):
+            d50 = float("nan") if rpm == 900.0 and rate == 1.2e-7 else 0.009
+            point = _point(d50, d50 * 0.95, d50 * 1.05, 0.012, 0.011, 0.013, failed=int(d50 != d50))
+            rows.append({"rpm": rpm, "liquid_rate": rate, THIRD: 8.0, **point})
+    table = pd.DataFrame(rows)
+    table["spec_status"] = specification_status(table, spec)
+    for name, part in (("two", table), ("one", table[table.rpm == 600.0])):
+        plot_design_space(part, THIRD, spec, tmp_path / f"{name}.png")
+        assert (tmp_path / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert list(table.spec_status) == ["meets", "meets", "meets", "failed"]

@@ -11,7 +11,8 @@ from .typed import Settings
 
 @dataclass(frozen=True)
 class Span(Settings):
-    """`num` values evenly from `start` to `stop` (null ends are resolved from the DEM grid)."""
+    """`num` values evenly from `start` to `stop` (null ends are resolved from the DEM grid); one
+    value if start = stop (a grid of one speed)."""
 
     start: float | None
     stop: float | None
@@ -20,6 +21,8 @@ class Span(Settings):
     def values(self) -> list[float]:
         import numpy as np
 
+        if self.stop == self.start:
+            return [float(self.start)]
         return [float(v) for v in np.linspace(self.start, self.stop, self.num)]
 
 
@@ -80,8 +83,8 @@ def problems(cfg) -> list[str]:
     out: list[str] = []
     ds = cfg.design_space
     for name, span in (("impeller_rpm", ds.impeller_rpm), ("liquid_rate", ds.liquid_rate)):
-        if not span.stop > span.start:
-            out.append(f"design_space.{name}: stop = {span.stop:g} must be greater than start = {span.start:g}")
+        if span.stop < span.start:
+            out.append(f"design_space.{name}: stop = {span.stop:g} must not be below start = {span.start:g}")
     keys = [("design_space.third_factor.key", ds.third_factor.key)]
     keys += [(f"calibration.parameters[{k}]", key) for k, key in enumerate(cfg.calibration.parameters)]
     for where, key in keys:

@@ -64,16 +64,20 @@ def plot_design_space(table: pd.DataFrame, third_key: str, spec: Specification, 
         _, _, lo = _grid(panel, "d50_member_min")
         _, _, hi = _grid(panel, "d50_member_max")
         top, bottom = axes[0, col], axes[1, col]
-        filled = top.contourf(x, y, 1e3 * d50, levels=levels["d50"], cmap="viridis", extend="both")
-        fig.colorbar(filled, ax=top, label="d50 (mm), ensemble mean")
+        # contours need two values on each axis and a finite value; the markers are always drawn
+        contours = min(d50.shape) >= 2 and np.isfinite(d50).any()
+        if contours:
+            filled = top.contourf(x, y, 1e3 * d50, levels=levels["d50"], cmap="viridis", extend="both")
+            fig.colorbar(filled, ax=top, label="d50 (mm), ensemble mean")
         for status, (marker, color, text) in STYLE.items():
             sel = panel[panel.spec_status == status]
             top.scatter(sel.rpm, 1e6 * 60 * sel.liquid_rate, marker=marker, color=color, s=28, label=text)
         top.set_title(f"{label} = {third:g}")
-        filled = bottom.contourf(x, y, 1e3 * d90, levels=levels["d90"], cmap="magma", extend="both")
-        fig.colorbar(filled, ax=bottom, label="d90 (mm), ensemble mean")
+        if contours and np.isfinite(d90).any():
+            filled = bottom.contourf(x, y, 1e3 * d90, levels=levels["d90"], cmap="magma", extend="both")
+            fig.colorbar(filled, ax=bottom, label="d90 (mm), ensemble mean")
         width = np.where(d50 > 0, (hi - lo) / d50, np.nan)
-        if np.isfinite(width).sum() >= 4:
+        if contours and np.isfinite(width).sum() >= 4:
             lines = bottom.contour(x, y, 100 * width, levels=5, colors="white", linewidths=0.8)
             bottom.clabel(lines, fmt="%.0f %%", fontsize=7)
         for ax in (top, bottom):

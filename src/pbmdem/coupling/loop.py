@@ -62,6 +62,16 @@ def write_outputs(outdir: Path, result, rows: list[dict], totals: dict) -> None:
     write_json(outdir / "timing.json", totals)
 
 
+def _prepared(outdir, loop: CoupledLoop, rpm: float, provider) -> Path | None:
+    """The loop's folder, made, with the finished intervals of other inputs discarded (None: in memory)."""
+    if outdir is None:
+        return None
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    intervals.discard_stale(outdir, {"loop": loop.to_dict(), "rpm": float(rpm), "provider": provider.fingerprint()})
+    return outdir
+
+
 def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None) -> LoopOutcome:
     """Run the PBM of `loop` at `rpm` over its coupling intervals, asking
     `provider(sample, interval_dir, index) -> (rates, info)` for the frequencies of each.
@@ -77,10 +87,7 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
     from pbmdem.pbm.setup import build_model, initial_state, output_times
 
     n_intervals = loop.coupling_intervals
-    if outdir is not None:
-        outdir = Path(outdir)
-        outdir.mkdir(parents=True, exist_ok=True)
-        intervals.discard_stale(outdir, {"loop": loop.to_dict(), "rpm": float(rpm), "provider": provider.fingerprint()})
+    outdir = _prepared(outdir, loop, rpm, provider)
     pbm = loop.batch.pbm
     model = build_model(pbm, ConstantFrequency(1.0), rpm=rpm)  # the source is set per interval
     state = initial_state(loop.batch, model)
@@ -129,29 +136,32 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
         }
         if folder is not None:
             intervals.save(folder, result, sample, matrix, info)
+        what, warned = "DEM" if provider.name == "pbm_dem" else "provider", int(extra.get("out_of_domain_count", 0))
         log.log(
             logging.INFO if folder is not None else logging.DEBUG,
             "%s at rpm %g: interval %d of %d (%.4g-%.4g s) done: %s wall time %.2f s, PBM wall time %.3f s, "
             "%d surrogate out-of-domain warning(s)",
-            provider.name,
-            rpm,
-            k + 1,
-            n_intervals,
-            t0,
-            t1,
-            "DEM" if provider.name == "pbm_dem" else "provider",
-            provider_wall,
-            pbm_wall,
-            int(extra.get("out_of_domain_count", 0)),
+            *(provider.name, rpm, k + 1, n_intervals, t0, t1, what, provider_wall, pbm_wall, warned),
         )
         results.append(result)
         rows.append(info)
         state = result.state
+    totals = _totals(provider.name, rpm, loop, rows, in_memory=outdir is None)
+    full = Result.concat(results)
+    if outdir is not None:
+        write_outputs(outdir, full, rows, totals)
+    return LoopOutcome(full, rows, totals)
+
+
+def _totals(method: str, rpm: float, loop: CoupledLoop, rows: list[dict], in_memory: bool = False) -> dict:
+    """The loop's totals (timing.json): wall times, and the out-of-domain warnings over its
+    intervals (logged as a warning when there were any; for a loop in memory, `in_memory`, the
+    caller reports them)."""
     totals = {
-        "method": provider.name,
+        "method": method,
         "rpm": rpm,
         "distribution": loop.batch.distribution,
-        "intervals": n_intervals,
+        "intervals": loop.coupling_intervals,
         "provider_wall_time_s": float(sum(r["provider_wall_time_s"] for r in rows)),
         "pbm_wall_time_s": float(sum(r["pbm_wall_time_s"] for r in rows)),
     }
@@ -163,17 +173,14 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
             # a loop in memory hands its counts to the caller, which reports them (the design
             # space marks each point and warns with the number of such points)
             log.log(
-                logging.WARNING if outdir is not None else logging.DEBUG,
+                logging.DEBUG if in_memory else logging.WARNING,
                 "%s at rpm %g: the surrogate was outside its training domain in %d of %d intervals "
                 "(%d warnings; see intervals.csv)",
-                provider.name,
+                method,
                 rpm,
                 totals["out_of_domain_intervals"],
                 len(rows),
                 totals["out_of_domain_count"],
             )
     totals["total_wall_time_s"] = totals["provider_wall_time_s"] + totals["pbm_wall_time_s"]
-    full = Result.concat(results)
-    if outdir is not None:
-        write_outputs(outdir, full, rows, totals)
-    return LoopOutcome(full, rows, totals)
+    return totals

@@ -66,7 +66,10 @@ def process_settings(
     dem_replicates: int,
     dem_sampling_time: float,
 ) -> pd.DataFrame:
-    """The settings of the validation batch: setting, value, unit and config key (one row each)."""
+    """The settings of the validation batch: setting, value, unit and config key (one row each).
+
+    Longer than 80 lines because it is the table itself, one literal row per setting in the order
+    the report shows them; split up, the table would no longer be readable in one place."""
     p, agg = pbm.process, pbm.aggregation
     added = pbm.liquid_addition.rate * p.liquid_addition_time
     grid = pbm.grid

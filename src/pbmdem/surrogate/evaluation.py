@@ -228,42 +228,25 @@ def cross_validate_models(data: TrainingData, models: dict, cv: str = "group_kfo
             rows.append(_row("encounter_frequency", name, str(k), ids, n_train, len(test), r2, mae, floor))
             vt = test[vmask[test]]
             if name in vel_models and len(vt):
-                te_v = data.X.iloc[vt]
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", UserWarning)
-                    if name in families:
-                        mu, sigma, mu_std, _ = fitted.predict_velocity(te_v, return_std=True)
-                    else:
-                        (mu, sigma), mu_std = fitted.predict_velocity(te_v), np.full(len(vt), np.nan)
-                    frac = fitted.velocity_fractions(te_v)
-                tv = total_variation(frac, obs_frac_full[vt])
-                idx = pred.index[vt]
-                pred.loc[idx, f"{name}_velocity_mu_log10"] = mu
-                pred.loc[idx, f"{name}_velocity_sigma"] = sigma
-                pred.loc[idx, f"{name}_velocity_tv"] = tv
-                pred.loc[idx, f"{name}_velocity_mu_std_log10"] = mu_std
-                r2v, maev = _metrics(pred.loc[idx, "velocity_mu_log10"].to_numpy(float), mu)
-                rows.append(
-                    _row("impact_velocity", name, str(k), ids, n_train, len(vt), r2v, maev, tv=float(tv.mean()))
+                r2v, maev, tv = _velocity_fold(
+                    name, fitted, data.X.iloc[vt], name in families, obs_frac_full[vt], pred, vt
                 )
-        elapsed = time.perf_counter() - t_start
-        done = [r for r in rows if r["fold"] == str(k) and r["target"] == "encounter_frequency"]
-        log.info(
-            "CV fold %d of %d done (held out %s) in %.1f s: %s; elapsed %.0f s, remaining ~%.0f s",
-            k + 1,
-            len(splits),
-            ids,
-            time.perf_counter() - t_fold,
-            ", ".join(f"{r['model']} R2 {r['r2_log10']:.3f}" for r in done),
-            elapsed,
-            elapsed / (k + 1) * (len(splits) - k - 1),
-        )
+                rows.append(_row("impact_velocity", name, str(k), ids, n_train, len(vt), r2v, maev, tv=tv))
+        _log_fold(k, len(splits), ids, rows, t_fold, t_start)
 
     metrics = pd.DataFrame(rows, columns=METRIC_COLUMNS)
+    summary = _summary_rows(metrics, pred, list(models), families, vel_models, vmask)
+    metrics = pd.concat([metrics, pd.DataFrame(summary, columns=METRIC_COLUMNS)], ignore_index=True)
+    return metrics, pred
+
+
+def _summary_rows(metrics: pd.DataFrame, pred: pd.DataFrame, models: list, families: list, vel_models: list, vmask):
+    """Per target and model a `pooled` row (all held-out rows together, with the families'
+    interval coverage and calibration) and a `mean` row (the average over the folds)."""
     summary = []
     floor = noise_floor_r2(pred[TARGET_NAME].to_numpy(float), pred[TARGET_NOISE_VAR].to_numpy(float))
     folds = pred["fold"].to_numpy()
-    for target, names in (("encounter_frequency", list(models)), ("impact_velocity", vel_models)):
+    for target, names in (("encounter_frequency", models), ("impact_velocity", vel_models)):
         for name in names:
             per = metrics[(metrics["model"] == name) & (metrics["target"] == target)]
             if target == "encounter_frequency":
@@ -299,8 +282,43 @@ def cross_validate_models(data: TrainingData, models: dict, cv: str = "group_kfo
                     float(per["tv_distance"].mean()),
                 )
             )
-    metrics = pd.concat([metrics, pd.DataFrame(summary, columns=METRIC_COLUMNS)], ignore_index=True)
-    return metrics, pred
+    return summary
+
+
+def _velocity_fold(name: str, fitted, X, uncertain: bool, observed, pred: pd.DataFrame, rows) -> tuple:
+    """A fitted model's impact-speed law on held-out `rows` (features `X`, `observed` bin fractions)
+    into `pred`; returns (R2, MAE of log10 median speed, mean total-variation distance)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # held-out runs at the edges of the ranges: expected
+        if uncertain:
+            mu, sigma, mu_std, _ = fitted.predict_velocity(X, return_std=True)
+        else:
+            (mu, sigma), mu_std = fitted.predict_velocity(X), np.full(len(rows), np.nan)
+        frac = fitted.velocity_fractions(X)
+    tv = total_variation(frac, observed)
+    idx = pred.index[rows]
+    pred.loc[idx, f"{name}_velocity_mu_log10"] = mu
+    pred.loc[idx, f"{name}_velocity_sigma"] = sigma
+    pred.loc[idx, f"{name}_velocity_tv"] = tv
+    pred.loc[idx, f"{name}_velocity_mu_std_log10"] = mu_std
+    r2, mae = _metrics(pred.loc[idx, "velocity_mu_log10"].to_numpy(float), mu)
+    return r2, mae, float(tv.mean())
+
+
+def _log_fold(k: int, n_folds: int, ids: str, rows: list, t_fold: float, t_start: float) -> None:
+    """One line of progress: fold k's held-out runs, the models' R2, the time left."""
+    elapsed = time.perf_counter() - t_start
+    done = [r for r in rows if r["fold"] == str(k) and r["target"] == "encounter_frequency"]
+    log.info(
+        "CV fold %d of %d done (held out %s) in %.1f s: %s; elapsed %.0f s, remaining ~%.0f s",
+        k + 1,
+        n_folds,
+        ids,
+        time.perf_counter() - t_fold,
+        ", ".join(f"{r['model']} R2 {r['r2_log10']:.3f}" for r in done),
+        elapsed,
+        elapsed / (k + 1) * (n_folds - k - 1),
+    )
 
 
 def select_family(metrics: pd.DataFrame, families) -> str:

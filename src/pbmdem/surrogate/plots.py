@@ -57,30 +57,7 @@ def parity_plot(
     for ax in axes[1][len(vel_models) :] if vel_models else []:
         ax.axis("off")
     for ax, m in zip(axes[1] if vel_models else [], vel_models):
-        sel_v = predictions[f"{m}_velocity_mu_log10"].notna().to_numpy()
-        obs_v = 10.0 ** predictions["velocity_mu_log10"].to_numpy(float)
-        pred_v = 10.0 ** predictions[f"{m}_velocity_mu_log10"].to_numpy(float)
-        both = np.concatenate([obs_v[sel_v], pred_v[sel_v]])
-        vlo, vhi = np.nanmin(both) / 1.5, np.nanmax(both) * 1.5
-        for r in rpms:
-            sel = sel_v & (predictions["rpm"].to_numpy() == r)
-            ax.plot(obs_v[sel], pred_v[sel], "o", ms=4, color=colours[r], alpha=0.85, label=f"{r:g} rpm")
-        ax.plot([vlo, vhi], [vlo, vhi], "k-", lw=0.8)
-        _square_log_axes(ax, vlo, vhi)
-        ax.set_xlabel("DEM median impact speed (m/s, log-normal fit)")
-        ax.set_ylabel("predicted (held-out runs) (m/s)")
-        title = f"{MODEL_LABELS.get(m, m)}: impact speed"
-        if metrics is not None and "target" in metrics:
-            row = metrics[
-                (metrics["model"] == m) & (metrics["fold"] == "pooled") & (metrics["target"] == "impact_velocity")
-            ]
-            if len(row):
-                title += (
-                    f"\nR2(log10) {row['r2_log10'].iloc[0]:.3f}, MAE {row['mae_log10'].iloc[0]:.3f} dec, "
-                    f"TV distance {row['tv_distance'].iloc[0]:.3f}"
-                )
-        ax.set_title(title, fontsize=10)
-        ax.grid(True, which="both", lw=0.3, alpha=0.5)
+        _velocity_panel(ax, m, predictions, rpms, colours, metrics)
     for ax, m in zip(axes[0], models):
         pred = 10.0 ** predictions[f"{m}_log10"].to_numpy(float)
         for r in rpms:
@@ -126,6 +103,34 @@ def parity_plot(
     )
 
     return save_figure(fig, path, dpi=dpi)
+
+
+def _velocity_panel(ax, m: str, predictions: pd.DataFrame, rpms, colours: dict, metrics) -> None:
+    """Model `m`'s held-out median impact speed against the DEM's, one colour per impeller speed."""
+    sel_v = predictions[f"{m}_velocity_mu_log10"].notna().to_numpy()
+    obs_v = 10.0 ** predictions["velocity_mu_log10"].to_numpy(float)
+    pred_v = 10.0 ** predictions[f"{m}_velocity_mu_log10"].to_numpy(float)
+    both = np.concatenate([obs_v[sel_v], pred_v[sel_v]])
+    vlo, vhi = np.nanmin(both) / 1.5, np.nanmax(both) * 1.5
+    for r in rpms:
+        sel = sel_v & (predictions["rpm"].to_numpy() == r)
+        ax.plot(obs_v[sel], pred_v[sel], "o", ms=4, color=colours[r], alpha=0.85, label=f"{r:g} rpm")
+    ax.plot([vlo, vhi], [vlo, vhi], "k-", lw=0.8)
+    _square_log_axes(ax, vlo, vhi)
+    ax.set_xlabel("DEM median impact speed (m/s, log-normal fit)")
+    ax.set_ylabel("predicted (held-out runs) (m/s)")
+    title = f"{MODEL_LABELS.get(m, m)}: impact speed"
+    if metrics is not None and "target" in metrics:
+        row = metrics[
+            (metrics["model"] == m) & (metrics["fold"] == "pooled") & (metrics["target"] == "impact_velocity")
+        ]
+        if len(row):
+            title += (
+                f"\nR2(log10) {row['r2_log10'].iloc[0]:.3f}, MAE {row['mae_log10'].iloc[0]:.3f} dec, "
+                f"TV distance {row['tv_distance'].iloc[0]:.3f}"
+            )
+    ax.set_title(title, fontsize=10)
+    ax.grid(True, which="both", lw=0.3, alpha=0.5)
 
 
 def empty_plot(path: str | os.PathLike, message: str) -> Path:

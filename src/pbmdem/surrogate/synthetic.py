@@ -72,6 +72,10 @@ def make_synthetic_tables(
     factor 10**N(0, run_noise_log10), shared by the replicates of a run); the table holds the mean
     over replicates and its standard error (NaN for one replicate). ``collisions`` (raw new
     contacts) are :data:`CONTACTS_PER_ENCOUNTER` times the encounters.
+
+    Longer than 80 lines: the two tables are written row by row in one pass over runs, pairs and
+    replicates, so that a row of the collision table and its velocity bins share their random
+    draws in a fixed order (same seed, same tables).
     """
     rng = np.random.default_rng(seed)
     if int(n_replicates) < 1:

@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES
+
 from ._io import atomic_write
 from .evaluation import METRIC_COLUMNS, cross_validate_models, select_family, summarise
 from .features import training_data
@@ -67,8 +69,61 @@ def train_and_report(
     metadata_path = Path(metadata_path) if metadata_path else model_path.with_suffix(".json")
     metrics_path = Path(metrics_path) if metrics_path else out / "metrics.csv"
     parity_path = Path(parity_path) if parity_path else out / "parity.png"
-    from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES
+    data, source, velocity_source = _training_data(table, velocity_table, impeller_radius, settings)
+    families = build_families(settings, impeller_radius, n_jobs=n_jobs)
+    t0 = time.perf_counter()
+    metrics, predictions, summary, velocity_summary = _held_out(data, families, settings)
+    t_cv = time.perf_counter() - t0
+    selected, reason = _kernel_source(settings["model"], metrics, summary)
+    surrogate = _calibrated(families[selected], selected, summary, velocity_summary)
+    t0 = time.perf_counter()
+    _logged(surrogate.fit, data.X, data.y, groups=data.groups, velocity=data.velocity)
+    t_fit = time.perf_counter() - t0
+    state = surrogate.frequency_model_.fitted_state()
+    fitted = state.get("best_params", state.get("fitted"))
+    log.info("final fit of %s: %s, %.1f s (cross-validation %.1f s)", selected, fitted, t_fit, t_cv)
+    meta = save_surrogate(
+        surrogate,
+        model_path,
+        metadata_path,
+        cv_scores={
+            "strategy": settings["cv"]["strategy"],
+            "selected": selected,
+            "selection": reason,
+            "outer_summary": summary,
+            "noise_floor_r2_log10": (next(iter(summary.values()))["noise_floor_r2_log10"] if summary else None),
+            "velocity_summary": velocity_summary,
+            "outer_folds": metrics[~metrics["fold"].isin(["pooled", "mean"])].to_dict(orient="records"),
+        },
+        extra={
+            "training_table": source,
+            "velocity_table": velocity_source,
+            "settings": settings,
+            "n_dropped_rows": data.n_dropped,
+            "n_floored_rows": data.n_floored,
+            "timing_s": {"cross_validation": t_cv, "final_fit": t_fit},
+        },
+    )
+    _write_csv(metrics, metrics_path)
+    if predictions is not None:
+        parity_plot(predictions, parity_path, metrics)
+    else:
+        empty_plot(parity_path, "parity plot needs at least two DEM runs")
+    return meta
 
+
+def _logged(fn, *args, **kwargs):
+    """`fn(*args, **kwargs)` with the warnings it raises written to the log (the job's log file)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = fn(*args, **kwargs)
+    for w in caught:
+        log.warning("%s: %s", w.category.__name__, w.message)
+    return result
+
+
+def _training_data(table, velocity_table, impeller_radius: float, settings: dict):
+    """(training data, name of the collision table, name of the impact-velocity table or None)."""
     frame, source = _read_table(table, GRID_PAIRS, need=("point_id",))
     if "point_id" not in frame:
         raise ValueError(f"collision table {source} lacks column 'point_id'")
@@ -77,20 +132,20 @@ def train_and_report(
     if velocity_table is not None:
         vframe, velocity_source = _read_table(velocity_table, GRID_VELOCITIES)
         log.info("impact-velocity table %s: %d rows", velocity_source, len(vframe))
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        data = training_data(
-            frame,
-            impeller_radius,
-            settings["zero_collisions"],
-            velocity_table=vframe,
-            velocity_source=f"impact-velocity table {velocity_source}",
-        )
-    for w in caught:
-        log.warning("%s: %s", w.category.__name__, w.message)
+    data = _logged(
+        training_data,
+        frame,
+        impeller_radius,
+        settings["zero_collisions"],
+        velocity_table=vframe,
+        velocity_source=f"impact-velocity table {velocity_source}",
+    )
+    return data, source, velocity_source
 
-    families = build_families(settings, impeller_radius, n_jobs=n_jobs)
-    t0 = time.perf_counter()
+
+def _held_out(data, families: dict, settings: dict):
+    """Every family and baseline on the same grouped outer folds: (metrics, predictions, summary
+    of the frequency, summary of the impact speed), logged; empty with a single DEM run."""
     if len(np.unique(data.groups)) >= 2:
         cv = settings["cv"]
         metrics, predictions = cross_validate_models(
@@ -99,7 +154,6 @@ def train_and_report(
     else:
         log.warning("a single DEM run: no held-out evaluation possible (metrics and parity plot are empty)")
         metrics, predictions = pd.DataFrame(columns=METRIC_COLUMNS), None
-    t_cv = time.perf_counter() - t0
     summary = summarise(metrics)
     velocity_summary = summarise(metrics, "impact_velocity")
     for name, s in summary.items():
@@ -122,8 +176,11 @@ def train_and_report(
             s["pooled_r2_log10"],
             s["pooled_tv_distance"],
         )
+    return metrics, predictions, summary, velocity_summary
 
-    choice = settings["model"]
+
+def _kernel_source(choice: str, metrics: pd.DataFrame, summary: dict) -> tuple[str, str]:
+    """The family PBM-ANN uses (`surrogate.model`, or with auto the best held-out R2) and why."""
     selected = choice if choice != "auto" else (select_family(metrics, FAMILIES) if summary else FAMILIES[0])
     reason = (
         f"surrogate.model = {choice}"
@@ -131,7 +188,11 @@ def train_and_report(
         else "surrogate.model = auto: the best pooled held-out R2 of log10 c of " + ", ".join(FAMILIES)
     )
     log.info("kernel source: %s (%s)", selected, reason)
-    surrogate = families[selected]
+    return selected, reason
+
+
+def _calibrated(surrogate, selected: str, summary: dict, velocity_summary: dict):
+    """`surrogate` with the held-out calibration factors of its family as uncertainty scales."""
     scales = {}
     for key, s in (("uncertainty_scale", summary), ("velocity_uncertainty_scale", velocity_summary)):
         scale = s.get(selected, {}).get("uncertainty_scale", float("nan"))
@@ -143,50 +204,4 @@ def train_and_report(
         scales["uncertainty_scale"],
         scales["velocity_uncertainty_scale"],
     )
-
-    t0 = time.perf_counter()
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        surrogate.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
-    for w in caught:
-        log.warning("%s: %s", w.category.__name__, w.message)
-    t_fit = time.perf_counter() - t0
-    freq = surrogate.frequency_model_
-    state = freq.fitted_state()
-    log.info(
-        "final fit of %s: %s, %.1f s (cross-validation %.1f s)",
-        selected,
-        state.get("best_params", state.get("fitted")),
-        t_fit,
-        t_cv,
-    )
-
-    cv_scores = {
-        "strategy": settings["cv"]["strategy"],
-        "selected": selected,
-        "selection": reason,
-        "outer_summary": summary,
-        "noise_floor_r2_log10": (next(iter(summary.values()))["noise_floor_r2_log10"] if summary else None),
-        "velocity_summary": velocity_summary,
-        "outer_folds": metrics[~metrics["fold"].isin(["pooled", "mean"])].to_dict(orient="records"),
-    }
-    meta = save_surrogate(
-        surrogate,
-        model_path,
-        metadata_path,
-        cv_scores=cv_scores,
-        extra={
-            "training_table": source,
-            "velocity_table": velocity_source,
-            "settings": settings,
-            "n_dropped_rows": data.n_dropped,
-            "n_floored_rows": data.n_floored,
-            "timing_s": {"cross_validation": t_cv, "final_fit": t_fit},
-        },
-    )
-    _write_csv(metrics, metrics_path)
-    if predictions is not None:
-        parity_plot(predictions, parity_path, metrics)
-    else:
-        empty_plot(parity_path, "parity plot needs at least two DEM runs")
-    return meta
+    return surrogate

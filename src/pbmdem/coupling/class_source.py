@@ -14,6 +14,7 @@ import pandas as pd
 
 from pbmdem.frequency import upper_pairs
 from pbmdem.impact import EncounterRates
+from pbmdem.pbm.kernels import TableFrequency
 
 
 def class_table(diameters, matrix) -> pd.DataFrame:
@@ -30,7 +31,6 @@ class ClassFrequencySource:
     fractions then make the source velocity-resolved (:meth:`encounters`)."""
 
     def __init__(self, diameters, rates, label: str):
-        from pbmdem.pbm.kernels import TableFrequency
 
         self.diameters = list(map(float, diameters))
         self.fractions = None

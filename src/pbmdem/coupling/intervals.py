@@ -19,6 +19,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from pbmdem.atomic import atomic_path, write_json
+from pbmdem.pbm.results import Result
+from pbmdem.pbm.state import FeedGranules, State
 from pbmdem.readers import read_json
 
 from .sample import DemSample
@@ -88,9 +90,6 @@ def save(folder: Path, result, sample: DemSample, matrix: np.ndarray, info: dict
 
 def load(folder: Path, grid):
     """(Result, interval info, class matrix) of a finished interval."""
-    from pbmdem.pbm.results import Result
-    from pbmdem.pbm.state import FeedGranules, State
-
     data = np.load(folder / "records.npz")
     records = SimpleNamespace(**{name: data[name] for name in RECORD_NAMES})
     feed = None

@@ -23,6 +23,9 @@ from pbmdem.atomic import write_csv, write_json
 from pbmdem.config import CoupledLoop
 from pbmdem.frequency import pair_weighted_mean, pairs_of
 from pbmdem.impact import EncounterRates
+from pbmdem.pbm.kernels import ConstantFrequency
+from pbmdem.pbm.results import Result
+from pbmdem.pbm.setup import build_model, initial_state, output_times
 
 from . import intervals
 from .class_source import ClassFrequencySource
@@ -82,10 +85,6 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
     PBM-ANN batches of the design space and the calibration, whose time would otherwise go to
     writing files (`interval_dir` is then None; only the surrogate provider accepts that).
     """
-    from pbmdem.pbm.kernels import ConstantFrequency
-    from pbmdem.pbm.results import Result
-    from pbmdem.pbm.setup import build_model, initial_state, output_times
-
     n_intervals = loop.coupling_intervals
     outdir = _prepared(outdir, loop, rpm, provider)
     pbm = loop.batch.pbm

@@ -1,5 +1,7 @@
 """The three models of the validation study, one function each (docs/validation.md).
 
+The surrogate is imported where it is loaded: a PBM-DEM job does not load scikit-learn.
+
 * `pbm_dem`: the fully coupled PBM-DEM loop (LIGGGHTS at every coupling interval);
 * `pbm_ann`: the same loop with the surrogate instead of LIGGGHTS. This is the one definition of
   PBM-ANN: the validation rules and `pbmdem pbm --kernel ann` both run it, with the frequencies
@@ -10,10 +12,19 @@
 
 from __future__ import annotations
 
+import logging
+import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
+
 from pbmdem.config import CoupledLoop, DemExecution
+from pbmdem.frequency import pair_weighted_mean
+from pbmdem.pbm.errors import PBMError
+from pbmdem.pbm.kernels import ConstantFrequency
+from pbmdem.pbm.setup import build_model, initial_state, run_batch
 
 from .loop import CouplingError, LoopOutcome, interval_bounds, run_loop, write_outputs
 from .providers import DemProvider, SurrogateProvider
@@ -47,13 +58,6 @@ def pbm_ann_members(loop: CoupledLoop, model_path: str | Path, rpm: float):
     The members' spread is PBM-ANN's uncertainty band (docs/validation.md). A member whose PBM
     fails (e.g. its extrapolated frequencies grow granules beyond the grid) is kept as one row
     with its error in `failed` and no sizes, and logged: it is reported, not dropped."""
-    import logging
-    import tempfile
-
-    import numpy as np
-    import pandas as pd
-
-    from pbmdem.pbm.errors import PBMError
     from pbmdem.surrogate import load_surrogate
 
     n = load_surrogate(model_path).n_members
@@ -99,11 +103,6 @@ def pbm_ann_members(loop: CoupledLoop, model_path: str | Path, rpm: float):
 def calibrated_frequency(loop: CoupledLoop, model_path: str | Path, rpm: float) -> tuple[float, list[str]]:
     """The surrogate's pair-weighted mean per-pair frequency of the initial sample (1/s), and its
     out-of-domain warnings (logged)."""
-    import numpy as np
-
-    from pbmdem.frequency import pair_weighted_mean
-    from pbmdem.pbm.kernels import ConstantFrequency
-    from pbmdem.pbm.setup import build_model, initial_state
     from pbmdem.surrogate import load_surrogate
     from pbmdem.surrogate.domain import out_of_domain_recorded
 
@@ -118,9 +117,6 @@ def calibrated_frequency(loop: CoupledLoop, model_path: str | Path, rpm: float) 
 
 def pbm_constant(loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: str | Path) -> LoopOutcome:
     """PBM-constant at `rpm`: c for every pair = the calibrated frequency, for the whole batch."""
-    from pbmdem.pbm.kernels import ConstantFrequency
-    from pbmdem.pbm.setup import run_batch
-
     frequency, found = calibrated_frequency(loop, model_path, rpm)
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)

@@ -6,6 +6,9 @@ A provider is called as `provider(sample, interval_dir, index) -> (rates, info)`
 `info` the figures recorded for the interval (wall times, DEM particle and encounter counts,
 out-of-domain warnings). `fingerprint()` names what its rates depend on, so that finished
 intervals of a changed provider are not reused.
+
+The DEM stage and the surrogate are imported where a provider uses them: a PBM-ANN job does not
+load the DEM stage, a PBM-DEM job not scikit-learn.
 """
 
 from __future__ import annotations

@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.config import CoupledLoop, SizeDistribution
+from pbmdem.pbm.errors import PBMError
 
 from .loop import CouplingError
 from .methods import pbm_ann
@@ -81,7 +82,6 @@ def run_case(loop: CoupledLoop, model_path: str | Path, rpm: float, feed: str, s
     """PBM-ANN for one (speed, feed): final d10/d50/d90 (m) of the ensemble mean, the members'
     min and max of each, the members that failed, the intervals outside the training domain and
     the wall time."""
-    from pbmdem.pbm.errors import PBMError
     from pbmdem.surrogate import load_surrogate
 
     case = loop.replace(batch=loop.batch.replace(distribution=feed, sizes=sizes))

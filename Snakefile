@@ -63,6 +63,7 @@ include: "rules/dem.smk"
 include: "rules/surrogate.smk"
 include: "rules/pbm.smk"
 include: "rules/validation.smk"
+include: "rules/design.smk"
 include: "rules/report.smk"
 
 

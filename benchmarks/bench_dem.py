@@ -320,7 +320,8 @@ def bench_cost(args) -> None:
     with_parse = (old.cpu_with_bed_s + old.parse_s, new.cpu_with_bed_s + new.parse_s)
     print(
         f"speed-up per point: LIGGGHTS CPU {old.cpu_with_bed_s:.1f} s -> {new.cpu_with_bed_s:.1f} s = "
-        f"{old.cpu_with_bed_s / new.cpu_with_bed_s:.2f}x; with parsing {with_parse[0]:.1f} s -> {with_parse[1]:.1f} s = "
+        f"{old.cpu_with_bed_s / new.cpu_with_bed_s:.2f}x; "
+        f"with parsing {with_parse[0]:.1f} s -> {with_parse[1]:.1f} s = "
         f"{with_parse[0] / with_parse[1]:.2f}x"
     )
 
@@ -345,7 +346,8 @@ def main() -> None:
     cost.add_argument("--out", default="results/bench_dem_cost")
     cost.add_argument(
         "--baseline",
-        help="config of the old side (run like the new side, from its own settled bed); default: the settings before issue 20",
+        help="config of the old side (run like the new side, from its own settled bed); "
+        "default: the settings before issue 20",
     )
     args = parser.parse_args()
     commands = {"point": bench_point, "profile": bench_profile, "acceptance": bench_acceptance, "cost": bench_cost}

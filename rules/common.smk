@@ -229,4 +229,6 @@ REPORT_TABLES = (
     "comparison_accuracy",
     "comparison_cost",
     "comparison_domain",
+    "design_space_table",
+    "calibration_check",
 )

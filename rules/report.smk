@@ -117,6 +117,26 @@ rule report_tables:
         "../workflow/scripts/report_tables.py"
 
 
+# The design space and the calibration check in display form (sizes in mm, the recovery table with
+# its intervals), next to their figures in "1. Findings".
+rule report_design:
+    input:
+        design=layout.design("design_space.csv"),
+        check=layout.design("calibration_check.csv"),
+    output:
+        **registered_tables(("design_space_table",), CATEGORIES["findings"], "design space"),
+        **registered_tables(("calibration_check",), CATEGORIES["findings"], "parameter estimation"),
+    log:
+        layout.log("report/design.log"),
+    conda:
+        "../envs/validation.yaml"
+    params:
+        third_key=CFG.design_space.third_factor.key,
+        confidence=CFG.calibration.confidence,
+    script:
+        "../workflow/scripts/report_design.py"
+
+
 # The configuration hash is read from the job's completed config (like the execution settings of a
 # DEM job); the params are the settings without the execution settings, which rerun nothing. The
 # results are inputs, so that the table (git commit, versions) is rewritten whenever they are. Where

@@ -6,8 +6,9 @@ the results layout, job logs), the figures' helpers (written through the atomic 
 contracts (`pbmdem.tables`, read through the readers), the settings layer (`pbmdem.config`), the
 contracts (`pbmdem.impact`, then `pbmdem.frequency`), the stages
 (`pbmdem.dem`, `pbmdem.pbm`, `pbmdem.surrogate`, independent of each other), the coupling of the
-stages (`pbmdem.coupling`), the validation study (`pbmdem.validation`), the report, the command
-line. A module imports only from its own unit or from lower layers.
+stages (`pbmdem.coupling`), the validation study (`pbmdem.validation`), what the fast model is for
+(`pbmdem.design`: design space, calibration), the report, the command line. A module imports
+only from its own unit or from lower layers.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ LAYERS = [
     {"dem", "pbm", "surrogate"},
     {"coupling"},
     {"validation"},
+    {"design"},
     {"report"},
     {"cli"},
 ]

@@ -363,6 +363,8 @@ REPORT_TABLES = (
     "comparison_accuracy",
     "comparison_cost",
     "comparison_domain",
+    "design_space_table",
+    "calibration_check",
 )
 
 
@@ -399,6 +401,8 @@ def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
         "parity.png",
         "metrics.csv",
         "runs.csv",
+        "design_space.png",
+        "calibration_check.png",
     ):
         assert files[name] == 1, (name, files)
     assert "surrogate kernel source" in provenance and "Kernel source: " in provenance
@@ -420,6 +424,8 @@ def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
         "Granule size against impeller speed.",
         "Granule size against the feed size distribution.",
         "The surrogate on DEM runs it never saw",
+        "PBM-ANN design space",
+        "Parameter estimation on data of known parameters",
     ):
         assert phrase in flat, phrase
 
@@ -476,8 +482,9 @@ def test_report_in_a_browser_opens_with_the_findings_and_shows_everything(tiny_w
     assert len(findings) == 2, found["landing_alts"]
     speeds = len(yaml.safe_load(configfile.read_text())["validation"]["rpm"])
     # per speed 4; the sweep, parity, speed response, impact velocities; the three findings figures
-    # (speed, feed, and with pbm.breakage on the breakage study)
-    assert found["images"] == 4 * speeds + 7 and found["broken"] == [], found
+    # (speed, feed, and with pbm.breakage on the breakage study); the design-space maps and the
+    # calibration check's fits
+    assert found["images"] == 4 * speeds + 9 and found["broken"] == [], found
     # the display tables and each speed's out-of-domain table
     assert found["pages"] == len(REPORT_TABLES) + speeds and found["page_broken"] == [] and found["overflow"] == [], (
         found
@@ -699,3 +706,26 @@ def test_adding_the_proposed_points_removes_the_out_of_domain_intervals(tiny_wor
         f"out-of-domain intervals {int((before.out_of_domain_count > 0).sum())} -> "
         f"{int((after.out_of_domain_count > 0).sum())}"
     )
+
+
+def test_design_space_and_calibration_check_of_the_tiny_workflow(tiny_workflow):
+    """The default targets hold the design space (every grid point judged or marked) and the
+    calibration check (both cases, every parameter, true against estimated with an interval)."""
+    from pbmdem.config import load_config
+    from pbmdem.design.space import STATUSES
+    from pbmdem.tables import MEASURED
+
+    workdir, configfile = tiny_workflow
+    cfg = load_config(configfile)
+    design = pd.read_csv(workdir / "results/design/design_space.csv")
+    ds = cfg.design_space
+    assert len(design) == ds.impeller_rpm.num * ds.liquid_rate.num * len(ds.third_factor.values)
+    assert set(design.spec_status) <= set(STATUSES)
+    assert (design.spec_status[design.out_of_domain_intervals > 0] == "out_of_domain").all()
+    check = pd.read_csv(workdir / "results/design/calibration_check.csv")
+    assert set(check.case) == {"pbm_dem", "pbm_constant_noise"}
+    assert set(check.parameter) == set(cfg.calibration.parameters)
+    assert (check.ci_low <= check.estimate).all() and (check.estimate <= check.ci_high).all()
+    assert (check.recovered == ((check.ci_low <= check.true) & (check.true <= check.ci_high))).all()
+    measured = MEASURED.read(workdir / "results/design/measured_pbm_dem.csv")
+    assert set(measured.rpm) == {float(r) for r in cfg.validation.rpm}

@@ -4,6 +4,8 @@
     pbmdem view --rpm 600 --distribution fine [--time 0.5] [--screenshot out.png]
     pbmdem pbm --config ... --kernel constant|table|ann --rpm 600 [--distribution fine] --out DIR
     pbmdem surrogate train|predict ...
+    pbmdem design-space --config ... --model MODEL --out DIR
+    pbmdem calibrate --config ... --model MODEL --data measured.csv --out DIR
 
 Every subcommand reads its configuration through `pbmdem.config.load_config` (validated once,
 defaults filled in), the same path the workflow takes. Bad input gets one line naming the file,
@@ -168,6 +170,9 @@ EXAMPLES = """examples:
   pbmdem view --rpm 600 --distribution fine --time 0.5 --screenshot shot.png
   pbmdem pbm --config config/config.yaml --kernel ann --model results/surrogate/model.skops --rpm 900 --out out/
   pbmdem surrogate predict --model results/surrogate/model.skops --table results/dem/collisions.csv
+  pbmdem design-space --config config/config.yaml --model results/surrogate/model.skops --out out/design
+  pbmdem calibrate --config config/config.yaml --model results/surrogate/model.skops \
+      --data results/design/measured_pbm_dem.csv --out out/calibration
 
 Run `pbmdem COMMAND --help` for the options and examples of each command."""
 
@@ -285,9 +290,11 @@ def build_parser() -> argparse.ArgumentParser:
     pbm.set_defaults(func=_pbm)
 
     from pbmdem.dem import viewer
+    from pbmdem.design import cli as design_cli
     from pbmdem.surrogate import cli as surrogate_cli
 
     viewer.add_cli(sub)
+    design_cli.add_cli(sub)
     surrogate = surrogate_cli.add_cli(sub)
     _with_examples(surrogate, SURROGATE_EXAMPLES[None])
     for action in surrogate._subparsers._group_actions:

@@ -12,6 +12,7 @@ text (Snakemake wants paths relative to its working directory) under `root` (def
     <root>/pbm/<kernel>/rpm<rpm>_<dist>/    one PBM batch (pbm_run)
     <root>/validation/rpm<rpm>/             one validation speed: pbm_dem/rep<k>/, pbm_ann/,
                                             pbm_constant/, bands.csv (validation_run)
+    <root>/design/                          the design space and the calibration check (design)
     <root>/report/                          the report's figures and tables
     <root>/logs/                            one log per job
 """
@@ -85,6 +86,11 @@ def validation_dir_of(path) -> str:
     if not at:
         raise ValueError(f"{path} is not below a validation speed's folder (rpm<rpm>/)")
     return str(PurePosixPath(*parts[: at[-1]]))
+
+
+def design(name: str = "", root: str = RESULTS) -> str:
+    """<root>/design/<name>: the design space and the check of the calibration (docs/design.md)."""
+    return f"{root}/design/{name}".rstrip("/")
 
 
 def report(name: str = "", root: str = RESULTS) -> str:

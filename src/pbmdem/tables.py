@@ -11,6 +11,7 @@ allowed) and `read(path)` checks a file against it; every stage reads these tabl
   impact_velocity.csv, wall_impact_velocity.csv).
 * `RUNS`: results/dem/runs.csv, one row per DEM run.
 * `INTERVALS`: a coupled loop's intervals.csv; `COMPARISON`: results/report/comparison.csv.
+* `MEASURED`: measured d10/d50/d90 over a batch at one or more speeds (`pbmdem calibrate --data`).
 
 A violation is an `InputFileError` naming the file, the 1-based data row, the column, the value
 and what is allowed: a missing column, a cell that is not of the column's type, a non-finite
@@ -339,3 +340,15 @@ COMPARISON = Table(
 )
 #: the comparison columns in their order (the report shows them)
 COMPARISON_COLUMNS = tuple(c.name for c in COMPARISON.columns)
+
+#: measured granule sizes over a batch (docs/calibration.md): one row per (impeller speed, time)
+#: with d10/d50/d90 and their measurement sd (m); what a calibration fits
+MEASURED = Table(
+    "measured size table",
+    (
+        Column("rpm", sign="positive"),
+        Column("time"),
+        *(Column(s, sign="positive") for s in ("d10", "d50", "d90")),
+        *(Column(f"{s}_sd") for s in ("d10", "d50", "d90")),
+    ),
+)

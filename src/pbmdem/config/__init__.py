@@ -10,6 +10,7 @@ defaults live; `Config.from_mapping` validates once, fills them in, and builds t
 """
 
 from .dem import Dem, DemExecution
+from .design import Calibration, DesignSpace, Factor, Specification
 from .errors import RPM_MAX, ConfigError, check_rpm
 from .granulator import Bed, Bowl, Granulator, Impeller, Material
 from .pbm import Pbm, Solver
@@ -62,4 +63,8 @@ __all__ = [
     "PbmBatch",
     "SurrogateTraining",
     "CoupledLoop",
+    "DesignSpace",
+    "Calibration",
+    "Factor",
+    "Specification",
 ]

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+from .design import problems as design_problems
 from .errors import ConfigError
 
 FRACTION_TOLERANCE = 1e-6
@@ -90,5 +91,6 @@ def check(cfg) -> None:
     if not sweep.stop > sweep.start:
         problems.append(f"validation.sweep: stop = {sweep.stop:g} must be greater than start = {sweep.start:g}")
     problems += cfg.surrogate.problems()
+    problems += design_problems(cfg)
     if problems:
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))

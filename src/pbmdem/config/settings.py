@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .dem import BED_KEYS, EXECUTION_KEYS, REPLICATES_KEY, Dem, DemExecution
+from .design import Calibration, DesignSpace
 from .errors import ConfigError
 from .granulator import Bed, Bowl, Granulator, Impeller, Material
 from .pbm import Pbm
@@ -93,6 +94,8 @@ class Config:
     pbm: Pbm
     surrogate: Surrogate
     validation: Validation
+    design_space: DesignSpace
+    calibration: Calibration
     mapping: dict  # the completed configuration mapping (defaults filled in), for provenance
 
     # ------------------------------------------------------------------ construction
@@ -132,11 +135,13 @@ class Config:
         if pbm_section["grid"]["min_diameter"] is None:
             pbm_section["grid"]["min_diameter"] = min(min(d.diameters) for d in dists.values())
         val_section = json.loads(json.dumps(full["validation"]))
-        sweep = val_section["sweep"]
-        if sweep["start"] is None:
-            sweep["start"] = min(grid.impeller_rpm)
-        if sweep["stop"] is None:
-            sweep["stop"] = max(grid.impeller_rpm)
+        design = json.loads(json.dumps(full["design_space"]))
+        # the speed ranges of the PBM-ANN sweep and of the design space: null ends are the grid's
+        for span in (val_section["sweep"], design["impeller_rpm"]):
+            if span["start"] is None:
+                span["start"] = min(grid.impeller_rpm)
+            if span["stop"] is None:
+                span["stop"] = max(grid.impeller_rpm)
         return cls(
             granulator=granulator,
             material=Material.from_dict(full["material"], "material"),
@@ -148,6 +153,8 @@ class Config:
             pbm=Pbm.from_dict(pbm_section, "pbm"),
             surrogate=Surrogate.from_dict(full["surrogate"], "surrogate"),
             validation=Validation.from_dict(val_section, "validation"),
+            design_space=DesignSpace.from_dict(design, "design_space"),
+            calibration=Calibration.from_dict(full["calibration"], "calibration"),
             mapping=full,
         )
 

@@ -66,17 +66,28 @@ def write_outputs(outdir: Path, result, rows: list[dict], totals: dict) -> None:
     write_json(outdir / "timing.json", totals)
 
 
-def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> LoopOutcome:
+def _prepared(outdir, loop: CoupledLoop, rpm: float, provider) -> Path | None:
+    """The loop's folder, made, with the finished intervals of other inputs discarded (None: in memory)."""
+    if outdir is None:
+        return None
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    intervals.discard_stale(outdir, {"loop": loop.to_dict(), "rpm": float(rpm), "provider": provider.fingerprint()})
+    return outdir
+
+
+def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None) -> LoopOutcome:
     """Run the PBM of `loop` at `rpm` over its coupling intervals, asking
     `provider(sample, interval_dir, index) -> (rates, info)` for the frequencies of each.
 
     Writes `outdir/interval_NN/` per interval, then `summary.csv`, `intervals.csv` (per interval:
     classes, frequencies, wall times, out-of-domain warnings), `final_bins.csv` and `timing.json`.
+    With `outdir=None` the loop runs in memory (nothing written, nothing resumed): the many short
+    PBM-ANN batches of the design space and the calibration, whose time would otherwise go to
+    writing files (`interval_dir` is then None; only the surrogate provider accepts that).
     """
-    outdir = Path(outdir)
-    outdir.mkdir(parents=True, exist_ok=True)
     n_intervals = loop.coupling_intervals
-    intervals.discard_stale(outdir, {"loop": loop.to_dict(), "rpm": float(rpm), "provider": provider.fingerprint()})
+    outdir = _prepared(outdir, loop, rpm, provider)
     pbm = loop.batch.pbm
     selection = impact_selection(pbm)  # breakage from each interval's impacts (None: aggregation only)
     model = build_model(pbm, ConstantFrequency(1.0), rpm=rpm, selection=selection)  # sources set per interval
@@ -84,8 +95,8 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
     bounds = interval_bounds(loop)
     results, rows = [], []
     for k in range(n_intervals):
-        folder = outdir / f"interval_{k:02d}"
-        if intervals.is_finished(folder):
+        folder = None if outdir is None else outdir / f"interval_{k:02d}"
+        if folder is not None and intervals.is_finished(folder):
             result, info, _ = intervals.load(folder, model.grid)
             log.info("interval %d of %s: resumed from %s", k, provider.name, folder)
             results.append(result)
@@ -128,9 +139,11 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
             "pbm_wall_time_s": pbm_wall,
             **extra,
         }
-        intervals.save(folder, result, sample, matrix, info)
+        if folder is not None:
+            intervals.save(folder, result, sample, matrix, info)
         what, warned = "DEM" if provider.name == "pbm_dem" else "provider", int(extra.get("out_of_domain_count", 0))
-        log.info(
+        log.log(
+            logging.INFO if folder is not None else logging.DEBUG,
             "%s at rpm %g: interval %d of %d (%.4g-%.4g s) done: %s wall time %.2f s, PBM wall time %.3f s, "
             "%d surrogate out-of-domain warning(s)",
             *(provider.name, rpm, k + 1, n_intervals, t0, t1, what, provider_wall, pbm_wall, warned),
@@ -138,15 +151,17 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path) -> Loo
         results.append(result)
         rows.append(info)
         state = result.state
-    totals = _totals(provider.name, rpm, loop, rows)
+    totals = _totals(provider.name, rpm, loop, rows, in_memory=outdir is None)
     full = Result.concat(results)
-    write_outputs(outdir, full, rows, totals)
+    if outdir is not None:
+        write_outputs(outdir, full, rows, totals)
     return LoopOutcome(full, rows, totals)
 
 
-def _totals(method: str, rpm: float, loop: CoupledLoop, rows: list[dict]) -> dict:
+def _totals(method: str, rpm: float, loop: CoupledLoop, rows: list[dict], in_memory: bool = False) -> dict:
     """The loop's totals (timing.json): wall times, and the out-of-domain warnings over its
-    intervals (logged as a warning when there were any)."""
+    intervals (logged as a warning when there were any; for a loop in memory, `in_memory`, the
+    caller reports them)."""
     totals = {
         "method": method,
         "rpm": rpm,
@@ -160,7 +175,10 @@ def _totals(method: str, rpm: float, loop: CoupledLoop, rows: list[dict]) -> dic
         totals["out_of_domain_count"] = int(sum(per_interval))
         totals["out_of_domain_intervals"] = int(sum(c > 0 for c in per_interval))
         if totals["out_of_domain_count"]:
-            log.warning(
+            # a loop in memory hands its counts to the caller, which reports them (the design
+            # space marks each point and warns with the number of such points)
+            log.log(
+                logging.DEBUG if in_memory else logging.WARNING,
                 "%s at rpm %g: the surrogate was outside its training domain in %d of %d intervals "
                 "(%d warnings; see intervals.csv)",
                 method,

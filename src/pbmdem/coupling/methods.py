@@ -39,11 +39,18 @@ def pbm_dem(loop: CoupledLoop, rpm: float, outdir: str | Path, execution: DemExe
 
 
 def pbm_ann(
-    loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: str | Path, member: int | None = None
+    loop: CoupledLoop,
+    model_path,
+    rpm: float,
+    outdir: str | Path | None,
+    member: int | None = None,
+    log_each: bool = True,
 ) -> LoopOutcome:
     """PBM-ANN at `rpm`: the surrogate in `model_path` (its ensemble mean, or member `member`
-    alone) gives the frequencies of every interval."""
-    return run_loop(loop, SurrogateProvider(model_path, rpm, member), rpm, outdir)
+    alone) gives the frequencies of every interval. `model_path` may be a loaded surrogate and
+    `outdir` None for a batch run in memory (nothing written); `log_each=False`: the caller logs
+    the out-of-domain warnings (their count is in the outcome's totals either way)."""
+    return run_loop(loop, SurrogateProvider(model_path, rpm, member, log_each), rpm, outdir)
 
 
 def pbm_ann_members(loop: CoupledLoop, model_path: str | Path, rpm: float):

@@ -108,24 +108,35 @@ class DemProvider:
 
 class SurrogateProvider:
     """Class encounter frequencies from the trained surrogate (one vectorised call per interval):
-    its ensemble mean, or ensemble member `member` alone."""
+    its ensemble mean, or ensemble member `member` alone.
+
+    `model` is the path of a saved surrogate or a loaded one (the many in-memory batches of the
+    design space and the calibration load it once). `log_each=False` leaves the logging of each
+    out-of-domain warning to the caller, which records and reports their count (never drops it).
+    """
 
     name = "pbm_ann"
 
-    def __init__(self, model_path: str | Path, rpm: float, member: int | None = None):
+    def __init__(self, model, rpm: float, member: int | None = None, log_each: bool = True):
         from pbmdem.surrogate import load_surrogate
 
-        model = load_surrogate(model_path)
+        if isinstance(model, (str, Path)):
+            self.model_path = Path(model)
+            model = load_surrogate(model)
+        else:
+            self.model_path = None
         self.model = model if member is None else model.member(member)
         self.member = member
-        self.model_path = Path(model_path)
         self.rpm = float(rpm)
+        self.log_each = log_each
         # with a velocity model the provider also hands over impact-velocity fractions (one call),
         # with wall models also the wall impacts (breakage)
         self.velocity_resolved = bool(self.model.has_velocity_model())
         self.walls = self.velocity_resolved and bool(getattr(self.model, "wall_models_", None))
 
     def fingerprint(self) -> dict:
+        if self.model_path is None:
+            raise ValueError("a surrogate provider of a loaded model has no fingerprint: give the model's path")
         return {
             "name": self.name,
             "rpm": self.rpm,
@@ -133,12 +144,13 @@ class SurrogateProvider:
             "model_sha256": hashlib.sha256(self.model_path.read_bytes()).hexdigest(),
         }
 
-    def __call__(self, sample: DemSample, interval_dir: Path, index: int):
+    def __call__(self, sample: DemSample, interval_dir: Path | None, index: int):
         from pbmdem.surrogate.domain import out_of_domain_recorded
 
         t0 = time.perf_counter()
         d, n = np.asarray(sample.diameters), np.asarray(sample.counts, float)
-        with out_of_domain_recorded(f"{self.name} at rpm {self.rpm:g}, interval {index}") as found:
+        where = f"{self.name} at rpm {self.rpm:g}, interval {index}"
+        with out_of_domain_recorded(where, log_each=self.log_each) as found:
             if self.walls:
                 rates = self.model.impacts(d, n, self.rpm)
             elif self.velocity_resolved:

@@ -143,6 +143,35 @@ def write_comparison(*, comparison, out: dict) -> None:
     )
 
 
+def write_design_tables(*, design, check, third_key: str, confidence: float, out: dict) -> None:
+    """The design space and the calibration check in display form. `out`: design_space_table_csv,
+    design_space_table_html, calibration_check_csv, calibration_check_html."""
+    from pbmdem.readers import read_table
+
+    from .tables import calibration_check_table, design_space_table
+
+    table = read_table(design, "design-space table", columns=("rpm", "liquid_rate", third_key, "spec_status"))
+    counts = ", ".join(f"{n} {s.replace('_', ' ')}" for s, n in table.spec_status.value_counts().items())
+    write_table(
+        out["design_space_table_csv"],
+        out["design_space_table_html"],
+        design_space_table(table, third_key),
+        "Design space",
+        f"{len(table)} grid points: {counts}. A point meets the specification only if every ensemble member does.",
+        keys=3,
+    )
+    recovery = read_table(check, "calibration check", columns=("case", "parameter", "true", "estimate", "recovered"))
+    recovered = int(recovery.recovered.astype(str).str.lower().eq("true").sum())
+    write_table(
+        out["calibration_check_csv"],
+        out["calibration_check_html"],
+        calibration_check_table(recovery, confidence),
+        "Parameter estimation on data of known parameters",
+        f"{recovered} of {len(recovery)} true values inside their interval.",
+        keys=2,
+    )
+
+
 def write_provenance(*, config: dict, settings: dict, basedir, runs, metadata, out: dict, workdir=None) -> None:
     """The provenance table. `config`: the completed configuration of the job (for its
     `Config.sha256()`); `settings`: the same without the execution settings; `basedir`: the

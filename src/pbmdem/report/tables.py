@@ -7,7 +7,9 @@ fractions in %), each narrow enough for a page.
 * `speeds`: impeller speed, tip speed and Froude number of every speed of the DEM training grid
   and of the validation;
 * `comparison_tables`: the comparison table (`results/report/comparison.csv`) as four tables:
-  d50, accuracy, computing time and the surrogate's domain.
+  d50, accuracy, computing time and the surrogate's domain;
+* `design_space_table`, `calibration_check_table`: the design space and the recovery of known
+  parameters (docs/design.md, docs/calibration.md).
 """
 
 from __future__ import annotations
@@ -240,3 +242,48 @@ def comparison_tables(table: pd.DataFrame) -> dict[str, pd.DataFrame]:
             }
         )
     return {name: pd.DataFrame(rows) for name, rows in out.items()}
+
+
+def design_space_table(table: pd.DataFrame, third_key: str) -> pd.DataFrame:
+    """The design-space table (`results/design/design_space.csv`) in display form: per grid point
+    the operating parameters, d50 and d90 of the ensemble mean with the members' range (mm), the
+    domain and the status against the specification."""
+    third = third_key.split(".")[-1].replace("_", " ")
+    return pd.DataFrame(
+        {
+            "rpm": [f"{r:g}" for r in table.rpm],
+            "binder (mL/min)": [f"{ML * 60 * q:.2f}" for q in table.liquid_rate],
+            third: [f"{v:g}" for v in table[third_key]],
+            "d50 (mm)": [f"{MM * v:.2f}" if v == v else "n/a" for v in table.d50],
+            "d50 members (mm)": [
+                value_range(MM * lo, MM * hi, 2) for lo, hi in zip(table.d50_member_min, table.d50_member_max)
+            ],
+            "d90 (mm)": [f"{MM * v:.2f}" if v == v else "n/a" for v in table.d90],
+            "d90 members (mm)": [
+                value_range(MM * lo, MM * hi, 2) for lo, hi in zip(table.d90_member_min, table.d90_member_max)
+            ],
+            "status": [s.replace("_", " ") for s in table.spec_status],
+        }
+    )
+
+
+def calibration_check_table(check: pd.DataFrame, confidence: float) -> pd.DataFrame:
+    """The recovery table of the calibration check (`results/design/calibration_check.csv`) in
+    display form: per case and parameter the true value, the estimate, its interval and whether
+    the truth lies inside it, the two parts of the interval and the reduced chi-square."""
+    return pd.DataFrame(
+        {
+            "case": check.case,
+            "parameter": check.parameter,
+            "true": [number(v) for v in check["true"]],
+            "estimate": [number(v) for v in check.estimate],
+            f"{PERCENT * confidence:g} % interval": [
+                f"{number(lo)} - {number(hi)}" for lo, hi in zip(check.ci_low, check.ci_high)
+            ],
+            "recovered": [yes_no(v) for v in check.recovered],
+            "sd ln (measurement / surrogate)": [
+                f"{a:.3f} / {b:.3f}" for a, b in zip(check.sd_ln_measurement, check.sd_ln_surrogate)
+            ],
+            "chi2 / dof": [number(v, ".3g") for v in check.chi2_reduced],
+        }
+    )

@@ -1,0 +1,172 @@
+"""Many short PBM batches at once: the engine of the design space and of the calibration.
+
+A `Case` is one batch: impeller speed, the pbm settings it changes (config key -> value), and
+its collision-frequency source: the surrogate's ensemble mean or one member (PBM-ANN, the one
+definition in `pbmdem.coupling.methods.pbm_ann`, run in memory), or the constant kernel of
+`pbm.aggregation` (PBM-constant). `run_cases` runs a list of cases, in order, over `n_jobs`
+processes forked from the caller (which has loaded the surrogate once) that run their share of
+the cases one after the other. A case's result does not depend on the process that ran it or on `n_jobs` (every batch is
+deterministic), so the same cases give the same table on any machine.
+
+Where the time goes (benchmarks/bench_design_space.py): a PBM-ANN batch of the default
+configuration (four coupling intervals) spends about half its time integrating the PBM and half
+in the surrogate's four calls; loading the surrogate (~0.1 s) and writing the loop's files
+(~0.05 s) took longer than both, so the cases run in memory with the surrogate loaded once per
+process.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pbmdem.config import CoupledLoop
+from pbmdem.config.design import with_pbm_values
+
+#: the size statistics a case reports (m)
+STATISTICS = ("d10", "d50", "d90")
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Case:
+    """One batch: `rpm`, the pbm settings it changes, and its source: `kernel` "ann" (the
+    surrogate; `member` None: the ensemble mean, k: member k alone) or "constant"."""
+
+    rpm: float
+    values: tuple[tuple[str, float], ...] = ()
+    member: int | None = None
+    kernel: str = "ann"
+
+    def loop(self, loop: CoupledLoop) -> CoupledLoop:
+        """`loop` with this case's pbm settings."""
+        if not self.values:
+            return loop
+        pbm = with_pbm_values(loop.batch.pbm, dict(self.values))
+        return loop.replace(batch=loop.batch.replace(pbm=pbm))
+
+
+@dataclass
+class Outcome:
+    """A finished (or failed) case: d10/d50/d90 (m) at the recorded times, the coupling intervals
+    in which the surrogate was evaluated outside its training domain, and the error of a failed
+    batch (e.g. granules that outgrew the PBM grid)."""
+
+    case: Case
+    times: np.ndarray = field(default_factory=lambda: np.empty(0))
+    sizes: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))  # (T, 3): d10, d50, d90
+    out_of_domain_intervals: int = 0
+    out_of_domain_count: int = 0
+    failed: str = ""
+
+    def final(self) -> dict:
+        """The final d10/d50/d90 (NaN for a failed case)."""
+        if self.failed or not len(self.times):
+            return dict.fromkeys(STATISTICS, float("nan"))
+        return dict(zip(STATISTICS, (float(v) for v in self.sizes[-1]), strict=True))
+
+    def at(self, times) -> np.ndarray:
+        """(len(times), 3) d10/d50/d90 at `times` (s), linear between the recorded times."""
+        times = np.asarray(times, float)
+        if self.failed:
+            return np.full((times.size, 3), np.nan)
+        return np.column_stack([np.interp(times, self.times, self.sizes[:, k]) for k in range(3)])
+
+
+@functools.lru_cache(maxsize=2)
+def _surrogate(path: str, mtime: float):
+    """The surrogate at `path` with its members, loaded once per process (and per file version)."""
+    from pbmdem.surrogate import load_surrogate
+
+    model = load_surrogate(path)
+    return model, [model.member(k) for k in range(model.n_members)]
+
+
+def run_case(loop: CoupledLoop, model_path: str | Path | None, case: Case) -> Outcome:
+    """Run one case in memory. Out-of-domain warnings are counted in the outcome (the caller
+    reports them); a batch the PBM or the loop refuses is a failed outcome with the error."""
+    from pbmdem.coupling import pbm_ann
+    from pbmdem.coupling.loop import CouplingError
+    from pbmdem.pbm.errors import PBMError
+    from pbmdem.pbm.setup import run_batch
+
+    case_loop = case.loop(loop)  # a bad config key raises here, not as a failed case
+    try:
+        if case.kernel == "constant":
+            result = run_batch(case_loop.batch, None, case.rpm)
+            totals: dict = {}
+        elif case.kernel == "ann":
+            if model_path is None:
+                raise ValueError("a PBM-ANN case needs the surrogate's path")
+            mean, members = _surrogate(str(model_path), Path(model_path).stat().st_mtime)
+            model = mean if case.member is None else members[case.member]
+            outcome = pbm_ann(case_loop, model, case.rpm, None, log_each=False)
+            result, totals = outcome.result, outcome.totals
+        else:
+            raise ValueError(f"case kernel {case.kernel!r}: allowed 'ann', 'constant'")
+    except (PBMError, CouplingError, ValueError) as exc:
+        # ValueError: a bed the granules outgrew so far that no representative DEM sample is left
+        # (pbmdem.coupling.sample); the settings were checked before (case.loop)
+        return Outcome(case, failed=str(exc))
+    summary = result.summary()
+    return Outcome(
+        case,
+        summary.time.to_numpy(float),
+        summary[list(STATISTICS)].to_numpy(float),
+        int(totals.get("out_of_domain_intervals", 0)),
+        int(totals.get("out_of_domain_count", 0)),
+    )
+
+
+def _run_chunk(loop: CoupledLoop, model_path, cases: list[Case]) -> list[Outcome]:
+    from pbmdem.surrogate._threads import single_threaded
+
+    with single_threaded():
+        return [run_case(loop, model_path, case) for case in cases]
+
+
+def run_cases(loop: CoupledLoop, model_path, cases: list[Case], n_jobs: int = 1) -> list[Outcome]:
+    """The outcomes of `cases` (in their order), over `n_jobs` processes.
+
+    The processes are forked from this one after it has loaded the surrogate (and compiled the
+    PBM), so that they start in milliseconds with both, and they end with the call: nothing is
+    left running."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    cases = list(cases)
+    if n_jobs <= 1 or len(cases) < 2:
+        return _run_chunk(loop, model_path, cases)
+    if model_path is not None and any(c.kernel == "ann" for c in cases):
+        _surrogate(str(model_path), Path(model_path).stat().st_mtime)
+    _run_chunk(loop, model_path, cases[:1])  # compiles the PBM's kernels here, once, not in every process
+    # a few chunks per process: the load stays balanced and each chunk pays one transfer
+    n_chunks = min(len(cases), 4 * n_jobs)
+    bounds = np.linspace(0, len(cases), n_chunks + 1).astype(int)
+    chunks = [cases[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+    context = multiprocessing.get_context("fork")
+    with ProcessPoolExecutor(max_workers=min(n_jobs, n_chunks), mp_context=context) as pool:
+        done = list(pool.map(_run_chunk, [loop] * len(chunks), [model_path] * len(chunks), chunks))
+    return [outcome for chunk in done for outcome in chunk]
+
+
+def outcomes_table(outcomes: list[Outcome]) -> pd.DataFrame:
+    """One row per case: rpm, member, changed settings, final d10/d50/d90, domain status, failure."""
+    rows = []
+    for o in outcomes:
+        row = {"rpm": o.case.rpm, "member": -1 if o.case.member is None else o.case.member}
+        row.update(dict(o.case.values))
+        row.update(o.final())
+        row.update(
+            out_of_domain_intervals=o.out_of_domain_intervals,
+            out_of_domain_count=o.out_of_domain_count,
+            failed=o.failed,
+        )
+        rows.append(row)
+    return pd.DataFrame(rows)

@@ -1,0 +1,109 @@
+"""The check of the calibration on data of known parameters (rule calibration_check,
+docs/calibration.md). Two cases, each fitted from start values `proof.start_factor` x the truth:
+
+* `pbm_dem`: PBM-DEM's own d10/d50/d90 at the validation speeds (mean of its replicates, the
+  standard error over replicates as the measurement sd), calibrated with PBM-ANN: the estimates
+  must give back the pbm settings PBM-DEM ran with, within intervals that hold the measurement
+  error and the surrogate's uncertainty;
+* `pbm_constant_noise`: PBM-constant's output at the same speeds (its frequency per speed
+  calibrated to the surrogate as in the validation) with Gaussian noise of `proof.noise` x the
+  value added, calibrated with PBM-constant: recovery at a known noise level, no surrogate error.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pbmdem.config import Calibration, CoupledLoop
+from pbmdem.config.design import pbm_value
+from pbmdem.validation.results import load_run, run_folder
+
+from .batches import Case, run_cases
+from .calibration import Estimate, Model, calibrate
+from .measured import measured_from_series, with_noise
+
+FREQUENCY_KEY = "pbm.aggregation.constant_frequency"
+
+
+def proof_times(loop: CoupledLoop, step: float) -> np.ndarray:
+    """Every `step` s from `step` to the end of the batch."""
+    end = loop.batch.pbm.process.end
+    return np.arange(step, end + 0.5 * step, step)[: int(end // step)]
+
+
+def dem_measured(validation_dir, rpms, replicates: int, times) -> pd.DataFrame:
+    """The measured table of PBM-DEM's replicates at `rpms` (wildcard text, e.g. "300")."""
+    series = {}
+    for rpm in rpms:
+        runs = [load_run(run_folder(validation_dir, str(rpm), "pbm_dem", k), "PBM-DEM run") for k in range(replicates)]
+        series[float(rpm)] = [run.summary for run in runs]
+    return measured_from_series(series, times)
+
+
+def constant_measured(loop: CoupledLoop, model_path, rpms, times, noise: float, seed: int):
+    """(measured table with noise, PBM-constant's frequency per speed) at `rpms`."""
+    from pbmdem.coupling.methods import calibrated_frequency
+
+    fixed = {float(r): ((FREQUENCY_KEY, calibrated_frequency(loop, model_path, float(r))[0]),) for r in rpms}
+    outcomes = run_cases(loop, model_path, [Case(r, fixed[r], kernel="constant") for r in fixed])
+    series = {}
+    for o in outcomes:
+        if o.failed:
+            raise RuntimeError(f"PBM-constant at {o.case.rpm:g} rpm failed: {o.failed}")
+        series[o.case.rpm] = [pd.DataFrame(o.sizes, columns=["d10", "d50", "d90"]).assign(time=o.times)]
+    return with_noise(measured_from_series(series, times), noise, seed), fixed
+
+
+def recovery_rows(case: str, estimate: Estimate, truth: dict[str, float]) -> list[dict]:
+    """One row per parameter: the truth against the estimate and its interval."""
+    rows = []
+    for rec in estimate.table.to_dict(orient="records"):
+        true = truth[rec["parameter"]]
+        rows.append(
+            {
+                "case": case,
+                "parameter": rec["parameter"],
+                "true": true,
+                "estimate": rec["estimate"],
+                "ci_low": rec["ci_low"],
+                "ci_high": rec["ci_high"],
+                "relative_error": rec["estimate"] / true - 1.0,
+                "recovered": bool(rec["ci_low"] <= true <= rec["ci_high"]),
+                "sd_ln_measurement": rec["sd_ln_measurement"],
+                "sd_ln_surrogate": rec["sd_ln_surrogate"],
+                "chi2_reduced": estimate.info["chi2_reduced"],
+                "out_of_domain_intervals": estimate.info["out_of_domain_intervals"],
+                "unidentifiable": "; ".join(f"{a} ~ {b} ({r:+.2f})" for a, b, r in estimate.unidentifiable),
+            }
+        )
+    return rows
+
+
+def calibration_check(
+    loop: CoupledLoop,
+    model_path: str | Path,
+    validation_dir,
+    rpms,
+    replicates: int,
+    settings: Calibration,
+    n_jobs: int = 1,
+) -> tuple[pd.DataFrame, dict[str, Estimate], dict[str, pd.DataFrame]]:
+    """(recovery table, estimate per case, measured table per case) of both cases."""
+    keys = settings.parameters
+    truth = {k: pbm_value(loop.batch.pbm, k) for k in keys}
+    start = {k: v * settings.proof.start_factor for k, v in truth.items()}
+    times = proof_times(loop, settings.proof.time_step)
+    data = {"pbm_dem": dem_measured(validation_dir, rpms, replicates, times)}
+    data["pbm_constant_noise"], fixed = constant_measured(
+        loop, model_path, rpms, times, settings.proof.noise, settings.proof.seed
+    )
+    models = {
+        "pbm_dem": Model(loop, model_path, keys, "ann", n_jobs=n_jobs),
+        "pbm_constant_noise": Model(loop, model_path, keys, "constant", fixed=fixed, n_jobs=n_jobs),
+    }
+    estimates = {case: calibrate(models[case], data[case], settings, start) for case in models}
+    rows = [row for case, est in estimates.items() for row in recovery_rows(case, est, truth)]
+    return pd.DataFrame(rows), estimates, data

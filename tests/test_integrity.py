@@ -479,6 +479,19 @@ def test_dem_progress_is_read_from_liggghts_thermo_while_it_runs(tiny_config, tm
     assert f"{total}/{total}" in capsys.readouterr().err  # tqdm's bar, complete
 
 
+def test_progress_of_a_run_from_a_settled_bed_counts_from_the_bed_s_last_step(tmp_path):
+    """LIGGGHTS goes on counting steps after read_restart: the reader subtracts the bed's steps."""
+    from pbmdem.dem.progress import ThermoProgress
+
+    log = tmp_path / "log.liggghts"
+    rows = "".join(f"{step} 100 0.0\n" for step in (1000, 1400, 1800, 2200))
+    log.write_text(f"Step Atoms KinEng\n{rows}Loop time of 1.0 on 1 procs\n")
+    progress = ThermoProgress(log, [("spin-up", 800), ("sampling", 400)], first_step=1000)
+    progress.update()
+    assert progress.step == 1200 and progress.phase() == "sampling" and progress.atoms == 100
+    assert "step 1200 of 1200 (100 %)" in progress.status()
+
+
 def test_dem_cli_logs_progress_lines_when_not_on_a_terminal(root, tmp_path):
     proc = subprocess.run(
         [

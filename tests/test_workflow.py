@@ -575,6 +575,9 @@ def test_job_logs_show_progress(tiny_workflow):
     assert re.search(
         r"pbmdem.dem.progress: DEM rpm600_small: \w[\w-]*, step \d+ of \d+ \(\d+ %\), \d+ particles", dem_log
     )
+    # the run starts from its settled bed and counts its own steps: never past its total
+    counts = [(int(a), int(b)) for a, b in re.findall(r"DEM rpm600_small: [\w-]+, step (\d+) of (\d+)", dem_log)]
+    assert counts and all(step <= total for step, total in counts), counts
     assert "CV fold 1 of" in (logs / "train_surrogate.log").read_text()
     loop = (logs / "validation" / "pbm_dem_rpm600_rep0.log").read_text()
     assert re.search(

@@ -46,7 +46,9 @@ def _eta(seconds: float) -> str:
 
 class ThermoProgress:
     """Follow `log_path` (a LIGGGHTS log being written) for a run of `phases`, a list of
-    (name, steps) in the order the deck runs them (steps accumulate across `run` commands)."""
+    (name, steps) in the order the deck runs them (steps accumulate across `run` commands);
+    `first_step`: the step counter at the first phase's start (a run from a settled bed goes on
+    counting from the bed's last step)."""
 
     def __init__(
         self,
@@ -56,12 +58,14 @@ class ThermoProgress:
         label: str = "LIGGGHTS",
         bar: bool = False,
         log_every: float = LOG_EVERY_S,
+        first_step: int = 0,
     ):
         self.path = Path(log_path)
         self.phases = [(str(n), int(s)) for n, s in phases]
         self.total = sum(s for _, s in self.phases)
         self.label = label
         self.log_every = float(log_every)
+        self.first_step = int(first_step)
         self.step = 0
         self.atoms = 0
         self._offset = 0
@@ -100,7 +104,7 @@ class ThermoProgress:
                 step = int(float(words[0]))
             except ValueError:
                 continue
-            self.step = max(self.step, step)
+            self.step = max(self.step, step - self.first_step)
             if "atoms" in self._header:
                 try:
                     self.atoms = int(float(words[self._header.index("atoms")]))

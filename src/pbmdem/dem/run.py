@@ -302,6 +302,7 @@ def _run_in(
         phases if bed_dir is not None else [("settling", plan.settle_steps), *phases],
         label=f"DEM {plan.point_id}",
         bar=progress_bar,
+        first_step=plan.settle_steps if bed_dir is not None else 0,
     )
     result = engine.run(deck_path, run_dir, ranks=execution.mpi_ranks, timeout=execution.timeout, progress=watcher)
     check_finished(plan, run_dir)

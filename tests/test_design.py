@@ -326,12 +326,15 @@ def test_design_space_command(tiny_surrogate, root, tmp_path, capsys):
     """`pbmdem design-space` writes the table, the maps and the figures of merit and prints the
     points of each status."""
     import json
+    import logging
 
     from pbmdem.cli import main
 
     out = tmp_path / "design"
     args = ["design-space", "--config", str(root / "config/test.yaml"), "--model", str(tiny_surrogate)]
+    level = logging.getLogger("pbmdem.coupling").level
     assert main([*args, "--out", str(out), "--jobs", "1"]) == 0
+    assert logging.getLogger("pbmdem.coupling").level == level  # the loops' logs held back for the command only
     printed = json.loads(capsys.readouterr().out)
     table = pd.read_csv(out / "design_space.csv")
     assert printed["points"] == len(table) == 18

@@ -515,7 +515,9 @@ def test_cli_table_run_with_velocity_table(tmp_path, root, capsys):
     ]
     assert main(base) == 2
     assert "needs --velocity-table PATH" in capsys.readouterr().err
-    # breakage (on by default) takes its selection from the wall tables too
+    # with breakage on, its selection comes from the wall tables too
+    cfg["pbm"]["breakage"]["enabled"] = True
+    cfg_path.write_text(yaml.safe_dump(cfg))
     assert main(base + ["--velocity-table", str(pv)]) == 2
     assert "--wall-table PATH" in capsys.readouterr().err
     cfg["pbm"]["breakage"]["enabled"] = False  # aggregation's velocity table is what this test is about

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import logging
 import sys
@@ -35,9 +36,23 @@ def _model_path(path: Path) -> Path:
     return path
 
 
-def _logging() -> None:
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
-    logging.getLogger("pbmdem.coupling").setLevel(logging.WARNING)
+def _with_logging(command):
+    """`command` with INFO logging on stderr and the coupled loops' per-interval lines held back
+    (hundreds of batches would flood the terminal) for the command's duration only: the level of
+    the `pbmdem.coupling` logger is restored afterwards, so a caller in the same process keeps its logs."""
+
+    @functools.wraps(command)
+    def run(args: argparse.Namespace) -> int:
+        logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+        loops = logging.getLogger("pbmdem.coupling")
+        level = loops.level
+        loops.setLevel(logging.WARNING)
+        try:
+            return command(args)
+        finally:
+            loops.setLevel(level)
+
+    return run
 
 
 def _design_space(args: argparse.Namespace) -> int:
@@ -50,7 +65,6 @@ def _design_space(args: argparse.Namespace) -> int:
     design = cfg.design_space if jobs is None else cfg.design_space.replace(n_jobs=jobs)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    _logging()
     table = write_design_space(
         cfg.coupled_loop(),
         _model_path(args.model),
@@ -82,7 +96,6 @@ def _calibrate(args: argparse.Namespace) -> int:
         except ValueError as exc:
             raise ValueError(f"--parameters: {exc}") from None
     data = read_measured(args.data, loop.batch.pbm.process.end)
-    _logging()
     model = Model(loop, _model_path(args.model), settings.parameters, "ann", n_jobs=_jobs(args.jobs))
     estimate = calibrate(model, data, settings)
     write_estimate(estimate, args.out, title=str(args.data.name))
@@ -110,7 +123,7 @@ def add_cli(sub) -> None:
     )
     _common(design)
     design.add_argument("--jobs", type=int, default=None, help="processes (default: design_space.n_jobs)")
-    design.set_defaults(func=_design_space)
+    design.set_defaults(func=_with_logging(_design_space))
 
     cal = sub.add_parser(
         "calibrate",
@@ -127,4 +140,4 @@ def add_cli(sub) -> None:
         "--parameters", nargs="+", default=None, help="config keys to estimate (default: calibration.parameters)"
     )
     cal.add_argument("--jobs", type=int, default=2, help="processes (default 2)")
-    cal.set_defaults(func=_calibrate)
+    cal.set_defaults(func=_with_logging(_calibrate))

@@ -89,10 +89,16 @@ def run_case(loop: CoupledLoop, model_path: str | Path, rpm: float, feed: str, s
     row: dict = {"rpm": float(rpm), "feed": feed, "feed_d50": mass_median(sizes)}
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
-        outcome = pbm_ann(case, model_path, rpm, Path(tmp) / "mean")
-        row.update(_final(outcome.result.summary()))
-        row["out_of_domain_intervals"] = int(outcome.totals.get("out_of_domain_intervals", 0))
-        row["intervals"] = int(outcome.totals.get("intervals", loop.coupling_intervals))
+        try:
+            outcome = pbm_ann(case, model_path, rpm, Path(tmp) / "mean")
+        except (PBMError, CouplingError) as exc:  # reported as a failed case, its sizes empty
+            log.warning("PBM-ANN at %g rpm, feed %s, ensemble mean failed: %s", rpm, feed, exc)
+            row.update({s: float("nan") for s in STATISTICS} | {"mean_failed": True})
+            row.update({"out_of_domain_intervals": 0, "intervals": 0})
+        else:
+            row.update(_final(outcome.result.summary()) | {"mean_failed": False})
+            row["out_of_domain_intervals"] = int(outcome.totals.get("out_of_domain_intervals", 0))
+            row["intervals"] = int(outcome.totals.get("intervals", loop.coupling_intervals))
         finals, failed = [], 0
         for k in range(n_members):
             try:
@@ -150,6 +156,10 @@ def feed_study(
     return pd.DataFrame(rows)
 
 
+#: step guard of one batch of the breakage study (the default batch takes about 170 steps)
+BREAKAGE_STUDY_MAX_STEPS = 20_000
+
+
 def breakage_variants(pbm) -> dict:
     """The breakage settings the breakage study compares (name -> pbm.breakage): breakage off
     (aggregation only), the configured criterion, and the dynamic yield strength Y and the critical
@@ -173,9 +183,13 @@ def breakage_study(loop: CoupledLoop, model_path: str | Path, speeds, grid_speed
     from pbmdem.pbm.impact_breakage import critical_speed
 
     pbm = loop.batch.pbm
+    # a variant whose breakage is so fast that the explicit solver's positivity limit takes
+    # 100x the default batch's ~170 steps is reported as failed after BREAKAGE_STUDY_MAX_STEPS,
+    # instead of spending minutes per ensemble member on the way to the solver's own guard
+    solver = pbm.solver.replace(max_steps=min(pbm.solver.max_steps, BREAKAGE_STUDY_MAX_STEPS))
     frames = []
     for name, brk in breakage_variants(pbm).items():
-        case = loop.replace(batch=loop.batch.replace(pbm=pbm.replace(breakage=brk)))
+        case = loop.replace(batch=loop.batch.replace(pbm=pbm.replace(breakage=brk, solver=solver)))
         frame = speed_study(case, model_path, speeds, grid_speeds)
         v = critical_speed(pbm.aggregation.success.stokes.granule_density, brk.yield_strength, brk.critical_stokes)
         frames.append(

@@ -65,12 +65,12 @@ def prepare_run(
     plan: DemPlan,
     run_dir: str | Path,
     ranks: int,
-    bed_dir: str | Path | None = None,
+    bed: Path | None = None,
     deck: str | None = None,
 ) -> Path:
     """Write geometry, deck and plan into `run_dir` (emptied of any earlier attempt's output);
-    with `bed_dir`, a copy of its settled bed (checked against the plan) for the deck to read;
-    `deck`: the rendered deck, if the caller has it already."""
+    with `bed` (a settled bed's restart file, as returned by `check_bed`), a copy of it for the
+    deck to read; `deck`: the rendered deck, if the caller has it already."""
     run_dir = Path(run_dir)
     post = run_dir / "post"
     if post.exists():
@@ -79,14 +79,14 @@ def prepare_run(
     for stale in ("crash.json", "log.liggghts", BED_FILE):
         (run_dir / stale).unlink(missing_ok=True)
     geometry.write_granulator(point.granulator, run_dir)
-    if bed_dir is not None:
-        shutil.copyfile(check_bed(point, plan, bed_dir), run_dir / BED_FILE)
+    if bed is not None:
+        shutil.copyfile(bed, run_dir / BED_FILE)
     if deck is None:
-        deck = render_granulator(point, plan, ranks, from_bed=bed_dir is not None)
+        deck = render_granulator(point, plan, ranks, from_bed=bed is not None)
     write_text(run_dir / "in.granulator", deck)
     # a run from a settled bed names it; a fresh run's plan.json is its plan (coupled loops compare them)
-    bed = {"settled_bed": str(Path(bed_dir) / BED_FILE)} if bed_dir is not None else {}
-    write_json(run_dir / "plan.json", plan.to_dict() | {"mpi_ranks": ranks} | bed)
+    named = {"settled_bed": str(bed)} if bed is not None else {}
+    write_json(run_dir / "plan.json", plan.to_dict() | {"mpi_ranks": ranks} | named)
     return run_dir / "in.granulator"
 
 
@@ -252,8 +252,7 @@ def run_point(
     check_limits(plan, execution.limits)
     # raises on any bad value, before any I/O
     deck = render_granulator(point, plan, execution.mpi_ranks, from_bed=bed_dir is not None)
-    if bed_dir is not None:
-        check_bed(point, plan, bed_dir)
+    bed = check_bed(point, plan, bed_dir) if bed_dir is not None else None
     finished = is_finished(run_dir)
     if finished and not force:
         markers = ", ".join(n for n in FINISHED_MARKERS if (run_dir / n).exists())
@@ -268,7 +267,7 @@ def run_point(
         shutil.rmtree(stage)
     stage.mkdir(parents=True)
     try:
-        summary = _run_in(point, plan, stage, run_dir, execution, deck, progress_bar, bed_dir)
+        summary = _run_in(point, plan, stage, run_dir, execution, deck, progress_bar, bed)
     except BaseException as exc:
         if not finished:  # nothing to protect: keep the crash and the logs in the run folder
             _move_into(stage, run_dir)
@@ -289,24 +288,25 @@ def _run_in(
     execution: DemExecution,
     deck: str,
     progress_bar: bool = False,
-    bed_dir: str | Path | None = None,
+    bed: Path | None = None,
 ) -> dict:
-    """run_point's work in the (staging) folder `run_dir`; paths in the summary name `final_dir`."""
+    """run_point's work in the (staging) folder `run_dir`; paths in the summary name `final_dir`;
+    `bed`: the checked settled bed's restart file, if the run starts from one."""
     from . import collisions, vtk_series  # local: keep this module light to import
     from .progress import ThermoProgress
 
-    deck_path = prepare_run(point, plan, run_dir, execution.mpi_ranks, bed_dir, deck)
+    deck_path = prepare_run(point, plan, run_dir, execution.mpi_ranks, bed, deck)
     phases = [("spin-up", plan.spinup_steps), ("sampling", plan.sampling_steps)]
     watcher = ThermoProgress(
         run_dir / "log.liggghts",
-        phases if bed_dir is not None else [("settling", plan.settle_steps), *phases],
+        phases if bed is not None else [("settling", plan.settle_steps), *phases],
         label=f"DEM {plan.point_id}",
         bar=progress_bar,
-        first_step=plan.settle_steps if bed_dir is not None else 0,
+        first_step=plan.settle_steps if bed is not None else 0,
     )
     result = engine.run(deck_path, run_dir, ranks=execution.mpi_ranks, timeout=execution.timeout, progress=watcher)
     check_finished(plan, run_dir)
-    (run_dir / BED_FILE).unlink(missing_ok=True)  # a copy; the bed stays in bed_dir
+    (run_dir / BED_FILE).unlink(missing_ok=True)  # a copy; the bed stays in its folder
     t0 = time.perf_counter()
     tables = collisions.tabulate_run(run_dir / "post", plan, point.granulator.bowl, point.granulator.impeller)
     parse_time = time.perf_counter() - t0
@@ -331,7 +331,7 @@ def _run_in(
         "steps": plan.total_steps,
         "mpi_ranks": execution.mpi_ranks,
         "liggghts_version": engine.version_of_log(result.log),
-        **_cost(plan, result, bed_dir),
+        **_cost(plan, result, bed),
         "parse_time_s": parse_time,
         "parse_cost_ratio": parse_time / result.wall_time,
         "collision_interval": plan.collision_interval,
@@ -347,13 +347,13 @@ def _run_in(
     return summary
 
 
-def _cost(plan: DemPlan, result: engine.LiggghtsRun, bed_dir: str | Path | None) -> dict:
+def _cost(plan: DemPlan, result: engine.LiggghtsRun, bed: Path | None) -> dict:
     """What the run cost: its own steps (without the settling when it started from a settled bed),
     particle-steps, LIGGGHTS wall and CPU time, particle-steps per second, and the settled bed's
     own cost (shared by every speed that starts from it)."""
-    steps = plan.run_steps if bed_dir is not None else plan.total_steps
+    steps = plan.run_steps if bed is not None else plan.total_steps
     particle_steps = float(plan.n_particles) * steps
-    bed = read_json(Path(bed_dir) / BED_RECORD, "settled-bed record") if bed_dir is not None else {}
+    record = read_json(bed.with_name(BED_RECORD), "settled-bed record") if bed is not None else {}
     return {
         "run_steps": steps,
         "particle_steps": particle_steps,
@@ -361,9 +361,9 @@ def _cost(plan: DemPlan, result: engine.LiggghtsRun, bed_dir: str | Path | None)
         "liggghts_cpu_time_s": result.cpu_time,
         "particle_steps_per_s": particle_steps / result.wall_time,
         "particle_steps_per_cpu_s": particle_steps / max(result.cpu_time, 1e-9),
-        "from_settled_bed": bed_dir is not None,
-        "bed_liggghts_wall_time_s": bed.get("liggghts_wall_time_s", 0.0),
-        "bed_liggghts_cpu_time_s": bed.get("liggghts_cpu_time_s", 0.0),
+        "from_settled_bed": bed is not None,
+        "bed_liggghts_wall_time_s": record.get("liggghts_wall_time_s", 0.0),
+        "bed_liggghts_cpu_time_s": record.get("liggghts_cpu_time_s", 0.0),
     }
 
 

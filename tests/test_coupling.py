@@ -3,6 +3,7 @@
 import json
 import sys
 
+import dem_tables
 import numpy as np
 import pandas as pd
 import pytest
@@ -226,21 +227,11 @@ def test_a_resumed_loop_continues_exactly(tiny_config, tmp_path):
 
 def test_velocity_fractions_of_a_dem_interval_reach_the_pbm_bins():
     from pbmdem.frequency import velocity_fractions_from_table
-    from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, EncounterRates
+    from pbmdem.impact import N_VELOCITY_BINS, EncounterRates
 
-    rows = []
-    for i, j, counts in [(0, 0, {3: 2.0, 5: 2.0}), (0, 1, {5: 3.0}), (1, 1, {})]:
-        for b in range(N_VELOCITY_BINS):
-            rows.append(
-                {
-                    "class_i": i,
-                    "class_j": j,
-                    "v_lo": VELOCITY_EDGES[b],
-                    "v_hi": VELOCITY_EDGES[b + 1],
-                    "encounters": counts.get(b, 0.0),
-                }
-            )
-    frac = velocity_fractions_from_table(pd.DataFrame(rows), 2)
+    counts = [(0, 0, {3: 2.0, 5: 2.0}), (0, 1, {5: 3.0}), (1, 1, {})]
+    table = dem_tables.binned([({"class_i": i, "class_j": j}, per_bin) for i, j, per_bin in counts])
+    frac = velocity_fractions_from_table(table, 2)
     assert frac.shape == (2, 2, N_VELOCITY_BINS)
     np.testing.assert_allclose(frac.sum(axis=2), 1.0)
     assert frac[0, 0, 3] == pytest.approx(0.5) and frac[0, 1, 5] == 1.0 and frac[1, 0, 5] == 1.0

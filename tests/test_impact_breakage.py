@@ -1,6 +1,7 @@
 """Breakage selection from impacts (pbmdem.pbm.impact_breakage): hand-made impacts with known
 speeds give the selection rate the Stokes deformation criterion predicts."""
 
+import dem_tables
 import numpy as np
 import pytest
 
@@ -114,67 +115,19 @@ def grid_tables(speed_of_rpm):
     """Hand-made grid tables of one distribution at 300 and 1200 rpm: classes 2 and 4 mm, every
     wall encounter of a point at the one speed `speed_of_rpm[rpm]` (m/s), impeller encounters
     2 and 4 per granule and second, bowl 10 and 20; pairs at 0.1 m/s."""
-    import pandas as pd
-
     from pbmdem.impact import velocity_bin
 
-    pairs, pair_v, walls, wall_v = [], [], [], []
-    for rpm, speed in speed_of_rpm.items():
-        pid = f"rpm{rpm}_feed"
-        for i, j in ((0, 0), (0, 1), (1, 1)):
-            pairs.append(
-                dict(
-                    point_id=pid,
-                    rpm=rpm,
-                    distribution="feed",
-                    class_i=i,
-                    class_j=j,
-                    d_i=0.002 * (1 + i),
-                    d_j=0.002 * (1 + j),
-                    encounter_frequency_per_pair=1e-3,
-                )
-            )
-            pair_v.append(
-                dict(
-                    point_id=pid,
-                    rpm=rpm,
-                    distribution="feed",
-                    class_i=i,
-                    class_j=j,
-                    b=velocity_bin(0.1),
-                    encounters=5.0,
-                )
-            )
-        for wall, rate in (("bowl", 10.0), ("impeller", 2.0)):
-            for c in (0, 1):
-                walls.append(
-                    dict(
-                        point_id=pid,
-                        rpm=rpm,
-                        distribution="feed",
-                        wall=wall,
-                        class_i=c,
-                        d_i=0.002 * (1 + c),
-                        encounter_frequency_per_particle=rate * (1 + c),
-                    )
-                )
-                wall_v.append(
-                    dict(
-                        point_id=pid,
-                        rpm=rpm,
-                        distribution="feed",
-                        wall=wall,
-                        class_i=c,
-                        b=velocity_bin(speed),
-                        encounters=7.0,
-                    )
-                )
-
-    def bins(rows):
-        frame = pd.DataFrame(rows)
-        return frame.assign(v_lo=VELOCITY_EDGES[frame.b], v_hi=VELOCITY_EDGES[frame.b + 1]).drop(columns="b")
-
-    return pd.DataFrame(pairs), bins(pair_v), pd.DataFrame(walls), bins(wall_v)
+    d, rpms, rate = (0.002, 0.004), list(speed_of_rpm), {"bowl": 10.0, "impeller": 2.0}
+    pairs = dem_tables.pair_table(d, lambda rpm, a, b: 1e-3, rpms, "feed")
+    pair_counts = {(rpm, a, b): {velocity_bin(0.1): 5.0} for rpm in rpms for a, b in ((0, 0), (0, 1), (1, 1))}
+    walls = dem_tables.wall_table(d, lambda rpm, wall, c: rate[wall] * (1 + c), rpms, "feed")
+    wall_counts = {(rpm, w, c): {velocity_bin(speed_of_rpm[rpm]): 7.0} for rpm in rpms for w in rate for c in (0, 1)}
+    return (
+        pairs,
+        dem_tables.pair_velocity_table(pair_counts, "feed", every_bin=False),
+        walls,
+        dem_tables.wall_velocity_table(wall_counts, "feed", every_bin=False),
+    )
 
 
 def test_selection_from_hand_made_dem_tables_breaks_only_above_the_critical_speed():

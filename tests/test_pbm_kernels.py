@@ -3,6 +3,7 @@ operators, config defaults/schema and the command line."""
 
 from __future__ import annotations
 
+import dem_tables
 import numpy as np
 import pandas as pd
 import pytest
@@ -22,26 +23,8 @@ from pbmdem.pbm import (
 D = np.array([0.002, 0.003, 0.004])
 
 
-def make_table(rpms=(300.0, 900.0), sym_law=True):
-    rows = []
-    for rpm in rpms:
-        for a in range(3):
-            for b in range(a, 3):
-                di, dj = D[a], D[b]
-                f = 1e-3 * (rpm / 300.0) * (di * dj / 4e-6) ** 1.2
-                rows.append(
-                    {
-                        "point_id": f"rpm{rpm:g}_fine",
-                        "rpm": rpm,
-                        "distribution": "fine",
-                        "class_i": a,
-                        "class_j": b,
-                        "d_i": di,
-                        "d_j": dj,
-                        "encounter_frequency_per_pair": f,
-                    }
-                )
-    return pd.DataFrame(rows)
+def make_table(rpms=(300.0, 900.0)):
+    return dem_tables.pair_table(D, lambda rpm, a, b: law(D[a], D[b], rpm), rpms)
 
 
 def law(d1, d2, rpm):

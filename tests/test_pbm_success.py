@@ -5,6 +5,7 @@ All quantities in SI units (m, kg, s, Pa s) unless a test converts them on purpo
 
 import math
 
+import dem_tables
 import numpy as np
 import pandas as pd
 import pytest
@@ -312,23 +313,7 @@ D2 = np.array([0.002, 0.004])
 
 
 def pair_table(rpms=(300.0, 900.0)):
-    rows = []
-    for rpm in rpms:
-        for a, b in ((0, 0), (0, 1), (1, 1)):
-            rows.append(
-                {
-                    "point_id": f"rpm{rpm:g}_fine",
-                    "rpm": rpm,
-                    "distribution": "fine",
-                    "class_i": a,
-                    "class_j": b,
-                    "d_i": D2[a],
-                    "d_j": D2[b],
-                    "frequency_per_pair": 9.0,
-                    "encounter_frequency_per_pair": 0.1 * (a + b + 1) * rpm / 300.0,
-                }
-            )
-    return pd.DataFrame(rows)
+    return dem_tables.pair_table(D2, lambda rpm, a, b: 0.1 * (a + b + 1) * rpm / 300.0, rpms, frequency_per_pair=9.0)
 
 
 #: encounters per (rpm, pair) and velocity bin of the hand-written velocity table
@@ -343,22 +328,7 @@ COUNTS = {
 
 
 def velocity_table():
-    rows = []
-    for (rpm, a, b), bins in COUNTS.items():
-        for k in range(N_VELOCITY_BINS):
-            rows.append(
-                {
-                    "point_id": f"rpm{rpm:g}_fine",
-                    "rpm": rpm,
-                    "distribution": "fine",
-                    "class_i": a,
-                    "class_j": b,
-                    "v_lo": VELOCITY_EDGES[k],
-                    "v_hi": VELOCITY_EDGES[k + 1],
-                    "encounters": bins.get(k, 0.0),
-                }
-            )
-    return pd.DataFrame(rows)
+    return dem_tables.pair_velocity_table(COUNTS)
 
 
 def hand_fractions(rpm, a, b):

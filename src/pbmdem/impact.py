@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pandas as pd
 
-from pbmdem.readers import InputFileError
+from pbmdem.readers import InputFileError, first_index
 from pbmdem.tables import GRID_VELOCITIES
 
 BINS_PER_DECADE = 4
@@ -160,8 +160,7 @@ def velocity_bins_of(v_lo, v_hi, source: str = "impact-velocity table") -> np.nd
     ok = np.isclose(VELOCITY_EDGES[b], lo, rtol=1e-6, atol=0.0) & np.isclose(
         VELOCITY_EDGES[b + 1], hi, rtol=1e-6, atol=0.0
     )
-    if not ok.all():
-        k = int(np.argmin(ok))
+    if (k := first_index(~ok)) is not None:
         raise InputFileError(
             f"{source}: row {k + 1}, velocity bin [v_lo, v_hi) = [{lo[k]!r}, {hi[k]!r}) m/s is not one of the "
             f"project's velocity bins; allowed: consecutive edges of pbmdem.impact.VELOCITY_EDGES "
@@ -183,9 +182,7 @@ def binned_counts(velocity: pd.DataFrame, source: str = "impact-velocity table",
     b = velocity_bins_of(velocity["v_lo"], velocity["v_hi"], source)
     frame = velocity.loc[:, list(keys)].astype({k: (str if k == "point_id" else int) for k in keys})
     frame = frame.assign(bin=b).reset_index(drop=True)
-    twice = frame.duplicated()
-    if twice.any():
-        k = int(np.argmax(twice.to_numpy()))
+    if (k := first_index(frame.duplicated())) is not None:
         raise InputFileError(f"{source}: row {k + 1}, bin listed twice for {frame.iloc[k][list(keys)].to_dict()}")
     pair_index = frame.groupby(list(keys), sort=True).ngroup().to_numpy()
     counts = np.zeros((int(pair_index.max(initial=-1)) + 1, N_VELOCITY_BINS))

@@ -36,15 +36,23 @@ def read_table(path: str | Path, what: str = "table", *, columns=(), finite=(), 
     for name in finite:
         if name not in frame.columns:
             continue
-        values = pd.to_numeric(frame[name], errors="coerce").to_numpy(float)
-        bad = ~np.isfinite(values)
-        if bad.any():
-            row = int(np.argmax(bad))
+        bad = ~np.isfinite(pd.to_numeric(frame[name], errors="coerce").to_numpy(float))
+        if (row := first_index(bad)) is not None:
             raise InputFileError(
                 f"{what} {path}: column {name!r} row {row + 1} = {frame[name].iloc[row]!r}: "
                 f"a finite number is required ({int(bad.sum())} such row(s))"
             )
     return frame
+
+
+def first_index(bad):
+    """The index of the first true entry (in row-major order) of the boolean array `bad`: an int
+    for a 1-D array, a tuple of ints otherwise; None if no entry is true. Checks name the first
+    offending entry (its row, column or class), its value and what is allowed."""
+    bad = np.asarray(bad)
+    if not bad.any():  # the common case, as cheap as the check itself
+        return None
+    return int(np.argmax(bad)) if bad.ndim == 1 else tuple(int(i) for i in np.argwhere(bad)[0])
 
 
 def read_json(path: str | Path, what: str = "JSON file", *, keys=()) -> dict:

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pbmdem.readers import InputFileError, read_table
+from pbmdem.readers import InputFileError, first_index, read_table
 
 KINDS = {"int": "an integer", "float": "a number", "str": "a text"}
 NOUNS = {"int": "integer", "float": "number"}
@@ -54,12 +54,11 @@ class Column:
         raw = frame[self.name]
         blank = raw.isna().to_numpy() | (raw.astype(str).str.strip() == "").to_numpy()
         allowed = np.zeros(len(frame), bool) if self.empty is None else np.asarray(self.empty(frame), bool)
-        bad = blank & ~allowed
-        if bad.any():
+        if (row := first_index(blank & ~allowed)) is not None:
             reason = "an empty cell" + (
                 " is allowed only where " + self.empty.__doc__ if self.empty else " is not allowed"
             )
-            return int(np.argmax(bad)), f"{KINDS[self.kind]}{SIGNS[self.sign]} is required ({reason})"
+            return row, f"{KINDS[self.kind]}{SIGNS[self.sign]} is required ({reason})"
         if self.kind == "str":
             return None
         values = pd.to_numeric(raw.where(~blank), errors="coerce").to_numpy(float)
@@ -70,9 +69,8 @@ class Column:
             checks.append(~blank & (values < 0))
         elif self.sign == "positive":
             checks.append(~blank & ~(values > 0))
-        wrong = np.logical_or.reduce(checks)
-        if wrong.any():
-            return int(np.argmax(wrong)), f"a finite {NOUNS[self.kind]}{SIGNS[self.sign]} is required"
+        if (row := first_index(np.logical_or.reduce(checks))) is not None:
+            return row, f"a finite {NOUNS[self.kind]}{SIGNS[self.sign]} is required"
         return None
 
 

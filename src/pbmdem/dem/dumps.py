@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pbmdem.readers import first_index
+
 _HEADER = re.compile(
     rb"ITEM: TIMESTEP\n(\d+)\nITEM: NUMBER OF (?:ENTRIES|ATOMS)\n(\d+)\n"
     rb"ITEM: BOX BOUNDS[^\n]*\n[^\n]*\n[^\n]*\n[^\n]*\nITEM: (?:ENTRIES|ATOMS)[^\n]*\n"
@@ -91,8 +93,8 @@ def read_dump(path: str | Path, columns: int, ids: tuple[int, ...] = ()) -> Snap
     offsets = np.concatenate([[0], np.cumsum(counts)])
     # 'nan' or 'inf' in any column (ids, overlaps, positions) would silently change the counts
     bad = ~np.isfinite(data)
-    if bad.any():
-        row, col = (int(x) for x in np.argwhere(bad)[0])
+    if (at := first_index(bad)) is not None:
+        row, col = at
         frame = int(np.searchsorted(offsets, row, side="right") - 1)
         raise DumpFormatError(
             f"{path}: non-finite value {float(data[row, col])!r} in column {col + 1} of "
@@ -103,8 +105,7 @@ def read_dump(path: str | Path, columns: int, ids: tuple[int, ...] = ()) -> Snap
     for col in ids:
         values = data[:, col]
         impossible = (values < 1) | (values != np.round(values))
-        if impossible.any():
-            row = int(np.argmax(impossible))
+        if (row := first_index(impossible)) is not None:
             frame = int(np.searchsorted(offsets, row, side="right") - 1)
             at = headers[frame].end()
             for _ in range(row - int(offsets[frame])):

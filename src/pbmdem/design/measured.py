@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pbmdem.readers import InputFileError
+from pbmdem.readers import InputFileError, first_index
 from pbmdem.tables import MEASURED
 
 STATISTICS = ("d10", "d50", "d90")
@@ -28,9 +28,7 @@ def check_measured(frame: pd.DataFrame, source, end_time: float) -> pd.DataFrame
     if frame.empty:
         raise InputFileError(f"measured size table {source}: no data rows; at least one (rpm, time) is required")
     times = frame.time.to_numpy(float)
-    late = np.flatnonzero(times > end_time * (1 + 1e-12))
-    if late.size:
-        row = int(late[0])
+    if (row := first_index(times > end_time * (1 + 1e-12))) is not None:
         raise InputFileError(
             f"measured size table {source}: row {row + 1}, column 'time' = {times[row]:g}: allowed 0 .. "
             f"{end_time:g} s (the batch of pbm.process)"
@@ -44,9 +42,7 @@ def check_measured(frame: pd.DataFrame, source, end_time: float) -> pd.DataFrame
             )
         last[rpm] = t
     for small, large in (("d10", "d50"), ("d50", "d90")):
-        bad = np.flatnonzero(frame[small].to_numpy(float) > frame[large].to_numpy(float))
-        if bad.size:
-            row = int(bad[0])
+        if (row := first_index(frame[small].to_numpy(float) > frame[large].to_numpy(float))) is not None:
             raise InputFileError(
                 f"measured size table {source}: row {row + 1}, column {large!r} = {frame[large].iloc[row]:g}: "
                 f"must be at least {small} = {frame[small].iloc[row]:g} (sizes of a cumulative distribution)"

@@ -39,6 +39,8 @@ from typing import Protocol
 
 import numpy as np
 
+from pbmdem.readers import first_index
+
 from .aggregation import cell_average_factors
 from .errors import PBMInputError, positive
 from .kernels import KernelInput
@@ -144,9 +146,7 @@ class Breakage:
                 f"breakage selection {self.selection!r} returned shape {S.shape}; expected ({K},), one "
                 "rate per grid pivot"
             )
-        bad = ~np.isfinite(S) | (S < 0)
-        if bad.any():
-            k = int(np.argmax(bad))
+        if (k := first_index(~np.isfinite(S) | (S < 0))) is not None:
             raise PBMInputError(
                 f"breakage selection {self.selection!r} gave {float(S[k])!r} 1/s for the pivot of diameter "
                 f"{float(inp.diameters[k]):.4g} m at t = {inp.t:.6g} s; allowed: finite rates >= 0"

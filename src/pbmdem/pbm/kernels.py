@@ -21,6 +21,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from pbmdem.readers import first_index
+
 from . import analytical
 from .errors import KernelShapeError, PBMInputError, positive
 from .success import SuccessProbability
@@ -173,23 +175,22 @@ def check_frequency_matrix(c, K: int, name: str) -> np.ndarray:
             f"collision-frequency source {name} returned shape {c.shape}; expected "
             f"({K}, {K}) for {K} bins (one c_ij per bin pair)"
         )
-    bad = ~np.isfinite(c)
-    if bad.any():
-        i, j = np.argwhere(bad)[0]
+    if (at := first_index(~np.isfinite(c))) is not None:
+        i, j = at
         raise KernelShapeError(
             f"collision-frequency source {name} returned a non-finite value "
             f"c[{i},{j}] = {c[i, j]}; allowed: finite values >= 0 (1/s per pair)"
         )
-    if (c < 0).any():
-        i, j = np.argwhere(c < 0)[0]
+    if (at := first_index(c < 0)) is not None:
+        i, j = at
         raise KernelShapeError(
             f"collision-frequency source {name} returned a negative value "
             f"c[{i},{j}] = {c[i, j]:.6g}; allowed: values >= 0 (1/s per pair)"
         )
     diff = np.abs(c - c.T)
     tol = SYMMETRY_RTOL * np.maximum(np.abs(c), np.abs(c.T)) + 1e-300
-    if (diff > tol).any():
-        i, j = np.argwhere(diff > tol)[0]
+    if (at := first_index(diff > tol)) is not None:
+        i, j = at
         raise KernelShapeError(
             f"collision-frequency source {name} returned a non-symmetric matrix: "
             f"c[{i},{j}] = {c[i, j]:.6g} but c[{j},{i}] = {c[j, i]:.6g}; c_ij must "
@@ -218,24 +219,22 @@ def check_encounter_rates(rates, K: int, name: str):
             f"collision-frequency source {name}.encounters returned velocity fractions of "
             f"shape {f.shape}; expected ({K}, {K}, {N_VELOCITY_BINS})"
         )
-    bad = ~np.isfinite(f) | (f < 0)
-    if bad.any():
-        i, j, b = np.argwhere(bad)[0]
+    if (at := first_index(~np.isfinite(f) | (f < 0))) is not None:
+        i, j, b = at
         raise KernelShapeError(
             f"collision-frequency source {name}.encounters returned velocity fraction "
             f"[{i},{j},{b}] = {f[i, j, b]!r}; allowed: finite values >= 0"
         )
     total = f.sum(axis=2)
     off = (np.abs(total - 1.0) > 1e-8) & (total != 0.0)
-    if off.any():
-        i, j = np.argwhere(off)[0]
+    if (at := first_index(off)) is not None:
+        i, j = at
         raise KernelShapeError(
             f"collision-frequency source {name}.encounters: the velocity fractions of pair "
             f"({i}, {j}) sum to {total[i, j]:.10g}; allowed: 1 (or 0 for a pair without data)"
         )
-    asym = np.abs(f - f.transpose(1, 0, 2)) > 1e-8
-    if asym.any():
-        i, j, b = np.argwhere(asym)[0]
+    if (at := first_index(np.abs(f - f.transpose(1, 0, 2)) > 1e-8)) is not None:
+        i, j, b = at
         raise KernelShapeError(
             f"collision-frequency source {name}.encounters: velocity fractions are not "
             f"symmetric: [{i},{j},{b}] = {f[i, j, b]:.6g} but [{j},{i},{b}] = {f[j, i, b]:.6g}"

@@ -7,6 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pbmdem.readers import first_index
+
 from .errors import NegativePopulationError, PBMInputError
 from .grid import Grid, diameter_of
 
@@ -84,9 +86,7 @@ def check_state(grid: Grid, s: State, where: str = "") -> None:
         d = diameter_of(s.feed.volumes)
         arrays += [("feed number", s.feed.number, d), ("feed liquid", s.feed.liquid, d), ("feed gas", s.feed.gas, d)]
     for name, arr, d in arrays:
-        bad = ~np.isfinite(arr) | (arr < 0)
-        if bad.any():
-            k = int(np.argmax(bad))
+        if (k := first_index(~np.isfinite(arr) | (arr < 0))) is not None:
             where_k = (
                 f"bin {k} (diameter {grid.d[k]:.4g} m)" if d is None else f"the feed class of diameter {d[k]:.4g} m"
             )
@@ -120,9 +120,7 @@ def feed_volumes(grid: Grid, s: State) -> np.ndarray:
     wn, ws = g.lever_weights(v)
     for name, w in (("number", wn), ("liquid", ws), ("gas", ws)):
         part, total = np.asarray(getattr(f, name), float) @ w, getattr(s, name)
-        over = part > total * (1.0 + 1e-9) + 1e-300
-        if over.any():
-            k = int(np.argmax(over))
+        if (k := first_index(part > total * (1.0 + 1e-9) + 1e-300)) is not None:
             raise PBMInputError(
                 f"state.feed.{name} puts {part[k]!r} into bin {k}, more than the bin's total "
                 f"{total[k]!r}; the feed granules are part of the bin totals"

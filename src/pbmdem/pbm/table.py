@@ -15,7 +15,7 @@ import pandas as pd
 from scipy.interpolate import RegularGridInterpolator
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_KEYS, EncounterRates, binned_counts
-from pbmdem.readers import InputFileError
+from pbmdem.readers import InputFileError, first_index
 from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES, GRID_WALL_VELOCITIES, GRID_WALLS
 
 from .errors import PBMInputError, positive
@@ -105,8 +105,8 @@ class TableFrequency:
             mean = sym.groupby(["d_i", "d_j"])[column].mean()
             u = np.unique(np.concatenate([mean.index.get_level_values(0), mean.index.get_level_values(1)]))
             F = mean.unstack().reindex(index=u, columns=u).to_numpy(float)
-            if np.isnan(F).any():
-                a, b = np.argwhere(np.isnan(F))[0]
+            if (at := first_index(np.isnan(F))) is not None:
+                a, b = at
                 raise PBMInputError(
                     f"collision table at rpm {rpm:g}: no row for the pair d_i = {u[a]:g}, "
                     f"d_j = {u[b]:g}; every pair of the table's sizes is needed"
@@ -190,12 +190,10 @@ class TableFrequency:
         except InputFileError as exc:
             raise PBMInputError(str(exc)) from None
         row = pd.Series(np.arange(len(t)), index=pd.MultiIndex.from_frame(t[keys].astype(_KEY_TYPES)))
-        if row.index.duplicated().any():
-            dup = row.index[row.index.duplicated()][0]
-            raise PBMInputError(f"collision table has several rows for (point_id, class_i, class_j) = {dup}")
+        if (k := first_index(row.index.duplicated())) is not None:
+            raise PBMInputError(f"collision table has several rows for (point_id, class_i, class_j) = {row.index[k]}")
         idx = row.reindex(pd.MultiIndex.from_frame(pairs)).to_numpy(float)
-        if np.isnan(idx).any():
-            k = int(np.argmax(np.isnan(idx)))
+        if (k := first_index(np.isnan(idx))) is not None:
             raise PBMInputError(
                 f"impact-velocity table: (point_id, class_i, class_j) = {tuple(pairs.iloc[k])} "
                 "has no row in the collision table; both tables must come from the same DEM runs"
@@ -207,9 +205,8 @@ class TableFrequency:
     def _fraction_grid(self, g: pd.DataFrame, counts: np.ndarray, u: np.ndarray, rpm) -> np.ndarray:
         """(n, n, V) velocity fractions on the table sizes u of one speed's rows g."""
         has = g[self.column].to_numpy(float) > 0
-        lacking = has & (counts.sum(axis=1) <= 0)
-        if lacking.any():
-            r = g.iloc[int(np.argmax(lacking))]
+        if (k := first_index(has & (counts.sum(axis=1) <= 0))) is not None:
+            r = g.iloc[k]
             raise PBMInputError(
                 f"collision table at rpm {rpm:g}: pair d_i = {r['d_i']:g}, d_j = {r['d_j']:g} has "
                 f"{self.column} = {r[self.column]:g} but no encounters in the impact-velocity "

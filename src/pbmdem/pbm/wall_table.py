@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, WALLS, WallRates
+from pbmdem.readers import first_index
 
 from .errors import PBMInputError, positive
 from .table import TableFrequency, speed_weights
@@ -29,8 +30,7 @@ def _bin_of(lo: np.ndarray, hi: np.ndarray, what: str) -> np.ndarray:
     """Velocity bin of every [v_lo, v_hi) row; refuses bins that are not the project's."""
     b = np.clip(np.searchsorted(VELOCITY_EDGES[:-1], lo), 0, N_VELOCITY_BINS - 1)
     ok = np.isclose(VELOCITY_EDGES[:-1][b], lo, rtol=1e-6, atol=0.0) & np.isclose(VELOCITY_EDGES[1:][b], hi, rtol=1e-6)
-    if not ok.all():
-        k = int(np.argmin(ok))
+    if (k := first_index(~ok)) is not None:
         raise PBMInputError(
             f"{what} row {k}: bin [{lo[k]!r}, {hi[k]!r}) m/s is not one of pbmdem.impact.VELOCITY_EDGES' bins"
         )
@@ -80,8 +80,7 @@ class WallTable:
         index = pd.MultiIndex.from_arrays([t["point_id"].astype(str), t["wall"], t["class_i"].astype(int)], names=keys)
         counts = wide.reindex(index).to_numpy(float)
         lacking = (t[WALL_FREQUENCY_COLUMN].to_numpy(float) > 0) & ~(np.nan_to_num(counts).sum(axis=1) > 0)
-        if lacking.any():
-            k = int(np.argmax(lacking))
+        if (k := first_index(lacking)) is not None:
             raise PBMInputError(
                 f"wall-collision table: {tuple(index[k])} has wall encounters but no row in the wall "
                 "impact-velocity table; both tables must come from the same DEM runs"

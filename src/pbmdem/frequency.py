@@ -29,13 +29,6 @@ def pair_counts(n) -> np.ndarray:
     return pairs
 
 
-def pairs_in_rows(class_i, class_j, n_i, n_j) -> np.ndarray:
-    """Particle pairs of table rows (class indices and class populations of each row)."""
-    n_i, n_j = np.asarray(n_i, float), np.asarray(n_j, float)
-    diagonal = np.asarray(class_i) == np.asarray(class_j)
-    return np.where(diagonal, n_i * (n_i - 1.0) / 2.0, n_i * n_j)
-
-
 def pairs_of(matrix) -> np.ndarray:
     """The upper-triangle entries (i <= j, row-major) of a (K, K) matrix (or (K, K, ...) array)."""
     m = np.asarray(matrix)

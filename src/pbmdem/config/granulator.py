@@ -35,10 +35,6 @@ class Bowl(Settings):
     def radius(self) -> float:
         return 0.5 * self.diameter
 
-    @property
-    def floor_area(self) -> float:
-        return math.pi * self.radius**2
-
 
 @dataclass(frozen=True)
 class Impeller(Settings):

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from pbmdem.atomic import write_csv, write_json
@@ -79,10 +78,6 @@ def plot_fit(cases: dict[str, pd.DataFrame], path: str | Path) -> None:
     axes[0, 0].legend(fontsize=6, ncol=2)
     fig.tight_layout()
     save_figure(fig, path)
-
-
-def residual_rms(residuals: pd.DataFrame) -> float:
-    return float(np.sqrt(np.mean(residuals.residual.to_numpy(float) ** 2)))
 
 
 def write_design_space(loop, model_path, design, table_path, maps_path, info_path) -> pd.DataFrame:

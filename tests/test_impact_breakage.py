@@ -159,3 +159,12 @@ def test_wall_rates_of_one_run_are_read_per_class_and_wall():
     np.testing.assert_allclose(rates.of("bowl")[0], [10.0, 20.0])
     np.testing.assert_allclose(rates.of("impeller")[1].sum(axis=1), 1.0)
     assert rates.of("impeller")[1][0].argmax() == np.searchsorted(VELOCITY_EDGES, 2.5, side="right") - 1
+
+
+def test_a_wall_velocity_bin_off_the_project_edges_is_refused_by_row():
+    from pbmdem.pbm.wall_table import WallTable
+
+    _, _, walls, wall_v = grid_tables({600: 2.5})
+    wall_v.loc[3, "v_lo"] *= 1.5
+    with pytest.raises(PBMInputError, match=r"wall impact-velocity table: row 4, .* not one of the project's velocity"):
+        WallTable(walls, wall_v)

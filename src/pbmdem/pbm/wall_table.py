@@ -16,25 +16,14 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, WALLS, WallRates
-from pbmdem.readers import first_index
+from pbmdem.impact import N_VELOCITY_BINS, WALLS, WallRates, velocity_bins_of
+from pbmdem.readers import InputFileError, first_index
 
 from .errors import PBMInputError, positive
 from .table import TableFrequency, speed_weights
 
 #: Column of the wall table the breakage selection is built on (impacts of granules that were apart).
 WALL_FREQUENCY_COLUMN = "encounter_frequency_per_particle"
-
-
-def _bin_of(lo: np.ndarray, hi: np.ndarray, what: str) -> np.ndarray:
-    """Velocity bin of every [v_lo, v_hi) row; refuses bins that are not the project's."""
-    b = np.clip(np.searchsorted(VELOCITY_EDGES[:-1], lo), 0, N_VELOCITY_BINS - 1)
-    ok = np.isclose(VELOCITY_EDGES[:-1][b], lo, rtol=1e-6, atol=0.0) & np.isclose(VELOCITY_EDGES[1:][b], hi, rtol=1e-6)
-    if (k := first_index(~ok)) is not None:
-        raise PBMInputError(
-            f"{what} row {k}: bin [{lo[k]!r}, {hi[k]!r}) m/s is not one of pbmdem.impact.VELOCITY_EDGES' bins"
-        )
-    return b
 
 
 class WallTable:
@@ -70,7 +59,10 @@ class WallTable:
     def _counts(t: pd.DataFrame, velocities: pd.DataFrame) -> pd.DataFrame:
         """(rows of t, V) wall encounters per velocity bin, as columns 0..V-1 on t's index."""
         v = velocities[velocities["point_id"].astype(str).isin(set(t["point_id"].astype(str)))]
-        b = _bin_of(v["v_lo"].to_numpy(float), v["v_hi"].to_numpy(float), "wall impact-velocity table")
+        try:
+            b = velocity_bins_of(v["v_lo"], v["v_hi"], "wall impact-velocity table")
+        except InputFileError as exc:
+            raise PBMInputError(str(exc)) from None
         keys = ["point_id", "wall", "class_i"]
         wide = (
             v.assign(bin=b, point_id=v["point_id"].astype(str), class_i=v["class_i"].astype(int))

@@ -82,15 +82,16 @@ def non_finite_values(obj, prefix: str = "") -> list[str]:
     return out
 
 
-def _key(path) -> str:
+def key_path(path, whole: str = "(top level)") -> str:
+    """A key's path in a JSON document as `a.b[2].c` (`whole` for the document itself)."""
     out = ""
     for part in path:
         out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
-    return out or "(top level)"
+    return out or whole
 
 
 def _describe(error) -> str:
-    key = _key(error.absolute_path)
+    key = key_path(error.absolute_path)
     s = error.schema if isinstance(error.schema, dict) else {}
     v = error.validator
     if v == "required":

@@ -18,6 +18,8 @@ import os
 
 from jsonschema import Draft202012Validator
 
+from pbmdem.config.schema import key_path
+
 #: the largest relative slack around a feature's training range (surrogate.domain_margin)
 MAX_DOMAIN_MARGIN = 1.0
 
@@ -190,10 +192,7 @@ class MetadataError(ValueError):
 
 
 def _key(path) -> str:
-    out = ""
-    for part in path:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
-    return out or "(the whole file)"
+    return key_path(path, "(the whole file)")
 
 
 def _non_finite(obj, path=()):

@@ -1,29 +1,16 @@
-"""Aggregation on a pivot grid: the cell-average technique and the fixed pivot technique.
+"""Aggregation on a pivot grid: the cell-average technique (default) and the fixed pivot technique,
+selected by ``pbm.aggregation.scheme``. docs/pbm.md ("Rate processes") describes the schemes, the
+aggregates refused beyond the last pivot, the feed classes and the schemes' accuracy.
 
-Two interchangeable discretisations of the Smoluchowski equation on the K pivots x_k (every
-particle of bin k has solid volume x_k), selected by ``pbm.aggregation.scheme``:
-
-* ``cell_average`` (default): Kumar, Peglow, Warnecke, Heinrich, Moerl (2006), Chem. Eng. Sci.
-  61:3327. Births are first collected per cell, then their average volume is split between two
-  neighbouring pivots.
-* ``fixed_pivot``: Kumar & Ramkrishna (1996), Chem. Eng. Sci. 51:1311. Every aggregate is split
-  between the two pivots that bracket its own volume.
-
-Both preserve number and solid volume exactly and differ only in how births are placed. Every
-ordered pair (i, j) is mapped once per grid: the aggregate volume s_ij = x_i + x_j and where it
-goes. A rate evaluation works on bin *totals* (numbers N, liquid L and gas G per bin) and never
-divides by a number or a volume of the state:
-
-* ordered-pair rates R_ij = beta_ij N_i N_j, RL_ij = beta_ij L_i N_j, RG_ij = beta_ij G_i N_j
-  (the event rate of the unordered pair i < j is R_ij, of i = i it is R_ii / 2; the liquid an
-  event of (i, j) brings is l_i + l_j, so sum RL over both orders is the liquid born);
-* every per-bin total the scheme needs is a sum of these 3 K^2 rates with weights fixed by the
-  grid: deaths (N_i sum_j beta_ij N_j and the same for L and G: each event removes one particle
-  of each partner with its own liquid and gas), births and the refused solid rate. One compiled
-  loop over the ordered pairs (numba, ``_compiled.aggregation_totals``) forms them, with the
-  target cell and weights of every pair precomputed once per grid by the scheme class here
-  (:meth:`PivotAggregation._pair_weights`). The same sums as one sparse map in numpy are the test
-  oracle (``tests/pbm_oracle.py``): the same products added in the same order, equal to the bit.
+Every ordered pair (i, j) is mapped once per grid: the aggregate volume s_ij = x_i + x_j and where
+it goes. A rate evaluation works on bin *totals* (numbers N, liquid L and gas G per class) and never
+divides by a number or a volume of the state: the ordered-pair rates R_ij = beta_ij N_i N_j,
+RL_ij = beta_ij L_i N_j, RG_ij = beta_ij G_i N_j (the event rate of the unordered pair i < j is
+R_ij, of i = i it is R_ii / 2) are summed, with weights fixed by the grid, into the deaths, the
+births and the refused solid rate by one compiled loop over the ordered pairs (numba,
+``_compiled.aggregation_totals``); the scheme classes here precompute the target cell and weights
+of every pair (:meth:`PivotAggregation._pair_weights`). The same sums as one sparse map in numpy
+are the test oracle (``tests/pbm_oracle.py``), equal to the bit.
 
 Cell average, volumes in units of the cell's pivot: with B_c = sum R (number born in cell c) and
 D_c = sum R (s/x_c - 1) (first moment of the births about the pivot, in units of x_c), the mean
@@ -34,22 +21,9 @@ mean volume a_c = V_c/B_c is ever formed (that ratio of two underflowing sums is
 m3 could produce negative births). Liquid and gas born in a cell follow the solid volume each
 pivot receives.
 
-Feed classes (``extra``): besides the K pivot classes, a map can hold P further classes of any
-volume in [x_0, x_(K-1)] that never receive births: the feed granules that have not aggregated
-yet, at their own sizes and apart from the aggregates, so that the two do not share liquid and
-gas (docs/pbm.md, "Feed granules"). They die like any class; an aggregate of volume s (of any
-two classes) is born on the pivots like every other. The classes are ordered [pivots 0..K-1,
-extra 0..P-1] in ``beta`` (K+P, K+P) and in the (3, K+P) totals.
-
-Pairs whose aggregate exceeds the last pivot x_(K-1) are refused: no birth and no death, so solid
-volume is conserved to round-off. The solid-volume rate of refused aggregates is returned, so
-the solver can account for it and stop (GridOverflowError) once it exceeds the allowed fraction.
-
-Accuracy (docs/pbm.md, ``benchmarks/bench_pbm_accuracy.py``): both schemes are exact in the
-zeroth and first moments. The fixed pivot places every aggregate on the two pivots around it,
-and this adds variance, so it over-predicts the second moment. With a ratio-2 grid and Golovin's
-kernel after 10x growth of the mean volume the error is +500 %. The cell average largely cancels
-that error and is the default.
+Feed classes (``extra``): P further classes of any volume in [x_0, x_(K-1)] that die like any class
+but never receive births, ordered [pivots 0..K-1, extra 0..P-1] in ``beta`` (K+P, K+P) and in the
+(3, K+P) totals.
 """
 
 from __future__ import annotations

@@ -1,35 +1,13 @@
 """Breakage of granules: the selection rate, the fragment distribution and their cell-average
-form on the aggregation grid (docs/pbm.md, "Breakage").
-
-The continuous breakage term of the number density n(v, t) is
-
-    dn/dt (v) = -S(v) n(v) + int_v^inf S(u) b(v|u) n(u) du
-
-with the selection rate S(u) (1/s per granule) and the fragment distribution b(v|u) (fragments
-of volume v per breakage of a granule of volume u; int v b(v|u) dv = u). Provided fragment
-distributions (``FRAGMENTS``):
-
-* ``binary``: two equal fragments, b(v|u) = 2 delta(v - u/2);
-* ``uniform``: binary breakage with uniform daughters, b(v|u) = 2/u on (0, u) (Ziff & McGrady
-  1985, J. Phys. A 18:3027): two fragments on average, any split equally likely; it also makes
-  small fragments (attrition-like fines) at the rate of large ones.
+form on the aggregation grid. docs/pbm.md ("Breakage") gives the balance, the fragment
+distributions (``FRAGMENTS``: ``binary``, ``uniform``), what breaks and the discretisation.
 
 Selection rates implement the protocol of the aggregation kernels: ``prepare(inp)`` at every
 step and ``selection(inp) -> (K,)`` the rate of each grid pivot, >= 0, for the classes of a
 :class:`~pbmdem.pbm.kernels.KernelInput`. :class:`ConstantSelection` (PBM-constant) and
 :class:`PowerLawSelection` (S = a v^p, the analytical cases) live here; the selection from the DEM's
-impact statistics is ``pbm.impact_breakage.ImpactSelection``.
-
-Discretisation: the cell-average technique for breakage (Kumar J., Peglow M., Warnecke G.,
-Heinrich S. 2008, Powder Technol. 182:81; Kumar J. et al. 2009, Powder Technol. 189:218), on the
-same grid and with the same split of the births of a cell onto the neighbouring pivots as
-aggregation (:func:`pbmdem.pbm.aggregation.cell_average_factors`). For a granule of pivot k that
-breaks, the fragments born in each cell i (their number and first moment about x_i) come from
-b(v|x_k) over the cell, up to x_k itself (:meth:`Breakage.fragment_tables`); the births of a cell
-are then moved to the pivots so that number and solid volume are exact. Fragments smaller than
-the first pivot x_0 would leave the grid: they are counted as granules of x_0 with their solid
-volume (solid exact, number not; with the first pivot at the smallest feed granule these are
-fragments smaller than any granule the batch started with). The rates themselves are computed
+impact statistics is ``pbm.impact_breakage.ImpactSelection``. :class:`Breakage` holds the
+fragment tables of a grid (:meth:`Breakage.fragment_tables`); the rates themselves are computed
 by the compiled backend (``_compiled.breakage_totals``).
 """
 

@@ -1,37 +1,14 @@
 """Aggregation success: the success probability of a pair from the surface liquid of both
 granules (:class:`SuccessProbability`) and, velocity-dependent, the viscous Stokes criterion of wet
-granule impacts (:class:`StokesCriterion`).
+granule impacts (:class:`StokesCriterion`; Ennis, Tardos & Pfeffer 1991, Powder Technol. 65:257;
+Liu, Litster, Iveson & Ennis 2000, AIChE J. 46:529).
 
-Ennis, Tardos & Pfeffer (1991, Powder Technol. 65:257) and Liu, Litster, Iveson & Ennis (2000,
-AIChE J. 46:529): two granules covered by a binder layer of thickness h meet at relative normal
-approach speed w. The viscous lubrication force of the layer, F = 6 pi mu a*^2 (dx/dt) / x at
-gap x (Reynolds, two spheres of reduced radius a* = a_i a_j / (a_i + a_j)), decelerates the relative
-motion of the reduced mass m* = m_i m_j / (m_i + m_j). Integrating m* dw = -6 pi mu a*^2 dx / x from
-the gap at which the layers meet to the gap at which the surface asperities meet, the approach is
-stopped before the solids touch if
-
-    St_v = m* w / (6 pi mu a*^2) < ln(h / h_a).
-
-If the asperities do touch, the granules rebound with restitution e and the layer dissipates on
-separation too; they stay together if St_v < St* = (1 + 1/e) ln(h / h_a) (Ennis et al. 1991, the
-rebound criterion used here). In the harmonic means of the pair, m~ = 2 m_i m_j / (m_i + m_j) and
-d~ = 2 d_i d_j / (d_i + d_j) (so m* = m~/2, a* = d~/4):
-
-    St_v = 4 m~ w / (3 pi mu d~^2) = 8 m~ u0 / (3 pi mu d~^2),  u0 = w / 2,
-
-which is the form of Liu et al. (2000) with their u0 = half the relative collision velocity, and
-for equal granules of radius a and density rho the form 8 rho u0 a / (9 mu) of Ennis et al. (1991).
-This module uses w, the relative normal approach speed (docs/architecture.md), throughout.
-
-Pair layers: the layers of granules i and j first meet at the gap h_i + h_j and the asperities at
-2 h_a, so h / h_a of a pair is (h_i + h_j) / (2 h_a). A layer no thicker than the asperities
-(h <= h_a) gives St* <= 0: no impact of that pair is held at any speed.
-
-Layer thickness from the PBM: a granule of diameter d whose surface liquid is the volume fraction
-phi of the granule carries a shell of thickness h = d/2 (1 - (1 - phi)^(1/3)) (about phi d / 6 for
-thin layers). d is the PBM size coordinate (the solid-equivalent diameter, which is also the DEM
-particle diameter), and the mass is m = rho_g pi d^3 / 6 with rho_g the granule density (the DEM
-material density). Every quantity is in SI units; the criterion depends only on the dimensionless
+A pair meeting at relative normal approach speed w (docs/architecture.md) is held if
+St_v = m* w / (6 pi mu a*^2) < St* = (1 + 1/e) ln(h / h_a), with the reduced mass m* and radius a*,
+the pair layer h / h_a = (h_i + h_j) / (2 h_a) and the layer thickness h = d/2 (1 - (1 - phi)^(1/3))
+of a granule whose surface liquid is the volume fraction phi. docs/pbm.md ("Rate processes",
+Stokes criterion) derives these, relates them to the forms of Liu et al. and Ennis et al. and
+gives the defaults. Every quantity is in SI units; the criterion depends only on the dimensionless
 groups St_v, h/h_a and e, so any consistent unit system gives the same answer.
 """
 

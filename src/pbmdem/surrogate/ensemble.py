@@ -92,6 +92,18 @@ def _object_array(values) -> np.ndarray:
     return out
 
 
+def _search_results(params: list[dict], mean, std, rank) -> dict:
+    """The candidates' parameters and scores in the layout of ``GridSearchCV.cv_results_``."""
+    return {
+        "params": params,
+        "param_hidden_layer_sizes": _object_array([p["hidden_layer_sizes"] for p in params]),
+        "param_alpha": np.array([p["alpha"] for p in params], dtype=float),
+        "mean_test_score": np.asarray(mean, dtype=float),
+        "std_test_score": np.asarray(std, dtype=float),
+        "rank_test_score": np.asarray(rank, dtype=int),
+    }
+
+
 class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
     """Ensemble of ``Pipeline(StandardScaler, MLPRegressor)`` with a grouped grid search.
 
@@ -299,14 +311,7 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
             {"hidden_layer_sizes": tuple(p["mlp__hidden_layer_sizes"]), "alpha": float(p["mlp__alpha"])}
             for p in res["params"]
         ]
-        out = {
-            "params": params,
-            "param_hidden_layer_sizes": _object_array([p["hidden_layer_sizes"] for p in params]),
-            "param_alpha": np.array([p["alpha"] for p in params], dtype=float),
-            "mean_test_score": np.asarray(res["mean_test_score"], dtype=float),
-            "std_test_score": np.asarray(res["std_test_score"], dtype=float),
-            "rank_test_score": np.asarray(res["rank_test_score"], dtype=int),
-        }
+        out = _search_results(params, res["mean_test_score"], res["std_test_score"], res["rank_test_score"])
         for k in range(n_splits):
             out[f"split{k}_test_score"] = np.asarray(res[f"split{k}_test_score"], dtype=float)
         return out
@@ -382,16 +387,12 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
                 {"hidden_layer_sizes": tuple(int(u) for u in r["hidden_layer_sizes"]), "alpha": float(r["alpha"])}
                 for r in rows
             ]
-            self.cv_results_ = {
-                "params": params,
-                "param_hidden_layer_sizes": _object_array([p["hidden_layer_sizes"] for p in params]),
-                "param_alpha": np.array([p["alpha"] for p in params], dtype=float),
-                "mean_test_score": -(np.array([r["rmse_log10"] for r in rows], dtype=float) ** 2),
-                "std_test_score": np.array(
-                    [np.nan if r["fold_mse_log10_std"] is None else r["fold_mse_log10_std"] for r in rows], dtype=float
-                ),
-                "rank_test_score": np.array([r["rank"] for r in rows], dtype=int),
-            }
+            self.cv_results_ = _search_results(
+                params,
+                -(np.array([r["rmse_log10"] for r in rows], dtype=float) ** 2),
+                [np.nan if r["fold_mse_log10_std"] is None else r["fold_mse_log10_std"] for r in rows],
+                [r["rank"] for r in rows],
+            )
         self.cv_folds_ = [list(f) for f in state["search_cv_folds"]]
         self.n_features_in_ = len(feature_names)
         self.feature_names_in_ = np.asarray(feature_names, dtype=object)

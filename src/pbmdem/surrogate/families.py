@@ -1,16 +1,7 @@
-"""Model families of the encounter surrogate besides the MLP ensemble: Kriging and a response surface.
-
-The seed study's introduction names the families used as reduced-order models of expensive
-simulators: response surfaces (RSM), Kriging, high-dimensional model representation (HDMR) and
-neural networks (the study's choice). :mod:`pbmdem.surrogate` offers three of them as the PBM's
-kernel source, side by side on the same grouped folds (``pbmdem.surrogate.evaluation``):
-
-* ``mlp``: :class:`~pbmdem.surrogate.ensemble.EnsembleMLPRegressorCV` (the study's ANN);
-* ``kriging``: :class:`KrigingRegressor`, a Gaussian process with an anisotropic squared-exponential
-  kernel (one length scale per feature), a linear trend (universal Kriging) and a noise term;
-* ``rsm``: :class:`ResponseSurface`, a full quadratic polynomial with Bayesian ridge
-  regularisation. A second-order polynomial in the (log) features is also a second-order HDMR
-  expansion with polynomial component functions, so HDMR is not fitted separately.
+"""Model families of the encounter surrogate besides the MLP ensemble: Kriging
+(:class:`KrigingRegressor`) and a response surface (:class:`ResponseSurface`); docs/surrogate.md
+("Model families and the kernel source") describes the families, how each is tuned and why HDMR is
+not fitted separately.
 
 Both classes here are scikit-learn regressors on any numeric ``X`` (1-D or 2-D ``y``; every output
 gets a model of its own) whose ``predict(X, return_std=True)`` returns the predictive standard

@@ -1,24 +1,12 @@
-"""Liquid addition and consolidation (rate processes besides aggregation).
+"""Liquid addition and consolidation (rate processes besides aggregation); docs/pbm.md ("Rate
+processes": liquid addition, consolidation) gives their balances and sources.
 
 Liquid addition: binder is sprayed at a volumetric rate Q (m3/s) during [t_start, t_end) and
-shared among the bins in proportion to
-
-* ``"surface_area"`` (default): N_k d_k^2, the particle surface area of the bin (droplets hit
-  particle surfaces: small particles take up more liquid per solid volume);
-* ``"solid_volume"``: N_k x_k, the bin's solid volume (liquid-to-solid ratio rises uniformly).
-
-dL_k/dt = Q w_k / sum_j w_j, so sum_k dL_k/dt = Q exactly: total liquid = initial + Q x overlap
-of the run with the spray window.
-
-Consolidation (first-order approach to a minimum porosity; Verkoeijen et al. 2002, Powder
-Technol. 124:195; as used by Barrasso & Ramachandran 2015, Chem. Eng. Res. Des. 93:304):
-
-    dG_k/dt = -c (G_k - eps_min / (1 - eps_min) S_k),      S_k = N_k x_k,
-
-so the intra-granular pore (gas) volume of every bin decays exponentially toward the value at
-which the porosity eps = G / (S + G) equals eps_min. Liquid fills pores first; liquid in excess of
-the pore volume is surface liquid, l_surf = max(l - g, 0), so consolidation squeezes liquid to the
-surface (see ``state.surface_fraction``).
+shared among the classes in proportion to ``"surface_area"`` (default: N_k d_k^2) or
+``"solid_volume"`` (N_k x_k), so that the total liquid is the initial + Q x overlap of the run with
+the spray window. Consolidation: dG_k/dt = -c (G_k - eps_min / (1 - eps_min) S_k), the pore volume
+approaching the minimum porosity; liquid in excess of the pore volume is surface liquid
+(``state.surface_fraction``).
 
 The classes here hold the settings; the rates themselves are computed with the other rate
 processes in the compiled backend (``_compiled.add_processes``).

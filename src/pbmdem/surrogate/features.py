@@ -396,7 +396,7 @@ class TrainingData:
     noise_var: np.ndarray
     """:data:`TARGET_NOISE_VAR`: replicate noise variance of ``y`` (decades^2, NaN if unknown)."""
     velocity: np.ndarray
-    """(n, 2) log-normal impact-speed law of every row: ``mu`` (log10 median speed, m/s) and
+    """(n, 2) impact-speed law (``speed_law``) of every row: ``mu`` (log10 median speed, m/s) and
     ``sigma`` (std of log10 v, decades), fitted to the row's velocity bins; NaN rows without bins."""
     table: pd.DataFrame
     """The rows used (:func:`prepare_training_table`), with the target columns and ``floored``."""
@@ -404,6 +404,8 @@ class TrainingData:
     """Rows of the input table left out (no pairs, zero encounters with ``drop``, non-finite)."""
     n_floored: int
     """Rows whose zero count was floored (``zero_policy="floor"``)."""
+    speed_law: str = "lognormal"
+    """The impact-speed law ``velocity`` was fitted with (:data:`~pbmdem.surrogate.velocity.SPEED_LAWS`)."""
 
 
 def training_data(
@@ -412,6 +414,7 @@ def training_data(
     zero_policy: str = "drop",
     velocity_table: pd.DataFrame | None = None,
     velocity_source: str = "impact-velocity table",
+    speed_law: str = "lognormal",
 ) -> TrainingData:
     """Features, target, groups, replicate noise and impact-speed targets of a collision table.
 
@@ -420,9 +423,12 @@ def training_data(
     :func:`~pbmdem.surrogate.velocity.attach_velocity_bins` (named ``velocity_source`` in errors);
     a table whose bins are already attached needs none. Without bins only the encounter frequency
     can be learned (a warning says so). ``impeller_radius`` (m) is
-    ``granulator.impeller.blade_length``, for the tip-speed feature.
+    ``granulator.impeller.blade_length``, for the tip-speed feature. ``speed_law`` is the
+    impact-speed law fitted to every row's bins (:data:`~pbmdem.surrogate.velocity.SPEED_LAWS`).
     """
-    from .velocity import attach_velocity_bins, bin_counts, fit_lognormal, velocity_rows
+    from .velocity import attach_velocity_bins, bin_counts, check_speed_law, fit_speed_law, velocity_rows
+
+    check_speed_law(speed_law)
 
     if velocity_table is not None:
         table = attach_velocity_bins(table, velocity_table, source=velocity_source)
@@ -431,7 +437,7 @@ def training_data(
     velocity = np.full((len(data), 2), np.nan)
     vmask = velocity_rows(data)
     if vmask.any():
-        mu, sigma = fit_lognormal(bin_counts(data.loc[vmask]))
+        mu, sigma = fit_speed_law(bin_counts(data.loc[vmask]), speed_law)
         velocity[vmask] = np.column_stack([mu, sigma])
     else:
         warnings.warn(
@@ -449,4 +455,5 @@ def training_data(
         table=data,
         n_dropped=int(len(table) - len(data)),
         n_floored=int(data["floored"].sum()),
+        speed_law=speed_law,
     )

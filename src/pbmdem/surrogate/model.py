@@ -38,7 +38,7 @@ from .features import (
     pair_features,
     pair_table,
 )
-from .velocity import lognormal_fractions
+from .velocity import check_speed_law, speed_fractions
 
 PHYSICS_OFFSETS = ("cross_section", "none")
 FEATURE_TRANSFORMS = ("log", "none")
@@ -78,6 +78,10 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         sizes follow the cross-section instead of a saturated tanh network. The velocity model
         likewise learns log10(median impact speed / tip speed). Needs X with the named features
         ``d_small``, ``d_large``, ``tip_speed``. ``"none"``: plain targets, any numeric X.
+    speed_law : {"lognormal", "weibull"}
+        The impact-speed law whose (mu, sigma) the velocity model learns and whose bin fractions
+        it predicts (:mod:`pbmdem.surrogate.velocity`); the ``velocity`` targets of ``fit`` must
+        be fitted with the same law (:func:`~pbmdem.surrogate.features.training_data`).
     domain_margin : float
         Relative slack of the per-feature training ranges before :class:`OutOfDomainWarning`
         (fraction of each feature's training range).
@@ -110,6 +114,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         feature_transform="none",
         uncertainty_scale=1.0,
         velocity_uncertainty_scale=1.0,
+        speed_law="lognormal",
     ):
         self.frequency_model = frequency_model
         self.velocity_model = velocity_model
@@ -119,6 +124,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         self.feature_transform = feature_transform
         self.uncertainty_scale = uncertainty_scale
         self.velocity_uncertainty_scale = velocity_uncertainty_scale
+        self.speed_law = speed_law
 
     # ------------------------------------------------------------------ helpers
     def _feature_names(self) -> list[str]:
@@ -175,6 +181,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         optionally ``velocity`` = (n, 2) log-normal impact-speed law per row (mu = log10 median
         speed in m/s, sigma in decades; rows with NaN are not used). Returns ``self``."""
         check_impeller_radius(self.impeller_radius)
+        check_speed_law(self.speed_law)
         if self.physics_offset not in PHYSICS_OFFSETS:
             raise ValueError(f"physics_offset = {self.physics_offset!r}; allowed: {PHYSICS_OFFSETS}")
         if self.feature_transform not in FEATURE_TRANSFORMS:
@@ -308,7 +315,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
             )
 
     def predict_velocity(self, X, return_std: bool = False, check_domain: bool = True):
-        """Log-normal impact-speed law per row: ``(mu, sigma)``.
+        """Impact-speed law (``speed_law``) per row: ``(mu, sigma)``.
 
         ``X``: a collision table, a feature frame or an array. ``mu`` is log10 of the median
         impact speed (m/s), ``sigma`` the standard deviation of log10 v (decades); both the
@@ -329,7 +336,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
     def velocity_fractions(self, X, check_domain: bool = True) -> np.ndarray:
         """(n, N_VELOCITY_BINS) predicted fraction of each row's encounters per velocity bin (rows sum to 1)."""
         mu, sigma = self.predict_velocity(X, check_domain=check_domain)
-        return lognormal_fractions(mu, sigma)
+        return speed_fractions(mu, sigma, self.speed_law)
 
     # ------------------------------------------------------------------ PBM kernel
     def _array_path(self) -> bool:
@@ -368,7 +375,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
             return self.velocity_fractions(F, check_domain=False)
         mean = self.velocity_model_.predict_array(self._transform(F)).reshape(len(F), 2)
         velocity_offset = np.zeros(len(F)) if self.physics_offset == "none" else np.log10(F[:, 5])
-        return lognormal_fractions(mean[:, 0] + velocity_offset, 10.0 ** mean[:, 1])
+        return speed_fractions(mean[:, 0] + velocity_offset, 10.0 ** mean[:, 1], self.speed_law)
 
     def frequency_matrix(self, diameters, numbers, rpm: float, return_std: bool = False, check_domain: bool = True):
         """(K,) diameters (m) and (K,) particle numbers -> (K, K) symmetric encounter frequency c_ij (1/s per pair).

@@ -1,15 +1,26 @@
-"""Impact-velocity distributions per class pair: reading, log-normal summary and bin fractions.
+"""Impact-velocity distributions per class pair: reading, two-parameter speed laws and bin fractions.
 
 ``results/dem/impact_velocity.csv`` (docs/architecture.md) holds, per run and class pair, the mean
 number of encounters per replicate in every bin of :data:`pbmdem.impact.VELOCITY_EDGES`. The
-surrogate summarises each pair's binned distribution by a log-normal law of the impact speed v,
+surrogate summarises each pair's binned distribution by a two-parameter law of the impact speed v
+(:data:`SPEED_LAWS`), both parametrised the same way, by
 
-    log10 v ~ Normal(mu, sigma),   median = 10**mu (m/s),  geometric spread = 10**sigma,
+    mu = log10 of the median speed (m/s),   sigma = standard deviation of log10 v (decades),
 
-fitted by maximum likelihood to the bin counts (interval-censored: bin 0 is (0, 1 mm/s), the last
-bin is open upwards because faster impacts are counted there). The MLP learns ``mu`` and
-``log10 sigma`` per pair; :func:`lognormal_fractions` turns them back into fractions per bin, so
-predicted fractions always lie on the project's bins, are >= 0 and sum to 1.
+and fitted by maximum likelihood to the bin counts (interval-censored: bin 0 is (0, 1 mm/s), the
+last bin is open upwards because faster impacts are counted there):
+
+* ``lognormal``: log10 v ~ Normal(mu, sigma); symmetric in log v, its fast tail falls as
+  exp(-(log v)^2 / 2 sigma^2);
+* ``weibull``: P(V > v) = exp(-(v / lambda)^k), with k = pi / (sqrt(6) ln(10) sigma) and
+  lambda = 10**mu / ln(2)**(1/k); in log v it is skewed towards slow impacts and its fast tail is
+  lighter (a stretched exponential in v, as the high-energy tails of driven granular gases,
+  exp(-c v^{3/2}), van Noije & Ernst 1998, Granular Matter 1:57-64).
+
+The surrogate learns ``mu`` and ``log10 sigma`` per pair; :func:`speed_fractions` turns them back
+into fractions per bin of the chosen law, so predicted fractions always lie on the project's bins,
+are >= 0 and sum to 1. Breakage counts the fraction of impacts faster than a critical speed, i.e.
+the fast tail (benchmarks/bench_breakage_tail.py measures it per law).
 """
 
 from __future__ import annotations
@@ -32,6 +43,9 @@ VELOCITY_COUNT_COLUMNS = tuple(f"vbin{b:02d}" for b in range(N_VELOCITY_BINS))
 #: Bounds of the fitted geometric spread sigma (decades). The lower bound is a fifth of a bin width
 #: (bins are 0.25 decades): a pair whose encounters all fall into one bin cannot resolve less.
 SIGMA_BOUNDS = (0.05, 3.0)
+
+#: The impact-speed laws (module docstring); ``lognormal`` was the only one before ``weibull``.
+SPEED_LAWS = ("lognormal", "weibull")
 
 #: log10 of the inner bin edges; bin 0 starts at -inf (v -> 0), the last bin ends at +inf.
 _LOG_EDGES = np.concatenate([[-np.inf], np.log10(VELOCITY_EDGES[1:-1]), [np.inf]])
@@ -95,38 +109,72 @@ def empirical_fractions(counts) -> np.ndarray:
     return counts / total
 
 
-def lognormal_fractions(mu, sigma) -> np.ndarray:
-    """(n, N_VELOCITY_BINS) fraction of a log-normal speed distribution in each velocity bin.
+def check_speed_law(law: str) -> str:
+    """``law`` if it is one of :data:`SPEED_LAWS`, else ValueError naming them."""
+    if law not in SPEED_LAWS:
+        raise ValueError(f"impact-speed law {law!r}; allowed: {list(SPEED_LAWS)}")
+    return law
+
+
+#: pi / sqrt(6): the standard deviation of ln E for E ~ Exp(1) (a Gumbel law of minima)
+_GUMBEL_STD = np.pi / np.sqrt(6.0)
+
+
+def _log_bin_probabilities(x_lo, x_hi, mu, sigma, law: str):
+    """log P(x_lo < log10 v < x_hi) of the law (broadcast), computed stably in both tails."""
+    if law == "lognormal":
+        lo, hi = log_ndtr((x_lo - mu) / sigma), log_ndtr((x_hi - mu) / sigma)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            return hi + np.log1p(-np.exp(np.minimum(lo - hi, 0.0)))
+    # weibull: P(V > v) = exp(-t), t = ln 2 exp(z), z = pi (log10 v - mu) / (sqrt(6) sigma)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        t_lo = np.log(2.0) * np.exp(_GUMBEL_STD * (x_lo - mu) / sigma)
+        t_hi = np.log(2.0) * np.exp(_GUMBEL_STD * (x_hi - mu) / sigma)
+        return -t_lo + np.log1p(-np.exp(-(t_hi - t_lo)))
+
+
+def speed_fractions(mu, sigma, law: str = "lognormal") -> np.ndarray:
+    """(n, N_VELOCITY_BINS) fraction of the speed law ``law`` (:data:`SPEED_LAWS`) in each velocity bin.
 
     ``mu``: log10 of the median speed (m/s); ``sigma``: standard deviation of log10 v (decades).
     Bin 0 takes everything below 1 mm/s, the last bin everything from its lower edge up.
     """
+    check_speed_law(law)
     mu = np.atleast_1d(np.asarray(mu, float))[:, None]
     sigma = np.atleast_1d(np.asarray(sigma, float))[:, None]
-    cdf = ndtr((_LOG_EDGES[None, :] - mu) / sigma)
-    frac = np.diff(cdf, axis=1)
-    frac = np.clip(frac, 0.0, None)
+    if law == "lognormal":
+        frac = np.diff(ndtr((_LOG_EDGES[None, :] - mu) / sigma), axis=1)
+    else:  # from the log of each bin's probability: exact in the fast tail that breakage counts
+        frac = np.exp(_log_bin_probabilities(_LOG_EDGES[None, :-1], _LOG_EDGES[None, 1:], mu, sigma, law))
+    frac = np.clip(np.nan_to_num(frac, nan=0.0), 0.0, None)
     return frac / frac.sum(axis=1, keepdims=True)
 
 
-def _neg_loglik(theta, counts):
+def lognormal_fractions(mu, sigma) -> np.ndarray:
+    """:func:`speed_fractions` of the log-normal law."""
+    return speed_fractions(mu, sigma, "lognormal")
+
+
+def _neg_loglik(theta, counts, law: str = "lognormal"):
     mu, log_sigma = theta
-    z = (_LOG_EDGES - mu) / np.exp(log_sigma)
-    # log P(bin) = log(Phi(z_hi) - Phi(z_lo)), computed stably from log Phi
-    lo, hi = log_ndtr(z[:-1]), log_ndtr(z[1:])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        logp = hi + np.log1p(-np.exp(np.minimum(lo - hi, 0.0)))
-    logp = np.where(counts > 0, logp, 0.0)
+    logp = _log_bin_probabilities(_LOG_EDGES[:-1], _LOG_EDGES[1:], mu, np.exp(log_sigma), law)
+    logp = np.where(counts > 0, np.nan_to_num(logp, nan=-745.0, neginf=-745.0), 0.0)
     return -float(np.sum(counts * np.maximum(logp, -745.0)))
 
 
 def fit_lognormal(counts) -> tuple[np.ndarray, np.ndarray]:
-    """Maximum-likelihood log-normal fit to binned counts, one per row.
+    """:func:`fit_speed_law` of the log-normal law."""
+    return fit_speed_law(counts, "lognormal")
+
+
+def fit_speed_law(counts, law: str = "lognormal") -> tuple[np.ndarray, np.ndarray]:
+    """Maximum-likelihood fit of the speed law ``law`` (:data:`SPEED_LAWS`) to binned counts, one per row.
 
     Returns ``(mu, sigma)``: log10 median speed (m/s) and standard deviation of log10 v (decades),
     sigma within :data:`SIGMA_BOUNDS`. Counts may be non-integer (means over replicates): they act
     as weights of the multinomial likelihood.
     """
+    check_speed_law(law)
     counts = np.atleast_2d(np.asarray(counts, float))
     if counts.shape[1] != N_VELOCITY_BINS:
         raise ValueError(f"expected {N_VELOCITY_BINS} bins per row, got {counts.shape[1]}")
@@ -141,12 +189,12 @@ def fit_lognormal(counts) -> tuple[np.ndarray, np.ndarray]:
         res = minimize(
             _neg_loglik,
             x0=[m0, np.log(s0)],
-            args=(w,),
+            args=(w, law),
             method="L-BFGS-B",
             bounds=[(np.log10(VELOCITY_EDGES[1]) - 3.0, np.log10(VELOCITY_EDGES[-1]) + 3.0), log_bounds],
         )
         if not res.success and not np.isfinite(res.fun):
-            warnings.warn(f"log-normal fit of velocity row {r} did not converge: {res.message}", stacklevel=2)
+            warnings.warn(f"{law} fit of velocity row {r} did not converge: {res.message}", stacklevel=2)
         mus[r], sigmas[r] = res.x[0], np.exp(res.x[1])
     return mus, sigmas
 

@@ -6,7 +6,7 @@ import pytest
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, EncounterRates, ImpactRates, WallRates, fraction_above
 from pbmdem.pbm.errors import PBMInputError
-from pbmdem.pbm.impact_breakage import ImpactSelection, critical_speed
+from pbmdem.pbm.impact_breakage import ImpactSelection, critical_speed, selection_rates
 from pbmdem.pbm.kernels import KernelInput
 
 RHO, Y, ST = 1000.0, 1.0e4, 0.2  # v* = sqrt(2 * 1e4 * 0.2 / 1000) = 2 m/s
@@ -206,3 +206,58 @@ def test_wall_rates_of_one_run_are_read_per_class_and_wall():
     np.testing.assert_allclose(rates.of("bowl")[0], [10.0, 20.0])
     np.testing.assert_allclose(rates.of("impeller")[1].sum(axis=1), 1.0)
     assert rates.of("impeller")[1][0].argmax() == np.searchsorted(VELOCITY_EDGES, 2.5, side="right") - 1
+
+
+# ---------------------------------------------------------------- gradual breakage (strength spread)
+def test_breaking_probability_of_a_log_normal_strength_by_hand():
+    from scipy.integrate import quad
+    from scipy.stats import norm
+
+    from pbmdem.impact import VELOCITY_EDGES, breaking_probability, fraction_above
+
+    v_star, s = 2.0, 0.5
+    p = breaking_probability(v_star, s)
+    # bin [1.78, 3.16) m/s straddles v*: the mean of Phi(2 ln(v / v*) / s) over ln v, by quadrature
+    for b in (12, 13, 14, 15):
+        lo, hi = np.log(VELOCITY_EDGES[b]), np.log(VELOCITY_EDGES[b + 1])
+        expected = quad(lambda u: norm.cdf(2 * (u - np.log(v_star)) / s), lo, hi)[0] / (hi - lo)
+        assert p[b] == pytest.approx(expected, rel=1e-9)
+    # far above v* every granule breaks, far below none
+    assert p[1] < 1e-12 and p[-1] > 0.95
+    # spread 0 is the sharp criterion; a small spread tends to it
+    assert np.array_equal(breaking_probability(v_star, 0.0), fraction_above(v_star))
+    assert np.allclose(breaking_probability(v_star, 1e-4), fraction_above(v_star), atol=1e-4)
+    with pytest.raises(ValueError, match="spread"):
+        breaking_probability(v_star, -0.1)
+
+
+def test_gradual_selection_from_hand_made_impacts():
+    # every pair and wall impact at 2.37 m/s (the bin [1.78, 3.16) m/s, its log centre): with
+    # v* = 2 m/s the sharp criterion breaks a fraction log(3.16 / 2) / log(3.16 / 1.78) = 0.795 of
+    # them; log-normal strengths (spread 0.5) break the bin's mean of Phi(4 ln(v / 2)) instead
+    from scipy.integrate import quad
+    from scipy.stats import norm
+
+    from pbmdem.impact import VELOCITY_EDGES
+
+    b = 14
+    lo, hi = np.log(VELOCITY_EDGES[b]), np.log(VELOCITY_EDGES[b + 1])
+    gradual = quad(lambda u: norm.cdf(4.0 * (u - np.log(2.0))), lo, hi)[0] / (hi - lo)
+    sharp = np.log(VELOCITY_EDGES[b + 1] / 2.0) / np.log(VELOCITY_EDGES[b + 1] / VELOCITY_EDGES[b])
+    K = 2
+    frac = np.zeros((K, K, N_VELOCITY_BINS))
+    frac[..., b] = 1.0
+    wall_frac = np.zeros((2, K, N_VELOCITY_BINS))
+    wall_frac[..., b] = 1.0
+    rates = ImpactRates(
+        EncounterRates(np.full((K, K), 0.01), frac), WallRates(np.array([[1.0, 2.0], [3.0, 4.0]]), wall_frac)
+    )
+    n = np.array([10.0, 5.0])
+    v_star = critical_speed(RHO, Y, ST)
+    assert v_star == pytest.approx(2.0)
+    for spread, p in ((0.0, sharp), (0.5, gradual)):
+        out = selection_rates(rates, n, v_star, spread=spread)
+        assert out["pairs"] == pytest.approx(0.01 * np.array([9.0 + 5.0, 10.0 + 4.0]) * p, rel=1e-9)
+        assert out["bowl"] == pytest.approx(np.array([1.0, 2.0]) * p, rel=1e-9)
+        assert out["impeller"] == pytest.approx(np.array([3.0, 4.0]) * p, rel=1e-9)
+    assert gradual != pytest.approx(sharp, rel=1e-2)

@@ -6,6 +6,7 @@ import math
 import warnings
 
 import numpy as np
+import pandas as pd
 import pytest
 from scipy.stats import weibull_min
 
@@ -15,7 +16,6 @@ from pbmdem.surrogate.baselines import PhysicalScaling
 from pbmdem.surrogate.families import ResponseSurface
 from pbmdem.surrogate.synthetic import make_synthetic_tables
 from pbmdem.surrogate.velocity import (
-    SPEED_LAWS,
     attach_velocity_bins,
     fit_speed_law,
     lognormal_fractions,
@@ -48,15 +48,53 @@ def test_weibull_fractions_are_the_weibull_law_by_hand():
 def test_weibull_tail_is_lighter_than_the_lognormal_of_same_median_and_spread():
     mu, sigma = math.log10(0.3), 0.3
     above = fraction_above(2.0)
-    weib, logn = (speed_fractions(mu, sigma, law)[0] @ above for law in SPEED_LAWS[::-1])
+    weib, logn = (speed_fractions(mu, sigma, law)[0] @ above for law in ("weibull", "lognormal"))
     assert 0 < weib < 0.1 * logn
 
 
-@pytest.mark.parametrize("law", SPEED_LAWS)
+@pytest.mark.parametrize("law", ("lognormal", "weibull"))
 def test_fit_recovers_its_own_law(law):
     mu, sigma = -0.6, 0.35
     mu_fit, sigma_fit = fit_speed_law(1e4 * speed_fractions(mu, sigma, law), law)
     assert mu_fit[0] == pytest.approx(mu, abs=1e-3) and sigma_fit[0] == pytest.approx(sigma, rel=1e-2)
+
+
+@pytest.mark.parametrize("q", (-0.8, 0.4, 1.6))
+def test_gengamma_fit_recovers_its_shape(q):
+    mu, sigma = -0.6, 0.35
+    mu_fit, sigma_fit, q_fit = fit_speed_law(1e5 * speed_fractions(mu, sigma, "gengamma", q), "gengamma")
+    assert mu_fit[0] == pytest.approx(mu, abs=1e-3) and sigma_fit[0] == pytest.approx(sigma, rel=1e-2)
+    assert q_fit[0] == pytest.approx(q, abs=0.05)
+
+
+def test_gengamma_is_the_lognormal_and_the_weibull_at_its_limits():
+    from scipy.stats import gengamma
+
+    mu, sigma = np.array([-0.5, 0.1]), np.array([0.3, 0.1])
+    assert np.allclose(speed_fractions(mu, sigma, "gengamma", [1.0, 1.0]), speed_fractions(mu, sigma, "weibull"))
+    assert np.allclose(speed_fractions(mu, sigma, "gengamma", [1e-4, -1e-4]), lognormal_fractions(mu, sigma))
+    # q = 0.5 by hand: v = s G^(q / ln 10 ...) -- scipy's Stacy form: v = scale G^(1/c), G ~ Gamma(a),
+    # a = 1 / q^2, c = q / (sigma_W ln 10 ... ) matched through the median and the std of log10 v
+    q, a = 0.5, 4.0
+    from scipy.special import polygamma
+
+    sd_log10 = np.sqrt(polygamma(1, a)) / np.log(10.0)  # std of log10 G
+    c = sd_log10 / 0.3  # log10 v = log10 scale + log10(G) / c has std 0.3
+    scale = 10**-0.5 / gengamma.median(a, 1.0) ** (1.0 / c)
+    cdf = gengamma.cdf(VELOCITY_EDGES, a, c, scale=scale)
+    cdf[-1] = 1.0
+    assert np.allclose(speed_fractions(-0.5, 0.3, "gengamma", q)[0], np.diff(cdf), atol=1e-12)
+
+
+def test_gengamma_fractions_on_the_bins_and_a_heavier_tail_for_negative_shape():
+    above = fraction_above(2.0)
+    tails = [speed_fractions(np.log10(0.3), 0.3, "gengamma", q)[0] for q in (-1.0, 0.0, 1.0, 1.5)]
+    for f in tails:
+        assert np.all(f >= 0) and f.sum() == pytest.approx(1.0, abs=1e-12)
+    p = [f @ above for f in tails]
+    assert p[0] > p[1] > p[2] > p[3] > 0
+    with pytest.raises(ValueError, match="shape"):
+        speed_fractions(0.0, 0.3, "gengamma")
 
 
 def test_weibull_fit_of_sampled_speeds_and_its_median():
@@ -110,6 +148,30 @@ def test_surrogate_predicts_fractions_of_its_law_and_persists_it(data, tmp_path)
     loaded = load_surrogate(tmp_path / "model.skops")
     assert loaded.speed_law == "weibull"
     assert np.array_equal(loaded.velocity_fractions(data.X.iloc[:5]), frac)
+
+
+def test_three_parameter_law_through_the_surrogate(data):
+    table = data.table
+    gg = training_data(table, R, speed_law="gengamma")
+    assert gg.velocity.shape == (len(gg.y), 3)
+    model = CollisionSurrogate(
+        frequency_model=ResponseSurface(degree=(1,), n_members=3),
+        impeller_radius=R,
+        physics_offset="cross_section",
+        feature_transform="log",
+        speed_law="gengamma",
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model.fit(gg.X, gg.y, groups=gg.groups, velocity=gg.velocity)
+        with pytest.raises(ValueError, match=r"\(n_samples, 3\)"):
+            model.fit(gg.X, gg.y, groups=gg.groups, velocity=gg.velocity[:, :2])
+    rates = model.encounters(np.array([1e-3, 2e-3]), np.array([3000.0, 500.0]), 600.0, check_domain=False)
+    X = pd.DataFrame([[1e-3, 2e-3, 3000 / 3500, 500 / 3500, 3500.0, 2 * np.pi * R * 10.0]], columns=list(gg.X.columns))
+    assert np.allclose(rates.velocity_fractions[0, 1], model.velocity_fractions(X, check_domain=False)[0])
+    assert np.allclose(rates.velocity_fractions.sum(axis=-1), 1.0)
+    base = PhysicalScaling(speed_law="gengamma").fit(gg.X, gg.y, velocity=gg.velocity)
+    assert np.allclose(base.velocity_fractions(gg.X.iloc[:2]).sum(axis=1), 1.0)
 
 
 def test_baseline_and_evaluation_follow_the_data_law(data):

@@ -397,7 +397,8 @@ class TrainingData:
     """:data:`TARGET_NOISE_VAR`: replicate noise variance of ``y`` (decades^2, NaN if unknown)."""
     velocity: np.ndarray
     """(n, 2) impact-speed law (``speed_law``) of every row: ``mu`` (log10 median speed, m/s) and
-    ``sigma`` (std of log10 v, decades), fitted to the row's velocity bins; NaN rows without bins."""
+    ``sigma`` (std of log10 v, decades), and for ``gengamma`` a third column, the shape q; fitted to
+    the row's velocity bins; NaN rows without bins."""
     table: pd.DataFrame
     """The rows used (:func:`prepare_training_table`), with the target columns and ``floored``."""
     n_dropped: int
@@ -426,19 +427,18 @@ def training_data(
     ``granulator.impeller.blade_length``, for the tip-speed feature. ``speed_law`` is the
     impact-speed law fitted to every row's bins (:data:`~pbmdem.surrogate.velocity.SPEED_LAWS`).
     """
-    from .velocity import attach_velocity_bins, bin_counts, check_speed_law, fit_speed_law, velocity_rows
+    from .velocity import attach_velocity_bins, bin_counts, fit_speed_law, n_law_parameters, velocity_rows
 
-    check_speed_law(speed_law)
+    n_par = n_law_parameters(speed_law)
 
     if velocity_table is not None:
         table = attach_velocity_bins(table, velocity_table, source=velocity_source)
     data = prepare_training_table(table, zero_policy).reset_index(drop=True)
     X = make_features(data, impeller_radius)
-    velocity = np.full((len(data), 2), np.nan)
+    velocity = np.full((len(data), n_par), np.nan)
     vmask = velocity_rows(data)
     if vmask.any():
-        mu, sigma = fit_speed_law(bin_counts(data.loc[vmask]), speed_law)
-        velocity[vmask] = np.column_stack([mu, sigma])
+        velocity[vmask] = np.column_stack(fit_speed_law(bin_counts(data.loc[vmask]), speed_law))
     else:
         warnings.warn(
             "the collision table carries no impact-velocity bins (results/dem/impact_velocity.csv "

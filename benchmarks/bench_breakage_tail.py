@@ -36,6 +36,8 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 KINDS = ("pairs", "impeller", "bowl")
+#: kind -> held-out total-variation distances of the last held_out_points call
+TV: dict = {}
 
 
 # ----------------------------------------------------------------------------- the DEM's own rates
@@ -138,6 +140,7 @@ def held_out_points(tables: dict, settings: dict, radius: float, family: str, la
     from pbmdem.surrogate.ensemble import grouped_splits
     from pbmdem.surrogate.features import training_data
     from pbmdem.surrogate.settings import build_surrogate
+    from pbmdem.surrogate.velocity import bin_counts, empirical_fractions, total_variation
     from pbmdem.surrogate.walls import wall_training_data
 
     s = {**settings, "speed_law": law}
@@ -165,6 +168,16 @@ def held_out_points(tables: dict, settings: dict, radius: float, family: str, la
             for point in test_runs:
                 d, n, rpm = point_classes(tables["pairs"], point)
                 out[point] = model.impacts(d, n, rpm, check_domain=False)
+            # the whole distribution too: total-variation distance of the held-out rows' bin fractions
+            for kind, (dd, m) in {
+                "pairs": (data, model),
+                **{w: (wd, model.wall_models_[w]) for w, wd in walls.items()},
+            }.items():
+                rows = np.flatnonzero(np.isin(dd.groups, test_runs) & np.isfinite(dd.velocity).all(axis=1))
+                observed = empirical_fractions(bin_counts(dd.table.iloc[rows]))
+                TV.setdefault(kind, []).extend(
+                    total_variation(m.velocity_fractions(dd.X.iloc[rows], check_domain=False), observed)
+                )
     return out
 
 
@@ -181,6 +194,7 @@ def rows_of(points: list, dem: dict, estimates: dict, speeds, source: str, sprea
                     rows.append(
                         {
                             "source": source,
+                            "spread": spread,
                             "point_id": point,
                             "rpm": ref["rpm"],
                             "class": k,
@@ -194,6 +208,15 @@ def rows_of(points: list, dem: dict, estimates: dict, speeds, source: str, sprea
                             "est_rate": b[kind][1][k],
                         }
                     )
+    return rows
+
+
+def scored(points, dem, estimates, speeds, source: str, spreads) -> list[dict]:
+    """:func:`rows_of` for every spread of ``spreads`` (the source named with the spread if several)."""
+    rows = []
+    for spread in spreads:
+        name = source if len(spreads) == 1 else f"{source} s={spread:g}"
+        rows += rows_of(points, dem, estimates, speeds, name, spread)
     return rows
 
 
@@ -234,7 +257,11 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--speeds", nargs="+", type=float, default=[1.0, 2.0, 4.0])
     parser.add_argument(
-        "--spread", type=float, default=0.0, help="std of ln Y across granules (pbm.breakage.strength_spread); 0: sharp"
+        "--spread",
+        nargs="+",
+        type=float,
+        default=[0.0],
+        help="std of ln Y across granules (pbm.breakage.strength_spread; 0: sharp); each one scored",
     )
     parser.add_argument("--model", type=Path, default=None, help="a trained surrogate: also its in-sample error")
     parser.add_argument("--no-held-out", action="store_true", help="only the law fits (and --model)")
@@ -255,19 +282,24 @@ def main(argv=None) -> int:
     points = sorted(tables["pairs"]["point_id"].astype(str).unique())
     dem = {p: dem_point(tables, p) for p in points}
     print(
-        f"{len(points)} grid points, v* = {args.speeds} m/s (spread of ln Y {args.spread:g}), family {args.family}, "
+        f"{len(points)} grid points, v* = {args.speeds} m/s (spread of ln Y {args.spread}), family {args.family}, "
         f"folds {settings['cv']}"
     )
     rows = []
     for law in args.laws:
         t0 = time.perf_counter()
         fitted = {p: dem_point(tables, p, law)["rates"] for p in points}
-        rows += rows_of(points, dem, fitted, args.speeds, f"{law} fit", args.spread)
+        rows += scored(points, dem, fitted, args.speeds, f"{law} fit", args.spread)
         print(f"{law}: fits to the DEM's own bins {time.perf_counter() - t0:.1f} s", flush=True)
         if not args.no_held_out:
             t0 = time.perf_counter()
+            TV.clear()
             held = held_out_points(tables, settings, radius, args.family, law)
-            rows += rows_of(points, dem, held, args.speeds, f"{law} held out", args.spread)
+            print(
+                f"{law}: held-out bin fractions, mean total-variation distance "
+                + ", ".join(f"{k} {np.mean(v):.3f} ({len(v)} rows)" for k, v in TV.items())
+            )
+            rows += scored(points, dem, held, args.speeds, f"{law} held out", args.spread)
             print(f"{law}: held-out {args.family} {time.perf_counter() - t0:.1f} s", flush=True)
     if args.model is not None:
         from pbmdem.surrogate import load_surrogate
@@ -276,7 +308,7 @@ def main(argv=None) -> int:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             est = {p: model.impacts(dem[p]["d"], dem[p]["n"], dem[p]["rpm"], check_domain=False) for p in points}
-        rows += rows_of(points, dem, est, args.speeds, f"{model.speed_law} in sample", args.spread)
+        rows += scored(points, dem, est, args.speeds, f"{model.speed_law} in sample", args.spread)
     frame = pd.DataFrame(rows)
     if args.csv:
         frame.to_csv(args.csv, index=False)
@@ -286,20 +318,21 @@ def main(argv=None) -> int:
     print("\n|log10(estimate / DEM)| per (point, class) where the DEM's is > 0 (med / p90 / median signed);")
     print("dem0: rows with no DEM impact above v*; est>0, est>3/N: estimates > 0 and above the detection limit")
     print(table.to_string(index=False, float_format=lambda x: f"{x:.3g}"))
-    # number-weighted selection rate per point, summed over kinds
+    # number-weighted selection rate per point, summed over kinds (the DEM's with the same spread)
     frame["N"] = [dem[p]["n"][k] for p, k in zip(frame["point_id"], frame["class"], strict=True)]
     agg = (
         frame.assign(dem=frame["N"] * frame["dem_rate"], est=frame["N"] * frame["est_rate"])
-        .groupby(["v_star", "point_id", "source"], sort=True)[["dem", "est", "N"]]
+        .groupby(["spread", "v_star", "point_id", "source"], sort=True)[["dem", "est", "N"]]
         .sum()
     )
-    n_kinds = len(KINDS)
-    agg["N"] /= n_kinds
+    agg["N"] /= len(KINDS)
     sel = pd.DataFrame({"DEM": agg["dem"] / agg["N"], "est": agg["est"] / agg["N"]}).reset_index()
-    wide = sel.pivot_table(index=["v_star", "point_id"], columns="source", values="est")
-    wide.insert(0, "DEM", sel.groupby(["v_star", "point_id"])["DEM"].first())
-    print("\nnumber-weighted selection rate S (1/s per granule, all kinds) per point:")
-    print(wide.to_string(float_format=lambda x: f"{x:.3g}"))
+    sel["source"] = sel["source"].str.replace(r" s=[0-9.]+$", "", regex=True)
+    for spread, g in sel.groupby("spread"):
+        wide = g.pivot_table(index=["v_star", "point_id"], columns="source", values="est")
+        wide.insert(0, "DEM", g.groupby(["v_star", "point_id"])["DEM"].first())
+        print(f"\nnumber-weighted selection rate S (1/s per granule, all kinds) per point, spread of ln Y {spread:g}:")
+        print(wide.to_string(float_format=lambda x: f"{x:.3g}"))
     return 0
 
 

@@ -239,13 +239,10 @@ def fit_speed_law(counts, law: str = "lognormal") -> tuple[np.ndarray, ...]:
         w = c / c.sum()
         m0 = float(np.dot(w, _LOG_CENTRES))
         s0 = float(np.clip(np.sqrt(np.dot(w, (_LOG_CENTRES - m0) ** 2) + 0.25**2 / 12), *SIGMA_BOUNDS))
-        # the generalised gamma from the log-normal (q ~ 0), the Weibull (q = 1) and a heavy tail
-        starts = [[m0, np.log(s0)]] if n_par == 2 else [[m0, np.log(s0), q0] for q0 in (0.01, 1.0, -0.5)]
-        best = None
-        for x0 in starts:
-            res = minimize(_neg_loglik, x0=x0, args=(w, law), method="L-BFGS-B", bounds=bounds[:n_par])
-            if best is None or res.fun < best.fun:
-                best = res
+        x0 = [m0, np.log(s0)]
+        if n_par == 3:  # the generalised gamma from the likeliest of a log-normal, a Weibull and a heavy tail
+            x0 = min(([m0, np.log(s0), q0] for q0 in (0.01, 1.0, -0.5)), key=lambda x: _neg_loglik(x, w, law))
+        best = minimize(_neg_loglik, x0=x0, args=(w, law), method="L-BFGS-B", bounds=bounds[:n_par])
         if not best.success and not np.isfinite(best.fun):
             warnings.warn(f"{law} fit of velocity row {r} did not converge: {best.message}", stacklevel=2)
         out[:, r] = best.x

@@ -95,6 +95,9 @@ def test_gengamma_fractions_on_the_bins_and_a_heavier_tail_for_negative_shape():
     assert p[0] > p[1] > p[2] > p[3] > 0
     with pytest.raises(ValueError, match="shape"):
         speed_fractions(0.0, 0.3, "gengamma")
+    # shapes beyond the fitted bounds (a widened ensemble member) are held at the bounds
+    assert np.array_equal(speed_fractions(-0.5, 0.3, "gengamma", 10.0), speed_fractions(-0.5, 0.3, "gengamma", 3.0))
+    assert np.array_equal(speed_fractions(-0.5, 0.3, "gengamma", -9.0), speed_fractions(-0.5, 0.3, "gengamma", -2.0))
 
 
 def test_weibull_fit_of_sampled_speeds_and_its_median():

@@ -194,7 +194,8 @@ def speed_fractions(mu, sigma, law: str = "lognormal", shape=None) -> np.ndarray
     if law == "lognormal":
         frac = np.diff(ndtr((_LOG_EDGES[None, :] - mu) / sigma), axis=1)
     else:  # from the log of each bin's probability: exact in the fast tail that breakage counts
-        q = None if shape is None else np.atleast_1d(np.asarray(shape, float))[:, None]
+        # a predicted shape beyond the fitted range (an extrapolating or widened member) is held at its bound
+        q = None if shape is None else np.clip(np.atleast_1d(np.asarray(shape, float)), *SHAPE_BOUNDS)[:, None]
         frac = np.exp(_log_bin_probabilities(_LOG_EDGES[None, :-1], _LOG_EDGES[None, 1:], mu, sigma, law, q))
     frac = np.clip(np.nan_to_num(frac, nan=0.0), 0.0, None)
     return frac / frac.sum(axis=1, keepdims=True)

@@ -261,3 +261,32 @@ def test_gradual_selection_from_hand_made_impacts():
         assert out["bowl"] == pytest.approx(np.array([1.0, 2.0]) * p, rel=1e-9)
         assert out["impeller"] == pytest.approx(np.array([3.0, 4.0]) * p, rel=1e-9)
     assert gradual != pytest.approx(sharp, rel=1e-2)
+
+
+def test_larger_granules_weaker_with_a_strength_size_exponent():
+    # Y (d / 2 mm)^(-1): a 2 mm granule has v* = 2 m/s, an 8 mm one v* = 2 / sqrt(4) = 1 m/s; every
+    # impact at 1.3 m/s (bin [1, 1.78) m/s) breaks the 8 mm granule and none of the 2 mm ones
+    d = (0.002, 0.008)
+    source = HandMadeSource(np.full((2, 2), 0.01), [2.0, 2.0], [1.0, 1.0], 1.3, 1.3, 1.3)
+    inp = kernel_input([10.0, 5.0], d=d)
+    flat = ImpactSelection(source, RHO, Y, ST)
+    sized = ImpactSelection(source, RHO, Y, ST, size_exponent=1.0, reference_diameter=0.002)
+    assert sized.critical_speeds(np.array(d)) == pytest.approx([2.0, 1.0])
+    assert np.all(flat(inp) == 0.0)
+    parts = sized.contributions(inp)
+    assert parts["pairs"] == pytest.approx([0.0, 0.01 * (10.0 + 4.0)])
+    assert parts["impeller"] == pytest.approx([0.0, 2.0]) and parts["bowl"] == pytest.approx([0.0, 1.0])
+    with pytest.raises(PBMInputError, match="exponent"):
+        ImpactSelection(source, RHO, Y, ST, size_exponent=-1.0)
+
+
+def test_breakage_study_variants_include_the_sharp_criterion(default_config):
+    from pbmdem.coupling.studies import breakage_variants
+
+    pbm = default_config.pbm
+    variants = breakage_variants(pbm)
+    assert list(variants) == ["off", "default", "Y/2", "Yx2", "sharp"]
+    assert variants["default"].strength_spread == pbm.breakage.strength_spread > 0
+    assert variants["sharp"].strength_spread == 0.0 and variants["sharp"].enabled
+    sharp_only = breakage_variants(pbm.replace(breakage=pbm.breakage.replace(strength_spread=0.0)))
+    assert "sharp" not in sharp_only

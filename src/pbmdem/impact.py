@@ -100,8 +100,9 @@ def fraction_above(speed: float) -> np.ndarray:
     return np.where(inside, np.where(lo > 0, log_part, linear_part), out)
 
 
-def breaking_probability(speed: float, spread: float = 0.0) -> np.ndarray:
-    """(N_VELOCITY_BINS,) mean probability that an impact of each bin breaks its granule.
+def breaking_probability(speed, spread: float = 0.0) -> np.ndarray:
+    """(N_VELOCITY_BINS,) mean probability that an impact of each bin breaks its granule; with an
+    array of critical speeds (one per size class) one row per speed, (K, N_VELOCITY_BINS).
 
     The granules' dynamic yield strength Y is log-normal across granules, with median Y50 and
     standard deviation ``spread`` of ln Y; an impact at speed v breaks a granule whose St_def =
@@ -120,6 +121,8 @@ def breaking_probability(speed: float, spread: float = 0.0) -> np.ndarray:
     s = float(spread)
     if not (np.isfinite(s) and s >= 0):
         raise ValueError(f"spread of ln Y {spread!r}: allowed are finite values >= 0")
+    if np.ndim(speed) > 0:
+        return np.stack([breaking_probability(float(v), s) for v in np.asarray(speed, float)])
     if s == 0.0:
         return fraction_above(speed)
     v_star = float(speed)

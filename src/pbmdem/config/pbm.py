@@ -109,6 +109,8 @@ class BreakageSettings(Settings):
     walls: tuple[str, ...]
     pairs: bool
     strength_spread: float
+    strength_size_exponent: float
+    reference_diameter: float
 
 
 @dataclass(frozen=True)

@@ -274,7 +274,9 @@ def test_breakage_from_each_intervals_impacts_breaks_only_above_the_critical_spe
     gas follows the consolidation of the granules, which depends on their sizes)."""
     loop = tiny_config.coupled_loop().replace(coupling_intervals=2)
     pbm = loop.batch.pbm
-    brk = pbm.breakage.replace(enabled=True, yield_strength=1.0e4, critical_stokes=0.2, walls=("impeller",))
+    brk = pbm.breakage.replace(
+        enabled=True, yield_strength=1.0e4, critical_stokes=0.2, walls=("impeller",), strength_spread=0.0
+    )
     on = loop.replace(batch=loop.batch.replace(pbm=pbm.replace(breakage=brk)))
     off = loop.replace(batch=loop.batch.replace(pbm=pbm.replace(breakage=brk.replace(enabled=False))))
     plain = coupling.run_loop(off, _FixedProvider(2.0), 600.0, tmp_path / "off").result.summary()

@@ -7,7 +7,7 @@ import pytest
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, EncounterRates, ImpactRates, WallRates, fraction_above
 from pbmdem.pbm.errors import PBMInputError
-from pbmdem.pbm.impact_breakage import ImpactSelection, critical_speed
+from pbmdem.pbm.impact_breakage import ImpactSelection, critical_speed, selection_rates
 from pbmdem.pbm.kernels import KernelInput
 
 RHO, Y, ST = 1000.0, 1.0e4, 0.2  # v* = sqrt(2 * 1e4 * 0.2 / 1000) = 2 m/s
@@ -168,3 +168,87 @@ def test_a_wall_velocity_bin_off_the_project_edges_is_refused_by_row():
     wall_v.loc[3, "v_lo"] *= 1.5
     with pytest.raises(PBMInputError, match=r"wall impact-velocity table: row 4, .* not one of the project's velocity"):
         WallTable(walls, wall_v)
+
+
+# ---------------------------------------------------------------- gradual breakage (strength spread)
+def test_breaking_probability_of_a_log_normal_strength_by_hand():
+    from scipy.integrate import quad
+    from scipy.stats import norm
+
+    from pbmdem.impact import VELOCITY_EDGES, breaking_probability, fraction_above
+
+    v_star, s = 2.0, 0.5
+    p = breaking_probability(v_star, s)
+    # bin [1.78, 3.16) m/s straddles v*: the mean of Phi(2 ln(v / v*) / s) over ln v, by quadrature
+    for b in (12, 13, 14, 15):
+        lo, hi = np.log(VELOCITY_EDGES[b]), np.log(VELOCITY_EDGES[b + 1])
+        expected = quad(lambda u: norm.cdf(2 * (u - np.log(v_star)) / s), lo, hi)[0] / (hi - lo)
+        assert p[b] == pytest.approx(expected, rel=1e-9)
+    # far above v* every granule breaks, far below none
+    assert p[1] < 1e-12 and p[-1] > 0.95
+    # spread 0 is the sharp criterion; a small spread tends to it
+    assert np.array_equal(breaking_probability(v_star, 0.0), fraction_above(v_star))
+    assert np.allclose(breaking_probability(v_star, 1e-4), fraction_above(v_star), atol=1e-4)
+    with pytest.raises(ValueError, match="spread"):
+        breaking_probability(v_star, -0.1)
+
+
+def test_gradual_selection_from_hand_made_impacts():
+    # every pair and wall impact at 2.37 m/s (the bin [1.78, 3.16) m/s, its log centre): with
+    # v* = 2 m/s the sharp criterion breaks a fraction log(3.16 / 2) / log(3.16 / 1.78) = 0.795 of
+    # them; log-normal strengths (spread 0.5) break the bin's mean of Phi(4 ln(v / 2)) instead
+    from scipy.integrate import quad
+    from scipy.stats import norm
+
+    from pbmdem.impact import VELOCITY_EDGES
+
+    b = 14
+    lo, hi = np.log(VELOCITY_EDGES[b]), np.log(VELOCITY_EDGES[b + 1])
+    gradual = quad(lambda u: norm.cdf(4.0 * (u - np.log(2.0))), lo, hi)[0] / (hi - lo)
+    sharp = np.log(VELOCITY_EDGES[b + 1] / 2.0) / np.log(VELOCITY_EDGES[b + 1] / VELOCITY_EDGES[b])
+    K = 2
+    frac = np.zeros((K, K, N_VELOCITY_BINS))
+    frac[..., b] = 1.0
+    wall_frac = np.zeros((2, K, N_VELOCITY_BINS))
+    wall_frac[..., b] = 1.0
+    rates = ImpactRates(
+        EncounterRates(np.full((K, K), 0.01), frac), WallRates(np.array([[1.0, 2.0], [3.0, 4.0]]), wall_frac)
+    )
+    n = np.array([10.0, 5.0])
+    v_star = critical_speed(RHO, Y, ST)
+    assert v_star == pytest.approx(2.0)
+    for spread, p in ((0.0, sharp), (0.5, gradual)):
+        out = selection_rates(rates, n, v_star, spread=spread)
+        assert out["pairs"] == pytest.approx(0.01 * np.array([9.0 + 5.0, 10.0 + 4.0]) * p, rel=1e-9)
+        assert out["bowl"] == pytest.approx(np.array([1.0, 2.0]) * p, rel=1e-9)
+        assert out["impeller"] == pytest.approx(np.array([3.0, 4.0]) * p, rel=1e-9)
+    assert gradual != pytest.approx(sharp, rel=1e-2)
+
+
+def test_larger_granules_weaker_with_a_strength_size_exponent():
+    # Y (d / 2 mm)^(-1): a 2 mm granule has v* = 2 m/s, an 8 mm one v* = 2 / sqrt(4) = 1 m/s; every
+    # impact at 1.3 m/s (bin [1, 1.78) m/s) breaks the 8 mm granule and none of the 2 mm ones
+    d = (0.002, 0.008)
+    source = HandMadeSource(np.full((2, 2), 0.01), [2.0, 2.0], [1.0, 1.0], 1.3, 1.3, 1.3)
+    inp = kernel_input([10.0, 5.0], d=d)
+    flat = ImpactSelection(source, RHO, Y, ST)
+    sized = ImpactSelection(source, RHO, Y, ST, size_exponent=1.0, reference_diameter=0.002)
+    assert sized.critical_speeds(np.array(d)) == pytest.approx([2.0, 1.0])
+    assert np.all(flat(inp) == 0.0)
+    parts = sized.contributions(inp)
+    assert parts["pairs"] == pytest.approx([0.0, 0.01 * (10.0 + 4.0)])
+    assert parts["impeller"] == pytest.approx([0.0, 2.0]) and parts["bowl"] == pytest.approx([0.0, 1.0])
+    with pytest.raises(PBMInputError, match="exponent"):
+        ImpactSelection(source, RHO, Y, ST, size_exponent=-1.0)
+
+
+def test_breakage_study_variants_include_the_sharp_criterion(default_config):
+    from pbmdem.coupling.studies import breakage_variants
+
+    pbm = default_config.pbm
+    variants = breakage_variants(pbm)
+    assert list(variants) == ["off", "default", "Y/2", "Yx2", "sharp"]
+    assert variants["default"].strength_spread == pbm.breakage.strength_spread > 0
+    assert variants["sharp"].strength_spread == 0.0 and variants["sharp"].enabled
+    sharp_only = breakage_variants(pbm.replace(breakage=pbm.breakage.replace(strength_spread=0.0)))
+    assert "sharp" not in sharp_only

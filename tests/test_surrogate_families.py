@@ -48,6 +48,7 @@ SETTINGS = Surrogate.from_section(
         "max_iter": 1000,
         "cv": {"strategy": "group_kfold", "n_splits": 4},
         "kriging": {"n_restarts_optimizer": 2},
+        "speed_law": "lognormal",  # the synthetic tables' known law
     }
 ).to_dict()
 
@@ -269,8 +270,8 @@ from pbmdem.surrogate.synthetic import make_synthetic_tables
 from pbmdem.config import Surrogate
 R = 0.0265
 table, velocity = make_synthetic_tables(R, rpms=(300, 600, 1200), sample_velocities=True)
-data = training_data(table, R, velocity_table=velocity)
 settings = Surrogate.from_section({}).to_dict()  # the defaults
+data = training_data(table, R, velocity_table=velocity, speed_law=settings["speed_law"])
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     for name in ("kriging", "rsm"):

@@ -80,6 +80,7 @@ def test_build_surrogate_from_settings():
         "frequency_model",
         "impeller_radius",
         "physics_offset",
+        "speed_law",
         "uncertainty_scale",
         "velocity_model",
         "velocity_uncertainty_scale",
@@ -90,6 +91,7 @@ def test_build_surrogate_from_settings():
         s["domain_margin"],
     )
     assert params["feature_transform"] == s["feature_transform"]
+    assert params["speed_law"] == s["speed_law"] == "gengamma"
     # the uncertainty scales are set by training from held-out coverage, not by a setting
     assert params["uncertainty_scale"] == params["velocity_uncertainty_scale"] == 1.0
     assert est.frequency_model.get_params() == {

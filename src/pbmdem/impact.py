@@ -100,6 +100,47 @@ def fraction_above(speed: float) -> np.ndarray:
     return np.where(inside, np.where(lo > 0, log_part, linear_part), out)
 
 
+def breaking_probability(speed, spread: float = 0.0) -> np.ndarray:
+    """(N_VELOCITY_BINS,) mean probability that an impact of each bin breaks its granule; with an
+    array of critical speeds (one per size class) one row per speed, (K, N_VELOCITY_BINS).
+
+    The granules' dynamic yield strength Y is log-normal across granules, with median Y50 and
+    standard deviation ``spread`` of ln Y; an impact at speed v breaks a granule whose St_def =
+    rho v^2 / (2 Y) exceeds St_def*, i.e. whose Y is below rho v^2 / (2 St_def*), so with v* the
+    critical speed of the median granule (``speed``, m/s)
+
+        P(v) = Phi(2 ln(v / v*) / spread).
+
+    ``spread`` = 0 is the sharp criterion, P = 1 above v* and 0 below: :func:`fraction_above`. As
+    there, impacts are spread evenly in log v inside a log bin (the mean of P over the bin is then
+    exact: the integral of Phi is z Phi(z) + phi(z)), evenly in v in bin 0 (64-point midpoint
+    rule), and the last bin ends at 10 m/s.
+    """
+    from scipy.special import ndtr
+
+    s = float(spread)
+    if not (np.isfinite(s) and s >= 0):
+        raise ValueError(f"spread of ln Y {spread!r}: allowed are finite values >= 0")
+    if np.ndim(speed) > 0:
+        return np.stack([breaking_probability(float(v), s) for v in np.asarray(speed, float)])
+    if s == 0.0:
+        return fraction_above(speed)
+    v_star = float(speed)
+    if not (np.isfinite(v_star) and v_star > 0):
+        raise ValueError(f"critical impact speed {speed!r} m/s: allowed are finite speeds > 0 with a spread")
+    a = 2.0 / s
+    lo, hi = VELOCITY_EDGES[1:-1], VELOCITY_EDGES[2:]
+    z_lo, z_hi = a * np.log(lo / v_star), a * np.log(hi / v_star)
+
+    def integral(z):  # antiderivative of Phi
+        return z * ndtr(z) + np.exp(-0.5 * z * z) / np.sqrt(2.0 * np.pi)
+
+    log_bins = (integral(z_hi) - integral(z_lo)) / (z_hi - z_lo)
+    v0 = (np.arange(64) + 0.5) / 64 * VELOCITY_EDGES[1]
+    first = float(np.mean(ndtr(a * np.log(v0 / v_star))))
+    return np.clip(np.concatenate([[first], log_bins]), 0.0, 1.0)
+
+
 @dataclass(frozen=True)
 class WallRates:
     """Velocity-resolved wall impacts of K size classes.

@@ -97,8 +97,9 @@ class AggregationSettings(Settings):
 class BreakageSettings(Settings):
     """Breakage of aggregates (docs/pbm.md, "Breakage"): on or off, the fragment distribution,
     PBM-constant's selection rate (1/s per granule), and the impact criterion of PBM-DEM and
-    PBM-ANN: dynamic yield strength Y (Pa), critical Stokes deformation number, the walls and
-    whether granule-granule impacts break granules."""
+    PBM-ANN: dynamic yield strength Y (Pa, the median granule's), critical Stokes deformation
+    number, the walls, whether granule-granule impacts break granules, and the standard deviation
+    of ln Y across granules (0: every impact above v* breaks)."""
 
     enabled: bool
     fragments: str
@@ -107,6 +108,9 @@ class BreakageSettings(Settings):
     critical_stokes: float
     walls: tuple[str, ...]
     pairs: bool
+    strength_spread: float
+    strength_size_exponent: float
+    reference_diameter: float
 
 
 @dataclass(frozen=True)

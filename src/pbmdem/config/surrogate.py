@@ -46,6 +46,7 @@ class Surrogate(Settings):
     zero_collisions: str
     domain_margin: float
     physics_offset: str
+    speed_law: str
     model: str
     feature_transform: str
     kriging: KrigingSettings

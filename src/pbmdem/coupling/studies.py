@@ -162,23 +162,27 @@ BREAKAGE_STUDY_MAX_STEPS = 20_000
 
 def breakage_variants(pbm) -> dict:
     """The breakage settings the breakage study compares (name -> pbm.breakage): breakage off
-    (aggregation only), the configured criterion, and the dynamic yield strength Y and the critical
-    Stokes deformation number St_def* each halved and doubled (v* ~ sqrt(Y St_def*))."""
+    (aggregation only), the configured criterion, the dynamic yield strength Y halved and doubled,
+    and, with a spread of granule strengths configured, the sharp criterion (``strength_spread`` 0:
+    every impact above v* breaks). The criterion depends on Y and St_def* only through
+    v* ~ sqrt(Y St_def*): halving or doubling St_def* gives the Y variants' results, so it is not
+    run again."""
     brk = pbm.breakage.replace(enabled=True)
-    return {
+    variants = {
         "off": pbm.breakage.replace(enabled=False),
         "default": brk,
         "Y/2": brk.replace(yield_strength=0.5 * brk.yield_strength),
         "Yx2": brk.replace(yield_strength=2.0 * brk.yield_strength),
-        "St*/2": brk.replace(critical_stokes=0.5 * brk.critical_stokes),
-        "St*x2": brk.replace(critical_stokes=2.0 * brk.critical_stokes),
     }
+    if brk.strength_spread > 0:
+        variants["sharp"] = brk.replace(strength_spread=0.0)
+    return variants
 
 
 def breakage_study(loop: CoupledLoop, model_path: str | Path, speeds, grid_speeds) -> pd.DataFrame:
     """:func:`speed_study` once per breakage variant (:func:`breakage_variants`): final sizes against
-    impeller speed without breakage, with it, and with the criterion's parameters halved and
-    doubled; columns ``variant``, ``yield_strength``, ``critical_stokes``, ``critical_speed``
+    impeller speed without breakage, with it, with Y halved and doubled and with the sharp criterion;
+    columns ``variant``, ``yield_strength``, ``critical_stokes``, ``strength_spread``, ``critical_speed``
     (m/s, v* = sqrt(2 Y St_def* / rho)) beside the speed study's."""
     from pbmdem.pbm.impact_breakage import critical_speed
 
@@ -198,9 +202,10 @@ def breakage_study(loop: CoupledLoop, model_path: str | Path, speeds, grid_speed
                 breakage=brk.enabled,
                 yield_strength=brk.yield_strength,
                 critical_stokes=brk.critical_stokes,
+                strength_spread=brk.strength_spread,
                 critical_speed=v if brk.enabled else float("nan"),
             )
         )
     out = pd.concat(frames, ignore_index=True)
-    first = ["variant", "breakage", "yield_strength", "critical_stokes", "critical_speed"]
+    first = ["variant", "breakage", "yield_strength", "critical_stokes", "strength_spread", "critical_speed"]
     return out[first + [c for c in out.columns if c not in first]]

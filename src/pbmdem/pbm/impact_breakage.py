@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from pbmdem.config import Pbm
-from pbmdem.impact import WALLS, ImpactRates, fraction_above
+from pbmdem.impact import N_VELOCITY_BINS, WALLS, ImpactRates, breaking_probability
 
 from .errors import PBMInputError, positive
 from .kernels import KernelInput
@@ -38,21 +38,25 @@ def critical_speed(density: float, yield_strength: float, critical_stokes: float
 
 
 def selection_rates(
-    rates: ImpactRates, numbers, speed: float, walls=WALLS, pairs: bool = True
+    rates: ImpactRates, numbers, speed: float, walls=WALLS, pairs: bool = True, spread: float = 0.0
 ) -> dict[str, np.ndarray]:
     """(K,) breaking impacts per granule and second of each class, per kind of impact: ``pairs``
-    (summed over the partner classes) and each wall of ``walls``; ``speed`` is v* (m/s)."""
-    above = fraction_above(speed)
+    (summed over the partner classes) and each wall of ``walls``; ``speed`` is v* (m/s) of the
+    median granule (or (K,), one per class), ``spread`` the standard deviation of ln Y across granules (0: the sharp
+    criterion; :func:`pbmdem.impact.breaking_probability`)."""
     n = np.asarray(numbers, float)
     K = n.size
+    # (K, V): the probability of each class's granule breaking in an impact of each bin
+    above = np.broadcast_to(breaking_probability(speed, spread), (K, N_VELOCITY_BINS))
     out: dict[str, np.ndarray] = {}
     if pairs:
-        breaking = rates.pairs.velocity_fractions @ above  # (K, K) fraction of each pair's impacts
+        # (K, K) fraction of each pair's impacts that break granule i
+        breaking = np.einsum("ijb,ib->ij", rates.pairs.velocity_fractions, above)
         partners = np.maximum(n[None, :] - np.eye(K), 0.0)  # a granule does not meet itself
         out["pairs"] = (rates.pairs.frequency * breaking * partners).sum(axis=1)
     for wall in walls:
         frequency, fractions = rates.walls.of(wall)
-        out[wall] = frequency * (fractions @ above)
+        out[wall] = frequency * (fractions * above).sum(axis=1)
     return out
 
 
@@ -62,7 +66,11 @@ class ImpactSelection:
     ``source`` offers ``impacts(diameters, numbers, rpm) -> pbmdem.impact.ImpactRates``;
     ``density`` (kg/m3) the granule density, ``yield_strength`` Y (Pa) the granule's dynamic yield
     strength, ``critical_stokes`` St_def*; ``walls`` the walls whose impacts can break a granule
-    (of "impeller", "bowl"); ``pairs`` whether granule-granule encounters can. :meth:`prepare`
+    (of "impeller", "bowl"); ``pairs`` whether granule-granule encounters can; ``strength_spread``
+    the standard deviation of ln Y across granules (log-normal strengths: an impact at v breaks
+    with probability Phi(2 ln(v / v*) / spread), v* that of the median granule; 0: every impact
+    above v* breaks, none below); ``size_exponent`` e: Y of a granule of diameter d is
+    Y (d / reference_diameter)^(-e) (0: the same for every size). :meth:`prepare`
     (at every step) asks the source for the impacts only when the pivots, the speed or the source
     (:meth:`set_source`, a coupling interval's) changed; a call weights them with the current
     numbers (the pair term)."""
@@ -75,6 +83,9 @@ class ImpactSelection:
         critical_stokes: float,
         walls=("impeller", "bowl"),
         pairs: bool = True,
+        strength_spread: float = 0.0,
+        size_exponent: float = 0.0,
+        reference_diameter: float = 0.002,
     ):
         self.density = positive("granule density (kg/m3)", density)
         self.yield_strength = positive("granule dynamic yield strength Y (Pa)", yield_strength)
@@ -84,13 +95,23 @@ class ImpactSelection:
             raise PBMInputError(f"breakage walls {list(walls)}: {unknown} unknown; allowed: {list(WALLS)}")
         self.walls = tuple(walls)
         self.pairs = bool(pairs)
+        spread = float(strength_spread)
+        if not (np.isfinite(spread) and spread >= 0):
+            raise PBMInputError(f"spread of ln Y across granules = {strength_spread!r}; allowed: finite, >= 0")
+        self.strength_spread = spread
+        exponent = float(size_exponent)
+        if not (np.isfinite(exponent) and exponent >= 0):
+            raise PBMInputError(f"strength size exponent = {size_exponent!r}; allowed: finite, >= 0")
+        self.size_exponent = exponent
+        self.reference_diameter = positive("reference diameter of Y (m)", reference_diameter)
         self.speed = critical_speed(self.density, self.yield_strength, self.critical_stokes)
         self.set_source(source)
 
     def __repr__(self) -> str:
         return (
             f"ImpactSelection(Y={self.yield_strength:g} Pa, St_def*={self.critical_stokes:g}, "
-            f"v*={self.speed:.3g} m/s, walls={list(self.walls)}, pairs={self.pairs}, source={self.source!r})"
+            f"v*={self.speed:.3g} m/s, spread of ln Y={self.strength_spread:g}, walls={list(self.walls)}, "
+            f"pairs={self.pairs}, source={self.source!r})"
         )
 
     def set_source(self, source) -> None:
@@ -123,8 +144,16 @@ class ImpactSelection:
         """Per kind of impact (pairs, each wall): (K,) breaking impacts per granule and second."""
         if self._rates is None:
             self.prepare(inp)
-        _, n = inp.per_bin()
-        return selection_rates(self._rates, n, self.speed, self.walls, self.pairs)
+        d, n = inp.per_bin()
+        return selection_rates(self._rates, n, self.critical_speeds(d), self.walls, self.pairs, self.strength_spread)
+
+    def critical_speeds(self, diameters) -> float | np.ndarray:
+        """v* of granules of each diameter (m): Y (d / d_ref)^(-e) with e = ``size_exponent``, so
+        v* (d / d_ref)^(-e / 2); the one v* with e = 0."""
+        if self.size_exponent == 0.0:
+            return self.speed
+        d = np.asarray(diameters, float)
+        return self.speed * (d / self.reference_diameter) ** (-0.5 * self.size_exponent)
 
     def __call__(self, inp: KernelInput) -> np.ndarray:
         parts = self.contributions(inp)
@@ -132,7 +161,7 @@ class ImpactSelection:
 
 
 def impact_selection(pbm: Pbm, source=None) -> ImpactSelection | None:
-    """The ImpactSelection of the ``pbm.breakage`` settings (Y, St_def*, walls, pairs) on
+    """The ImpactSelection of the ``pbm.breakage`` settings (Y, St_def*, walls, pairs, strength_spread) on
     ``source`` (None: set later), with the granule density of the Stokes success model
     (``pbm.aggregation.success.stokes.granule_density``, the DEM particle density); None when breakage
     is off."""
@@ -140,4 +169,14 @@ def impact_selection(pbm: Pbm, source=None) -> ImpactSelection | None:
     if not brk.enabled:
         return None
     density = pbm.aggregation.success.stokes.granule_density
-    return ImpactSelection(source, density, brk.yield_strength, brk.critical_stokes, brk.walls, brk.pairs)
+    return ImpactSelection(
+        source,
+        density,
+        brk.yield_strength,
+        brk.critical_stokes,
+        brk.walls,
+        brk.pairs,
+        brk.strength_spread,
+        brk.strength_size_exponent,
+        brk.reference_diameter,
+    )

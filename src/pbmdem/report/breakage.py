@@ -18,6 +18,7 @@ STYLES = {
     "Yx2": ("tab:blue", ":", "Y x 2"),
     "St*/2": ("tab:orange", "-.", "St_def* / 2"),
     "St*x2": ("tab:green", "-.", "St_def* x 2"),
+    "sharp": ("tab:purple", "-.", "sharp criterion (every impact above v* breaks)"),
 }
 
 

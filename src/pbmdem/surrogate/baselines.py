@@ -28,7 +28,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._threads import single_threaded
 from .features import FEATURE_NAMES
-from .velocity import lognormal_fractions
+from .velocity import n_law_parameters, speed_fractions
 
 #: Features the physical scaling is a law of.
 LAW_FEATURES = ("d_small", "d_large", "tip_speed")
@@ -73,8 +73,12 @@ class PhysicalScaling(RegressorMixin, BaseEstimator):
 
     ``X`` must carry the named features ``d_small``, ``d_large`` (m) and ``tip_speed`` (m/s): a
     feature frame with those columns, or an array whose columns are :data:`FEATURE_NAMES` in
-    that order.
+    that order. ``speed_law``: the impact-speed law of :meth:`velocity_fractions`
+    (:data:`pbmdem.surrogate.velocity.SPEED_LAWS`; that of the ``velocity`` targets of ``fit``).
     """
+
+    def __init__(self, speed_law: str = "lognormal"):
+        self.speed_law = speed_law
 
     def _columns(self) -> list[int]:
         names = getattr(self, "feature_names_in_", None)
@@ -109,19 +113,21 @@ class PhysicalScaling(RegressorMixin, BaseEstimator):
     def fit(self, X, y, groups=None, velocity=None):
         """Fit ``log10 K'`` to ``y`` (log10 frequency); with ``velocity`` ((n, 2): mu = log10
         median speed, sigma; NaN rows skipped) also the speed ratio and spread. ``groups`` is not used."""
+        p = n_law_parameters(self.speed_law)
         X, y = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
         self.log10_K_ = float(np.mean(y - self._log10_shape(X)))
         self.K_ = 10.0**self.log10_K_
-        self.log10_speed_ratio_ = self.log10_sigma_ = None
+        self.log10_speed_ratio_ = self.log10_sigma_ = self.shape_ = None
         if velocity is not None:
             V = np.asarray(velocity, dtype=float)
-            if V.shape != (len(y), 2):
-                raise ValueError(f"velocity must have shape (n_samples, 2) = ({len(y)}, 2), got {V.shape}")
+            if V.shape != (len(y), p):
+                raise ValueError(f"velocity must have shape (n_samples, {p}) = ({len(y)}, {p}), got {V.shape}")
             vmask = np.isfinite(V).all(axis=1)
             if vmask.any():
                 _, v_tip = self._law_inputs(X[vmask])
                 self.log10_speed_ratio_ = float(np.mean(V[vmask, 0] - np.log10(v_tip)))
                 self.log10_sigma_ = float(np.mean(np.log10(V[vmask, 1])))
+                self.shape_ = float(np.mean(V[vmask, 2])) if p == 3 else None
         return self
 
     def predict(self, X):
@@ -141,4 +147,6 @@ class PhysicalScaling(RegressorMixin, BaseEstimator):
         return mu, np.full(len(mu), 10.0**self.log10_sigma_)
 
     def velocity_fractions(self, X) -> np.ndarray:
-        return lognormal_fractions(*self.predict_velocity(X))
+        mu, sigma = self.predict_velocity(X)
+        shape = None if self.shape_ is None else np.full(len(mu), self.shape_)
+        return speed_fractions(mu, sigma, self.speed_law, shape)

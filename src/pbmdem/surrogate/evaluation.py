@@ -143,9 +143,9 @@ def _row(target, model, fold, ids, n_train, n_test, r2, mae, floor=np.nan, tv=np
     }
 
 
-def default_baselines(random_state: int | None = 0) -> dict:
-    """HGB (seeded with ``random_state``) and physical-scaling baselines."""
-    return {"hgb": HGBBaseline(random_state=random_state), "physical": PhysicalScaling()}
+def default_baselines(random_state: int | None = 0, speed_law: str = "lognormal") -> dict:
+    """HGB (seeded with ``random_state``) and physical-scaling (impact-speed law ``speed_law``) baselines."""
+    return {"hgb": HGBBaseline(random_state=random_state), "physical": PhysicalScaling(speed_law=speed_law)}
 
 
 def _fit(model, data: TrainingData, rows: np.ndarray):
@@ -176,6 +176,13 @@ def cross_validate_models(data: TrainingData, models: dict, cv: str = "group_kfo
     the families' predictive standard deviations and the fold number.
     """
     groups = data.groups
+    laws = {name: model.speed_law for name, model in models.items() if hasattr(model, "speed_law")}
+    wrong = {name: law for name, law in laws.items() if law != data.speed_law}
+    if wrong:
+        raise ValueError(
+            f"models {wrong} learn another impact-speed law than the training data's {data.speed_law!r} "
+            "(training_data(..., speed_law=...))"
+        )
     splits = grouped_splits(groups, cv, n_splits)
     table = data.table
 

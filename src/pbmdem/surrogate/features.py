@@ -396,14 +396,17 @@ class TrainingData:
     noise_var: np.ndarray
     """:data:`TARGET_NOISE_VAR`: replicate noise variance of ``y`` (decades^2, NaN if unknown)."""
     velocity: np.ndarray
-    """(n, 2) log-normal impact-speed law of every row: ``mu`` (log10 median speed, m/s) and
-    ``sigma`` (std of log10 v, decades), fitted to the row's velocity bins; NaN rows without bins."""
+    """(n, 2) impact-speed law (``speed_law``) of every row: ``mu`` (log10 median speed, m/s) and
+    ``sigma`` (std of log10 v, decades), and for ``gengamma`` a third column, the shape q; fitted to
+    the row's velocity bins; NaN rows without bins."""
     table: pd.DataFrame
     """The rows used (:func:`prepare_training_table`), with the target columns and ``floored``."""
     n_dropped: int
     """Rows of the input table left out (no pairs, zero encounters with ``drop``, non-finite)."""
     n_floored: int
     """Rows whose zero count was floored (``zero_policy="floor"``)."""
+    speed_law: str = "lognormal"
+    """The impact-speed law ``velocity`` was fitted with (:data:`~pbmdem.surrogate.velocity.SPEED_LAWS`)."""
 
 
 def training_data(
@@ -412,6 +415,7 @@ def training_data(
     zero_policy: str = "drop",
     velocity_table: pd.DataFrame | None = None,
     velocity_source: str = "impact-velocity table",
+    speed_law: str = "lognormal",
 ) -> TrainingData:
     """Features, target, groups, replicate noise and impact-speed targets of a collision table.
 
@@ -420,19 +424,21 @@ def training_data(
     :func:`~pbmdem.surrogate.velocity.attach_velocity_bins` (named ``velocity_source`` in errors);
     a table whose bins are already attached needs none. Without bins only the encounter frequency
     can be learned (a warning says so). ``impeller_radius`` (m) is
-    ``granulator.impeller.blade_length``, for the tip-speed feature.
+    ``granulator.impeller.blade_length``, for the tip-speed feature. ``speed_law`` is the
+    impact-speed law fitted to every row's bins (:data:`~pbmdem.surrogate.velocity.SPEED_LAWS`).
     """
-    from .velocity import attach_velocity_bins, bin_counts, fit_lognormal, velocity_rows
+    from .velocity import attach_velocity_bins, bin_counts, fit_speed_law, n_law_parameters, velocity_rows
+
+    n_par = n_law_parameters(speed_law)
 
     if velocity_table is not None:
         table = attach_velocity_bins(table, velocity_table, source=velocity_source)
     data = prepare_training_table(table, zero_policy).reset_index(drop=True)
     X = make_features(data, impeller_radius)
-    velocity = np.full((len(data), 2), np.nan)
+    velocity = np.full((len(data), n_par), np.nan)
     vmask = velocity_rows(data)
     if vmask.any():
-        mu, sigma = fit_lognormal(bin_counts(data.loc[vmask]))
-        velocity[vmask] = np.column_stack([mu, sigma])
+        velocity[vmask] = np.column_stack(fit_speed_law(bin_counts(data.loc[vmask]), speed_law))
     else:
         warnings.warn(
             "the collision table carries no impact-velocity bins (results/dem/impact_velocity.csv "
@@ -449,4 +455,5 @@ def training_data(
         table=data,
         n_dropped=int(len(table) - len(data)),
         n_floored=int(data["floored"].sum()),
+        speed_law=speed_law,
     )

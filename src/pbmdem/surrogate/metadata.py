@@ -20,6 +20,8 @@ from jsonschema import Draft202012Validator
 
 from pbmdem.config.schema import key_path
 
+from .velocity import SPEED_LAWS
+
 #: the largest relative slack around a feature's training range (surrogate.domain_margin)
 MAX_DOMAIN_MARGIN = 1.0
 
@@ -135,6 +137,7 @@ SCHEMA = {
                 "physics_offset": {"enum": ["cross_section", "none"]},
                 "domain_margin": {"type": "number", "minimum": 0, "maximum": MAX_DOMAIN_MARGIN},
                 "feature_transform": {"enum": ["log", "none"]},
+                "speed_law": {"enum": list(SPEED_LAWS)},
                 "uncertainty_scale": _SCALE,
                 "velocity_uncertainty_scale": _SCALE,
             },

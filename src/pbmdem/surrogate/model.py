@@ -4,7 +4,7 @@
 (:data:`~pbmdem.surrogate.features.FEATURE_NAMES`, built by
 :func:`~pbmdem.surrogate.features.training_data` / :func:`~pbmdem.surrogate.features.make_features`):
 ``fit(X, y, groups=..., velocity=...)`` with ``y`` = log10 of the encounter frequency per pair and
-``velocity`` = the log-normal impact-speed law (mu, sigma) of every row. It is composed of
+``velocity`` = the impact-speed law (mu, sigma[, q]) of every row. It is composed of
 
 * the frequency model (``frequency_model``, an :class:`~pbmdem.surrogate.ensemble.EnsembleMLPRegressorCV`)
   fitted to ``y`` minus the physics offset,
@@ -38,7 +38,7 @@ from .features import (
     pair_features,
     pair_table,
 )
-from .velocity import lognormal_fractions
+from .velocity import check_speed_law, n_law_parameters, speed_fractions
 
 PHYSICS_OFFSETS = ("cross_section", "none")
 FEATURE_TRANSFORMS = ("log", "none")
@@ -78,6 +78,10 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         sizes follow the cross-section instead of a saturated tanh network. The velocity model
         likewise learns log10(median impact speed / tip speed). Needs X with the named features
         ``d_small``, ``d_large``, ``tip_speed``. ``"none"``: plain targets, any numeric X.
+    speed_law : {"lognormal", "weibull", "gengamma"}
+        The impact-speed law whose (mu, sigma[, q]) the velocity model learns and whose bin fractions
+        it predicts (:mod:`pbmdem.surrogate.velocity`); the ``velocity`` targets of ``fit`` must
+        be fitted with the same law (:func:`~pbmdem.surrogate.features.training_data`).
     domain_margin : float
         Relative slack of the per-feature training ranges before :class:`OutOfDomainWarning`
         (fraction of each feature's training range).
@@ -110,6 +114,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         feature_transform="none",
         uncertainty_scale=1.0,
         velocity_uncertainty_scale=1.0,
+        speed_law="lognormal",
     ):
         self.frequency_model = frequency_model
         self.velocity_model = velocity_model
@@ -119,6 +124,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         self.feature_transform = feature_transform
         self.uncertainty_scale = uncertainty_scale
         self.velocity_uncertainty_scale = velocity_uncertainty_scale
+        self.speed_law = speed_law
 
     # ------------------------------------------------------------------ helpers
     def _feature_names(self) -> list[str]:
@@ -172,9 +178,10 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
     def fit(self, X, y, groups=None, velocity=None):
         """Fit on the feature matrix ``X`` (n, n_features), ``y`` = log10 encounter frequency per
         pair (n,), ``groups`` = DEM run of every row (for the grouped hyperparameter search), and
-        optionally ``velocity`` = (n, 2) log-normal impact-speed law per row (mu = log10 median
+        optionally ``velocity`` = (n, 2) or (n, 3) impact-speed law per row (``speed_law``; mu = log10 median
         speed in m/s, sigma in decades; rows with NaN are not used). Returns ``self``."""
         check_impeller_radius(self.impeller_radius)
+        check_speed_law(self.speed_law)
         if self.physics_offset not in PHYSICS_OFFSETS:
             raise ValueError(f"physics_offset = {self.physics_offset!r}; allowed: {PHYSICS_OFFSETS}")
         if self.feature_transform not in FEATURE_TRANSFORMS:
@@ -201,9 +208,11 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
                 raise ValueError(f"groups must be 1-d with one entry per sample ({len(y)}), got shape {groups.shape}")
         if velocity is not None:
             V = np.asarray(velocity, dtype=float)
-            if V.shape != (len(y), 2):
+            p = n_law_parameters(self.speed_law)
+            if V.shape != (len(y), p):
                 raise ValueError(
-                    f"velocity must have shape (n_samples, 2) = ({len(y)}, 2) (mu, sigma per row), got {V.shape}"
+                    f"velocity must have shape (n_samples, {p}) = ({len(y)}, {p}) (the {self.speed_law} law's "
+                    f"mu, sigma{', q' if p == 3 else ''} per row), got {V.shape}"
                 )
             vmask = np.isfinite(V).all(axis=1)
             if (V[vmask, 1] <= 0).any():
@@ -224,7 +233,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         self.n_velocity_rows_ = 0
         if velocity is not None and vmask.any():
             Fv = F.loc[vmask].reset_index(drop=True)
-            Yv = np.column_stack([V[vmask, 0] - self._velocity_offset(Fv), np.log10(V[vmask, 1])])
+            Yv = np.column_stack([V[vmask, 0] - self._velocity_offset(Fv), np.log10(V[vmask, 1]), V[vmask, 2:]])
             vtemplate = template if self.velocity_model is None else self.velocity_model
             self.velocity_model_ = clone(vtemplate).fit(
                 self._inner(Fv), Yv, groups=None if groups is None else groups[vmask]
@@ -308,7 +317,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
             )
 
     def predict_velocity(self, X, return_std: bool = False, check_domain: bool = True):
-        """Log-normal impact-speed law per row: ``(mu, sigma)``.
+        """Impact-speed law (``speed_law``) per row: ``(mu, sigma)``.
 
         ``X``: a collision table, a feature frame or an array. ``mu`` is log10 of the median
         impact speed (m/s), ``sigma`` the standard deviation of log10 v (decades); both the
@@ -320,16 +329,25 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         F = self._frame(X)
         if check_domain:
             self._warn_domain(X, stacklevel=3)
-        mean, std = self.velocity_model_.predict(self._inner(F), return_std=True)
-        mean, std = mean.reshape(len(F), 2), self.velocity_uncertainty_scale * std.reshape(len(F), 2)
-        mu = mean[:, 0] + self._velocity_offset(F)
-        sigma = 10.0 ** mean[:, 1]
+        mu, sigma, _, std = self._velocity_law(F)
         return (mu, sigma, std[:, 0], std[:, 1]) if return_std else (mu, sigma)
+
+    def _velocity_law(self, F):
+        """(mu, sigma, shape or None, (n, outputs) std) of the velocity model on the feature frame."""
+        mean, std = self.velocity_model_.predict(self._inner(F), return_std=True)
+        mean, std = mean.reshape(len(F), -1), self.velocity_uncertainty_scale * std.reshape(len(F), -1)
+        shape = mean[:, 2] if mean.shape[1] > 2 else None
+        return mean[:, 0] + self._velocity_offset(F), 10.0 ** mean[:, 1], shape, std
 
     def velocity_fractions(self, X, check_domain: bool = True) -> np.ndarray:
         """(n, N_VELOCITY_BINS) predicted fraction of each row's encounters per velocity bin (rows sum to 1)."""
-        mu, sigma = self.predict_velocity(X, check_domain=check_domain)
-        return lognormal_fractions(mu, sigma)
+        self._require_velocity_model()
+        X = validate_data(self, self._features(X), reset=False, dtype=np.float64)
+        F = self._frame(X)
+        if check_domain:
+            self._warn_domain(X, stacklevel=3)
+        mu, sigma, shape, _ = self._velocity_law(F)
+        return speed_fractions(mu, sigma, self.speed_law, shape)
 
     # ------------------------------------------------------------------ PBM kernel
     def _array_path(self) -> bool:
@@ -366,9 +384,10 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         """:meth:`velocity_fractions` of the pairs' features from :meth:`_pairs` (unchecked domain)."""
         if not isinstance(F, np.ndarray):
             return self.velocity_fractions(F, check_domain=False)
-        mean = self.velocity_model_.predict_array(self._transform(F)).reshape(len(F), 2)
+        mean = self.velocity_model_.predict_array(self._transform(F)).reshape(len(F), -1)
         velocity_offset = np.zeros(len(F)) if self.physics_offset == "none" else np.log10(F[:, 5])
-        return lognormal_fractions(mean[:, 0] + velocity_offset, 10.0 ** mean[:, 1])
+        shape = mean[:, 2] if mean.shape[1] > 2 else None
+        return speed_fractions(mean[:, 0] + velocity_offset, 10.0 ** mean[:, 1], self.speed_law, shape)
 
     def frequency_matrix(self, diameters, numbers, rpm: float, return_std: bool = False, check_domain: bool = True):
         """(K,) diameters (m) and (K,) particle numbers -> (K, K) symmetric encounter frequency c_ij (1/s per pair).

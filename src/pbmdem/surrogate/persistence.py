@@ -378,6 +378,8 @@ def _from_metadata(stored: dict, meta: dict, metadata_path) -> CollisionSurrogat
             f"{metadata_path}: features {meta['feature_names']} differ from this version's {list(FEATURE_NAMES)}"
         )
     params = dict(meta["params"])
+    # a surrogate saved before the speed law was a setting learned the log-normal law
+    params.setdefault("speed_law", "lognormal")
     params["frequency_model"] = _inner_model(params["frequency_model"], "params.frequency_model")
     if params["velocity_model"] is not None:
         params["velocity_model"] = _inner_model(params["velocity_model"], "params.velocity_model")

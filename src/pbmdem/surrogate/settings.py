@@ -65,6 +65,7 @@ def build_surrogate(
         physics_offset=typed.physics_offset,
         domain_margin=typed.domain_margin,
         feature_transform=typed.feature_transform,
+        speed_law=typed.speed_law,
     )
 
 
@@ -74,5 +75,6 @@ def build_families(settings: dict, impeller_radius: float, n_jobs: int | None = 
 
 
 def build_baselines(settings: dict) -> dict:
-    """The baselines of the evaluation (``hgb`` seeded with ``random_state``, ``physical``)."""
-    return default_baselines(int(settings["random_state"]))
+    """The baselines of the evaluation (``hgb`` seeded with ``random_state``, ``physical`` with
+    the impact-speed law ``speed_law``)."""
+    return default_baselines(int(settings["random_state"]), settings.get("speed_law", "lognormal"))

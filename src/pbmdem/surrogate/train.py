@@ -179,6 +179,7 @@ def _training_data(table, velocity_table, impeller_radius: float, settings: dict
         settings["zero_collisions"],
         velocity_table=vframe,
         velocity_source=f"impact-velocity table {velocity_source}",
+        speed_law=settings.get("speed_law", "lognormal"),
     )
     return data, source, velocity_source
 

@@ -1,15 +1,32 @@
-"""Impact-velocity distributions per class pair: reading, log-normal summary and bin fractions.
+"""Impact-velocity distributions per class pair: reading, two-parameter speed laws and bin fractions.
 
 ``results/dem/impact_velocity.csv`` (docs/architecture.md) holds, per run and class pair, the mean
 number of encounters per replicate in every bin of :data:`pbmdem.impact.VELOCITY_EDGES`. The
-surrogate summarises each pair's binned distribution by a log-normal law of the impact speed v,
+surrogate summarises each pair's binned distribution by a two-parameter law of the impact speed v
+(:data:`SPEED_LAWS`), both parametrised the same way, by
 
-    log10 v ~ Normal(mu, sigma),   median = 10**mu (m/s),  geometric spread = 10**sigma,
+    mu = log10 of the median speed (m/s),   sigma = standard deviation of log10 v (decades),
 
-fitted by maximum likelihood to the bin counts (interval-censored: bin 0 is (0, 1 mm/s), the last
-bin is open upwards because faster impacts are counted there). The MLP learns ``mu`` and
-``log10 sigma`` per pair; :func:`lognormal_fractions` turns them back into fractions per bin, so
-predicted fractions always lie on the project's bins, are >= 0 and sum to 1.
+and fitted by maximum likelihood to the bin counts (interval-censored: bin 0 is (0, 1 mm/s), the
+last bin is open upwards because faster impacts are counted there):
+
+* ``lognormal``: log10 v ~ Normal(mu, sigma); symmetric in log v, its fast tail falls as
+  exp(-(log v)^2 / 2 sigma^2);
+* ``weibull``: P(V > v) = exp(-(v / lambda)^k), with k = pi / (sqrt(6) ln(10) sigma) and
+  lambda = 10**mu / ln(2)**(1/k); in log v it is skewed towards slow impacts and its fast tail is
+  lighter (a stretched exponential in v, as the high-energy tails of driven granular gases,
+  exp(-c v^{3/2}), van Noije & Ernst 1998, Granular Matter 1:57-64);
+* ``gengamma``: the generalised gamma law (Stacy 1962) in Prentice's (1974, Biometrika 61:539)
+  form, with a third parameter, the shape q: log10 v = mu + sigma (W - med W) / sd W with
+  W = ln(q^2 G) / q, G ~ Gamma(1 / q^2); q -> 0 is the log-normal, q = 1 the Weibull, q < 0 a
+  fast tail heavier than the log-normal's. The DEM's speed distributions need it: their fast tail is
+  lighter than the log-normal's at high impeller speeds and heavier than the Weibull's at low ones
+  (docs/surrogate.md, "Impact-speed laws").
+
+The surrogate learns ``mu``, ``log10 sigma`` (and q) per pair; :func:`speed_fractions` turns them back
+into fractions per bin of the chosen law, so predicted fractions always lie on the project's bins,
+are >= 0 and sum to 1. Breakage counts the fraction of impacts faster than a critical speed, i.e.
+the fast tail (benchmarks/bench_breakage_tail.py measures it per law).
 """
 
 from __future__ import annotations
@@ -19,7 +36,7 @@ import warnings
 import numpy as np
 import pandas as pd
 from scipy.optimize import minimize
-from scipy.special import log_ndtr, ndtr
+from scipy.special import gammainc, gammaincc, gammaincinv, log_ndtr, ndtr, polygamma
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, VELOCITY_KEYS, binned_counts, representative_velocities
 from pbmdem.readers import InputFileError
@@ -32,6 +49,14 @@ VELOCITY_COUNT_COLUMNS = tuple(f"vbin{b:02d}" for b in range(N_VELOCITY_BINS))
 #: Bounds of the fitted geometric spread sigma (decades). The lower bound is a fifth of a bin width
 #: (bins are 0.25 decades): a pair whose encounters all fall into one bin cannot resolve less.
 SIGMA_BOUNDS = (0.05, 3.0)
+
+#: The impact-speed laws (module docstring) and their number of parameters (mu, sigma[, q]).
+SPEED_LAWS = ("lognormal", "weibull", "gengamma")
+LAW_PARAMETERS = {"lognormal": 2, "weibull": 2, "gengamma": 3}
+#: Bounds of the generalised gamma's shape q (beyond them the tail bins cannot tell q apart).
+SHAPE_BOUNDS = (-2.0, 3.0)
+#: |q| below this is the log-normal (the generalised gamma's limit; differences O(q)).
+_Q_LOGNORMAL = 1e-3
 
 #: log10 of the inner bin edges; bin 0 starts at -inf (v -> 0), the last bin ends at +inf.
 _LOG_EDGES = np.concatenate([[-np.inf], np.log10(VELOCITY_EDGES[1:-1]), [np.inf]])
@@ -95,60 +120,138 @@ def empirical_fractions(counts) -> np.ndarray:
     return counts / total
 
 
-def lognormal_fractions(mu, sigma) -> np.ndarray:
-    """(n, N_VELOCITY_BINS) fraction of a log-normal speed distribution in each velocity bin.
+def check_speed_law(law: str) -> str:
+    """``law`` if it is one of :data:`SPEED_LAWS`, else ValueError naming them."""
+    if law not in SPEED_LAWS:
+        raise ValueError(f"impact-speed law {law!r}; allowed: {list(SPEED_LAWS)}")
+    return law
 
-    ``mu``: log10 of the median speed (m/s); ``sigma``: standard deviation of log10 v (decades).
-    Bin 0 takes everything below 1 mm/s, the last bin everything from its lower edge up.
+
+#: pi / sqrt(6): the standard deviation of ln E for E ~ Exp(1) (a Gumbel law of minima)
+_GUMBEL_STD = np.pi / np.sqrt(6.0)
+
+
+def n_law_parameters(law: str) -> int:
+    """Parameters per row of the speed law ``law``: 2 (mu, sigma) or 3 (mu, sigma, q)."""
+    return LAW_PARAMETERS[check_speed_law(law)]
+
+
+def _gengamma_standard(q):
+    """(a, median, standard deviation) of W = ln(q^2 G) / q, G ~ Gamma(a = 1 / q^2)."""
+    a = 1.0 / (q * q)
+    med = np.log(q * q * gammaincinv(a, 0.5)) / q
+    sd = np.sqrt(polygamma(1, a)) / np.abs(q)
+    return a, med, sd
+
+
+def _log_cdf_sf(x, mu, sigma, law: str, shape=None):
+    """log P(log10 v < x) and log P(log10 v > x) of the law (broadcast), each exact in its tail."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
+        if law == "weibull":  # P(V > v) = exp(-t), t = ln 2 exp(z), z = pi (log10 v - mu) / (sqrt(6) sigma)
+            t = np.log(2.0) * np.exp(_GUMBEL_STD * (x - mu) / sigma)
+            return np.log(-np.expm1(-t)), -t
+        z = (x - mu) / sigma
+        if law == "lognormal":
+            return log_ndtr(z), log_ndtr(-z)
+        q = np.broadcast_to(np.asarray(shape, float), np.broadcast(x, mu, sigma, shape).shape)
+        z = np.broadcast_to(z, q.shape)
+        normal = np.abs(q) < _Q_LOGNORMAL
+        qq = np.where(normal, 1.0, q)
+        a, med, sd = _gengamma_standard(qq)
+        g = np.exp(qq * (med + z * sd)) / (qq * qq)
+        lower, upper = np.log(gammainc(a, g)), np.log(gammaincc(a, g))
+        log_cdf = np.where(normal, log_ndtr(z), np.where(qq > 0, lower, upper))
+        log_sf = np.where(normal, log_ndtr(-z), np.where(qq > 0, upper, lower))
+        return log_cdf, log_sf
+
+
+def _log_bin_probabilities(x_lo, x_hi, mu, sigma, law: str, shape=None):
+    """log P(x_lo < log10 v < x_hi) of the law (broadcast), computed stably in both tails: from the
+    distribution function below the median, from the survival function above it."""
+    if law == "lognormal":  # the form of the log-normal fits before the other laws (same digits)
+        lo, hi = log_ndtr((x_lo - mu) / sigma), log_ndtr((x_hi - mu) / sigma)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            return hi + np.log1p(-np.exp(np.minimum(lo - hi, 0.0)))
+    cdf_lo, sf_lo = _log_cdf_sf(x_lo, mu, sigma, law, shape)
+    cdf_hi, sf_hi = _log_cdf_sf(x_hi, mu, sigma, law, shape)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        below = cdf_hi + np.log1p(-np.exp(np.minimum(cdf_lo - cdf_hi, 0.0)))
+        above = sf_lo + np.log1p(-np.exp(np.minimum(sf_hi - sf_lo, 0.0)))
+        return np.where(sf_lo < np.log(0.5), above, below)
+
+
+def speed_fractions(mu, sigma, law: str = "lognormal", shape=None) -> np.ndarray:
+    """(n, N_VELOCITY_BINS) fraction of the speed law ``law`` (:data:`SPEED_LAWS`) in each velocity bin.
+
+    ``mu``: log10 of the median speed (m/s); ``sigma``: standard deviation of log10 v (decades);
+    ``shape``: the generalised gamma's q (``gengamma`` only). Bin 0 takes everything below 1 mm/s,
+    the last bin everything from its lower edge up.
     """
+    if n_law_parameters(law) == 3 and shape is None:
+        raise ValueError(f"the {law} law needs its shape q (speed_fractions(mu, sigma, law, shape))")
     mu = np.atleast_1d(np.asarray(mu, float))[:, None]
     sigma = np.atleast_1d(np.asarray(sigma, float))[:, None]
-    cdf = ndtr((_LOG_EDGES[None, :] - mu) / sigma)
-    frac = np.diff(cdf, axis=1)
-    frac = np.clip(frac, 0.0, None)
+    if law == "lognormal":
+        frac = np.diff(ndtr((_LOG_EDGES[None, :] - mu) / sigma), axis=1)
+    else:  # from the log of each bin's probability: exact in the fast tail that breakage counts
+        # a predicted shape beyond the fitted range (an extrapolating or widened member) is held at its bound
+        q = None if shape is None else np.clip(np.atleast_1d(np.asarray(shape, float)), *SHAPE_BOUNDS)[:, None]
+        frac = np.exp(_log_bin_probabilities(_LOG_EDGES[None, :-1], _LOG_EDGES[None, 1:], mu, sigma, law, q))
+    frac = np.clip(np.nan_to_num(frac, nan=0.0), 0.0, None)
     return frac / frac.sum(axis=1, keepdims=True)
 
 
-def _neg_loglik(theta, counts):
-    mu, log_sigma = theta
-    z = (_LOG_EDGES - mu) / np.exp(log_sigma)
-    # log P(bin) = log(Phi(z_hi) - Phi(z_lo)), computed stably from log Phi
-    lo, hi = log_ndtr(z[:-1]), log_ndtr(z[1:])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        logp = hi + np.log1p(-np.exp(np.minimum(lo - hi, 0.0)))
-    logp = np.where(counts > 0, logp, 0.0)
+def lognormal_fractions(mu, sigma) -> np.ndarray:
+    """:func:`speed_fractions` of the log-normal law."""
+    return speed_fractions(mu, sigma, "lognormal")
+
+
+def _neg_loglik(theta, counts, law: str = "lognormal"):
+    mu, log_sigma = theta[:2]
+    shape = theta[2] if len(theta) > 2 else None
+    logp = _log_bin_probabilities(_LOG_EDGES[:-1], _LOG_EDGES[1:], mu, np.exp(log_sigma), law, shape)
+    logp = np.where(counts > 0, np.nan_to_num(logp, nan=-745.0, neginf=-745.0), 0.0)
     return -float(np.sum(counts * np.maximum(logp, -745.0)))
 
 
 def fit_lognormal(counts) -> tuple[np.ndarray, np.ndarray]:
-    """Maximum-likelihood log-normal fit to binned counts, one per row.
+    """:func:`fit_speed_law` of the log-normal law."""
+    return fit_speed_law(counts, "lognormal")
 
-    Returns ``(mu, sigma)``: log10 median speed (m/s) and standard deviation of log10 v (decades),
-    sigma within :data:`SIGMA_BOUNDS`. Counts may be non-integer (means over replicates): they act
-    as weights of the multinomial likelihood.
+
+def fit_speed_law(counts, law: str = "lognormal") -> tuple[np.ndarray, ...]:
+    """Maximum-likelihood fit of the speed law ``law`` (:data:`SPEED_LAWS`) to binned counts, one per row.
+
+    Returns ``(mu, sigma)`` (``(mu, sigma, q)`` for ``gengamma``): log10 median speed (m/s),
+    standard deviation of log10 v (decades) within :data:`SIGMA_BOUNDS`, and the shape q within
+    :data:`SHAPE_BOUNDS`. Counts may be non-integer (means over replicates): they act as weights of
+    the multinomial likelihood.
     """
+    n_par = n_law_parameters(law)
     counts = np.atleast_2d(np.asarray(counts, float))
     if counts.shape[1] != N_VELOCITY_BINS:
         raise ValueError(f"expected {N_VELOCITY_BINS} bins per row, got {counts.shape[1]}")
     if not (np.isfinite(counts).all() and (counts >= 0).all()):
         raise ValueError("bin counts must be finite and >= 0")
-    mus, sigmas = np.empty(len(counts)), np.empty(len(counts))
+    out = np.empty((n_par, len(counts)))
     log_bounds = (np.log(SIGMA_BOUNDS[0]), np.log(SIGMA_BOUNDS[1]))
+    bounds = [(np.log10(VELOCITY_EDGES[1]) - 3.0, np.log10(VELOCITY_EDGES[-1]) + 3.0), log_bounds, SHAPE_BOUNDS]
     for r, c in enumerate(counts):
         w = c / c.sum()
         m0 = float(np.dot(w, _LOG_CENTRES))
         s0 = float(np.clip(np.sqrt(np.dot(w, (_LOG_CENTRES - m0) ** 2) + 0.25**2 / 12), *SIGMA_BOUNDS))
-        res = minimize(
-            _neg_loglik,
-            x0=[m0, np.log(s0)],
-            args=(w,),
-            method="L-BFGS-B",
-            bounds=[(np.log10(VELOCITY_EDGES[1]) - 3.0, np.log10(VELOCITY_EDGES[-1]) + 3.0), log_bounds],
-        )
-        if not res.success and not np.isfinite(res.fun):
-            warnings.warn(f"log-normal fit of velocity row {r} did not converge: {res.message}", stacklevel=2)
-        mus[r], sigmas[r] = res.x[0], np.exp(res.x[1])
-    return mus, sigmas
+        x0 = [m0, np.log(s0)]
+        if n_par == 3:  # the generalised gamma from the likeliest of a log-normal, a Weibull and a heavy tail
+            x0 = min(([m0, np.log(s0), q0] for q0 in (0.01, 1.0, -0.5)), key=lambda x: _neg_loglik(x, w, law))
+        # beyond the log-normal, converged tightly: the looser default stops where another BLAS
+        # kernel's rounding moves a flat likelihood's optimum by 1e-4 (tests/test_surrogate_families.py)
+        options = {} if law == "lognormal" else {"ftol": 1e-15, "gtol": 1e-10, "maxiter": 2000}
+        best = minimize(_neg_loglik, x0=x0, args=(w, law), method="L-BFGS-B", bounds=bounds[:n_par], options=options)
+        if not best.success and not np.isfinite(best.fun):
+            warnings.warn(f"{law} fit of velocity row {r} did not converge: {best.message}", stacklevel=2)
+        out[:, r] = best.x
+        out[1, r] = np.exp(best.x[1])
+    return tuple(out)
 
 
 def total_variation(p, q) -> np.ndarray:

@@ -48,8 +48,10 @@ def wall_velocity_table(velocities: pd.DataFrame, wall: str) -> pd.DataFrame:
     return rows.drop(columns=["wall"]).reset_index(drop=True)
 
 
-def wall_training_data(walls, velocities, wall: str, impeller_radius: float, zero_policy: str):
-    """:class:`~pbmdem.surrogate.features.TrainingData` of one wall."""
+def wall_training_data(
+    walls, velocities, wall: str, impeller_radius: float, zero_policy: str, speed_law: str = "lognormal"
+):
+    """:class:`~pbmdem.surrogate.features.TrainingData` of one wall (impact-speed law ``speed_law``)."""
     from .features import training_data
 
     return training_data(
@@ -58,6 +60,7 @@ def wall_training_data(walls, velocities, wall: str, impeller_radius: float, zer
         zero_policy,
         velocity_table=wall_velocity_table(velocities, wall),
         velocity_source=f"wall impact-velocity table ({wall})",
+        speed_law=speed_law,
     )
 
 
@@ -107,7 +110,14 @@ def train_wall_models(walls, velocities, template, candidates: dict, settings: d
     family = next(name for name, model in candidates.items() if model is template)
     models, frames, summaries = {}, [], {}
     for wall in WALLS:
-        data = wall_training_data(walls, velocities, wall, impeller_radius, settings["zero_collisions"])
+        data = wall_training_data(
+            walls,
+            velocities,
+            wall,
+            impeller_radius,
+            settings["zero_collisions"],
+            settings.get("speed_law", "lognormal"),
+        )
         metrics, _ = cross_validate_models(
             data,
             {name: clone(m) for name, m in candidates.items()},

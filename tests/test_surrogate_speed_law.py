@@ -1,0 +1,209 @@
+"""The impact-speed laws of the surrogate (pbmdem.surrogate.velocity.SPEED_LAWS): the Weibull law
+beside the log-normal, fitted to bins, its fractions on the project's bins, its fast tail, and the
+surrogate, its persistence and its baselines carrying the law."""
+
+import math
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.stats import weibull_min
+
+from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, fraction_above, velocity_bin
+from pbmdem.surrogate import CollisionSurrogate, training_data
+from pbmdem.surrogate.baselines import PhysicalScaling
+from pbmdem.surrogate.families import ResponseSurface
+from pbmdem.surrogate.synthetic import make_synthetic_tables
+from pbmdem.surrogate.velocity import (
+    attach_velocity_bins,
+    fit_speed_law,
+    lognormal_fractions,
+    speed_fractions,
+)
+
+R = 0.0265
+
+
+def weibull_bins(shape: float, scale: float) -> np.ndarray:
+    """Exact fractions of a Weibull(shape, scale) speed law in every bin (last bin open upwards)."""
+    cdf = weibull_min.cdf(VELOCITY_EDGES, shape, scale=scale)
+    cdf[-1] = 1.0
+    return np.diff(cdf)
+
+
+def test_weibull_fractions_are_the_weibull_law_by_hand():
+    # k = 2, lambda = 0.5 m/s: median = lambda ln2^(1/k); std of ln v = pi / (sqrt 6 k)
+    k, lam = 2.0, 0.5
+    mu = math.log10(lam * math.log(2.0) ** (1 / k))
+    sigma = math.pi / (math.sqrt(6.0) * k) / math.log(10.0)
+    frac = speed_fractions(mu, sigma, "weibull")[0]
+    assert frac.shape == (N_VELOCITY_BINS,)
+    assert np.all(frac >= 0) and frac.sum() == pytest.approx(1.0, abs=1e-12)
+    assert np.allclose(frac, weibull_bins(k, lam), rtol=1e-9, atol=1e-15)
+    # the fast tail by hand: P(V > 1 m/s) = exp(-(1 / 0.5)^2) = exp(-4) (1 m/s is a bin edge)
+    assert frac @ fraction_above(1.0) == pytest.approx(math.exp(-4.0), rel=1e-9)
+
+
+def test_weibull_tail_is_lighter_than_the_lognormal_of_same_median_and_spread():
+    mu, sigma = math.log10(0.3), 0.3
+    above = fraction_above(2.0)
+    weib, logn = (speed_fractions(mu, sigma, law)[0] @ above for law in ("weibull", "lognormal"))
+    assert 0 < weib < 0.1 * logn
+
+
+@pytest.mark.parametrize("law", ("lognormal", "weibull"))
+def test_fit_recovers_its_own_law(law):
+    mu, sigma = -0.6, 0.35
+    mu_fit, sigma_fit = fit_speed_law(1e4 * speed_fractions(mu, sigma, law), law)
+    assert mu_fit[0] == pytest.approx(mu, abs=1e-3) and sigma_fit[0] == pytest.approx(sigma, rel=1e-2)
+
+
+@pytest.mark.parametrize("q", (-0.8, 0.4, 1.6))
+def test_gengamma_fit_recovers_its_shape(q):
+    mu, sigma = -0.6, 0.35
+    mu_fit, sigma_fit, q_fit = fit_speed_law(1e5 * speed_fractions(mu, sigma, "gengamma", q), "gengamma")
+    assert mu_fit[0] == pytest.approx(mu, abs=1e-3) and sigma_fit[0] == pytest.approx(sigma, rel=1e-2)
+    assert q_fit[0] == pytest.approx(q, abs=0.05)
+
+
+def test_gengamma_is_the_lognormal_and_the_weibull_at_its_limits():
+    from scipy.stats import gengamma
+
+    mu, sigma = np.array([-0.5, 0.1]), np.array([0.3, 0.1])
+    assert np.allclose(speed_fractions(mu, sigma, "gengamma", [1.0, 1.0]), speed_fractions(mu, sigma, "weibull"))
+    assert np.allclose(speed_fractions(mu, sigma, "gengamma", [1e-4, -1e-4]), lognormal_fractions(mu, sigma))
+    # q = 0.5 by hand: v = s G^(q / ln 10 ...) -- scipy's Stacy form: v = scale G^(1/c), G ~ Gamma(a),
+    # a = 1 / q^2, c = q / (sigma_W ln 10 ... ) matched through the median and the std of log10 v
+    q, a = 0.5, 4.0
+    from scipy.special import polygamma
+
+    sd_log10 = np.sqrt(polygamma(1, a)) / np.log(10.0)  # std of log10 G
+    c = sd_log10 / 0.3  # log10 v = log10 scale + log10(G) / c has std 0.3
+    scale = 10**-0.5 / gengamma.median(a, 1.0) ** (1.0 / c)
+    cdf = gengamma.cdf(VELOCITY_EDGES, a, c, scale=scale)
+    cdf[-1] = 1.0
+    assert np.allclose(speed_fractions(-0.5, 0.3, "gengamma", q)[0], np.diff(cdf), atol=1e-12)
+
+
+def test_gengamma_fractions_on_the_bins_and_a_heavier_tail_for_negative_shape():
+    above = fraction_above(2.0)
+    tails = [speed_fractions(np.log10(0.3), 0.3, "gengamma", q)[0] for q in (-1.0, 0.0, 1.0, 1.5)]
+    for f in tails:
+        assert np.all(f >= 0) and f.sum() == pytest.approx(1.0, abs=1e-12)
+    p = [f @ above for f in tails]
+    assert p[0] > p[1] > p[2] > p[3] > 0
+    with pytest.raises(ValueError, match="shape"):
+        speed_fractions(0.0, 0.3, "gengamma")
+    # shapes beyond the fitted bounds (a widened ensemble member) are held at the bounds
+    assert np.array_equal(speed_fractions(-0.5, 0.3, "gengamma", 10.0), speed_fractions(-0.5, 0.3, "gengamma", 3.0))
+    assert np.array_equal(speed_fractions(-0.5, 0.3, "gengamma", -9.0), speed_fractions(-0.5, 0.3, "gengamma", -2.0))
+
+
+def test_weibull_fit_of_sampled_speeds_and_its_median():
+    rng = np.random.default_rng(0)
+    v = 0.4 * rng.weibull(1.5, 100_000)
+    counts = np.bincount(velocity_bin(v), minlength=N_VELOCITY_BINS)
+    mu, sigma = fit_speed_law(counts, "weibull")
+    assert mu[0] == pytest.approx(np.log10(np.median(v)), abs=0.01)
+    assert sigma[0] == pytest.approx(np.std(np.log10(v)), rel=0.03)
+
+
+def test_lognormal_fractions_unchanged_by_the_law_option():
+    mu, sigma = np.array([-1.0, 0.2]), np.array([0.3, 0.05])
+    assert np.array_equal(speed_fractions(mu, sigma, "lognormal"), lognormal_fractions(mu, sigma))
+
+
+def test_unknown_law_is_refused():
+    with pytest.raises(ValueError, match="weibull"):
+        speed_fractions(0.0, 0.3, "gamma")
+    with pytest.raises(ValueError, match="allowed"):
+        fit_speed_law(np.ones(N_VELOCITY_BINS), "gamma")
+
+
+@pytest.fixture(scope="module")
+def data():
+    table = attach_velocity_bins(*make_synthetic_tables(R, seed=3, noise_log10=0.03, sample_velocities=True))
+    return training_data(table, R, speed_law="weibull")
+
+
+def test_surrogate_predicts_fractions_of_its_law_and_persists_it(data, tmp_path):
+    from pbmdem.surrogate import load_surrogate, save_surrogate
+
+    assert data.speed_law == "weibull"
+    model = CollisionSurrogate(
+        frequency_model=ResponseSurface(degree=(1,), n_members=3),
+        impeller_radius=R,
+        physics_offset="cross_section",
+        feature_transform="log",
+        speed_law="weibull",
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
+    frac = model.velocity_fractions(data.X.iloc[:5])
+    assert np.allclose(frac, speed_fractions(*model.predict_velocity(data.X.iloc[:5]), "weibull"))
+    assert not np.allclose(frac, lognormal_fractions(*model.predict_velocity(data.X.iloc[:5])))
+    d, n = np.array([1e-3, 2e-3]), np.array([3000.0, 500.0])
+    rates = model.encounters(d, n, 600.0, check_domain=False)
+    assert np.allclose(rates.velocity_fractions.sum(axis=-1), 1.0) and (rates.velocity_fractions >= 0).all()
+    save_surrogate(model, tmp_path / "model.skops", tmp_path / "model.json")
+    loaded = load_surrogate(tmp_path / "model.skops")
+    assert loaded.speed_law == "weibull"
+    assert np.array_equal(loaded.velocity_fractions(data.X.iloc[:5]), frac)
+
+
+def test_three_parameter_law_through_the_surrogate(data):
+    table = data.table
+    gg = training_data(table, R, speed_law="gengamma")
+    assert gg.velocity.shape == (len(gg.y), 3)
+    model = CollisionSurrogate(
+        frequency_model=ResponseSurface(degree=(1,), n_members=3),
+        impeller_radius=R,
+        physics_offset="cross_section",
+        feature_transform="log",
+        speed_law="gengamma",
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model.fit(gg.X, gg.y, groups=gg.groups, velocity=gg.velocity)
+        with pytest.raises(ValueError, match=r"\(n_samples, 3\)"):
+            model.fit(gg.X, gg.y, groups=gg.groups, velocity=gg.velocity[:, :2])
+    rates = model.encounters(np.array([1e-3, 2e-3]), np.array([3000.0, 500.0]), 600.0, check_domain=False)
+    X = pd.DataFrame([[1e-3, 2e-3, 3000 / 3500, 500 / 3500, 3500.0, 2 * np.pi * R * 10.0]], columns=list(gg.X.columns))
+    assert np.allclose(rates.velocity_fractions[0, 1], model.velocity_fractions(X, check_domain=False)[0])
+    assert np.allclose(rates.velocity_fractions.sum(axis=-1), 1.0)
+    base = PhysicalScaling(speed_law="gengamma").fit(gg.X, gg.y, velocity=gg.velocity)
+    assert np.allclose(base.velocity_fractions(gg.X.iloc[:2]).sum(axis=1), 1.0)
+
+
+def test_baseline_and_evaluation_follow_the_data_law(data):
+    from pbmdem.surrogate import cross_validate_models
+
+    base = PhysicalScaling(speed_law="weibull").fit(data.X, data.y, velocity=data.velocity)
+    assert np.allclose(
+        base.velocity_fractions(data.X.iloc[:3]), speed_fractions(*base.predict_velocity(data.X.iloc[:3]), "weibull")
+    )
+    with pytest.raises(ValueError, match="another impact-speed law"):
+        cross_validate_models(data, {"physical": PhysicalScaling()}, "group_kfold", 3)
+
+
+def test_a_surrogate_saved_before_the_law_option_loads_as_lognormal(data, tmp_path):
+    import json
+
+    from pbmdem.surrogate import load_surrogate, save_surrogate
+
+    lognormal = training_data(data.table, R)
+    model = CollisionSurrogate(frequency_model=ResponseSurface(degree=(1,), n_members=3), impeller_radius=R)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model.fit(lognormal.X, lognormal.y, groups=lognormal.groups, velocity=lognormal.velocity)
+    save_surrogate(model, tmp_path / "model.skops", tmp_path / "model.json")
+    meta = json.loads((tmp_path / "model.json").read_text())
+    del meta["params"]["speed_law"]  # the metadata of the version before
+    (tmp_path / "model.json").write_text(json.dumps(meta))
+    loaded = load_surrogate(tmp_path / "model.skops")
+    assert loaded.speed_law == "lognormal"
+    assert np.array_equal(
+        loaded.velocity_fractions(lognormal.X.iloc[:4]), model.velocity_fractions(lognormal.X.iloc[:4])
+    )

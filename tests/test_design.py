@@ -12,7 +12,7 @@ from conftest import config_of
 from pbmdem.config import ConfigError, Specification
 from pbmdem.config.design import pbm_value, with_pbm_values
 from pbmdem.design.batches import Case, run_cases
-from pbmdem.design.calibration import Model, calibrate
+from pbmdem.design.calibration import Model, calibrate, profile_widths
 from pbmdem.design.measured import STATISTICS, check_measured, measured_from_series, read_measured, with_noise
 from pbmdem.design.space import LIQUID_KEY, design_space, specification_status
 from pbmdem.readers import InputFileError
@@ -175,6 +175,52 @@ def test_calibration_recovers_known_parameters_within_intervals(tiny_config):
     assert 0.3 < est.info["chi2_reduced"] < 2.0  # the noise level the data were made with
     assert est.correlation.shape == (2, 2) and np.allclose(np.diag(est.correlation), 1.0)
     assert set(est.residuals.statistic) == set(STATISTICS) and len(est.residuals) == data.size // 8 * 3
+
+
+class _FakeResiduals:
+    """Residuals r(x) of a hand-made function, with the `_evaluate` the profile fits call."""
+
+    def __init__(self, function):
+        self.function = function
+
+    def __call__(self, x):
+        return np.asarray(self.function(np.asarray(x, float)), float)
+
+    def _evaluate(self, points):
+        return [self(p) for p in points]
+
+
+def test_profile_interval_of_a_linear_model_is_the_analytical_one():
+    """r = A x - b: the profile interval of each parameter is x_hat +- z sqrt((A^T A)^-1_ii), the
+    other parameter fitted again (correlated columns); the scan's bisection errs wide by < 1/16."""
+    A = np.array([[1.0, 0.5], [0.2, 1.0], [1.0, 1.0], [0.3, -0.4]]) * 40.0
+    b = A @ np.array([0.1, -0.2]) + np.array([0.5, -0.3, 0.2, 0.4])
+    x_hat = np.linalg.lstsq(A, b, rcond=None)[0]
+    res = _FakeResiduals(lambda x: A @ x - b)
+    z = 1.96
+    widths = profile_widths(res, x_hat, x_hat - 2.0, x_hat + 2.0, z)
+    expected = z * np.sqrt(np.diag(np.linalg.inv(A.T @ A)))
+    for i in range(2):
+        for side in range(2):
+            assert expected[i] <= widths[i, side] <= expected[i] * (1 + 1 / 16), (i, side, widths, expected)
+
+
+def test_profile_interval_reaches_past_a_jump_to_the_valley_behind_it():
+    """A sum of squares with a wall just above the estimate (a switch of the model's output) and a
+    valley behind it: the interval is the hull of the set below z^2, not the first crossing; a
+    parameter the data do not constrain gets an open interval."""
+
+    def r(x):
+        wall = 10.0 if 0.01 < x[0] < 0.03 else 0.0  # +100 in the sum of squares
+        return np.array([x[0] / 0.04, wall])  # quadratic part: z-width 0.0784 either side
+
+    widths = profile_widths(_FakeResiduals(r), np.array([0.0]), np.array([-1.0]), np.array([1.0]), 1.96)
+    assert 0.0784 <= widths[0, 0] <= 0.0784 * (1 + 1 / 16), widths
+    assert 0.0784 <= widths[0, 1] <= 0.0784 * (1 + 1 / 16), widths  # not 0.01, where the wall begins
+    flat = profile_widths(
+        _FakeResiduals(lambda x: np.array([0.1])), np.array([0.0]), np.array([-1.0]), np.array([1.0]), 1.96
+    )
+    assert np.isinf(flat).all()
 
 
 def test_calibration_reports_parameters_the_data_cannot_separate(tiny_config):

@@ -77,6 +77,20 @@ def test_timestep_from_rayleigh_time(tiny_config):
     assert plan.contact_time / 2 < plan.collision_interval * plan.timestep <= plan.contact_time / SNAPSHOTS_PER_CONTACT
 
 
+def test_rayleigh_warning_limit_follows_a_planned_fraction_above_20_percent(tiny_config):
+    """LIGGGHTS' time-step check warns above 20 % of the Rayleigh time, or just above the planned
+    fraction where that is larger (a documented choice), so a run at the plan does not warn while a
+    smaller particle than planned would."""
+    small = tiny_config.dem_point("small")
+    for fraction, limit in ((0.15, 0.2), (0.25, 0.255)):
+        point = small.replace(dem=small.dem.replace(timestep_fraction=fraction))
+        plan = plan_point(point, 600)
+        assert plan.timestep / plan.rayleigh_time == pytest.approx(fraction)
+        text = deck.render_granulator(point, plan, ranks=1)
+        line = next(ln for ln in text.splitlines() if "check/timestep/gran" in ln)
+        assert float(line.split()[-2]) == pytest.approx(limit) and line.split()[-1] == "0.2", line
+
+
 def test_particle_count_fills_the_bed(default_config):
     for name in default_config.grid.size_distributions:
         plan = plan_point(default_config.dem_point(name), 600)

@@ -9,6 +9,8 @@ the runs recorded them).
     .venv/bin/python benchmarks/bench_dem.py profile results/dem [more results/dem ...]
     # acceptance of new DEM settings against old ones, every point and class pair (docs/dem.md, "Cost")
     .venv/bin/python benchmarks/bench_dem.py acceptance OLD/results/dem NEW/results/dem
+    # how many pairs that acceptance fails from replicate noise alone (no change of settings)
+    .venv/bin/python benchmarks/bench_dem.py null results/dem [--draws 4000]
     # one point with the settings before issue 20 and with the current ones, side by side (same load)
     .venv/bin/python benchmarks/bench_dem.py cost [--rpm 600] [--distribution fine] [--speeds 4] [--out DIR]
 """
@@ -253,6 +255,32 @@ def bench_acceptance(args) -> None:
     )
 
 
+def bench_null(args) -> None:
+    """How many pairs the acceptance fails when nothing changes: both sides drawn from the same
+    normal law per pair (the mean and replicate sd of `dem`'s replicates), 3 replicates each."""
+    keys = ["point_id", "class_i", "class_j"]
+    runs = pd.read_csv(Path(args.dem) / "collisions_replicates.csv").groupby(keys)
+    rng = np.random.default_rng(args.seed)
+    n, draws = 3, args.draws
+
+    def sides(column):
+        mean, sd = runs[column].mean().to_numpy(), runs[column].std(ddof=1).to_numpy()
+        x = mean[None, :, None] + sd[None, :, None] * rng.standard_normal((draws, mean.size, n))
+        return x.mean(-1), x.std(-1, ddof=1) / np.sqrt(n)
+
+    (f_old, se_old), (f_new, se_new) = sides("encounter_frequency_per_pair"), sides("encounter_frequency_per_pair")
+    freq_fail = (np.abs(f_new - f_old) > np.maximum(2 * np.hypot(se_old, se_new), 0.03 * f_old)).sum(axis=1)
+    (v_old, _), (v_new, _) = sides("impact_velocity_median"), sides("impact_velocity_median")
+    speed_fail = (np.abs(v_new / v_old - 1) > 0.05).sum(axis=1)
+    pairs = f_old.shape[1]
+    for name, fails in (("frequency criterion", freq_fail), ("median impact speed within 5 %", speed_fail)):
+        lo, hi = np.percentile(fails, [5, 95])
+        print(
+            f"{name}: pairs failing without any change, of {pairs}: mean {fails.mean():.1f}, 5-95 % {lo:.0f}-{hi:.0f}; "
+            f"all pass in {100 * np.mean(fails == 0):.2f} % of {draws} draws"
+        )
+
+
 # --------------------------------------------------------------------------------- cost
 #: the DEM settings before issue 20: E = 1e7 Pa, two contact snapshots per contact time, positions
 #: every fourth snapshot, every run settling its own bed
@@ -338,6 +366,10 @@ def main() -> None:
     accept = sub.add_parser("acceptance", help="old against new DEM settings, every point and pair")
     accept.add_argument("old")
     accept.add_argument("new")
+    null = sub.add_parser("null", help="pairs the acceptance fails when nothing changes (replicate noise)")
+    null.add_argument("dem")
+    null.add_argument("--draws", type=int, default=4000)
+    null.add_argument("--seed", type=int, default=1)
     cost = sub.add_parser("cost", help="one point with the old and the new DEM settings side by side")
     cost.add_argument("--config", default="config/config.yaml")
     cost.add_argument("--rpm", type=float, default=600.0)
@@ -351,6 +383,7 @@ def main() -> None:
     )
     args = parser.parse_args()
     commands = {"point": bench_point, "profile": bench_profile, "acceptance": bench_acceptance, "cost": bench_cost}
+    commands["null"] = bench_null
     commands[args.command](args)
 
 

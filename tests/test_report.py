@@ -464,3 +464,30 @@ def test_liggghts_version_is_read_from_the_log_header(tmp_path):
         version_of_log(log)
     with pytest.raises(InputFileError, match=re.escape(str(tmp_path / "missing.log"))):
         version_of_log(tmp_path / "missing.log")
+
+
+def test_breakage_words_leave_failed_speeds_out_of_the_peak():
+    """A variant whose ensemble mean failed at the fastest speeds (d50 NaN) peaks where its
+    finished speeds peak, not at the first failed one; one that falls from the lowest speed on is
+    named as such."""
+    from pbmdem.report.breakage import breakage_words, peak_speed
+
+    rpm = [300.0, 450.0, 600.0, 750.0, 900.0]
+    rows = {
+        "off": [7.9, 9.1, 9.9, 10.6, 10.9],
+        "default": [7.9, 3.7, 2.0, 2.0, 2.0],
+        "Y/2": [4.7, 2.0, 2.0, np.nan, np.nan],
+        "Yx2": [7.9, 8.6, 4.7, 2.0, np.nan],
+    }
+    study = pd.DataFrame(
+        [
+            {"variant": v, "rpm": r, "d50": 1e-3 * d, "critical_speed": 2.0}
+            for v, d50s in rows.items()
+            for r, d in zip(rpm, d50s, strict=True)
+        ]
+    )
+    peaks = {v: peak_speed(s) for v, s in study.groupby("variant")}
+    assert peaks == {"off": None, "default": None, "Y/2": None, "Yx2": 450.0}
+    words = breakage_words(study)
+    assert "falls above it for: Yx2 (450 rpm)." in words
+    assert "from the lowest speed studied on for: Y/2, default." in words

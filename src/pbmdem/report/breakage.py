@@ -49,10 +49,20 @@ def breakage_figure(study: pd.DataFrame):
 
 def peak_speed(s: pd.DataFrame) -> float | None:
     """The speed of the largest final d50 when it lies inside the speed range (granules get smaller
-    above it), else None."""
-    s = s.sort_values("rpm")
+    above it), else None; speeds whose ensemble mean failed (d50 NaN) are left out, not taken as
+    the peak."""
+    s = s[np.isfinite(s.d50.to_numpy(float))].sort_values("rpm")
+    if s.empty:
+        return None
     k = int(np.argmax(s.d50.to_numpy(float)))
     return float(s.rpm.iloc[k]) if 0 < k < len(s) - 1 else None
+
+
+def falls_throughout(s: pd.DataFrame) -> bool:
+    """Whether the final d50 is largest at the lowest speed and smaller at the highest (of the
+    speeds whose ensemble mean finished)."""
+    d50 = s[np.isfinite(s.d50.to_numpy(float))].sort_values("rpm").d50.to_numpy(float)
+    return d50.size > 1 and int(np.argmax(d50)) == 0 and d50[-1] < d50[0]
 
 
 def breakage_words(study: pd.DataFrame) -> str:
@@ -65,6 +75,7 @@ def breakage_words(study: pd.DataFrame) -> str:
     change_off = (off.d50.iloc[-1] - off.d50.iloc[0]) / off.d50.iloc[0]
     peaks = {name: peak_speed(s) for name, s in study.groupby("variant")}
     with_peak = [f"{name} ({rpm:g} rpm)" for name, rpm in peaks.items() if rpm is not None]
+    falling = [name for name, s in study.groupby("variant") if falls_throughout(s)]
     return (
         f"**Breakage.** With breakage from impacts (St_def = rho v^2 / (2 Y) > St_def*, critical speed "
         f"v* = {on.critical_speed.iloc[0]:.2g} m/s) the final d50 goes from {MM * lo.d50:.2f} mm at {lo.rpm:g} rpm "
@@ -75,5 +86,6 @@ def breakage_words(study: pd.DataFrame) -> str:
             if with_peak
             else "No variant shows a speed above which the granules get smaller within the speeds studied. "
         )
-        + "Impacts break granules only where they exceed v*, a fraction of the impeller tip speed."
+        + (f"It falls from the lowest speed studied on for: {', '.join(falling)}. " if falling else "")
+        + "Impacts break granules where they approach or exceed v*, a fraction of the impeller tip speed."
     )

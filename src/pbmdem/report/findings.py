@@ -215,6 +215,56 @@ def _label(v) -> str:
     return f"{v:g} rpm" if isinstance(v, (int, float, np.floating)) else str(v)
 
 
+def _speed_paragraph(speed: pd.DataFrame, speed_feed: str, batch_s: float) -> str:
+    """The answer to "how does the impeller speed change the granules?" (`speed`: one row per speed)."""
+    s = speed.sort_values("rpm")
+    lo, hi = s.iloc[0], s.iloc[-1]
+    change = (hi.d50 - lo.d50) / lo.d50 if lo.d50 else float("nan")
+    return (
+        f"**Impeller speed.** With the ``{speed_feed}`` feed, raising the impeller speed from {lo.rpm:g} to "
+        f"{hi.rpm:g} rpm changes the granule size after the {batch_text(batch_s)} batch from d50 = {_mm(lo.d50)} to "
+        f"{_mm(hi.d50)} ({PERCENT * change:+.1f} %); d10 goes from {_mm(lo.d10)} to {_mm(hi.d10)} and d90 from "
+        f"{_mm(lo.d90)} to {_mm(hi.d90)}. "
+        + (
+            "Over this range of speeds the final size changes by less than 5 %: faster impellers make the "
+            "granules collide more often, but a collision only grows a granule when both carry enough surface "
+            "liquid. "
+            if abs(change) < 0.05
+            else "Faster impellers make the granules collide more often, and more collisions make larger granules. "
+            if change > 0
+            else "The granules end smaller at higher speeds in this model. "
+        )
+        + _disagree(max(_spread(r) for _, r in s.iterrows()))
+        + _domain_words(s, "speed", "rpm")
+    )
+
+
+def _feed_paragraph(feed: pd.DataFrame, feed_rpm: float) -> str:
+    """The answer to "how does the feed size distribution change the granules?" (`feed`: one row per feed)."""
+    f = feed.sort_values("feed_d50")
+    f_lo, f_hi = f.iloc[0], f.iloc[-1]
+    growth = (f.d50 / f.feed_d50).to_numpy(float)
+    blends = f[~f.in_grid.astype(bool)]
+    return (
+        f"**Feed size distribution.** At {feed_rpm:g} rpm the final d50 goes from {_mm(f_lo.d50)} for the finest "
+        f"feed, ``{f_lo.feed}`` (feed d50 {_mm(f_lo.feed_d50)}), to {_mm(f_hi.d50)} for the coarsest, "
+        f"``{f_hi.feed}`` (feed d50 {_mm(f_hi.feed_d50)}); "
+        + _feed_trend(f)
+        + f" The granules end {np.nanmin(growth):.2f} to {np.nanmax(growth):.2f} times as large as their feed. "
+        + (
+            ("The blend " if len(blends) == 1 else f"The {len(blends)} blends ")
+            + "between the grid's feeds ("
+            + ", ".join(f"``{b}``" for b in blends.feed)
+            + (") was" if len(blends) == 1 else ") were")
+            + " never run in DEM; PBM-ANN predicts such feeds in seconds. "
+            if len(blends)
+            else ""
+        )
+        + _disagree(max(_spread(r) for _, r in f.iterrows()))
+        + _domain_words(f, "feed", "feed")
+    )
+
+
 def findings_rst(
     speed: pd.DataFrame,
     feed: pd.DataFrame,
@@ -231,56 +281,17 @@ def findings_rst(
     `speed_png`, `feed_png` embedded as data URIs, so that the text shows them wherever it is
     included: Snakemake's own `embeddedimage` directive does not embed), then `extra` (further
     findings, lines of rst), then how far to trust them."""
-    s = speed.sort_values("rpm")
-    lo, hi = s.iloc[0], s.iloc[-1]
-    change = (hi.d50 - lo.d50) / lo.d50 if lo.d50 else float("nan")
-    spread_speed = max(_spread(r) for _, r in s.iterrows())
-    f = feed.sort_values("feed_d50")
-    f_lo, f_hi = f.iloc[0], f.iloc[-1]
-    growth = (f.d50 / f.feed_d50).to_numpy(float)
-    spread_feed = max(_spread(r) for _, r in f.iterrows())
-    blends = f[~f.in_grid.astype(bool)]
-    minutes = batch_text(batch_s)
     lines = [
         "Findings",
         "--------",
         "",
-        f"**Impeller speed.** With the ``{speed_feed}`` feed, raising the impeller speed from {lo.rpm:g} to "
-        f"{hi.rpm:g} rpm changes the granule size after the {minutes} batch from d50 = {_mm(lo.d50)} to "
-        f"{_mm(hi.d50)} ({PERCENT * change:+.1f} %); d10 goes from {_mm(lo.d10)} to {_mm(hi.d10)} and d90 from "
-        f"{_mm(lo.d90)} to {_mm(hi.d90)}. "
-        + (
-            "Over this range of speeds the final size changes by less than 5 %: faster impellers make the "
-            "granules collide more often, but a collision only grows a granule when both carry enough surface "
-            "liquid. "
-            if abs(change) < 0.05
-            else "Faster impellers make the granules collide more often, and more collisions make larger granules. "
-            if change > 0
-            else "The granules end smaller at higher speeds in this model. "
-        )
-        + _disagree(spread_speed)
-        + _domain_words(s, "speed", "rpm"),
+        _speed_paragraph(speed, speed_feed, batch_s),
         "",
         _image_directive(speed_png),
         "   :width: 640px",
         "   :alt: final d10, d50, d90 against impeller speed",
         "",
-        f"**Feed size distribution.** At {feed_rpm:g} rpm the final d50 goes from {_mm(f_lo.d50)} for the finest "
-        f"feed, ``{f_lo.feed}`` (feed d50 {_mm(f_lo.feed_d50)}), to {_mm(f_hi.d50)} for the coarsest, "
-        f"``{f_hi.feed}`` (feed d50 {_mm(f_hi.feed_d50)}); "
-        + _feed_trend(f)
-        + f" The granules end {np.nanmin(growth):.2f} to {np.nanmax(growth):.2f} times as large as their feed. "
-        + (
-            ("The blend " if len(blends) == 1 else f"The {len(blends)} blends ")
-            + "between the grid's feeds ("
-            + ", ".join(f"``{b}``" for b in blends.feed)
-            + (") was" if len(blends) == 1 else ") were")
-            + " never run in DEM; PBM-ANN predicts such feeds in seconds. "
-            if len(blends)
-            else ""
-        )
-        + _disagree(spread_feed)
-        + _domain_words(f, "feed", "feed"),
+        _feed_paragraph(feed, feed_rpm),
         "",
         _image_directive(feed_png),
         "   :width: 640px",

@@ -222,7 +222,25 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"pbmdem {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_dem(sub)
+    _add_pbm(sub)
 
+    from pbmdem.dem import viewer
+    from pbmdem.design import cli as design_cli
+    from pbmdem.surrogate import cli as surrogate_cli
+
+    viewer.add_cli(sub)
+    design_cli.add_cli(sub)
+    surrogate = surrogate_cli.add_cli(sub)
+    _with_examples(surrogate, SURROGATE_EXAMPLES[None])
+    for action in surrogate._subparsers._group_actions:
+        for name, child in action.choices.items():
+            _with_examples(child, SURROGATE_EXAMPLES[name])
+    return parser
+
+
+def _add_dem(sub) -> None:
+    """The `pbmdem dem` command."""
     dem = sub.add_parser(
         "dem",
         help="run one DEM operating point with LIGGGHTS (or only plan it, with a runtime estimate)",
@@ -254,6 +272,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     dem.set_defaults(func=_dem)
 
+
+def _add_pbm(sub) -> None:
+    """The `pbmdem pbm` command."""
     pbm = sub.add_parser(
         "pbm",
         help="run the population balance model of the batch granulator",
@@ -288,19 +309,6 @@ def build_parser() -> argparse.ArgumentParser:
     pbm.add_argument("--distribution", default=None, help="size distribution name (default: first of the grid)")
     pbm.add_argument("--out", required=True, type=Path, help="output folder (tables, plots, run.json)")
     pbm.set_defaults(func=_pbm)
-
-    from pbmdem.dem import viewer
-    from pbmdem.design import cli as design_cli
-    from pbmdem.surrogate import cli as surrogate_cli
-
-    viewer.add_cli(sub)
-    design_cli.add_cli(sub)
-    surrogate = surrogate_cli.add_cli(sub)
-    _with_examples(surrogate, SURROGATE_EXAMPLES[None])
-    for action in surrogate._subparsers._group_actions:
-        for name, child in action.choices.items():
-            _with_examples(child, SURROGATE_EXAMPLES[name])
-    return parser
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -161,6 +161,52 @@ def _uncertain(model) -> bool:
     return hasattr(model, "predict_velocity") and hasattr(type(model), "n_members")
 
 
+def _check_speed_laws(models: dict, speed_law: str) -> None:
+    """ValueError unless every model that learns an impact-speed law learns the training data's."""
+    laws = {name: model.speed_law for name, model in models.items() if hasattr(model, "speed_law")}
+    wrong = {name: law for name, law in laws.items() if law != speed_law}
+    if wrong:
+        raise ValueError(
+            f"models {wrong} learn another impact-speed law than the training data's {speed_law!r} "
+            "(training_data(..., speed_law=...))"
+        )
+
+
+def _prediction_frame(table: pd.DataFrame, models: dict, families: list) -> pd.DataFrame:
+    """The pairs' ids and DEM targets with empty columns for the fold and every model's held-out
+    prediction (and the families' standard deviations)."""
+    keep = [c for c in (*PAIR_ID_COLUMNS, TARGET_COLUMN, TARGET_NAME, TARGET_NOISE_VAR) if c in table]
+    pred = table[keep].copy()
+    pred["fold"] = -1
+    for name in models:
+        pred[f"{name}_log10"] = np.nan
+    for name in families:
+        pred[f"{name}_std_log10"] = np.nan
+    return pred
+
+
+def _velocity_columns(pred: pd.DataFrame, data: TrainingData, models: dict):
+    """The impact-velocity distribution of every row with bins: its DEM log-normal fit into ``pred``
+    with empty columns for the models that learn it. Returns ``(vmask, vel_models, obs_frac_full)``:
+    the rows with bins, those models (none without such rows) and the DEM bin fractions of every
+    row (NaN where it has none; None without such rows)."""
+    vmask = np.isfinite(data.velocity).all(axis=1)
+    if not vmask.any():
+        return vmask, [], None
+    vel_models = [m for m, model in models.items() if hasattr(model, "predict_velocity")]
+    obs_frac = empirical_fractions(bin_counts(data.table.loc[vmask]))
+    pred["velocity_mu_log10"] = np.nan
+    pred["velocity_sigma"] = np.nan
+    pred.loc[vmask, "velocity_mu_log10"] = data.velocity[vmask, 0]
+    pred.loc[vmask, "velocity_sigma"] = data.velocity[vmask, 1]
+    for name in vel_models:
+        for col in ("mu_log10", "sigma", "tv", "mu_std_log10"):
+            pred[f"{name}_velocity_{col}"] = np.nan
+    obs_frac_full = np.full((len(data.table), obs_frac.shape[1]), np.nan)
+    obs_frac_full[vmask] = obs_frac
+    return vmask, vel_models, obs_frac_full
+
+
 def cross_validate_models(data: TrainingData, models: dict, cv: str = "group_kfold", n_splits: int = 5):
     """Evaluate every model on the same grouped outer folds (whole DEM runs held out).
 
@@ -176,39 +222,11 @@ def cross_validate_models(data: TrainingData, models: dict, cv: str = "group_kfo
     the families' predictive standard deviations and the fold number.
     """
     groups = data.groups
-    laws = {name: model.speed_law for name, model in models.items() if hasattr(model, "speed_law")}
-    wrong = {name: law for name, law in laws.items() if law != data.speed_law}
-    if wrong:
-        raise ValueError(
-            f"models {wrong} learn another impact-speed law than the training data's {data.speed_law!r} "
-            "(training_data(..., speed_law=...))"
-        )
+    _check_speed_laws(models, data.speed_law)
     splits = grouped_splits(groups, cv, n_splits)
-    table = data.table
-
-    keep = [c for c in (*PAIR_ID_COLUMNS, TARGET_COLUMN, TARGET_NAME, TARGET_NOISE_VAR) if c in table]
-    pred = table[keep].copy()
-    pred["fold"] = -1
     families = [name for name, model in models.items() if _uncertain(model)]
-    for name in models:
-        pred[f"{name}_log10"] = np.nan
-    for name in families:
-        pred[f"{name}_std_log10"] = np.nan
-
-    # impact-velocity distribution: DEM fractions and log-normal fit of every row with bins
-    vmask = np.isfinite(data.velocity).all(axis=1)
-    vel_models = [m for m, model in models.items() if hasattr(model, "predict_velocity")] if vmask.any() else []
-    if vmask.any():
-        obs_frac = empirical_fractions(bin_counts(table.loc[vmask]))
-        pred["velocity_mu_log10"] = np.nan
-        pred["velocity_sigma"] = np.nan
-        pred.loc[vmask, "velocity_mu_log10"] = data.velocity[vmask, 0]
-        pred.loc[vmask, "velocity_sigma"] = data.velocity[vmask, 1]
-        for name in vel_models:
-            for col in ("mu_log10", "sigma", "tv", "mu_std_log10"):
-                pred[f"{name}_velocity_{col}"] = np.nan
-        obs_frac_full = np.full((len(table), obs_frac.shape[1]), np.nan)
-        obs_frac_full[vmask] = obs_frac
+    pred = _prediction_frame(data.table, models, families)
+    vmask, vel_models, obs_frac_full = _velocity_columns(pred, data, models)
 
     rows = []
     t_start = time.perf_counter()

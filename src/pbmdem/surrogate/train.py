@@ -68,6 +68,17 @@ def _train_walls(surrogate, selected: str, metrics, tables, settings, impeller_r
     return pd.concat([metrics, wall_metrics], ignore_index=True), summary
 
 
+def _output_paths(model_path: Path, metadata_path, metrics_path, parity_path) -> tuple[Path, Path, Path]:
+    """The metadata, metrics and parity-plot paths: as given, else siblings of ``model_path``
+    (``model.json``, ``metrics.csv``, ``parity.png``)."""
+    out = model_path.parent
+    return (
+        Path(metadata_path) if metadata_path else model_path.with_suffix(".json"),
+        Path(metrics_path) if metrics_path else out / "metrics.csv",
+        Path(parity_path) if parity_path else out / "parity.png",
+    )
+
+
 def train_and_report(
     table: str | os.PathLike | pd.DataFrame,
     model_path: str | os.PathLike,
@@ -102,10 +113,7 @@ def train_and_report(
     Returns the metadata written to ``model.json``.
     """
     model_path = Path(model_path)
-    out = model_path.parent
-    metadata_path = Path(metadata_path) if metadata_path else model_path.with_suffix(".json")
-    metrics_path = Path(metrics_path) if metrics_path else out / "metrics.csv"
-    parity_path = Path(parity_path) if parity_path else out / "parity.png"
+    metadata_path, metrics_path, parity_path = _output_paths(model_path, metadata_path, metrics_path, parity_path)
     data, source, velocity_source = _training_data(table, velocity_table, impeller_radius, settings)
     families = build_families(settings, impeller_radius, n_jobs=n_jobs)
     t0 = time.perf_counter()
@@ -121,20 +129,17 @@ def train_and_report(
     state = surrogate.frequency_model_.fitted_state()
     fitted = state.get("best_params", state.get("fitted"))
     log.info("final fit of %s: %s, %.1f s (cross-validation %.1f s)", selected, fitted, t_fit, t_cv)
+    cv_scores = {
+        "strategy": settings["cv"]["strategy"],
+        "selected": selected,
+        "selection": reason,
+        **_cv_summaries(metrics, summary, velocity_summary, wall_summary),
+    }
     meta = save_surrogate(
         surrogate,
         model_path,
         metadata_path,
-        cv_scores={
-            "strategy": settings["cv"]["strategy"],
-            "selected": selected,
-            "selection": reason,
-            "outer_summary": summary,
-            "noise_floor_r2_log10": (next(iter(summary.values()))["noise_floor_r2_log10"] if summary else None),
-            "velocity_summary": velocity_summary,
-            "wall_summary": wall_summary,
-            "outer_folds": metrics[~metrics["fold"].isin(["pooled", "mean"])].to_dict(orient="records"),
-        },
+        cv_scores=cv_scores,
         extra={
             "training_table": source,
             "velocity_table": velocity_source,
@@ -150,6 +155,18 @@ def train_and_report(
     else:
         empty_plot(parity_path, "parity plot needs at least two DEM runs")
     return meta
+
+
+def _cv_summaries(metrics: pd.DataFrame, summary: dict, velocity_summary: dict, wall_summary: dict) -> dict:
+    """The held-out scores that ``model.json`` keeps under ``cv_scores``, besides the choice of the
+    kernel source: the summaries per model and target and every outer fold's row of ``metrics``."""
+    return {
+        "outer_summary": summary,
+        "noise_floor_r2_log10": (next(iter(summary.values()))["noise_floor_r2_log10"] if summary else None),
+        "velocity_summary": velocity_summary,
+        "wall_summary": wall_summary,
+        "outer_folds": metrics[~metrics["fold"].isin(["pooled", "mean"])].to_dict(orient="records"),
+    }
 
 
 def _logged(fn, *args, **kwargs):

@@ -235,33 +235,7 @@ def run(
         cmd, cwd=workdir, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, errors="replace", env=env
     )
     with _PassSignals(proc) as signals:
-        try:
-            while True:
-                left = None if timeout is None else timeout - (time.perf_counter() - t0)
-                try:
-                    stdout, stderr = proc.communicate(timeout=poll if left is None else max(0.0, min(poll, left)))
-                    returncode = proc.returncode
-                    break
-                except subprocess.TimeoutExpired:
-                    if left is not None and left <= poll:
-                        kill_tree(proc)
-                        stdout, _ = proc.communicate()
-                        returncode, stderr = -9, f"timed out after {timeout} s"
-                        break
-                    if signals.deadline is not None and time.perf_counter() >= signals.deadline:
-                        kill_tree(proc)  # a cancelled job must end before the cluster's KillWait
-                        stdout, _ = proc.communicate()
-                        returncode, stderr = -9, f"killed: still running {SIGNAL_KILL:g} s after {signals.received[0]}"
-                        break
-                    if progress is not None:
-                        progress.update()
-        except BaseException:  # e.g. KeyboardInterrupt: do not leave the engine running
-            kill_tree(proc)
-            proc.communicate()
-            raise
-        finally:
-            if progress is not None:
-                progress.close()
+        stdout, stderr, returncode = _wait(proc, t0, timeout, poll, progress, signals)
     wall = time.perf_counter() - t0
     cpu = _children_cpu() - cpu0
     screen = workdir / "screen.liggghts"
@@ -269,18 +243,7 @@ def run(
     log_text = log.read_text(errors="replace") if log.exists() else ""
     # an error can reach the screen but not the log (e.g. when MPI aborts while reporting it)
     log_text += "\n" + stdout
-    problems = []
-    if signals.received:
-        problems.append(f"interrupted by {', '.join(signals.received)}")
-    if returncode != 0:
-        problems.append(f"exit code {returncode}")
-    err = _ERROR_LINE.search(log_text)
-    if err:
-        problems.append(f"log says: {err.group(0).strip()}")
-    if _LOST.search(log_text):
-        problems.append("particles were lost")
-    if _FORCED_RESTART.search(log_text):
-        problems.append("interrupted: LIGGGHTS wrote a forced restart (it received SIGINT or SIGTERM)")
+    problems, err = _problems(log_text, returncode, signals.received)
     if problems:
         record_crash(
             workdir,
@@ -292,6 +255,55 @@ def run(
             error_line=err.group(0).strip() if err else None,
         )
     return LiggghtsRun(log=log, wall_time=wall, returncode=returncode, cpu_time=cpu)
+
+
+def _wait(proc: subprocess.Popen, t0: float, timeout, poll: float, progress, signals: _PassSignals):
+    """``(stdout, stderr, returncode)`` of ``proc`` (started at ``t0``) once it ended, with
+    ``progress.update()`` every ``poll`` seconds meanwhile. Kills it (returncode -9, the reason as
+    stderr) after ``timeout`` s or at the deadline of a received signal; on any exception (e.g.
+    KeyboardInterrupt) kills it and re-raises, so that the engine is never left running."""
+    try:
+        while True:
+            left = None if timeout is None else timeout - (time.perf_counter() - t0)
+            try:
+                stdout, stderr = proc.communicate(timeout=poll if left is None else max(0.0, min(poll, left)))
+                return stdout, stderr, proc.returncode
+            except subprocess.TimeoutExpired:
+                if left is not None and left <= poll:
+                    kill_tree(proc)
+                    stdout, _ = proc.communicate()
+                    return stdout, f"timed out after {timeout} s", -9
+                if signals.deadline is not None and time.perf_counter() >= signals.deadline:
+                    kill_tree(proc)  # a cancelled job must end before the cluster's KillWait
+                    stdout, _ = proc.communicate()
+                    return stdout, f"killed: still running {SIGNAL_KILL:g} s after {signals.received[0]}", -9
+                if progress is not None:
+                    progress.update()
+    except BaseException:  # e.g. KeyboardInterrupt: do not leave the engine running
+        kill_tree(proc)
+        proc.communicate()
+        raise
+    finally:
+        if progress is not None:
+            progress.close()
+
+
+def _problems(log_text: str, returncode: int, received: list) -> tuple[list[str], re.Match | None]:
+    """What went wrong in a run, from its log and screen text, its exit code and the signals it
+    ``received`` (empty: nothing), with the log's error line (a match, or None)."""
+    problems = []
+    if received:
+        problems.append(f"interrupted by {', '.join(received)}")
+    if returncode != 0:
+        problems.append(f"exit code {returncode}")
+    err = _ERROR_LINE.search(log_text)
+    if err:
+        problems.append(f"log says: {err.group(0).strip()}")
+    if _LOST.search(log_text):
+        problems.append("particles were lost")
+    if _FORCED_RESTART.search(log_text):
+        problems.append("interrupted: LIGGGHTS wrote a forced restart (it received SIGINT or SIGTERM)")
+    return problems, err
 
 
 def _children_cpu() -> float:

@@ -9,12 +9,14 @@ Two files:
 * ``model.json`` - metadata: estimator parameters (the impeller radius among them), feature names
   and training ranges, training runs, CV scores, library versions and the SHA-256 of ``model.skops``.
 
-:func:`load_surrogate` checks, before deserialising anything, that the metadata format is known,
-the SHA-256 matches (else :class:`TamperedModelError`) and the scikit-learn major.minor equals the
-installed one (else :class:`IncompatibleVersionError`). It then lists every type in the skops
-schema and refuses any type outside :data:`ALLOWED_TYPES` (:class:`UntrustedTypesError`); only
-the allow-listed types that skops itself does not trust by default (``skops.io.get_untrusted_types``)
-are passed as ``trusted``.
+:func:`load_surrogate` checks, before deserialising anything, that the metadata format is known
+and the metadata fulfils its contract (:mod:`.metadata`), the SHA-256 matches (else
+:class:`TamperedModelError`) and the scikit-learn major.minor equals the installed one (else
+:class:`IncompatibleVersionError`). It then refuses any type outside :data:`ALLOWED_TYPES`
+(:class:`UntrustedTypesError`), of those in the skops schema and of those skops itself does not
+trust (``skops.io.get_untrusted_types``), and passes the latter as ``trusted``. The allow-list is
+written out because skops' own is wider: since skops 0.10 it trusts every scikit-learn estimator
+by default (a ``LinearRegression`` would load), and a surrogate file holds only a few of them.
 """
 
 from __future__ import annotations
@@ -291,14 +293,15 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
     metadata_path = metadata_path_for(model_path) if metadata_path is None else Path(metadata_path)
     meta = read_metadata(metadata_path)
 
+    # read_metadata checked the contract: the keys below are there, with values of their type
     digest = sha256_file(model_path)
-    if digest != meta.get("model_sha256"):
+    if digest != meta["model_sha256"]:
         raise TamperedModelError(
-            f"{model_path}: SHA-256 {digest} does not match {meta.get('model_sha256')} recorded in "
+            f"{model_path}: SHA-256 {digest} does not match {meta['model_sha256']} recorded in "
             f"{metadata_path}; the model file was modified or belongs to another training run"
         )
 
-    saved = meta.get("versions", {}).get("sklearn", "?")
+    saved = meta["versions"]["sklearn"]
     if _major_minor(saved) != _major_minor(sklearn.__version__):
         raise IncompatibleVersionError(
             f"{model_path} was written with scikit-learn {saved}, installed is {sklearn.__version__} "
@@ -306,11 +309,8 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
         )
 
     types = schema_types(model_path)
-    bad = sorted(types - ALLOWED_TYPES)
-    if bad:
-        raise UntrustedTypesError(f"{model_path} contains types outside the allow-list: {bad}")
-    untrusted = sio.get_untrusted_types(file=model_path)
-    bad = sorted(set(untrusted) - ALLOWED_TYPES)
+    untrusted = sio.get_untrusted_types(file=model_path) if types <= ALLOWED_TYPES else []
+    bad = sorted((types | set(untrusted)) - ALLOWED_TYPES)
     if bad:
         raise UntrustedTypesError(f"{model_path} contains types outside the allow-list: {bad}")
     stored = sio.load(model_path, trusted=list(untrusted))
@@ -321,8 +321,8 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
         or not isinstance(stored.get("velocity"), list)
     ):
         raise SurrogateLoadError(f"{model_path} does not hold the fitted frequency and velocity pipelines")
-    edges = meta.get("velocity_edges")
-    if edges is None or len(edges) != len(VELOCITY_EDGES) or not np.allclose(edges, VELOCITY_EDGES, rtol=1e-9):
+    edges = meta["velocity_edges"]
+    if len(edges) != len(VELOCITY_EDGES) or not np.allclose(edges, VELOCITY_EDGES, rtol=1e-9):
         raise IncompatibleVersionError(
             f"{metadata_path}: velocity bins {edges} differ from this version's pbmdem.impact.VELOCITY_EDGES; "
             f"retrain the surrogate"

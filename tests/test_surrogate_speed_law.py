@@ -127,20 +127,26 @@ def data():
     return training_data(table, R, speed_law="weibull")
 
 
-def test_surrogate_predicts_fractions_of_its_law_and_persists_it(data, tmp_path):
-    from pbmdem.surrogate import load_surrogate, save_surrogate
-
-    assert data.speed_law == "weibull"
+def _fitted_surrogate(data, speed_law: str) -> CollisionSurrogate:
+    """A response-surface surrogate with the speed law `speed_law`, fitted on `data` (convergence
+    warnings of the small synthetic set ignored)."""
     model = CollisionSurrogate(
         frequency_model=ResponseSurface(degree=(1,), n_members=3),
         impeller_radius=R,
         physics_offset="cross_section",
         feature_transform="log",
-        speed_law="weibull",
+        speed_law=speed_law,
     )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        model.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
+        return model.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
+
+
+def test_surrogate_predicts_fractions_of_its_law_and_persists_it(data, tmp_path):
+    from pbmdem.surrogate import load_surrogate, save_surrogate
+
+    assert data.speed_law == "weibull"
+    model = _fitted_surrogate(data, "weibull")
     frac = model.velocity_fractions(data.X.iloc[:5])
     assert np.allclose(frac, speed_fractions(*model.predict_velocity(data.X.iloc[:5]), "weibull"))
     assert not np.allclose(frac, lognormal_fractions(*model.predict_velocity(data.X.iloc[:5])))
@@ -157,16 +163,9 @@ def test_three_parameter_law_through_the_surrogate(data):
     table = data.table
     gg = training_data(table, R, speed_law="gengamma")
     assert gg.velocity.shape == (len(gg.y), 3)
-    model = CollisionSurrogate(
-        frequency_model=ResponseSurface(degree=(1,), n_members=3),
-        impeller_radius=R,
-        physics_offset="cross_section",
-        feature_transform="log",
-        speed_law="gengamma",
-    )
+    model = _fitted_surrogate(gg, "gengamma")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        model.fit(gg.X, gg.y, groups=gg.groups, velocity=gg.velocity)
         with pytest.raises(ValueError, match=r"\(n_samples, 3\)"):
             model.fit(gg.X, gg.y, groups=gg.groups, velocity=gg.velocity[:, :2])
     rates = model.encounters(np.array([1e-3, 2e-3]), np.array([3000.0, 500.0]), 600.0, check_domain=False)

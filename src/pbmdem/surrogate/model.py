@@ -268,6 +268,15 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         index = F.index if isinstance(F, pd.DataFrame) else None
         return pd.DataFrame(self._domain_mask(vals), columns=self._feature_names(), index=index)
 
+    def _validated_frame(self, X, check_domain: bool):
+        """The feature frame of the feature matrix ``X`` (validated against the fitted features),
+        with an OutOfDomainWarning per feature outside the training range if ``check_domain``
+        (pointing at the caller of the public method that called this)."""
+        X = validate_data(self, X, reset=False, dtype=np.float64)
+        if check_domain:
+            self._warn_domain(X, stacklevel=4)
+        return self._frame(X)
+
     def _warn_domain(self, vals: np.ndarray, stacklevel: int = 3) -> None:
         """One OutOfDomainWarning per feature with values outside the training range (``vals``:
         validated feature array)."""
@@ -292,10 +301,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         Features outside the training range raise :class:`OutOfDomainWarning` unless
         ``check_domain`` is False."""
         check_is_fitted(self)
-        X = validate_data(self, X, reset=False, dtype=np.float64)
-        F = self._frame(X)
-        if check_domain:
-            self._warn_domain(X, stacklevel=3)
+        F = self._validated_frame(X, check_domain)
         mean, std = self.frequency_model_.predict(self._inner(F), return_std=True)
         mean = mean + self._offset(F)
         return (mean, self.uncertainty_scale * std) if return_std else mean
@@ -325,10 +331,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         ``mu`` and of ``log10 sigma`` (decades).
         """
         self._require_velocity_model()
-        X = validate_data(self, self._features(X), reset=False, dtype=np.float64)
-        F = self._frame(X)
-        if check_domain:
-            self._warn_domain(X, stacklevel=3)
+        F = self._validated_frame(self._features(X), check_domain)
         mu, sigma, _, std = self._velocity_law(F)
         return (mu, sigma, std[:, 0], std[:, 1]) if return_std else (mu, sigma)
 
@@ -342,10 +345,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
     def velocity_fractions(self, X, check_domain: bool = True) -> np.ndarray:
         """(n, N_VELOCITY_BINS) predicted fraction of each row's encounters per velocity bin (rows sum to 1)."""
         self._require_velocity_model()
-        X = validate_data(self, self._features(X), reset=False, dtype=np.float64)
-        F = self._frame(X)
-        if check_domain:
-            self._warn_domain(X, stacklevel=3)
+        F = self._validated_frame(self._features(X), check_domain)
         mu, sigma, shape, _ = self._velocity_law(F)
         return speed_fractions(mu, sigma, self.speed_law, shape)
 

@@ -73,6 +73,15 @@ class Model:
         return [Case(float(r), values + tuple(fixed.get(float(r), ())), self.member, self.kernel) for r in rpms]
 
 
+def forward_jacobian(evaluate, x) -> np.ndarray:
+    """Forward-difference Jacobian (step LN_STEP in each coordinate) of the residual vectors that
+    `evaluate` gives for a list of points, all points of one Jacobian evaluated in one call."""
+    x = np.asarray(x, float)
+    steps = [x + LN_STEP * np.eye(x.size)[i] for i in range(x.size)]
+    base, *shifted = evaluate([x, *steps])
+    return np.column_stack([(s - base) / LN_STEP for s in shifted])
+
+
 class Residuals:
     """The normalised residuals of `model` against `data` as a function of ln theta, and their
     forward-difference Jacobian (the batches of all columns in one parallel call)."""
@@ -118,10 +127,7 @@ class Residuals:
         return self._evaluate([np.asarray(x, float)])[0]
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x, float)
-        steps = [x + LN_STEP * np.eye(x.size)[i] for i in range(x.size)]
-        base, *shifted = self._evaluate([x, *steps])
-        return np.column_stack([(s - base) / LN_STEP for s in shifted])
+        return forward_jacobian(self._evaluate, x)
 
 
 class _Profiled:
@@ -142,10 +148,7 @@ class _Profiled:
         return self.residuals(self._point(y))
 
     def jacobian(self, y) -> np.ndarray:
-        y = np.asarray(y, float)
-        steps = [y + LN_STEP * np.eye(y.size)[i] for i in range(y.size)]
-        base, *shifted = self.residuals._evaluate([self._point(v) for v in (y, *steps)])
-        return np.column_stack([(s - base) / LN_STEP for s in shifted])
+        return forward_jacobian(lambda points: self.residuals._evaluate([self._point(v) for v in points]), y)
 
 
 def profile_chi2(

@@ -65,9 +65,9 @@ def check(cfg) -> None:
     grid = cfg.grid
     if grid.count() > grid.max_points:
         problems.append(
-            f"grid: {len(grid.impeller_rpm)} impeller_rpm x {len(grid.full_distributions())} size_distributions "
-            f"and design_distributions "
-            f"+ {len(grid.extra_points)} extra_points = {grid.count()} operating points, more than "
+            f"grid: {len(grid.impeller_rpm)} impeller_rpm x {len(grid.size_distributions)} size_distributions "
+            f"+ {len(grid.extra_points)} extra_points + {len(grid.design_points)} design_points = {grid.count()} "
+            f"operating points, more than "
             f"grid.max_points = {grid.max_points} (raise it if the grid is meant to be this large)"
         )
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
@@ -75,14 +75,12 @@ def check(cfg) -> None:
     for name in cfg.grid.size_distributions:
         if name not in cfg.size_distributions:
             problems.append(f"grid.size_distributions: {name!r} is not defined; defined names: {defined}")
-    for name in cfg.grid.design_distributions:
-        if name not in cfg.size_distributions:
-            problems.append(f"grid.design_distributions: {name!r} is not defined; defined names: {defined}")
-    for k, point in enumerate(cfg.grid.extra_points):
-        if point.distribution not in cfg.size_distributions:
-            problems.append(
-                f"grid.extra_points[{k}].distribution: {point.distribution!r} is not defined; defined names: {defined}"
-            )
+    for key in ("extra_points", "design_points"):
+        for k, point in enumerate(getattr(cfg.grid, key)):
+            if point.distribution not in cfg.size_distributions:
+                problems.append(
+                    f"grid.{key}[{k}].distribution: {point.distribution!r} is not defined; defined names: {defined}"
+                )
     if cfg.validation.distribution not in cfg.size_distributions:
         problems.append(
             f"validation.distribution: {cfg.validation.distribution!r} is not defined; defined names: {defined}"

@@ -45,46 +45,48 @@ class ExtraPoint(Settings):
 
 @dataclass(frozen=True)
 class OperatingGrid(Settings):
-    """The DEM grid: every impeller speed (rpm) with every named size distribution, and single
-    extra points (the active learning's proposals)."""
+    """The DEM grid: every impeller speed (rpm) with every named size distribution, single extra
+    points (the active learning's proposals) and the points of a space-filling design (each a
+    distribution at one speed, `pbmdem.dem.design`)."""
 
     impeller_rpm: tuple[float, ...]
     size_distributions: tuple[str, ...]
     extra_points: tuple[ExtraPoint, ...]
     max_points: int
-    design_distributions: tuple[str, ...]
+    design_points: tuple[ExtraPoint, ...]
     design_replicates: int | None
 
     def full_distributions(self) -> list[str]:
-        """The distributions run at every speed: the named ones, then the design's not among them."""
-        named = list(self.size_distributions)
-        return named + [d for d in self.design_distributions if d not in named]
+        """The distributions run at every speed: the named ones."""
+        return list(self.size_distributions)
 
     def count(self) -> int:
-        """Number of operating points of the full grid plus the extra points (an upper bound of
-        len(points()), computed without listing them)."""
-        return len(self.impeller_rpm) * len(self.full_distributions()) + len(self.extra_points)
+        """Number of operating points of the full grid plus the extra and design points (an upper
+        bound of len(points()), computed without listing them)."""
+        return len(self.impeller_rpm) * len(self.size_distributions) + len(self.extra_points) + len(self.design_points)
 
     def points(self) -> list[tuple[float, str]]:
-        """Every operating point (rpm, distribution): the full grid (named distributions, then
-        the design's), then the extra points not in it."""
-        full = [(rpm, dist) for rpm in self.impeller_rpm for dist in self.full_distributions()]
-        extra = [(p.rpm, p.distribution) for p in self.extra_points]
-        return full + [p for k, p in enumerate(extra) if p not in full and p not in extra[:k]]
+        """Every operating point (rpm, distribution): the full grid, then the extra points and the
+        design points not in it."""
+        full = [(rpm, dist) for rpm in self.impeller_rpm for dist in self.size_distributions]
+        single = [(p.rpm, p.distribution) for p in (*self.extra_points, *self.design_points)]
+        return full + [p for k, p in enumerate(single) if p not in full and p not in single[:k]]
 
     def speeds(self) -> list[float]:
         """Every impeller speed that some operating point runs at, ascending."""
         return sorted({rpm for rpm, _ in self.points()})
 
     def replicates(self, distribution: str, default: int) -> int:
-        """DEM runs per operating point of `distribution`: `design_replicates` for a design
+        """DEM runs per operating point of `distribution`: `design_replicates` for a design point's
         distribution (unless it is also named or an extra point's), else `default` (dem.replicates)."""
         own = set(self.size_distributions) | {p.distribution for p in self.extra_points}
-        if distribution in self.design_distributions and distribution not in own and self.design_replicates:
+        design = {p.distribution for p in self.design_points}
+        if distribution in design and distribution not in own and self.design_replicates:
             return int(self.design_replicates)
         return int(default)
 
     def distributions(self) -> list[str]:
-        """The size distributions of the grid and of the extra points, each once."""
+        """The size distributions of the grid, of the extra points and of the design points, each once."""
         names = self.full_distributions()
-        return names + sorted({p.distribution for p in self.extra_points} - set(names))
+        single = {p.distribution for p in (*self.extra_points, *self.design_points)}
+        return names + sorted(single - set(names))

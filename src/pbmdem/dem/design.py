@@ -1,20 +1,25 @@
-"""A space-filling design of size distributions for the DEM grid.
+"""A space-filling design of operating points for the DEM grid.
 
 The surrogate learns the encounter frequency of a class pair from the pair's diameters, the number
 fractions of its two classes, the bed's particle count and the tip speed
-(`pbmdem.surrogate.features.FEATURE_NAMES`). The named feeds place a few beds in that space; the
-PBM's states lie between them. `design_distributions` fills the space between with three-class
-distributions from a scrambled Sobol sequence (scipy.stats.qmc, seeded) over five coordinates:
+(`pbmdem.surrogate.features.FEATURE_NAMES`). The named feeds at the grid's speeds place a few beds
+in that space; the PBM's states lie between them. `design_points` fills the space between with
+three-class distributions, each at one impeller speed, from a scrambled Sobol sequence
+(scipy.stats.qmc, seeded) over six coordinates:
 
 * the smallest diameter, log-uniform in `d_min_range`;
 * the largest over the smallest, log-uniform from `min_span` to what keeps the largest within
   `d_max_limit`;
 * the middle class's place between them on a log scale, uniform in `middle_range`;
-* the number fractions, uniform on the simplex above a floor `min_fraction` for each class.
+* the number fractions, uniform on the simplex above a floor `min_fraction` for each class;
+* the impeller speed, log-uniform in `rpm_range` (the speeds of the named grid double from one to
+  the next, and the encounter rate changes most at the low end).
 
-The particle count follows from the bed's solid volume (`pbmdem.dem.plan.bed_particle_count`), the
-tip speed from the grid's speeds, at which every design distribution runs. Diameters are rounded to
-0.1 mm and fractions to 0.01, so that the config holds the design as plain numbers.
+The particle count follows from the bed's solid volume (`pbmdem.dem.plan.bed_particle_count`).
+Placing each distribution at one speed, instead of at every grid speed, spreads the design over
+the tip-speed feature too, between the grid's speeds, at a quarter of the cost of running it at
+four speeds. Diameters are rounded to 0.1 mm, fractions to 0.01 and speeds to 10 rpm, so that the
+config holds the design as plain numbers.
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ class DesignSpace:
     middle_range: tuple[float, float] = (0.3, 0.7)
     min_fraction: float = 0.10
     max_span: float = 4.0
+    rpm_range: tuple[float, float] = (150.0, 1200.0)
 
 
 def _fractions(u: float, v: float, floor: float) -> list[float]:
@@ -47,17 +53,19 @@ def _fractions(u: float, v: float, floor: float) -> list[float]:
     return [*rounded, round(1.0 - sum(rounded), 2)]
 
 
-def design_distributions(n: int, seed: int, space: DesignSpace = DesignSpace()) -> list[dict]:
-    """`n` three-class distributions `{"diameters": [...], "number_fractions": [...]}` (m, ascending;
-    sum 1) from the first `n` points of a scrambled Sobol sequence seeded with `seed`."""
+def design_points(n: int, seed: int, space: DesignSpace = DesignSpace()) -> list[dict]:
+    """`n` design points `{"rpm": ..., "diameters": [...], "number_fractions": [...]}` (three
+    classes, m, ascending; fractions sum to 1) from the first `n` points of a scrambled Sobol
+    sequence seeded with `seed`."""
     from scipy.stats import qmc
 
     if n < 1:
-        raise ValueError(f"n = {n!r}: at least one distribution is needed")
-    points = qmc.Sobol(d=5, scramble=True, seed=seed).random(n)
+        raise ValueError(f"n = {n!r}: at least one design point is needed")
+    points = qmc.Sobol(d=6, scramble=True, seed=seed).random(n)
     out = []
     lo, hi = space.d_min_range
-    for a, b, c, u, v in points:
+    rpm_lo, rpm_hi = space.rpm_range
+    for a, b, c, u, v, w in points:
         d_min = lo * (hi / lo) ** a
         top = min(space.max_span, space.d_max_limit / d_min)
         span = space.min_span * (top / space.min_span) ** b
@@ -65,6 +73,7 @@ def design_distributions(n: int, seed: int, space: DesignSpace = DesignSpace()) 
         diameters = [d_min, d_min * span**t, d_min * span]
         out.append(
             {
+                "rpm": float(round(rpm_lo * (rpm_hi / rpm_lo) ** w, -1)),
                 "diameters": [round(float(d), 4) for d in diameters],
                 "number_fractions": _fractions(float(u), float(v), space.min_fraction),
             }
@@ -79,12 +88,15 @@ def design_names(n: int, prefix: str = "sf") -> list[str]:
 
 
 def design_yaml(n: int, seed: int) -> str:
-    """The design as `size_distributions` entries for config/config.yaml."""
-    lines = []
-    for name, dist in zip(design_names(n), design_distributions(n, seed)):
-        d = ", ".join(f"{x:g}" for x in dist["diameters"])
-        f = ", ".join(f"{x:.2f}" for x in dist["number_fractions"])
+    """The design as config/config.yaml entries: `size_distributions` and `grid.design_points`."""
+    names, points = design_names(n), design_points(n, seed)
+    lines = ["size_distributions:"]
+    for name, point in zip(names, points):
+        d = ", ".join(f"{x:g}" for x in point["diameters"])
+        f = ", ".join(f"{x:.2f}" for x in point["number_fractions"])
         lines += [f"  {name}:", f"    diameters: [{d}]", f"    number_fractions: [{f}]"]
+    lines += ["grid:", "  design_points:"]
+    lines += [f"    - {{rpm: {point['rpm']:g}, distribution: {name}}}" for name, point in zip(names, points)]
     return "\n".join(lines)
 
 

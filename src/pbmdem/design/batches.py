@@ -145,15 +145,18 @@ def run_cases(loop: CoupledLoop, model_path, cases: list[Case], n_jobs: int = 1)
         return _run_chunk(loop, model_path, cases)
     if model_path is not None and any(c.kernel == "ann" for c in cases):
         _surrogate(str(model_path), Path(model_path).stat().st_mtime)
-    _run_chunk(loop, model_path, cases[:1])  # compiles the PBM's kernels here, once, not in every process
+    # the first case runs here: it compiles the PBM's kernels once, not in every process, and its
+    # outcome is kept (a calibration's evaluation is 3 cases: 2 case times on 2 processes, not 3)
+    first = _run_chunk(loop, model_path, cases[:1])
+    rest = cases[1:]
     # a few chunks per process: the load stays balanced and each chunk pays one transfer
-    n_chunks = min(len(cases), 4 * n_jobs)
-    bounds = np.linspace(0, len(cases), n_chunks + 1).astype(int)
-    chunks = [cases[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+    n_chunks = min(len(rest), 4 * n_jobs)
+    bounds = np.linspace(0, len(rest), n_chunks + 1).astype(int)
+    chunks = [rest[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
     context = multiprocessing.get_context("fork")
     with ProcessPoolExecutor(max_workers=min(n_jobs, n_chunks), mp_context=context) as pool:
         done = list(pool.map(_run_chunk, [loop] * len(chunks), [model_path] * len(chunks), chunks))
-    return [outcome for chunk in done for outcome in chunk]
+    return first + [outcome for chunk in done for outcome in chunk]
 
 
 def outcomes_table(outcomes: list[Outcome]) -> pd.DataFrame:

@@ -97,11 +97,18 @@ def flow_development(runs: pd.DataFrame) -> pd.DataFrame:
 
 
 def plot_speed_response(response: pd.DataFrame, path) -> None:
-    """Encounters per particle and second against impeller speed, one line per feed, with
-    replicate standard errors; the raw new-contact rate on a second panel."""
+    """Encounters per particle and second against impeller speed, one line per feed run at
+    several speeds, with replicate standard errors; the raw new-contact rate on a second panel.
+    Distributions run at one speed only (the design points) are grey markers: a point, not a speed
+    response."""
     plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    for dist, g in response.groupby("distribution"):
+    several = response.groupby("distribution").rpm.transform("nunique") > 1
+    single = response[~several]
+    for ax, column in zip(axes, ("encounters_per_particle_per_s", "new_contacts_per_particle_per_s")):
+        if len(single):
+            ax.plot(single.rpm, single[column], "o", color="0.6", markersize=4, label="single points")
+    for dist, g in response[several].groupby("distribution"):
         g = g.sort_values("rpm")
         axes[0].errorbar(
             g.rpm,
@@ -137,9 +144,11 @@ def plot_speed_response(response: pd.DataFrame, path) -> None:
 
 
 def plot_impact_velocities(velocities: pd.DataFrame, path) -> None:
-    """Distribution of impact speeds (all class pairs pooled) per speed, one panel per feed."""
+    """Distribution of impact speeds (all class pairs pooled) per speed, one panel per feed run at
+    several speeds (the design points, one speed each, are left out)."""
     plt = pyplot()
-    feeds = sorted(velocities.distribution.unique())
+    speeds = velocities.groupby("distribution").rpm.nunique()
+    feeds = sorted(speeds.index[speeds > 1]) or sorted(speeds.index)
     # at most three panels a row, each as large as a single figure's panel (readable at page width)
     ncols = min(3, len(feeds))
     nrows = -(-len(feeds) // ncols)

@@ -56,6 +56,10 @@ class KernelInput:
     apart (docs/pbm.md, "Feed granules"), the K pivots followed by P feed classes at their own
     volumes; ``feed_weights`` (P, K) is then the lever rule of the feed classes onto the pivots
     (number fractions). A kernel returns the (K + P, K + P) matrix of the classes.
+
+    ``porosity`` is the intra-granular porosity eps = G / (S + G) of every class (NaN where a class
+    holds no solid; None: not given). Only a selection rate whose strength depends on porosity reads it
+    (``pbm.impact_breakage.ImpactSelection``).
     """
 
     t: float
@@ -65,6 +69,7 @@ class KernelInput:
     surface_fraction: np.ndarray
     rpm: float
     feed_weights: np.ndarray | None = None
+    porosity: np.ndarray | None = None
 
     @property
     def pivots(self) -> int:

@@ -36,7 +36,7 @@ from .grid import Grid, diameter_of
 from .kernels import Kernel, KernelInput
 from .processes import Consolidation, LiquidAddition
 from .results import Result
-from .state import FeedGranules, State, check_state, feed_volumes, surface_fraction
+from .state import FeedGranules, State, check_state, feed_volumes, granule_porosity, surface_fraction
 from .stepping import FLUSH, STEP_LIMITS, TIME_EPS, Records, StepControl, check_solver
 
 __all__ = ["GranulationPBM", "check_solver"]
@@ -213,6 +213,7 @@ class GranulationPBM:
             numbers=N,
             surface_fraction=surface_fraction(S, L, G),
             rpm=self.rpm,
+            porosity=granule_porosity(S, G),
         )
 
     def rates(self, t: float, N, L, G, spraying: bool):
@@ -331,6 +332,7 @@ class GranulationPBM:
             surface_fraction=phi,
             rpm=self.rpm,
             feed_weights=self._feed_number_w,
+            porosity=granule_porosity(nlg[0] * self._xc, nlg[2]),  # solid and gas in units of x_0
         )
 
     # ----------------------------------------------------------------- integration

@@ -252,3 +252,149 @@ def test_breakage_study_variants_include_the_sharp_criterion(default_config):
     assert variants["sharp"].strength_spread == 0.0 and variants["sharp"].enabled
     sharp_only = breakage_variants(pbm.replace(breakage=pbm.breakage.replace(strength_spread=0.0)))
     assert "sharp" not in sharp_only
+
+
+def test_a_porosity_exponent_of_zero_leaves_the_selection_bit_identical():
+    # n = 0 (the default): the selection ignores porosity; the rates are those of the v* of
+    # the size law alone, bit for bit, whatever porosity the input carries
+    d = np.array([0.002, 0.004, 0.008])
+    source = HandMadeSource(np.full((3, 3), 0.01), [2.0, 2.0, 3.0], [1.0, 1.0, 1.0], 1.3, 2.5, 3.1)
+    inp = kernel_input([10.0, 5.0, 2.0], d=d)
+    inp.porosity = np.array([0.5, 0.3, 0.2])
+    for size_exponent in (0.0, 1.0):
+        for spread in (0.0, 0.5):
+            base = dict(strength_spread=spread, size_exponent=size_exponent)
+            before = ImpactSelection(source, RHO, Y, ST, **base)
+            after = ImpactSelection(source, RHO, Y, ST, **base, porosity_exponent=0.0, reference_porosity=0.3)
+            v = before.speed if size_exponent == 0.0 else before.speed * (d / 0.002) ** (-0.5 * size_exponent)
+            rates = source.impacts(d, inp.numbers, inp.rpm)
+            expected = selection_rates(rates, inp.numbers, v, before.walls, before.pairs, spread)
+            for sel in (before, after):
+                parts = sel.contributions(inp)
+                assert parts.keys() == expected.keys()
+                for k in parts:
+                    np.testing.assert_array_equal(parts[k], expected[k])
+
+
+@pytest.mark.parametrize("n", [1.0, 2.0])
+def test_consolidated_granules_are_stronger_with_a_porosity_exponent(n):
+    # Y(eps) = Y [((1 - eps)/eps) / ((1 - 0.5)/0.5)]^n: at eps = 0.2, (1 - eps)/eps = 4, so
+    # v* = 2 m/s * 4^(n/2): 4 m/s (n = 1), 8 m/s (n = 2); at eps = 0.5 (and where a pivot is
+    # empty, NaN) v* = 2 m/s. Every impact at 4.5 m/s (bin [3.16, 5.62) m/s) breaks the fresh
+    # granule; of the consolidated one's the fraction above v* in log v: log(5.62/4)/log(5.62/3.16)
+    # with n = 1, none with n = 2
+    d = (0.004, 0.004, 0.004)
+    source = HandMadeSource(np.full((3, 3), 0.01), [2.0, 2.0, 2.0], [1.0, 1.0, 1.0], 4.5, 4.5, 4.5)
+    inp = kernel_input([10.0, 5.0, 0.0], d=d)
+    inp.porosity = np.array([0.5, 0.2, np.nan])
+    sharp = ImpactSelection(source, RHO, Y, ST, porosity_exponent=n)
+    v_fresh, v_dense = 2.0, 2.0 * 4.0 ** (n / 2)
+    assert sharp.critical_speeds(np.array(d), inp.porosity) == pytest.approx([v_fresh, v_dense, v_fresh])
+    s = sharp(inp)
+    lo, hi = VELOCITY_EDGES[15], VELOCITY_EDGES[16]
+    dense_above = np.clip(np.log(hi / v_dense) / np.log(hi / lo), 0.0, 1.0)
+    assert s[0] == pytest.approx(0.01 * (9.0 + 5.0 + 0.0) + 2.0 + 1.0)
+    assert s[1] == pytest.approx((0.01 * (10.0 + 4.0 + 0.0) + 2.0 + 1.0) * dense_above)
+    assert s[1] < s[0]
+    # with a spread of strengths the consolidated granule breaks in fewer impacts, by the same law
+    spread = ImpactSelection(source, RHO, Y, ST, strength_spread=0.5, porosity_exponent=n)
+    rates = source.impacts(np.array(d), inp.numbers, 600.0)
+    expected = selection_rates(rates, inp.numbers, np.array([v_fresh, v_dense, v_fresh]), spread=0.5)
+    np.testing.assert_allclose(spread(inp), sum(expected.values()), rtol=1e-12)
+    assert 0.0 < spread(inp)[1] < spread(inp)[0]
+    # the reference porosity is the one whose strength is Y
+    shifted = ImpactSelection(source, RHO, Y, ST, porosity_exponent=n, reference_porosity=0.2)
+    assert shifted.critical_speeds(np.array(d), inp.porosity) == pytest.approx([2.0 / 4.0 ** (n / 2), 2.0, 2.0])
+    with pytest.raises(PBMInputError, match="porosity exponent"):
+        ImpactSelection(source, RHO, Y, ST, porosity_exponent=-1.0)
+    with pytest.raises(PBMInputError, match="reference porosity"):
+        ImpactSelection(source, RHO, Y, ST, porosity_exponent=n, reference_porosity=1.0)
+    inp.porosity = None
+    with pytest.raises(PBMInputError, match="porosity"):
+        sharp(inp)
+
+
+def test_the_porosity_of_the_aggregates_decides_not_that_of_the_feed_classes():
+    # K = 2 pivots followed by one feed class: only the pivots' porosities enter
+    d = np.array([0.004, 0.008, 0.004])
+    source = HandMadeSource(np.full((2, 2), 0.01), [2.0, 2.0], [1.0, 1.0], 3.0, 3.0, 3.0)
+    inp = KernelInput(
+        0.0, np.pi / 6 * d**3, d, np.array([5.0, 5.0, 100.0]), np.zeros(3), rpm=600.0,
+        feed_weights=np.array([[1.0, 0.0]]), porosity=np.array([0.2, 0.5, 0.5]),
+    )  # fmt: skip
+    sel = ImpactSelection(source, RHO, Y, ST, porosity_exponent=2.0)
+    s = sel(inp)
+    assert s[0] == 0.0 and s[1] > 0.0
+
+
+def _porosity_model(n, separate_feed=True, consolidation=None):
+    from pbmdem.pbm import ConstantKernel, GranulationPBM, Grid
+    from pbmdem.pbm.breakage import Breakage
+
+    g = Grid(30, 2.0 ** (1 / 3), min_diameter=2e-3)  # SI: pivots of 4.2e-9 .. 4.3e-6 m3
+    # every impact at 3 m/s: v* 2 m/s when fresh (eps 0.5), 8 m/s when consolidated (eps 0.2, n = 2)
+    source = HandMadeSource(np.full((30, 30), 1e-4), np.full(30, 0.05), np.full(30, 0.02), 3.0, 3.0, 3.0)
+    sel = ImpactSelection(source, RHO, Y, ST, strength_spread=0.5, porosity_exponent=n)
+    model = GranulationPBM(
+        g, ConstantKernel(1e-5), consolidation=consolidation, breakage=Breakage(sel, "binary"),
+        separate_feed=separate_feed,
+    )  # fmt: skip
+    return g, model
+
+
+@pytest.mark.parametrize("n", [0.0, 2.0])
+def test_breakage_with_a_porosity_dependent_strength_conserves_solid_liquid_and_gas(n):
+    # bins alternately fresh (eps 0.5) and consolidated (eps 0.2), no consolidation: aggregation
+    # and breakage move solid, liquid and gas between bins and conserve each, in SI volumes
+    from pbmdem.pbm import State
+
+    g, model = _porosity_model(n)
+    N = np.where(np.arange(30) < 12, 100.0 * np.exp(-np.arange(30) / 4.0), 0.0)
+    S = N * g.x
+    G = np.where(np.arange(30) % 2 == 0, 1.0, 0.25) * S
+    state = State(0.0, N, 0.2 * S, G)
+    res = model.run(0.0, 60.0, state, output_times=np.arange(0.0, 61.0, 10.0))
+    for name, total in (("solid", res.number @ g.x), ("liquid", res.liquid.sum(axis=1)), ("gas", res.gas.sum(axis=1))):
+        rel = np.abs(total / total[0] - 1).max()
+        print(f"n = {n:g}: {name} changed by at most {rel:.1e}")
+        assert rel < 1e-13, name
+    # the selection saw each bin's porosity: with n = 2 the consolidated bins' impeller impacts break less
+    impeller = model.breakage.selection.contributions(model.kernel_input(0.0, N, 0.2 * S, G))["impeller"][:12]
+    if n == 0.0:
+        assert np.all(impeller == impeller[0]) and impeller[0] > 0.0
+    else:
+        assert np.all(impeller[1::2] < 0.1 * impeller[0::2])
+
+
+def test_consolidated_aggregates_break_less_and_the_batch_conserves_solid_and_liquid():
+    # a batch consolidating from eps 0.5 towards 0.2 while it aggregates and its aggregates break:
+    # solid and liquid to round-off; the gas follows consolidation's closed form for the whole batch,
+    # G_min + (G0 - G_min) e^(-ct), within the solver's tolerance; with n = 2 fewer granules remain
+    from pbmdem.pbm.processes import Consolidation
+
+    d = np.array([2e-3, 3e-3, 5e-3, 8e-3])
+    for separate_feed in (True, False):
+        numbers = {}
+        for n in (0.0, 2.0):
+            g, model = _porosity_model(n, separate_feed, Consolidation(0.02, 0.2))
+            state = model.initial_state(np.pi / 6 * d**3, [400.0, 200.0, 80.0, 20.0], liquid_content=0.2, porosity=0.5)
+            res = model.run(0.0, 120.0, state, output_times=np.arange(0.0, 121.0, 20.0))
+            solid = res.number @ g.x
+            for name, total in (("solid", solid), ("liquid", res.liquid.sum(axis=1))):
+                assert np.abs(total / total[0] - 1).max() < 1e-13, (n, separate_feed, name)
+            gas0 = res.gas.sum(axis=1)[0]
+            closed = 0.25 * solid[0] + (gas0 - 0.25 * solid[0]) * np.exp(-0.02 * np.asarray(res.times))
+            np.testing.assert_allclose(res.gas.sum(axis=1), closed, rtol=1e-4)
+            numbers[n] = res.state.number.sum()
+        assert numbers[2.0] < numbers[0.0]
+
+
+def test_the_porosity_exponent_setting_reaches_the_selection(default_config):
+    from pbmdem.pbm.impact_breakage import impact_selection
+
+    pbm = default_config.pbm
+    assert pbm.breakage.strength_porosity_exponent == 0.0
+    assert pbm.breakage.reference_porosity == 0.5 == pbm.initial.porosity
+    brk = pbm.breakage.replace(enabled=True, strength_porosity_exponent=2.0, reference_porosity=0.4)
+    sel = impact_selection(pbm.replace(breakage=brk))
+    assert (sel.porosity_exponent, sel.reference_porosity) == (2.0, 0.4)

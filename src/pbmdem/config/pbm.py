@@ -98,8 +98,9 @@ class BreakageSettings(Settings):
     """Breakage of aggregates (docs/pbm.md, "Breakage"): on or off, the fragment distribution,
     PBM-constant's selection rate (1/s per granule), and the impact criterion of PBM-DEM and
     PBM-ANN: dynamic yield strength Y (Pa, the median granule's), critical Stokes deformation
-    number, the walls, whether granule-granule impacts break granules, and the standard deviation
-    of ln Y across granules (0: every impact above v* breaks)."""
+    number, the walls, whether granule-granule impacts break granules, the standard deviation
+    of ln Y across granules (0: every impact above v* breaks), and how Y depends on the granule's
+    size and porosity (exponents, with the diameter and porosity whose Y is ``yield_strength``)."""
 
     enabled: bool
     fragments: str
@@ -111,6 +112,8 @@ class BreakageSettings(Settings):
     strength_spread: float
     strength_size_exponent: float
     reference_diameter: float
+    strength_porosity_exponent: float
+    reference_porosity: float
 
 
 @dataclass(frozen=True)

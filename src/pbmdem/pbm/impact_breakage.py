@@ -19,6 +19,16 @@ granule on wall w (impeller, bowl) and P the fraction of the impact-velocity dis
 (:func:`pbmdem.impact.fraction_above`: impacts spread evenly in log v inside a bin). The impact
 statistics come from the frequency source's ``impacts(diameters, numbers, rpm)`` (DEM tables,
 a coupling interval's DEM run or the surrogate), evaluated at the bins' pivots.
+
+Y may depend on the granule's size d and porosity eps (both factors are 1 at d_ref and eps_ref):
+
+    Y(d, eps) = Y (d / d_ref)^(-e) [((1 - eps) / eps) / ((1 - eps_ref) / eps_ref)]^n,
+
+so v* scales with the square root of both factors. The porosity factor is the strengthening of a
+wet granule as it consolidates: Rumpf's (1962) tensile strength of a capillary-bound aggregate
+grows as (1 - eps) / eps (n = 1), the viscous dynamic yield strength of wet granules as
+((1 - eps) / eps)^2 (n = 2; Iveson, Litster, Hapgood & Ennis 2001). eps is each pivot's
+aggregate porosity G / (S + G) (``KernelInput.porosity``), eps_ref where a pivot is empty.
 """
 
 from __future__ import annotations
@@ -30,6 +40,9 @@ from pbmdem.impact import N_VELOCITY_BINS, WALLS, ImpactRates, breaking_probabil
 
 from .errors import PBMInputError, positive
 from .kernels import KernelInput
+
+#: porosities are kept in [POROSITY_LIMIT, 1 - POROSITY_LIMIT] by the porosity-dependent strength
+POROSITY_LIMIT = 1e-6
 
 
 def critical_speed(density: float, yield_strength: float, critical_stokes: float) -> float:
@@ -70,7 +83,10 @@ class ImpactSelection:
     the standard deviation of ln Y across granules (log-normal strengths: an impact at v breaks
     with probability Phi(2 ln(v / v*) / spread), v* that of the median granule; 0: every impact
     above v* breaks, none below); ``size_exponent`` e: Y of a granule of diameter d is
-    Y (d / reference_diameter)^(-e) (0: the same for every size). :meth:`prepare`
+    Y (d / reference_diameter)^(-e) (0: the same for every size); ``porosity_exponent`` n: Y of a
+    granule of porosity eps is Y [((1 - eps) / eps) / ((1 - eps_ref) / eps_ref)]^n with eps_ref =
+    ``reference_porosity`` (0: the same at every porosity; 1: Rumpf's capillary strength, 2: the
+    viscous strength of Iveson et al. 2001). :meth:`prepare`
     (at every step) asks the source for the impacts only when the pivots, the speed or the source
     (:meth:`set_source`, a coupling interval's) changed; a call weights them with the current
     numbers (the pair term)."""
@@ -86,6 +102,8 @@ class ImpactSelection:
         strength_spread: float = 0.0,
         size_exponent: float = 0.0,
         reference_diameter: float = 0.002,
+        porosity_exponent: float = 0.0,
+        reference_porosity: float = 0.5,
     ):
         self.density = positive("granule density (kg/m3)", density)
         self.yield_strength = positive("granule dynamic yield strength Y (Pa)", yield_strength)
@@ -104,14 +122,25 @@ class ImpactSelection:
             raise PBMInputError(f"strength size exponent = {size_exponent!r}; allowed: finite, >= 0")
         self.size_exponent = exponent
         self.reference_diameter = positive("reference diameter of Y (m)", reference_diameter)
+        exponent = float(porosity_exponent)
+        if not (np.isfinite(exponent) and exponent >= 0):
+            raise PBMInputError(f"strength porosity exponent = {porosity_exponent!r}; allowed: finite, >= 0")
+        self.porosity_exponent = exponent
+        eps_ref = float(reference_porosity)
+        if not 0.0 < eps_ref < 1.0:
+            raise PBMInputError(f"reference porosity of Y = {reference_porosity!r}; allowed: 0 < porosity < 1")
+        self.reference_porosity = eps_ref
         self.speed = critical_speed(self.density, self.yield_strength, self.critical_stokes)
         self.set_source(source)
 
     def __repr__(self) -> str:
+        porosity = ""
+        if self.porosity_exponent != 0.0:
+            porosity = f", porosity exponent={self.porosity_exponent:g} (eps_ref={self.reference_porosity:g})"
         return (
             f"ImpactSelection(Y={self.yield_strength:g} Pa, St_def*={self.critical_stokes:g}, "
             f"v*={self.speed:.3g} m/s, spread of ln Y={self.strength_spread:g}, walls={list(self.walls)}, "
-            f"pairs={self.pairs}, source={self.source!r})"
+            f"pairs={self.pairs}, source={self.source!r}{porosity})"
         )
 
     def set_source(self, source) -> None:
@@ -145,15 +174,37 @@ class ImpactSelection:
         if self._rates is None:
             self.prepare(inp)
         d, n = inp.per_bin()
-        return selection_rates(self._rates, n, self.critical_speeds(d), self.walls, self.pairs, self.strength_spread)
+        eps = None
+        if self.porosity_exponent != 0.0:
+            if inp.porosity is None:
+                raise PBMInputError(
+                    "a strength that depends on porosity (porosity_exponent > 0) needs the classes' porosity "
+                    "in the KernelInput; it has none"
+                )
+            eps = inp.porosity[: inp.pivots]  # the aggregates of each pivot: feed granules do not break
+        speeds = self.critical_speeds(d, eps)
+        return selection_rates(self._rates, n, speeds, self.walls, self.pairs, self.strength_spread)
 
-    def critical_speeds(self, diameters) -> float | np.ndarray:
-        """v* of granules of each diameter (m): Y (d / d_ref)^(-e) with e = ``size_exponent``, so
-        v* (d / d_ref)^(-e / 2); the one v* with e = 0."""
-        if self.size_exponent == 0.0:
+    def critical_speeds(self, diameters, porosity=None) -> float | np.ndarray:
+        """v* of granules of each diameter (m) and porosity: Y (d / d_ref)^(-e) with e =
+        ``size_exponent`` times [r(eps) / r(eps_ref)]^n with r = (1 - eps) / eps and n =
+        ``porosity_exponent``, so v* scales with the square root of both factors; ``porosity``
+        None or NaN (an empty pivot): eps_ref. The one v* with e = n = 0."""
+        if self.size_exponent == 0.0 and self.porosity_exponent == 0.0:
             return self.speed
         d = np.asarray(diameters, float)
-        return self.speed * (d / self.reference_diameter) ** (-0.5 * self.size_exponent)
+        speeds = np.full(d.shape, self.speed)
+        if self.size_exponent != 0.0:
+            speeds = self.speed * (d / self.reference_diameter) ** (-0.5 * self.size_exponent)
+        if self.porosity_exponent != 0.0 and porosity is not None:
+            eps = np.broadcast_to(np.asarray(porosity, float), d.shape)
+            eps = np.where(np.isfinite(eps), eps, self.reference_porosity)
+            # kept inside (0, 1) so that v* stays finite and > 0 (at eps -> 0 a granule without
+            # pores is unbreakable, at eps -> 1 one without solid breaks at any impact)
+            eps = np.clip(eps, POROSITY_LIMIT, 1.0 - POROSITY_LIMIT)
+            ref = (1.0 - self.reference_porosity) / self.reference_porosity
+            speeds = speeds * (((1.0 - eps) / eps) / ref) ** (0.5 * self.porosity_exponent)
+        return speeds
 
     def __call__(self, inp: KernelInput) -> np.ndarray:
         parts = self.contributions(inp)
@@ -161,7 +212,8 @@ class ImpactSelection:
 
 
 def impact_selection(pbm: Pbm, source=None) -> ImpactSelection | None:
-    """The ImpactSelection of the ``pbm.breakage`` settings (Y, St_def*, walls, pairs, strength_spread) on
+    """The ImpactSelection of the ``pbm.breakage`` settings (Y, St_def*, walls, pairs, strength_spread, its
+    size and porosity dependence) on
     ``source`` (None: set later), with the granule density of the Stokes success model
     (``pbm.aggregation.success.stokes.granule_density``, the DEM particle density); None when breakage
     is off."""
@@ -179,4 +231,6 @@ def impact_selection(pbm: Pbm, source=None) -> ImpactSelection | None:
         brk.strength_spread,
         brk.strength_size_exponent,
         brk.reference_diameter,
+        brk.strength_porosity_exponent,
+        brk.reference_porosity,
     )

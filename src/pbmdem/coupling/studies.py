@@ -181,11 +181,14 @@ def breakage_variants(pbm) -> dict:
     return variants
 
 
-def breakage_study(loop: CoupledLoop, model_path: str | Path, speeds, grid_speeds) -> pd.DataFrame:
-    """:func:`speed_study` once per breakage variant (:func:`breakage_variants`): final sizes against
-    impeller speed without breakage, with it, with Y halved and doubled and with the sharp criterion;
-    columns ``variant``, ``yield_strength``, ``critical_stokes``, ``strength_spread``, ``critical_speed``
-    (m/s, v* = sqrt(2 Y St_def* / rho)) beside the speed study's."""
+def breakage_study(
+    loop: CoupledLoop, model_path: str | Path, speeds, grid_speeds, variants: dict | None = None
+) -> pd.DataFrame:
+    """:func:`speed_study` once per breakage variant (``variants``, name -> pbm.breakage; None:
+    :func:`breakage_variants`, without breakage, with it, with Y halved and doubled and with the sharp
+    criterion): final sizes against impeller speed; columns ``variant``, ``yield_strength``,
+    ``critical_stokes``, ``strength_spread``, ``strength_porosity_exponent``, ``critical_speed`` (m/s,
+    v* = sqrt(2 Y St_def* / rho) of a granule at the reference size and porosity) beside the speed study's."""
     from pbmdem.pbm.impact_breakage import critical_speed
 
     pbm = loop.batch.pbm
@@ -194,7 +197,7 @@ def breakage_study(loop: CoupledLoop, model_path: str | Path, speeds, grid_speed
     # instead of spending minutes per ensemble member on the way to the solver's own guard
     solver = pbm.solver.replace(max_steps=min(pbm.solver.max_steps, BREAKAGE_STUDY_MAX_STEPS))
     frames = []
-    for name, brk in breakage_variants(pbm).items():
+    for name, brk in (breakage_variants(pbm) if variants is None else variants).items():
         case = loop.replace(batch=loop.batch.replace(pbm=pbm.replace(breakage=brk, solver=solver)))
         frame = speed_study(case, model_path, speeds, grid_speeds)
         v = critical_speed(pbm.aggregation.success.stokes.granule_density, brk.yield_strength, brk.critical_stokes)
@@ -205,9 +208,11 @@ def breakage_study(loop: CoupledLoop, model_path: str | Path, speeds, grid_speed
                 yield_strength=brk.yield_strength,
                 critical_stokes=brk.critical_stokes,
                 strength_spread=brk.strength_spread,
+                strength_porosity_exponent=brk.strength_porosity_exponent,
                 critical_speed=v if brk.enabled else float("nan"),
             )
         )
     out = pd.concat(frames, ignore_index=True)
-    first = ["variant", "breakage", "yield_strength", "critical_stokes", "strength_spread", "critical_speed"]
+    first = ["variant", "breakage", "yield_strength", "critical_stokes", "strength_spread"]
+    first += ["strength_porosity_exponent", "critical_speed"]
     return out[first + [c for c in out.columns if c not in first]]

@@ -9,7 +9,10 @@ each speed of --rpm, once per variant:
 * ``n=1``, ``n=2``: Y(eps) = Y [((1 - eps)/eps) / ((1 - eps_ref)/eps_ref)]^n (Rumpf 1962; Iveson
   et al. 2001), the configured Y at eps_ref;
 * ``n=2 v*=X``: n = 2 with the Y that puts v* of a fresh granule (eps = eps_ref) at X m/s, for each
-  X of --fresh-speeds: Y = rho X^2 / (2 St_def*).
+  X of --fresh-speeds: Y = rho X^2 / (2 St_def*);
+* ``n=0 Y=Z``: one strength Z (Pa) at every porosity, for each Z of --fixed-strengths: the control
+  that tells a porosity-dependent strength from a stronger granule (Z = Y [r(eps_min)/r(eps_ref)]^n,
+  r = (1 - eps)/eps, is the strength of a fully consolidated granule with exponent n).
 
 Prints final d10/d50/d90 (mm) per speed and variant with the members' d50 range, and writes the
 study's rows to --csv. The config is a config file plus overlays (later ones win), e.g. the
@@ -17,10 +20,10 @@ breakage run of 2026-12-02:
 
     PYTHONPATH=src .venv/bin/python benchmarks/bench_porosity_strength.py \\
         --config /work/brkval/config/config.yaml /work/brkval/brk.yaml \\
-        --model /work/brkval/results/surrogate/model.skops --csv /tmp/porosity_strength.csv
+        --model /work/brkval/results/surrogate/model.skops --fixed-strengths 4e4 1.6e5 --csv /tmp/rows.csv
 
-One process; about 3 s per (speed, variant) with a 5-member ensemble. Numbers in docs/pbm.md
-("Breakage selection from impacts").
+One process; about 5 s per (speed, variant) with a 5-member ensemble (the study's step guard). Numbers in
+docs/pbm.md ("Breakage selection from impacts").
 """
 
 from __future__ import annotations
@@ -43,7 +46,7 @@ def merged(base: dict, overlay: dict) -> dict:
     return out
 
 
-def variants(pbm, fresh_speeds) -> dict:
+def variants(pbm, fresh_speeds, fixed_strengths=()) -> dict:
     brk = pbm.breakage.replace(enabled=True)
     out = {
         "off": pbm.breakage.replace(enabled=False),
@@ -55,6 +58,8 @@ def variants(pbm, fresh_speeds) -> dict:
     for v in fresh_speeds:
         y = rho * v * v / (2.0 * brk.critical_stokes)
         out[f"n=2 v*={v:g}"] = brk.replace(strength_porosity_exponent=2.0, yield_strength=y)
+    for y in fixed_strengths:
+        out[f"n=0 Y={y:g}"] = brk.replace(yield_strength=y)
     return out
 
 
@@ -64,6 +69,7 @@ def main(argv=None) -> None:
     ap.add_argument("--model", required=True, help="trained surrogate (model.skops)")
     ap.add_argument("--rpm", nargs="+", type=float, default=[150, 300, 450, 600, 750, 900, 1050, 1200])
     ap.add_argument("--fresh-speeds", nargs="*", type=float, default=[1.0, 2.0], help="v* (m/s) at eps_ref, n = 2")
+    ap.add_argument("--fixed-strengths", nargs="*", type=float, default=[], help="Y (Pa) of n = 0 controls")
     ap.add_argument("--only", nargs="*", help="run only these variants (names as printed)")
     ap.add_argument("--csv", help="write the study's rows here")
     args = ap.parse_args(argv)
@@ -74,7 +80,7 @@ def main(argv=None) -> None:
         data = merged(data, load_yaml(path))
     cfg = Config.from_mapping(data)
     loop = cfg.coupled_loop()
-    chosen = variants(loop.batch.pbm, args.fresh_speeds)
+    chosen = variants(loop.batch.pbm, args.fresh_speeds, args.fixed_strengths)
     if args.only:
         chosen = {k: v for k, v in chosen.items() if k in args.only}
     print(f"feed {loop.batch.distribution}, step guard {BREAKAGE_STUDY_MAX_STEPS}")

@@ -11,7 +11,7 @@ from conftest import config_of
 
 from pbmdem.config import ConfigError, Specification
 from pbmdem.config.design import pbm_value, with_pbm_values
-from pbmdem.design.batches import Case, run_cases
+from pbmdem.design.batches import MIN_POOLED_CASES, Case, run_cases
 from pbmdem.design.calibration import Model, calibrate, profile_widths
 from pbmdem.design.measured import STATISTICS, check_measured, measured_from_series, read_measured, with_noise
 from pbmdem.design.space import LIQUID_KEY, design_space, specification_status
@@ -239,7 +239,8 @@ def test_calibration_reports_parameters_the_data_cannot_separate(tiny_config):
 
 def test_batches_do_not_depend_on_the_number_of_processes(tiny_config):
     loop = tiny_config.coupled_loop()
-    cases = [Case(600.0, ((LIQUID_KEY, rate),), kernel="constant") for rate in (1.0e-7, 1.2e-7, 1.4e-7)]
+    rates = np.linspace(1.0e-7, 1.4e-7, MIN_POOLED_CASES)  # enough cases for the process pool
+    cases = [Case(600.0, ((LIQUID_KEY, rate),), kernel="constant") for rate in rates]
     one = run_cases(loop, None, cases, n_jobs=1)
     two = run_cases(loop, None, cases, n_jobs=2)
     for a, b in zip(one, two, strict=True):

@@ -31,13 +31,15 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class DesignSpace:
     """The ranges of the design (m for diameters). The defaults span the feeds and the active
-    learning's points of the default grid: smallest classes 2-3.2 mm, largest up to 8.1 mm, size
-    ratios largest / smallest from 1.5 (narrower than any feed) to 4, every class at least 10 % of
-    the particles (a smaller class has too few pairs for a frequency: docs/validation.md)."""
+    learning's points of the default grid and reach past them where the PBM goes: smallest classes
+    2-3.2 mm, largest up to 9.5 mm (the largest class of PBM-ANN's samples at 900-1200 rpm reached
+    8.1 mm, the largest class of the feeds and the active learning's points), size ratios largest /
+    smallest from 1.5 (narrower than any feed) to 4, every class at least 10 % of the particles (a
+    smaller class has too few pairs for a frequency: docs/validation.md), speeds over the grid's."""
 
     d_min_range: tuple[float, float] = (0.0020, 0.0032)
     min_span: float = 1.5
-    d_max_limit: float = 0.0081
+    d_max_limit: float = 0.0095
     middle_range: tuple[float, float] = (0.3, 0.7)
     min_fraction: float = 0.10
     max_span: float = 4.0

@@ -7,11 +7,12 @@
 #   scripts/slurm_cluster.sh stop      # stop every daemon by its PID; remove /etc/slurm/slurm.conf
 #
 # State (keys, spool, logs, PID files) lives in $PBMDEM_SLURM_STATE (default /tmp/pbmdem-slurm).
-# No systemd and no cgroups: ProctrackType=proctrack/pgid, TaskPlugin=task/none. pgid, not
-# linuxproc: linuxproc finds a job's processes through their parents, so its SIGKILL after KillWait
-# missed a job step's `snakemake --target-jobs` process that had been re-parented to init when its
-# batch shell died on scancel's SIGTERM (once, under load, it outlived the test); pgid signals
-# every process of the job's process groups, re-parented or not, as cgroups do on a real cluster. No
+# No systemd and no cgroups: ProctrackType=proctrack/linuxproc, TaskPlugin=task/none. linuxproc
+# finds a job's processes through their parents, so its SIGKILL after KillWait can miss a process
+# re-parented to init (once, under load, a job step's `snakemake --target-jobs` outlived a cancel).
+# proctrack/pgid was tried instead: a cancelled job step then ended within 2.5 s, before the DEM
+# job's Python could record the interruption (no crash.json), which breaks the cancel contract
+# the SLURM test checks. No
 # accounting database: job status comes from squeue (the profile sets slurm-status-command), so
 # MinJobAge keeps finished jobs visible for 10 minutes. The configuration has to be
 # /etc/slurm/slurm.conf (the executor's job steps drop SLURM_CONF); an existing file that this
@@ -77,7 +78,7 @@ SlurmctldPidFile=$STATE/run/slurmctld.pid
 SlurmdPidFile=$STATE/run/slurmd.pid
 SlurmctldLogFile=$STATE/log/slurmctld.log
 SlurmdLogFile=$STATE/log/slurmd.log
-ProctrackType=proctrack/pgid
+ProctrackType=proctrack/linuxproc
 TaskPlugin=task/none
 SelectType=select/cons_tres
 SelectTypeParameters=CR_Core

@@ -491,3 +491,16 @@ def test_breakage_words_leave_failed_speeds_out_of_the_peak():
     words = breakage_words(study)
     assert "falls above it for: Yx2 (450 rpm)." in words
     assert "from the lowest speed studied on for: Y/2, default." in words
+
+
+def test_a_fall_within_the_members_range_is_not_a_peak():
+    """Without breakage d50 levels off (10.9 mm at 900 rpm, 10.85 at 1200): inside the members'
+    range at the peak that is no speed above which granules get smaller; a fall below that range is."""
+    from pbmdem.report.breakage import peak_speed
+
+    def study(d50s, member_min):
+        rpm = [300.0, 600.0, 900.0, 1200.0]
+        return pd.DataFrame({"rpm": rpm, "d50": 1e-3 * np.array(d50s), "d50_member_min": 1e-3 * np.array(member_min)})
+
+    assert peak_speed(study([7.9, 9.9, 10.9, 10.85], [7.6, 9.4, 10.4, 10.5])) is None
+    assert peak_speed(study([7.9, 9.9, 10.9, 10.2], [7.6, 9.4, 10.4, 9.8])) == 900.0

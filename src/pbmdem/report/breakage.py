@@ -48,14 +48,21 @@ def breakage_figure(study: pd.DataFrame):
 
 
 def peak_speed(s: pd.DataFrame) -> float | None:
-    """The speed of the largest final d50 when it lies inside the speed range (granules get smaller
-    above it), else None; speeds whose ensemble mean failed (d50 NaN) are left out, not taken as
-    the peak."""
+    """The speed of the largest final d50 when it lies inside the speed range and the granules get
+    smaller above it, else None. Smaller means below the surrogate's uncertainty at the peak: the
+    fastest speed's d50 under the smallest member d50 at the peak (`d50_member_min`, where the
+    study has it), so that a flat curve's wobble within the members is not called a peak. Speeds
+    whose ensemble mean failed (d50 NaN) are left out, not taken as the peak."""
     s = s[np.isfinite(s.d50.to_numpy(float))].sort_values("rpm")
     if s.empty:
         return None
     k = int(np.argmax(s.d50.to_numpy(float)))
-    return float(s.rpm.iloc[k]) if 0 < k < len(s) - 1 else None
+    if not 0 < k < len(s) - 1:
+        return None
+    floor = float(s.d50_member_min.iloc[k]) if "d50_member_min" in s else float("nan")
+    if np.isfinite(floor) and not float(s.d50.iloc[-1]) < floor:
+        return None
+    return float(s.rpm.iloc[k])
 
 
 def falls_throughout(s: pd.DataFrame) -> bool:

@@ -8,12 +8,22 @@ import pytest
 from pbmdem.config import Config, ConfigError
 from pbmdem.dem.design import DesignSpace, design_names, design_points
 
+#: the default bed's solid volume (m3): 18 mm x pi/4 (60 mm)^2 x 0.60 (granulator.bed_solid_volume)
+BED = 0.018 * math.pi / 4.0 * 0.060**2 * 0.60
+
+
+def _particles(point):
+    """Particles per class of the design point in the default bed (as pbmdem.dem.plan counts them)."""
+    d, f = point["diameters"], point["number_fractions"]
+    mean_volume = sum(fk * math.pi / 6.0 * dk**3 for dk, fk in zip(d, f))
+    return [fk * BED / mean_volume for fk in f]
+
 
 def test_the_design_is_seeded_and_stays_in_its_space():
     space = DesignSpace()
-    first = design_points(16, seed=7)
-    assert first == design_points(16, seed=7)
-    assert first != design_points(16, seed=8)
+    first = design_points(16, 7, BED)
+    assert first == design_points(16, 7, BED)
+    assert first != design_points(16, 8, BED)
     for dist in first:
         assert space.rpm_range[0] - 5 <= dist["rpm"] <= space.rpm_range[1] + 5
         d, f = dist["diameters"], dist["number_fractions"]
@@ -22,28 +32,38 @@ def test_the_design_is_seeded_and_stays_in_its_space():
         assert d[-1] <= space.d_max_limit + 5e-5
         assert space.min_span - 0.1 <= d[-1] / d[0] <= space.max_span + 0.1
         assert math.isclose(sum(f), 1.0, abs_tol=1e-9)
-        assert min(f) >= space.min_fraction - 0.005
+        assert space.min_fraction - 5e-4 <= f[-1] == min(f)  # the largest class is the rarest
+        assert min(_particles(dist)) >= space.min_class_particles
 
 
 def test_the_design_fills_its_space():
     """Sobol points spread over each coordinate: the smallest diameters and spans of 16
-    distributions, and their speeds, reach into every quarter of their (log) ranges."""
+    distributions, and their speeds, reach into every quarter of their (log) ranges; the largest
+    class's fraction reaches below 5 % (where PBM-ANN's samples go) and up to about a third."""
     space = DesignSpace()
-    dists = design_points(16, seed=20141)
+    dists = design_points(16, 20141, BED)
     for key, (lo, hi) in (("diameters", space.d_min_range), ("rpm", space.rpm_range)):
         lo, hi = math.log(lo), math.log(hi)
         values = [d[key][0] if key == "diameters" else d[key] for d in dists]
         quarters = {min(3, int(4 * (math.log(x) - lo) / (hi - lo))) for x in values}
         assert quarters == {0, 1, 2, 3}, key
-    first = [d["number_fractions"][0] for d in dists]
-    assert min(first) < 0.2 and max(first) > 0.5
+    rare = [d["number_fractions"][-1] for d in dists]
+    assert min(rare) < 0.05 and max(rare) > 0.25
+
+
+def test_a_bed_too_small_for_rare_classes_is_refused():
+    """With a bed of a few hundred particles no class can be 2 % and hold 50 of them."""
+    with pytest.raises(ValueError, match=r"hold 50 particles in every class"):
+        design_points(16, 20141, BED / 20.0, DesignSpace(min_fraction=0.02, d_min_range=(0.0030, 0.0032)))
 
 
 def test_the_config_holds_the_documented_design(default_config):
     points = default_config.grid.design_points
     names = [p.distribution for p in points]
     assert names == design_names(len(names))
-    for point, design in zip(points, design_points(len(points), seed=20141)):
+    volume = default_config.granulator.bed_solid_volume
+    assert volume == pytest.approx(BED)
+    for point, design in zip(points, design_points(len(points), 20141, volume)):
         sizes = default_config.size_distributions[point.distribution]
         assert point.rpm == design["rpm"]
         assert list(sizes.diameters) == pytest.approx(design["diameters"])
@@ -72,5 +92,5 @@ def test_the_default_grid_spans_150_to_1200_rpm_with_its_design_points_once_each
 def test_an_undefined_design_distribution_is_refused(default_config):
     mapping = copy.deepcopy(default_config.to_dict())
     mapping["grid"]["design_points"].append({"rpm": 300.0, "distribution": "sf99"})
-    with pytest.raises(ConfigError, match=r"grid\.design_points\[8\]\.distribution: 'sf99' is not defined"):
+    with pytest.raises(ConfigError, match=r"grid\.design_points\[10\]\.distribution: 'sf99' is not defined"):
         Config.from_mapping(mapping)

@@ -11,14 +11,21 @@ three-class distributions, each at one impeller speed, from a scrambled Sobol se
 * the largest over the smallest, log-uniform from `min_span` to what keeps the largest within
   `d_max_limit`;
 * the middle class's place between them on a log scale, uniform in `middle_range`;
-* the number fractions, uniform on the simplex above a floor `min_fraction` for each class;
+* the number fraction of the largest class, log-uniform from `min_fraction` to 1/3, and how the
+  rest splits between the two smaller classes (each at least the largest's): the PBM's samples are
+  mostly beds of small granules with a few large aggregates, whose rare classes (2.5-8 % of a
+  sample) a design with every class at 10 % or more left outside the training domain;
 * the impeller speed, log-uniform in `rpm_range` (the speeds of the named grid double from one to
   the next, and the encounter rate changes most at the low end).
 
-The particle count follows from the bed's solid volume (`pbmdem.dem.plan.bed_particle_count`).
+The particle count follows from the bed's solid volume (`pbmdem.dem.plan.bed_particle_count`). A
+class needs particles to give a frequency: a point whose largest class would hold fewer than
+`min_class_particles` (the 50 granules below which the PBM's samples merge classes,
+`validation.min_particles_per_class`) is skipped and the sequence goes on, so the rarest classes
+come in beds of many small granules, as in the PBM.
 Placing each distribution at one speed, instead of at every grid speed, spreads the design over
 the tip-speed feature too, between the grid's speeds, at a quarter of the cost of running it at
-four speeds. Diameters are rounded to 0.1 mm, fractions to 0.01 and speeds to 10 rpm, so that the
+four speeds. Diameters are rounded to 0.1 mm, fractions to 0.001 and speeds to 10 rpm, so that the
 config holds the design as plain numbers.
 """
 
@@ -34,53 +41,64 @@ class DesignSpace:
     learning's points of the default grid and reach past them where the PBM goes: smallest classes
     2-3.2 mm, largest up to 9.5 mm (the largest class of PBM-ANN's samples at 900-1200 rpm reached
     8.1 mm, the largest class of the feeds and the active learning's points), size ratios largest /
-    smallest from 1.5 (narrower than any feed) to 4, every class at least 10 % of the particles (a
-    smaller class has too few pairs for a frequency: docs/validation.md), speeds over the grid's."""
+    smallest from 1.5 (narrower than any feed) to 4, the largest class from 2 % of the particles
+    with at least 50 particles in every class (docs/validation.md), speeds over the grid's."""
 
     d_min_range: tuple[float, float] = (0.0020, 0.0032)
     min_span: float = 1.5
     d_max_limit: float = 0.0095
     middle_range: tuple[float, float] = (0.3, 0.7)
-    min_fraction: float = 0.10
+    min_fraction: float = 0.02
     max_span: float = 4.0
     rpm_range: tuple[float, float] = (150.0, 1200.0)
+    min_class_particles: int = 50
 
 
 def _fractions(u: float, v: float, floor: float) -> list[float]:
-    """A point of the simplex (three fractions >= floor) from two uniform numbers (uniform on it)."""
-    r = math.sqrt(u)
-    simplex = (1.0 - r, r * (1.0 - v), r * v)
-    raw = [floor + (1.0 - 3.0 * floor) * s for s in simplex]
-    rounded = [round(f, 2) for f in raw[:2]]
-    return [*rounded, round(1.0 - sum(rounded), 2)]
+    """Three number fractions (sum 1, smallest diameter first) from two uniform numbers: the largest
+    class's log-uniform from `floor` to 1/3 (u), the rest split between the two smaller classes,
+    each at least the largest's (v)."""
+    rare = floor * (1.0 / (3.0 * floor)) ** u
+    first = round(rare + (1.0 - 3.0 * rare) * v, 3)
+    rare = round(rare, 3)
+    return [first, round(1.0 - first - rare, 3), rare]
 
 
-def design_points(n: int, seed: int, space: DesignSpace = DesignSpace()) -> list[dict]:
+def _particles(bed_solid_volume: float, diameters, fractions) -> list[float]:
+    """Particles per class of a bed of `bed_solid_volume` (m3), as pbmdem.dem.plan counts them."""
+    mean_volume = math.fsum(f * math.pi / 6.0 * d**3 for d, f in zip(diameters, fractions))
+    return [f * bed_solid_volume / mean_volume for f in fractions]
+
+
+def design_points(n: int, seed: int, bed_solid_volume: float, space: DesignSpace = DesignSpace()) -> list[dict]:
     """`n` design points `{"rpm": ..., "diameters": [...], "number_fractions": [...]}` (three
-    classes, m, ascending; fractions sum to 1) from the first `n` points of a scrambled Sobol
-    sequence seeded with `seed`."""
+    classes, m, ascending; fractions sum to 1): the first `n` points of a scrambled Sobol sequence
+    seeded with `seed` whose every class holds at least `space.min_class_particles` particles in a
+    bed of `bed_solid_volume` (m3, `granulator.bed_solid_volume`)."""
     from scipy.stats import qmc
 
     if n < 1:
         raise ValueError(f"n = {n!r}: at least one design point is needed")
-    points = qmc.Sobol(d=6, scramble=True, seed=seed).random(n)
+    candidates = qmc.Sobol(d=6, scramble=True, seed=seed).random(2 ** math.ceil(math.log2(64 * n)))
     out = []
     lo, hi = space.d_min_range
     rpm_lo, rpm_hi = space.rpm_range
-    for a, b, c, u, v, w in points:
+    for a, b, c, u, v, w in candidates:
         d_min = lo * (hi / lo) ** a
         top = min(space.max_span, space.d_max_limit / d_min)
         span = space.min_span * (top / space.min_span) ** b
         t = space.middle_range[0] + (space.middle_range[1] - space.middle_range[0]) * c
-        diameters = [d_min, d_min * span**t, d_min * span]
-        out.append(
-            {
-                "rpm": float(round(rpm_lo * (rpm_hi / rpm_lo) ** w, -1)),
-                "diameters": [round(float(d), 4) for d in diameters],
-                "number_fractions": _fractions(float(u), float(v), space.min_fraction),
-            }
-        )
-    return out
+        diameters = [round(float(d), 4) for d in (d_min, d_min * span**t, d_min * span)]
+        fractions = _fractions(float(u), float(v), space.min_fraction)
+        if min(_particles(bed_solid_volume, diameters, fractions)) < space.min_class_particles:
+            continue
+        rpm = float(round(rpm_lo * (rpm_hi / rpm_lo) ** w, -1))
+        out.append({"rpm": rpm, "diameters": diameters, "number_fractions": fractions})
+        if len(out) == n:
+            return out
+    raise ValueError(
+        f"only {len(out)} of the {n} design points hold {space.min_class_particles} particles in every class"
+    )
 
 
 def design_names(n: int, prefix: str = "sf") -> list[str]:
@@ -89,13 +107,13 @@ def design_names(n: int, prefix: str = "sf") -> list[str]:
     return [f"{prefix}{k + 1:0{width}d}" for k in range(n)]
 
 
-def design_yaml(n: int, seed: int) -> str:
+def design_yaml(n: int, seed: int, bed_solid_volume: float) -> str:
     """The design as config/config.yaml entries: `size_distributions` and `grid.design_points`."""
-    names, points = design_names(n), design_points(n, seed)
+    names, points = design_names(n), design_points(n, seed, bed_solid_volume)
     lines = ["size_distributions:"]
     for name, point in zip(names, points):
         d = ", ".join(f"{x:g}" for x in point["diameters"])
-        f = ", ".join(f"{x:.2f}" for x in point["number_fractions"])
+        f = ", ".join(f"{x:g}" for x in point["number_fractions"])
         lines += [f"  {name}:", f"    diameters: [{d}]", f"    number_fractions: [{f}]"]
     lines += ["grid:", "  design_points:"]
     lines += [f"    - {{rpm: {point['rpm']:g}, distribution: {name}}}" for name, point in zip(names, points)]
@@ -105,4 +123,7 @@ def design_yaml(n: int, seed: int) -> str:
 if __name__ == "__main__":  # pragma: no cover - prints the config entries
     import sys
 
-    print(design_yaml(int(sys.argv[1]), int(sys.argv[2])))
+    from pbmdem.config import load_config
+
+    config = load_config(sys.argv[3] if len(sys.argv) > 3 else "config/config.yaml")
+    print(design_yaml(int(sys.argv[1]), int(sys.argv[2]), config.granulator.bed_solid_volume))

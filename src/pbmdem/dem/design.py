@@ -64,10 +64,14 @@ def _fractions(u: float, v: float, floor: float) -> list[float]:
     return [first, round(1.0 - first - rare, 3), rare]
 
 
-def _particles(bed_solid_volume: float, diameters, fractions) -> list[float]:
-    """Particles per class of a bed of `bed_solid_volume` (m3), as pbmdem.dem.plan counts them."""
-    mean_volume = math.fsum(f * math.pi / 6.0 * d**3 for d, f in zip(diameters, fractions))
-    return [f * bed_solid_volume / mean_volume for f in fractions]
+def _particles(bed_solid_volume: float, diameters, fractions) -> list[int]:
+    """Particles per class of a bed of `bed_solid_volume` (m3): the counts a DEM run would plan."""
+    from pbmdem.config import SizeDistribution
+
+    from .plan import bed_particle_count, class_counts
+
+    sizes = SizeDistribution(tuple(diameters), tuple(fractions))
+    return class_counts(bed_particle_count(bed_solid_volume, sizes), fractions)
 
 
 def design_points(n: int, seed: int, bed_solid_volume: float, space: DesignSpace = DesignSpace()) -> list[dict]:

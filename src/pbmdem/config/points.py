@@ -56,10 +56,6 @@ class OperatingGrid(Settings):
     design_points: tuple[ExtraPoint, ...]
     design_replicates: int | None
 
-    def full_distributions(self) -> list[str]:
-        """The distributions run at every speed: the named ones."""
-        return list(self.size_distributions)
-
     def count(self) -> int:
         """Number of operating points of the full grid plus the extra and design points (an upper
         bound of len(points()), computed without listing them)."""
@@ -87,6 +83,6 @@ class OperatingGrid(Settings):
 
     def distributions(self) -> list[str]:
         """The size distributions of the grid, of the extra points and of the design points, each once."""
-        names = self.full_distributions()
+        names = list(self.size_distributions)
         single = {p.distribution for p in (*self.extra_points, *self.design_points)}
         return names + sorted(single - set(names))

@@ -5,8 +5,9 @@ import math
 
 import pytest
 
-from pbmdem.config import Config, ConfigError
-from pbmdem.dem.design import DesignSpace, design_names, design_points
+from pbmdem.config import Config, ConfigError, SizeDistribution
+from pbmdem.dem.design import CORNER_NAME, DesignSpace, corner_point, design_names, design_points
+from pbmdem.dem.plan import bed_particle_count, class_counts
 
 #: the default bed's solid volume (m3): 18 mm x pi/4 (60 mm)^2 x 0.60 (granulator.bed_solid_volume)
 BED = 0.018 * math.pi / 4.0 * 0.060**2 * 0.60
@@ -57,13 +58,36 @@ def test_a_bed_too_small_for_rare_classes_is_refused():
         design_points(16, 20141, BED / 20.0, DesignSpace(min_fraction=0.02, d_min_range=(0.0030, 0.0032)))
 
 
+def test_the_corner_holds_the_largest_granules_as_rare_classes_at_the_fastest_speed():
+    space = DesignSpace()
+    corner = corner_point(BED)
+    d, f = corner["diameters"], corner["number_fractions"]
+    assert corner["rpm"] == space.rpm_range[1]
+    assert d[-1] == space.d_max_limit and d[0] < d[1] < d[2]
+    assert d[-1] / d[0] <= space.max_span and space.d_min_range[0] <= d[0] <= space.d_min_range[1]
+    assert math.isclose(sum(f), 1.0, abs_tol=1e-9) and f[1] == f[2] < f[0]
+
+    def planned(fractions):  # the DEM plan's own counts, rounded to whole particles
+        return class_counts(bed_particle_count(BED, SizeDistribution(tuple(d), tuple(fractions))), fractions)
+
+    assert min(planned(f)) >= space.min_class_particles
+    # the rarest that holds 50: one step (0.001) rarer leaves the largest classes short
+    assert min(planned([f[0] + 0.002, f[1] - 0.001, f[2] - 0.001])) < space.min_class_particles
+
+
+def test_a_bed_too_small_for_the_corner_is_refused():
+    with pytest.raises(ValueError, match=r"cannot hold 50 particles in every class"):
+        corner_point(BED / 4.0)
+
+
 def test_the_config_holds_the_documented_design(default_config):
     points = default_config.grid.design_points
     names = [p.distribution for p in points]
-    assert names == design_names(len(names))
+    assert names == [*design_names(len(names) - 1), CORNER_NAME]
     volume = default_config.granulator.bed_solid_volume
     assert volume == pytest.approx(BED)
-    for point, design in zip(points, design_points(len(points), 20141, volume)):
+    corner = corner_point(volume)
+    for point, design in zip(points, [*design_points(len(points) - 1, 20141, volume), corner]):
         sizes = default_config.size_distributions[point.distribution]
         assert point.rpm == design["rpm"]
         assert list(sizes.diameters) == pytest.approx(design["diameters"])
@@ -92,5 +116,5 @@ def test_the_default_grid_spans_150_to_1200_rpm_with_its_design_points_once_each
 def test_an_undefined_design_distribution_is_refused(default_config):
     mapping = copy.deepcopy(default_config.to_dict())
     mapping["grid"]["design_points"].append({"rpm": 300.0, "distribution": "sf99"})
-    with pytest.raises(ConfigError, match=r"grid\.design_points\[10\]\.distribution: 'sf99' is not defined"):
+    with pytest.raises(ConfigError, match=r"grid\.design_points\[11\]\.distribution: 'sf99' is not defined"):
         Config.from_mapping(mapping)

@@ -99,6 +99,18 @@ def test_findings_state_the_answers_with_their_numbers(tmp_path):
     assert text.index("**How far to trust them.**") < text.index("Glossary\n--------")
 
 
+def test_a_speed_above_which_the_granules_get_smaller_is_named():
+    """With breakage the final d50 can peak inside the speed range: the words say where, not that more
+    collisions make larger granules; a fall within the members' spread is not called a peak."""
+    speed = _study({"rpm": [150.0, 600.0, 900.0, 1200.0]}, [0.0058, 0.0103, 0.0105, 0.0075])
+    words = findings._speed_paragraph(speed, "fine", 480.0)
+    assert "grows with the speed up to 900 rpm (d50 = 10.50 mm) and falls above it" in words
+    assert "more collisions make larger granules" not in words
+    flat = _study({"rpm": [150.0, 600.0, 900.0, 1200.0]}, [0.0058, 0.0103, 0.0105, 0.010495])
+    words = findings._speed_paragraph(flat, "fine", 480.0)
+    assert "falls above it" not in words and "more collisions make larger granules" in words
+
+
 def test_a_feed_that_breaks_the_trend_is_named():
     feed = _study(
         {"feed": ["fine", "fine+coarse", "coarse"], "feed_d50": [0.003, 0.004, 0.006]},

@@ -393,8 +393,11 @@ def test_the_porosity_exponent_setting_reaches_the_selection(default_config):
     from pbmdem.pbm.impact_breakage import impact_selection
 
     pbm = default_config.pbm
-    assert pbm.breakage.strength_porosity_exponent == 0.0
+    # the default: breakage on, the viscous (n = 2) strength law, Y given for a fresh granule
+    assert pbm.breakage.enabled and pbm.breakage.strength_porosity_exponent == 2.0
     assert pbm.breakage.reference_porosity == 0.5 == pbm.initial.porosity
-    brk = pbm.breakage.replace(enabled=True, strength_porosity_exponent=2.0, reference_porosity=0.4)
+    sel = impact_selection(pbm)
+    assert (sel.porosity_exponent, sel.reference_porosity) == (2.0, 0.5)
+    brk = pbm.breakage.replace(strength_porosity_exponent=1.0, reference_porosity=0.4)
     sel = impact_selection(pbm.replace(breakage=brk))
-    assert (sel.porosity_exponent, sel.reference_porosity) == (2.0, 0.4)
+    assert (sel.porosity_exponent, sel.reference_porosity) == (1.0, 0.4)

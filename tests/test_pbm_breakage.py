@@ -336,9 +336,9 @@ def _with_breakage(mapping, **breakage):
     return config_of(mapping)
 
 
-def test_breakage_is_off_by_default_and_one_setting_away(default_config, default_mapping):
-    assert default_config.pbm.breakage.enabled is False  # config/config.yaml says why
-    assert build_model(default_config.pbm).breakage is None
+def test_breakage_is_on_by_default_and_aggregation_only_one_setting_away(default_config, default_mapping):
+    assert default_config.pbm.breakage.enabled is True  # config/config.yaml says why
+    assert build_model(default_config.pbm).breakage is not None  # PBM-constant: the constant rate
     off = config_of({**default_mapping, "pbm": {**default_mapping["pbm"], "breakage": {"enabled": False}}})
     assert build_model(off.pbm).breakage is None  # aggregation only: the model before
     cfg = _with_breakage(default_mapping, fragments="uniform")

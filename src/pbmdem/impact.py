@@ -121,24 +121,25 @@ def breaking_probability(speed, spread: float = 0.0) -> np.ndarray:
     s = float(spread)
     if not (np.isfinite(s) and s >= 0):
         raise ValueError(f"spread of ln Y {spread!r}: allowed are finite values >= 0")
-    if np.ndim(speed) > 0:
-        return np.stack([breaking_probability(float(v), s) for v in np.asarray(speed, float)])
     if s == 0.0:
+        if np.ndim(speed) > 0:
+            return np.stack([fraction_above(float(v)) for v in np.asarray(speed, float)])
         return fraction_above(speed)
-    v_star = float(speed)
-    if not (np.isfinite(v_star) and v_star > 0):
+    v_star = np.asarray(speed, float)
+    if not np.all(np.isfinite(v_star) & (v_star > 0)):
         raise ValueError(f"critical impact speed {speed!r} m/s: allowed are finite speeds > 0 with a spread")
     a = 2.0 / s
+    column = v_star[..., None]  # one row per critical speed, one column per bin
     lo, hi = VELOCITY_EDGES[1:-1], VELOCITY_EDGES[2:]
-    z_lo, z_hi = a * np.log(lo / v_star), a * np.log(hi / v_star)
+    z_lo, z_hi = a * np.log(lo / column), a * np.log(hi / column)
 
     def integral(z):  # antiderivative of Phi
         return z * ndtr(z) + np.exp(-0.5 * z * z) / np.sqrt(2.0 * np.pi)
 
     log_bins = (integral(z_hi) - integral(z_lo)) / (z_hi - z_lo)
     v0 = (np.arange(64) + 0.5) / 64 * VELOCITY_EDGES[1]
-    first = float(np.mean(ndtr(a * np.log(v0 / v_star))))
-    return np.clip(np.concatenate([[first], log_bins]), 0.0, 1.0)
+    first = np.mean(ndtr(a * np.log(v0 / column)), axis=-1, keepdims=True)
+    return np.clip(np.concatenate([first, log_bins], axis=-1), 0.0, 1.0)
 
 
 @dataclass(frozen=True)

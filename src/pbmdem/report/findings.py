@@ -217,23 +217,35 @@ def _label(v) -> str:
 
 def _speed_paragraph(speed: pd.DataFrame, speed_feed: str, batch_s: float) -> str:
     """The answer to "how does the impeller speed change the granules?" (`speed`: one row per speed)."""
+    from .breakage import peak_speed
+
     s = speed.sort_values("rpm")
     lo, hi = s.iloc[0], s.iloc[-1]
     change = (hi.d50 - lo.d50) / lo.d50 if lo.d50 else float("nan")
+    peak = peak_speed(s)
+    if peak is not None:
+        top = s[s.rpm == peak].iloc[0]
+        trend = (
+            f"The final d50 grows with the speed up to {peak:g} rpm (d50 = {_mm(top.d50)}) and falls above it: "
+            "faster impellers make the granules collide more often, but above that speed more of the impacts "
+            "are fast enough to break the granules (breakage from impacts, the Stokes deformation criterion). "
+        )
+    elif abs(change) < 0.05:
+        trend = (
+            "Over this range of speeds the final size changes by less than 5 %: faster impellers make the "
+            "granules collide more often, but a collision only grows a granule when both carry enough surface "
+            "liquid. "
+        )
+    elif change > 0:
+        trend = "Faster impellers make the granules collide more often, and more collisions make larger granules. "
+    else:
+        trend = "The granules end smaller at higher speeds in this model. "
     return (
         f"**Impeller speed.** With the ``{speed_feed}`` feed, raising the impeller speed from {lo.rpm:g} to "
         f"{hi.rpm:g} rpm changes the granule size after the {batch_text(batch_s)} batch from d50 = {_mm(lo.d50)} to "
         f"{_mm(hi.d50)} ({PERCENT * change:+.1f} %); d10 goes from {_mm(lo.d10)} to {_mm(hi.d10)} and d90 from "
         f"{_mm(lo.d90)} to {_mm(hi.d90)}. "
-        + (
-            "Over this range of speeds the final size changes by less than 5 %: faster impellers make the "
-            "granules collide more often, but a collision only grows a granule when both carry enough surface "
-            "liquid. "
-            if abs(change) < 0.05
-            else "Faster impellers make the granules collide more often, and more collisions make larger granules. "
-            if change > 0
-            else "The granules end smaller at higher speeds in this model. "
-        )
+        + trend
         + _disagree(max(_spread(r) for _, r in s.iterrows()))
         + _domain_words(s, "speed", "rpm")
     )

@@ -491,6 +491,9 @@ def test_breakage_words_leave_failed_speeds_out_of_the_peak():
     words = breakage_words(study)
     assert "falls above it for: Yx2 (450 rpm)." in words
     assert "from the lowest speed studied on for: Y/2, default." in words
+    assert "v* = 2 m/s) the final d50" in words  # one strength at every porosity
+    consolidating = breakage_words(study.assign(strength_porosity_exponent=2.0))
+    assert "v* = 2 m/s for a fresh granule, rising as it consolidates (strength ~ ((1 - eps)/eps)^2)" in consolidating
 
 
 def test_a_fall_within_the_members_range_is_not_a_peak():

@@ -83,9 +83,13 @@ def breakage_words(study: pd.DataFrame) -> str:
     peaks = {name: peak_speed(s) for name, s in study.groupby("variant")}
     with_peak = [f"{name} ({rpm:g} rpm)" for name, rpm in peaks.items() if rpm is not None]
     falling = [name for name, s in study.groupby("variant") if falls_throughout(s)]
+    n = float(on.strength_porosity_exponent.iloc[0]) if "strength_porosity_exponent" in on else 0.0
+    v_star = f"v* = {on.critical_speed.iloc[0]:.2g} m/s"
+    if n > 0:  # v* of a fresh granule; consolidation raises it
+        v_star += f" for a fresh granule, rising as it consolidates (strength ~ ((1 - eps)/eps)^{n:g})"
     return (
         f"**Breakage.** With breakage from impacts (St_def = rho v^2 / (2 Y) > St_def*, critical speed "
-        f"v* = {on.critical_speed.iloc[0]:.2g} m/s) the final d50 goes from {MM * lo.d50:.2f} mm at {lo.rpm:g} rpm "
+        f"{v_star}) the final d50 goes from {MM * lo.d50:.2f} mm at {lo.rpm:g} rpm "
         f"to {MM * hi.d50:.2f} mm at {hi.rpm:g} rpm ({PERCENT * change:+.1f} %); without breakage "
         f"{PERCENT * change_off:+.1f} %. "
         + (
@@ -94,5 +98,6 @@ def breakage_words(study: pd.DataFrame) -> str:
             else "No variant shows a speed above which the granules get smaller within the speeds studied. "
         )
         + (f"It falls from the lowest speed studied on for: {', '.join(falling)}. " if falling else "")
-        + "Impacts break granules where they approach or exceed v*, a fraction of the impeller tip speed."
+        + "Impacts break granules where the fastest of them, at the impeller and between granules, approach or "
+        "exceed their v*."
     )

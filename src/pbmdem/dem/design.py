@@ -32,8 +32,8 @@ the largest granules at the fastest speeds, where the batch grows most. `corner_
 distribution there: its largest class at `d_max_limit`, its smallest at the widest span, both
 larger classes as rare as `min_class_particles` allows, at the top of `rpm_range`. (Ten Sobol
 points of seed 20141 reached 8.3 mm, and PBM-ANN's samples at 900 rpm left the training domain
-with classes of 8.5-8.8 mm.) Diameters are rounded to 0.1 mm, fractions to 0.001 and speeds to 10 rpm, so that the
-config holds the design as plain numbers.
+with classes of 8.5-8.8 mm.) Diameters are rounded to 0.1 mm, fractions to 0.001 and speeds to
+10 rpm, so that the config holds the design as plain numbers.
 """
 
 from __future__ import annotations

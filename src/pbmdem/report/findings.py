@@ -22,6 +22,7 @@ import pandas as pd
 
 from pbmdem.plotting import pyplot
 
+from .breakage import peak_speed
 from .display import MM, PERCENT
 
 STATS = (("d90", "^", "tab:red"), ("d50", "o", "black"), ("d10", "v", "tab:blue"))
@@ -217,8 +218,6 @@ def _label(v) -> str:
 
 def _speed_paragraph(speed: pd.DataFrame, speed_feed: str, batch_s: float) -> str:
     """The answer to "how does the impeller speed change the granules?" (`speed`: one row per speed)."""
-    from .breakage import peak_speed
-
     s = speed.sort_values("rpm")
     lo, hi = s.iloc[0], s.iloc[-1]
     change = (hi.d50 - lo.d50) / lo.d50 if lo.d50 else float("nan")

@@ -14,7 +14,8 @@ BED = 0.018 * math.pi / 4.0 * 0.060**2 * 0.60
 
 
 def _particles(point):
-    """Particles per class of the design point in the default bed (as pbmdem.dem.plan counts them)."""
+    """Particles per class of the design point in the default bed, unrounded: stricter than the DEM
+    plan's whole-particle counts (`planned` in the corner's test), which round 49.6 up to 50."""
     d, f = point["diameters"], point["number_fractions"]
     mean_volume = sum(fk * math.pi / 6.0 * dk**3 for dk, fk in zip(d, f))
     return [fk * BED / mean_volume for fk in f]

@@ -226,3 +226,93 @@ def test_an_impossible_particle_id_is_corruption_located_by_line_and_frame(tmp_p
         err.value
     )
     assert read_dump(path, 3).frames == 5  # the same rows without the id check: the check is what refuses them
+
+
+def binary_frame(step: int, rows: np.ndarray, ranks: int = 1) -> bytes:
+    """One frame of a binary LIGGGHTS 3.8 `dump custom` (*.bin), its rows split over `ranks` chunks."""
+    from pbmdem.dem.dumps import BINARY_HEADER
+
+    rows = np.asarray(rows, dtype="<f8")
+    head = np.zeros(1, BINARY_HEADER)
+    head["step"], head["rows"], head["boundary"] = step, len(rows), 1
+    head["box"] = (-1, 1, -1, 1, -1, 1)
+    head["size_one"], head["chunks"] = rows.shape[1], ranks
+    out = head.tobytes()
+    for part in np.array_split(rows, ranks):
+        out += np.int32(part.size).tobytes() + part.tobytes()
+    return out
+
+
+def positions(step: int, n: int = 4) -> np.ndarray:
+    ids = np.arange(1, n + 1)
+    return np.column_stack([ids, 0.01 * ids, -0.02 * ids, step * 1e-6 + 0 * ids, ids, 2 * ids, 3 * ids])
+
+
+def test_a_binary_dump_reads_back_every_frame_and_chunk(tmp_path):
+    from pbmdem.dem.dumps import read_trajectories
+
+    path = tmp_path / "positions.bin"
+    path.write_bytes(binary_frame(100, positions(100)) + binary_frame(110, positions(110), ranks=2))
+    snaps = read_dump(path, 7, ids=(0,))
+    assert snaps.steps.tolist() == [100, 110]
+    assert snaps.offsets.tolist() == [0, 4, 8]
+    np.testing.assert_array_equal(snaps.data, np.vstack([positions(100), positions(110)]))
+    traj = read_trajectories(path, 4)
+    assert traj.ids.tolist() == [1, 2, 3, 4]
+    assert traj.pos[1, 2].tolist() == positions(110)[2, 1:4].tolist()
+    assert traj.vel[0, 3].tolist() == [4.0, 8.0, 12.0]
+
+
+def test_a_truncated_binary_dump_names_byte_and_frame(tmp_path):
+    from pbmdem.dem import engine
+    from pbmdem.dem.dumps import find_damage
+
+    whole = binary_frame(100, positions(100)) + binary_frame(110, positions(110))
+    path = tmp_path / "positions.bin"
+    path.write_bytes(whole[:-20])
+    first = len(binary_frame(100, positions(100)))
+    with pytest.raises(
+        DumpFormatError,
+        match=rf"positions.bin: byte {first}, frame 2, after the frame at step 100: "
+        r"truncated: the frame at step 110 announces 28 values, the file ends first",
+    ):
+        read_dump(path, 7)
+    assert engine.dump_steps(path) == [100]  # the well-formed frames before the damage
+    assert "truncated" in find_damage(path)
+    path.write_bytes(whole[: first + 30])
+    assert "bytes left of a 100-byte frame header" in find_damage(path)
+
+
+def test_binary_dump_damage_steps_values_ids_and_plan(tmp_path):
+    from pbmdem.dem.dumps import find_damage
+
+    path = tmp_path / "positions.bin"
+    good = binary_frame(100, positions(100)) + binary_frame(110, positions(110))
+    path.write_bytes(good)
+    assert find_damage(path) is None
+    assert find_damage(path, expected_steps=[100, 110]) is None
+    assert "frame 2 should be at step 105 (a frame is missing)" in find_damage(path, expected_steps=[100, 105, 110])
+    assert "the file ends after 2 of 3 planned frames" in find_damage(path, expected_steps=[100, 110, 120])
+    path.write_bytes(binary_frame(110, positions(110)) + binary_frame(100, positions(100)))
+    assert "time step 100 does not follow 110" in find_damage(path)
+    with pytest.raises(DumpFormatError, match="time step 100 does not follow 110"):
+        read_dump(path, 7)
+    rows = positions(110)
+    rows[2, 4] = np.nan
+    path.write_bytes(binary_frame(100, positions(100)) + binary_frame(110, rows))
+    with pytest.raises(
+        DumpFormatError, match=r"non-finite value nan in column 5 of entry row 3 of the frame at step 110"
+    ):
+        read_dump(path, 7)
+    nan_at = len(binary_frame(100, positions(100))) + 104 + 8 * (2 * 7 + 4)
+    assert f"byte {nan_at}, frame 2 (step 110): non-finite value nan" in find_damage(path)
+    rows = positions(110)
+    rows[3, 0] = 2.5
+    path.write_bytes(binary_frame(100, positions(100)) + binary_frame(110, rows))
+    row_at = len(binary_frame(100, positions(100))) + 104 + 8 * 3 * 7
+    with pytest.raises(
+        DumpFormatError, match=rf"byte {row_at}, frame 2 \(step 110\), entry row 4: column 1 = 2.5 is not"
+    ):
+        read_dump(path, 7, ids=(0,))
+    with pytest.raises(DumpFormatError, match="rows of 7 values, 3 expected"):
+        read_dump(path, 3)

@@ -101,3 +101,31 @@ def test_particle_count_fills_the_bed(default_config):
         assert bed == pytest.approx(default_config.granulator.bed.height, rel=0.01)
         assert solids == pytest.approx(default_config.granulator.bed_solid_volume, rel=0.01)
         assert sum(plan.counts) == plan.n_particles
+
+
+def test_neighbour_skin_follows_the_tip_speed_between_half_the_smallest_and_largest_diameter():
+    d = (0.002, 0.003, 0.004)
+    assert deck.neighbor_skin(d, 1.0e-5) == 0.001  # impeller at rest: half the smallest
+    travel = 2 * deck.SKIN_STEPS_AT_TIP_SPEED * 3.0 * 1.0e-5
+    assert 0.001 < travel < 0.002
+    assert deck.neighbor_skin(d, 1.0e-5, 3.0) == pytest.approx(travel)
+    assert deck.neighbor_skin(d, 1.0e-5, 50.0) == 0.002  # half the largest at most
+    # no unit in it: millimetres and milliseconds give the same skin in millimetres
+    assert deck.neighbor_skin([x * 1e3 for x in d], 1.0e-2, 3.0) == pytest.approx(1e3 * travel)
+
+
+def test_a_point_deck_sets_its_speed_s_skin_and_the_bed_deck_the_resting_one(default_config):
+    point = default_config.dem_point("fine")
+    slow, fast = plan_point(point, 150), plan_point(point, 1200)
+    skin = {}
+    for name, text in {
+        "bed": deck.render_bed(point, slow.bed, 1),
+        "slow": deck.render_granulator(point, slow, 1, from_bed=True),
+        "fast": deck.render_granulator(point, fast, 1, from_bed=True),
+    }.items():
+        (line,) = [x for x in text.splitlines() if x.startswith("neighbor ")]
+        skin[name] = float(line.split()[1])
+    d_min, d_max = min(slow.bed.diameters), max(slow.bed.diameters)
+    assert skin["bed"] == skin["slow"] == 0.5 * d_min
+    assert 0.5 * d_min < skin["fast"] <= 0.5 * d_max
+    assert skin["fast"] == pytest.approx(2 * deck.SKIN_STEPS_AT_TIP_SPEED * fast.tip_speed * fast.timestep)

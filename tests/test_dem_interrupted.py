@@ -281,3 +281,28 @@ def test_a_cancelled_job_ends_within_killwait_even_if_the_engine_ignores_sigterm
                 os.kill(pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
+
+
+def test_random_bytes_in_the_binary_positions_of_a_finished_run_are_found_where_they_are(tiny_run, tmp_path):
+    """The positions are a binary dump: 4000 random bytes in its middle keep its frame structure
+    (the plan check passes: LIGGGHTS did finish), but the tabulation refuses the impossible
+    particle ids they leave and names the byte and frame."""
+    import random
+
+    from pbmdem.dem import collisions
+    from pbmdem.dem.dumps import DumpFormatError
+    from pbmdem.dem.run import check_finished
+
+    run = _copy_run(tiny_run, tmp_path, "corrupt_positions")
+    path = run / "post" / "positions.bin"
+    data = bytearray(path.read_bytes())
+    middle = len(data) // 2
+    data[middle : middle + 4000] = random.Random(25).randbytes(4000)
+    path.write_bytes(bytes(data))
+    check_finished(tiny_run["plan"], run)
+    point = tiny_run["point"]
+    with pytest.raises(DumpFormatError) as err:
+        collisions.tabulate_run(run / "post", tiny_run["plan"], point.granulator.bowl, point.granulator.impeller)
+    found = re.search(r"corrupt dump: (\S+positions\.bin): byte (\d+), frame (\d+) \(step \d+\)", str(err.value))
+    assert found, str(err.value)
+    assert middle <= int(found.group(2)) < middle + 4000

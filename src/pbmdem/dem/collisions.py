@@ -260,7 +260,7 @@ class RunAnalysis:
         self.radius_of_class = 0.5 * np.asarray(plan.diameters, float)
         self.pairs = read_dump(post_dir / "pairs.dump", 3, ids=(0, 1))
         self.walls = read_dump(post_dir / "walls.dump", 3, ids=(1,))
-        self.traj = read_trajectories(post_dir / "positions.dump", plan.n_particles)
+        self.traj = read_trajectories(post_dir / "positions.bin", plan.n_particles)
         window = self.pairs.steps[self.pairs.steps >= plan.window_start_step]
         if len(window) < 2:
             raise DumpFormatError(f"{plan.point_id}: fewer than two contact snapshots in the sampling window")

@@ -1,9 +1,10 @@
 """LIGGGHTS dump files of a DEM run, read vectorised and checked.
 
-A dump (`dump local` of contacts, `dump custom` of particles) is read once as bytes; frame headers
-are located with one regular-expression scan and all entry rows are handed in one piece to
-pandas' C reader. A truncated, inconsistent or non-finite dump is a DumpFormatError naming the
-file, the frame and the row.
+A text dump (`dump local` of contacts, `dump custom` of particles) is read once as bytes; frame
+headers are located with one regular-expression scan and all entry rows are handed in one piece to
+pandas' C reader. A binary dump (`dump custom` to a file named `*.bin`, the position snapshots) is
+walked frame by frame and its doubles are viewed in place. A truncated, inconsistent or non-finite
+dump is a DumpFormatError naming the file, the frame and the row.
 """
 
 from __future__ import annotations
@@ -24,8 +25,138 @@ _HEADER = re.compile(
 )
 
 
+#: Header of one frame of a binary LIGGGHTS 3.8 dump (LAMMPS' binary format of its time, before the
+#: magic string of later versions): time step, rows, triclinic flag, the six boundary flags, the six
+#: box bounds, values per row and the number of chunks that follow. Each chunk is an int32 count of
+#: values and as many float64 values, rows one after the other (one chunk per MPI rank).
+BINARY_HEADER = np.dtype(
+    [
+        ("step", "<i8"),
+        ("rows", "<i8"),
+        ("triclinic", "<i4"),
+        ("boundary", "<i4", (6,)),
+        ("box", "<f8", (6,)),
+        ("size_one", "<i4"),
+        ("chunks", "<i4"),
+    ]
+)
+BINARY_SUFFIX = ".bin"
+
+
 class DumpFormatError(ValueError):
     """A dump file is malformed or truncated."""
+
+
+@dataclass
+class BinaryFrame:
+    step: int
+    rows: int
+    size_one: int
+    at: int  # byte offset of the frame header
+    chunks: list[tuple[int, int]]  # (byte offset of the first value, number of values)
+
+
+def binary_frames(raw: bytes, path: str | Path, width: int | None = None) -> tuple[list[BinaryFrame], str | None]:
+    """The well-formed frames at the start of the binary dump `raw` (read from `path`) and where
+    it stops being one (None if it never does): a header or chunk cut short, a count that cannot
+    be (negative rows, values not `rows` x values per row, a width other than `width`), a step
+    that does not increase."""
+    frames: list[BinaryFrame] = []
+    at, size = 0, len(raw)
+
+    def damage(message: str) -> str:
+        previous = f", after the frame at step {frames[-1].step}" if frames else ""
+        return f"{path}: byte {at}, frame {len(frames) + 1}{previous}: {message}"
+
+    while at < size:
+        if size - at < BINARY_HEADER.itemsize:
+            return frames, damage(f"truncated: {size - at} bytes left of a {BINARY_HEADER.itemsize}-byte frame header")
+        head = np.frombuffer(raw, BINARY_HEADER, 1, at)[0]
+        step, rows = int(head["step"]), int(head["rows"])
+        size_one, n_chunks = int(head["size_one"]), int(head["chunks"])
+        if rows < 0 or size_one < 1 or n_chunks < 1 or head["triclinic"] not in (0, 1):
+            return frames, damage(f"not a frame header (step {step}, rows {rows}, width {size_one}, chunks {n_chunks})")
+        if width is not None and size_one != width:
+            return frames, damage(f"rows of {size_one} values, {width} expected")
+        if frames and step <= frames[-1].step:
+            return frames, damage(f"time step {step} does not follow {frames[-1].step}")
+        header_end = at + BINARY_HEADER.itemsize + (3 * 8 if head["triclinic"] else 0)
+        chunks, cursor, values = [], header_end, 0
+        for _ in range(n_chunks):
+            if size - cursor < 4:
+                return frames, damage(f"truncated: the file ends inside the frame at step {step} (a chunk count)")
+            n = int(np.frombuffer(raw, "<i4", 1, cursor)[0])
+            if n < 0 or cursor + 4 + 8 * n > size:
+                return frames, damage(f"truncated: the frame at step {step} announces {n} values, the file ends first")
+            chunks.append((cursor + 4, n))
+            cursor += 4 + 8 * n
+            values += n
+        if values != rows * size_one:
+            announced = f"its header announces {rows} rows of {size_one}"
+            return frames, damage(f"the frame at step {step} holds {values} values, {announced}")
+        frames.append(BinaryFrame(step, rows, size_one, at, chunks))
+        at = cursor
+    return frames, None
+
+
+def _binary_row_byte(frame: BinaryFrame, row: int) -> int:
+    """Byte offset of the `row`-th row (0-based) of a binary frame."""
+    value = row * frame.size_one
+    for start, n in frame.chunks:
+        if value < n:
+            return start + 8 * value
+        value -= n
+    return frame.chunks[-1][0] + 8 * frame.chunks[-1][1]
+
+
+def read_binary_dump(path: str | Path, columns: int, ids: tuple[int, ...] = ()) -> Snapshots:
+    """Read a binary LIGGGHTS `dump custom` file with `columns` values per row; the 0-based
+    columns `ids` hold particle ids. Checked like a text dump (structure, finite values, ids)."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise DumpFormatError(f"dump file {path} does not exist (did LIGGGHTS reach the sampling phase?)") from None
+    frames, damage = binary_frames(raw, path, width=columns)
+    if damage is not None:
+        raise DumpFormatError(f"corrupt dump: {damage}")
+    steps = np.array([f.step for f in frames], dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum([f.rows for f in frames])]).astype(np.int64)
+    parts = [np.frombuffer(raw, "<f8", n, start) for f in frames for start, n in f.chunks]
+    data = (np.concatenate(parts) if parts else np.zeros(0)).reshape(-1, columns)
+
+    def where(frame: int, row: int) -> str:
+        return (
+            f"byte {_binary_row_byte(frames[frame], row)}, frame {frame + 1} (step {steps[frame]}), entry row {row + 1}"
+        )
+
+    _check_values(path, steps, offsets, data, ids, where)
+    return Snapshots(steps=steps, offsets=offsets, data=data)
+
+
+def _check_values(path: Path, steps: np.ndarray, offsets: np.ndarray, data: np.ndarray, ids, where) -> None:
+    """Every value finite and every id column a positive integer, or a DumpFormatError naming
+    the place (`where(frame, row in frame)`), the column and how many such values there are."""
+    bad = ~np.isfinite(data)
+    if (at := first_index(bad)) is not None:
+        row, col = at
+        frame = int(np.searchsorted(offsets, row, side="right") - 1)
+        raise DumpFormatError(
+            f"{path}: non-finite value {float(data[row, col])!r} in column {col + 1} of "
+            f"entry row {row - offsets[frame] + 1} "
+            f"of the frame at step {steps[frame]} ({int(bad.sum())} non-finite value(s) in all); every value of a "
+            "dump must be a finite number"
+        )
+    for col in ids:
+        values = data[:, col]
+        impossible = (values < 1) | (values != np.round(values))
+        if (row := first_index(impossible)) is not None:
+            frame = int(np.searchsorted(offsets, row, side="right") - 1)
+            raise DumpFormatError(
+                f"corrupt dump: {path}: {where(frame, row - int(offsets[frame]))}: column {col + 1} = "
+                f"{values[row]:g} is not a particle id (a positive integer); "
+                f"{int(impossible.sum())} such value(s) in all"
+            )
 
 
 @dataclass
@@ -47,8 +178,11 @@ class Snapshots:
 
 def read_dump(path: str | Path, columns: int, ids: tuple[int, ...] = ()) -> Snapshots:
     """Read a LIGGGHTS `dump local` (or `dump custom`) text file with `columns` values per row;
-    the 0-based columns `ids` hold particle ids (positive integers: anything else is corruption)."""
+    the 0-based columns `ids` hold particle ids (positive integers: anything else is corruption).
+    A file named `*.bin` is read as a binary dump."""
     path = Path(path)
+    if path.suffix == BINARY_SUFFIX:
+        return read_binary_dump(path, columns, ids)
     try:
         raw = path.read_bytes()
     except FileNotFoundError:
@@ -91,31 +225,16 @@ def read_dump(path: str | Path, columns: int, ids: tuple[int, ...] = ()) -> Snap
             f"found {len(data)} complete rows"
         )
     offsets = np.concatenate([[0], np.cumsum(counts)])
+
+    def where(frame: int, row: int) -> str:
+        at = headers[frame].end()
+        for _ in range(row):
+            at = raw.index(b"\n", at) + 1
+        line = raw.count(b"\n", 0, at) + 1
+        return f"line {line} (byte {at}), frame {frame + 1} (step {steps[frame]})"
+
     # 'nan' or 'inf' in any column (ids, overlaps, positions) would silently change the counts
-    bad = ~np.isfinite(data)
-    if (at := first_index(bad)) is not None:
-        row, col = at
-        frame = int(np.searchsorted(offsets, row, side="right") - 1)
-        raise DumpFormatError(
-            f"{path}: non-finite value {float(data[row, col])!r} in column {col + 1} of "
-            f"entry row {row - offsets[frame] + 1} "
-            f"of the frame at step {steps[frame]} ({int(bad.sum())} non-finite value(s) in all); every value of a "
-            "dump must be a finite number"
-        )
-    for col in ids:
-        values = data[:, col]
-        impossible = (values < 1) | (values != np.round(values))
-        if (row := first_index(impossible)) is not None:
-            frame = int(np.searchsorted(offsets, row, side="right") - 1)
-            at = headers[frame].end()
-            for _ in range(row - int(offsets[frame])):
-                at = raw.index(b"\n", at) + 1
-            line = raw.count(b"\n", 0, at) + 1
-            raise DumpFormatError(
-                f"corrupt dump: {path}: line {line} (byte {at}), frame {frame + 1} "
-                f"(step {steps[frame]}): column {col + 1} = {values[row]:g} is not a particle id (a positive "
-                f"integer); {int(impossible.sum())} such value(s) in all"
-            )
+    _check_values(path, steps, offsets, data, ids, where)
     # each frame's rows must be as many as its header says; a short last frame is truncation
     last_lines = bodies[-1].count(b"\n")
     if last_lines < counts[-1]:
@@ -135,6 +254,8 @@ def find_damage(path: str | Path, expected_steps=None) -> str | None:
     path = Path(path)
     raw = path.read_bytes()
     planned = None if expected_steps is None else [int(x) for x in expected_steps]
+    if path.suffix == BINARY_SUFFIX:
+        return _find_binary_damage(raw, path, planned)
     offset, line_no, frame, step, previous = 0, 0, 0, None, None
     lines = raw.split(b"\n")
     if lines and lines[-1] == b"":
@@ -200,6 +321,30 @@ def find_damage(path: str | Path, expected_steps=None) -> str | None:
     return None
 
 
+def _find_binary_damage(raw: bytes, path: Path, planned: list[int] | None) -> str | None:
+    """find_damage for a binary dump: its structure, finite values and the planned frame steps."""
+    frames, damage = binary_frames(raw, path)
+    if damage is not None:
+        return damage
+    for k, frame in enumerate(frames):
+        if planned is not None and (k >= len(planned) or frame.step != planned[k]):
+            if k >= len(planned):
+                expected = f"more frames than the {len(planned)} planned"
+            else:
+                expected = f"frame {k + 1} should be at step {planned[k]} (a frame is missing)"
+            return f"{path}: byte {frame.at}, frame {k + 1} (step {frame.step}): {expected}"
+        for start, n in frame.chunks:
+            values = np.frombuffer(raw, "<f8", n, start)
+            if (bad := first_index(~np.isfinite(values))) is not None:
+                return (
+                    f"{path}: byte {start + 8 * bad}, frame {k + 1} (step {frame.step}): non-finite value "
+                    f"{float(values[bad])!r}"
+                )
+    if planned is not None and len(frames) < len(planned):
+        return f"{path}: byte {len(raw)}, the file ends after {len(frames)} of {len(planned)} planned frames"
+    return None
+
+
 def _numbers(line: bytes, widths: tuple[int, ...]) -> bool:
     words = line.split()
     if len(words) not in widths:
@@ -226,7 +371,7 @@ def class_lookup(ids: np.ndarray, classes: np.ndarray) -> np.ndarray:
 
 
 def read_trajectories(path: str | Path, n_particles: int):
-    """Position snapshots (`dump custom ... id x y z vx vy vz`, sorted by id) as Trajectories."""
+    """Position snapshots (`dump custom ... id x y z vx vy vz`, sorted by id; text or binary) as Trajectories."""
     from .encounters import Trajectories
 
     snaps = read_dump(path, 7, ids=(0,))

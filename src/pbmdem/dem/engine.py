@@ -31,7 +31,7 @@ from pathlib import Path
 
 from pbmdem.atomic import write_json
 
-from .dumps import DumpFormatError, find_damage
+from .dumps import BINARY_SUFFIX, DumpFormatError, binary_frames, find_damage
 
 _ERROR_LINE = re.compile(r"^(ERROR|ERROR on proc \d+).*$", re.MULTILINE)
 _LOST = re.compile(r"Lost atoms|lost atoms", re.IGNORECASE)
@@ -313,11 +313,14 @@ def _children_cpu() -> float:
 
 
 def dump_steps(path: str | Path) -> list[int]:
-    """Time steps of the frames of a LIGGGHTS dump file (empty if the file is missing)."""
+    """Time steps of the frames of a LIGGGHTS dump file (empty if the file is missing); of a
+    binary dump (`*.bin`), those of the well-formed frames before any damage."""
     try:
         data = Path(path).read_bytes()
     except FileNotFoundError:
         return []
+    if Path(path).suffix == BINARY_SUFFIX:
+        return [frame.step for frame in binary_frames(data, path)[0]]
     return [int(m.group(1)) for m in _DUMP_FRAME.finditer(data)]
 
 

@@ -214,7 +214,7 @@ def planned_dumps(plan: DemPlan) -> dict[str, tuple[int, int]]:
     return {
         "post/pairs.dump": contacts,
         "post/walls.dump": contacts,
-        "post/positions.dump": frames_and_last(plan.position_interval),
+        "post/positions.bin": frames_and_last(plan.position_interval),
     }
 
 
@@ -313,7 +313,7 @@ def _run_in(
     collisions.write_tables(tables, run_dir)
     series = vtk_series.write_series(run_dir / "post", plan.timestep)
     if not point.dem.keep_contact_dumps:
-        for dump in ("pairs.dump", "walls.dump", "positions.dump"):
+        for dump in ("pairs.dump", "walls.dump", "positions.bin"):
             (run_dir / "post" / dump).unlink(missing_ok=True)
     thermo = engine.thermo_table(result.log)
     # fix check/timestep/gran: ts[1] = dt / Rayleigh time, ts[2] = dt / Hertz time (LIGGGHTS' own)

@@ -199,6 +199,8 @@ def test_profile_interval_of_a_linear_model_is_the_analytical_one():
     res = _FakeResiduals(lambda x: A @ x - b)
     z = 1.96
     widths = profile_widths(res, x_hat, x_hat - 2.0, x_hat + 2.0, z)
+    # the sides scanned at once in two processes give the same widths, to the bit
+    np.testing.assert_array_equal(profile_widths(res, x_hat, x_hat - 2.0, x_hat + 2.0, z, n_jobs=2), widths)
     expected = z * np.sqrt(np.diag(np.linalg.inv(A.T @ A)))
     for i in range(2):
         for side in range(2):

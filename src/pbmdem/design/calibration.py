@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -217,16 +217,40 @@ def profile_side(residuals: Residuals, x: np.ndarray, index: int, sign: int, low
     return outside
 
 
-def profile_widths(residuals: Residuals, x: np.ndarray, lower, upper, z: float) -> np.ndarray:
+def profile_widths(residuals: Residuals, x: np.ndarray, lower, upper, z: float, n_jobs: int = 1) -> np.ndarray:
     """(p, 2) ln widths below and above the estimate of each parameter's profile-likelihood
     interval (rise z^2, :func:`profile_side`); np.inf for a side the data do not bound within the
-    search box."""
-    widths = np.full((x.size, 2), np.inf)
-    for i in range(x.size):
-        for k, sign in enumerate((-1, +1)):
-            t = profile_side(residuals, x, i, sign, lower, upper, z * z)
-            widths[i, k] = np.inf if t is None else t
-    return widths
+    search box. With `n_jobs` > 1 the 2p sides are scanned at once in as many processes, forked
+    from this one (each scan is sequential and its PBM batches are too small to share); the
+    widths are the same as one after the other."""
+    sides = [(i, sign) for i in range(x.size) for sign in (-1, +1)]
+    global _PROFILE
+    _PROFILE = (residuals, x, lower, upper, z * z)
+    try:
+        if n_jobs > 1 and len(sides) > 1:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+
+            context = multiprocessing.get_context("fork")
+            with ProcessPoolExecutor(max_workers=min(n_jobs, len(sides)), mp_context=context) as pool:
+                ends = list(pool.map(_profile_side_in_process, sides))
+        else:
+            ends = [profile_side(residuals, x, i, sign, lower, upper, z * z) for i, sign in sides]
+    finally:
+        _PROFILE = None
+    return np.array([np.inf if t is None else t for t in ends], float).reshape(x.size, 2)
+
+
+#: what the processes of profile_widths scan (set by the parent before it forks them)
+_PROFILE = None
+
+
+def _profile_side_in_process(side: tuple[int, int]):
+    residuals, x, lower, upper, rise = _PROFILE
+    model = getattr(residuals, "model", None)
+    if model is not None:  # one process per side already: no pool inside it
+        residuals.model = replace(model, n_jobs=1)
+    return profile_side(residuals, x, side[0], side[1], lower, upper, rise)
 
 
 def screen(residuals: Residuals, x0: np.ndarray, lower: np.ndarray, upper: np.ndarray, keep: int) -> list[np.ndarray]:
@@ -359,7 +383,7 @@ def calibrate(model: Model, data: pd.DataFrame, settings: Calibration, start: di
     z = _z(settings.confidence)
     span = math.log(settings.max_factor)
     sd_curvature = np.sqrt(np.clip(np.diag(cov_meas), 0.0, None))
-    widths = profile_widths(residuals, x, x0 - span, x0 + span, z)
+    widths = profile_widths(residuals, x, x0 - span, x0 + span, z, n_jobs=model.n_jobs)
     sd_surrogate = np.sqrt(np.diag(cov_surr))
     below, above = (np.hypot(widths[:, k], z * sd_surrogate) for k in (0, 1))
     sd_measurement = widths.mean(axis=1) / z  # the profile interval's half-width as an sd

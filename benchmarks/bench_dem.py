@@ -13,6 +13,9 @@ the runs recorded them).
     .venv/bin/python benchmarks/bench_dem.py null results/dem [--draws 4000]
     # one point with the settings before issue 20 and with the current ones, side by side (same load)
     .venv/bin/python benchmarks/bench_dem.py cost [--rpm 600] [--distribution fine] [--speeds 4] [--out DIR]
+    # finished runs again with other neighbour skins (run: the deck's own; dmin, dmax: half the
+    # smallest, largest diameter; or metres), interleaved, LIGGGHTS wall time of every run command
+    .venv/bin/python benchmarks/bench_dem.py skin RUN_DIR [RUN_DIR ...] [--skins run,dmin,dmax] [--repeats 2]
 """
 
 from __future__ import annotations
@@ -354,6 +357,68 @@ def bench_cost(args) -> None:
     )
 
 
+def _skin_value(spec: str, deck: str, diameters) -> float:
+    if spec == "run":
+        return float(next(line.split()[1] for line in deck.splitlines() if line.startswith("neighbor ")))
+    if spec in ("dmin", "dmax"):
+        return 0.5 * (min(diameters) if spec == "dmin" else max(diameters))
+    return float(spec)
+
+
+def bench_skin(args) -> None:
+    """The deck of each finished run, again, with each skin (interleaved, `repeats` rounds): a
+    skin changes which pairs are checked, never the contacts, so only the time differs."""
+    import shutil
+    import subprocess
+
+    rows = []
+    for run_dir in map(Path, args.runs):
+        plan = json.loads((run_dir / "plan.json").read_text())
+        deck = (run_dir / "in.granulator").read_text()
+        skins = {spec: _skin_value(spec, deck, plan["diameters"]) for spec in args.skins.split(",")}
+        with tempfile.TemporaryDirectory() as tmp:
+            for repeat in range(args.repeats):
+                for spec, skin in skins.items():
+                    work = Path(tmp) / f"{spec}_{repeat}"
+                    (work / "post").mkdir(parents=True)
+                    for name in ("bowl.stl", "impeller.stl"):
+                        shutil.copy(run_dir / name, work / name)
+                    if plan.get("settled_bed"):
+                        shutil.copy(Path(args.root) / plan["settled_bed"], work / "bed.restart")
+                    lines = [
+                        f"neighbor        {skin!r} bin" if line.startswith("neighbor ") else line
+                        for line in deck.splitlines()
+                    ]
+                    (work / "in.granulator").write_text("\n".join(lines) + "\n")
+                    subprocess.run(
+                        ["liggghts", "-in", "in.granulator", "-log", "log.liggghts"],
+                        cwd=work,
+                        check=True,
+                        stdout=subprocess.DEVNULL,
+                    )
+                    blocks = engine.loop_times(work / "log.liggghts")
+                    rows.append(
+                        {
+                            "run": f"{plan['point_id']}/rep{plan['replicate']}",
+                            "particles": plan["n_particles"],
+                            "rpm": plan["rpm"],
+                            "skin": spec,
+                            "skin_mm": 1e3 * skin,
+                            "repeat": repeat,
+                            "wall_s": sum(b["wall"] for b in blocks),
+                            "neigh_s": sum(b.get("Neigh", 0.0) for b in blocks),
+                            "pair_s": sum(b.get("Pair", 0.0) for b in blocks),
+                        }
+                    )
+                    shutil.rmtree(work)
+                    print(rows[-1], flush=True)
+    table = pd.DataFrame(rows).groupby(["run", "particles", "rpm", "skin", "skin_mm"], sort=False).mean()
+    table = table.drop(columns="repeat").reset_index()
+    first = table.groupby("run")["wall_s"].transform("first")
+    table["against_first"] = table["wall_s"] / first - 1
+    print(table.to_markdown(index=False, floatfmt=".3g"))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -381,9 +446,15 @@ def main() -> None:
         help="config of the old side (run like the new side, from its own settled bed); "
         "default: the settings before issue 20",
     )
+    skin = sub.add_parser("skin", help="finished runs again with other neighbour skins, side by side")
+    skin.add_argument("runs", nargs="+", help="run folders (results/dem/rpm*/rep*, or a coupled loop's dem/)")
+    skin.add_argument("--skins", default="run,dmin,dmax")
+    skin.add_argument("--repeats", type=int, default=2)
+    skin.add_argument("--root", default=".", help="the project the runs' settled beds are relative to")
     args = parser.parse_args()
     commands = {"point": bench_point, "profile": bench_profile, "acceptance": bench_acceptance, "cost": bench_cost}
     commands["null"] = bench_null
+    commands["skin"] = bench_skin
     commands[args.command](args)
 
 

@@ -16,6 +16,8 @@ the runs recorded them).
     # finished runs again with other neighbour skins (run: the deck's own; dmin, dmax: half the
     # smallest, largest diameter; or metres), interleaved, LIGGGHTS wall time of every run command
     .venv/bin/python benchmarks/bench_dem.py skin RUN_DIR [RUN_DIR ...] [--skins run,dmin,dmax] [--repeats 2]
+    # run-level totals, half-window trend and wall encounters of two results/dem, many replicates each
+    .venv/bin/python benchmarks/bench_dem.py runs OLD/results/dem NEW/results/dem [--skip-replicates 0]
 """
 
 from __future__ import annotations
@@ -419,6 +421,70 @@ def bench_skin(args) -> None:
     print(table.to_markdown(index=False, floatfmt=".3g"))
 
 
+# --------------------------------------------------------------------------- run totals
+RUN_COUNTS = (
+    "total_encounters",
+    "encounters_first_half",
+    "encounters_second_half",
+    "wall_encounters_impeller",
+    "wall_encounters_bowl",
+)
+
+
+def _half_changes(runs: pd.DataFrame) -> np.ndarray:
+    return (runs["encounters_second_half"] / runs["encounters_first_half"] - 1).to_numpy()
+
+
+def bench_runs(args) -> None:
+    """Run-level counts of two results/dem with several replicates per point: the window's totals,
+    its two halves and the wall encounters (new / old - 1 with the combined replicate error), and
+    per point the change of the half-window trend, with a permutation test of the replicates'
+    labels (no normality assumed) over the points together."""
+    old, new = (pd.read_csv(Path(d) / "runs.csv") for d in (args.old, args.new))
+    if args.skip_replicates:
+        skip = {int(k) for k in args.skip_replicates.split(",")}
+        old, new = (r[~r["replicate"].isin(skip)] for r in (old, new))
+    points = sorted(set(old.point_id) & set(new.point_id))
+    print("| point | runs old / new | quantity | new / old - 1 | z |")
+    print("| --- | --- | --- | --- | --- |")
+    groups = []
+    for point in points:
+        a, b = new[new.point_id == point], old[old.point_id == point]
+        for col in RUN_COUNTS:
+            ma, mb = a[col].mean(), b[col].mean()
+            se = math.hypot(
+                a[col].std(ddof=1) / math.sqrt(len(a)) / mb, b[col].std(ddof=1) / math.sqrt(len(b)) * ma / mb**2
+            )
+            print(
+                f"| {point} | {len(b)} / {len(a)} | {col} | {100 * (ma / mb - 1):+.1f} % +- {100 * se:.1f} % | "
+                f"{(ma / mb - 1) / se:+.1f} |"
+            )
+        ha, hb = _half_changes(a), _half_changes(b)
+        se = math.hypot(ha.std(ddof=1) / math.sqrt(ha.size), hb.std(ddof=1) / math.sqrt(hb.size))
+        print(
+            f"| {point} | {len(b)} / {len(a)} | second half / first half - 1 | old {100 * hb.mean():+.1f} %, new "
+            f"{100 * ha.mean():+.1f} % (sd per run {100 * hb.std(ddof=1):.1f} / {100 * ha.std(ddof=1):.1f} %) | "
+            f"{(ha.mean() - hb.mean()) / se:+.1f} |"
+        )
+        groups.append((ha, hb))
+
+    def spread(pairs):
+        return sum(abs(x.mean() - y.mean()) for x, y in pairs)
+
+    rng = np.random.default_rng(args.seed)
+    observed, beyond = spread(groups), 0
+    for _ in range(args.draws):
+        shuffled = []
+        for ha, hb in groups:
+            both = rng.permutation(np.concatenate([ha, hb]))
+            shuffled.append((both[: ha.size], both[ha.size :]))
+        beyond += spread(shuffled) >= observed
+    print(
+        f"\nhalf-window trend, sum over the {len(points)} points of |new - old|: {100 * observed:.1f} %; "
+        f"permutation p = {beyond / args.draws:.4f} ({args.draws} draws)"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -451,10 +517,17 @@ def main() -> None:
     skin.add_argument("--skins", default="run,dmin,dmax")
     skin.add_argument("--repeats", type=int, default=2)
     skin.add_argument("--root", default=".", help="the project the runs' settled beds are relative to")
+    runs = sub.add_parser("runs", help="run-level totals, halves and wall encounters of two results/dem")
+    runs.add_argument("old")
+    runs.add_argument("new")
+    runs.add_argument("--skip-replicates", help="replicates to leave out, e.g. 0 (runs chosen for failing)")
+    runs.add_argument("--draws", type=int, default=20000)
+    runs.add_argument("--seed", type=int, default=1)
     args = parser.parse_args()
     commands = {"point": bench_point, "profile": bench_profile, "acceptance": bench_acceptance, "cost": bench_cost}
     commands["null"] = bench_null
     commands["skin"] = bench_skin
+    commands["runs"] = bench_runs
     commands[args.command](args)
 
 

@@ -101,10 +101,12 @@ def calibration_check(
         loop, model_path, rpms, times, settings.proof.noise, settings.proof.seed
     )
     # the two cases side by side, each evaluating its batches in order: a calibration's evaluation
-    # is 3 short batches, too few to gain from a process pool of its own (run_cases)
+    # is 3 short batches, too few to gain from a process pool of its own (run_cases). Their n_jobs
+    # is for the profile-likelihood scan at the end, which takes PBM-ANN four times as long as
+    # PBM-constant: its sides use the core the finished case has left (profile_widths)
     models = {
-        "pbm_dem": Model(loop, model_path, keys, "ann"),
-        "pbm_constant_noise": Model(loop, model_path, keys, "constant", fixed=fixed),
+        "pbm_dem": Model(loop, model_path, keys, "ann", n_jobs=n_jobs),
+        "pbm_constant_noise": Model(loop, model_path, keys, "constant", fixed=fixed, n_jobs=n_jobs),
     }
     estimates = dict(zip(models, _calibrate_all(models, data, settings, start, n_jobs), strict=True))
     rows = [row for case, est in estimates.items() for row in recovery_rows(case, est, truth)]

@@ -1,18 +1,26 @@
-"""Throughput of many PBM-ANN batches (the design space and the calibration): prints figures, no
-assertions.
+"""PBM-ANN batches: one batch, warm, and the throughput of many (the design space, the sensitivity
+analysis and the calibration). Prints figures, no assertions.
 
-Runs `--batches` PBM-ANN batches of the default configuration (the validation feed, four coupling
-intervals; speeds spread over 300-1200 rpm, the ensemble mean and its members in turn) with
-`pbmdem.design.batches.run_cases` on 1 and on `--jobs` processes, and prints for each: wall time,
-CPU time of this process and its children, batches per second, and the projected wall time of
-1000 batches (the target: at most 60 s on 2 cores). Also one batch split into its parts as the
-coupled loop records them (surrogate calls, PBM integration), and what loading the surrogate and
-writing the loop's files cost per batch before the batches ran in memory.
+1. **One batch** of the default configuration (the validation feed, its coupling intervals, the
+   surrogate's ensemble mean, in memory, the surrogate loaded once), warm (after one batch that
+   loads numba's cache, the thread pools and scikit-learn's lazy imports), `--repeat` times (>= 20)
+   at the validation's speeds in turn: min / median / max of the wall and CPU time of this process,
+   with breakage on (the default) and off. Then the median batch split into its parts: the
+   surrogate's calls (`provider_wall_time_s`), the PBM's integration (`pbm_wall_time_s`), of it the
+   breakage selection (timed by wrapping `ImpactSelection.__call__`), and the rest of the loop
+   (sample, class-frequency source).
+2. **Throughput**: `--batches` batches (speeds over the grid's range; the ensemble mean and each
+   member in turn, as the design space runs them) with `pbmdem.design.batches.run_cases` on 1 and
+   on `--jobs` processes: wall and CPU time (this process and its children), batches per minute.
 
-The machine is shared: the load average is printed before and after; compare figures of one run.
+The targets of issue 35: one batch <= 10 ms with breakage, <= 5 ms without (median, warm); >= 10,000
+batches per minute on 2 cores. The machine may be shared: the load average is printed before and
+after; compare figures of one run.
 
 Run: .venv/bin/python benchmarks/bench_design_space.py [--model results/surrogate/model.skops]
-     [--batches 300] [--jobs 2]
+     [--repeat 30] [--batches 2000] [--jobs 2] [--quick]
+`--quick` (for the test suite): trains a small surrogate on synthetic tables (benchmarks/quick.py)
+unless `--model` is given, and runs a few batches of each kind.
 """
 
 from __future__ import annotations
@@ -20,89 +28,148 @@ from __future__ import annotations
 import argparse
 import os
 import resource
-import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def cpu_seconds() -> float:
-    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+def cpu_seconds(children: bool = True) -> float:
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    total = own.ru_utime + own.ru_stime
+    if children:
+        kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+        total += kids.ru_utime + kids.ru_stime
+    return total
 
 
-def cases(n: int, n_members: int):
-    from pbmdem.design.batches import Case
+def spread(values, scale: float = 1e3, unit: str = "ms") -> str:
+    v = np.asarray(values, float) * scale
+    return f"min {v.min():.2f} / median {np.median(v):.2f} / max {v.max():.2f} {unit}"
+
+
+def without_breakage(loop):
+    pbm = loop.batch.pbm
+    return loop.replace(batch=loop.batch.replace(pbm=pbm.replace(breakage=pbm.breakage.replace(enabled=False))))
+
+
+class SelectionTimer:
+    """Wraps ImpactSelection.__call__ to add up the time of the breakage selection."""
+
+    def __init__(self):
+        from pbmdem.pbm.impact_breakage import ImpactSelection
+
+        self.cls, self.original, self.seconds, self.calls = ImpactSelection, ImpactSelection.__call__, 0.0, 0
+        timer = self
+
+        def timed(sel, inp):
+            t0 = time.perf_counter()
+            out = timer.original(sel, inp)
+            timer.seconds += time.perf_counter() - t0
+            timer.calls += 1
+            return out
+
+        ImpactSelection.__call__ = timed
+
+    def close(self):
+        self.cls.__call__ = self.original
+
+
+def one_batch(loop, model, speeds, repeat: int, label: str) -> None:
+    """`repeat` warm in-memory batches at `speeds` in turn: their wall and CPU time and the parts of
+    the batch of median wall time."""
+    from pbmdem.coupling import pbm_ann
+
+    pbm_ann(loop, model, speeds[0], None, log_each=False)  # warm: numba's cache, thread pools, imports
+    walls, cpus, parts, finals = [], [], [], []
+    timer = SelectionTimer()
+    try:
+        for k in range(repeat):
+            rpm = speeds[k % len(speeds)]
+            timer.seconds, timer.calls = 0.0, 0
+            t0, c0 = time.perf_counter(), time.process_time()
+            outcome = pbm_ann(loop, model, rpm, None, log_each=False)
+            walls.append(time.perf_counter() - t0)
+            cpus.append(time.process_time() - c0)
+            t = outcome.totals
+            parts.append((t["provider_wall_time_s"], t["pbm_wall_time_s"], timer.seconds, timer.calls))
+            if k < len(speeds):
+                s = outcome.result.summary()
+                finals.append((rpm, [float(s[q].iloc[-1]) for q in ("d10", "d50", "d90")]))
+    finally:
+        timer.close()
+    print(f"one PBM-ANN batch, {label} ({repeat} warm batches at {', '.join(f'{s:g}' for s in speeds)} rpm):")
+    print(f"  wall {spread(walls)}; CPU {spread(cpus)}")
+    k = int(np.argsort(walls)[len(walls) // 2])
+    surrogate, pbm, selection, calls = parts[k]
+    print(
+        f"  the median batch ({1e3 * walls[k]:.2f} ms): surrogate {1e3 * surrogate:.2f} ms, PBM {1e3 * pbm:.2f} ms "
+        f"(of it the breakage selection {1e3 * selection:.2f} ms in {calls} evaluations), rest of the loop "
+        f"{1e3 * (walls[k] - surrogate - pbm):.2f} ms"
+    )
+    for rpm, final in finals:
+        print(f"  final d10 / d50 / d90 at {rpm:g} rpm: " + " / ".join(f"{1e3 * q:.9f}" for q in final) + " mm")
+
+
+def throughput(loop, model_path, n: int, jobs: int, n_members: int, speeds) -> None:
+    from pbmdem.design.batches import Case, run_cases
 
     members = (None, *range(n_members))
-    return [Case(300.0 + 900.0 * k / max(n - 1, 1), member=members[k % len(members)]) for k in range(n)]
-
-
-def measure(loop, model, batch_cases, jobs: int) -> dict:
-    from pbmdem.design.batches import run_cases
-
-    t0, c0 = time.perf_counter(), cpu_seconds()
-    outcomes = run_cases(loop, model, batch_cases, jobs)
-    wall, cpu = time.perf_counter() - t0, cpu_seconds() - c0
-    return {"wall": wall, "cpu": cpu, "failed": sum(bool(o.failed) for o in outcomes), "n": len(outcomes)}
-
-
-def parts(loop, model) -> None:
-    """One batch as the loop records it, and the costs the in-memory path avoids."""
-    from pbmdem.coupling import pbm_ann
-    from pbmdem.surrogate import load_surrogate
-
-    t0 = time.perf_counter()
-    loaded = load_surrogate(model)
-    load = time.perf_counter() - t0
-    pbm_ann(loop, loaded, 600.0, None)  # warm
-    t0 = time.perf_counter()
-    outcome = pbm_ann(loop, loaded, 610.0, None)
-    total = time.perf_counter() - t0
-    with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
-        pbm_ann(loop, model, 620.0, Path(tmp) / "run")  # from the file, as the validation rules run it
-        on_disk = time.perf_counter() - t0
-    t = outcome.totals
-    print(
-        f"one PBM-ANN batch in memory: {1e3 * total:.1f} ms = surrogate {1e3 * t['provider_wall_time_s']:.1f} ms "
-        f"+ PBM {1e3 * t['pbm_wall_time_s']:.1f} ms + the rest of the loop "
-        f"{1e3 * (total - t['total_wall_time_s']):.1f} ms"
-    )
-    print(
-        f"avoided per batch: loading the surrogate {1e3 * load:.0f} ms; loading it and writing the loop's "
-        f"files {1e3 * (on_disk - total):.0f} ms (from the file, with an output folder: {1e3 * on_disk:.1f} ms)"
-    )
+    lo, hi = min(speeds), max(speeds)
+    cases = [Case(lo + (hi - lo) * k / max(n - 1, 1), member=members[k % len(members)]) for k in range(n)]
+    for j in sorted({1, jobs}):
+        t0, c0 = time.perf_counter(), cpu_seconds()
+        outcomes = run_cases(loop, model_path, cases, j)
+        wall, cpu = time.perf_counter() - t0, cpu_seconds() - c0
+        failed = sum(bool(o.failed) for o in outcomes)
+        print(
+            f"{len(outcomes)} PBM-ANN batches (mean and {n_members} members) on {j} process(es): wall {wall:.2f} s, "
+            f"CPU {cpu:.2f} s ({1e3 * cpu / len(outcomes):.2f} ms per batch): {60 * len(outcomes) / wall:.0f} "
+            f"batches per minute; {failed} failed"
+        )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--model", default=str(ROOT / "results/surrogate/model.skops"))
+    parser.add_argument("--model", default=None, help="a trained surrogate (default: results/surrogate/model.skops)")
     parser.add_argument("--config", default=str(ROOT / "config/config.yaml"))
-    parser.add_argument("--batches", type=int, default=300)
+    parser.add_argument("--repeat", type=int, default=30, help="warm single batches per kind (>= 20 for a statement)")
+    parser.add_argument("--batches", type=int, default=2000, help="batches of the throughput measurement")
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--quick", action="store_true", help="a small surrogate and a few batches (smoke test)")
     args = parser.parse_args()
 
+    import tempfile
+
     from pbmdem.config import load_config
-    from pbmdem.design.batches import _surrogate
+    from pbmdem.surrogate import load_surrogate
     from pbmdem.surrogate._threads import single_threaded
 
-    loop = load_config(args.config).coupled_loop()
-    print(f"load average before: {os.getloadavg()}; {os.cpu_count()} CPUs")
-    n_members = _surrogate(args.model, Path(args.model).stat().st_mtime)[0].n_members
+    cfg = load_config(args.config)
+    loop = cfg.coupled_loop()
+    tmp = tempfile.TemporaryDirectory()
+    model_path = args.model
+    if model_path is None and args.quick:
+        import quick
+
+        model_path = quick.surrogate(Path(tmp.name), cfg)
+        print(f"surrogate: a small one trained on synthetic tables ({model_path})")
+    elif model_path is None:
+        model_path = str(ROOT / "results/surrogate/model.skops")
+    repeat, batches = (3, 12) if args.quick else (args.repeat, args.batches)
+    print(f"load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs")
+    model = load_surrogate(model_path)
+    speeds = [float(r) for r in cfg.validation.rpm]
     with single_threaded():
-        parts(loop, args.model)
-    batch_cases = cases(args.batches, n_members)
-    for jobs in sorted({1, args.jobs}):
-        m = measure(loop, args.model, batch_cases, jobs)
-        rate = m["n"] / m["wall"]
-        print(
-            f"{m['n']} PBM-ANN batches on {jobs} process(es): wall {m['wall']:.1f} s, CPU {m['cpu']:.1f} s "
-            f"({1e3 * m['cpu'] / m['n']:.1f} ms per batch), {rate:.1f} batches/s -> 1000 batches in "
-            f"{1000 / rate:.0f} s; {m['failed']} failed"
-        )
-    print(f"load average after: {os.getloadavg()}")
+        one_batch(loop, model, speeds, repeat, "breakage on" if loop.batch.pbm.breakage.enabled else "breakage off")
+        if loop.batch.pbm.breakage.enabled:
+            one_batch(without_breakage(loop), model, speeds, repeat, "breakage off")
+    grid = [float(r) for r in cfg.grid.impeller_rpm]
+    throughput(loop, model_path, batches, args.jobs, model.n_members, grid)
+    print(f"load average after: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    tmp.cleanup()
 
 
 if __name__ == "__main__":

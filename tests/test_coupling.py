@@ -286,3 +286,60 @@ def test_breakage_from_each_intervals_impacts_breaks_only_above_the_critical_spe
     assert fast.d50.iloc[-1] < 0.9 * plain.d50.iloc[-1]
     for column in ("total_solid_volume", "total_liquid_volume"):
         np.testing.assert_allclose(fast[column], plain[column], rtol=1e-9)
+
+
+class _CountingSurrogate:
+    """A fitted surrogate's PBM-facing calls, counted: constant frequencies and impacts."""
+
+    def __init__(self):
+        self.calls = {"frequency_matrix": 0, "encounters": 0, "impacts": 0}
+        self.wall_models_ = {"bowl": None, "impeller": None}
+
+    def has_velocity_model(self):
+        return True
+
+    def frequency_matrix(self, d, n, rpm):
+        self.calls["frequency_matrix"] += 1
+        return np.full((len(d), len(d)), 0.1)
+
+    def encounters(self, d, n, rpm):
+        from pbmdem.impact import N_VELOCITY_BINS, EncounterRates
+
+        self.calls["encounters"] += 1
+        return EncounterRates(np.full((len(d), len(d)), 0.1), np.full((len(d), len(d), N_VELOCITY_BINS), 1 / 17))
+
+    def impacts(self, d, n, rpm):
+        from pbmdem.impact import N_VELOCITY_BINS, ImpactRates, WallRates
+
+        self.calls["impacts"] += 1
+        walls = WallRates(np.ones((2, len(d))), np.full((2, len(d), N_VELOCITY_BINS), 1 / N_VELOCITY_BINS))
+        return ImpactRates(self.encounters(d, n, rpm), walls)
+
+
+def test_the_surrogate_provider_predicts_only_what_the_pbm_reads_and_a_repeated_sample_once(default_config):
+    from pbmdem.coupling.providers import SurrogateProvider, surrogate_needs
+    from pbmdem.coupling.sample import DemSample
+
+    pbm = default_config.coupled_loop().batch.pbm
+    assert pbm.breakage.enabled and surrogate_needs(pbm) == (True, True)  # the default: breakage by every impact
+    off = pbm.replace(breakage=pbm.breakage.replace(enabled=False))
+    assert surrogate_needs(off) == (False, False)  # aggregation only, velocity-independent success
+    stokes = off.replace(
+        aggregation=off.aggregation.replace(success=off.aggregation.success.replace(velocity_model="stokes"))
+    )
+    assert surrogate_needs(stokes) == (True, False)
+    feed = DemSample([0.002, 0.003], [100, 50], [[0], [1]])
+    grown = DemSample([0.002, 0.003, 0.004], [80, 40, 10], [[0], [1], [2]])
+    kinds = (((False, False), "frequency_matrix"), ((True, False), "encounters"), ((True, True), "impacts"))
+    for needs, called in kinds:
+        model = _CountingSurrogate()
+        provider = SurrogateProvider(model, 600.0, needs=needs)
+        first, _ = provider(feed, None, 0)
+        again, info = provider(feed, None, 1)  # the same sample: not predicted again
+        assert again is first and info["out_of_domain_count"] == 0
+        provider(grown, None, 2)
+        provider(feed, None, 3)  # not the sample of the interval before: predicted
+        assert model.calls[called] == 3, (needs, model.calls)
+        # impacts() asks encounters() for its pairs; nothing else is predicted
+        inner = ("impacts", "encounters") if called == "impacts" else (called,)
+        assert not any(v for k, v in model.calls.items() if k not in inner), (needs, model.calls)

@@ -65,7 +65,7 @@ def test_findings_state_the_answers_with_their_numbers(tmp_path):
                 "d50_end_dem_min_mm": 3.98,
                 "d50_end_dem_max_mm": 4.02,
                 "ann_d50_outside_band_max": 0.003,
-                "wall_time_ratio_dem_over_ann": 5000.0,
+                "cpu_time_ratio_dem_over_ann": 5000.0,
             }
         ]
     )

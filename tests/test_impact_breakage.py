@@ -401,3 +401,44 @@ def test_the_porosity_exponent_setting_reaches_the_selection(default_config):
     brk = pbm.breakage.replace(strength_porosity_exponent=1.0, reference_porosity=0.4)
     sel = impact_selection(pbm.replace(breakage=brk))
     assert (sel.porosity_exponent, sel.reference_porosity) == (1.0, 0.4)
+
+
+@pytest.mark.parametrize("spread", [0.0, 0.5, 1.3])
+def test_the_compiled_selection_equals_the_numpy_form_on_random_impacts(spread):
+    # ImpactSelection.__call__ (compiled: _compiled.breaking_probability + impact_selection) against
+    # the numpy definition (selection_rates summed over its kinds) on random impacts, numbers,
+    # sizes and porosities (so one v* per class), with pairs and each subset of the walls
+    from pbmdem.impact import breaking_probability
+
+    rng = np.random.default_rng(7)
+    K = 9
+    d = 0.002 * 1.26 ** np.arange(K)
+    c = rng.uniform(0.0, 0.3, (K, K))
+    pair_f = rng.dirichlet(np.ones(N_VELOCITY_BINS), (K, K))
+    rates = ImpactRates(
+        EncounterRates(0.5 * (c + c.T), 0.5 * (pair_f + pair_f.transpose(1, 0, 2))),
+        WallRates(rng.uniform(0.0, 5.0, (2, K)), rng.dirichlet(np.ones(N_VELOCITY_BINS), (2, K))),
+    )
+
+    class Source:
+        def impacts(self, diameters, numbers, rpm):
+            return rates
+
+    numbers = rng.uniform(0.0, 40.0, K)
+    numbers[3] = 0.5  # fewer than one partner of its own class
+    inp = KernelInput(0.0, np.pi / 6 * d**3, d, numbers, np.zeros(K), rpm=900.0)
+    inp.porosity = rng.uniform(0.2, 0.5, K)
+    for walls, pairs in ((("impeller", "bowl"), True), (("bowl",), True), ((), True), (("impeller",), False)):
+        sel = ImpactSelection(Source(), RHO, Y, ST, walls, pairs, spread, size_exponent=0.5, porosity_exponent=2.0)
+        parts = sel.contributions(inp)
+        expected = np.sum(list(parts.values()), axis=0) if parts else np.zeros(K)
+        got = sel(inp)
+        np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-300)
+        assert got.shape == (K,) and (got > 0).any()
+    # the compiled probability against pbmdem.impact.breaking_probability, one row per v*
+    from pbmdem.pbm import _compiled
+
+    v = np.array([1e-4, 5e-4, 0.0316, 0.3, 2.0, 9.9, 12.0])
+    out = np.empty((v.size, N_VELOCITY_BINS))
+    _compiled.breaking_probability(v, spread, VELOCITY_EDGES, out)
+    np.testing.assert_allclose(out, breaking_probability(v, spread), rtol=1e-12, atol=1e-15)

@@ -156,3 +156,48 @@ def test_a_surrogate_fitted_on_an_array_keeps_the_frame_path(data):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         np.testing.assert_allclose(c[iu, ju], 10.0 ** plain.predict(make_features(frame, R).to_numpy()), rtol=1e-12)
+
+
+@pytest.fixture(scope="module", params=["mlp", "kriging", "rsm"])
+def with_walls(request, data):
+    """A surrogate of each family whose wall models (bowl, impeller) are fitted like its pair model
+    (on the pair tables, rescaled: what matters here is the path, not the data)."""
+    from pbmdem.surrogate.families import KrigingRegressor, ResponseSurface
+
+    def family():
+        if request.param == "kriging":
+            return KrigingRegressor(n_restarts_optimizer=0, n_members=3)
+        if request.param == "rsm":
+            return ResponseSurface(degree=(1, 2), n_members=3)
+        return EnsembleMLPRegressorCV(
+            hidden_layer_sizes=((6,),), alpha=(0.1,), seeds=(0, 1), max_iter=200, activation="relu", solver="lbfgs"
+        )
+
+    def fit(shift):
+        model = CollisionSurrogate(frequency_model=family(), impeller_radius=R, physics_offset="cross_section")
+        return model.fit(data.X, data.y + shift, groups=data.groups, velocity=data.velocity)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pairs = fit(0.0)
+        pairs.wall_models_ = {"bowl": fit(1.0), "impeller": fit(1.5)}
+    return pairs
+
+
+def test_wall_rates_equal_the_frame_path_for_every_family(with_walls):
+    from pbmdem.surrogate.walls import wall_rates
+
+    slow = frame_path(with_walls)
+    slow.wall_models_ = {wall: frame_path(model) for wall, model in with_walls.wall_models_.items()}
+    for d, n, rpm in distributions():
+        fast, fast_warn = recorded(partial(wall_rates, with_walls, d, n, rpm))
+        ref, ref_warn = recorded(partial(wall_rates, slow, d, n, rpm))
+        assert fast_warn == ref_warn
+        np.testing.assert_allclose(fast.frequency, ref.frequency, rtol=1e-12, atol=0.0)
+        np.testing.assert_allclose(fast.velocity_fractions, ref.velocity_fractions, rtol=1e-12, atol=1e-300)
+    # and the pair model of every family, through impacts()
+    for d, n, rpm in distributions():
+        fast, _ = recorded(partial(with_walls.impacts, d, n, rpm))
+        ref, _ = recorded(partial(slow.impacts, d, n, rpm))
+        np.testing.assert_allclose(fast.pairs.frequency, ref.pairs.frequency, rtol=1e-12, atol=0.0)
+        np.testing.assert_allclose(fast.pairs.velocity_fractions, ref.pairs.velocity_fractions, rtol=1e-12, atol=1e-300)

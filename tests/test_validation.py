@@ -45,7 +45,7 @@ def test_a_single_replicate_has_no_spread_and_replicates_must_share_their_times(
         bands.band_table([summary(t, [2.0, 3.0]), summary(t + 1.0, [2.0, 3.0])], summary(t, [2.0, 3.0]))
 
 
-def write_run(folder, times, d50, wall, provider_wall, intervals=None):
+def write_run(folder, times, d50, wall, provider_wall, intervals=None, **timing):
     folder.mkdir(parents=True, exist_ok=True)
     summary(times, d50, 1e-3).assign(number_mean_diameter=1e-3).to_csv(folder / "summary.csv", index=False)
     pd.DataFrame({"time": [times[-1]], "diameter": [1e-3], "mass_fraction": [1.0]}).to_csv(
@@ -53,7 +53,12 @@ def write_run(folder, times, d50, wall, provider_wall, intervals=None):
     )
     (folder / "timing.json").write_text(
         json.dumps(
-            {"total_wall_time_s": wall, "provider_wall_time_s": provider_wall, "pbm_wall_time_s": wall - provider_wall}
+            {
+                "total_wall_time_s": wall,
+                "provider_wall_time_s": provider_wall,
+                "pbm_wall_time_s": wall - provider_wall,
+                **timing,
+            }
         )
     )
     if intervals is not None:
@@ -68,14 +73,23 @@ def test_comparison_row_follows_the_contract(tmp_path):
     loop = pd.DataFrame({"interval": [0, 1], "out_of_domain_count": [0, 0], "out_of_domain": ["", ""]})
     for k, end in enumerate((4.0, 4.4, 4.1)):
         write_run(
-            folder / "pbm_dem" / f"rep{k}", t, [2.0, 3.0, end], wall=120.0 + k, provider_wall=119.0, intervals=loop
+            folder / "pbm_dem" / f"rep{k}",
+            t,
+            [2.0, 3.0, end],
+            wall=120.0 + k,
+            provider_wall=119.0,
+            intervals=loop,
+            dem_cpu_time_s=100.0 + k,  # LIGGGHTS' processes
+            pbm_cpu_time_s=0.5,
         )
     write_run(
         folder / "pbm_ann",
         t,
         [2.0, 3.1, 4.8],
-        wall=0.04,
+        wall=0.04,  # the first batch of its process
         provider_wall=0.01,
+        warm_wall_time_s_median=0.012,
+        warm_cpu_time_s_median=0.02,  # two threads
         intervals=loop.assign(
             out_of_domain_count=[0, 2], out_of_domain=["", "d_large = 0.011 outside the training range"]
         ),
@@ -89,13 +103,18 @@ def test_comparison_row_follows_the_contract(tmp_path):
     assert row.ann_out_of_domain_intervals == 1 and row.ann_intervals == 2
     # the reference's own spread: replicate 1 (4.4) against the others' mean (4.05) at the end
     assert row.dem_replicate_d50_rel_error_max == pytest.approx(0.35 / 4.05)
-    assert row.pbm_dem_wall_s == pytest.approx(121.0) and row.wall_time_ratio_dem_over_ann == pytest.approx(121 / 0.04)
+    # the speed ratio: warm PBM-ANN batches (median) against a PBM-DEM loop (mean), in CPU and in wall time
+    assert row.pbm_dem_wall_s == pytest.approx(121.0) and row.wall_time_ratio_dem_over_ann == pytest.approx(121 / 0.012)
+    assert row.pbm_dem_cpu_s == pytest.approx(101.5) and row.pbm_ann_cpu_s == pytest.approx(0.02)
+    assert row.cpu_time_ratio_dem_over_ann == pytest.approx(101.5 / 0.02)
+    assert row.pbm_ann_first_batch_wall_s == pytest.approx(0.04)
     assert row.dem_calls == 2
     for col in (
         "n_dem_replicates",
         "ann_d50_outside_band_max",
         "ann_out_of_domain_intervals",
         "wall_time_ratio_dem_over_ann",
+        "cpu_time_ratio_dem_over_ann",
         "ann_d50_rel_error_max",
         "d50_end_ann_mm",
     ):

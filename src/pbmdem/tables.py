@@ -294,8 +294,15 @@ def _no_dem_spread(frame: pd.DataFrame) -> np.ndarray:
 
 
 def _no_ann_time(frame: pd.DataFrame) -> np.ndarray:
-    """PBM-ANN took no measurable time (pbm_ann_wall_s = 0: the ratio is undefined)"""
-    return _numbers(frame, "pbm_ann_wall_s") == 0
+    """PBM-ANN's warm batches were not timed or took no measurable time (pbm_ann_wall_s empty or 0:
+    the ratio is undefined)"""
+    t = _numbers(frame, "pbm_ann_wall_s")
+    return ~(t > 0)
+
+
+def _no_cpu_time(frame: pd.DataFrame) -> np.ndarray:
+    """a CPU time was not recorded (loops of an older record) or PBM-ANN took no measurable CPU time"""
+    return ~(_numbers(frame, "pbm_ann_cpu_s") > 0) | ~np.isfinite(_numbers(frame, "pbm_dem_cpu_s"))
 
 
 def _not_recorded(frame: pd.DataFrame) -> np.ndarray:
@@ -325,11 +332,15 @@ COMPARISON = Table(
         Column("constant_d50_outside_band_max", sign=None),
         Column("dem_calls", "int"),
         Column("pbm_dem_wall_s"),
+        Column("pbm_dem_cpu_s", empty=_no_cpu_time),
         Column("pbm_dem_liggghts_wall_s"),
-        Column("pbm_ann_wall_s"),
+        Column("pbm_ann_wall_s", empty=_no_ann_time),
+        Column("pbm_ann_cpu_s", empty=_no_cpu_time),
+        Column("pbm_ann_first_batch_wall_s"),
         Column("pbm_ann_surrogate_wall_s"),
         Column("pbm_constant_wall_s"),
         Column("wall_time_ratio_dem_over_ann", empty=_no_ann_time),
+        Column("cpu_time_ratio_dem_over_ann", empty=_no_cpu_time),
         Column("ann_out_of_domain_intervals", "int", empty=_not_recorded),
         Column("ann_intervals", "int"),
         Column("ann_out_of_domain_warnings", "int", empty=_not_recorded),

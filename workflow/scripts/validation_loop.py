@@ -1,9 +1,10 @@
 """Snakemake rules pbm_dem_coupled / pbm_ann_coupled / pbm_constant_calibrated (thin)."""
 
 import os
+from pathlib import Path
 
 from pbmdem import coupling
-from pbmdem.atomic import write_csv
+from pbmdem.atomic import write_csv, write_json
 from pbmdem.config import CoupledLoop, DemExecution
 from pbmdem.joblog import log_job
 
@@ -19,7 +20,11 @@ if method == "dem":
     execution = DemExecution.of_job(snakemake.config, snakemake.resources)  # noqa: F821
     coupling.pbm_dem(loop, rpm, outdir, execution, replicate=int(snakemake.wildcards.rep))  # noqa: F821
 elif method == "ann":
-    coupling.pbm_ann(loop, snakemake.input.model, rpm, outdir)  # noqa: F821
+    outcome = coupling.pbm_ann(loop, snakemake.input.model, rpm, outdir)  # noqa: F821
+    # the speed of one batch as a benchmark measures it (warm, median of several; the loop above
+    # was the first batch of this process): the comparison's speed ratio
+    warm = coupling.warm_batch_times(loop, snakemake.input.model, rpm)  # noqa: F821
+    write_json(Path(outdir) / "timing.json", outcome.totals | warm)
     # the PBM-ANN band: once per ensemble member of the surrogate (not part of PBM-ANN's timing)
     write_csv(snakemake.output.members, coupling.pbm_ann_members(loop, snakemake.input.model, rpm))  # noqa: F821
 else:

@@ -12,7 +12,7 @@
 """
 
 from .loop import CouplingError, run_loop
-from .methods import calibrated_frequency, pbm_ann, pbm_ann_members, pbm_constant, pbm_dem
+from .methods import calibrated_frequency, pbm_ann, pbm_ann_members, pbm_constant, pbm_dem, warm_batch_times
 from .sample import DemSample, representative_sample
 
 __all__ = [
@@ -23,6 +23,7 @@ __all__ = [
     "pbm_ann_members",
     "pbm_constant",
     "calibrated_frequency",
+    "warm_batch_times",
     "DemSample",
     "representative_sample",
 ]

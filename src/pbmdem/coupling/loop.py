@@ -105,7 +105,7 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
             continue
         t0, t1 = bounds[k], bounds[k + 1]
         sample = representative_sample(*model.particle_classes(state), loop.sample)
-        t_provider = time.perf_counter()
+        t_provider, cpu_provider = time.perf_counter(), time.process_time()
         try:
             rates, extra = provider(sample, folder, k)
         except Exception as exc:
@@ -113,16 +113,16 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
                 f"{provider.name} at rpm {rpm:g}: interval {k} ({t0:g}-{t1:g} s) failed: {exc}. "
                 f"Intervals 0..{k - 1} are kept in {outdir}; rerun to resume."
             ) from exc
-        provider_wall = time.perf_counter() - t_provider
+        provider_wall, provider_cpu = time.perf_counter() - t_provider, time.process_time() - cpu_provider
         source = ClassFrequencySource(sample.diameters, rates, f"{provider.name} interval {k}")
         model.kernel.set_source(source)
         if selection is not None:
             selection.set_source(source)
         pairs = rates.pairs if isinstance(rates, ImpactRates) else rates
         matrix = pairs.frequency if isinstance(pairs, EncounterRates) else np.asarray(pairs, float)
-        t_pbm = time.perf_counter()
+        t_pbm, cpu_pbm = time.perf_counter(), time.process_time()
         result = model.run(t0, t1, state, output_times=output_times(pbm, t0, t1))
-        pbm_wall = time.perf_counter() - t_pbm
+        pbm_wall, pbm_cpu = time.perf_counter() - t_pbm, time.process_time() - cpu_pbm
         info = {
             "interval": k,
             "t_start": t0,
@@ -137,6 +137,9 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
             "mean_frequency_per_pair": pair_weighted_mean(matrix, sample.counts),
             "provider_wall_time_s": provider_wall,
             "pbm_wall_time_s": pbm_wall,
+            # CPU seconds of this process (a DEM provider adds its LIGGGHTS processes' in dem_cpu_time_s)
+            "provider_cpu_time_s": provider_cpu,
+            "pbm_cpu_time_s": pbm_cpu,
             **extra,
         }
         if folder is not None:
@@ -169,6 +172,11 @@ def _totals(method: str, rpm: float, loop: CoupledLoop, rows: list[dict], in_mem
         "intervals": loop.coupling_intervals,
         "provider_wall_time_s": float(sum(r["provider_wall_time_s"] for r in rows)),
         "pbm_wall_time_s": float(sum(r["pbm_wall_time_s"] for r in rows)),
+        # CPU seconds: this process's in the provider and the PBM, and the DEM's LIGGGHTS processes
+        # (0 for a surrogate); intervals resumed from an earlier run count as recorded then
+        "provider_cpu_time_s": float(sum(r.get("provider_cpu_time_s", float("nan")) for r in rows)),
+        "pbm_cpu_time_s": float(sum(r.get("pbm_cpu_time_s", float("nan")) for r in rows)),
+        "dem_cpu_time_s": float(sum(r.get("dem_cpu_time_s", 0.0) for r in rows)),
     }
     if any("out_of_domain_count" in r for r in rows):
         per_interval = [int(r.get("out_of_domain_count", 0) or 0) for r in rows]
@@ -188,4 +196,5 @@ def _totals(method: str, rpm: float, loop: CoupledLoop, rows: list[dict], in_mem
                 totals["out_of_domain_count"],
             )
     totals["total_wall_time_s"] = totals["provider_wall_time_s"] + totals["pbm_wall_time_s"]
+    totals["total_cpu_time_s"] = totals["provider_cpu_time_s"] + totals["pbm_cpu_time_s"] + totals["dem_cpu_time_s"]
     return totals

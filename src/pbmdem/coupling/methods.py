@@ -28,7 +28,7 @@ from pbmdem.pbm.kernels import ConstantFrequency
 from pbmdem.pbm.setup import build_model, initial_state, run_batch
 
 from .loop import CouplingError, LoopOutcome, interval_bounds, run_loop, write_outputs
-from .providers import DemProvider, SurrogateProvider
+from .providers import DemProvider, SurrogateProvider, surrogate_needs
 from .sample import representative_sample
 
 
@@ -50,7 +50,38 @@ def pbm_ann(
     alone) gives the frequencies of every interval. `model_path` may be a loaded surrogate and
     `outdir` None for a batch run in memory (nothing written); `log_each=False`: the caller logs
     the out-of-domain warnings (their count is in the outcome's totals either way)."""
-    return run_loop(loop, SurrogateProvider(model_path, rpm, member, log_each), rpm, outdir)
+    provider = SurrogateProvider(model_path, rpm, member, log_each, needs=surrogate_needs(loop.batch.pbm))
+    return run_loop(loop, provider, rpm, outdir)
+
+
+#: in-memory PBM-ANN batches timed after one warm-up batch (:func:`warm_batch_times`)
+WARM_BATCHES = 9
+
+
+def warm_batch_times(loop: CoupledLoop, model, rpm: float, repeats: int = WARM_BATCHES) -> dict:
+    """PBM-ANN's cost of one batch at `rpm` as a benchmark measures it: the surrogate (`model`: a
+    path or a loaded one) loaded once, one batch to warm up (lazy imports, caches, thread pools),
+    then `repeats` batches in memory. Returns the median, min and max of their wall and CPU
+    seconds (CPU: this process's), keys ``warm_{wall,cpu}_time_s_{median,min,max}`` and
+    ``warm_batches``: what the comparison's speed ratio uses (docs/validation.md)."""
+    from pbmdem.surrogate import load_surrogate
+
+    loaded = load_surrogate(model) if isinstance(model, (str, Path)) else model
+    pbm_ann(loop, loaded, rpm, None, log_each=False)
+    walls, cpus = [], []
+    for _ in range(int(repeats)):
+        t0, c0 = time.perf_counter(), time.process_time()
+        pbm_ann(loop, loaded, rpm, None, log_each=False)
+        walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
+    out = {"warm_batches": int(repeats)}
+    for name, values in (("wall", walls), ("cpu", cpus)):
+        out |= {
+            f"warm_{name}_time_s_median": float(np.median(values)),
+            f"warm_{name}_time_s_min": float(np.min(values)),
+            f"warm_{name}_time_s_max": float(np.max(values)),
+        }
+    return out
 
 
 def pbm_ann_members(loop: CoupledLoop, model_path: str | Path, rpm: float):
@@ -146,4 +177,12 @@ def pbm_constant(loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: 
     return LoopOutcome(result, [], totals)
 
 
-__all__ = ["pbm_dem", "pbm_ann", "pbm_ann_members", "pbm_constant", "calibrated_frequency", "interval_bounds"]
+__all__ = [
+    "pbm_dem",
+    "pbm_ann",
+    "pbm_ann_members",
+    "pbm_constant",
+    "calibrated_frequency",
+    "interval_bounds",
+    "warm_batch_times",
+]

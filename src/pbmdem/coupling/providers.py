@@ -64,11 +64,15 @@ class DemProvider:
             run_dir = interval_dir / "dem"
             # an interval without interval.json is unfinished, whatever its DEM folder holds
             summary = run_point(point, plan, run_dir, self.execution, force=True)
-            info = {"dem_wall_time_s": summary["liggghts_wall_time_s"] + summary["parse_time_s"]}
+            info = {
+                "dem_wall_time_s": summary["liggghts_wall_time_s"] + summary["parse_time_s"],
+                # the LIGGGHTS processes' CPU seconds: the run and, if it settled its own bed, the bed's
+                "dem_cpu_time_s": summary["liggghts_cpu_time_s"] + summary.get("bed_liggghts_cpu_time_s", 0.0),
+            }
         else:
             reused_from, run_dir = earlier
             summary = read_json(run_dir / "summary.json", "DEM run summary of a coupling interval")
-            info = {"dem_wall_time_s": 0.0, "dem_reused_from_interval": reused_from}
+            info = {"dem_wall_time_s": 0.0, "dem_cpu_time_s": 0.0, "dem_reused_from_interval": reused_from}
         table = RUN_PAIRS.read(run_dir / "collisions.csv", "collision table of a coupling interval")
         velocities = RUN_VELOCITIES.read(
             run_dir / "impact_velocity.csv", "impact-velocity table of a coupling interval"
@@ -106,6 +110,17 @@ class DemProvider:
         return None
 
 
+def surrogate_needs(pbm) -> tuple[bool, bool]:
+    """(impact velocities, wall impacts): what the PBM of the ``pbm`` settings reads from a
+    frequency source besides the pair encounter frequencies. Velocities: a velocity-dependent
+    success (the Stokes criterion) or breakage by granule-granule impacts; walls: breakage by
+    wall impacts."""
+    breakage = pbm.breakage
+    walls = bool(breakage.enabled and breakage.walls)
+    velocities = pbm.aggregation.success.velocity_model != "none" or bool(breakage.enabled and breakage.pairs)
+    return velocities, walls
+
+
 class SurrogateProvider:
     """Class encounter frequencies from the trained surrogate (one vectorised call per interval):
     its ensemble mean, or ensemble member `member` alone.
@@ -113,11 +128,15 @@ class SurrogateProvider:
     `model` is the path of a saved surrogate or a loaded one (the many in-memory batches of the
     design space and the calibration load it once). `log_each=False` leaves the logging of each
     out-of-domain warning to the caller, which records and reports their count (never drops it).
+    `needs` = (impact velocities, wall impacts), :func:`surrogate_needs` of the PBM's settings:
+    only what the PBM reads is predicted (None: everything the surrogate can predict). A sample
+    equal to the one of an earlier interval (typically the feed, until the binder lets granules
+    grow) is not predicted again: its rates and out-of-domain warnings are those of that interval.
     """
 
     name = "pbm_ann"
 
-    def __init__(self, model, rpm: float, member: int | None = None, log_each: bool = True):
+    def __init__(self, model, rpm: float, member: int | None = None, log_each: bool = True, needs=None):
         from pbmdem.surrogate import load_surrogate
 
         if isinstance(model, (str, Path)):
@@ -129,10 +148,13 @@ class SurrogateProvider:
         self.member = member
         self.rpm = float(rpm)
         self.log_each = log_each
+        velocities, walls = (True, True) if needs is None else needs
         # with a velocity model the provider also hands over impact-velocity fractions (one call),
-        # with wall models also the wall impacts (breakage)
-        self.velocity_resolved = bool(self.model.has_velocity_model())
-        self.walls = self.velocity_resolved and bool(getattr(self.model, "wall_models_", None))
+        # with wall models also the wall impacts (breakage): when the PBM reads them
+        has_velocity = bool(self.model.has_velocity_model())
+        self.walls = has_velocity and walls and bool(getattr(self.model, "wall_models_", None))
+        self.velocity_resolved = has_velocity and (velocities or self.walls)
+        self._last: tuple[bytes, object, list[str]] | None = None
 
     def fingerprint(self) -> dict:
         if self.model_path is None:
@@ -148,15 +170,20 @@ class SurrogateProvider:
         from pbmdem.surrogate.domain import out_of_domain_recorded
 
         t0 = time.perf_counter()
-        d, n = np.asarray(sample.diameters), np.asarray(sample.counts, float)
-        where = f"{self.name} at rpm {self.rpm:g}, interval {index}"
-        with out_of_domain_recorded(where, log_each=self.log_each) as found:
-            if self.walls:
-                rates = self.model.impacts(d, n, self.rpm)
-            elif self.velocity_resolved:
-                rates = self.model.encounters(d, n, self.rpm)
-            else:
-                rates = np.asarray(self.model.frequency_matrix(d, n, self.rpm), float)
+        d, n = np.asarray(sample.diameters, float), np.asarray(sample.counts, float)
+        key = d.tobytes() + n.tobytes()
+        if self._last is not None and self._last[0] == key:
+            _, rates, found = self._last  # the sample of the interval before: the same prediction
+        else:
+            where = f"{self.name} at rpm {self.rpm:g}, interval {index}"
+            with out_of_domain_recorded(where, log_each=self.log_each) as found:
+                if self.walls:
+                    rates = self.model.impacts(d, n, self.rpm)
+                elif self.velocity_resolved:
+                    rates = self.model.encounters(d, n, self.rpm)
+                else:
+                    rates = np.asarray(self.model.frequency_matrix(d, n, self.rpm), float)
+            self._last = (key, rates, list(found))
         return rates, {
             "ann_wall_time_s": time.perf_counter() - t0,
             "out_of_domain": "; ".join(sorted(set(found))),

@@ -36,8 +36,9 @@ from __future__ import annotations
 import numpy as np
 
 from pbmdem.config import Pbm
-from pbmdem.impact import N_VELOCITY_BINS, WALLS, ImpactRates, breaking_probability
+from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, WALLS, ImpactRates, breaking_probability
 
+from . import _compiled
 from .errors import PBMInputError, positive
 from .kernels import KernelInput
 
@@ -131,6 +132,10 @@ class ImpactSelection:
             raise PBMInputError(f"reference porosity of Y = {reference_porosity!r}; allowed: 0 < porosity < 1")
         self.reference_porosity = eps_ref
         self.speed = critical_speed(self.density, self.yield_strength, self.critical_stokes)
+        # the compiled selection's strength parameters (_compiled.STRENGTH_FIELDS) and "no porosity"
+        strength = dict(vars(self), limit=POROSITY_LIMIT)
+        self._strength = np.array([float(strength[k]) for k in _compiled.STRENGTH_FIELDS])
+        self._no_porosity = np.zeros(0)
         self.set_source(source)
 
     def __repr__(self) -> str:
@@ -168,12 +173,28 @@ class ImpactSelection:
                 f"{self.source!r}.impacts gave {type(rates).__name__}, not ImpactRates of {d.size} bins"
             )
         self._rates, self._key = rates, key
+        # the compiled selection's arguments: contiguous arrays, the walls that can break a granule
+        walls = rates.walls
+        rows = [walls.walls.index(w) for w in self.walls]
+        shape = (len(rows), d.size)
+        self._arrays = (
+            np.ascontiguousarray(rates.pairs.frequency, dtype=float),
+            np.ascontiguousarray(rates.pairs.velocity_fractions, dtype=float),
+            np.ascontiguousarray(walls.frequency[rows], dtype=float).reshape(shape),
+            np.ascontiguousarray(walls.velocity_fractions[rows], dtype=float).reshape(*shape, N_VELOCITY_BINS),
+        )
+        self._work = (np.empty(d.size), np.empty((d.size, N_VELOCITY_BINS)))
 
     def contributions(self, inp: KernelInput) -> dict[str, np.ndarray]:
-        """Per kind of impact (pairs, each wall): (K,) breaking impacts per granule and second."""
+        """Per kind of impact (pairs, each wall): (K,) breaking impacts per granule and second
+        (numpy: for reports and as the oracle of the compiled :meth:`__call__`)."""
         if self._rates is None:
             self.prepare(inp)
         d, n = inp.per_bin()
+        return selection_rates(self._rates, n, self._speeds(inp), self.walls, self.pairs, self.strength_spread)
+
+    def _speeds(self, inp: KernelInput):
+        """v* of the pivots of ``inp`` (one v* when the strength depends on neither size nor porosity)."""
         eps = None
         if self.porosity_exponent != 0.0:
             if inp.porosity is None:
@@ -182,8 +203,7 @@ class ImpactSelection:
                     "in the KernelInput; it has none"
                 )
             eps = inp.porosity[: inp.pivots]  # the aggregates of each pivot: feed granules do not break
-        speeds = self.critical_speeds(d, eps)
-        return selection_rates(self._rates, n, speeds, self.walls, self.pairs, self.strength_spread)
+        return self.critical_speeds(inp.per_bin()[0], eps)
 
     def critical_speeds(self, diameters, porosity=None) -> float | np.ndarray:
         """v* of granules of each diameter (m) and porosity: Y (d / d_ref)^(-e) with e =
@@ -207,8 +227,34 @@ class ImpactSelection:
         return speeds
 
     def __call__(self, inp: KernelInput) -> np.ndarray:
-        parts = self.contributions(inp)
-        return np.sum(list(parts.values()), axis=0) if parts else np.zeros(inp.pivots)
+        """S_i of every pivot: the sum of :meth:`contributions`, in one compiled call
+        (``_compiled.selection_of_impacts``: v*, the breaking probability per velocity bin, the sum
+        over the impacts)."""
+        if self._rates is None:
+            self.prepare(inp)
+        d, n = inp.per_bin()
+        eps = self._no_porosity
+        if self.porosity_exponent != 0.0:
+            if inp.porosity is None:
+                raise PBMInputError(
+                    "a strength that depends on porosity (porosity_exponent > 0) needs the classes' porosity "
+                    "in the KernelInput; it has none"
+                )
+            eps = np.ascontiguousarray(inp.porosity[: inp.pivots], dtype=float)
+        out = np.empty(d.size)
+        _compiled.selection_of_impacts(
+            np.ascontiguousarray(d, dtype=float),
+            eps,
+            self._strength,
+            self.strength_spread,
+            VELOCITY_EDGES,
+            *self._arrays,
+            np.ascontiguousarray(n, dtype=float),
+            self.pairs,
+            *self._work,
+            out,
+        )
+        return out
 
 
 def impact_selection(pbm: Pbm, source=None) -> ImpactSelection | None:

@@ -78,11 +78,17 @@ class KernelInput:
 
     def per_bin(self) -> tuple[np.ndarray, np.ndarray]:
         """(diameters, numbers) of the K pivots; the numbers are the bin totals (aggregates and
-        the feed classes put on the pivots by the lever rule)."""
-        if self.feed_weights is None:
-            return self.diameters, self.numbers
-        K = self.pivots
-        return self.diameters[:K], self.numbers[:K] + self.numbers[K:] @ self.feed_weights
+        the feed classes put on the pivots by the lever rule). Computed once per input (the
+        kernel and the breakage selection of a step read the same)."""
+        cached = self.__dict__.get("_per_bin")
+        if cached is None:
+            if self.feed_weights is None:
+                cached = (self.diameters, self.numbers)
+            else:
+                K = self.pivots
+                cached = (self.diameters[:K], self.numbers[:K] + self.numbers[K:] @ self.feed_weights)
+            self.__dict__["_per_bin"] = cached
+        return cached
 
 
 class KernelFactors(NamedTuple):

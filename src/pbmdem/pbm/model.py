@@ -322,8 +322,9 @@ class GranulationPBM:
 
     def _input(self, t: float, nlg: np.ndarray) -> KernelInput:
         """KernelInput of the scaled class state (3, M): surface-liquid fraction from class totals."""
-        phi = np.empty(nlg.shape[1])
+        phi, eps = np.empty(nlg.shape[1]), np.empty(nlg.shape[1])
         self._jit.surface_fraction(nlg, self._xc, phi)  # max(L - G, 0) / (S + max(L, G)), 0 if empty
+        self._jit.granule_porosity(nlg, self._xc, eps)  # G / (S + G) in units of x_0, NaN if empty
         return KernelInput(
             t=t,
             volumes=self._vc,
@@ -332,7 +333,7 @@ class GranulationPBM:
             surface_fraction=phi,
             rpm=self.rpm,
             feed_weights=self._feed_number_w,
-            porosity=granule_porosity(nlg[0] * self._xc, nlg[2]),  # solid and gas in units of x_0
+            porosity=eps,
         )
 
     # ----------------------------------------------------------------- integration

@@ -7,7 +7,7 @@ The targets (issue 13) are checked at every validation speed on the comparison t
 | --- | --- |
 | PBM-ANN's d50(t) stays within 1 % of the PBM-DEM replicate band | `ann_d50_outside_band_max` <= 0.01 |
 | PBM-ANN never runs the surrogate outside its training domain | `ann_out_of_domain_intervals` = 0 |
-| PBM-ANN is at least 3000x faster than PBM-DEM | `wall_time_ratio_dem_over_ann` >= 3000 |
+| PBM-ANN needs at most 1/3000 of PBM-DEM's CPU time per batch | `cpu_time_ratio_dem_over_ann` >= 3000 |
 
 A missing measurement (NaN) is "not met (not measured)". The out-of-domain statement lists every
 PBM-ANN interval (inside or outside), every ensemble member's count and the constant kernel's
@@ -56,7 +56,7 @@ class Target:
 TARGETS = (
     Target("ann_d50_outside_band_max", "<=", 0.01, "PBM-ANN's d50(t) within 1 % of the PBM-DEM replicate band", "%"),
     Target("ann_out_of_domain_intervals", "==", 0, "PBM-ANN never outside the surrogate's training domain"),
-    Target("wall_time_ratio_dem_over_ann", ">=", 3000, "PBM-ANN at least 3000x faster than PBM-DEM", "x"),
+    Target("cpu_time_ratio_dem_over_ann", ">=", 3000, "PBM-ANN at least 3000x faster than PBM-DEM (CPU time)", "x"),
 )
 
 

@@ -220,12 +220,12 @@ def comparison_tables(table: pd.DataFrame) -> dict[str, pd.DataFrame]:
         out["cost"].append(
             {
                 "speed (rpm)": speed,
-                "DEM calls per PBM-DEM loop (count)": str(int(r.dem_calls)),
+                "PBM-DEM CPU time, LIGGGHTS + PBM, mean of a loop (s)": number(r.pbm_dem_cpu_s, ".4g"),
                 "PBM-DEM wall time, mean of a loop (s)": number(r.pbm_dem_wall_s, ".4g"),
-                "of it LIGGGHTS (s)": number(r.pbm_dem_liggghts_wall_s, ".4g"),
-                "PBM-ANN wall time (s)": number(r.pbm_ann_wall_s, ".3g"),
-                "of it surrogate (s)": number(r.pbm_ann_surrogate_wall_s, ".3g"),
-                "PBM-constant wall time (s)": number(r.pbm_constant_wall_s, ".3g"),
+                "PBM-ANN CPU time, median of warm batches (s)": number(r.pbm_ann_cpu_s, ".3g"),
+                "PBM-ANN wall time, median of warm batches (s)": number(r.pbm_ann_wall_s, ".3g"),
+                "PBM-ANN first batch of its process, wall (s)": number(r.pbm_ann_first_batch_wall_s, ".3g"),
+                "CPU-time ratio PBM-DEM / PBM-ANN (-)": number(r.cpu_time_ratio_dem_over_ann, ".0f"),
                 "wall-time ratio PBM-DEM / PBM-ANN (-)": number(r.wall_time_ratio_dem_over_ann, ".0f"),
             }
         )

@@ -72,7 +72,10 @@ def diagonal_features(diameters, numbers, rpm: float, impeller_radius: float) ->
 
 def wall_rates(surrogate, diameters, numbers, rpm: float, check_domain: bool = True) -> WallRates:
     """:class:`pbmdem.impact.WallRates` of the classes from the surrogate's wall models (every
-    wall of :data:`pbmdem.impact.WALLS`; ValueError naming the missing ones)."""
+    wall of :data:`pbmdem.impact.WALLS`; ValueError naming the missing ones). The wall models
+    predict from the diagonal pairs' feature array (the pair model's array path: the same numbers
+    as their ``predict`` on the feature frame, without its DataFrames and without the members'
+    spread, which the PBM does not use); each warns of features outside its own training range."""
     models = getattr(surrogate, "wall_models_", None) or {}
     missing = [w for w in WALLS if w not in models]
     if missing:
@@ -83,9 +86,17 @@ def wall_rates(surrogate, diameters, numbers, rpm: float, check_domain: bool = T
     X = diagonal_features(diameters, numbers, rpm, surrogate.impeller_radius)
     frequency = np.empty((len(WALLS), len(X)))
     fractions = np.empty((len(WALLS), len(X), N_VELOCITY_BINS))
-    frame = pd.DataFrame(X, columns=surrogate._feature_names())
+    frame = None
     for w, wall in enumerate(WALLS):
         model = models[wall]
+        if model._array_path():
+            if check_domain:
+                model._warn_domain(X, stacklevel=3)
+            frequency[w] = 10.0 ** model._pair_log10(X)
+            fractions[w] = model._pair_velocity(X)
+            continue
+        if frame is None:
+            frame = pd.DataFrame(X, columns=surrogate._feature_names())
         frequency[w] = 10.0 ** model.predict(frame, check_domain=check_domain)
         fractions[w] = model.velocity_fractions(frame, check_domain=False)
     return WallRates(frequency, fractions)

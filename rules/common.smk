@@ -226,6 +226,7 @@ REPORT_TABLES = (
     "provenance",
     "targets",
     "comparison_d50",
+    "comparison_tails",
     "comparison_accuracy",
     "comparison_cost",
     "comparison_domain",

@@ -105,7 +105,13 @@ rule report_tables:
     output:
         **registered_tables(("targets",), CATEGORIES["validation"], "targets"),
         **registered_tables(
-            ("comparison_d50", "comparison_accuracy", "comparison_cost", "comparison_domain"),
+            (
+                "comparison_d50",
+                "comparison_tails",
+                "comparison_accuracy",
+                "comparison_cost",
+                "comparison_domain",
+            ),
             CATEGORIES["validation"],
             "comparison",
         ),

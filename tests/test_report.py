@@ -160,7 +160,7 @@ def test_comparison_in_display_form_has_units_mm_percent_and_fits_a_page(tmp_pat
     write_validation(tmp_path)
     table = pd.read_csv(tmp_path / "comparison.csv")
     shown = comparison_tables(table)
-    assert set(shown) == {"d50", "accuracy", "cost", "domain"}
+    assert set(shown) == {"d50", "tails", "accuracy", "cost", "domain"}
     for name, frame in shown.items():
         assert frame.shape[1] <= MAX_COLUMNS, name
         for column in frame.columns:

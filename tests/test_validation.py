@@ -100,6 +100,11 @@ def test_comparison_row_follows_the_contract(tmp_path):
     assert row.rpm == 300 and row.in_training_grid and row.n_dem_replicates == 3
     assert row.d50_end_dem_mm == pytest.approx(12.5 / 3) and row.d50_end_dem_min_mm == 4.0
     assert row.ann_d50_outside_band_max == pytest.approx(0.4 / (12.5 / 3))
+    # the tails (d10 = 0.6 d50, d90 = 1.4 d50 here): the same distance outside, in mm at the end
+    assert row.ann_d10_outside_band_max == pytest.approx(0.4 / (12.5 / 3))
+    assert row.ann_d90_outside_band_max == pytest.approx(0.4 / (12.5 / 3))
+    assert row.d10_end_ann_mm == pytest.approx(0.6 * 4.8) and row.d90_end_dem_max_mm == pytest.approx(1.4 * 4.4)
+    assert row.d10_end_dem_mm == pytest.approx(0.6 * 12.5 / 3)
     assert row.ann_out_of_domain_intervals == 1 and row.ann_intervals == 2
     # the reference's own spread: replicate 1 (4.4) against the others' mean (4.05) at the end
     assert row.dem_replicate_d50_rel_error_max == pytest.approx(0.35 / 4.05)

@@ -327,6 +327,13 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
     assert sorted(comparison.rpm) == sorted(float(r) for r in cfg["validation"]["rpm"])
     assert (comparison.dem_calls == cfg["validation"]["coupling_intervals"]).all()
     assert (comparison.wall_time_ratio_dem_over_ann > 1).all()
+    # the speed ratio in CPU seconds: LIGGGHTS' processes and the PBM against warm PBM-ANN batches
+    assert (comparison.pbm_dem_cpu_s > 0).all() and (comparison.pbm_ann_cpu_s > 0).all()
+    assert (comparison.cpu_time_ratio_dem_over_ann > 1).all()
+    # d10, d50 and d90 against the PBM-DEM replicate band at every validation speed (two here)
+    assert len(comparison) >= 2
+    for q in ("d10", "d50", "d90"):
+        assert comparison[f"ann_{q}_outside_band_max"].notna().all() and (comparison[f"{q}_end_ann_mm"] > 0).all()
     replicates = [
         sorted((res / "validation" / f"rpm{rpm}" / "pbm_dem").glob("rep*")) for rpm in cfg["validation"]["rpm"]
     ]
@@ -360,6 +367,7 @@ REPORT_TABLES = (
     "provenance",
     "targets",
     "comparison_d50",
+    "comparison_tails",
     "comparison_accuracy",
     "comparison_cost",
     "comparison_domain",

@@ -323,6 +323,17 @@ COMPARISON = Table(
         Column("d50_end_dem_max_mm", sign="positive"),
         Column("d50_end_ann_mm", sign="positive"),
         Column("d50_end_constant_mm", sign="positive"),
+        *(
+            Column(name, sign=sign)
+            for q in ("d10", "d90")
+            for name, sign in (
+                (f"{q}_end_dem_mm", "positive"),
+                (f"{q}_end_dem_min_mm", "positive"),
+                (f"{q}_end_dem_max_mm", "positive"),
+                (f"{q}_end_ann_mm", "positive"),
+                (f"ann_{q}_outside_band_max", None),
+            )
+        ),
         Column("ann_d50_rel_error_max", sign=None),
         Column("ann_d50_rel_error_end", None),
         Column("ann_d50_outside_band_max", sign=None),

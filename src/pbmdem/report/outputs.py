@@ -123,7 +123,7 @@ def write_settings(
 
 def write_comparison(*, comparison, out: dict) -> None:
     """The comparison table in display form and the targets. `out`: comparison_<name>_csv and
-    comparison_<name>_html for name in d50, accuracy, cost, domain; targets_csv, targets_html."""
+    comparison_<name>_html for name in d50, tails, accuracy, cost, domain; targets_csv, targets_html."""
     from pbmdem.tables import COMPARISON
 
     from .statements import target_sentences, targets
@@ -132,6 +132,7 @@ def write_comparison(*, comparison, out: dict) -> None:
     table = COMPARISON.read(comparison)
     titles = {
         "d50": "d50 at the start and the end of the batch",
+        "tails": "d10 and d90 at the end of the batch",
         "accuracy": "Accuracy against PBM-DEM",
         "cost": "Computing time",
         "domain": "Surrogate training domain",

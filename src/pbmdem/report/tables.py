@@ -180,10 +180,15 @@ def _of(count, total) -> str:
     return "n/a" if number(count) == "n/a" else f"{int(count)} of {int(total)}"
 
 
+def _tail(r, q: str, *which: str) -> list[float]:
+    """The comparison row's ``{q}_end_{which}_mm`` values."""
+    return [getattr(r, f"{q}_end_{w}_mm") for w in which]
+
+
 def comparison_tables(table: pd.DataFrame) -> dict[str, pd.DataFrame]:
     """The comparison table in display form, split to fit a page: name -> table
-    (`d50`, `accuracy`, `cost`, `domain`), each keyed by the speed."""
-    out = {"d50": [], "accuracy": [], "cost": [], "domain": []}
+    (`d50`, `tails` (d10 and d90), `accuracy`, `cost`, `domain`), each keyed by the speed."""
+    out = {"d50": [], "tails": [], "accuracy": [], "cost": [], "domain": []}
     for r in table.itertuples():
         speed = f"{r.rpm:g}"
         members = (
@@ -203,6 +208,26 @@ def comparison_tables(table: pd.DataFrame) -> dict[str, pd.DataFrame]:
                 "PBM-ANN d50 at end (mm)": number(r.d50_end_ann_mm, ".3f"),
                 "PBM-ANN members' range (mm)": members,
                 "PBM-constant d50 at end (mm)": number(r.d50_end_constant_mm, ".3f"),
+            }
+        )
+        out["tails"].append(
+            {
+                "speed (rpm)": speed,
+                **{
+                    key: value
+                    for q in ("d10", "d90")
+                    for key, value in (
+                        (
+                            f"PBM-DEM {q} at end, replicates' range (mm)",
+                            value_range(*_tail(r, q, "dem_min", "dem_max")),
+                        ),
+                        (f"PBM-ANN {q} at end (mm)", number(getattr(r, f"{q}_end_ann_mm"), ".3f")),
+                        (
+                            f"PBM-ANN {q} outside the PBM-DEM band, largest (%)",
+                            percent(getattr(r, f"ann_{q}_outside_band_max")),
+                        ),
+                    )
+                },
             }
         )
         out["accuracy"].append(

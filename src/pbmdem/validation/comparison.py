@@ -70,6 +70,7 @@ def comparison_row(speed: SpeedResults, in_grid: bool) -> dict:
     ann_max, ann_end = relative_error(mean, ann)
     con_max, con_end = relative_error(mean, con)
     ends = np.array([r.summary.d50.iloc[-1] for r in speed.dem])
+    tails = {q: np.array([r.summary[q].iloc[-1] for r in speed.dem]) for q in ("d10", "d90")}
     dem_wall = np.array([r.timing["total_wall_time_s"] for r in speed.dem])
     dem_liggghts = np.array([r.timing["provider_wall_time_s"] for r in speed.dem])
     nan = float("nan")
@@ -89,6 +90,18 @@ def comparison_row(speed: SpeedResults, in_grid: bool) -> dict:
         "d50_end_dem_max_mm": 1e3 * ends.max(),
         "d50_end_ann_mm": 1e3 * ann.d50.iloc[-1],
         "d50_end_constant_mm": 1e3 * con.d50.iloc[-1],
+        # the tails: breakage moves d10 first, aggregation d90
+        **{
+            key: value
+            for q, values in tails.items()
+            for key, value in (
+                (f"{q}_end_dem_mm", 1e3 * values.mean()),
+                (f"{q}_end_dem_min_mm", 1e3 * values.min()),
+                (f"{q}_end_dem_max_mm", 1e3 * values.max()),
+                (f"{q}_end_ann_mm", 1e3 * ann[q].iloc[-1]),
+                (f"ann_{q}_outside_band_max", largest_outside(band, "ann", q)),
+            )
+        },
         "ann_d50_rel_error_max": ann_max,
         "ann_d50_rel_error_end": ann_end,
         "ann_d50_outside_band_max": largest_outside(band, "ann", "d50"),

@@ -34,6 +34,10 @@ class ClassFrequencySource:
     fractions then make the source velocity-resolved (:meth:`encounters`), or an ImpactRates whose
     wall impacts also make it a source for breakage (:meth:`impacts`)."""
 
+    #: the frequencies on given bins depend on their diameters alone (not on numbers, rpm or time):
+    #: a kernel need not ask again for the same bins (``CollisionKernel.prepare``)
+    fixed_for_diameters = True
+
     def __init__(self, diameters, rates, label: str):
 
         self.diameters = list(map(float, diameters))

@@ -124,6 +124,8 @@ class Breakage:
                 f"breakage selection {self.selection!r} returned shape {S.shape}; expected ({K},), one "
                 "rate per grid pivot"
             )
+        if np.isfinite(S).all() and (S >= 0).all():
+            return S
         if (k := first_index(~np.isfinite(S) | (S < 0))) is not None:
             raise PBMInputError(
                 f"breakage selection {self.selection!r} gave {float(S[k])!r} 1/s for the pivot of diameter "

@@ -311,6 +311,7 @@ class CollisionKernel(Kernel):
         self._class_c = self._class_cumulative = None
         self._t_eval = -np.inf
         self._raw: np.ndarray | None = None  # the source's last matrix as returned (before the check)
+        self._diameters: np.ndarray | None = None  # the pivots the source was last asked about
         self._beta_of = None  # the class matrix the cached products below belong to
         self._scaled = self._beta = self._beta_key = None
 
@@ -333,7 +334,15 @@ class CollisionKernel(Kernel):
     def prepare(self, inp: KernelInput) -> None:
         # the source sees the grid's pivots and the bins' total numbers, with or without feed classes
         K = inp.pivots
-        if self._c is None or self._c.shape != (K, K) or inp.t >= self._t_eval + self.update_interval:
+        due = self._c is None or self._c.shape != (K, K) or inp.t >= self._t_eval + self.update_interval
+        if due and self._c is not None and getattr(self.source, "fixed_for_diameters", False):
+            # a source whose frequencies depend on the diameters alone (a coupling interval's
+            # classes, ClassFrequencySource) gives the same matrix on the same pivots: not asked again
+            d = inp.per_bin()[0]
+            due = self._diameters is None or not np.array_equal(d, self._diameters)
+            if not due:
+                self._t_eval = inp.t
+        if due:
             previous = self._c
             d, n = inp.per_bin()
             if self.success.velocity_dependent:
@@ -349,6 +358,7 @@ class CollisionKernel(Kernel):
                     self._c = check_frequency_matrix(c, K, repr(self.source))
                     self._raw = np.array(c, dtype=float)
             self._t_eval = inp.t
+            self._diameters = np.array(d, dtype=float)
             self.evaluations += 1
             if (
                 self.success.velocity_dependent

@@ -153,8 +153,10 @@ def _log_cdf_sf(x, mu, sigma, law: str, shape=None):
         z = (x - mu) / sigma
         if law == "lognormal":
             return log_ndtr(z), log_ndtr(-z)
-        q = np.broadcast_to(np.asarray(shape, float), np.broadcast(x, mu, sigma, shape).shape)
-        z = np.broadcast_to(z, q.shape)
+        full = np.broadcast(x, mu, sigma, shape).shape
+        z = np.broadcast_to(z, full)
+        # the law's constants per value of q (not per speed: gammaincinv is the costly part)
+        q = np.asarray(shape, float)
         normal = np.abs(q) < _Q_LOGNORMAL
         qq = np.where(normal, 1.0, q)
         a, med, sd = _gengamma_standard(qq)
@@ -162,18 +164,21 @@ def _log_cdf_sf(x, mu, sigma, law: str, shape=None):
         lower, upper = np.log(gammainc(a, g)), np.log(gammaincc(a, g))
         log_cdf = np.where(normal, log_ndtr(z), np.where(qq > 0, lower, upper))
         log_sf = np.where(normal, log_ndtr(-z), np.where(qq > 0, upper, lower))
-        return log_cdf, log_sf
+        return np.broadcast_to(log_cdf, full), np.broadcast_to(log_sf, full)
 
 
-def _log_bin_probabilities(x_lo, x_hi, mu, sigma, law: str, shape=None):
-    """log P(x_lo < log10 v < x_hi) of the law (broadcast), computed stably in both tails: from the
-    distribution function below the median, from the survival function above it."""
+def _log_bin_probabilities(edges, mu, sigma, law: str, shape=None):
+    """log P(edges[b] < log10 v < edges[b + 1]) of the law for the consecutive bins of ``edges``
+    (last axis; mu, sigma, shape broadcast against it), computed stably in both tails: from the
+    distribution function below the median, from the survival function above it. The law is
+    evaluated once per edge (each inner edge bounds two bins)."""
     if law == "lognormal":  # the form of the log-normal fits before the other laws (same digits)
-        lo, hi = log_ndtr((x_lo - mu) / sigma), log_ndtr((x_hi - mu) / sigma)
+        cdf = log_ndtr((edges - mu) / sigma)
+        lo, hi = cdf[..., :-1], cdf[..., 1:]
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             return hi + np.log1p(-np.exp(np.minimum(lo - hi, 0.0)))
-    cdf_lo, sf_lo = _log_cdf_sf(x_lo, mu, sigma, law, shape)
-    cdf_hi, sf_hi = _log_cdf_sf(x_hi, mu, sigma, law, shape)
+    cdf, sf = _log_cdf_sf(edges, mu, sigma, law, shape)
+    cdf_lo, sf_lo, cdf_hi, sf_hi = cdf[..., :-1], sf[..., :-1], cdf[..., 1:], sf[..., 1:]
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         below = cdf_hi + np.log1p(-np.exp(np.minimum(cdf_lo - cdf_hi, 0.0)))
         above = sf_lo + np.log1p(-np.exp(np.minimum(sf_hi - sf_lo, 0.0)))
@@ -196,7 +201,7 @@ def speed_fractions(mu, sigma, law: str = "lognormal", shape=None) -> np.ndarray
     else:  # from the log of each bin's probability: exact in the fast tail that breakage counts
         # a predicted shape beyond the fitted range (an extrapolating or widened member) is held at its bound
         q = None if shape is None else np.clip(np.atleast_1d(np.asarray(shape, float)), *SHAPE_BOUNDS)[:, None]
-        frac = np.exp(_log_bin_probabilities(_LOG_EDGES[None, :-1], _LOG_EDGES[None, 1:], mu, sigma, law, q))
+        frac = np.exp(_log_bin_probabilities(_LOG_EDGES[None, :], mu, sigma, law, q))
     frac = np.clip(np.nan_to_num(frac, nan=0.0), 0.0, None)
     return frac / frac.sum(axis=1, keepdims=True)
 
@@ -209,7 +214,7 @@ def lognormal_fractions(mu, sigma) -> np.ndarray:
 def _neg_loglik(theta, counts, law: str = "lognormal"):
     mu, log_sigma = theta[:2]
     shape = theta[2] if len(theta) > 2 else None
-    logp = _log_bin_probabilities(_LOG_EDGES[:-1], _LOG_EDGES[1:], mu, np.exp(log_sigma), law, shape)
+    logp = _log_bin_probabilities(_LOG_EDGES, mu, np.exp(log_sigma), law, shape)
     logp = np.where(counts > 0, np.nan_to_num(logp, nan=-745.0, neginf=-745.0), 0.0)
     return -float(np.sum(counts * np.maximum(logp, -745.0)))
 

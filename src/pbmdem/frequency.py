@@ -11,14 +11,24 @@ of particle pairs (`pair_weighted_mean`).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from pbmdem.impact import N_VELOCITY_BINS, binned_counts
 
 
 def upper_pairs(k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Row and column index (i <= j) of the K (K + 1) / 2 unordered class pairs, row-major."""
-    return np.triu_indices(int(k))
+    """Row and column index (i <= j) of the K (K + 1) / 2 unordered class pairs, row-major (read-only
+    arrays, made once per K: every coupling interval and prediction asks for them)."""
+    return _upper_pairs(int(k))
+
+
+@functools.lru_cache(maxsize=64)
+def _upper_pairs(k: int) -> tuple[np.ndarray, np.ndarray]:
+    iu, ju = np.triu_indices(k)
+    iu.flags.writeable = ju.flags.writeable = False
+    return iu, ju
 
 
 def pair_counts(n) -> np.ndarray:

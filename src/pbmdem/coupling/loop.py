@@ -49,6 +49,11 @@ class LoopOutcome:
     totals: dict
 
 
+def _no_clock() -> float:
+    """NaN: a CPU time not measured."""
+    return float("nan")
+
+
 def interval_bounds(loop: CoupledLoop) -> np.ndarray:
     """Start and end times (s) of the coupling intervals: equal parts of the whole batch."""
     return np.linspace(0.0, loop.batch.pbm.process.end, loop.coupling_intervals + 1)
@@ -105,7 +110,9 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
             continue
         t0, t1 = bounds[k], bounds[k + 1]
         sample = representative_sample(*model.particle_classes(state), loop.sample)
-        t_provider, cpu_provider = time.perf_counter(), time.process_time()
+        # CPU seconds only for a loop on disk (a system call each: the many in-memory batches skip them)
+        cpu = time.process_time if outdir is not None else _no_clock
+        t_provider, cpu_provider = time.perf_counter(), cpu()
         try:
             rates, extra = provider(sample, folder, k)
         except Exception as exc:
@@ -113,16 +120,16 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
                 f"{provider.name} at rpm {rpm:g}: interval {k} ({t0:g}-{t1:g} s) failed: {exc}. "
                 f"Intervals 0..{k - 1} are kept in {outdir}; rerun to resume."
             ) from exc
-        provider_wall, provider_cpu = time.perf_counter() - t_provider, time.process_time() - cpu_provider
+        provider_wall, provider_cpu = time.perf_counter() - t_provider, cpu() - cpu_provider
         source = ClassFrequencySource(sample.diameters, rates, f"{provider.name} interval {k}")
         model.kernel.set_source(source)
         if selection is not None:
             selection.set_source(source)
         pairs = rates.pairs if isinstance(rates, ImpactRates) else rates
         matrix = pairs.frequency if isinstance(pairs, EncounterRates) else np.asarray(pairs, float)
-        t_pbm, cpu_pbm = time.perf_counter(), time.process_time()
+        t_pbm, cpu_pbm = time.perf_counter(), cpu()
         result = model.run(t0, t1, state, output_times=output_times(pbm, t0, t1))
-        pbm_wall, pbm_cpu = time.perf_counter() - t_pbm, time.process_time() - cpu_pbm
+        pbm_wall, pbm_cpu = time.perf_counter() - t_pbm, cpu() - cpu_pbm
         info = {
             "interval": k,
             "t_start": t0,

@@ -28,6 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from pbmdem.frequency import upper_pairs
+
 from .errors import CollisionTableError
 
 #: Columns that name a row of the collision table: its run, its class pair and their diameters.
@@ -325,7 +327,7 @@ def pair_table(diameters, numbers, rpm: float) -> tuple[pd.DataFrame, np.ndarray
     Returns the frame and the row/column indices (``iu``, ``ju``) of each row in the (K, K) matrix.
     """
     d, n = _distribution(diameters, numbers, rpm)
-    iu, ju = np.triu_indices(d.size)
+    iu, ju = upper_pairs(d.size)
     frame = pd.DataFrame(
         {
             "point_id": "query",
@@ -363,7 +365,7 @@ def pair_features(diameters, numbers, rpm: float, impeller_radius: float) -> tup
     (the same operations), for the PBM's calls. Returns the matrix (C-ordered, columns
     :data:`FEATURE_NAMES`) and the row/column indices ``iu``, ``ju`` of each row."""
     d, n = _distribution(diameters, numbers, rpm)
-    iu, ju = np.triu_indices(d.size)
+    iu, ju = upper_pairs(d.size)
     d_i, d_j = d[iu], d[ju]
     n_total = n.sum()
     f_i, f_j = n[iu] / n_total, n[ju] / n_total

@@ -32,6 +32,8 @@ TEST_CONFIG = ROOT / "config" / "test.yaml"
 RPMS = (300, 750, 1200)
 DIAMETERS = (0.002, 0.005, 0.012)
 FEEDS = {"fine": (0.6, 0.3, 0.1), "coarse": (0.3, 0.4, 0.3)}
+#: particles in a run of the synthetic grid (the tiny configuration's beds hold about 300-500)
+N_TOTAL = (300, 600)
 #: file names of the grid tables, as in results/dem
 TABLE_FILES = {
     "pairs": "collisions.csv",
@@ -68,7 +70,13 @@ def dem_tables(folder: str | Path, cfg=None, seed: int = 0) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     # c0 = 0.03: the lower end of the DEM's encounter frequencies per pair (as bench_pbm's surrogate)
     pairs, velocities = make_synthetic_tables(
-        radius, rpms=RPMS, distributions=FEEDS, diameters=DIAMETERS, law=partial(power_law, c0=0.03), seed=seed
+        radius,
+        rpms=RPMS,
+        distributions=FEEDS,
+        diameters=DIAMETERS,
+        n_total_range=N_TOTAL,
+        law=partial(power_law, c0=0.03),
+        seed=seed,
     )
     walls, wall_velocities = make_synthetic_wall_tables(pairs, radius, seed=seed + 1)
     # the columns of the grid tables' contract (pbmdem.tables) that the synthetic tables leave out:

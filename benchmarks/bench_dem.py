@@ -40,6 +40,8 @@ from pbmdem.dem import collisions, engine
 from pbmdem.dem.plan import plan_point
 from pbmdem.dem.run import run_point
 
+ROOT = Path(__file__).resolve().parents[1]
+
 
 def naive_parse(path: Path) -> int:
     """Line-by-line reader with a Python set per frame (the approach the vectorised parser replaces)."""
@@ -527,7 +529,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="every subcommand on the tiny config (smoke test)")
     sub = parser.add_subparsers(dest="command")
     point = sub.add_parser("point", help="one point with the real LIGGGHTS: speed, parse cost, snapshot interval")
-    point.add_argument("--config", default="config/config.yaml")
+    point.add_argument("--config", default=str(ROOT / "config" / "config.yaml"))
     point.add_argument("--rpm", type=float, default=600.0)
     point.add_argument("--distribution", default="fine")
     profile = sub.add_parser("profile", help="per-phase LIGGGHTS time of the finished runs of a results/dem")
@@ -540,7 +542,7 @@ def main() -> None:
     null.add_argument("--draws", type=int, default=4000)
     null.add_argument("--seed", type=int, default=1)
     cost = sub.add_parser("cost", help="one point with the old and the new DEM settings side by side")
-    cost.add_argument("--config", default="config/config.yaml")
+    cost.add_argument("--config", default=str(ROOT / "config" / "config.yaml"))
     cost.add_argument("--rpm", type=float, default=600.0)
     cost.add_argument("--distribution", default="fine")
     cost.add_argument("--speeds", type=int, default=4, help="speeds that share one settled bed")

@@ -34,11 +34,14 @@ from __future__ import annotations
 import argparse
 import logging
 import tempfile
+from pathlib import Path
 
 import numpy as np
 
 from pbmdem.config import Config, load_yaml
 from pbmdem.coupling.studies import BREAKAGE_STUDY_MAX_STEPS, breakage_study
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def merged(base: dict, overlay: dict) -> dict:
@@ -69,7 +72,7 @@ def variants(pbm, fresh_speeds, fixed_strengths=()) -> dict:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--config", nargs="+", default=["config/config.yaml"], help="config file and overlays")
+    ap.add_argument("--config", nargs="+", default=[str(ROOT / "config" / "config.yaml")], help="config and overlays")
     ap.add_argument("--model", help="trained surrogate (model.skops); required unless --quick")
     ap.add_argument("--rpm", nargs="+", type=float, default=[150, 300, 450, 600, 750, 900, 1050, 1200])
     ap.add_argument("--fresh-speeds", nargs="*", type=float, default=[1.0, 2.0], help="v* (m/s) at eps_ref, n = 2")

@@ -24,11 +24,17 @@ Run: .venv/bin/python benchmarks/bench_breakage_tail.py --tables results/dem
 (--spread: pbm.breakage.strength_spread values to score, 0 the sharp criterion.) About 1 min per
 law (fits and held-out MLP or Kriging) on the default grid (12 runs, 5 folds) on one core; measured
 numbers in docs/measurements.md ("Breakage: the speed law's fast tail").
+
+``--quick`` (the suite's smoke test): synthetic grid tables with known laws for the tiny
+config/test.yaml (benchmarks/quick.py: 6 runs, 3 classes), its speed law, v* = 0.25 and 0.5 m/s
+(its tip speeds are 0.4-1.7 m/s), spreads 0 and 0.5, and a surrogate trained here on the same
+tables for the in-sample row; tables and model in a temporary folder.
 """
 
 from __future__ import annotations
 
 import argparse
+import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -270,8 +276,24 @@ def main(argv=None) -> int:
     parser.add_argument("--model", type=Path, default=None, help="a trained surrogate: also its in-sample error")
     parser.add_argument("--no-held-out", action="store_true", help="only the law fits (and --model)")
     parser.add_argument("--csv", type=Path, default=None, help="write every row (point, class, kind, v*, source)")
+    parser.add_argument("--quick", action="store_true", help="synthetic tables, tiny config (smoke test)")
     args = parser.parse_args(argv)
+    from pbmdem.surrogate._threads import single_threaded
 
+    # one BLAS thread: the speed-law fits (an L-BFGS-B per row) ran 3x slower with two on a busy machine
+    with tempfile.TemporaryDirectory() as tmp, single_threaded():
+        if args.quick:
+            import quick
+
+            cfg = quick.config()
+            args.config, args.tables = quick.TEST_CONFIG, quick.dem_tables(Path(tmp) / "dem", cfg)
+            args.laws, args.speeds, args.spread = [cfg.surrogate.speed_law], [0.25, 0.5], [0.0, 0.5]
+            args.model = quick.surrogate(tmp, cfg, tables=args.tables)
+        return report(args)
+
+
+def report(args) -> int:
+    """Score the estimates of ``args`` against the DEM's tables and print the tables."""
     from pbmdem.config import load_config
     from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES, GRID_WALL_VELOCITIES, GRID_WALLS
 

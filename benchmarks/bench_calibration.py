@@ -13,13 +13,17 @@ Needs a trained surrogate (PBM-constant's frequency per speed is calibrated to i
 validation). About 5-40 s per seed, by the machine's load.
 
 Run: .venv/bin/python benchmarks/bench_calibration.py [--config config/config.yaml]
-     [--model results/surrogate/model.skops] [--seeds 30] [--out results/bench_calibration.csv]
+     [--model results/surrogate/model.skops] [--seeds 30] [--out results/bench_calibration.csv] [--quick]
+
+``--quick`` (the suite's smoke test): config/test.yaml, a surrogate trained here in seconds on
+synthetic tables (benchmarks/quick.py), 2 seeds, the rows in a temporary folder.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import tempfile
 import time
 from pathlib import Path
 
@@ -93,11 +97,23 @@ def main() -> None:
     parser.add_argument("--model", default=str(ROOT / "results/surrogate/model.skops"))
     parser.add_argument("--seeds", type=int, default=30)
     parser.add_argument("--out", default=str(ROOT / "results/bench_calibration.csv"))
+    parser.add_argument("--quick", action="store_true", help="tiny config, quick surrogate, 2 seeds (smoke test)")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
-    rows = coverage_rows(args.config, args.model, args.seeds)
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    rows.to_csv(args.out, index=False)
+    with tempfile.TemporaryDirectory() as tmp:
+        if args.quick:
+            import quick
+
+            args.config, args.seeds, args.out = str(quick.TEST_CONFIG), 2, str(Path(tmp) / "bench_calibration.csv")
+            args.model = str(quick.timed_surrogate(tmp)[0])
+        rows = coverage_rows(args.config, args.model, args.seeds)
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        rows.to_csv(args.out, index=False)
+        summarise(rows, args)
+
+
+def summarise(rows: pd.DataFrame, args) -> None:
+    """Print the coverage per parameter over the seeds."""
     summary = rows.groupby("parameter").agg(
         seeds=("seed", "size"),
         coverage_profile=("inside_profile", "mean"),

@@ -18,6 +18,9 @@ the runs recorded them).
     .venv/bin/python benchmarks/bench_dem.py skin RUN_DIR [RUN_DIR ...] [--skins run,dmin,dmax] [--repeats 2]
     # run-level totals, half-window trend and wall encounters of two results/dem, many replicates each
     .venv/bin/python benchmarks/bench_dem.py runs OLD/results/dem NEW/results/dem [--skip-replicates 0]
+    # every subcommand above once on the tiny test configuration, in a temporary folder (about 30 s;
+    # the suite's smoke test): a DEM grid of one point, 2 replicates from settled beds, made here
+    .venv/bin/python benchmarks/bench_dem.py --quick
 """
 
 from __future__ import annotations
@@ -36,6 +39,8 @@ from pbmdem.config import load_config
 from pbmdem.dem import collisions, engine
 from pbmdem.dem.plan import plan_point
 from pbmdem.dem.run import run_point
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def naive_parse(path: Path) -> int:
@@ -485,11 +490,46 @@ def bench_runs(args) -> None:
     )
 
 
+def bench_quick() -> None:
+    """Every subcommand on the tiny test configuration (config/test.yaml), in a temporary folder:
+    a DEM grid of one point with 2 replicates (quick.dem_grid) stands for results/dem; acceptance
+    and runs compare it with itself (no change: every pair agrees)."""
+    import quick
+
+    ns = argparse.Namespace
+    config, rpm, dist = str(quick.TEST_CONFIG), 600.0, "small"
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        dem = str(quick.dem_grid(tmp, rpm=rpm, distribution=dist, replicates=2))
+        print(f"quick: DEM grid of {dist} at {rpm:g} rpm, 2 replicates, {time.perf_counter() - t0:.1f} s", flush=True)
+        steps = {
+            "point": (bench_point, ns(config=config, rpm=rpm, distribution=dist)),
+            "profile": (bench_profile, ns(dem=[dem])),
+            "acceptance": (bench_acceptance, ns(old=dem, new=dem)),
+            "null": (bench_null, ns(dem=dem, draws=200, seed=1)),
+            "runs": (bench_runs, ns(old=dem, new=dem, skip_replicates=None, draws=200, seed=1)),
+            "skin": (
+                bench_skin,
+                ns(runs=[str(next(Path(dem).glob("rpm*/rep0")))], skins="run,dmax", repeats=1, root="."),
+            ),
+            "cost": (
+                bench_cost,
+                ns(config=config, rpm=rpm, distribution=dist, speeds=2, out=str(Path(tmp) / "cost"), baseline=None),
+            ),
+        }
+        for name, (command, args) in steps.items():
+            print(f"\n=== bench_dem.py {name} (quick)", flush=True)
+            t0 = time.perf_counter()
+            command(args)
+            print(f"=== {name}: {time.perf_counter() - t0:.1f} s", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser.add_argument("--quick", action="store_true", help="every subcommand on the tiny config (smoke test)")
+    sub = parser.add_subparsers(dest="command")
     point = sub.add_parser("point", help="one point with the real LIGGGHTS: speed, parse cost, snapshot interval")
-    point.add_argument("--config", default="config/config.yaml")
+    point.add_argument("--config", default=str(ROOT / "config" / "config.yaml"))
     point.add_argument("--rpm", type=float, default=600.0)
     point.add_argument("--distribution", default="fine")
     profile = sub.add_parser("profile", help="per-phase LIGGGHTS time of the finished runs of a results/dem")
@@ -502,7 +542,7 @@ def main() -> None:
     null.add_argument("--draws", type=int, default=4000)
     null.add_argument("--seed", type=int, default=1)
     cost = sub.add_parser("cost", help="one point with the old and the new DEM settings side by side")
-    cost.add_argument("--config", default="config/config.yaml")
+    cost.add_argument("--config", default=str(ROOT / "config" / "config.yaml"))
     cost.add_argument("--rpm", type=float, default=600.0)
     cost.add_argument("--distribution", default="fine")
     cost.add_argument("--speeds", type=int, default=4, help="speeds that share one settled bed")
@@ -524,6 +564,11 @@ def main() -> None:
     runs.add_argument("--draws", type=int, default=20000)
     runs.add_argument("--seed", type=int, default=1)
     args = parser.parse_args()
+    if args.quick:
+        bench_quick()
+        return
+    if args.command is None:
+        parser.error("a subcommand is required (or --quick)")
     commands = {"point": bench_point, "profile": bench_profile, "acceptance": bench_acceptance, "cost": bench_cost}
     commands["null"] = bench_null
     commands["skin"] = bench_skin

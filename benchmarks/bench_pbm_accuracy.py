@@ -33,7 +33,8 @@ Riccati solution, the PSD against the steady state n = 4 e^(-2 v)). Printed as t
 cases, with the observed orders of |M0 error|, |M2 error| and L1.
 
 Run: .venv/bin/python benchmarks/bench_pbm_accuracy.py [--quick] [--fixed-pivot] [--grid] [--breakage]
-(about 2-3 min; --grid alone about 1 min, --breakage alone about 30 s)
+(about 2-3 min; --grid alone about 1 min, --breakage alone about 30 s; --quick, the suite's smoke
+test, about 20 s: q = 1, 2, 4, the grid convergence up to q = 16)
 """
 
 from __future__ import annotations
@@ -178,6 +179,17 @@ GRID_VARIANTS = (
 GRID_QS = (1, 2, 3, 4, 6, 8, 12, 16, 24)
 
 
+def batch_with(cfg, section: dict, distribution: str = "fine"):
+    """The config's batch with its pbm settings replaced by a (partial) pbm section over the
+    schema's defaults (the first pivot stays the config's)."""
+    from pbmdem.config import Pbm
+
+    pbm = Pbm.from_section(section)
+    if section.get("grid", {}).get("min_diameter") is None:
+        pbm = pbm.replace(grid=pbm.grid.replace(min_diameter=cfg.pbm.grid.min_diameter))
+    return cfg.pbm_batch(distribution).replace(pbm=pbm)
+
+
 def _feed_4mm(res) -> tuple[float, float]:
     """(liquid / solid, surface-liquid fraction) of the 4 mm feed granules at the end: their own
     class with separate feed, else the 4 mm bin they share with aggregates (it is on a pivot)."""
@@ -196,8 +208,6 @@ def grid_convergence(qs=GRID_QS):
     import copy
     from pathlib import Path
 
-    from bench_pbm import batch_with
-
     from pbmdem.config import load_config
     from pbmdem.pbm.setup import run_batch
 
@@ -207,7 +217,7 @@ def grid_convergence(qs=GRID_QS):
     for label, pbm in GRID_VARIANTS:
         print(f"\n{label}")
         print(
-            "    q  bins   d10 / d50 / d90 (mm)        vs 4x finer (%)         vs q = 24 (%)       "
+            f"    q  bins   d10 / d50 / d90 (mm)        vs 4x finer (%)         vs q = {max(qs):<3d}(%)       "
             "4 mm feed: l/s, phi   steps  wall"
         )
         rows = {}

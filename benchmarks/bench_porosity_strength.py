@@ -24,17 +24,24 @@ breakage run of 2026-12-02:
 
 One process; about 5 s per (speed, variant) with a 5-member ensemble (the study's step guard). Numbers in
 docs/pbm.md ("Breakage selection from impacts").
+
+``--quick`` (the suite's smoke test): config/test.yaml, a surrogate trained here in seconds on
+synthetic tables (benchmarks/quick.py), two speeds and the variants off, n=0 and n=2.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import tempfile
+from pathlib import Path
 
 import numpy as np
 
 from pbmdem.config import Config, load_yaml
 from pbmdem.coupling.studies import BREAKAGE_STUDY_MAX_STEPS, breakage_study
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def merged(base: dict, overlay: dict) -> dict:
@@ -65,16 +72,29 @@ def variants(pbm, fresh_speeds, fixed_strengths=()) -> dict:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--config", nargs="+", default=["config/config.yaml"], help="config file and overlays")
-    ap.add_argument("--model", required=True, help="trained surrogate (model.skops)")
+    ap.add_argument("--config", nargs="+", default=[str(ROOT / "config" / "config.yaml")], help="config and overlays")
+    ap.add_argument("--model", help="trained surrogate (model.skops); required unless --quick")
     ap.add_argument("--rpm", nargs="+", type=float, default=[150, 300, 450, 600, 750, 900, 1050, 1200])
     ap.add_argument("--fresh-speeds", nargs="*", type=float, default=[1.0, 2.0], help="v* (m/s) at eps_ref, n = 2")
     ap.add_argument("--fixed-strengths", nargs="*", type=float, default=[], help="Y (Pa) of n = 0 controls")
     ap.add_argument("--only", nargs="*", help="run only these variants (names as printed)")
     ap.add_argument("--csv", help="write the study's rows here")
+    ap.add_argument("--quick", action="store_true", help="tiny config, quick surrogate, 2 speeds (smoke test)")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
+    if args.model is None and not args.quick:
+        ap.error("--model is required (or --quick)")
+    with tempfile.TemporaryDirectory() as tmp:
+        if args.quick:
+            import quick
 
+            args.config, args.rpm, args.only = [str(quick.TEST_CONFIG)], [600.0, 1200.0], ["off", "n=0", "n=2"]
+            args.model = str(quick.timed_surrogate(tmp)[0])
+        study(args)
+
+
+def study(args) -> None:
+    """Run the variants of ``args`` and print the final sizes."""
     data = {}
     for path in args.config:
         data = merged(data, load_yaml(path))

@@ -6,7 +6,9 @@ error of the collisions per rank count (the seeds are the replicates), and wheth
 agree within their combined standard error x 2. Prints figures, asserts nothing.
 
     .venv/bin/python benchmarks/bench_ranks.py [--config config/test.yaml] [--rpm 600]
-        [--distribution small] [--ranks 1 2] [--seeds 20141 30011 40009]
+        [--distribution small] [--ranks 1 2] [--seeds 20141 30011 40009] [--quick]
+
+``--quick`` (the suite's smoke test, about 10-25 s): the first seed only (no standard errors).
 """
 
 from __future__ import annotations
@@ -16,20 +18,26 @@ import math
 import statistics
 import tempfile
 import time
+from pathlib import Path
 
 from pbmdem.config import load_config
 from pbmdem.dem.plan import plan_point
 from pbmdem.dem.run import run_point
 
+ROOT = Path(__file__).resolve().parents[1]
+
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--config", default="config/test.yaml")
+    parser.add_argument("--config", default=str(ROOT / "config" / "test.yaml"))
     parser.add_argument("--rpm", type=float, default=600)
     parser.add_argument("--distribution", default="small")
     parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--seeds", type=int, nargs="+", default=[20141, 30011, 40009])
+    parser.add_argument("--quick", action="store_true", help="the first seed only (smoke test)")
     args = parser.parse_args()
+    if args.quick:
+        args.seeds = args.seeds[:1]
     base = load_config(args.config)
     results: dict[int, list[tuple[float, int]]] = {}
     for ranks in args.ranks:

@@ -11,7 +11,9 @@ grid speed, feed `fine`) and a few replicates, it runs LIGGGHTS and reports:
   window (the count must converge with history length);
 * flow development: encounters in the first and second halves of the sampling window.
 
-    .venv/bin/python benchmarks/study_encounters.py [--config FILE] [--rpm R ...] [--replicates N]
+    .venv/bin/python benchmarks/study_encounters.py [--config FILE] [--rpm R ...] [--replicates N] [--quick]
+
+``--quick`` (the suite's smoke test, about 20 s): config/test.yaml, feed `small`, 600 rpm, 2 replicates.
 """
 
 from __future__ import annotations
@@ -60,7 +62,11 @@ def main(argv=None):
     ap.add_argument("--rpm", type=float, nargs="*")
     ap.add_argument("--replicates", type=int, default=3)
     ap.add_argument("--json", help="write the figures to this file too")
+    ap.add_argument("--quick", action="store_true", help="the tiny test config, one speed, 2 replicates (smoke test)")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.config, args.distribution, args.rpm = str(ROOT / "config" / "test.yaml"), "small", [600.0]
+        args.replicates = 2
     cfg = load_config(args.config)
     speeds = args.rpm or [min(cfg.grid.impeller_rpm), max(cfg.grid.impeller_rpm)]
     point = cfg.dem_point(args.distribution)

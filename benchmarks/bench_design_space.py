@@ -134,7 +134,7 @@ def throughput(loop, model_path, n: int, jobs: int, n_members: int, speeds) -> N
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", default=None, help="a trained surrogate (default: results/surrogate/model.skops)")
-    parser.add_argument("--config", default=str(ROOT / "config/config.yaml"))
+    parser.add_argument("--config", default=None, help="default: config/config.yaml (--quick: config/test.yaml)")
     parser.add_argument("--repeat", type=int, default=30, help="warm single batches per kind (>= 20 for a statement)")
     parser.add_argument("--batches", type=int, default=2000, help="batches of the throughput measurement")
     parser.add_argument("--jobs", type=int, default=2)
@@ -147,7 +147,7 @@ def main() -> None:
     from pbmdem.surrogate import load_surrogate
     from pbmdem.surrogate._threads import single_threaded
 
-    cfg = load_config(args.config)
+    cfg = load_config(args.config or ROOT / "config" / ("test.yaml" if args.quick else "config.yaml"))
     loop = cfg.coupled_loop()
     tmp = tempfile.TemporaryDirectory()
     model_path = args.model

@@ -162,32 +162,14 @@ def batch_with(cfg, section: dict, distribution: str = "fine"):
     return cfg.pbm_batch(distribution).replace(pbm=pbm)
 
 
-def train_surrogate(cfg, path: Path) -> float:
-    """A small surrogate on synthetic tables (sizes 2-12 mm, 300-900 rpm, both targets; the power
-    law of ``synthetic.power_law`` at the DEM's level), with the config's settings but one
-    hyperparameter candidate, saved to ``path``; returns the fit time."""
-    from pbmdem.surrogate import training_data
-    from pbmdem.surrogate.persistence import save_surrogate
-    from pbmdem.surrogate.settings import build_surrogate
-    from pbmdem.surrogate.synthetic import make_synthetic_tables, power_law
+def train_surrogate(cfg, folder: Path) -> tuple[Path, float]:
+    """A small surrogate (pairs, walls, the config's speed law) trained on synthetic tables
+    (benchmarks/quick.py) in ``folder``: its path and the fit time."""
+    import quick
 
-    radius = cfg.granulator.impeller.blade_length
-    # the lower end of the DEM's encounter frequencies (0.03-0.2 1/s per pair for the fine feed at
-    # 600 rpm): with the cross-section offset the surrogate's c_ij grows as (d_i + d_j)^2 beyond
-    # 12 mm, and at c0 = 0.1 the loop outgrows the grid (32 mm) with the config of 2026-12-01 21:50
-    table, velocity = make_synthetic_tables(
-        radius, diameters=(0.002, 0.003, 0.004, 0.006, 0.009, 0.012), seed=0, law=partial(power_law, c0=0.03)
-    )
-    settings = cfg.surrogate.to_dict()
-    settings.update(hidden_layer_sizes=[[8]], alpha=[0.1])
     t0 = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        data = training_data(table, radius, velocity_table=velocity)
-        surrogate = build_surrogate(settings, radius).fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
-    fit = time.perf_counter() - t0
-    save_surrogate(surrogate, path)
-    return fit
+    path = quick.surrogate(folder, cfg)
+    return path, time.perf_counter() - t0
 
 
 def cold_build(src: Path) -> float | None:
@@ -211,8 +193,12 @@ def main():
     ap.add_argument("--no-before", action="store_true", help="skip the comparison with --before")
     ap.add_argument("--repeat", type=int, default=7)
     ap.add_argument("--ann-repeat", type=int, default=5, help="PBM-ANN loops per tree (the first is not counted)")
-    ap.add_argument("--quick", action="store_true", help="skip the variants and the per-evaluation timing")
+    ap.add_argument(
+        "--quick", action="store_true", help="no --before, 2 repeats, no variants or per-evaluation timing (smoke test)"
+    )
     args = ap.parse_args()
+    if args.quick:
+        args.no_before, args.repeat, args.ann_repeat = True, 2, 2
     load = os.getloadavg()
     print(f"load average (1, 5, 15 min): {', '.join(f'{x:.2f}' for x in load)} on {os.cpu_count()} cores")
 
@@ -220,12 +206,10 @@ def main():
 
     cfg = load_config(ROOT / "config" / "config.yaml")
     tmp = tempfile.TemporaryDirectory()
-    model_path = Path(tmp.name) / "surrogate" / "model.skops"
-    model_path.parent.mkdir()
-    fit = train_surrogate(cfg, model_path)
+    model_path, fit = train_surrogate(cfg, Path(tmp.name) / "surrogate")
     loop = cfg.coupled_loop()
     print(
-        f"surrogate for PBM-ANN: trained in {fit:.1f} s on synthetic tables (5 + 5 MLP members); loop: "
+        f"surrogate for PBM-ANN: trained in {fit:.1f} s on synthetic tables (benchmarks/quick.py); loop: "
         f"{loop.coupling_intervals} intervals of {loop.batch.pbm.process.end / loop.coupling_intervals:g} s, "
         f"'{loop.batch.distribution}', {RPM:g} rpm, at most {loop.sample.max_classes} classes"
     )
@@ -289,7 +273,7 @@ def main():
         if a_new and a_old:
             rel = [abs(a / b - 1) for a, b in zip(a_new[0]["final"], a_old[0]["final"])]
             print(f"  PBM-ANN, relative change of the final d10 / d50 / d90: {' / '.join(f'{x:.2e}' for x in rel)}")
-    cold = cold_build(ROOT / "src")
+    cold = None if args.quick else cold_build(ROOT / "src")
     if cold is not None:
         print(f"  this tree, first model build with an empty numba cache (compiling): {cold:.2f} s")
     print(f"load average after: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")

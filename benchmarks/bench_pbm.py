@@ -36,7 +36,6 @@ import sys
 import tarfile
 import tempfile
 import time
-import warnings
 from functools import partial
 from pathlib import Path
 

@@ -297,6 +297,7 @@ def test_design_space_marks_points_outside_the_training_domain(tiny_config, tiny
     design = tiny_config.design_space  # 600-1200 rpm: the surrogate saw 600-900 only
     table, info = design_space(tiny_config.coupled_loop(), tiny_surrogate, design)
     assert len(table) == 3 * 3 * 2 and info["batches"] == len(table) * 3  # mean + 2 members
+    assert info["batches_per_minute"] == pytest.approx(60.0 * info["batches"] / info["wall_time_s"])
     assert set(table.rpm) == {600.0, 900.0, 1200.0} and set(table[THIRD]) == {6.0, 8.0}
     fast = table[table.rpm == 1200.0]
     assert (fast.out_of_domain_intervals > 0).all() and (fast.spec_status == "out_of_domain").all()

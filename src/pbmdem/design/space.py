@@ -111,14 +111,24 @@ def design_space(loop: CoupledLoop, model_path: str | Path, design: DesignSpace)
     table = point_table(outcomes_table(outcomes), design.third_factor.key)
     table["spec_status"] = specification_status(table, design.specification)
     counts = {s: int((table.spec_status == s).sum()) for s in STATUSES}
-    info = {"batches": len(cases), "wall_time_s": wall, "n_jobs": design.n_jobs, "points": len(table), **counts}
+    per_minute = 60.0 * len(cases) / wall if wall > 0 else float("nan")
+    info = {
+        "batches": len(cases),
+        "wall_time_s": wall,
+        "batches_per_minute": per_minute,
+        "n_jobs": design.n_jobs,
+        "points": len(table),
+        **counts,
+    }
     log.info(
-        "design space: %d PBM-ANN batches (%d points x (mean + %d members)) in %.1f s on %d process(es): %s",
+        "design space: %d PBM-ANN batches (%d points x (mean + %d members)) in %.1f s on %d process(es), "
+        "%.0f batches per minute: %s",
         len(cases),
         len(table),
         n_members,
         wall,
         design.n_jobs,
+        per_minute,
         ", ".join(f"{v} {k}" for k, v in counts.items()),
     )
     if counts["out_of_domain"]:

@@ -24,6 +24,7 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._threads import single_threaded
+from .errors import require_fitted
 
 log = logging.getLogger(__name__)
 
@@ -322,7 +323,7 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         scikit-learn's per-call validation (the caller's array is trusted: finite, 2-d, the
         fitted number of features): the same members' predictions, mean and spread, for the
         PBM's frequent calls with a few rows (``CollisionSurrogate.frequency_matrix``)."""
-        check_is_fitted(self)
+        require_fitted(self, "estimators_")
         X = np.asarray(X, dtype=np.float64)
         if X.ndim != 2 or X.shape[1] != self.n_features_in_:
             raise ValueError(f"predict_array: X must be (n, {self.n_features_in_}), got shape {X.shape}")
@@ -352,7 +353,7 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
 
     def predict_members(self, X) -> np.ndarray:
         """(n_members, n[, n_outputs]): every member's prediction (X as in :meth:`predict_array`)."""
-        check_is_fitted(self)
+        require_fitted(self, "estimators_")
         X = np.asarray(X, dtype=np.float64)
         return np.stack([_forward(m, X) for m in self.estimators_])
 

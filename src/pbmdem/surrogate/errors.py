@@ -1,7 +1,20 @@
-"""Errors of the surrogate's input tables."""
+"""Errors of the surrogate's input tables, and the fitted check of its hot paths."""
 
 from __future__ import annotations
+
+from sklearn.exceptions import NotFittedError
 
 
 class CollisionTableError(ValueError):
     """The collision table violates the contract of docs/architecture.md."""
+
+
+def require_fitted(estimator, attribute: str) -> None:
+    """NotFittedError unless ``estimator`` has the fitted ``attribute``: scikit-learn's
+    ``check_is_fitted`` for the PBM's per-interval calls, without its scan of every attribute
+    (about 30 us a call, 22 calls per PBM-ANN batch)."""
+    if attribute not in vars(estimator):
+        raise NotFittedError(
+            f"This {type(estimator).__name__} instance is not fitted yet. Call 'fit' with appropriate "
+            "arguments before using this estimator."
+        )

@@ -38,6 +38,7 @@ from sklearn.preprocessing import PolynomialFeatures, StandardScaler
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._threads import single_threaded
+from .errors import require_fitted
 
 log = logging.getLogger(__name__)
 
@@ -133,7 +134,7 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
     def predict_array(self, X: np.ndarray, return_std: bool = False):
         """:meth:`predict` on a trusted float64 array in the training feature order, without
         scikit-learn's per-call validation (``config_context``)."""
-        check_is_fitted(self)
+        require_fitted(self, "estimators_")
         X = np.asarray(X, dtype=np.float64)
         if X.ndim != 2 or X.shape[1] != self.n_features_in_:
             raise ValueError(f"predict_array: X must be (n, {self.n_features_in_}), got shape {X.shape}")

@@ -30,6 +30,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 from pbmdem.impact import EncounterRates
 
 from .ensemble import EnsembleMLPRegressorCV
+from .errors import require_fitted
 from .features import (
     FEATURE_NAMES,
     check_impeller_radius,
@@ -312,7 +313,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
 
     def has_velocity_model(self) -> bool:
         """True if the surrogate was trained with impact-velocity targets."""
-        check_is_fitted(self)
+        require_fitted(self, "velocity_model_")
         return self.velocity_model_ is not None
 
     def _require_velocity_model(self) -> None:
@@ -399,7 +400,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         :meth:`EnsembleMLPRegressorCV.predict_array`): the same numbers as :meth:`predict_log10`
         on the pairs' collision table, without its DataFrames.
         """
-        check_is_fitted(self)
+        require_fitted(self, "frequency_model_")
         F, iu, ju, k = self._pairs(diameters, numbers, rpm, check_domain)
         out = self._pair_log10(F, return_std=return_std)
         mean, std = out if return_std else (out, None)
@@ -449,7 +450,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
     @property
     def n_members(self) -> int:
         """Members of the frequency model's uncertainty (ensemble networks or predictive quantiles)."""
-        check_is_fitted(self)
+        require_fitted(self, "frequency_model_")
         return self.frequency_model_.n_members_
 
     def member(self, k: int) -> CollisionSurrogate:

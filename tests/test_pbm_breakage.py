@@ -95,28 +95,33 @@ def test_compiled_breakage_rates_and_stages_equal_the_oracle(scheme, fragments):
     brk[0][:] = rng.uniform(0.0, 0.5, K)
     vectors = np.ascontiguousarray(np.stack([xc, np.ones(M), np.zeros(M)]))
     params = np.zeros(6)
-    d = np.empty((3, M))
-    refused = _compiled.class_rates(u, beta, _compiled.ALWAYS, vectors, params, *op.compiled_arrays(), *brk,
-                                    np.zeros((2, M)), d)  # fmt: skip
+    d, tally = np.empty((3, M)), np.empty(3)
+    _compiled.class_rates(u, beta, _compiled.ALWAYS, vectors, params, *op.compiled_arrays(), *brk,
+                          np.zeros((2, M)), d, tally)  # fmt: skip
 
     def oracle_rates(v):
-        return oracle.class_rates(op, v, beta, brk=brk[:2])
+        return oracle.class_rates(op, v, beta, brk=(brk[0], brk[1], brk[3]))
 
-    d_ref, refused_ref = oracle_rates(u)
+    d_ref, tally_ref = oracle_rates(u)
     np.testing.assert_allclose(d.reshape(-1), d_ref, rtol=1e-12, atol=1e-14 * np.abs(d_ref).max())
-    assert refused == refused_ref
+    assert tally[0] == tally_ref[0]
+    # the fragments merged into the first pivot: those of the pivots whose halves (binary) or
+    # whose lower tail (uniform) lie below x_0, at the oracle's rates
+    assert tally[1] > 0 and tally[2] > 0
+    np.testing.assert_allclose(tally[1:], tally_ref[1:], rtol=1e-13)
     # breakage changes neither the solid (x_0 units) nor the liquid and gas totals
     dn = d[0] - oracle.aggregation_totals(op, beta, u.reshape(3, M))[0][0]
     assert abs(dn @ xc) < 1e-13 * np.sum(brk[0] * N[:K] * xc[:K])
     dt = 0.3 * _compiled.depletion_time(u, d.reshape(-1))
-    k, r = np.zeros((3, 3 * M)), np.zeros(4)
-    k[0], r[0] = d.reshape(-1), refused
+    k, r = np.zeros((3, 3 * M)), np.zeros((4, 3))
+    k[0], r[0] = d.reshape(-1), tally
     u_new, u_low, stage = np.empty(3 * M), np.empty(3 * M), np.empty(3 * M)
     _compiled.ssp_step(u, k, r, dt, 3, beta, _compiled.ALWAYS, vectors, params, *op.compiled_arrays(), *brk,
                        np.zeros((2, M)), u_new, u_low, stage)  # fmt: skip
-    ref_new, ref_low, _ = oracle.ssp_step(oracle_rates, u, dt, 3)
+    ref_new, ref_low, ref_tally = oracle.ssp_step(oracle_rates, u, dt, 3)
     np.testing.assert_allclose(u_new, ref_new, rtol=1e-12, atol=1e-14 * np.abs(u).max())
     np.testing.assert_allclose(u_low, ref_low, rtol=1e-12, atol=1e-14 * np.abs(u).max())
+    np.testing.assert_allclose(r[3], ref_tally, rtol=1e-12)
 
 
 def _si_model(fragments, rate=0.05, separate_feed=True, kernel=None):

@@ -155,11 +155,13 @@ class Breakage:
         smaller than the first pivot x_0 and their solid volume in units of x_0. The fragment
         tables merge them into x_0 (number = solid / x_0, solid exact), so a breakage of pivot k
         loses ``below[0, k] - below[1, k]`` granules; the run tallies both
-        (``State.merged_number``, ``State.merged_volume``)."""
+        (``State.merged_number``, ``State.merged_volume``). Column 0 is zero: a granule of the
+        first pivot gives back one granule of the first pivot, no change (it does not break), so
+        that a fragment merged into x_0 is counted once, not again at every breakage it is denied."""
         x = np.asarray(x, float)
         xr = x / x[0]
         out = np.zeros((2, x.size))
-        for k in range(x.size):
+        for k in range(1, x.size):
             out[:, k] = _fragments_of(self.fragments, xr[k], xr, xr[1:])[2]
         return out
 

@@ -31,8 +31,10 @@ FLOOR_LIMIT = 0.01
 
 
 def grid_floor(state: State, grid: Grid) -> dict:
-    """The breakage fragments smaller than the first pivot x_0 merged into it by ``state``'s time
-    (the grid floor): ``merged_number`` fragments carrying ``merged_volume`` m3 of solid, counted
+    """The breakage fragments smaller than the first pivot x_0 merged into it by ``state``'s time,
+    from the batch's start (the grid floor; each counted once, at its birth from a granule above
+    the floor: a granule at x_0 does not break): ``merged_number`` fragments carrying
+    ``merged_volume`` m3 of solid, counted
     as merged_volume / x_0 granules of x_0, so that ``lost_number`` granules are missing from the
     population; ``merged_fraction`` = merged_number / the final number of granules, ``flagged``
     when it exceeds FLOOR_LIMIT (1 %), ``floor_diameter`` d_0 (m)."""
@@ -51,16 +53,17 @@ def grid_floor(state: State, grid: Grid) -> dict:
 
 
 def floor_words(floor: dict, what: str) -> str:
-    """One line on the grid floor of a batch ``what``: 'clipping: none' or 'X % of granules
-    merged at the grid floor (d_0 mm) in <what>'."""
+    """One line on the grid floor (:func:`grid_floor`) of the batch ``what``: 'clipping: none in
+    <what>', or the fragments merged at the floor, their share of the final number (FLAGGED above
+    FLOOR_LIMIT), the granules lost and the solid kept there."""
     if floor["merged_number"] <= 0:
-        return f"clipping: none in {what}"
-    share = 100.0 * floor["merged_fraction"]
-    flag = f" (above {100 * FLOOR_LIMIT:g} %)" if floor["flagged"] else ""
+        return f"clipping: none in {what} (no breakage fragment below the grid floor)"
+    flag = f" (FLAGGED: above {100 * FLOOR_LIMIT:g} %)" if floor["flagged"] else ""
     return (
-        f"clipping: {share:.3g} % of granules{flag} merged at the grid floor ({1e3 * floor['floor_diameter']:.3g} mm) "
-        f"in {what}: {floor['merged_number']:.4g} fragments below the first pivot, {floor['lost_number']:.4g} "
-        f"granules lost, {floor['merged_volume']:.4g} m3 of solid kept at the floor"
+        f"clipping: {floor['merged_number']:.4g} breakage fragments merged at the grid floor "
+        f"({1e3 * floor['floor_diameter']:.3g} mm) in {what}, {100 * floor['merged_fraction']:.3g} % of its final "
+        f"number of granules{flag}; {floor['lost_number']:.4g} granules lost, {floor['merged_volume']:.4g} m3 of "
+        "solid kept at the floor"
     )
 
 

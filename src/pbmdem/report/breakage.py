@@ -140,10 +140,11 @@ def clipping_words(studies: dict[str, pd.DataFrame]) -> str:
         )
     share, worst = merged[0]
     flagged = [c for c in merged if c[0] > FLOOR_LIMIT]
-    text = (
-        f"clipping: {PERCENT * share:.3g} % of granules merged at the grid floor in {worst}: breakage fragments "
-        "smaller than the grid's first pivot are counted as first-pivot granules (their solid kept, their number "
-        f"lost). Batches that merged some: {len(merged)} of {len(cases)} (ensemble means and members' largest); "
+    text = head + (
+        f"clipping: breakage fragments merged at the grid floor amount to {PERCENT * share:.3g} % of the final "
+        f"number of granules in {worst}, the most of any batch: fragments smaller than the grid's first pivot "
+        "are counted as first-pivot granules (their solid kept, their number not). Batch results that merged "
+        f"some: {len(merged)} of {len(cases)} (ensemble means, and the members' largest); "
     )
     if flagged:
         names = "; ".join(f"{b}: {PERCENT * s:.3g} %" for s, b in flagged[:5])

@@ -267,7 +267,8 @@ class GranulationPBM:
     def _stages(self, t: float, u: np.ndarray, dt: float, order: int, spraying: bool):
         """The stages of one step of size dt from u (rates ``self._k[0]``, tallies
         ``self._r[0]``): (new state, embedded lower-order state, tallies of the step (3,): refused
-        solid, merged fragments and merged solid rates), by the
+        solid, merged fragments and merged solid rates; ``self._r[3]``, valid until the next
+        step), by the
         compiled stages (``_compiled.ssp_stage``): in one compiled call with a factored kernel,
         else stage by stage with the kernel called between them."""
         n = u.size
@@ -279,12 +280,12 @@ class GranulationPBM:
                 u, k, r, dt, order, self._factored, self._success_code, self._vectors, params, *self._op_arrays,
                 *self._brk_arrays, self._pw, u_new, u_low, stage,
             )  # fmt: skip
-            return u_new, u_low, r[3].copy()
+            return u_new, u_low, r[3]
         for j, at in ((1, t + dt), (2, t + 0.5 * dt), (3, t)):
             if jit.ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
                 break
             self._rates(at, stage, spraying, j)
-        return u_new, u_low, r[3].copy()
+        return u_new, u_low, r[3]
 
     def _set_params(self, threshold: float, width: float) -> None:
         """The compiled rates' parameters, not spraying ([0]) and spraying ([1])."""
@@ -420,7 +421,7 @@ class GranulationPBM:
         u = self._class_state(s)
         total_solid = float(np.sum(u[:M] * self._xc))  # x_0 units
         refused = s.refused_volume / x0
-        merged = np.array([s.merged_number, s.merged_volume / x0])  # fragments merged into x_0 so far
+        merged_n, merged_v = s.merged_number, s.merged_volume / x0  # fragments merged into x_0 so far
         allowed_refused = opt.max_overflow_fraction * total_solid
         # error scale of entry k: rtol |u_k| + atol x total solid / w_k, where number entries count
         # by their solid volume (w = x_k / x_0) and liquid and gas as volumes (w = 1)
@@ -446,17 +447,19 @@ class GranulationPBM:
             t = t_next if capped else t + dt
             jit.flush(u, M, flush_n, flush_v)
             s.steps += 1
-            refused += tally[0] * dt
-            merged += tally[1:] * dt
+            refused_rate, merged_n_rate, merged_v_rate = tally.tolist()  # r[3], overwritten by the next step
+            refused += refused_rate * dt
+            merged_n += merged_n_rate * dt
+            merged_v += merged_v_rate * dt
             if spraying:
                 s.liquid_added += self.liquid.rate * dt
             if refused > allowed_refused:
                 self._overflow(t, refused, total_solid)
             ctl.check_limits(t)
             if capped and (t in outs or t == t_end):
-                self._store(s, t, u, refused, merged)
+                self._store(s, t, u, refused, (merged_n, merged_v))
                 rec.add(s)
-        self._store(s, t_end, u, refused, merged)
+        self._store(s, t_end, u, refused, (merged_n, merged_v))
         if refresh0 is not None:
             ctl.limits["kernel_refreshes"] = int(self.kernel.evaluations - refresh0)
         res = Result(self.grid, rec, s, self._info(ctl))
@@ -494,7 +497,7 @@ class GranulationPBM:
             "feed_volumes": self._op.extra.tolist() if self._M > self.grid.bins else [],
         }
 
-    def _store(self, s: State, t: float, u: np.ndarray, refused: float, merged: np.ndarray) -> None:
+    def _store(self, s: State, t: float, u: np.ndarray, refused: float, merged: tuple) -> None:
         """Write time t, the class state u, the refused solid and the fragments merged into the
         first pivot (number, solid; x_0 units) into ``s``: per-bin totals and the feed classes."""
         x0 = float(self.grid.x[0])

@@ -7,8 +7,9 @@ the batch and at its end), beside the same error of one replicate against the ot
 (`dem_replicate_d50_rel_error_max`, the reference's own spread), the largest distance of PBM-ANN's
 d50(t) outside the PBM-DEM band (`ann_d50_outside_band_max`, a fraction of d50; 0 when always
 inside), the wall times (PBM-DEM: the mean of one loop, LIGGGHTS plus PBM; PBM-ANN: its loop with
-the ensemble mean, surrogate plus PBM) and their ratio, and how often the surrogate left its
-training domain.
+the ensemble mean, surrogate plus PBM) and their ratio, how often the surrogate left its
+training domain, and the share of each model's final number of granules merged at the PBM grid's
+floor (breakage fragments smaller than its first pivot).
 """
 
 from __future__ import annotations
@@ -60,6 +61,23 @@ def domain_counts(speed: SpeedResults) -> dict:
     }
 
 
+def merged_fraction(timing: dict) -> float:
+    """The share of a run's final number of granules merged at the grid floor (its timing.json's
+    ``grid_floor``, pbmdem.pbm.results.grid_floor); NaN for a record without it."""
+    return float(timing.get("grid_floor", {}).get("merged_fraction", float("nan")))
+
+
+def floor_columns(speed: SpeedResults) -> dict:
+    """The grid floor of every model at this speed: the largest share over the PBM-DEM replicates,
+    PBM-ANN's and PBM-constant's."""
+    dem = [merged_fraction(r.timing) for r in speed.dem]
+    return {
+        "dem_merged_fraction_max": max(dem) if dem and not np.isnan(dem).any() else float("nan"),
+        "ann_merged_fraction": merged_fraction(speed.ann.timing),
+        "constant_merged_fraction": merged_fraction(speed.constant.timing),
+    }
+
+
 def comparison_row(speed: SpeedResults, in_grid: bool) -> dict:
     band = bands_of(speed)
     mean = band.pivot(index="time", columns="statistic", values="dem_mean").reset_index()
@@ -97,6 +115,7 @@ def comparison_row(speed: SpeedResults, in_grid: bool) -> dict:
         "pbm_constant_wall_s": float(speed.constant.timing["total_wall_time_s"]),
         "wall_time_ratio_dem_over_ann": float(dem_wall.mean()) / t_ann if t_ann > 0 else float("nan"),
         **domain_counts(speed),
+        **floor_columns(speed),
     }
     if speed.members is not None and len(speed.members):
         ok = finished_members(speed.members)

@@ -137,6 +137,7 @@ class GranulationPBM:
         # fragments, merged solid; ``_compiled.class_rates``) of the stages, a stage
         self._k, self._r, self._stage = np.empty((3, 3 * self._M)), np.zeros((4, 3)), np.empty(3 * self._M)
         self._k_rows = [k.reshape(3, self._M) for k in self._k]  # the rates of stage j as (3, M)
+        self._r_rows = list(self._r)  # the tallies of stage j (views, made once)
         self._op_arrays = op.compiled_arrays()
 
     def _pivot_totals(self, u: np.ndarray) -> np.ndarray:
@@ -261,7 +262,7 @@ class GranulationPBM:
             *self._brk_arrays,
             self._pw,
             self._k_rows[j],
-            self._r[j],
+            self._r_rows[j],
         )
 
     def _stages(self, t: float, u: np.ndarray, dt: float, order: int, spraying: bool):

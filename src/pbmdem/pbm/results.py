@@ -34,10 +34,10 @@ def grid_floor(state: State, grid: Grid) -> dict:
     """The breakage fragments smaller than the first pivot x_0 merged into it by ``state``'s time,
     from the batch's start (the grid floor; each counted once, at its birth from a granule above
     the floor: a granule at x_0 does not break): ``merged_number`` fragments carrying
-    ``merged_volume`` m3 of solid, counted
-    as merged_volume / x_0 granules of x_0, so that ``lost_number`` granules are missing from the
-    population; ``merged_fraction`` = merged_number / the final number of granules, ``flagged``
-    when it exceeds FLOOR_LIMIT (1 %), ``floor_diameter`` d_0 (m)."""
+    ``merged_volume`` m3 of solid, counted as merged_volume / x_0 granules of x_0, so that
+    ``lost_number`` granules are missing from the population; ``merged_fraction`` = merged_number
+    / the final number of granules (cumulative: above 1 where merged granules aggregate and break
+    again), ``flagged`` when it exceeds FLOOR_LIMIT (1 %), ``floor_diameter`` d_0 (m)."""
     total = float(np.sum(state.number))
     n, v = float(state.merged_number), float(state.merged_volume)
     fraction = n / total if total > 0 else (0.0 if n == 0 else float("inf"))
@@ -99,10 +99,9 @@ class Result:
         self.liquid_added = np.asarray(records.liquid_added, float)
         self.refused_volume = np.asarray(records.refused, float)
         self.steps = np.asarray(records.steps, int)
-        # fragments merged into the first pivot so far (records of runs before the tally: zeros)
-        zeros = np.zeros(self.times.size)
-        self.merged_number = np.asarray(getattr(records, "merged_number", zeros), float)
-        self.merged_volume = np.asarray(getattr(records, "merged_volume", zeros), float)
+        # breakage fragments merged into the first pivot so far and their solid (m3; State)
+        self.merged_number = np.asarray(records.merged_number, float)
+        self.merged_volume = np.asarray(records.merged_volume, float)
         self.state = state
         self.info = dict(info)
 

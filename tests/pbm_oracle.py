@@ -174,26 +174,31 @@ def consolidation(nlg, rate, gas_min):
 def class_rates(
     op, u, beta, model="always", threshold=0.0, width=1.0, xc=None, spray=(0.0, None), consol=(0.0, None), brk=None
 ):
-    """Rates (3M,) and refused rate of the class state u = [N, L, G] (3M,) with the kernel beta_ij
+    """Rates (3M,) and tallies (refused solid rate, fragments merged below the first pivot and
+    their solid per second) of the class state u = [N, L, G] (3M,) with the kernel beta_ij
     p(phi_i) p(phi_j) (``model``), spraying (rate, weights), consolidation (rate, G_min) and
-    breakage ``brk`` (selection (K,), fragment tables) or None."""
+    breakage ``brk`` (selection (K,), fragment tables[, fragments below x_0 per breakage (2, K)])
+    or None."""
     nlg = u.reshape(3, op.M)
     if model != "always":
         p = success(model, threshold, width, surface_fraction(nlg, op.class_volumes if xc is None else xc))
         beta = beta * np.outer(p, p)
     d, refused = aggregation_totals(op, beta, nlg)
+    tally = np.array([refused, 0.0, 0.0])
     if brk is not None:
-        d += breakage_totals(op.xr, *brk, nlg)
+        d += breakage_totals(op.xr, *brk[:2], nlg)
+        if len(brk) > 2:  # the fragments below the first pivot per breakage (2, K): their rates
+            tally[1:] = brk[2] @ (brk[0] * nlg[0, : op.K])
     if spray[0] > 0:
         d[1] += spraying(nlg, *spray)
     if consol[0] > 0:
         d[2] += consolidation(nlg, *consol)
-    return d.reshape(-1), refused
+    return d.reshape(-1), tally
 
 
 def ssp_step(rates, u, dt, order):
-    """One SSP Runge-Kutta step of size dt from u with ``rates(u) -> (rates, refused)``: (new
-    state, embedded lower-order state or None, refused rate), increment forms."""
+    """One SSP Runge-Kutta step of size dt from u with ``rates(u) -> (rates, tallies)``: (new
+    state, embedded lower-order state or None, tallies of the step), increment forms."""
     k1, r1 = rates(u)
     u1 = u + dt * k1
     if order == 1 or (u1 < 0).any():

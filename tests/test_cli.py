@@ -68,3 +68,25 @@ def test_plan_only_estimates_the_wall_time_from_measured_runs(root, tmp_path, ca
     steps = n * (plan["settle_steps"] + plan["spinup_steps"] + plan["sampling_steps"])
     assert estimate["particle_steps"] == steps
     assert estimate["wall_time_s"] == pytest.approx(steps / rate, abs=0.06)
+
+
+def test_pbm_warns_of_fragments_merged_at_the_grid_floor(tiny_mapping, tmp_path, capsys):
+    """`pbmdem pbm` with strong breakage (constant rate 0.5 1/s, three bins per doubling of volume):
+    the run's run.json holds the grid floor, the printed summary its share of the final number, and a
+    warning names it above 1 %."""
+    import yaml
+
+    tiny_mapping["pbm"]["grid"].update(ratio=2.0 ** (1 / 3), bins=40)
+    tiny_mapping["pbm"]["breakage"].update(enabled=True, constant_rate=0.5)
+    config = tmp_path / "config.yaml"
+    config.write_text(yaml.safe_dump(tiny_mapping))
+    out = tmp_path / "run"
+    assert main(["pbm", "--config", str(config), "--rpm", "600", "--out", str(out)]) == 0
+    captured = capsys.readouterr()
+    printed = json.loads(captured.out)
+    floor = json.loads((out / "run.json").read_text())["grid_floor"]
+    assert floor["flagged"] and printed["grid_floor_merged_fraction"] == floor["merged_fraction"] > 0.01
+    assert "warning: clipping: " in captured.err
+    assert "breakage fragments merged at the grid floor (1.5 mm)" in captured.err and "FLAGGED" in captured.err
+    summary = pd.read_csv(out / "summary.csv")
+    assert summary.merged_number.iloc[-1] == pytest.approx(floor["merged_number"], rel=1e-12)

@@ -343,3 +343,42 @@ def test_the_surrogate_provider_predicts_only_what_the_pbm_reads_and_a_repeated_
         # impacts() asks encounters() for its pairs; nothing else is predicted
         inner = ("impacts", "encounters") if called == "impacts" else (called,)
         assert not any(v for k, v in model.calls.items() if k not in inner), (needs, model.calls)
+
+
+def test_a_loop_reports_the_fragments_merged_at_the_grid_floor(tiny_config, tmp_path, caplog):
+    """Strong breakage from impacts (every impact at 4 m/s, twice the critical speed) on a grid of
+    three bins per doubling of volume: the halves of the aggregates of the two pivots above the first
+    fall below it. The loop's timing.json and summary.csv
+    give the merged number and solid, the log warns above 1 % of the final number, and a loop
+    resumed from its intervals on disk ends with the same tally; impacts below the critical speed
+    merge nothing and the log says so."""
+    import json
+    import logging
+    import shutil
+
+    loop = tiny_config.coupled_loop().replace(coupling_intervals=3)
+    pbm = loop.batch.pbm
+    brk = pbm.breakage.replace(
+        enabled=True, yield_strength=1.0e4, critical_stokes=0.2, walls=("impeller",), strength_spread=0.0
+    )
+    grid = pbm.grid.replace(ratio=2.0 ** (1 / 3), bins=40)
+    on = loop.replace(batch=loop.batch.replace(pbm=pbm.replace(breakage=brk, grid=grid)))
+    with caplog.at_level(logging.INFO, logger="pbmdem.coupling.loop"):
+        fast = coupling.run_loop(on, _ImpactProvider(2.0, 4.0), 600.0, tmp_path / "fast")
+        slow = coupling.run_loop(on, _ImpactProvider(2.0, 0.5), 600.0, tmp_path / "slow")
+    floor = json.loads((tmp_path / "fast" / "timing.json").read_text())["grid_floor"]
+    print(f"merged {floor['merged_number']:.4g} fragments, {100 * floor['merged_fraction']:.3g} % of the final number")
+    assert floor["merged_number"] > 0.01 * fast.result.state.number.sum() and floor["flagged"]
+    assert floor["merged_volume"] > 0 and floor == fast.result.info["grid_floor"]
+    summary = pd.read_csv(tmp_path / "fast" / "summary.csv")
+    assert summary.merged_number.iloc[-1] == pytest.approx(floor["merged_number"], rel=1e-12)
+    assert (np.diff(summary.merged_number) >= 0).all() and summary.merged_number.iloc[0] == 0.0
+    warned = [r for r in caplog.records if r.levelno == logging.WARNING and "grid floor" in r.getMessage()]
+    assert len(warned) == 1 and "impacts at rpm 600" in warned[0].getMessage()
+    assert slow.totals["grid_floor"]["merged_number"] == 0.0
+    assert any("clipping: none" in r.getMessage() for r in caplog.records)
+    # resumed after its first interval: the same tally as the loop in one go
+    for name in ("interval_01", "interval_02"):
+        shutil.rmtree(tmp_path / "fast" / name)
+    resumed = coupling.run_loop(on, _ImpactProvider(2.0, 4.0), 600.0, tmp_path / "fast")
+    assert resumed.totals["grid_floor"] == pytest.approx(floor, rel=1e-12)

@@ -185,3 +185,49 @@ def test_hyperparameters_in_words():
     nested = hyperparameters({"frequency": {"alpha": 1.0}, "velocity": {"mlp__alpha": 0.01}})
     assert nested == "frequency: L2 penalty alpha 1; velocity: L2 penalty alpha 0.01"
     assert "{" not in nested
+
+
+def test_the_breakage_finding_is_followed_by_the_clipping_line(tmp_path):
+    """write_findings puts the grid floor's line (report.breakage.clipping_words) after the breakage
+    finding, from the merged_fraction columns of the speed, feed and breakage studies."""
+    from pbmdem.report.outputs import write_findings
+
+    speed = _study({"rpm": [300.0, 900.0]}, [0.004, 0.005], feed="fine", in_grid_range=True, dem_speed=True)
+    speed = speed.assign(merged_fraction=[0.0, 0.02], merged_fraction_member_max=[0.0, 0.03])
+    feed = _study({"feed": ["fine"], "feed_d50": [0.003]}, [0.004], in_grid=True, rpm=300.0)
+    feed = feed.assign(merged_fraction=0.0, merged_fraction_member_max=0.0)
+    breakage = pd.concat(
+        [
+            _study({"rpm": [300.0, 900.0]}, [0.004, d], feed="fine", variant=v, critical_speed=2.0, merged_fraction=0.0)
+            for v, d in (("off", 0.005), ("default", 0.0045))
+        ]
+    )
+    comparison = pd.DataFrame(
+        [
+            {
+                "rpm": 300.0,
+                "in_training_grid": True,
+                "n_dem_replicates": 3,
+                "d50_end_ann_mm": 4.01,
+                "d50_end_dem_mm": 4.0,
+                "d50_end_dem_min_mm": 3.98,
+                "d50_end_dem_max_mm": 4.02,
+                "ann_d50_outside_band_max": 0.003,
+                "wall_time_ratio_dem_over_ann": 5000.0,
+            }
+        ]
+    )
+    paths = {}
+    for name, frame in (("speed", speed), ("feed", feed), ("breakage", breakage), ("comparison", comparison)):
+        paths[name] = tmp_path / f"{name}.csv"
+        frame.to_csv(paths[name], index=False)
+    out = {k: tmp_path / f"{k}.png" for k in ("speed_png", "feed_png", "breakage_png")} | {"rst": tmp_path / "f.rst"}
+    write_findings(
+        speed=paths["speed"], feed=paths["feed"], comparison=paths["comparison"], speed_feed="fine",
+        feed_rpm=300.0, batch_s=480.0, breakage=paths["breakage"], out=out,
+    )  # fmt: skip
+    text = out["rst"].read_text()
+    line = "**Clipping at the grid floor.** clipping: breakage fragments merged at the grid floor amount to 3 %"
+    assert line in text and text.index("**Breakage.**") < text.index(line) < text.index("**How far to trust them.**")
+    assert "the speed study's batch at 900 rpm, feed fine (an ensemble member)" in text
+    assert "FLAGGED: 2 above 1 % of their final number" in text

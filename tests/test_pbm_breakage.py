@@ -13,7 +13,7 @@ import pytest
 from conftest import config_of
 from scipy import integrate
 
-from pbmdem.config import ConfigError
+from pbmdem.config import ConfigError, Solver
 from pbmdem.pbm import (
     SCHEMES,
     CollisionKernel,
@@ -95,28 +95,33 @@ def test_compiled_breakage_rates_and_stages_equal_the_oracle(scheme, fragments):
     brk[0][:] = rng.uniform(0.0, 0.5, K)
     vectors = np.ascontiguousarray(np.stack([xc, np.ones(M), np.zeros(M)]))
     params = np.zeros(6)
-    d = np.empty((3, M))
-    refused = _compiled.class_rates(u, beta, _compiled.ALWAYS, vectors, params, *op.compiled_arrays(), *brk,
-                                    np.zeros((2, M)), d)  # fmt: skip
+    d, tally = np.empty((3, M)), np.empty(3)
+    _compiled.class_rates(u, beta, _compiled.ALWAYS, vectors, params, *op.compiled_arrays(), *brk,
+                          np.zeros((2, M)), d, tally)  # fmt: skip
 
     def oracle_rates(v):
-        return oracle.class_rates(op, v, beta, brk=brk[:2])
+        return oracle.class_rates(op, v, beta, brk=(brk[0], brk[1], brk[3]))
 
-    d_ref, refused_ref = oracle_rates(u)
+    d_ref, tally_ref = oracle_rates(u)
     np.testing.assert_allclose(d.reshape(-1), d_ref, rtol=1e-12, atol=1e-14 * np.abs(d_ref).max())
-    assert refused == refused_ref
+    assert tally[0] == tally_ref[0]
+    # the fragments merged into the first pivot: those of the pivots whose halves (binary) or
+    # whose lower tail (uniform) lie below x_0, at the oracle's rates
+    assert tally[1] > 0 and tally[2] > 0
+    np.testing.assert_allclose(tally[1:], tally_ref[1:], rtol=1e-13)
     # breakage changes neither the solid (x_0 units) nor the liquid and gas totals
     dn = d[0] - oracle.aggregation_totals(op, beta, u.reshape(3, M))[0][0]
     assert abs(dn @ xc) < 1e-13 * np.sum(brk[0] * N[:K] * xc[:K])
     dt = 0.3 * _compiled.depletion_time(u, d.reshape(-1))
-    k, r = np.zeros((3, 3 * M)), np.zeros(4)
-    k[0], r[0] = d.reshape(-1), refused
+    k, r = np.zeros((3, 3 * M)), np.zeros((4, 3))
+    k[0], r[0] = d.reshape(-1), tally
     u_new, u_low, stage = np.empty(3 * M), np.empty(3 * M), np.empty(3 * M)
     _compiled.ssp_step(u, k, r, dt, 3, beta, _compiled.ALWAYS, vectors, params, *op.compiled_arrays(), *brk,
                        np.zeros((2, M)), u_new, u_low, stage)  # fmt: skip
-    ref_new, ref_low, _ = oracle.ssp_step(oracle_rates, u, dt, 3)
+    ref_new, ref_low, ref_tally = oracle.ssp_step(oracle_rates, u, dt, 3)
     np.testing.assert_allclose(u_new, ref_new, rtol=1e-12, atol=1e-14 * np.abs(u).max())
     np.testing.assert_allclose(u_low, ref_low, rtol=1e-12, atol=1e-14 * np.abs(u).max())
+    np.testing.assert_allclose(r[3], ref_tally, rtol=1e-12)
 
 
 def _si_model(fragments, rate=0.05, separate_feed=True, kernel=None):
@@ -397,3 +402,79 @@ def test_one_breakage_serves_models_on_different_grids():
     for _, model, state in runs:
         res = model.run(0.0, 10.0, state)
         assert res.state.number.sum() > 1.2 * state.number.sum()
+
+
+class _FromPivot:
+    """Selection ``rate`` (1/s) for the pivots of solid volume >= ``v_min`` (m3), 0 below."""
+
+    def __init__(self, rate, v_min):
+        self.rate, self.v_min = rate, v_min
+
+    def prepare(self, inp):
+        pass
+
+    def __call__(self, inp):
+        v = np.asarray(inp.volumes[: inp.pivots], float)
+        return np.where(v >= self.v_min, self.rate, 0.0)
+
+
+def test_fragments_below_the_grid_floor_are_counted_against_a_grid_extended_downwards():
+    """Strong binary breakage, SI volumes (first pivot 2 mm): the halves of the 2-2.5 mm granules
+    fall below the first pivot and are merged into it. The tally of the run (info, summary, state)
+    equals what an independent reference holds below the floor: the same problem on a grid that
+    reaches three bins (one halving) lower, where those halves have bins of their own and nothing
+    is merged. Granules of the first pivot do not break in either run (their halves would break
+    again on the extended grid only), so that everything above the floor evolves alike."""
+    ratio, d0 = 2.0 ** (1 / 3), 2e-3
+    clipped = Grid(30, ratio, min_diameter=d0)
+    x0 = clipped.x[0]
+    extended = Grid(33, ratio, v0=0.5 * x0)  # pivots x_0 / 2, x_0 / 2^(2/3), x_0 / 2^(1/3), x_0, ...
+    rate, t_end = 0.05, 120.0  # 1/s per granule: six breakages per granule over the run
+    N = np.array([0, 40, 30, 60, 50, 40, 30, 20, 10, 5], float)  # 2 mm and up: none at the first pivot
+    runs, solver = {}, Solver.defaults().replace(max_step=0.5)
+    for name, g, pad in (("clipped", clipped, 0), ("extended", extended, 3)):
+        selection = _FromPivot(rate, 1.5 * x0)  # every pivot above the 2 mm one
+        brk = Breakage(selection, "binary")
+        # the same steps in both runs (max_step limits every one): their results differ only by round-off
+        model = GranulationPBM(g, ver.NoAggregation(), solver=solver, breakage=brk, separate_feed=False)
+        n = np.zeros(g.bins)
+        n[pad : pad + N.size] = N
+        S = n * g.x
+        runs[name] = model.run(0.0, t_end, State(0.0, n, 0.2 * S, 0.5 * S), output_times=[30.0, 60.0, 90.0])
+    clip, ext = runs["clipped"], runs["extended"]
+    floor = clip.info["grid_floor"]
+    assert ext.info["grid_floor"]["merged_number"] == 0.0 and ext.info["grid_floor"]["merged_volume"] == 0.0
+    below_n, below_v = ext.number[:, :3].sum(axis=1), ext.number[:, :3] @ extended.x[:3]
+    assert below_n[-1] > 0.05 * ext.state.number.sum()  # strong: well above the 1 % flag
+    print(f"merged {floor['merged_number']:.6g} fragments ({below_n[-1]:.6g} below the extended floor)")
+    # the tally at every recorded time: the number and solid the extended grid holds below x_0
+    s = clip.summary()
+    np.testing.assert_allclose(s.merged_number, below_n, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(s.merged_solid_volume, below_v, rtol=1e-9, atol=1e-12 * x0)
+    assert floor["merged_number"] == s.merged_number.iloc[-1] == clip.state.merged_number
+    assert floor["merged_volume"] == pytest.approx(below_v[-1], rel=1e-9)
+    # number accounting: the clipped run keeps their solid as merged_volume / x_0 granules of x_0,
+    # and misses merged_number - merged_volume / x_0 granules
+    np.testing.assert_allclose(clip.number[:, 0], ext.number[:, 3] + below_v / x0, rtol=1e-9)
+    np.testing.assert_allclose(clip.number[:, 1:], ext.number[:, 4:], rtol=1e-9, atol=1e-12)
+    lost = ext.state.number.sum() - clip.state.number.sum()
+    assert floor["lost_number"] == pytest.approx(lost, rel=1e-9)
+    assert floor["lost_number"] == pytest.approx(floor["merged_number"] - floor["merged_volume"] / x0, rel=1e-12)
+    assert floor["merged_fraction"] == pytest.approx(floor["merged_number"] / clip.state.number.sum(), rel=1e-12)
+    assert floor["flagged"] and not ext.info["grid_floor"]["flagged"]
+    assert floor["floor_diameter"] == d0
+
+
+def test_the_grid_floor_of_a_resumed_run_is_that_of_the_whole_batch():
+    # the tally is cumulative in the State: a run resumed halfway ends with the whole batch's
+    g, model, state = _si_model("uniform", rate=0.5, separate_feed=False)
+    whole = model.run(0.0, 40.0, state)
+    half = model.run(0.0, 20.0, state)
+    rest = model.run(20.0, 40.0, half.state)
+    assert 0.0 < half.state.merged_number < whole.state.merged_number
+    joined = type(whole).concat([half, rest])
+    for key in ("merged_number", "merged_volume"):
+        assert joined.info["grid_floor"][key] == pytest.approx(whole.info["grid_floor"][key], rel=1e-6)
+    # without breakage nothing is merged
+    plain = GranulationPBM(g, ConstantKernel(1e-5), separate_feed=False).run(0.0, 40.0, state)
+    assert plain.info["grid_floor"]["merged_number"] == 0.0 and not plain.info["grid_floor"]["flagged"]

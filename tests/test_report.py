@@ -520,3 +520,37 @@ def test_a_fall_within_the_members_range_is_not_a_peak():
 
     assert peak_speed(study([7.9, 9.9, 10.9, 10.85], [7.6, 9.4, 10.4, 10.5])) is None
     assert peak_speed(study([7.9, 9.9, 10.9, 10.2], [7.6, 9.4, 10.4, 9.8])) == 900.0
+
+
+def test_the_findings_state_the_clipping_at_the_grid_floor():
+    """The breakage section says 'clipping: none' when no batch of the studies merged a fragment at
+    the grid floor, and otherwise names the batch with the largest share of its final number merged
+    there, flagging those above 1 %, ensemble members included; studies written before the tally
+    read 'not measured' (the findings text with the line: tests/test_findings.py)."""
+    from pbmdem.report.breakage import clipping_words
+
+    def study(fractions, members, variant=None):
+        rows = [
+            {"rpm": r, "feed": "fine", "merged_fraction": f, "merged_fraction_member_max": m}
+            for r, f, m in zip((300.0, 900.0, 1200.0), fractions, members, strict=True)
+        ]
+        frame = pd.DataFrame(rows)
+        return frame if variant is None else frame.assign(variant=variant)
+
+    clean = {"speed study": study([0, 0, 0], [0, 0, 0]), "breakage study": study([0, 0, 0], [0, 0, 0], "Y/2")}
+    assert "clipping: none: no breakage fragment fell below the grid's first pivot in any of the 6" in (
+        clipping_words(clean)
+    )
+    small = {"speed study": study([0, 0.002, 0.004], [0, 0.003, 0.005])}
+    words = clipping_words(small)
+    assert "amount to 0.5 % of the final number of granules in the speed study's batch at 1200 rpm, feed fine " in words
+    assert "(an ensemble member)" in words and "none above 1 %" in words and "FLAGGED" not in words
+    strong = {"speed study": study([0, 0.002, 0.004], [0, 0.003, 0.005]), "breakage study": study(
+        [0.0, 0.03, 0.25], [0.0, 0.02, 0.3], "Y/2")}  # fmt: skip
+    words = clipping_words(strong)
+    assert "amount to 30 % of the final number of granules in the breakage study's Y/2 batch at 1200 rpm" in words
+    assert "FLAGGED: 4 above 1 % of their final number" in words
+    assert "the breakage study's Y/2 batch at 900 rpm, feed fine (the ensemble mean): 3 %" in words
+    assert "not measured" in clipping_words(
+        {"speed study": study([0, 0, 0], [0, 0, 0]).drop(columns="merged_fraction")}
+    )

@@ -45,22 +45,21 @@ def test_a_single_replicate_has_no_spread_and_replicates_must_share_their_times(
         bands.band_table([summary(t, [2.0, 3.0]), summary(t + 1.0, [2.0, 3.0])], summary(t, [2.0, 3.0]))
 
 
-def write_run(folder, times, d50, wall, provider_wall, intervals=None, **timing):
+def write_run(folder, times, d50, wall, provider_wall, intervals=None, merged=None, **timing):
     folder.mkdir(parents=True, exist_ok=True)
     summary(times, d50, 1e-3).assign(number_mean_diameter=1e-3).to_csv(folder / "summary.csv", index=False)
     pd.DataFrame({"time": [times[-1]], "diameter": [1e-3], "mass_fraction": [1.0]}).to_csv(
         folder / "final_bins.csv", index=False
     )
-    (folder / "timing.json").write_text(
-        json.dumps(
-            {
-                "total_wall_time_s": wall,
-                "provider_wall_time_s": provider_wall,
-                "pbm_wall_time_s": wall - provider_wall,
-                **timing,
-            }
-        )
-    )
+    timing = {
+        "total_wall_time_s": wall,
+        "provider_wall_time_s": provider_wall,
+        "pbm_wall_time_s": wall - provider_wall,
+        **timing,
+    }
+    if merged is not None:  # the grid floor (pbm.results.grid_floor): the share of the final number merged
+        timing["grid_floor"] = {"merged_fraction": merged, "flagged": merged > 0.01}
+    (folder / "timing.json").write_text(json.dumps(timing))
     if intervals is not None:
         intervals.to_csv(folder / "intervals.csv", index=False)
 
@@ -79,6 +78,7 @@ def test_comparison_row_follows_the_contract(tmp_path):
             wall=120.0 + k,
             provider_wall=119.0,
             intervals=loop,
+            merged=0.001 * k,
             dem_cpu_time_s=100.0 + k,  # LIGGGHTS' processes
             pbm_cpu_time_s=0.5,
         )
@@ -93,8 +93,9 @@ def test_comparison_row_follows_the_contract(tmp_path):
         intervals=loop.assign(
             out_of_domain_count=[0, 2], out_of_domain=["", "d_large = 0.011 outside the training range"]
         ),
+        merged=0.05,
     )
-    write_run(folder / "pbm_constant", t, [2.0, 2.5, 3.0], wall=0.03, provider_wall=0.0)
+    write_run(folder / "pbm_constant", t, [2.0, 2.5, 3.0], wall=0.03, provider_wall=0.0)  # an older record
     table = compare(tmp_path, ["300"], [150, 300], replicates=3)
     row = table.iloc[0]
     assert row.rpm == 300 and row.in_training_grid and row.n_dem_replicates == 3
@@ -114,6 +115,15 @@ def test_comparison_row_follows_the_contract(tmp_path):
     assert row.cpu_time_ratio_dem_over_ann == pytest.approx(101.5 / 0.02)
     assert row.pbm_ann_first_batch_wall_s == pytest.approx(0.04)
     assert row.dem_calls == 2
+    # the grid floor: the replicates' largest share, PBM-ANN's, and n/a for a record without it
+    assert row.dem_merged_fraction_max == 0.002 and row.ann_merged_fraction == 0.05
+    assert np.isnan(row.constant_merged_fraction)
+    from pbmdem.report.tables import comparison_tables
+
+    domain = comparison_tables(table)["domain"].iloc[0]
+    assert domain["grid floor: merged fragments per final granule, PBM-DEM / PBM-ANN / PBM-constant (%)"] == (
+        "0.2 / 5 FLAGGED / n/a"
+    )
     for col in (
         "n_dem_replicates",
         "ann_d50_outside_band_max",

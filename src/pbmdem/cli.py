@@ -110,6 +110,11 @@ def _pbm(args: argparse.Namespace) -> int:
         selection = impact_selection(batch.pbm, source) if source is not None else None
         result = run_batch(batch, source, rpm, selection=selection)
     result.info.update(info)
+    floor = result.info["grid_floor"]  # breakage fragments merged at the grid's first pivot (run.json)
+    if floor["flagged"]:
+        from pbmdem.pbm.results import floor_words
+
+        print(f"warning: {floor_words(floor, f'this batch ({distribution}, {rpm:g} rpm)')}", file=sys.stderr)
     paths = result.save(args.out)
     last = result.summary().iloc[-1]
     print(
@@ -121,6 +126,7 @@ def _pbm(args: argparse.Namespace) -> int:
                 "number_mean_diameter_final_m": float(last["number_mean_diameter"]),
                 "steps": int(result.info["steps"]),
                 "wall_time_s": round(result.info["wall_time_s"], 3),
+                "grid_floor_merged_fraction": floor["merged_fraction"],
             },
             indent=2,
         )

@@ -310,6 +310,11 @@ def _not_recorded(frame: pd.DataFrame) -> np.ndarray:
     return np.ones(len(frame), bool)
 
 
+def _no_floor(frame: pd.DataFrame) -> np.ndarray:
+    """the run recorded no grid floor (an older record, before the tally of merged fragments)"""
+    return np.ones(len(frame), bool)
+
+
 COMPARISON = Table(
     "comparison table",
     (
@@ -356,6 +361,10 @@ COMPARISON = Table(
         Column("ann_intervals", "int"),
         Column("ann_out_of_domain_warnings", "int", empty=_not_recorded),
         Column("constant_calibration_out_of_domain_warnings", "int", empty=_not_recorded),
+        # breakage fragments merged at the grid floor, share of the final number (pbm.results.grid_floor)
+        Column("dem_merged_fraction_max", empty=_no_floor),
+        Column("ann_merged_fraction", empty=_no_floor),
+        Column("constant_merged_fraction", empty=_no_floor),
     ),
 )
 #: the comparison columns in their order (the report shows them)

@@ -7,6 +7,7 @@ from pbmdem.config import PbmBatch
 from pbmdem.joblog import log_job
 from pbmdem.pbm.impact_breakage import impact_selection
 from pbmdem.pbm.kernels import TableFrequency
+from pbmdem.pbm.results import floor_words
 from pbmdem.pbm.setup import run_batch
 from pbmdem.pbm.wall_table import WallTable
 
@@ -38,4 +39,11 @@ logging.info(
     result.info["steps"],
     result.info["wall_time_s"],
     sorted(str(p) for p in paths.values()),
+)
+# breakage fragments merged into the first pivot (run.json's grid_floor): a warning above 1 %
+floor = result.info["grid_floor"]
+logging.log(
+    logging.WARNING if floor["flagged"] else logging.INFO,
+    "%s",
+    floor_words(floor, f"PBM {kernel} kernel rpm {rpm:g} {batch.distribution}"),
 )

@@ -27,7 +27,18 @@ from .sample import DemSample
 
 log = logging.getLogger(__name__)
 
-RECORD_NAMES = ("times", "number", "liquid", "gas", "liquid_added", "refused", "steps")
+#: the records of a Result; merged_*: breakage fragments merged at the grid floor (State)
+RECORD_NAMES = (
+    "times",
+    "number",
+    "liquid",
+    "gas",
+    "liquid_added",
+    "refused",
+    "steps",
+    "merged_number",
+    "merged_volume",
+)
 
 
 def discard_stale(outdir: Path, inputs: dict) -> None:
@@ -47,7 +58,16 @@ def discard_stale(outdir: Path, inputs: dict) -> None:
 
 
 def is_finished(folder: Path) -> bool:
-    return (folder / "interval.json").exists()
+    """Whether `folder` holds a finished interval that a loop can resume from: interval.json
+    written, and records with every record of RECORD_NAMES (an interval written before the grid
+    floor's tally, ``merged_number``, is computed again rather than resumed without it)."""
+    if not (folder / "interval.json").exists():
+        return False
+    with np.load(folder / "records.npz") as data:
+        if "state_merged_number" in data.files:
+            return True
+    log.info("%s was written without the grid floor's tally: computed again", folder)
+    return False
 
 
 def save(folder: Path, result, sample: DemSample, matrix: np.ndarray, info: dict) -> None:
@@ -74,6 +94,8 @@ def save(folder: Path, result, sample: DemSample, matrix: np.ndarray, info: dict
                 liquid_added=result.liquid_added,
                 refused=result.refused_volume,
                 steps=result.steps,
+                merged_number=result.merged_number,
+                merged_volume=result.merged_volume,
                 state_t=state.t,
                 state_number=state.number,
                 state_liquid=state.liquid,
@@ -81,6 +103,8 @@ def save(folder: Path, result, sample: DemSample, matrix: np.ndarray, info: dict
                 state_refused=state.refused_volume,
                 state_liquid_added=state.liquid_added,
                 state_steps=state.steps,
+                state_merged_number=state.merged_number,
+                state_merged_volume=state.merged_volume,
                 class_matrix=matrix,
                 **feed,
             )
@@ -104,6 +128,8 @@ def load(folder: Path, grid):
         float(data["state_liquid_added"]),
         int(data["state_steps"]),
         feed,
+        float(data["state_merged_number"]),
+        float(data["state_merged_volume"]),
     )
     info = read_json(folder / "interval.json", "coupling interval record")
     return Result(grid, records, state, {"wall_time_s": info.get("pbm_wall_time_s", 0.0)}), info, data["class_matrix"]

@@ -25,7 +25,7 @@ from pbmdem.frequency import pair_weighted_mean, pairs_of
 from pbmdem.impact import EncounterRates, ImpactRates
 from pbmdem.pbm.impact_breakage import impact_selection
 from pbmdem.pbm.kernels import ConstantFrequency
-from pbmdem.pbm.results import Result
+from pbmdem.pbm.results import Result, floor_words
 from pbmdem.pbm.setup import build_model, initial_state, output_times
 
 from . import intervals
@@ -161,8 +161,17 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
         results.append(result)
         rows.append(info)
         state = result.state
-    totals = _totals(provider.name, rpm, loop, rows, in_memory=outdir is None)
     full = Result.concat(results)
+    totals = _totals(provider.name, rpm, loop, rows, in_memory=outdir is None)
+    totals["grid_floor"] = floor = full.info["grid_floor"]
+    # breakage fragments merged into the first pivot: a warning above FLOOR_LIMIT of the final
+    # number (for a loop in memory the caller reports it, as the out-of-domain counts)
+    level = logging.WARNING if floor["flagged"] else logging.INFO
+    log.log(
+        logging.DEBUG if outdir is None else level,
+        "%s",
+        floor_words(floor, f"{provider.name} at rpm {rpm:g}, feed {loop.batch.distribution}"),
+    )
     if outdir is not None:
         write_outputs(outdir, full, rows, totals)
     return LoopOutcome(full, rows, totals)
@@ -171,7 +180,7 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
 def _totals(method: str, rpm: float, loop: CoupledLoop, rows: list[dict], in_memory: bool = False) -> dict:
     """The loop's totals (timing.json): wall times, and the out-of-domain warnings over its
     intervals (logged as a warning when there were any; for a loop in memory, `in_memory`, the
-    caller reports them)."""
+    caller reports them). `run_loop` adds the grid floor (`Result.grid_floor`)."""
     totals = {
         "method": method,
         "rpm": rpm,

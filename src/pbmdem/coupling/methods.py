@@ -25,6 +25,7 @@ from pbmdem.frequency import pair_weighted_mean
 from pbmdem.pbm.breakage import ConstantSelection
 from pbmdem.pbm.errors import PBMError
 from pbmdem.pbm.kernels import ConstantFrequency
+from pbmdem.pbm.results import floor_words
 from pbmdem.pbm.setup import build_model, initial_state, run_batch
 
 from .loop import CouplingError, LoopOutcome, interval_bounds, run_loop, write_outputs
@@ -172,7 +173,14 @@ def pbm_constant(loop: CoupledLoop, model_path: str | Path, rpm: float, outdir: 
         "provider_wall_time_s": 0.0,
         "out_of_domain": "; ".join(sorted(set(found))),
         "out_of_domain_count": len(found),
+        "grid_floor": result.info["grid_floor"],
     }
+    floor = totals["grid_floor"]
+    logging.getLogger(__name__).log(
+        logging.WARNING if floor["flagged"] else logging.INFO,
+        "%s",
+        floor_words(floor, f"pbm_constant at rpm {rpm:g}, feed {loop.batch.distribution}"),
+    )
     write_outputs(outdir, result, [], totals)
     return LoopOutcome(result, [], totals)
 

@@ -99,6 +99,7 @@ def run_case(loop: CoupledLoop, model_path: str | Path, rpm: float, feed: str, s
             row.update(_final(outcome.result.summary()) | {"mean_failed": False})
             row["out_of_domain_intervals"] = int(outcome.totals.get("out_of_domain_intervals", 0))
             row["intervals"] = int(outcome.totals.get("intervals", loop.coupling_intervals))
+            row["merged_fraction"] = float(outcome.totals["grid_floor"]["merged_fraction"])
         finals, failed = [], 0
         for k in range(n_members):
             try:
@@ -107,11 +108,14 @@ def run_case(loop: CoupledLoop, model_path: str | Path, rpm: float, feed: str, s
                 log.warning("PBM-ANN at %g rpm, feed %s, ensemble member %d failed: %s", rpm, feed, k, exc)
                 failed += 1
                 continue
-            finals.append(_final(member.result.summary()))
+            finals.append(_final(member.result.summary()) | {"merged": member.totals["grid_floor"]["merged_fraction"]})
     for s in STATISTICS:
         values = [f[s] for f in finals]
         row[f"{s}_member_min"] = min(values) if values else float("nan")
         row[f"{s}_member_max"] = max(values) if values else float("nan")
+    # breakage fragments merged at the grid floor, as a share of the final number (Result.grid_floor)
+    row.setdefault("merged_fraction", float("nan"))
+    row["merged_fraction_member_max"] = max((f["merged"] for f in finals), default=float("nan"))
     row["members"] = n_members
     row["members_failed"] = failed
     row["wall_time_s"] = time.perf_counter() - t0

@@ -35,7 +35,7 @@ def rpm_sweep(
         for rpm in speeds:
             folder = Path(tmp) / f"rpm{rpm:g}"
             t0 = time.perf_counter()
-            pbm_ann(loop, model_path, rpm, folder)
+            outcome = pbm_ann(loop, model_path, rpm, folder)
             wall = time.perf_counter() - t0
             summary = read_table(
                 folder / "summary.csv", "PBM-ANN summary", columns=SUMMARY_COLUMNS, finite=SUMMARY_COLUMNS
@@ -54,6 +54,8 @@ def rpm_sweep(
                     "wall_time_s": wall,
                     "out_of_domain_intervals": int((ood.fillna(0) > 0).sum()),
                     "out_of_domain_count": int(ood.fillna(0).sum()),
+                    # breakage fragments merged at the grid floor, share of the final number (Result.grid_floor)
+                    "merged_fraction": float(outcome.totals["grid_floor"]["merged_fraction"]),
                 }
             )
             curves.append((rpm, summary.time.to_numpy(), summary.d50.to_numpy()))

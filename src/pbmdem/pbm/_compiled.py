@@ -170,8 +170,12 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
     return refused
 
 
-@njit("void(f8[::1], f8[:, ::1], i8, f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1])", cache=True, nogil=True)
-def breakage_totals(sel, nlg, K, tab, factors, work, d):
+@njit(
+    "void(f8[::1], f8[:, ::1], i8, f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1])",
+    cache=True,
+    nogil=True,
+)
+def breakage_totals(sel, nlg, K, tab, factors, below, work, d, tally):
     """Add breakage to the rates ``d`` (3, M) of the class totals ``nlg`` (3, M): the granules of
     pivot k (k < K; feed classes do not break) break at the selection rate ``sel[k]`` (1/s),
     each breakage removing one granule with its liquid and gas; its fragments are born in the
@@ -179,11 +183,18 @@ def breakage_totals(sel, nlg, K, tab, factors, work, d):
     moment about x_i, share of the parent's solid, which is also the share of its liquid and
     gas), and the births of every cell are split onto the pivots by the cell average
     (:func:`_split_cells`, ``factors`` of ``aggregation.cell_average_factors``), so that number
-    and solid volume are exact. ``work`` (10, K): work array."""
+    and solid volume are exact. ``work`` (10, K): work array.
+
+    The fragments smaller than the first pivot are merged into it (``tab`` counts them as
+    granules of x_0 with their solid): ``below`` (2, K) holds, per breakage of pivot k, their
+    number and solid (x_0 units) (``Breakage.below_floor``), and their rates are added to
+    ``tally[1]`` (fragments merged per second) and ``tally[2]`` (their solid, x_0 units)."""
     born = work[:4]  # rows: number, liquid, gas born per cell, first moment D_c
     for r in range(4):
         for c in range(K):
             born[r, c] = 0.0
+    merged_n = 0.0
+    merged_v = 0.0
     for k in range(K):
         s = sel[k]
         R = s * nlg[0, k]
@@ -192,6 +203,8 @@ def breakage_totals(sel, nlg, K, tab, factors, work, d):
         d[0, k] -= R
         d[1, k] -= RL
         d[2, k] -= RG
+        merged_n += R * below[0, k]
+        merged_v += R * below[1, k]
         for i in range(k + 1):
             born[0, i] += R * tab[0, i, k]
             born[3, i] += R * tab[1, i, k]
@@ -201,6 +214,8 @@ def breakage_totals(sel, nlg, K, tab, factors, work, d):
     for b in range(3):
         for c in range(K):
             d[b, c] += born[b, c]
+    tally[1] += merged_n
+    tally[2] += merged_v
 
 
 @njit("void(f8[:, ::1], f8[:, ::1], f8, f8[::1], f8, f8[::1])", cache=True, nogil=True)
@@ -331,22 +346,25 @@ def success_probability(model, threshold, width, phi, p):
 
 
 @njit(
-    "f8(f8[::1], f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], "
-    "f8[::1], f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1])",
+    "void(f8[::1], f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], "
+    "f8[::1], f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1])",
     cache=True,
     nogil=True,
 )
-def class_rates(u, beta, model, vectors, params, K, cell_average, target, weight, factors, work, sel, tab, bf, pw, d):
-    """All rates ``d`` (3, M) of the class state u = [N, L, G] (3M,), and the refused solid rate
-    (returned): the one rate evaluation of the PBM. The kernel is beta_ij p(phi_i) p(phi_j)
+def class_rates(
+    u, beta, model, vectors, params, K, cell_average, target, weight, factors, work, sel, tab, bf, below, pw, d, tally
+):
+    """All rates ``d`` (3, M) of the class state u = [N, L, G] (3M,), and the tallies ``tally``
+    (3,): the refused solid rate, the rate of fragments merged into the first pivot and their
+    solid (x_0 units); the one rate evaluation of the PBM. The kernel is beta_ij p(phi_i) p(phi_j)
     (success ``model``: STEP or LOGISTIC, a factored kernel) or ``beta`` itself (ALWAYS: a
     factored kernel without success model, or the matrix of a kernel called in Python).
 
     ``vectors`` (3, M): class volumes (x_0 units), spray weights, G_min per particle; ``params``:
     number flush level, volume flush level (0: none), success threshold and width, spray rate (0:
-    not spraying), consolidation rate (0: none); ``sel`` (K,), ``tab``, ``bf``: the breakage's
-    selection rates, fragment tables and split factors (:func:`breakage_totals`; ``sel`` empty:
-    no breakage); ``pw`` (2, M): work (phi, p)."""
+    not spraying), consolidation rate (0: none); ``sel`` (K,), ``tab``, ``bf``, ``below``: the
+    breakage's selection rates, fragment tables, split factors and fragments below the first pivot
+    (:func:`breakage_totals`; ``sel`` empty: no breakage); ``pw`` (2, M): work (phi, p)."""
     M = vectors.shape[1]
     flush_n = params[0]
     flush_v = params[1]
@@ -358,18 +376,32 @@ def class_rates(u, beta, model, vectors, params, K, cell_average, target, weight
     if model != ALWAYS:
         surface_fraction(nlg, vectors[0], phi)
         success_probability(model, params[2], params[3], phi, p)
-    refused = aggregation_totals(beta, p, model != ALWAYS, nlg, K, cell_average, target, weight, factors, work, d)
+    tally[0] = aggregation_totals(beta, p, model != ALWAYS, nlg, K, cell_average, target, weight, factors, work, d)
+    tally[1] = 0.0
+    tally[2] = 0.0
     if sel.size > 0:
-        breakage_totals(sel, nlg, K, tab, bf, work, d)
+        breakage_totals(sel, nlg, K, tab, bf, below, work, d, tally)
     add_processes(d, nlg, params[4], vectors[1], params[5], vectors[2])
-    return refused
 
 
-@njit("b1(i8, i8, f8, f8[::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1])", cache=True, nogil=True)
+@njit("void(f8[:, ::1], i8, i8, i8, f8)", cache=True, nogil=True)
+def _combine(r, a, b, c, weight):
+    """The tallies of a step, ``r[3]``: r[a] (``weight`` 0), (r[a] + r[b]) / 2 (``weight`` 1:
+    Heun) or (r[a] + r[b] + 4 r[c]) / 6 (``weight`` 4: SSP-RK3)."""
+    for q in range(r.shape[1]):
+        if weight == 0:
+            r[3, q] = r[a, q]
+        elif weight == 1:
+            r[3, q] = 0.5 * (r[a, q] + r[b, q])
+        else:
+            r[3, q] = (r[a, q] + r[b, q] + 4.0 * r[c, q]) / 6.0
+
+
+@njit("b1(i8, i8, f8, f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1])", cache=True, nogil=True)
 def ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
     """Stage ``j`` (1, 2, 3) of one explicit SSP Runge-Kutta step of size ``dt`` from u, given
-    the rates ``k[0 .. j-1]`` (3, 3M) and refused rates ``r[0 .. j-1]`` (r: (4,)) of the stages
-    before.
+    the rates ``k[0 .. j-1]`` (3, 3M) and tallies ``r[0 .. j-1]`` (r: (4, 3): the refused solid,
+    merged fragment and merged solid rates of :func:`class_rates`) of the stages before.
 
     Returns True if the step ends at this stage, with the new state in ``u_new`` (for ``order``
     > 1 also the embedded lower-order state in ``u_low``) and the step's refused rate in
@@ -386,7 +418,7 @@ def ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
         if order == 1 or any_negative(stage):
             for i in range(n):
                 u_new[i] = stage[i]
-            r[3] = r[0]
+            _combine(r, 0, 0, 0, 0)
             return True
         return False
     k2 = k[1]
@@ -396,7 +428,7 @@ def ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
             for i in range(n):
                 u_low[i] = stage[i]
                 u_new[i] = u[i] + h * (k1[i] + k2[i])  # Heun (SSP-RK2)
-            r[3] = 0.5 * (r[0] + r[1])
+            _combine(r, 0, 1, 0, 1)
             return True
         q = 0.25 * dt
         for i in range(n):
@@ -406,21 +438,21 @@ def ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
         if any_negative(stage):
             for i in range(n):
                 u_new[i] = stage[i]
-            r[3] = r[0]
+            _combine(r, 0, 0, 0, 0)
             return True
         return False
     k3 = k[2]
     c = dt / 6.0
     for i in range(n):
         u_new[i] = u[i] + c * ((k1[i] + k2[i]) + 4.0 * k3[i])
-    r[3] = (r[0] + r[1] + 4.0 * r[2]) / 6.0
+    _combine(r, 0, 1, 2, 4)
     return True
 
 
 @njit(
-    "f8(f8[::1], f8[:, ::1], f8[::1], f8, i8, f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], "
-    "f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], "
-    "f8[::1])",
+    "void(f8[::1], f8[:, ::1], f8[:, ::1], f8, i8, f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], "
+    "f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], "
+    "f8[::1], f8[::1])",
     cache=True,
     nogil=True,
 )
@@ -443,18 +475,20 @@ def ssp_step(
     sel,
     tab,
     bf,
+    below,
     pw,
     u_new,
     u_low,
     stage,
 ):
     """One step of :func:`ssp_stage` with the rates of a factored kernel (:func:`class_rates`) in
-    one compiled call; ``k[0]``, ``r[0]``: the rates at u. Returns the refused rate of the step."""
+    one compiled call; ``k[0]``, ``r[0]``: the rates and tallies at u. The step's tallies (refused
+    solid, merged fragments, merged solid rates) are left in ``r[3]``."""
     M = vectors.shape[1]
     for j in range(1, 4):
         if ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
-            return r[3]
-        r[j] = class_rates(
+            return
+        class_rates(
             stage,
             beta,
             model,
@@ -469,10 +503,11 @@ def ssp_step(
             sel,
             tab,
             bf,
+            below,
             pw,
             k[j].reshape((3, M)),
+            r[j],
         )
-    return r[3]  # pragma: no cover - stage 3 always ends the step
 
 
 # ----------------------------------------------------------------- breakage selection from impacts

@@ -93,13 +93,15 @@ class Breakage:
     def __repr__(self) -> str:
         return f"Breakage({self.selection!r}, fragments={self.fragments!r})"
 
-    def compiled_arrays(self, x: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(selection (K,), fragment tables (3, K, K), split factors (4, K)): the arguments of the
-        compiled rates (``_compiled.breakage_totals``) on the grid of pivots ``x`` and cell
-        ``edges``; :meth:`prepare` refreshes the selection array in place."""
+    def compiled_arrays(self, x: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(selection (K,), fragment tables (3, K, K), split factors (4, K), fragments below the
+        first pivot (2, K)): the arguments of the compiled rates (``_compiled.breakage_totals``) on
+        the grid of pivots ``x`` and cell ``edges``; :meth:`prepare` refreshes the selection array
+        in place."""
         x = np.asarray(x, float)
         tab = np.ascontiguousarray(self.fragment_tables(x, edges))
-        return np.zeros(x.size), tab, np.ascontiguousarray(cell_average_factors(x / x[0]))
+        factors = np.ascontiguousarray(cell_average_factors(x / x[0]))
+        return np.zeros(x.size), tab, factors, np.ascontiguousarray(self.below_floor(x))
 
     def reset(self) -> None:
         """Start of a run: the next :meth:`prepare` evaluates the selection."""
@@ -144,38 +146,54 @@ class Breakage:
         e = np.asarray(edges, float)[1:-1] / x[0]  # inner cell bounds, x_0 units
         tab = np.zeros((3, K, K))
         for k in range(K):
-            number, solid = _fragments_of(self.fragments, xr[k], xr, e)
+            number, solid, _ = _fragments_of(self.fragments, xr[k], xr, e)
             tab[0, :, k] = number
             tab[1, :, k] = solid / xr - number
             tab[2, :, k] = solid / xr[k]
         return tab
+
+    def below_floor(self, x: np.ndarray) -> np.ndarray:
+        """(2, K) per breakage of one granule of pivot k (column k): the number of its fragments
+        smaller than the first pivot x_0 and their solid volume in units of x_0. The fragment
+        tables merge them into x_0 (number = solid / x_0, solid exact), so a breakage of pivot k
+        loses ``below[0, k] - below[1, k]`` granules; the run tallies both
+        (``State.merged_number``, ``State.merged_volume``). Column 0 is zero: a granule of the
+        first pivot gives back one granule of the first pivot, no change (it does not break), so
+        that a fragment merged into x_0 is counted once, not again at every breakage it is denied."""
+        x = np.asarray(x, float)
+        xr = x / x[0]
+        out = np.zeros((2, x.size))
+        for k in range(1, x.size):
+            out[:, k] = _fragments_of(self.fragments, xr[k], xr, xr[1:])[2]
+        return out
 
 
 def breakage_arrays(breakage: Breakage | None, x: np.ndarray, edges: np.ndarray) -> tuple:
     """The breakage's arguments of the compiled rates on the grid of pivots ``x`` and cell
     ``edges`` (:meth:`Breakage.compiled_arrays`); None: an empty selection, no breakage."""
     if breakage is None:
-        return np.zeros(0), np.zeros((3, 0, 0)), np.zeros((4, 0))
+        return np.zeros(0), np.zeros((3, 0, 0)), np.zeros((4, 0)), np.zeros((2, 0))
     if not isinstance(breakage, Breakage):
         raise PBMInputError(f"breakage = {breakage!r}; allowed: a pbmdem.pbm.breakage.Breakage or None")
     return breakage.compiled_arrays(x, edges)
 
 
-def _fragments_of(fragments: str, u: float, xr: np.ndarray, inner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(number, solid volume) of the fragments of one granule of volume ``u`` (units of x_0) in
-    each cell of pivots ``xr`` with inner bounds ``inner`` (K - 1,), cell i spanning [inner[i-1],
-    inner[i]) and the fragments of cell k (u's own cell) reaching up to u. Fragments below x_0 = 1
-    are put in cell 0 as number = solid volume / x_0."""
+def _fragments_of(fragments: str, u: float, xr: np.ndarray, inner: np.ndarray) -> tuple:
+    """(number (K,), solid volume (K,), (number, solid) below x_0) of the fragments of one granule
+    of volume ``u`` (units of x_0) in each cell of pivots ``xr`` with inner bounds ``inner`` (K -
+    1,), cell i spanning [inner[i-1], inner[i]) and the fragments of cell k (u's own cell) reaching
+    up to u. Fragments below x_0 = 1 are put in cell 0 as number = solid volume / x_0; the last
+    item gives how many they were and their solid."""
     K = xr.size
     number, solid = np.zeros(K), np.zeros(K)
     if fragments == "binary":
         h = 0.5 * u
         if h < 1.0:
             number[0], solid[0] = u, u  # two fragments below x_0: u / x_0 granules of x_0
-        else:
-            i = int(np.searchsorted(inner, h, side="right"))
-            number[i], solid[i] = 2.0, u
-        return number, solid
+            return number, solid, (2.0, u)
+        i = int(np.searchsorted(inner, h, side="right"))
+        number[i], solid[i] = 2.0, u
+        return number, solid, (0.0, 0.0)
     # uniform daughters b(v|u) = 2/u on (0, u): number 2 (b - a)/u, solid (b^2 - a^2)/u in [a, b]
     low = min(1.0, u)
     solid[0] = number[0] = low * low / u  # the fragments below x_0, as granules of x_0
@@ -184,4 +202,4 @@ def _fragments_of(fragments: str, u: float, xr: np.ndarray, inner: np.ndarray) -
     a, b = lower, np.maximum(upper, lower)
     number += 2.0 * (b - a) / u
     solid += (b - a) * (b + a) / u
-    return number, solid
+    return number, solid, (2.0 * low / u, low * low / u)

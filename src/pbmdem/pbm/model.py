@@ -133,9 +133,11 @@ class GranulationPBM:
         self._params = (np.zeros(6), np.zeros(6))
         self._set_params(0.0, 1.0)
         self._pw = np.zeros((2, self._M))
-        # work of the stages: the rates k (3, 3M) and refused rates r (4,) of the stages, a stage
-        self._k, self._r, self._stage = np.empty((3, 3 * self._M)), np.zeros(4), np.empty(3 * self._M)
+        # work of the stages: the rates k (3, 3M) and tallies r (4, 3: refused solid, merged
+        # fragments, merged solid; ``_compiled.class_rates``) of the stages, a stage
+        self._k, self._r, self._stage = np.empty((3, 3 * self._M)), np.zeros((4, 3)), np.empty(3 * self._M)
         self._k_rows = [k.reshape(3, self._M) for k in self._k]  # the rates of stage j as (3, M)
+        self._r_rows = list(self._r)  # the tallies of stage j (views, made once)
         self._op_arrays = op.compiled_arrays()
 
     def _pivot_totals(self, u: np.ndarray) -> np.ndarray:
@@ -224,15 +226,16 @@ class GranulationPBM:
         u = np.concatenate([N, np.asarray(L, float) / x0, np.asarray(G, float) / x0])
         inp = self.kernel_input(t, N, L, G)
         self._prepare(inp)
-        refused = self._rates(t, u, spraying, 0)
+        self._rates(t, u, spraying, 0)
         d = self._k[0].copy()
         K = self.grid.bins
-        return d[:K], d[K : 2 * K] * x0, d[2 * K :] * x0, refused * x0
+        return d[:K], d[K : 2 * K] * x0, d[2 * K :] * x0, float(self._r[0, 0]) * x0
 
-    def _rates(self, t: float, u: np.ndarray, spraying: bool, j: int) -> float:
+    def _rates(self, t: float, u: np.ndarray, spraying: bool, j: int) -> None:
         """Rates of the scaled class state u = [N, L/x_0, G/x_0] (M classes: the K pivots and the
-        feed classes of the run, :meth:`_use_classes`) into ``self._k[j]`` (3M,); returns the
-        refused solid rate (x_0 units). One compiled call (``_compiled.class_rates``: flush, kernel,
+        feed classes of the run, :meth:`_use_classes`) into ``self._k[j]`` (3M,), and its tallies
+        (refused solid, fragments merged into the first pivot and their solid, x_0 units) into
+        ``self._r[j]``. One compiled call (``_compiled.class_rates``: flush, kernel,
         aggregation, breakage, spraying, consolidation); a kernel without factors is called here,
         at the flushed state, and its matrix passed in.
 
@@ -249,7 +252,7 @@ class GranulationPBM:
                     f"kernel {self.kernel!r} returned shape {beta.shape}; expected ({self._M}, {self._M}) "
                     f"for the {self._M} classes"
                 )
-        return self._jit.class_rates(
+        self._jit.class_rates(
             u,
             beta,
             self._success_code,
@@ -259,11 +262,14 @@ class GranulationPBM:
             *self._brk_arrays,
             self._pw,
             self._k_rows[j],
+            self._r_rows[j],
         )
 
     def _stages(self, t: float, u: np.ndarray, dt: float, order: int, spraying: bool):
-        """The stages of one step of size dt from u (rates ``self._k[0]``, refused rate
-        ``self._r[0]``): (new state, embedded lower-order state, refused rate of the step), by the
+        """The stages of one step of size dt from u (rates ``self._k[0]``, tallies
+        ``self._r[0]``): (new state, embedded lower-order state, tallies of the step (3,): refused
+        solid, merged fragments and merged solid rates; ``self._r[3]``, valid until the next
+        step), by the
         compiled stages (``_compiled.ssp_stage``): in one compiled call with a factored kernel,
         else stage by stage with the kernel called between them."""
         n = u.size
@@ -271,15 +277,15 @@ class GranulationPBM:
         jit, k, r, stage = self._jit, self._k, self._r, self._stage
         params = self._params[1] if spraying else self._params[0]
         if self._factored is not None:
-            refused = jit.ssp_step(
+            jit.ssp_step(
                 u, k, r, dt, order, self._factored, self._success_code, self._vectors, params, *self._op_arrays,
                 *self._brk_arrays, self._pw, u_new, u_low, stage,
             )  # fmt: skip
-            return u_new, u_low, refused
+            return u_new, u_low, r[3]
         for j, at in ((1, t + dt), (2, t + 0.5 * dt), (3, t)):
             if jit.ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
                 break
-            r[j] = self._rates(at, stage, spraying, j)
+            self._rates(at, stage, spraying, j)
         return u_new, u_low, r[3]
 
     def _set_params(self, threshold: float, width: float) -> None:
@@ -417,6 +423,7 @@ class GranulationPBM:
         u = self._class_state(s)
         total_solid = float(np.sum(u[:M] * self._xc))  # x_0 units
         refused = s.refused_volume / x0
+        merged_n, merged_v = s.merged_number, s.merged_volume / x0  # fragments merged into x_0 so far
         allowed_refused = opt.max_overflow_fraction * total_solid
         # error scale of entry k: rtol |u_k| + atol x total solid / w_k, where number entries count
         # by their solid volume (w = x_k / x_0) and liquid and gas as volumes (w = 1)
@@ -433,28 +440,33 @@ class GranulationPBM:
             t_next = events[ev]
             spraying = self.liquid is not None and self.liquid.active(t)
             self._prepare(self._input(t, u.reshape(3, M)))
-            self._r[0] = self._rates(t, u, spraying, 0)
+            self._rates(t, u, spraying, 0)
             k1 = self._k[0]
             if not jit.all_finite(k1):
                 self._raise_bad(t, np.where(np.isfinite(k1), u, np.nan), "non-finite rate")
-            u, dt, refused_rate = ctl.step(t, t_next, u, k1, spraying)
+            u, dt, tally = ctl.step(t, t_next, u, k1, spraying)
             capped = dt == t_next - t
             t = t_next if capped else t + dt
             jit.flush(u, M, flush_n, flush_v)
             s.steps += 1
+            refused_rate, merged_n_rate, merged_v_rate = tally.tolist()  # r[3], overwritten by the next step
             refused += refused_rate * dt
+            merged_n += merged_n_rate * dt
+            merged_v += merged_v_rate * dt
             if spraying:
                 s.liquid_added += self.liquid.rate * dt
             if refused > allowed_refused:
                 self._overflow(t, refused, total_solid)
             ctl.check_limits(t)
             if capped and (t in outs or t == t_end):
-                self._store(s, t, u, refused)
+                self._store(s, t, u, refused, (merged_n, merged_v))
                 rec.add(s)
-        self._store(s, t_end, u, refused)
+        self._store(s, t_end, u, refused, (merged_n, merged_v))
         if refresh0 is not None:
             ctl.limits["kernel_refreshes"] = int(self.kernel.evaluations - refresh0)
-        return Result(self.grid, rec, s, self._info(ctl))
+        res = Result(self.grid, rec, s, self._info(ctl))
+        res.info["grid_floor"] = res.grid_floor()  # fragments merged into the first pivot since the batch began
+        return res
 
     def _overflow(self, t: float, refused: float, total_solid: float) -> None:
         """GridOverflowError: the refused solid (x_0 units) exceeds the allowed fraction."""
@@ -487,9 +499,9 @@ class GranulationPBM:
             "feed_volumes": self._op.extra.tolist() if self._M > self.grid.bins else [],
         }
 
-    def _store(self, s: State, t: float, u: np.ndarray, refused: float) -> None:
-        """Write time t, the class state u and the refused solid (x_0 units) into ``s``: per-bin
-        totals and the feed classes."""
+    def _store(self, s: State, t: float, u: np.ndarray, refused: float, merged: tuple) -> None:
+        """Write time t, the class state u, the refused solid and the fragments merged into the
+        first pivot (number, solid; x_0 units) into ``s``: per-bin totals and the feed classes."""
         x0 = float(self.grid.x[0])
         s.t = t
         tot = self._pivot_totals(u)
@@ -499,3 +511,4 @@ class GranulationPBM:
             v = u.reshape(3, M)[:, K:]
             s.feed = FeedGranules(self._op.extra.copy(), v[0].copy(), v[1] * x0, v[2] * x0)
         s.refused_volume = refused * x0
+        s.merged_number, s.merged_volume = float(merged[0]), float(merged[1]) * x0

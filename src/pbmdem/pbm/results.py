@@ -26,6 +26,47 @@ if TYPE_CHECKING:
     import pandas as pd
 
 
+#: share of a batch's final number of granules merged at the grid floor above which it is flagged
+FLOOR_LIMIT = 0.01
+
+
+def grid_floor(state: State, grid: Grid) -> dict:
+    """The breakage fragments smaller than the first pivot x_0 merged into it by ``state``'s time,
+    from the batch's start (the grid floor; each counted once, at its birth from a granule above
+    the floor: a granule at x_0 does not break): ``merged_number`` fragments carrying
+    ``merged_volume`` m3 of solid, counted as merged_volume / x_0 granules of x_0, so that
+    ``lost_number`` granules are missing from the population; ``merged_fraction`` = merged_number
+    / the final number of granules (cumulative: above 1 where merged granules aggregate and break
+    again), ``flagged`` when it exceeds FLOOR_LIMIT (1 %), ``floor_diameter`` d_0 (m)."""
+    total = float(np.sum(state.number))
+    n, v = float(state.merged_number), float(state.merged_volume)
+    fraction = n / total if total > 0 else (0.0 if n == 0 else float("inf"))
+    return {
+        "merged_number": n,
+        "merged_volume": v,
+        "lost_number": max(n - v / float(grid.x[0]), 0.0),
+        "final_number": total,
+        "merged_fraction": fraction,
+        "flagged": bool(fraction > FLOOR_LIMIT),
+        "floor_diameter": float(grid.d[0]),
+    }
+
+
+def floor_words(floor: dict, what: str) -> str:
+    """One line on the grid floor (:func:`grid_floor`) of the batch ``what``: 'clipping: none in
+    <what>', or the fragments merged at the floor, their share of the final number (FLAGGED above
+    FLOOR_LIMIT), the granules lost and the solid kept there."""
+    if floor["merged_number"] <= 0:
+        return f"clipping: none in {what} (no breakage fragment below the grid floor)"
+    flag = f" (FLAGGED: above {100 * FLOOR_LIMIT:g} %)" if floor["flagged"] else ""
+    return (
+        f"clipping: {floor['merged_number']:.4g} breakage fragments merged at the grid floor "
+        f"({1e3 * floor['floor_diameter']:.3g} mm) in {what}, {100 * floor['merged_fraction']:.3g} % of its final "
+        f"number of granules{flag}; {floor['lost_number']:.4g} granules lost, {floor['merged_volume']:.4g} m3 of "
+        "solid kept at the floor"
+    )
+
+
 def mass_quantiles(mass: np.ndarray, d_edges: np.ndarray, q=(0.1, 0.5, 0.9)) -> np.ndarray:
     """Diameters below which fractions ``q`` of the solid lie; ``mass`` (T, K) or (K,)."""
     m = np.atleast_2d(np.asarray(mass, float))
@@ -58,6 +99,9 @@ class Result:
         self.liquid_added = np.asarray(records.liquid_added, float)
         self.refused_volume = np.asarray(records.refused, float)
         self.steps = np.asarray(records.steps, int)
+        # breakage fragments merged into the first pivot so far and their solid (m3; State)
+        self.merged_number = np.asarray(records.merged_number, float)
+        self.merged_volume = np.asarray(records.merged_volume, float)
         self.state = state
         self.info = dict(info)
 
@@ -80,6 +124,8 @@ class Result:
             ("liquid_added", "liquid_added"),
             ("refused", "refused_volume"),
             ("steps", "steps"),
+            ("merged_number", "merged_number"),
+            ("merged_volume", "merged_volume"),
         ):
             setattr(rec, name, np.concatenate([getattr(r, attr)[k] for r, k in zip(results, keep)]))
         info = dict(results[-1].info)
@@ -89,7 +135,14 @@ class Result:
         limits = [r.info["step_limits"] for r in results if isinstance(r.info.get("step_limits"), dict)]
         if limits:
             info["step_limits"] = {k: int(sum(lim.get(k, 0) for lim in limits)) for k in limits[-1]}
-        return cls(first.grid, rec, results[-1].state, info)
+        out = cls(first.grid, rec, results[-1].state, info)
+        out.info["grid_floor"] = out.grid_floor()  # the whole batch's (the state's tallies carry over)
+        return out
+
+    def grid_floor(self) -> dict:
+        """The breakage fragments merged into the first pivot by the end of the run (cumulative
+        from the batch's start; :func:`grid_floor`)."""
+        return grid_floor(self.state, self.grid)
 
     # ------------------------------------------------------------- derived quantities
     @property
@@ -129,6 +182,8 @@ class Result:
                 "mean_surface_liquid_fraction": surface_fraction(Stot, Ltot, Gtot),
                 "liquid_added": self.liquid_added,
                 "refused_solid_volume": self.refused_volume,
+                "merged_number": self.merged_number,
+                "merged_solid_volume": self.merged_volume,
                 "steps": self.steps,
             }
         )

@@ -42,7 +42,10 @@ class State:
     ``refused_volume``: solid volume of aggregates refused beyond the last bin so far (m3);
     ``liquid_added``: binder sprayed so far (m3); ``steps``: time steps taken so far;
     ``feed``: the feed granules not yet aggregated (:class:`FeedGranules`, included in number,
-    liquid and gas) or None (every particle of a bin shares the bin's liquid and gas).
+    liquid and gas) or None (every particle of a bin shares the bin's liquid and gas);
+    ``merged_number``, ``merged_volume``: breakage fragments smaller than the first pivot so far
+    and their solid volume (m3), merged into the first pivot as merged_volume / x_0 granules (the
+    grid floor: solid exact, merged_number - merged_volume / x_0 granules lost).
     """
 
     t: float
@@ -53,6 +56,8 @@ class State:
     liquid_added: float = 0.0
     steps: int = 0
     feed: FeedGranules | None = None
+    merged_number: float = 0.0
+    merged_volume: float = 0.0
 
     def copy(self) -> State:
         return State(
@@ -64,6 +69,8 @@ class State:
             self.liquid_added,
             self.steps,
             None if self.feed is None else self.feed.copy(),
+            self.merged_number,
+            self.merged_volume,
         )
 
 

@@ -68,6 +68,8 @@ class Records:
     liquid_added: list = field(default_factory=list)
     refused: list = field(default_factory=list)
     steps: list = field(default_factory=list)
+    merged_number: list = field(default_factory=list)
+    merged_volume: list = field(default_factory=list)
 
     def add(self, s: State):
         self.times.append(s.t)
@@ -77,6 +79,8 @@ class Records:
         self.liquid_added.append(s.liquid_added)
         self.refused.append(s.refused_volume)
         self.steps.append(s.steps)
+        self.merged_number.append(s.merged_number)
+        self.merged_volume.append(s.merged_volume)
 
 
 class StepControl:
@@ -84,7 +88,7 @@ class StepControl:
 
     ``error_floor`` (3M,): atol x total solid / w_k, the absolute part of the error scale of
     every entry (numbers count by their solid volume, liquid and gas as volumes); ``stages(t, u,
-    dt, order, spraying)`` -> (new state, embedded lower-order state, refused rate) of a step of
+    dt, order, spraying)`` -> (new state, embedded lower-order state, tallies (3,)) of a step of
     size dt; ``bad(t, u, why)`` raises NegativePopulationError for the entry of u that is negative
     or not finite."""
 
@@ -103,14 +107,14 @@ class StepControl:
 
     def step(self, t: float, t_next: float, u: np.ndarray, k1: np.ndarray, spraying: bool):
         """One accepted step from the state u at t with rates k1, not beyond t_next: (new state,
-        dt, refused rate of the step)."""
+        dt, tallies of the step (``stages``'s: refused solid, merged fragments, merged solid rates))."""
         opt, jit, stages, order = self.opt, self._jit, self.stages, self.order
         cands = (opt.safety * jit.depletion_time(u, k1), self.dt_prop, opt.max_step, t_next - t)
         dt = min(cands)
         why = cands.index(dt)
         rejected = 0
         for _ in range(MAX_HALVINGS + 1):
-            u_new, u_low, refused_rate = stages(t, u, dt, order, spraying)
+            u_new, u_low, tally = stages(t, u, dt, order, spraying)
             err = 0.0
             if not jit.all_nonnegative(u_new):
                 if np.isnan(u_new).any():
@@ -138,7 +142,7 @@ class StepControl:
             # no growth right after a rejection (Hairer, Norsett & Wanner, Solving ODE I, II.4)
             self.dt_prop = dt * min(1.0 if rejected else 5.0, 0.9 * max(err, 1e-300) ** -self.expo)
         self.taken += 1
-        return u_new, dt, refused_rate
+        return u_new, dt, tally
 
     def check_limits(self, t: float) -> None:
         """SolverLimitError if the run is not done at t and has used up max_steps or max_wall_time."""

@@ -101,3 +101,56 @@ def breakage_words(study: pd.DataFrame) -> str:
         + "Impacts break granules where the fastest of them, at the impeller and between granules, approach or "
         "exceed their v*."
     )
+
+
+def _batch_name(study: str, row: dict, member: bool) -> str:
+    """'the breakage study's Y/2 batch at 1200 rpm, feed fine (an ensemble member)'."""
+    variant = f" {row['variant']}" if isinstance(row.get("variant"), str) else ""
+    who = "an ensemble member" if member else "the ensemble mean"
+    return f"the {study}'s{variant} batch at {float(row['rpm']):g} rpm, feed {row.get('feed', '?')} ({who})"
+
+
+def clipping_words(studies: dict[str, pd.DataFrame]) -> str:
+    """The grid floor of the PBM-ANN studies' batches in words: 'clipping: none' when no breakage
+    fragment fell below the first pivot in any batch (ensemble means and members), else the
+    largest share of a batch's granules merged there (``merged_fraction``, the ensemble mean's, and
+    ``merged_fraction_member_max``; pbmdem.pbm.results.grid_floor) and the batches above
+    FLOOR_LIMIT (1 %), flagged. ``studies``: name -> study table (speed, feed, breakage)."""
+    from pbmdem.pbm.results import FLOOR_LIMIT
+
+    cases = []  # (share, batch)
+    batches = 0
+    for name, table in studies.items():
+        if table is None or "merged_fraction" not in table:
+            continue
+        for row in table.to_dict("records"):
+            batches += 1
+            for column, member in (("merged_fraction", False), ("merged_fraction_member_max", True)):
+                share = float(row.get(column, float("nan")))
+                if np.isfinite(share):
+                    cases.append((share, _batch_name(name, row, member)))
+    head = "**Clipping at the grid floor.** "
+    if not batches:
+        return head + "clipping: not measured (the studies' tables have no merged_fraction column)."
+    merged = sorted((c for c in cases if c[0] > 0), reverse=True)
+    if not merged:
+        return head + (
+            f"clipping: none: no breakage fragment fell below the grid's first pivot in any of the {batches} "
+            "PBM-ANN batches of the studies (ensemble means and members)."
+        )
+    share, worst = merged[0]
+    flagged = [c for c in merged if c[0] > FLOOR_LIMIT]
+    text = head + (
+        f"clipping: breakage fragments merged at the grid floor amount to {PERCENT * share:.3g} % of the final "
+        f"number of granules in {worst}, the most of any batch: fragments smaller than the grid's first pivot "
+        "are counted as first-pivot granules (their solid kept, their number not). Batch results that merged "
+        f"some: {len(merged)} of {len(cases)} (ensemble means, and the members' largest); "
+    )
+    if flagged:
+        names = "; ".join(f"{b}: {PERCENT * s:.3g} %" for s, b in flagged[:5])
+        more = f" and {len(flagged) - 5} more" if len(flagged) > 5 else ""
+        return text + (
+            f"FLAGGED: {len(flagged)} above {PERCENT * FLOOR_LIMIT:g} % of their final number ({names}{more}); "
+            "a smaller pbm.grid.min_diameter gives their fragments bins of their own."
+        )
+    return text + f"none above {PERCENT * FLOOR_LIMIT:g} % of its final number."

@@ -209,12 +209,14 @@ def write_findings(
     save(feed_figure(feed_table, feed_rpm, batch_s), out["feed_png"])
     extra: tuple[str, ...] = ()
     if breakage is not None:
-        from .breakage import breakage_figure, breakage_words
+        from .breakage import breakage_figure, breakage_words, clipping_words
         from .findings import _image_directive
 
         study = read_table(breakage, "PBM-ANN breakage study", columns=("variant", "rpm", "d50", "critical_speed"))
         save(breakage_figure(study), out["breakage_png"])
+        studies = {"speed study": speed_table, "feed study": feed_table, "breakage study": study}
         extra = (breakage_words(study), "", _image_directive(out["breakage_png"]), "   :width: 640px", "")
+        extra += (clipping_words(studies), "")
     text = findings_rst(
         speed_table,
         feed_table,

@@ -14,6 +14,7 @@ fractions in %), each narrow enough for a page.
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 
 from pbmdem.config import Granulator, Pbm, SizeDistribution
@@ -264,9 +265,23 @@ def comparison_tables(table: pd.DataFrame) -> dict[str, pd.DataFrame]:
                 "PBM-constant calibration out-of-domain warnings (count)": number(
                     r.constant_calibration_out_of_domain_warnings, ".0f"
                 ),
+                "grid floor: merged fragments per final granule, PBM-DEM / PBM-ANN / PBM-constant (%)": " / ".join(
+                    _floor(getattr(r, column, float("nan")))
+                    for column in ("dem_merged_fraction_max", "ann_merged_fraction", "constant_merged_fraction")
+                ),
             }
         )
     return {name: pd.DataFrame(rows) for name, rows in out.items()}
+
+
+def _floor(fraction) -> str:
+    """A share of a run's final number merged at the grid floor in %, FLAGGED above FLOOR_LIMIT."""
+    from pbmdem.pbm.results import FLOOR_LIMIT
+
+    if fraction is None or not np.isfinite(float(fraction)):
+        return "n/a"
+    shown = f"{PERCENT * float(fraction):.3g}"
+    return shown + (" FLAGGED" if float(fraction) > FLOOR_LIMIT else "")
 
 
 def design_space_table(table: pd.DataFrame, third_key: str) -> pd.DataFrame:

@@ -6,12 +6,13 @@ mean, with their spread), the relative error of d50(t) against the replicates' m
 the batch and at its end), beside the same error of one replicate against the others' mean
 (`dem_replicate_d50_rel_error_max`, the reference's own spread), the largest distance of PBM-ANN's
 d50(t) outside the PBM-DEM band (`ann_d50_outside_band_max`, a fraction of d50; 0 when always
-inside), the cost of one batch and the speed ratio, and how often the surrogate left its training
-domain. Cost in CPU seconds beside the wall time: PBM-DEM, the mean over its loops of the LIGGGHTS
-processes' CPU time plus the PBM's; PBM-ANN, the median of warm in-memory batches with the ensemble
-mean (`coupling.warm_batch_times`: surrogate plus PBM, the surrogate loaded once), as a benchmark
-measures it; the first batch of the rule's process (imports and thread pools included) is kept
-beside it (`pbm_ann_first_batch_wall_s`).
+inside), the cost of one batch and the speed ratio, how often the surrogate left its training
+domain, and the share of each model's final number of granules merged at the PBM grid's floor
+(breakage fragments smaller than its first pivot). Cost in CPU seconds beside the wall time:
+PBM-DEM, the mean over its loops of the LIGGGHTS processes' CPU time plus the PBM's; PBM-ANN, the
+median of warm in-memory batches with the ensemble mean (`coupling.warm_batch_times`: surrogate plus
+PBM, the surrogate loaded once), as a benchmark measures it; the first batch of the rule's process
+(imports and thread pools included) is kept beside it (`pbm_ann_first_batch_wall_s`).
 """
 
 from __future__ import annotations
@@ -60,6 +61,23 @@ def domain_counts(speed: SpeedResults) -> dict:
         "ann_intervals": int(len(ann)) if ann is not None else 0,
         "ann_out_of_domain_warnings": int(counts.sum()) if counts is not None else float("nan"),
         "constant_calibration_out_of_domain_warnings": speed.constant.timing.get("out_of_domain_count", float("nan")),
+    }
+
+
+def merged_fraction(timing: dict) -> float:
+    """The share of a run's final number of granules merged at the grid floor (its timing.json's
+    ``grid_floor``, pbmdem.pbm.results.grid_floor); NaN for a record without it."""
+    return float(timing.get("grid_floor", {}).get("merged_fraction", float("nan")))
+
+
+def floor_columns(speed: SpeedResults) -> dict:
+    """The grid floor of every model at this speed: the largest share over the PBM-DEM replicates,
+    PBM-ANN's and PBM-constant's."""
+    dem = [merged_fraction(r.timing) for r in speed.dem]
+    return {
+        "dem_merged_fraction_max": max(dem) if dem and not np.isnan(dem).any() else float("nan"),
+        "ann_merged_fraction": merged_fraction(speed.ann.timing),
+        "constant_merged_fraction": merged_fraction(speed.constant.timing),
     }
 
 
@@ -122,6 +140,7 @@ def comparison_row(speed: SpeedResults, in_grid: bool) -> dict:
         "wall_time_ratio_dem_over_ann": float(dem_wall.mean()) / t_ann if t_ann > 0 else nan,
         "cpu_time_ratio_dem_over_ann": float(dem_cpu.mean()) / cpu_ann if cpu_ann > 0 else nan,
         **domain_counts(speed),
+        **floor_columns(speed),
     }
     if speed.members is not None and len(speed.members):
         ok = finished_members(speed.members)

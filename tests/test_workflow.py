@@ -366,6 +366,21 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
     # the three findings figures (speed, feed, and with pbm.breakage on the breakage study)
     assert findings.count(".. image:: data:image/png;base64,") == 3
     assert "**Breakage.**" in findings
+    # beside the validation, what the surrogate was trained on (every grid point and replicate of
+    # the run) and its accuracy on points it never saw
+    grid = cfg["grid"]
+    runs = len(grid["impeller_rpm"]) * len(grid["size_distributions"]) * cfg["dem"]["replicates"]
+    learned = (
+        f"**What the surrogate was trained on.** The surrogate was trained on {runs} DEM runs: "
+        f"{len(grid['impeller_rpm']) * len(grid['size_distributions'])} operating points (impeller speeds "
+        + " and ".join(f"{r:g}" for r in sorted(grid["impeller_rpm"]))
+        + " rpm; feeds "
+        + " and ".join(sorted(grid["size_distributions"]))
+        + f") with {cfg['dem']['replicates']} replicates each"
+    )
+    assert learned in findings, findings[findings.find("**How far") :][:3000]
+    assert findings.index("**How far to trust them.**") < findings.index(learned)
+    assert "cross-validation" in findings and "the noise floor" in findings
     response = pd.read_csv(res / "dem" / "speed_response.csv")
     assert len(response) == len(cfg["grid"]["impeller_rpm"]) * len(cfg["grid"]["size_distributions"])
     assert (response.n_replicates == cfg["dem"]["replicates"]).all()

@@ -297,7 +297,7 @@ def test_rule_declares_contract_paths():
     assert "model=MODEL" in text and layout.MODEL == "results/surrogate/model.skops"
     assert "../workflow/scripts/train_surrogate.py" in text
     script = (REPO / "workflow" / "scripts" / "train_surrogate.py").read_text()
-    assert "velocity_table=sm.input.velocity" in script
+    assert "velocity_table=snakemake.input.velocity" in script
 
 
 def test_single_run_table_still_trains(tmp_path):

@@ -2,13 +2,12 @@
 
 from pbmdem.atomic import write_csv
 from pbmdem.dem.grid_tables import aggregate, read_tables, run_table
-from pbmdem.joblog import rule_job
+from pbmdem.joblog import log_job
 
-sm = snakemake  # noqa: F821
-with rule_job(sm.log[0]):
-    aggregate(sm.input.tables, sm.output.table)
-    aggregate(sm.input.walls, sm.output.walls, kind="walls")
-    aggregate(sm.input.velocities, sm.output.velocities, kind="velocities")
-    aggregate(sm.input.wall_velocities, sm.output.wall_velocities, kind="wall_velocities")
-    write_csv(sm.output.replicates, read_tables(sm.input.tables, "pairs"))
-    run_table(sm.input.summaries, sm.output.runs)
+log_job(snakemake.log[0])  # noqa: F821
+aggregate(snakemake.input.tables, snakemake.output.table)  # noqa: F821
+aggregate(snakemake.input.walls, snakemake.output.walls, kind="walls")  # noqa: F821
+aggregate(snakemake.input.velocities, snakemake.output.velocities, kind="velocities")  # noqa: F821
+aggregate(snakemake.input.wall_velocities, snakemake.output.wall_velocities, kind="wall_velocities")  # noqa: F821
+write_csv(snakemake.output.replicates, read_tables(snakemake.input.tables, "pairs"))  # noqa: F821
+run_table(snakemake.input.summaries, snakemake.output.runs)  # noqa: F821

@@ -1,12 +1,16 @@
 """Snakemake rule comparison: the comparison table of every validation speed."""
 
 from pbmdem.atomic import write_csv
-from pbmdem.joblog import rule_job
+from pbmdem.joblog import log_job
 from pbmdem.validation.comparison import compare
 
-sm = snakemake  # noqa: F821
-with rule_job(sm.log[0]):
-    write_csv(
-        sm.output.table,
-        compare(sm.params.validation_dir, sm.params.rpms, sm.params.grid_rpm, sm.params.replicates),
-    )
+log_job(snakemake.log[0])  # noqa: F821
+write_csv(
+    snakemake.output.table,
+    compare(
+        snakemake.params.validation_dir,
+        snakemake.params.rpms,  # noqa: F821
+        snakemake.params.grid_rpm,
+        snakemake.params.replicates,
+    ),
+)  # noqa: F821

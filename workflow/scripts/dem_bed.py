@@ -6,14 +6,13 @@ import os
 from pbmdem.config import DemExecution, DemPoint
 from pbmdem.dem.plan import plan_bed
 from pbmdem.dem.run import settle_bed
-from pbmdem.joblog import rule_job
+from pbmdem.joblog import log_job
 
-sm = snakemake  # noqa: F821
-with rule_job(sm.log[0]):
-    point = DemPoint.from_dict(sm.params.point)
-    execution = DemExecution.of_job(sm.config, sm.resources)
-    if sm.resources.get("mpi"):
-        os.environ["PBMDEM_MPI_LAUNCHER"] = str(sm.resources.mpi)
-    bed = plan_bed(point, replicate=int(sm.wildcards.rep))
-    record = settle_bed(point, bed, sm.params.bed_dir, execution)
-    logging.info("settled bed %s: %.1f s of LIGGGHTS", bed.bed_id, record["liggghts_wall_time_s"])
+log_job(snakemake.log[0])  # noqa: F821
+point = DemPoint.from_dict(snakemake.params.point)  # noqa: F821
+execution = DemExecution.of_job(snakemake.config, snakemake.resources)  # noqa: F821
+if snakemake.resources.get("mpi"):  # noqa: F821
+    os.environ["PBMDEM_MPI_LAUNCHER"] = str(snakemake.resources.mpi)  # noqa: F821
+bed = plan_bed(point, replicate=int(snakemake.wildcards.rep))  # noqa: F821
+record = settle_bed(point, bed, snakemake.params.bed_dir, execution)  # noqa: F821
+logging.info("settled bed %s: %.1f s of LIGGGHTS", bed.bed_id, record["liggghts_wall_time_s"])

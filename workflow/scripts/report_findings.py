@@ -1,24 +1,24 @@
 """Snakemake rule report_findings: the figures and words the report opens with (thin)."""
 
-from pbmdem.joblog import rule_job
+from pbmdem.joblog import log_job
 from pbmdem.report.outputs import write_findings
 
 sm = snakemake  # noqa: F821
-with rule_job(sm.log[0]):
-    write_findings(
-        speed=sm.input.speed,
-        feed=sm.input.feed,
-        comparison=sm.input.comparison,
-        speed_feed=sm.params.speed_feed,
-        feed_rpm=sm.params.feed_rpm,
-        batch_s=sm.params.batch_s,
-        breakage=sm.input.breakage,
-        training=sm.input.training,
-        metadata=sm.input.metadata,
-        out={
-            "speed_png": sm.output.speed_png,
-            "feed_png": sm.output.feed_png,
-            "breakage_png": sm.output.breakage_png,
-            "rst": sm.output.rst,
-        },
-    )
+log_job(sm.log[0])
+write_findings(
+    speed=sm.input.speed,
+    feed=sm.input.feed,
+    comparison=sm.input.comparison,
+    speed_feed=sm.params.speed_feed,
+    feed_rpm=sm.params.feed_rpm,
+    batch_s=sm.params.batch_s,
+    breakage=sm.input.breakage,
+    training=sm.input.training,
+    metadata=sm.input.metadata,
+    out={
+        "speed_png": sm.output.speed_png,
+        "feed_png": sm.output.feed_png,
+        "breakage_png": sm.output.breakage_png,
+        "rst": sm.output.rst,
+    },
+)

@@ -9,17 +9,17 @@ directory are recorded in the table, not as params: moving the project reruns no
 import os
 from pathlib import Path
 
-from pbmdem.joblog import rule_job
+from pbmdem.joblog import log_job
 from pbmdem.report.outputs import write_provenance
 
 sm = snakemake  # noqa: F821
-with rule_job(sm.log[0]):
-    write_provenance(
-        config=sm.config,
-        settings=sm.params.settings,
-        basedir=Path(sm.scriptdir).resolve().parents[1],
-        workdir=os.getcwd(),
-        runs=sm.input.runs,
-        metadata=sm.input.metadata,
-        out={"csv": sm.output.csv, "html": sm.output.html},
-    )
+log_job(sm.log[0])
+write_provenance(
+    config=sm.config,
+    settings=sm.params.settings,
+    basedir=Path(sm.scriptdir).resolve().parents[1],
+    workdir=os.getcwd(),
+    runs=sm.input.runs,
+    metadata=sm.input.metadata,
+    out={"csv": sm.output.csv, "html": sm.output.html},
+)

@@ -1,11 +1,11 @@
 """Snakemake rule report_settings: the process-settings and impeller-speed tables (thin)."""
 
-from pbmdem.joblog import rule_job
+from pbmdem.joblog import log_job
 from pbmdem.report.outputs import write_settings
 
 sm = snakemake  # noqa: F821
-with rule_job(sm.log[0]):
-    write_settings(
-        **sm.params.settings,
-        out={name: sm.output[name] for name in ("settings_csv", "settings_html", "speeds_csv", "speeds_html")},
-    )
+log_job(sm.log[0])
+write_settings(
+    **sm.params.settings,
+    out={name: sm.output[name] for name in ("settings_csv", "settings_html", "speeds_csv", "speeds_html")},
+)

@@ -2,15 +2,14 @@
 
 from pbmdem.config import CoupledLoop, Sweep
 from pbmdem.coupling.sweep import rpm_sweep
-from pbmdem.joblog import rule_job
+from pbmdem.joblog import log_job
 
-sm = snakemake  # noqa: F821
 # one line per interval and per speed (wall times, out-of-domain counts): job log and terminal
-with rule_job(sm.log[0]):
-    rpm_sweep(
-        CoupledLoop.from_dict(sm.params.loop),
-        Sweep.from_dict(sm.params.sweep),
-        sm.input.model,
-        sm.output.table,
-        sm.output.plot,
-    )
+log_job(snakemake.log[0])  # noqa: F821
+rpm_sweep(
+    CoupledLoop.from_dict(snakemake.params.loop),
+    Sweep.from_dict(snakemake.params.sweep),  # noqa: F821
+    snakemake.input.model,
+    snakemake.output.table,
+    snakemake.output.plot,
+)  # noqa: F821

@@ -1,11 +1,14 @@
 """Snakemake rule validation_bands: the PBM-DEM replicate band of one speed and the other models in it."""
 
 from pbmdem.atomic import write_csv
-from pbmdem.joblog import rule_job
+from pbmdem.joblog import log_job
 from pbmdem.validation.comparison import bands_of
 from pbmdem.validation.results import load_speed
 
-sm = snakemake  # noqa: F821
-with rule_job(sm.log[0]):
-    speed = load_speed(sm.params.validation_dir, sm.wildcards.rpm, sm.params.replicates)
-    write_csv(sm.output.bands, bands_of(speed))
+log_job(snakemake.log[0])  # noqa: F821
+speed = load_speed(
+    snakemake.params.validation_dir,
+    snakemake.wildcards.rpm,  # noqa: F821
+    snakemake.params.replicates,
+)  # noqa: F821
+write_csv(snakemake.output.bands, bands_of(speed))  # noqa: F821

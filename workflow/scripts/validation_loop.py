@@ -5,23 +5,22 @@ import os
 from pbmdem import coupling
 from pbmdem.atomic import write_csv
 from pbmdem.config import CoupledLoop, DemExecution
-from pbmdem.joblog import rule_job
+from pbmdem.joblog import log_job
 
-sm = snakemake  # noqa: F821
 # interval lines (DEM and PBM wall time, out-of-domain count) and DEM progress: job log and terminal
-with rule_job(sm.log[0]):
-    loop = CoupledLoop.from_dict(sm.params.loop)
-    rpm = float(sm.wildcards.rpm)
-    outdir = sm.params.outdir
-    method = sm.params.method
-    if method == "dem":
-        if sm.resources.get("mpi"):
-            os.environ["PBMDEM_MPI_LAUNCHER"] = str(sm.resources.mpi)
-        execution = DemExecution.of_job(sm.config, sm.resources)
-        coupling.pbm_dem(loop, rpm, outdir, execution, replicate=int(sm.wildcards.rep))
-    elif method == "ann":
-        coupling.pbm_ann(loop, sm.input.model, rpm, outdir)
-        # the PBM-ANN band: once per ensemble member of the surrogate (not part of PBM-ANN's timing)
-        write_csv(sm.output.members, coupling.pbm_ann_members(loop, sm.input.model, rpm))
-    else:
-        coupling.pbm_constant(loop, sm.input.model, rpm, outdir)
+log_job(snakemake.log[0])  # noqa: F821
+loop = CoupledLoop.from_dict(snakemake.params.loop)  # noqa: F821
+rpm = float(snakemake.wildcards.rpm)  # noqa: F821
+outdir = snakemake.params.outdir  # noqa: F821
+method = snakemake.params.method  # noqa: F821
+if method == "dem":
+    if snakemake.resources.get("mpi"):  # noqa: F821
+        os.environ["PBMDEM_MPI_LAUNCHER"] = str(snakemake.resources.mpi)  # noqa: F821
+    execution = DemExecution.of_job(snakemake.config, snakemake.resources)  # noqa: F821
+    coupling.pbm_dem(loop, rpm, outdir, execution, replicate=int(snakemake.wildcards.rep))  # noqa: F821
+elif method == "ann":
+    coupling.pbm_ann(loop, snakemake.input.model, rpm, outdir)  # noqa: F821
+    # the PBM-ANN band: once per ensemble member of the surrogate (not part of PBM-ANN's timing)
+    write_csv(snakemake.output.members, coupling.pbm_ann_members(loop, snakemake.input.model, rpm))  # noqa: F821
+else:
+    coupling.pbm_constant(loop, snakemake.input.model, rpm, outdir)  # noqa: F821

@@ -183,7 +183,8 @@ def train_surrogate(cfg, path: Path) -> float:
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        data = training_data(table, radius, velocity_table=velocity)
+        # the config's speed law (the surrogate's velocity targets have its parameters), as train.py
+        data = training_data(table, radius, velocity_table=velocity, speed_law=settings["speed_law"])
         surrogate = build_surrogate(settings, radius).fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
     fit = time.perf_counter() - t0
     save_surrogate(surrogate, path)

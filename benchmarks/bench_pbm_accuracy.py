@@ -30,10 +30,14 @@ Ziff & McGrady (1985): uniform daughters with S = v (t = 9: the number grows 10x
 (t = 10: 3.7x); binary equal fragments with S = v (number only: M0 = 1 + t); and constant
 aggregation (beta = 1) with uniform-daughter breakage S = 2 v at t = 12 (the number against the
 Riccati solution, the PSD against the steady state n = 4 e^(-2 v)). Printed as the aggregation
-cases, with the observed orders of |M0 error|, |M2 error| and L1.
+cases, with the observed orders of |M0 error|, |M2 error| and L1. Then uniform-daughter breakage
+S = v from a monodisperse start (every granule at v = 1, a pivot of every grid; grids from 2^-20)
+against its closed form (Ziff & McGrady 1985), at a l t = 0.25 to 10 breakages per starting
+granule: L1 and the cumulative-mass error with their observed orders, lower while the start's jump
+dominates than after it has decayed.
 
 Run: .venv/bin/python benchmarks/bench_pbm_accuracy.py [--quick] [--fixed-pivot] [--grid] [--breakage]
-(about 2-3 min; --grid alone about 1 min, --breakage alone about 30 s; --quick, the suite's smoke
+(about 2-3 min; --grid alone about 1 min, --breakage alone about 1 min; --quick, the suite's smoke
 test, about 20 s: q = 1, 2, 4, the grid convergence up to q = 16)
 """
 
@@ -293,6 +297,83 @@ def breakage_accuracy(qs):
         print("  observed order per halving of ln r: " + "; ".join(f"|{k}| {_orders(qs, v)}" for k, v in cols.items()))
 
 
+#: the monodisperse breakage case: times (in units of 1 / (a l)) at which it is compared
+MONODISPERSE_TIMES = (0.25, 0.5, 1.0, 2.0, 4.0, 10.0)
+
+
+def monodisperse_breakage_cells(edges, t, a, l):
+    """Exact number and volume per cell of pure breakage S = a v with uniform daughters (b = 2/u)
+    from N0 = 1 granules of volume l (Ziff & McGrady 1985): e^(-a l t) granules still at l, and
+    the fragments' density e^(-s v) (2 s + s^2 (l - v)) below l, s = a t (the number above v is
+    G(v) = e^(-s v) (1 + s (l - v)) - e^(-s l), so that M0 = 1 + a l t)."""
+    from scipy import integrate
+
+    s_ = a * t
+
+    def above(v):
+        return np.exp(-s_ * v) * (1.0 + s_ * (l - v)) - np.exp(-s_ * l)
+
+    num, vol = [], []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        top = min(hi, l)
+        if lo >= l:
+            num.append(0.0)
+            vol.append(0.0)
+            continue
+        num.append(above(lo) - above(top))
+        vol.append(
+            integrate.quad(lambda v: v * np.exp(-s_ * v) * (2 * s_ + s_**2 * (l - v)), lo, top, epsrel=1e-12, epsabs=0)[
+                0
+            ]
+        )
+    num, vol = np.array(num), np.array(vol)
+    k = int(np.searchsorted(edges, l, side="right")) - 1  # the cell that holds l
+    num[k] += np.exp(-s_ * l)
+    vol[k] += np.exp(-s_ * l) * l
+    return num, vol
+
+
+def monodisperse_breakage(qs, a: float = 1.0, l: float = 1.0):
+    """Cell-average breakage from a monodisperse start (all granules at the pivot l, grids of ratio
+    2^(1/q) from 2^-20 l): L1 of the cell numbers and the cumulative-mass error at the times
+    MONODISPERSE_TIMES (a l t = the number of breakages per starting granule so far), with their
+    observed orders. While the start's jump dominates (a l t <= 1) the order is lower than after
+    it has decayed."""
+    print(f"\nbreakage from a monodisperse start: uniform daughters, S = {a:g} v, all granules at v = {l:g}")
+    rows = {}
+    for q in qs:
+        grid = ver.geometric_grid(q, x0=2.0**-20 * l, x_max=2.0 * l)
+        k = int(np.argmin(np.abs(grid.x - l)))
+        assert abs(grid.x[k] / l - 1.0) < 1e-12, "the start must sit on a pivot"
+        N = np.zeros(grid.bins)
+        N[k] = 1.0
+        solver = Solver.defaults().replace(rtol=1e-8, atol=1e-14, max_step=np.inf)
+        model = GranulationPBM(
+            grid, ver.NoAggregation(), solver=solver, breakage=Breakage(PowerLawSelection(a, 1.0), "uniform")
+        )
+        S = N * grid.x
+        res = model.run(0.0, max(MONODISPERSE_TIMES), State(0.0, N, 0.3 * S, 0.1 * S), output_times=MONODISPERSE_TIMES)
+        edges = np.concatenate([[0.0], grid.edges[1:-1], [np.inf]])
+        times = np.asarray(res.times, float)
+        for t in MONODISPERSE_TIMES:
+            number = np.asarray(res.number[int(np.argmin(np.abs(times - t)))], float)
+            num, vol = monodisperse_breakage_cells(edges, t, a, l)
+            l1 = np.abs(number - num).sum() / num.sum()
+            Q = np.cumsum(number * grid.x) / np.sum(number * grid.x)
+            rows.setdefault(t, []).append((l1, float(np.abs(Q - np.cumsum(vol) / vol.sum()).max())))
+    print("   a l t | L1 cells (ratio " + " / ".join(f"{2 ** (1 / q):.4f}" for q in qs) + ") | observed order"
+          " | PSD (Q3) | observed order")  # fmt: skip
+    for t, errs in rows.items():
+        l1s, qs3 = [e[0] for e in errs], [e[1] for e in errs]
+        print(
+            f"  {a * l * t:6.2f} | "
+            + " / ".join(f"{e:.2e}" for e in l1s)
+            + f" | {_orders(qs, l1s)} | "
+            + " / ".join(f"{e:.2e}" for e in qs3)
+            + f" | {_orders(qs, qs3)}"
+        )
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="q = 1, 2, 4 only")
@@ -307,6 +388,7 @@ def main():
         return
     if args.breakage:
         breakage_accuracy(qs)
+        monodisperse_breakage((*qs, 8) if args.quick else qs)
         return
     schemes = ("cell_average", "fixed_pivot") if args.fixed_pivot else ("cell_average",)
     t_all = time.perf_counter()
@@ -341,6 +423,7 @@ def main():
                         )
                     print(f"  observed order per halving of ln r: |M2 err| {_orders(qs, m2s)}; L1 {_orders(qs, l1s)}")
     breakage_accuracy(qs)
+    monodisperse_breakage(qs)
     grid_convergence((1, 2, 3, 4, 8, 12, 16) if args.quick else GRID_QS)
     print(f"\ntotal {time.perf_counter() - t_all:.0f} s")
 

@@ -9,13 +9,17 @@ report: "../workflow/report/workflow.rst"
 
 # The findings the report opens with (category "1. Findings", and the text included at the top of
 # workflow/report/workflow.rst): final sizes against impeller speed and against the feed, in words
-# and one figure each, then how far to trust them (the comparison with PBM-DEM).
+# and one figure each, then how far to trust them (the comparison with PBM-DEM, and what the
+# surrogate was trained on with its accuracy on DEM runs it never saw).
 rule report_findings:
     input:
         speed=layout.validation("speed_study.csv"),
         feed=layout.validation("feed_study.csv"),
         breakage=layout.validation("breakage_study.csv"),
         comparison=layout.report("comparison.csv"),
+        # what the surrogate was trained on, and its held-out accuracy, beside the validation
+        training=layout.dem("collisions.csv"),
+        metadata=layout.surrogate("model.json"),
     output:
         speed_png=registered(
             layout.report("findings/speed.png"),

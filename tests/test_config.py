@@ -101,3 +101,39 @@ def test_load_config_errors(tmp_path):
     p.write_text("- 1\n- 2\n")
     with pytest.raises(ConfigError, match="mapping"):
         load_config(p)
+
+
+@pytest.mark.parametrize(
+    "key, value, allowed",
+    [
+        ("strength_size_exponent", -0.5, "allowed: number >= 0 and <= 3"),
+        ("strength_size_exponent", 3.5, "allowed: number >= 0 and <= 3"),
+        ("strength_porosity_exponent", -1.0, "allowed: number >= 0 and <= 4"),
+        ("yield_strength", 0.0, "allowed: number > 0 and <= 1000000000.0"),
+        ("yield_strength", -1.0e4, "allowed: number > 0 and <= 1000000000.0"),
+        ("critical_stokes", 0.0, "allowed: number > 0 and <= 1000.0"),
+        ("strength_spread", -0.1, "allowed: number >= 0 and <= 5"),
+        ("reference_porosity", 0.0, "allowed: number > 0 and < 1"),
+        ("reference_porosity", 1.0, "allowed: number > 0 and < 1"),
+        ("reference_diameter", -0.002, "allowed: number > 0 and <= 1"),
+        ("constant_rate", -0.002, "allowed: number >= 0 and <= 1000.0"),
+    ],
+)
+def test_breakage_settings_out_of_their_physical_range_are_refused_where_they_enter(
+    tmp_path, root, key, value, allowed
+):
+    """A breakage setting out of its range is refused when the file is loaded, with the key, the
+    value and the allowed range, before any computation (no numpy warning first)."""
+    import warnings
+
+    cfg = yaml.safe_load((root / "config" / "config.yaml").read_text())
+    cfg["pbm"].setdefault("breakage", {}).update({"enabled": True, key: value})
+    path = tmp_path / "config.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a warning before the error fails the test
+        with pytest.raises(ConfigError) as info:
+            load_config(path)
+    message = str(info.value)
+    assert f"pbm.breakage.{key} = {value!r}" in message and allowed in message, message
+    assert "Traceback" not in message

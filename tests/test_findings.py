@@ -11,6 +11,7 @@ from pbmdem.config import SizeDistribution
 from pbmdem.coupling.studies import blend, feed_cases, mass_median
 from pbmdem.report import findings
 from pbmdem.report.provenance import hyperparameters, kernel_source
+from pbmdem.report.training import training_set, training_words
 
 FINE = SizeDistribution((0.002, 0.003, 0.004), (0.5, 0.3, 0.2))
 COARSE = SizeDistribution((0.0032, 0.005, 0.008), (0.3, 0.4, 0.3))
@@ -84,6 +85,7 @@ def test_findings_state_the_answers_with_their_numbers(tmp_path):
         batch_s=480.0,
         speed_png=tmp_path / "speed.png",
         feed_png=tmp_path / "feed.png",
+        training="The surrogate was trained on 9 DEM runs.",
     )
     assert "from 300 to 1200 rpm changes the granule size after the 8 min batch from d50 = 4.00 mm to 4.50 mm" in text
     assert "(+12.5 %)" in text and "disagree on the final d50 by at most 0.03 mm" in text
@@ -97,6 +99,60 @@ def test_findings_state_the_answers_with_their_numbers(tmp_path):
     # the glossary closes the findings
     assert "* **PBM-ANN**: the PBM with the surrogate" in text
     assert text.index("**How far to trust them.**") < text.index("Glossary\n--------")
+    # what the surrogate was trained on follows the validation, before the glossary
+    learned = text.index("**What the surrogate was trained on.** The surrogate was trained on 9 DEM runs.")
+    assert text.index("**How far to trust them.**") < learned < text.index("Glossary\n--------")
+
+
+def test_the_report_states_the_surrogates_training_set_beside_its_accuracy(tmp_path):
+    """The training set (DEM runs, operating points, replicates, speeds, feeds) is read from the
+    table the surrogate was trained on, the accuracy from its metadata: a real (tiny) training."""
+    import warnings
+
+    from pbmdem.config import Surrogate
+    from pbmdem.readers import InputFileError
+    from pbmdem.surrogate.synthetic import make_synthetic_tables
+    from pbmdem.surrogate.train import train_and_report
+    from pbmdem.tables import GRID_PAIRS
+
+    radius = 0.0265
+    fractions = {"fine": [0.6, 0.3, 0.1], "coarse": [0.2, 0.3, 0.5]}
+    table, _ = make_synthetic_tables(radius, rpms=(300, 600, 900), distributions=fractions, n_replicates=3, seed=5)
+    csv = tmp_path / "collisions.csv"
+    table.to_csv(csv, index=False)
+    settings = {
+        "hidden_layer_sizes": [[4]],
+        "alpha": [0.1],
+        "ensemble_size": 2,
+        "seeds": [3, 4],
+        "max_iter": 300,
+        "cv": {"strategy": "group_kfold", "n_splits": 3},
+        "model": "mlp",
+    }
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        meta = train_and_report(
+            csv, tmp_path / "model.skops", settings=Surrogate.from_section(settings).to_dict(), impeller_radius=radius
+        )
+    grid = GRID_PAIRS.read(csv, need=("point_id", "rpm", "distribution", "n_replicates"))
+    training = training_set(grid, str(csv), meta["training_point_ids"])
+    assert (training.runs, training.points, training.replicates) == (18, 6, (3,))
+    words = training_words(training, meta, "results/dem/collisions.csv")
+    assert words.startswith(
+        "The surrogate was trained on 18 DEM runs: 6 operating points (impeller speeds 300, 600 and 900 rpm; "
+        "feeds coarse and fine) with 3 replicates each (DEM insertion seeds), the table "
+        "``results/dem/collisions.csv``."
+    ), words
+    held_out = meta["cv_scores"]["outer_summary"]["mlp"]
+    assert "(group kfold cross-validation, 3 folds, whole points held out)" in words
+    assert "its kernel source, the MLP ensemble (ANN), predicts log10 of the encounter frequency" in words
+    assert f"R2 = {held_out['pooled_r2_log10']:.3f}" in words
+    assert f"mean absolute error of {held_out['pooled_mae_log10']:.3f} decades" in words
+    assert f"allows R2 = {held_out['noise_floor_r2_log10']:.3f} at best" in words
+    # a point the surrogate was trained on that the table lacks: the table changed after training
+    with pytest.raises(InputFileError, match=r"collisions.csv: the surrogate was trained on operating point\(s\) "
+                                             r"\['rpm1500_fine'\] that it lacks"):  # fmt: skip
+        training_set(grid, str(csv), [*meta["training_point_ids"], "rpm1500_fine"])
 
 
 def test_a_speed_above_which_the_granules_get_smaller_is_named():

@@ -7,6 +7,8 @@ refresh, the settings and PBM-constant with breakage."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pbm_oracle as oracle
 import pytest
@@ -478,3 +480,22 @@ def test_the_grid_floor_of_a_resumed_run_is_that_of_the_whole_batch():
     # without breakage nothing is merged
     plain = GranulationPBM(g, ConstantKernel(1e-5), separate_feed=False).run(0.0, 40.0, state)
     assert plain.info["grid_floor"]["merged_number"] == 0.0 and not plain.info["grid_floor"]["flagged"]
+
+
+@pytest.mark.parametrize("exponent", [-1.0, -0.01, float("nan"), float("inf"), "steep"])
+def test_a_power_law_selection_refuses_exponents_outside_its_range(exponent):
+    # a negative exponent breaks the smallest granules fastest: the shattering transition (mass lost
+    # to zero size), which no grid holds; refused when the selection is made, not at run time
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(PBMInputError, match=r"breakage selection exponent = .*allowed: a finite number >= 0"):
+            PowerLawSelection(1.0, exponent)
+
+
+def test_a_power_law_selection_that_overflows_on_the_grid_is_refused_without_a_warning():
+    g = ver.geometric_grid(2, x0=1.0, x_max=1e6)
+    selection = PowerLawSelection(1.0, 60.0)  # (1e6)^60 is beyond the largest float
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(PBMInputError, match=r"at pivot \d+ \(volume .*\) = inf; allowed: finite rates"):
+            ver.simulate_breakage(Breakage(selection, "uniform"), 1.0, g)

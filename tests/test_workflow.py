@@ -233,6 +233,28 @@ def test_a_copied_project_with_its_results_reruns_nothing(tiny_workflow, root, t
     assert f"from the throughput of the {runs} finished runs in results/dem/runs.csv" in dry.stderr
 
 
+def test_a_damaged_run_table_stops_its_rule_with_the_message_alone(tiny_workflow, root, tmp_path):
+    """A negative encounter frequency in one DEM run's table (in a copy of the finished workflow):
+    the rule that reads it fails, and the terminal and the rule's log show the message naming the
+    file, row, column and value, without a Python traceback."""
+    workdir, configfile = tiny_workflow
+    copy = tmp_path / "wd"
+    shutil.copytree(workdir, copy, symlinks=True)  # copy2: results keep their time stamps
+    damaged = Path("results/dem/rpm600_small/rep0/collisions.csv")
+    table = pd.read_csv(copy / damaged)
+    table.loc[1, "encounter_frequency_per_pair"] = -1.0
+    table.to_csv(copy / damaged, index=False)  # newer than the grid table: collision_tables reruns
+    proc = snakemake(root, copy, copy / configfile.name, "--cores", "1", "results/dem/collisions.csv", check=False)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode != 0, out[-3000:]
+    message = f"{damaged}: row 2, column 'encounter_frequency_per_pair' = -1.0"
+    log = (copy / "results" / "logs" / "dem" / "collision_tables.log").read_text()
+    for text in (out, log):
+        assert message in text and "a finite number >= 0 is required" in text, text[-3000:]
+        assert "Traceback" not in text, text[-3000:]
+    assert "Error in rule collision_tables" in out
+
+
 def test_lint_is_clean(root, tiny_workflow):
     workdir, configfile = tiny_workflow
     proc = snakemake(root, workdir, configfile, "--lint", check=False)
@@ -351,6 +373,21 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
     # the three findings figures (speed, feed, and with pbm.breakage on the breakage study)
     assert findings.count(".. image:: data:image/png;base64,") == 3
     assert "**Breakage.**" in findings
+    # beside the validation, what the surrogate was trained on (every grid point and replicate of
+    # the run) and its accuracy on points it never saw
+    grid = cfg["grid"]
+    runs = len(grid["impeller_rpm"]) * len(grid["size_distributions"]) * cfg["dem"]["replicates"]
+    learned = (
+        f"**What the surrogate was trained on.** The surrogate was trained on {runs} DEM runs: "
+        f"{len(grid['impeller_rpm']) * len(grid['size_distributions'])} operating points (impeller speeds "
+        + " and ".join(f"{r:g}" for r in sorted(grid["impeller_rpm"]))
+        + " rpm; feeds "
+        + " and ".join(sorted(grid["size_distributions"]))
+        + f") with {cfg['dem']['replicates']} replicates each"
+    )
+    assert learned in findings, findings[findings.find("**How far") :][:3000]
+    assert findings.index("**How far to trust them.**") < findings.index(learned)
+    assert "cross-validation" in findings and "the noise floor" in findings
     response = pd.read_csv(res / "dem" / "speed_response.csv")
     assert len(response) == len(cfg["grid"]["impeller_rpm"]) * len(cfg["grid"]["size_distributions"])
     assert (response.n_replicates == cfg["dem"]["replicates"]).all()

@@ -2,7 +2,9 @@
 
 from pbmdem.atomic import write_csv
 from pbmdem.dem.grid_tables import aggregate, read_tables, run_table
+from pbmdem.joblog import log_job
 
+log_job(snakemake.log[0])  # noqa: F821
 aggregate(snakemake.input.tables, snakemake.output.table)  # noqa: F821
 aggregate(snakemake.input.walls, snakemake.output.walls, kind="walls")  # noqa: F821
 aggregate(snakemake.input.velocities, snakemake.output.velocities, kind="velocities")  # noqa: F821

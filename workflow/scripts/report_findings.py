@@ -13,6 +13,8 @@ write_findings(
     feed_rpm=sm.params.feed_rpm,
     batch_s=sm.params.batch_s,
     breakage=sm.input.breakage,
+    training=sm.input.training,
+    metadata=sm.input.metadata,
     out={
         "speed_png": sm.output.speed_png,
         "feed_png": sm.output.feed_png,

@@ -1,9 +1,11 @@
 """Snakemake rule validation_bands: the PBM-DEM replicate band of one speed and the other models in it."""
 
 from pbmdem.atomic import write_csv
+from pbmdem.joblog import log_job
 from pbmdem.validation.comparison import bands_of
 from pbmdem.validation.results import load_speed
 
+log_job(snakemake.log[0])  # noqa: F821
 speed = load_speed(
     snakemake.params.validation_dir,
     snakemake.wildcards.rpm,  # noqa: F821

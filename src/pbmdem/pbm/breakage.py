@@ -54,13 +54,23 @@ class ConstantSelection:
 
 class PowerLawSelection:
     """S = ``coefficient`` x v^``exponent`` with v the pivot's solid volume (m3, or the unit of
-    the grid): exponent 1 and 2 are the linear and quadratic cases of Ziff & McGrady (1985)."""
+    the grid): exponent 1 and 2 are the linear and quadratic cases of Ziff & McGrady (1985).
+    A negative exponent (the smallest granules breaking fastest) is refused: its solutions lose
+    mass to granules of zero size (the shattering transition, McGrady & Ziff 1987), which no grid
+    with a smallest class holds."""
 
     def __init__(self, coefficient: float, exponent: float):
         self.coefficient = positive("breakage selection coefficient", coefficient, allow_zero=True)
-        if not np.isfinite(exponent):
-            raise PBMInputError(f"breakage selection exponent = {exponent!r}; allowed: a finite number")
-        self.exponent = float(exponent)
+        try:
+            p = float(exponent)
+        except (TypeError, ValueError):
+            p = float("nan")
+        if not (np.isfinite(p) and p >= 0):
+            raise PBMInputError(
+                f"breakage selection exponent = {exponent!r}; allowed: a finite number >= 0 (a negative "
+                "exponent shatters granules to zero size, which no grid holds)"
+            )
+        self.exponent = p
 
     def __repr__(self) -> str:
         return f"PowerLawSelection(coefficient={self.coefficient:g}, exponent={self.exponent:g})"
@@ -69,7 +79,15 @@ class PowerLawSelection:
         pass
 
     def __call__(self, inp: KernelInput) -> np.ndarray:
-        return self.coefficient * np.asarray(inp.volumes[: inp.pivots], float) ** self.exponent
+        volumes = np.asarray(inp.volumes[: inp.pivots], float)
+        with np.errstate(over="ignore"):
+            rates = self.coefficient * volumes**self.exponent
+        if (k := first_index(~np.isfinite(rates))) is not None:
+            raise PBMInputError(
+                f"breakage selection {self!r} at pivot {k} (volume {volumes[k]:g}) = {float(rates[k])!r}; allowed: "
+                "finite rates (a smaller coefficient or exponent, or the grid's volumes in another unit)"
+            )
+        return rates
 
 
 class Breakage:

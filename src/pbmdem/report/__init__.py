@@ -9,6 +9,7 @@ figure and table registered with `report()` in rules/report.smk, captions in wor
 | `figures` | the figures of one validation speed (size bands, PSD evolution, liquid and porosity, frequencies) |
 | `tables` | the process settings, the speeds, and the comparison table in display form |
 | `statements` | the targets (met or not, with the measured values) and the out-of-domain statement |
+| `training` | the surrogate's training set (DEM runs, points, replicates, speeds, feeds), held-out accuracy |
 | `provenance` | configuration hash, git commit, versions of LIGGGHTS, Python and libraries, the kernel source |
 | `outputs` | the files of the report rules (rules/report.smk), one function per rule |
 

@@ -287,11 +287,14 @@ def findings_rst(
     speed_png: str,
     feed_png: str,
     extra: tuple[str, ...] = (),
+    training: str | None = None,
 ) -> str:
     """The findings as reStructuredText: the two answers with their figures (the PNGs at
     `speed_png`, `feed_png` embedded as data URIs, so that the text shows them wherever it is
     included: Snakemake's own `embeddedimage` directive does not embed), then `extra` (further
-    findings, lines of rst), then how far to trust them."""
+    findings, lines of rst), then how far to trust them: the validation and, with `training` (the
+    paragraph of `pbmdem.report.training.training_words`), what the surrogate was trained on and
+    its accuracy on DEM runs it never saw."""
     lines = [
         "Findings",
         "--------",
@@ -311,6 +314,7 @@ def findings_rst(
         *extra,
         "**How far to trust them.** " + trust_words(comparison),
         "",
+        *(("**What the surrogate was trained on.** " + training, "") if training else ()),
         "Glossary",
         "--------",
         "",

@@ -192,11 +192,23 @@ def write_provenance(*, config: dict, settings: dict, basedir, runs, metadata, o
 
 
 def write_findings(
-    *, speed, feed, comparison, speed_feed: str, feed_rpm: float, batch_s: float, out: dict, breakage=None
+    *,
+    speed,
+    feed,
+    comparison,
+    speed_feed: str,
+    feed_rpm: float,
+    batch_s: float,
+    out: dict,
+    breakage=None,
+    training=None,
+    metadata=None,
 ) -> None:
     """The findings: the figures (speed, feed, and with `breakage` the breakage study) and their
     text (rst), atomically. `speed`, `feed`, `breakage`: the PBM-ANN study tables; `comparison`: the
-    validation's comparison table; `out`: speed_png, feed_png, breakage_png, rst."""
+    validation's comparison table; `training`, `metadata`: the grid collision table the surrogate
+    was trained on and its metadata (model.json), for its training set and held-out accuracy beside
+    the validation; `out`: speed_png, feed_png, breakage_png, rst."""
     from pbmdem.atomic import write_text
     from pbmdem.plotting import save_figure as save
 
@@ -217,6 +229,16 @@ def write_findings(
         studies = {"speed study": speed_table, "feed study": feed_table, "breakage study": study}
         extra = (breakage_words(study), "", _image_directive(out["breakage_png"]), "   :width: 640px", "")
         extra += (clipping_words(studies), "")
+    learned = None
+    if training is not None and metadata is not None:
+        from pbmdem.surrogate.persistence import read_metadata
+        from pbmdem.tables import GRID_PAIRS
+
+        from .training import training_set, training_words
+
+        meta = read_metadata(metadata)
+        table = GRID_PAIRS.read(training, need=("point_id", "rpm", "distribution", "n_replicates"))
+        learned = training_words(training_set(table, str(training), meta["training_point_ids"]), meta, str(training))
     text = findings_rst(
         speed_table,
         feed_table,
@@ -227,5 +249,6 @@ def write_findings(
         speed_png=str(out["speed_png"]),
         feed_png=str(out["feed_png"]),
         extra=extra,
+        training=learned,
     )
     write_text(out["rst"], text)

@@ -127,9 +127,49 @@ def _lower_centre(w, step, centres):
     return lo - 1
 
 
+@njit("UniTuple(f8, 2)(f8, f8, f8, f8, f8[::1])", cache=True, nogil=True)
+def _locate(l_sum, inv_vol, kz, step, centres):
+    """(e, f): the aggregate of liquid ``l_sum`` and solid 1 / ``inv_vol`` (ratio w) goes to liquid
+    class e with the share 1 - f and to e + 1 with f, e and e + 1 the classes whose centres enclose
+    w (f = 0 below the first centre and above the last); ``kz`` = inv_vol / step (uniform classes)."""
+    top = centres.size - 1
+    if step > 0.0:
+        z = l_sum * kz - 0.5  # (w - centre_0) / step
+        if z <= 0.0:
+            return 0.0, 0.0
+        if z >= top:
+            return float(top), 0.0
+        e = int(z)
+        return float(e), z - e
+    w = l_sum * inv_vol
+    e = _lower_centre(w, step, centres)
+    if e < 0:
+        return 0.0, 0.0
+    if e >= top:
+        return float(top), 0.0
+    return float(e), (w - centres[e]) / (centres[e + 1] - centres[e])
+
+
+@njit("void(f8[:, :], f8, f8, f8, f8, f8)", cache=True, nogil=True)
+def _deposit(tmp, e, f, R, RL, RG):
+    """Births (number rate R, liquid RL, gas RG) to liquid class e (share 1 - f) and e + 1 (f)."""
+    k = int(e)
+    if f == 0.0:
+        tmp[0, k] += R
+        tmp[1, k] += RL
+        tmp[2, k] += RG
+    else:
+        tmp[0, k] += R - R * f
+        tmp[1, k] += RL - RL * f
+        tmp[2, k] += RG - RG * f
+        tmp[0, k + 1] += R * f
+        tmp[1, k + 1] += RL * f
+        tmp[2, k + 1] += RG * f
+
+
 @njit(
     "f8(f8[:, ::1], f8[::1], b1, f8[:, ::1], i8[::1], f8[::1], f8, f8[::1], i8[::1], f8[:, ::1], f8[:, ::1], "
-    "i8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, :, ::1], f8[:, ::1])",
+    "i8[:, ::1], f8[:, :, ::1], f8[:, ::1], f8[:, :, ::1], f8[:, ::1])",
     cache=True,
     nogil=True,
 )
@@ -139,7 +179,7 @@ def aggregation_totals2d(S, p, use_p, nlg, dims, xc, step, centres, target, weig
     of the size classes, times p(phi_a) p(phi_b) of the two classes with ``use_p``; ``xc`` (Mx,)
     the size classes' volumes; ``step``, ``centres``: the liquid classes' centres (``LiquidGrid``);
     ``target``, ``weight``, ``factors``: the size axis' pair map (``_compiled.aggregation_totals``).
-    Work: ``act`` (Mx, J + 1), ``cw`` (4, M2), ``xw`` (4, max(K, Mx)), ``rw`` (9, K, J).
+    Work: ``act`` (Mx, J + 1), ``cw`` (4, Mx, J), ``xw`` (4, max(K, Mx)), ``rw`` (9, K, J).
 
     Event rate of classes a != b: beta_ab N_a N_b (a = b: half of beta_aa N_a^2), beta_ab = S_ij p_a
     p_b. Deaths need only P_i = sum_e p N of every size class: class a loses N_a p_a sum_j S_ij P_j
@@ -151,29 +191,26 @@ def aggregation_totals2d(S, p, use_p, nlg, dims, xc, step, centres, target, weig
     to the first or last class beyond their centres), so that the births change continuously with
     the state (a class taken by w alone would switch within a step and force tiny steps)."""
     K, Mx, J, cell_average = dims[0], dims[1], dims[2], dims[3] != 0
-    M2 = Mx * J
+    # the classes that can aggregate, packed per size class i (act[i, J] of them): cw[:, i, k] =
+    # N p, L p, G p and the liquid per granule of the k-th one (its liquid class is not needed)
     A, AL, AG, lpp = cw[0], cw[1], cw[2], cw[3]
     P, death, pooled = xw[0], xw[1], xw[2:4]
     tmp = rw[6:9, 0]  # (3, J): the births of one pair of size classes
     for i in range(Mx):
         P[i] = 0.0
-        act[i, J] = 0
-    for a in range(M2):
-        N = nlg[0, a]
-        pa = p[a] if use_p else 1.0
-        if N > 0 and pa > 0:
-            i = a // J
-            A[a] = N * pa
-            AL[a] = nlg[1, a] * pa
-            AG[a] = nlg[2, a] * pa
-            lpp[a] = nlg[1, a] / N
-            P[i] += A[a]
-            act[i, act[i, J]] = a
-            act[i, J] += 1
-        else:
-            A[a] = 0.0
-            AL[a] = 0.0
-            AG[a] = 0.0
+        n = 0
+        for e in range(J):
+            a = i * J + e
+            N = nlg[0, a]
+            pa = p[a] if use_p else 1.0
+            if N > 0 and pa > 0:
+                A[i, n] = N * pa
+                AL[i, n] = nlg[1, a] * pa
+                AG[i, n] = nlg[2, a] * pa
+                lpp[i, n] = nlg[1, a] / N
+                P[i] += A[i, n]
+                n += 1
+        act[i, J] = n
     refused = 0.0
     for i in range(Mx):
         s = 0.0
@@ -184,11 +221,15 @@ def aggregation_totals2d(S, p, use_p, nlg, dims, xc, step, centres, target, weig
             else:
                 s += S[i, j] * P[j]
         death[i] = s
-    for a in range(M2):
-        f = death[a // J]
-        d[0, a] = -A[a] * f
-        d[1, a] = -AL[a] * f
-        d[2, a] = -AG[a] * f
+    for i in range(Mx):
+        f = death[i]
+        for e in range(J):
+            a = i * J + e
+            pa = p[a] if use_p else 1.0
+            q = pa * f if nlg[0, a] > 0 else 0.0
+            d[0, a] = -nlg[0, a] * q
+            d[1, a] = -nlg[1, a] * q
+            d[2, a] = -nlg[2, a] * q
     for q in range(3):
         for c in range(K):
             for e in range(J):
@@ -198,6 +239,8 @@ def aggregation_totals2d(S, p, use_p, nlg, dims, xc, step, centres, target, weig
     for c in range(K):
         pooled[0, c] = 0.0
         pooled[1, c] = 0.0
+    inv_step = 1.0 / step if step > 0.0 else 0.0
+    top = J - 1
     for i in range(Mx):
         ni = act[i, J]
         if ni == 0:
@@ -210,54 +253,49 @@ def aggregation_totals2d(S, p, use_p, nlg, dims, xc, step, centres, target, weig
             s_ij = S[i, j]
             vol = xc[i] + xc[j]
             inv_vol = 1.0 / vol
+            kz = inv_vol * inv_step
             total = 0.0
             e_lo, e_hi = J, -1
+            Aj, ALj, AGj, lj = A[j], AL[j], AG[j], lpp[j]
             for ka in range(ni):
-                a = act[i, ka]
-                Aa, ALa, AGa, la = A[a], AL[a], AG[a], lpp[a]
-                for kb in range(ka if i == j else 0, nj):
-                    b = act[j, kb]
-                    Ab = A[b]
-                    h = s_ij if b != a else 0.5 * s_ij
-                    R = h * Aa * Ab
-                    RL = h * (ALa * Ab + AL[b] * Aa)
-                    RG = h * (AGa * Ab + AG[b] * Aa)
+                sA = s_ij * A[i, ka]
+                sAL = s_ij * AL[i, ka]
+                sAG = s_ij * AG[i, ka]
+                la = lpp[i, ka]
+                kb0 = 0
+                if i == j:  # a class with itself: half the events, beta N^2 / 2; then the classes after it
+                    kb0 = ka + 1
+                    Ab = Aj[ka]
+                    R = 0.5 * sA * Ab
                     total += R
-                    w = (la + lpp[b]) * inv_vol
-                    e = _lower_centre(w, step, centres)
-                    if e < 0 or e == J - 1:
-                        e = 0 if e < 0 else e
-                        tmp[0, e] += R
-                        tmp[1, e] += RL
-                        tmp[2, e] += RG
-                    else:
-                        f = (w - centres[e]) / (centres[e + 1] - centres[e])
-                        tmp[0, e] += R - R * f
-                        tmp[1, e] += RL - RL * f
-                        tmp[2, e] += RG - RG * f
-                        tmp[0, e + 1] += R * f
-                        tmp[1, e + 1] += RL * f
-                        tmp[2, e + 1] += RG * f
-                        e_hi = max(e_hi, e + 1)
-                    e_lo = min(e_lo, e)
-                    e_hi = max(e_hi, e)
+                    e, f = _locate(la + lj[ka], inv_vol, kz, step, centres)
+                    _deposit(tmp, e, f, R, 0.5 * (sAL * Ab + sA * ALj[ka]), 0.5 * (sAG * Ab + sA * AGj[ka]))
+                    e_lo, e_hi = min(e_lo, e), max(e_hi, min(e + 1, top))
+                for kb in range(kb0, nj):
+                    Ab = Aj[kb]
+                    R = sA * Ab
+                    total += R
+                    e, f = _locate(la + lj[kb], inv_vol, kz, step, centres)
+                    _deposit(tmp, e, f, R, sAL * Ab + sA * ALj[kb], sAG * Ab + sA * AGj[kb])
+                    e_lo, e_hi = min(e_lo, e), max(e_hi, min(e + 1, top))
+            lo, hi = int(e_lo), int(e_hi)
             w0 = weight[0, i * Mx + j]
             if cell_average:
                 pooled[0, t] += total
                 pooled[1, t] += total * w0
-                for e in range(e_lo, e_hi + 1):
+                for e in range(lo, hi + 1):
                     rw[0, t, e] += tmp[0, e] * vol
                     rw[1, t, e] += tmp[1, e]
                     rw[2, t, e] += tmp[2, e]
             else:
                 fu = weight[1, i * Mx + j]  # the upper pivot's share of the solid
-                for e in range(e_lo, e_hi + 1):
+                for e in range(lo, hi + 1):
                     for q in range(3):
                         v = tmp[q, e] * vol if q == 0 else tmp[q, e]
                         rw[q, t, e] += v - v * fu
                         rw[q, t + 1, e] += v * fu
             for q in range(3):
-                for e in range(e_lo, e_hi + 1):
+                for e in range(lo, hi + 1):
                     tmp[q, e] = 0.0
     _split_rows(pooled, rw, factors, xc, K, J, cell_average, d)
     return refused
@@ -309,8 +347,8 @@ def breakage_totals2d(sel, nlg, dims, xc, tab, factors, xw, rw, d):
 
 _RATES = (
     "f8(f8[::1], f8[:, ::1], i8, f8[:, ::1], f8[::1], f8[::1], i8[::1], f8, f8[::1], i8[::1], f8[:, ::1], "
-    "f8[:, ::1], f8[::1], f8[:, :, ::1], f8[:, ::1], i8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, :, ::1], f8[:, ::1], "
-    "f8[:, ::1])"
+    "f8[:, ::1], f8[::1], f8[:, :, ::1], f8[:, ::1], i8[:, ::1], f8[:, :, ::1], f8[:, ::1], f8[:, :, ::1], "
+    "f8[:, ::1], f8[:, ::1])"
 )
 
 
@@ -344,7 +382,7 @@ def class_rates2d(
 @njit(
     "f8(f8[::1], f8[:, ::1], f8[::1], f8, i8, f8[::1], f8[::1], f8[::1], f8[:, ::1], i8, f8[:, ::1], f8[::1], "
     "f8[::1], i8[::1], f8, f8[::1], i8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[:, :, ::1], f8[:, ::1], "
-    "i8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, :, ::1], f8[:, ::1])",
+    "i8[:, ::1], f8[:, :, ::1], f8[:, ::1], f8[:, :, ::1], f8[:, ::1])",
     cache=True,
     nogil=True,
 )

@@ -79,7 +79,7 @@ class GranulationPBM2D(GranulationPBM):
         self._k2_rows = [k.reshape(3, M2) for k in self._k2]
         self._work2 = (
             np.empty((Mx, J + 1), dtype=np.int64),
-            np.empty((4, M2)),
+            np.empty((4, Mx, J)),
             np.empty((4, max(K, Mx))),
             np.empty((9, K, J)),
             np.zeros((2, M2)),

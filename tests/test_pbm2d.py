@@ -2,7 +2,8 @@
 two-component aggregation checked against its density, the constant kernel from the bivariate
 exponential start on two grids with the observed order, conservation of solid, liquid and gas in SI
 units, the size marginal of a liquid-independent process equal to the one-dimensional model's, the
-liquid classes and the settings (pbm.dimensions)."""
+liquid classes and the settings (pbm.dimensions), and the compiled aggregation rates against the
+plain Python form of their equations."""
 
 from __future__ import annotations
 
@@ -204,3 +205,82 @@ def test_a_run_resumes_from_its_state_and_refuses_a_one_dimensional_state():
     one, _ = _process_models("step", Solver.defaults())
     with pytest.raises(PBMInputError, match="starts from a State2D"):
         model.run(0.0, 10.0, one.initial_state(volumes, numbers, 0.0, 0.5))
+
+
+def _reference_rates(S, p, nlg, xc, K, target, weight, centres):
+    """Aggregation rates of the (size x liquid) classes in plain Python, from the equations of
+    docs/pbm.md ("Two-dimensional PBM"): every unordered pair of classes, the births shared between
+    the two liquid classes whose centres enclose their ratio, the cell-average split of every size
+    cell pooled over the liquid classes. Volumes in units of the first pivot."""
+    Mx, J = xc.size, centres.size
+    N, L, G = (nlg[q].reshape(Mx, J) for q in range(3))
+    d = np.zeros((3, Mx, J))
+    pooled = np.zeros((2, K))
+    rows = np.zeros((3, K, J))
+    classes = [(i, e) for i in range(Mx) for e in range(J) if N[i, e] > 0 and p[i * J + e] > 0]
+    for i, e in classes:
+        for j, f in classes:
+            if target[i * Mx + j] >= 0:  # deaths: every ordered pair within the grid
+                q = S[i, j] * p[i * J + e] * p[j * J + f] * N[j, f]
+                d[:, i, e] -= q * np.array([N[i, e], L[i, e], G[i, e]])
+    for ia, (i, e) in enumerate(classes):
+        for j, f in classes[ia:]:
+            t = target[i * Mx + j]
+            if t < 0:
+                continue
+            beta = S[i, j] * p[i * J + e] * p[j * J + f] * (0.5 if (i, e) == (j, f) else 1.0)
+            R = beta * N[i, e] * N[j, f]
+            RL = beta * (L[i, e] * N[j, f] + L[j, f] * N[i, e])
+            RG = beta * (G[i, e] * N[j, f] + G[j, f] * N[i, e])
+            vol = xc[i] + xc[j]
+            w = (L[i, e] / N[i, e] + L[j, f] / N[j, f]) / vol
+            pooled[:, t] += R, R * (vol / xc[t] - 1.0)
+            k = int(np.searchsorted(centres, w, side="right")) - 1
+            shares = {0: 1.0} if k < 0 else {k: 1.0} if k >= J - 1 else {}
+            if not shares:
+                share = (w - centres[k]) / (centres[k + 1] - centres[k])
+                shares = {k: 1.0 - share, k + 1: share}
+            for c, sh in shares.items():
+                rows[:, t, c] += sh * np.array([R * vol, RL, RG])
+    for c in range(K):
+        B, D = pooled[:, c]
+        up = max(D, 0.0) * xc[c] / (xc[c + 1] - xc[c]) if c < K - 1 else 0.0
+        down = -min(D, 0.0) * xc[c] / (xc[c] - xc[c - 1]) if c > 0 else 0.0
+        fu = up * xc[c + 1] / xc[c] / (B + D) if c < K - 1 and B + D > 0 else 0.0
+        fd = down * xc[c - 1] / xc[c] / (B + D) if c > 0 and B + D > 0 else 0.0
+        for target_cell, share in ((c, 1.0 - fu - fd), (c + 1, fu), (c - 1, fd)):
+            if share:
+                d[0, target_cell] += share * rows[0, c] / xc[target_cell]
+                d[1:, target_cell] += share * rows[1:, c]
+    return d.reshape(3, Mx * J)
+
+
+@pytest.mark.parametrize("success", ["always", "step"])
+def test_compiled_aggregation_rates_equal_the_equations(success):
+    """The compiled rates (feed classes, uniform liquid classes, cell average) against the plain
+    Python form of the equations, on a random state with some classes dry (step success)."""
+    rng = np.random.default_rng(7)
+    grid = Grid(8, 2.0**0.5, min_diameter=2e-3)
+    lg = LiquidGrid.uniform(0.1, 0.5)
+    kernel = CollisionKernel(ConstantFrequency(0.3), 1e-3, SuccessProbability(success, 0.02))
+    model = GranulationPBM2D(grid, kernel, liquid_grid=lg)
+    feed = grid.x[[1, 3]] * 1.2
+    Mx, J = grid.bins + feed.size, lg.classes
+    number = rng.uniform(0, 50, (Mx, J)) * (rng.uniform(size=(Mx, J)) < 0.6)
+    solid = number * np.concatenate([grid.x, feed])[:, None]
+    ratio = (np.arange(J) + rng.uniform(0.05, 0.95, (Mx, J))) * lg.step  # inside each class's band
+    classes = np.stack([number, ratio * solid, rng.uniform(0.2, 0.4, (Mx, J)) * solid])
+    state = model.make_state(0.0, classes, feed)
+    s = model._begin(0.0, 1.0, state)
+    u = model._class_state(s)
+    model._prepare(model._input(0.0, model._marginal(u)))
+    model._rates2(0.0, u, False, 0)
+    nlg = u.reshape(3, -1)
+    volume = nlg[0] * np.repeat(model._xcc, J) + np.maximum(nlg[1], nlg[2])
+    phi = np.divide(np.maximum(nlg[1] - nlg[2], 0), volume, out=np.zeros_like(volume), where=volume > 0)
+    p = np.ones(Mx * J) if success == "always" else (phi >= 0.02).astype(float)
+    assert success == "always" or 0 < p[nlg[0] > 0].mean() < 1  # some classes dry, some wet
+    target, weight, _ = model._pair
+    ref = _reference_rates(kernel._scaled, p, nlg, model._xcc, grid.bins, target, weight, lg.centres)
+    scale = np.abs(ref).max(axis=1, keepdims=True)
+    np.testing.assert_allclose(model._k2_rows[0], ref, rtol=0, atol=1e-12 * scale.max())

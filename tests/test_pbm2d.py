@@ -7,6 +7,8 @@ plain Python form of their equations."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from scipy import integrate
@@ -284,3 +286,22 @@ def test_compiled_aggregation_rates_equal_the_equations(success):
     ref = _reference_rates(kernel._scaled, p, nlg, model._xcc, grid.bins, target, weight, lg.centres)
     scale = np.abs(ref).max(axis=1, keepdims=True)
     np.testing.assert_allclose(model._k2_rows[0], ref, rtol=0, atol=1e-12 * scale.max())
+
+
+def test_the_command_line_runs_pbm_constant_in_two_dimensions(tmp_path, root):
+    """The `pbm_constant` rule's command with `pbm.dimensions: 2` in the config file: the same outputs."""
+    import yaml
+
+    from pbmdem.cli import main
+
+    mapping = yaml.safe_load((root / "config" / "config.yaml").read_text())
+    mapping["pbm"]["dimensions"] = 2
+    config = tmp_path / "config.yaml"
+    config.write_text(yaml.safe_dump(mapping))
+    out = tmp_path / "rpm600_fine"
+    args = ["pbm", "--config", str(config), "--kernel", "constant", "--rpm", "600", "--distribution", "fine"]
+    assert main([*args, "--out", str(out)]) == 0
+    for name in ("summary.csv", "bins.csv", "run.json", "psd.png", "d50.png"):
+        assert (out / name).is_file()
+    info = json.loads((out / "run.json").read_text())
+    assert info["dimensions"] == 2 and info["settings"]["dimensions"] == 2

@@ -329,3 +329,13 @@ def test_the_process_does_not_depend_on_the_unit_of_volume():
         assert abs(res.info["steps"] - ref.info["steps"]) <= 0.01 * ref.info["steps"]
         assert np.abs(res.number - ref.number).max() < 1e-5 * ref.number.sum(1).max()
         assert np.abs(res.liquid / unit - ref.liquid).max() < 1e-5 * ref.liquid.sum(1).max()
+
+
+def test_joined_runs_keep_the_classes():
+    _, model = _process_models("step", Solver.defaults())
+    volumes, numbers = _feed()
+    first = model.run(0.0, 200.0, model.initial_state(volumes, numbers, 0.0, 0.5), output_times=[100.0])
+    second = model.run(200.0, 480.0, first.state, output_times=[300.0])
+    joined = type(first).concat([first, second])
+    assert joined.classes.shape == (joined.times.size, *first.classes.shape[1:])
+    np.testing.assert_array_equal(joined.classes[-1], second.state.classes)

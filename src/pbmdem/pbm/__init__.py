@@ -56,10 +56,12 @@ from .kernels import (
     SumKernel,
     TableFrequency,
 )
+from .liquid_grid import LiquidGrid
 from .model import GranulationPBM
+from .model2d import GranulationPBM2D
 from .processes import Consolidation, LiquidAddition
 from .results import Result, mass_quantiles
-from .state import FeedGranules, State, surface_fraction
+from .state import FeedGranules, State, State2D, surface_fraction
 from .success import StokesCriterion
 
 __all__ = [
@@ -79,11 +81,14 @@ __all__ = [
     "KernelFactors",
     "KernelInput",
     "GranulationPBM",
+    "GranulationPBM2D",
+    "LiquidGrid",
     "Breakage",
     "ConstantSelection",
     "PowerLawSelection",
     "FRAGMENTS",
     "State",
+    "State2D",
     "FeedGranules",
     "surface_fraction",
     "LiquidAddition",

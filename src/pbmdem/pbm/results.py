@@ -47,7 +47,11 @@ def mass_quantiles(mass: np.ndarray, d_edges: np.ndarray, q=(0.1, 0.5, 0.9)) -> 
 
 class Result:
     """Time series of a PBM run: ``times`` (T,), ``number``/``liquid``/``gas`` (T, K) per bin,
-    ``state`` (the final, resumable :class:`State`) and ``info`` (run metadata)."""
+    ``state`` (the final, resumable :class:`State`) and ``info`` (run metadata). A run of the
+    two-dimensional model also sets ``classes`` (T, 3, Mx, J) and ``class_volumes`` (Mx,)."""
+
+    classes: np.ndarray | None = None
+    class_volumes: np.ndarray | None = None
 
     def __init__(self, grid: Grid, records, state: State, info: dict):
         self.grid = grid
@@ -82,6 +86,9 @@ class Result:
             ("steps", "steps"),
         ):
             setattr(rec, name, np.concatenate([getattr(r, attr)[k] for r, k in zip(results, keep)]))
+        classes = None
+        if all(getattr(r, "classes", None) is not None for r in results):  # two-dimensional runs
+            classes = np.concatenate([r.classes[k] for r, k in zip(results, keep)])
         info = dict(results[-1].info)
         info["steps"] = int(sum(r.info.get("steps", 0) for r in results))
         info["wall_time_s"] = float(sum(r.info.get("wall_time_s", 0.0) for r in results))
@@ -89,7 +96,10 @@ class Result:
         limits = [r.info["step_limits"] for r in results if isinstance(r.info.get("step_limits"), dict)]
         if limits:
             info["step_limits"] = {k: int(sum(lim.get(k, 0) for lim in limits)) for k in limits[-1]}
-        return cls(first.grid, rec, results[-1].state, info)
+        joined = cls(first.grid, rec, results[-1].state, info)
+        if classes is not None:
+            joined.classes, joined.class_volumes = classes, results[-1].class_volumes
+        return joined
 
     # ------------------------------------------------------------- derived quantities
     @property

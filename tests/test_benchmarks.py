@@ -50,6 +50,11 @@ QUICK = {
         r"batch  min +[\d.]+ ms, median +[\d.]+ ms \| \d+ steps, 37 bins",
         r"PBM-ANN surrogate \+ PBM min +[\d.]+ ms",
     ),
+    "bench_pbm2d.py --quick": (
+        r"default batch, dimensions 1 \(3 runs, warm\)",
+        r"CPU s:  min [\d.]+  median [\d.]+  max [\d.]+",
+        r"one rate evaluation at the end state",
+    ),
     "bench_pbm_accuracy.py --quick": (
         r"observed order per halving of ln r: \|M2 err\|",
         r"breakage: aggregation beta = 1",

@@ -225,6 +225,26 @@ def test_a_resumed_loop_continues_exactly(tiny_config, tmp_path):
     np.testing.assert_array_equal(resumed.state.feed.number, whole.state.feed.number)
 
 
+def test_a_two_dimensional_loop_resumes_exactly(tiny_config, tmp_path):
+    """pbm.dimensions 2 in the coupled loop: the representative sample from the 2-D state, the
+    source swapped per interval, and the (size x liquid) classes saved and resumed."""
+    from pbmdem.pbm.state import State2D
+
+    loop = tiny_config.coupled_loop().replace(coupling_intervals=3)
+    loop = loop.replace(batch=loop.batch.replace(pbm=loop.batch.pbm.replace(dimensions=2)))
+    whole = coupling.run_loop(loop, _FixedProvider(2.0), 600.0, tmp_path / "whole").result
+    assert isinstance(whole.state, State2D) and whole.info["dimensions"] == 2
+    part = tmp_path / "part"
+    coupling.run_loop(loop, _FixedProvider(2.0), 600.0, part)
+    import shutil
+
+    for name in ("interval_01", "interval_02"):
+        shutil.rmtree(part / name)
+    resumed = coupling.run_loop(loop, _FixedProvider(2.0), 600.0, part).result
+    np.testing.assert_array_equal(resumed.number, whole.number)
+    np.testing.assert_array_equal(resumed.state.classes, whole.state.classes)
+
+
 def test_velocity_fractions_of_a_dem_interval_reach_the_pbm_bins():
     from pbmdem.frequency import velocity_fractions_from_table
     from pbmdem.impact import N_VELOCITY_BINS, EncounterRates

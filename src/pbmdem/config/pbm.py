@@ -11,12 +11,15 @@ from .typed import Settings
 class GridSettings(Settings):
     """Geometric solid-volume grid: ratio of neighbouring pivots, first pivot diameter (m; resolved
     to the smallest feed class when the config says null), largest diameter reached (m), or a
-    fixed number of bins; whether the feed granules are classes of their own (docs/pbm.md)."""
+    fixed number of bins; whether the feed granules are classes of their own (docs/pbm.md); the
+    liquid classes of the two-dimensional PBM (width and open top, liquid-to-solid volume ratio)."""
 
     bins: int | None
     ratio: float
     min_diameter: float | None
     max_diameter: float
+    liquid_step: float
+    liquid_max: float
     separate_feed: bool
 
 
@@ -146,6 +149,10 @@ class OutputSettings(Settings):
 
 @dataclass(frozen=True)
 class Pbm(Settings):
+    """The `pbm:` section; ``dimensions``: 1 (lumped liquid per size class) or 2 (size x liquid
+    classes, ``pbmdem.pbm.model2d``)."""
+
+    dimensions: int
     grid: GridSettings
     process: ProcessSettings
     initial: InitialSettings

@@ -20,7 +20,7 @@ import numpy as np
 
 from pbmdem.atomic import atomic_path, write_json
 from pbmdem.pbm.results import Result
-from pbmdem.pbm.state import FeedGranules, State
+from pbmdem.pbm.state import FeedGranules, State, State2D
 from pbmdem.readers import read_json
 
 from .sample import DemSample
@@ -83,6 +83,8 @@ def save(folder: Path, result, sample: DemSample, matrix: np.ndarray, info: dict
             "feed_liquid": state.feed.liquid,
             "feed_gas": state.feed.gas,
         }
+    if isinstance(state, State2D):  # the two-dimensional PBM's (size x liquid) classes
+        feed.update(state_classes=state.classes, state_class_volumes=state.class_volumes)
     with atomic_path(folder / "records.npz") as tmp:
         with open(tmp, "wb") as fh:
             np.savez(
@@ -113,13 +115,20 @@ def save(folder: Path, result, sample: DemSample, matrix: np.ndarray, info: dict
 
 
 def load(folder: Path, grid):
-    """(Result, interval info, class matrix) of a finished interval."""
+    """(Result, interval info, class matrix) of a finished interval (the state a State2D if the
+    interval was run by the two-dimensional PBM)."""
     data = np.load(folder / "records.npz")
     records = SimpleNamespace(**{name: data[name] for name in RECORD_NAMES})
     feed = None
     if "feed_volumes" in data:
         feed = FeedGranules(data["feed_volumes"], data["feed_number"], data["feed_liquid"], data["feed_gas"])
-    state = State(
+    two = "state_classes" in data
+    kind, extra = (
+        (State2D, {"classes": data["state_classes"], "class_volumes": data["state_class_volumes"]})
+        if two
+        else (State, {})
+    )
+    state = kind(
         float(data["state_t"]),
         data["state_number"],
         data["state_liquid"],
@@ -130,6 +139,7 @@ def load(folder: Path, grid):
         feed,
         float(data["state_merged_number"]),
         float(data["state_merged_volume"]),
+        **extra,
     )
     info = read_json(folder / "interval.json", "coupling interval record")
     return Result(grid, records, state, {"wall_time_s": info.get("pbm_wall_time_s", 0.0)}), info, data["class_matrix"]

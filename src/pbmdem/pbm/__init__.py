@@ -19,12 +19,17 @@ positivity-preserving explicit integration.
 | `processes` | liquid addition and consolidation |
 | `state` | the resumable state of a run |
 | `model` | the population balance and its time integration |
+| `model2d` | the two-dimensional population balance: size x liquid-to-solid ratio classes (`pbm.dimensions: 2`) |
+| `liquid_grid` | the liquid classes of the two-dimensional model |
+| `_compiled2d` | the rates and stages of the two-dimensional model (numba) |
 | `stepping` | the step control of the time integration (step sizes, rejections, limits, records) |
 | `_compiled` | the one implementation of the rates and stages (numba), imported when a model is built |
 | `results` | time series, size statistics, tables, plots |
 | `setup` | a model and a batch from the typed settings (pbmdem.config) |
 | `analytical` | closed-form solutions of pure aggregation, pure breakage and both |
+| `analytical2d` | the closed form of two-component aggregation (the two-dimensional model's check) |
 | `verification` | the harness that checks the model against them |
+| `verification2d` | the harness of the two-dimensional model |
 | `errors` | the PBM's exceptions |
 
 `setup` (and with it the settings layer) is imported on first use, so `import pbmdem.pbm` stays light.
@@ -51,10 +56,12 @@ from .kernels import (
     SumKernel,
     TableFrequency,
 )
+from .liquid_grid import LiquidGrid
 from .model import GranulationPBM
+from .model2d import GranulationPBM2D
 from .processes import Consolidation, LiquidAddition
 from .results import Result, mass_quantiles
-from .state import FeedGranules, State, surface_fraction
+from .state import FeedGranules, State, State2D, surface_fraction
 from .success import StokesCriterion
 
 __all__ = [
@@ -74,11 +81,14 @@ __all__ = [
     "KernelFactors",
     "KernelInput",
     "GranulationPBM",
+    "GranulationPBM2D",
+    "LiquidGrid",
     "Breakage",
     "ConstantSelection",
     "PowerLawSelection",
     "FRAGMENTS",
     "State",
+    "State2D",
     "FeedGranules",
     "surface_fraction",
     "LiquidAddition",

@@ -88,7 +88,11 @@ def mass_quantiles(mass: np.ndarray, d_edges: np.ndarray, q=(0.1, 0.5, 0.9)) -> 
 
 class Result:
     """Time series of a PBM run: ``times`` (T,), ``number``/``liquid``/``gas`` (T, K) per bin,
-    ``state`` (the final, resumable :class:`State`) and ``info`` (run metadata)."""
+    ``state`` (the final, resumable :class:`State`) and ``info`` (run metadata). A run of the
+    two-dimensional model also sets ``classes`` (T, 3, Mx, J) and ``class_volumes`` (Mx,)."""
+
+    classes: np.ndarray | None = None
+    class_volumes: np.ndarray | None = None
 
     def __init__(self, grid: Grid, records, state: State, info: dict):
         self.grid = grid
@@ -128,6 +132,9 @@ class Result:
             ("merged_volume", "merged_volume"),
         ):
             setattr(rec, name, np.concatenate([getattr(r, attr)[k] for r, k in zip(results, keep)]))
+        classes = None
+        if all(getattr(r, "classes", None) is not None for r in results):  # two-dimensional runs
+            classes = np.concatenate([r.classes[k] for r, k in zip(results, keep)])
         info = dict(results[-1].info)
         info["steps"] = int(sum(r.info.get("steps", 0) for r in results))
         info["wall_time_s"] = float(sum(r.info.get("wall_time_s", 0.0) for r in results))
@@ -136,6 +143,8 @@ class Result:
         if limits:
             info["step_limits"] = {k: int(sum(lim.get(k, 0) for lim in limits)) for k in limits[-1]}
         out = cls(first.grid, rec, results[-1].state, info)
+        if classes is not None:
+            out.classes, out.class_volumes = classes, results[-1].class_volumes
         out.info["grid_floor"] = out.grid_floor()  # the whole batch's (the state's tallies carry over)
         return out
 

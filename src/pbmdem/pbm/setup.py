@@ -1,9 +1,10 @@
 """A PBM batch from the typed settings: model, initial state, run (docs/pbm.md).
 
 `build_model(pbm, source, rpm)` builds a GranulationPBM from the `pbm:` settings
-(`pbmdem.config.Pbm`); `initial_state(batch, model)` puts the batch's feed on the grid, scaled to
-the bed's solid volume (owned by `pbmdem.config.Granulator.bed_solid_volume`: the PBM models the
-DEM bed); `run_batch(batch, source, rpm)` runs the whole batch.
+(`pbmdem.config.Pbm`), or with `pbm.dimensions: 2` the two-dimensional GranulationPBM2D;
+`initial_state(batch, model)` puts the batch's feed on the grid, scaled to the bed's solid volume
+(owned by `pbmdem.config.Granulator.bed_solid_volume`: the PBM models the DEM bed);
+`run_batch(batch, source, rpm)` runs the whole batch.
 """
 
 from __future__ import annotations
@@ -75,10 +76,20 @@ def build_breakage(pbm: Pbm, selection=None) -> Breakage | None:
 
 
 def build_model(pbm: Pbm, source=None, rpm: float = 0.0, selection=None) -> GranulationPBM:
-    """GranulationPBM of the `pbm:` settings; `source` (collision-frequency source) defaults to
+    """GranulationPBM of the `pbm:` settings (`pbm.dimensions` 2: a GranulationPBM2D with the
+    liquid classes of `pbm.grid`); `source` (collision-frequency source) defaults to
     the constant one of `pbm.aggregation`. With `pbm.breakage.enabled`, the breakage's selection
     rate is `selection`; None: PBM-constant's constant rate, allowed only with the constant
     source (a DEM or surrogate source needs the selection from its impact statistics)."""
+    if pbm.dimensions not in (1, 2):
+        raise PBMInputError(f"pbm.dimensions = {pbm.dimensions!r}; allowed: 1 or 2")
+    if pbm.dimensions == 2 and pbm.aggregation.success.velocity_resolved:
+        raise PBMInputError(
+            f"pbm.dimensions = 2 with pbm.aggregation.success.velocity_model = "
+            f"{pbm.aggregation.success.velocity_model!r}: the two-dimensional PBM evaluates the success "
+            "of every (size, liquid) class inside its compiled rates, which the Stokes criterion's "
+            "kernel does not offer; allowed: velocity_model none, or dimensions 1"
+        )
     grid = build_grid(pbm)
     agg = pbm.aggregation
     if source is None:
@@ -95,17 +106,15 @@ def build_model(pbm: Pbm, source=None, rpm: float = 0.0, selection=None) -> Gran
         pbm.liquid_addition.rate, process.spray_start, process.spray_end, pbm.liquid_addition.distribution
     )
     cons = Consolidation(pbm.consolidation.rate, pbm.consolidation.min_porosity)
-    return GranulationPBM(
-        grid,
-        kernel,
-        liquid,
-        cons,
-        pbm.solver,
-        rpm=rpm,
-        scheme=agg.scheme,
-        separate_feed=pbm.grid.separate_feed,
-        breakage=build_breakage(pbm, selection),
-    )
+    kwargs = {"rpm": rpm, "scheme": agg.scheme, "separate_feed": pbm.grid.separate_feed}
+    kwargs["breakage"] = build_breakage(pbm, selection)
+    if pbm.dimensions == 2:
+        from .liquid_grid import LiquidGrid
+        from .model2d import GranulationPBM2D
+
+        lg = LiquidGrid.uniform(pbm.grid.liquid_step, pbm.grid.liquid_max)
+        return GranulationPBM2D(grid, kernel, liquid, cons, pbm.solver, liquid_grid=lg, **kwargs)
+    return GranulationPBM(grid, kernel, liquid, cons, pbm.solver, **kwargs)
 
 
 def initial_state(batch: PbmBatch, model: GranulationPBM) -> State:

@@ -140,3 +140,23 @@ def feed_volumes(grid: Grid, s: State) -> np.ndarray:
                 f"{total[k]!r}; the feed granules are part of the bin totals"
             )
     return v
+
+
+@dataclass
+class State2D(State):
+    """State of the two-dimensional PBM (``model2d``): besides the per-bin totals of :class:`State`
+    (the size marginal, feed classes put on the pivots by the lever rule, what results and the
+    coupled loop read), ``classes`` (3, Mx, J): number, liquid (m3) and gas (m3) of every size class
+    (the K pivots, then the feed classes of solid volume ``class_volumes[K:]``) and liquid class;
+    ``class_volumes`` (Mx,): the size classes' solid volumes (m3)."""
+
+    classes: np.ndarray | None = None
+    class_volumes: np.ndarray | None = None
+
+    def copy(self) -> State2D:
+        base = State.copy(self)
+        return State2D(
+            **{f: getattr(base, f) for f in State.__dataclass_fields__},
+            classes=None if self.classes is None else self.classes.copy(),
+            class_volumes=None if self.class_volumes is None else self.class_volumes.copy(),
+        )

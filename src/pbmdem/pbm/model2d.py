@@ -1,0 +1,300 @@
+"""The two-dimensional PBM: granules classed by solid volume and by liquid-to-solid volume ratio.
+
+Class (i, e): size class i (the K pivots of the :class:`Grid`, then the feed classes, exactly as in
+the one-dimensional model) and liquid class e (a band of liquid-to-solid ratio, :class:`LiquidGrid`),
+with number N, liquid L and gas G totals; liquid and gas are lumped per class, so every class carries
+its own mean liquid and porosity, and aggregation succeeds with p(phi) of each class's own surface
+liquid. The processes are the one-dimensional model's (docs/pbm.md, "Two-dimensional PBM"):
+
+* aggregation with the same kernels (``Kernel.factors``: beta = S_ij p(phi_a) p(phi_b), S of the
+  size classes) and the same size-axis pair map; the aggregate of classes a and b has the solid
+  x_i + x_j and the liquid and gas of both, and is born in the liquid class of its ratio;
+* breakage of the pivot classes: the fragments keep their parent's ratio (its liquid class);
+* binder spraying shared over the classes as in the one-dimensional model (``distribution``): it
+  raises the liquid of every class; after every step a class whose mean ratio has left its band
+  moves, whole, to the band of its mean (``_compiled2d.rebin``), so granules move along the liquid
+  axis without the numerical spreading of an upwind flux;
+* consolidation of every class's gas.
+
+It is a :class:`GranulationPBM` with another class state: settings, kernel handling (its
+``prepare`` and factors at every step, the breakage selection), the step control, the feed classes
+and the results are the one-dimensional model's; the rates and stages are ``_compiled2d``'s. Runs
+start from a :class:`State2D` (:meth:`initial_state`, :meth:`make_state`); the returned
+``Result`` holds the size marginal like the one-dimensional model's, and ``result.classes`` the
+(T, 3, Mx, J) class totals (number, liquid m3, gas m3) at the recorded times.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import NegativePopulationError, PBMInputError
+from .grid import Grid
+from .liquid_grid import LiquidGrid
+from .model import GranulationPBM
+from .results import Result
+from .state import FeedGranules, State2D
+from .stepping import FLUSH, TIME_EPS, Records, StepControl
+
+__all__ = ["GranulationPBM2D"]
+
+
+class GranulationPBM2D(GranulationPBM):
+    """Batch granulator PBM on (solid volume) x (liquid-to-solid ratio): the arguments of
+    :class:`GranulationPBM`, and ``liquid_grid`` the liquid classes (default: steps of 0.02 up to 1,
+    the schema's ``pbm.grid.liquid_step`` / ``liquid_max``). The kernel must offer
+    ``factors`` (every kernel of the library except the Stokes criterion's)."""
+
+    def __init__(self, grid: Grid, kernel, *args, liquid_grid: LiquidGrid | None = None, **kwargs):
+        self.liquid_grid = LiquidGrid.uniform(0.02, 1.0) if liquid_grid is None else liquid_grid
+        if not isinstance(self.liquid_grid, LiquidGrid):
+            raise PBMInputError(f"liquid_grid = {liquid_grid!r}; allowed: a pbmdem.pbm.liquid_grid.LiquidGrid")
+        from . import _compiled2d
+
+        self._jit2 = _compiled2d
+        super().__init__(grid, kernel, *args, **kwargs)
+
+    def __repr__(self) -> str:
+        return "GranulationPBM2D" + super().__repr__()[len("GranulationPBM") : -1] + f", {self.liquid_grid!r})"
+
+    def _use_classes(self, feed_volumes: np.ndarray) -> None:
+        """The 1-D model's size classes, and the (size x liquid) classes of a run."""
+        same = tuple(float(v) for v in feed_volumes) == getattr(self, "_classes_key", None)
+        super()._use_classes(feed_volumes)
+        if same and hasattr(self, "_M2"):
+            return
+        Mx, J = self._M, self.liquid_grid.classes
+        M2 = self._M2 = Mx * J
+        self._J = J
+
+        def rep(v):
+            return np.repeat(np.asarray(v, float), J)
+
+        self._vectors2 = np.ascontiguousarray(np.stack([rep(self._xc), rep(self._spray_weight), rep(self._gas_min)]))
+        self._xcc = np.ascontiguousarray(self._xc, dtype=float)
+        K, cell_average, target, weight, factors, _ = self._op_arrays
+        self._dims = np.array([K, Mx, J, int(cell_average)], dtype=np.int64)
+        self._pair = (target, weight, factors)
+        self._k2, self._r2, self._stage2 = np.empty((3, 3 * M2)), np.zeros((4, 3)), np.empty(3 * M2)
+        self._k2_rows = [k.reshape(3, M2) for k in self._k2]
+        self._work2 = (
+            np.empty((Mx, J + 1), dtype=np.int64),
+            np.empty((4, Mx, J)),
+            np.empty((4, max(K, Mx))),
+            np.empty((9, K, J)),
+            np.zeros((2, M2)),
+        )
+        self._rebin_work = np.empty(3 * M2)
+
+    def _use_factors(self, inp) -> None:
+        super()._use_factors(inp)
+        if self._factored is None:
+            raise PBMInputError(
+                f"the two-dimensional PBM (pbm.dimensions: 2) evaluates the kernel per (size, liquid) class "
+                f"inside its compiled rates and needs a kernel with factors; {self.kernel!r} has none "
+                "(the Stokes criterion: pbm.aggregation.success.velocity_model = stokes); allowed: "
+                "velocity_model none, or pbm.dimensions: 1"
+            )
+
+    def rates(self, *args, **kwargs):
+        raise PBMInputError("GranulationPBM2D.rates: per-bin rates are the one-dimensional model's (pbm.dimensions: 1)")
+
+    def _marginal(self, u: np.ndarray) -> np.ndarray:
+        """(3, Mx) size-class totals of the scaled class state u (3 M2,)."""
+        return np.ascontiguousarray(u.reshape(3, self._M, self._J).sum(axis=2))
+
+    def _rates2(self, t: float, u: np.ndarray, spraying: bool, j: int) -> None:
+        """Rates of the class state u into ``self._k2[j]``, its tallies (refused solid, merged
+        fragments and their solid, x_0 units) into ``self._r2[j]``."""
+        lg = self.liquid_grid
+        self._jit2.class_rates2d(
+            u, self._factored, self._success_code, self._vectors2, self._xcc,
+            self._params[1] if spraying else self._params[0], self._dims, lg.step, lg.centres, *self._pair,
+            *self._brk_arrays, *self._work2, self._k2_rows[j], self._r2[j],
+        )  # fmt: skip
+
+    def _stages2(self, t: float, u: np.ndarray, dt: float, order: int, spraying: bool):
+        """(new state, embedded lower-order state, tallies (3,) of the step) of one step: one compiled call."""
+        n = u.size
+        u_new, u_low = np.empty(n), np.empty(n)
+        lg = self.liquid_grid
+        self._jit2.ssp_step2d(
+            u, self._k2, self._r2, dt, order, u_new, u_low, self._stage2, self._factored, self._success_code,
+            self._vectors2, self._xcc, self._params[1] if spraying else self._params[0], self._dims, lg.step,
+            lg.centres, *self._pair, *self._brk_arrays, *self._work2,
+        )  # fmt: skip
+        return u_new, u_low, self._r2[3]
+
+    # ----------------------------------------------------------------- states
+    def initial_state(self, volumes, numbers, liquid_content=0.0, porosity=0.0, t=0.0, what="initial distribution"):
+        """The one-dimensional model's initial state (:meth:`GranulationPBM.initial_state`), every
+        granule in the liquid class of ``liquid_content``."""
+        base = super().initial_state(volumes, numbers, liquid_content, porosity, t, what)
+        K, J = self.grid.bins, self.liquid_grid.classes
+        e0 = int(self.liquid_grid.classify([liquid_content])[0])
+        if base.feed is not None:
+            f = base.feed
+            vols = np.concatenate([self.grid.x, f.volumes])
+            parts = (f.number, f.liquid, f.gas)
+        else:
+            vols = self.grid.x.copy()
+            parts = (base.number, base.liquid, base.gas)
+        classes = np.zeros((3, vols.size, J))
+        for q, part in enumerate(parts):
+            classes[q, vols.size - part.size :, e0] = part
+        return self.make_state(t, classes, vols[K:])
+
+    def make_state(self, t: float, classes, feed_volumes=()) -> State2D:
+        """A :class:`State2D` at ``t`` from the class totals ``classes`` (3, K + P, J): number,
+        liquid (m3), gas (m3) of the K pivots and the P feed classes of solid volumes
+        ``feed_volumes`` (m3) in every liquid class; the per-bin totals by the lever rule."""
+        feed = np.asarray(feed_volumes, float).reshape(-1)
+        vols = np.concatenate([self.grid.x, feed])
+        c = np.asarray(classes, float)
+        if c.shape != (3, vols.size, self.liquid_grid.classes):
+            raise PBMInputError(
+                f"state classes of shape {c.shape}; expected (3, {vols.size}, {self.liquid_grid.classes}) "
+                "(number, liquid, gas x size classes x liquid classes)"
+            )
+        self._use_classes(feed)
+        x0 = float(self.grid.x[0])
+        u = np.concatenate([c[0].ravel(), c[1].ravel() / x0, c[2].ravel() / x0])
+        s = State2D(float(t), np.zeros(self.grid.bins), np.zeros(self.grid.bins), np.zeros(self.grid.bins))
+        self._store(s, float(t), u, 0.0, (0.0, 0.0))
+        return s
+
+    def _begin(self, t_start: float, t_end: float, state) -> State2D:
+        if not t_end > t_start:
+            raise PBMInputError(f"run: t_end = {t_end} must be > t_start = {t_start}")
+        if not isinstance(state, State2D) or state.classes is None or state.class_volumes is None:
+            raise PBMInputError(
+                f"run: the two-dimensional PBM starts from a State2D (GranulationPBM2D.initial_state or "
+                f"make_state), not {type(state).__name__}"
+            )
+        if abs(state.t - t_start) > TIME_EPS * max(1.0, abs(t_start)):
+            raise PBMInputError(f"run: the state is at t = {state.t}, not at t_start = {t_start}")
+        K, J = self.grid.bins, self.liquid_grid.classes
+        vols = np.asarray(state.class_volumes, float)
+        if vols.size < K or not np.allclose(vols[:K], self.grid.x, rtol=1e-12, atol=0):
+            raise PBMInputError("run: the state's size classes do not start with this grid's pivots")
+        if np.shape(state.classes) != (3, vols.size, J):
+            raise PBMInputError(f"state.classes has shape {np.shape(state.classes)}; expected (3, {vols.size}, {J})")
+        if not np.all(np.isfinite(state.classes)) or np.any(state.classes < 0):
+            q, i, e = np.argwhere(~(np.isfinite(state.classes) & (state.classes >= 0)))[0]
+            raise NegativePopulationError(
+                f"{('number', 'liquid', 'gas')[q]} of size class {i} (diameter {self._diameter(vols[i]):.4g} m), "
+                f"liquid class {e} is {state.classes[q, i, e]!r} at t = {state.t:.6g} s (start of run); "
+                "allowed: finite values >= 0"
+            )
+        s = state.copy()
+        s.t = t_start
+        self._use_classes(vols[K:])
+        self.kernel.reset()
+        if self.breakage is not None:
+            self.breakage.reset()
+        return s
+
+    @staticmethod
+    def _diameter(v: float) -> float:
+        return float(np.cbrt(6.0 / np.pi * v))
+
+    def _class_state(self, s: State2D) -> np.ndarray:
+        x0 = float(self.grid.x[0])
+        c = s.classes
+        return np.concatenate([c[0].ravel(), c[1].ravel() / x0, c[2].ravel() / x0])
+
+    def _store(self, s: State2D, t: float, u: np.ndarray, refused: float, merged: tuple) -> None:
+        """Write time t, the class state u, the refused solid and the fragments merged into the
+        first pivot (number, solid; x_0 units) into ``s``."""
+        x0 = float(self.grid.x[0])
+        K, Mx, J = self.grid.bins, self._M, self._J
+        s.t = t
+        v = u.reshape(3, Mx, J)
+        s.classes = np.stack([v[0], v[1] * x0, v[2] * x0])
+        s.class_volumes = self._vc.copy()
+        m = self._marginal(u)
+        tot = self._pivot_totals(m.ravel())
+        s.number, s.liquid, s.gas = tot[0], tot[1] * x0, tot[2] * x0
+        s.feed = FeedGranules(self._op.extra.copy(), m[0, K:], m[1, K:] * x0, m[2, K:] * x0) if Mx > K else None
+        s.refused_volume = refused * x0
+        s.merged_number, s.merged_volume = float(merged[0]), float(merged[1]) * x0
+
+    def _raise_bad(self, t: float, arr: np.ndarray, why: str):
+        M2, J = self._M2, self._J
+        bad = ~np.isfinite(arr) | (arr < 0)
+        idx = int(np.argmax(bad))
+        q, a = divmod(idx, M2)
+        i, e = divmod(a, J)
+        value = float(arr[idx]) * (self.grid.x[0] if q else 1.0)
+        raise NegativePopulationError(
+            f"{('number', 'liquid', 'gas')[q]} of size class {i} (diameter {self._dc[i]:.4g} m), liquid class {e} "
+            f"became {value!r} at t = {t:.6g} s ({why}); populations must stay finite and >= 0"
+        )
+
+    # ----------------------------------------------------------------- integration
+    def run(self, t_start: float, t_end: float, state, output_times=None) -> Result:
+        """Integrate from ``t_start`` (= ``state.t``) to ``t_end`` as :meth:`GranulationPBM.run`
+        does (the same step control, flush and records), the classes rebinned after every step."""
+        t_start, t_end = float(t_start), float(t_end)
+        s = self._begin(t_start, t_end, state)
+        M2, x0, opt, jit = self._M2, float(self.grid.x[0]), self.solver, self._jit
+        outs = set()
+        if output_times is not None:
+            outs = {float(o) for o in np.atleast_1d(output_times) if t_start < float(o) < t_end}
+        edges = self.liquid.edges() if self.liquid is not None else ()
+        events = sorted({t_end} | outs | {e for e in edges if t_start < e < t_end})
+        rec, classes = Records(), [s.classes.copy()]
+        rec.add(s)
+        u = self._class_state(s)
+        xcc = self._vectors2[0]
+        total_solid = float(np.sum(u[:M2] * xcc))
+        refused = s.refused_volume / x0
+        merged_n, merged_v = s.merged_number, s.merged_volume / x0  # fragments merged into x_0 so far
+        allowed_refused = opt.max_overflow_fraction * total_solid
+        floor = opt.atol * max(total_solid, 1e-300) / np.concatenate([xcc, np.ones(2 * M2)])
+        ctl = StepControl(opt, t_start, t_end, floor, self._stages2, self._raise_bad)
+        flush_n = self._flush_n = FLUSH * float(np.sum(u[:M2]))
+        flush_v = self._flush_v = FLUSH * total_solid
+        jit.flush(u, M2, flush_n, flush_v)
+        refresh0 = getattr(self.kernel, "evaluations", None)
+        lg, moved = self.liquid_grid, 0
+        t, ev = t_start, 0
+        while t < t_end:
+            while events[ev] <= t:
+                ev += 1
+            t_next = events[ev]
+            spraying = self.liquid is not None and self.liquid.active(t)
+            self._prepare(self._input(t, self._marginal(u)))
+            self._rates2(t, u, spraying, 0)
+            k1 = self._k2[0]
+            if not jit.all_finite(k1):
+                self._raise_bad(t, np.where(np.isfinite(k1), u, np.nan), "non-finite rate")
+            u, dt, tally = ctl.step(t, t_next, u, k1, spraying)
+            refused_rate, merged_n_rate, merged_v_rate = tally.tolist()  # r[3], overwritten by the next step
+            merged_n += merged_n_rate * dt
+            merged_v += merged_v_rate * dt
+            capped = dt == t_next - t
+            t = t_next if capped else t + dt
+            jit.flush(u, M2, flush_n, flush_v)
+            moved += self._jit2.rebin(u, self._M, self._J, self._xcc, lg.step, lg.bounds, lg.centres, self._rebin_work)
+            s.steps += 1
+            refused += refused_rate * dt
+            if spraying:
+                s.liquid_added += self.liquid.rate * dt
+            if refused > allowed_refused:
+                self._overflow(t, refused, total_solid)
+            ctl.check_limits(t)
+            if capped and (t in outs or t == t_end):
+                self._store(s, t, u, refused, (merged_n, merged_v))
+                rec.add(s)
+                classes.append(s.classes.copy())
+        self._store(s, t_end, u, refused, (merged_n, merged_v))
+        if refresh0 is not None:
+            ctl.limits["kernel_refreshes"] = int(self.kernel.evaluations - refresh0)
+        info = self._info(ctl)
+        info.update({"dimensions": 2, "liquid_grid": repr(lg), "classes_moved": int(moved)})
+        res = Result(self.grid, rec, s, info)
+        res.info["grid_floor"] = res.grid_floor()  # fragments merged into the first pivot since the batch began
+        res.classes = np.stack(classes)
+        res.class_volumes = self._vc.copy()
+        return res

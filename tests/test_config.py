@@ -101,3 +101,28 @@ def test_load_config_errors(tmp_path):
     p.write_text("- 1\n- 2\n")
     with pytest.raises(ConfigError, match="mapping"):
         load_config(p)
+
+
+def test_feed_check_names_a_case_of_the_feed_study(default_config, tiny_config):
+    check = default_config.validation.feed_check
+    assert (check.feed, check.replicates) == ("fine+medium", 3)
+    # rpm null: the feed study's speed, the grid's middle speed (150, 300, 600, 1200 -> 300)
+    assert check.rpm == default_config.grid.middle_speed() == 300.0
+    assert tiny_config.validation.feed_check.rpm == 600.0  # of 600 and 1200, the lower
+    mapping = copy.deepcopy(default_config.to_dict())
+    mapping["validation"]["feed_check"] = {"feed": "medium", "rpm": 450}
+    chosen = Config.from_mapping(mapping).validation.feed_check
+    assert (chosen.feed, chosen.rpm, chosen.replicates) == ("medium", 450.0, 3)
+    mapping["validation"]["feed_check"] = {}
+    assert Config.from_mapping(mapping).validation.feed_check.feed is None  # no feed check
+    # a blend of feeds that are not neighbours, an end of the order, an unknown name: refused
+    for feed in ("fine+coarse", "fine", "coarse", "huge"):
+        msg = bad(default_config, lambda c, f=feed: c["validation"]["feed_check"].__setitem__("feed", f))
+        assert f"validation.feed_check.feed = {feed!r}" in msg, msg
+        assert "allowed: ['fine+medium', 'medium', 'medium+coarse']" in msg, msg
+    msg = bad(default_config, lambda c: c["validation"]["feed_check"].__setitem__("replicates", 0))
+    assert "validation.feed_check.replicates = 0" in msg and ">= 1" in msg
+    msg = bad(default_config, lambda c: c["validation"]["feed_check"].__setitem__("rpm", -300))
+    assert "validation.feed_check.rpm = -300" in msg
+    msg = bad(default_config, lambda c: c["validation"]["feed_check"].__setitem__("seeds", 2))
+    assert "seeds" in msg and "allowed keys" in msg

@@ -13,6 +13,7 @@ write_findings(
     feed_rpm=sm.params.feed_rpm,
     batch_s=sm.params.batch_s,
     breakage=sm.input.breakage,
+    feed_check=sm.input.get("feed_check"),
     out={
         "speed_png": sm.output.speed_png,
         "feed_png": sm.output.feed_png,

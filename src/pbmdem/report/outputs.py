@@ -191,11 +191,21 @@ def write_provenance(*, config: dict, settings: dict, basedir, runs, metadata, o
 
 
 def write_findings(
-    *, speed, feed, comparison, speed_feed: str, feed_rpm: float, batch_s: float, out: dict, breakage=None
+    *,
+    speed,
+    feed,
+    comparison,
+    speed_feed: str,
+    feed_rpm: float,
+    batch_s: float,
+    out: dict,
+    breakage=None,
+    feed_check=None,
 ) -> None:
     """The findings: the figures (speed, feed, and with `breakage` the breakage study) and their
     text (rst), atomically. `speed`, `feed`, `breakage`: the PBM-ANN study tables; `comparison`: the
-    validation's comparison table; `out`: speed_png, feed_png, breakage_png, rst."""
+    validation's comparison table; `feed_check`: the feed check's table (or None: no check);
+    `out`: speed_png, feed_png, breakage_png, rst."""
     from pbmdem.atomic import write_text
     from pbmdem.plotting import save_figure as save
 
@@ -214,6 +224,12 @@ def write_findings(
         study = read_table(breakage, "PBM-ANN breakage study", columns=("variant", "rpm", "d50", "critical_speed"))
         save(breakage_figure(study), out["breakage_png"])
         extra = (breakage_words(study), "", _image_directive(out["breakage_png"]), "   :width: 640px", "")
+    check = None
+    if feed_check is not None:
+        from pbmdem.validation.feed_check import CHECK_COLUMNS
+
+        check_table = read_table(feed_check, "feed check table", columns=CHECK_COLUMNS)
+        check = check_table.iloc[0].to_dict()
     text = findings_rst(
         speed_table,
         feed_table,
@@ -224,5 +240,6 @@ def write_findings(
         speed_png=str(out["speed_png"]),
         feed_png=str(out["feed_png"]),
         extra=extra,
+        feed_check=check,
     )
     write_text(out["rst"], text)

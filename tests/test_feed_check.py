@@ -175,6 +175,12 @@ def test_the_findings_say_whether_pbm_dem_confirms_it():
     assert "PBM-DEM confirms it: every replicate ends below both parents' PBM-ANN d50." in text
     assert "1.6 % of d50 outside the PBM-DEM replicates' range" in text
     assert "most surprising in-domain result by the stated rule" in text
+    assert "training domain in" not in text  # the case and its parents stayed inside it
+    partly_outside = _check([6.1, 6.3, 6.2]).to_dict() | {"parent_coarser_out_of_domain_intervals": 1}
+    assert (
+        "The parent ``medium`` left the training domain in 1 interval of its batch: its d50 is partly an "
+        "extrapolation." in feed_check_words(partly_outside)
+    )
     text = feed_check_words(_check([8.0, 8.2]).to_dict())
     assert "PBM-DEM does not confirm it: no replicate ends below both parents' PBM-ANN d50." in text
     text = feed_check_words(_check([6.0, 8.0]).to_dict())

@@ -267,7 +267,7 @@ def _feed_paragraph(feed: pd.DataFrame, feed_rpm: float) -> str:
             + "between the grid's feeds ("
             + ", ".join(f"``{b}``" for b in blends.feed)
             + (") was" if len(blends) == 1 else ") were")
-            + " never run in DEM; PBM-ANN predicts such feeds in seconds. "
+            + " not in the DEM grid; PBM-ANN predicts such feeds in seconds. "
             if len(blends)
             else ""
         )
@@ -316,10 +316,10 @@ def feed_check_words(check) -> str:
             f"{int(check['ann_intervals'])} intervals of this batch. "
         )
     for p in ("finer", "coarser"):
-        if int(check[f"parent_{p}_out_of_domain_intervals"]):
+        if m := int(check[f"parent_{p}_out_of_domain_intervals"]):
             domain += (
-                f"The parent ``{check[f'parent_{p}']}`` left it in {int(check[f'parent_{p}_out_of_domain_intervals'])} "
-                "intervals: its d50 is an extrapolation. "
+                f"The parent ``{check[f'parent_{p}']}`` left the training domain in {m} interval{'s' if m > 1 else ''} "
+                "of its batch: its d50 is partly an extrapolation. "
             )
     if check["is_most_surprising"]:
         choice = (

@@ -51,6 +51,11 @@ def print_runtime_estimate():
         for j in jobs
         if j.rule.name == "pbm_dem_coupled"
     ]
+    loops += [
+        (CFG.validation.feed_check.rpm, j.wildcards_dict["rep"], feed_check_loop())
+        for j in jobs
+        if j.rule.name == "feed_check_dem"
+    ]
     cores = workflow.resource_settings.cores or 1
     print(study_estimate(CFG, grid, loops, layout.RESULTS).text(cores), file=sys.stderr)
 
@@ -82,6 +87,15 @@ def loop_params(wildcards=None):
     return CFG.coupled_loop().to_dict()
 
 
+def feed_check_loop():
+    """The coupled loop of the feed check: the validation's, from validation.feed_check.feed."""
+    from pbmdem.coupling.studies import feed_case, with_feed
+
+    feed = CFG.validation.feed_check.feed
+    grid = {name: CFG.distribution(name) for name in CFG.grid.size_distributions}
+    return with_feed(CFG.coupled_loop(), feed, feed_case(grid, feed))
+
+
 def pbm_outputs(kernel):
     folder = layout.pbm_run(kernel)
     return {
@@ -98,7 +112,7 @@ DEM_RANKS = CFG.dem_execution.mpi_ranks
 
 # --- validation speeds and runs
 # the feed study's speed: the middle impeller speed of the DEM grid (a speed the surrogate was trained at)
-FEED_STUDY_RPM = sorted(CFG.grid.impeller_rpm)[(len(CFG.grid.impeller_rpm) - 1) // 2]
+FEED_STUDY_RPM = CFG.grid.middle_speed()
 VAL_RPMS = [rpm_text(r) for r in CFG.validation.rpm]
 VAL_REPS = list(range(CFG.validation.dem_replicates))
 RUN_FILES = layout.RUN_FILES

@@ -10,9 +10,15 @@ report: "../workflow/report/workflow.rst"
 # The findings the report opens with (category "1. Findings", and the text included at the top of
 # workflow/report/workflow.rst): final sizes against impeller speed and against the feed, in words
 # and one figure each, then how far to trust them (the comparison with PBM-DEM, and what the
-# surrogate was trained on with its accuracy on DEM runs it never saw).
+# surrogate was trained on with its accuracy on DEM runs it never saw); with
+# validation.feed_check.feed set, the PBM-DEM check of the feed result (rules/validation.smk).
 rule report_findings:
     input:
+        **(
+            {"feed_check": layout.validation("feed_check.csv")}
+            if CFG.validation.feed_check.feed
+            else {}
+        ),
         speed=layout.validation("speed_study.csv"),
         feed=layout.validation("feed_study.csv"),
         breakage=layout.validation("breakage_study.csv"),

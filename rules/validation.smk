@@ -170,3 +170,79 @@ rule pbm_ann_studies:
         feeds={name: CFG.distribution(name).to_dict() for name in CFG.grid.size_distributions},
     script:
         "../workflow/scripts/pbm_ann_studies.py"
+
+
+# The feed check (validation.feed_check, docs/validation.md): PBM-DEM loops (one job per replicate,
+# run in parallel like pbm_dem_coupled) and PBM-ANN (ensemble mean and members, with the case's
+# parent feeds) for one case of the feed study, configured so that the DAG is known before the feed
+# study runs; the table says whether PBM-DEM confirms the case's statement and whether it is still
+# the feed study's most surprising case by pbmdem.validation.feed_check's rule.
+FEED_CHECK = CFG.validation.feed_check
+FEED_CHECK_REPS = list(range(FEED_CHECK.replicates))
+GRID_FEEDS = {name: CFG.distribution(name).to_dict() for name in CFG.grid.size_distributions}
+
+
+rule feed_check_dem:
+    output:
+        **run_outputs(layout.feed_check_run()),
+    log:
+        layout.log("validation/feed_check_pbm_dem_rep{rep}.log"),
+    conda:
+        "../envs/validation.yaml"
+    threads: DEM_RANKS
+    resources:
+        tasks=DEM_RANKS,
+    params:
+        deck_sha256=DECK_SHA256,
+        loop=loop_params,
+        feed=FEED_CHECK.feed,
+        feeds=GRID_FEEDS,
+        rpm=FEED_CHECK.rpm,
+        outdir=lambda wc, output: os.path.dirname(output.summary),
+    script:
+        "../workflow/scripts/feed_check_loop.py"
+
+
+rule feed_check_ann:
+    input:
+        model=MODEL,
+    output:
+        table=layout.feed_check("pbm_ann.csv"),
+    log:
+        layout.log("validation/feed_check_pbm_ann.log"),
+    conda:
+        "../envs/validation.yaml"
+    params:
+        loop=loop_params,
+        feed=FEED_CHECK.feed,
+        feeds=GRID_FEEDS,
+        rpm=FEED_CHECK.rpm,
+    script:
+        "../workflow/scripts/feed_check_ann.py"
+
+
+rule feed_check:
+    input:
+        dem=[f"{layout.feed_check_run(rep)}/summary.csv" for rep in FEED_CHECK_REPS],
+        ann=layout.feed_check("pbm_ann.csv"),
+        study=layout.validation("feed_study.csv"),
+    output:
+        table=report(
+            layout.validation("feed_check.csv"),
+            caption="../workflow/report/feed_check.rst",
+            category=CATEGORIES["validation"],
+        ),
+    log:
+        layout.log("validation/feed_check.log"),
+    conda:
+        "../envs/validation.yaml"
+    params:
+        feed=FEED_CHECK.feed,
+        rpm=FEED_CHECK.rpm,
+        feed_study_rpm=FEED_STUDY_RPM,
+    script:
+        "../workflow/scripts/feed_check.py"
+
+
+if FEED_CHECK.feed is not None:
+    extra_targets.append(layout.validation("feed_check.csv"))

@@ -137,3 +137,61 @@ def test_breakage_settings_out_of_their_physical_range_are_refused_where_they_en
     message = str(info.value)
     assert f"pbm.breakage.{key} = {value!r}" in message and allowed in message, message
     assert "Traceback" not in message
+
+
+def test_feed_check_names_a_case_of_the_feed_study(default_config, tiny_config):
+    check = default_config.validation.feed_check
+    assert (check.feed, check.replicates) == ("fine+medium", 3)
+    # rpm null: the feed study's speed, the grid's middle speed (150, 300, 600, 1200 -> 300)
+    assert check.rpm == default_config.grid.middle_speed() == 300.0
+    assert tiny_config.validation.feed_check.rpm == 600.0  # of 600 and 1200, the lower
+    mapping = copy.deepcopy(default_config.to_dict())
+    mapping["validation"]["feed_check"] = {"feed": "medium", "rpm": 450}
+    chosen = Config.from_mapping(mapping).validation.feed_check
+    assert (chosen.feed, chosen.rpm, chosen.replicates) == ("medium", 450.0, 3)
+    mapping["validation"]["feed_check"] = {}
+    assert Config.from_mapping(mapping).validation.feed_check.feed is None  # no feed check
+    # a blend of feeds that are not neighbours, an end of the order, an unknown name: refused
+    for feed in ("fine+coarse", "fine", "coarse", "huge"):
+        msg = bad(default_config, lambda c, f=feed: c["validation"]["feed_check"].__setitem__("feed", f))
+        assert f"validation.feed_check.feed = {feed!r}" in msg, msg
+        assert "allowed: ['fine+medium', 'medium', 'medium+coarse']" in msg, msg
+    msg = bad(default_config, lambda c: c["validation"]["feed_check"].__setitem__("replicates", 0))
+    assert "validation.feed_check.replicates = 0" in msg and ">= 1" in msg
+    msg = bad(default_config, lambda c: c["validation"]["feed_check"].__setitem__("rpm", -300))
+    assert "validation.feed_check.rpm = -300" in msg
+    msg = bad(default_config, lambda c: c["validation"]["feed_check"].__setitem__("seeds", 2))
+    assert "seeds" in msg and "allowed keys" in msg
+
+
+def test_the_feed_check_jobs_follow_the_config(tmp_path, tiny_mapping):
+    """validation.feed_check: one PBM-DEM job per replicate, PBM-ANN and the table; none with
+    feed null; an unknown feed stops Snakemake before any job with the key, value and what is allowed."""
+
+    def jobs(edit) -> tuple[int, dict, str]:
+        cfg = copy.deepcopy(tiny_mapping)
+        edit(cfg["validation"]["feed_check"])
+        path = tmp_path / "check.yaml"
+        path.write_text(yaml.safe_dump(cfg))
+        proc = subprocess.run(
+            snakemake_command(tmp_path, "-n", "--cores", "2", "--quiet", "rules", configfile=path),
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        counts = {
+            line.split()[0]: int(line.split()[1])
+            for line in proc.stdout.splitlines()
+            if len(line.split()) == 2 and line.split()[1].isdigit()
+        }
+        return proc.returncode, counts, proc.stdout + proc.stderr
+
+    code, counts, out = jobs(lambda c: c.update(replicates=3))
+    assert code == 0, out
+    assert (counts["feed_check_dem"], counts["feed_check_ann"], counts["feed_check"]) == (3, 1, 1), out
+    code, counts, out = jobs(lambda c: c.update(feed=None))
+    assert code == 0 and "pbm_dem_coupled" in counts, out
+    assert not {"feed_check_dem", "feed_check_ann", "feed_check"} & set(counts), out
+    code, counts, out = jobs(lambda c: c.update(feed="large+small"))
+    assert code != 0 and "validation.feed_check.feed = 'large+small'" in out and "allowed: ['small+large']" in out
+    assert not (tmp_path / "results").exists()

@@ -92,7 +92,7 @@ def test_findings_state_the_answers_with_their_numbers(tmp_path):
     assert "left its training domain at 1 of 3 speeds (1200 rpm)" in text
     assert "goes from 4.00 mm for the finest feed, ``fine``" in text and "7.00 mm for the coarsest, ``coarse``" in text
     assert "a coarser feed gives larger granules at every step" in text
-    assert "The blend between the grid's feeds (``fine+coarse``) was never run in DEM" in text
+    assert "The blend between the grid's feeds (``fine+coarse``) was not in the DEM grid" in text
     assert "at 300 rpm (a speed of the DEM grid) PBM-ANN's final d50 is 4.01 mm against 4.00 mm" in text
     # the figures travel inside the text (Snakemake's report includes it), as data URIs
     assert text.count(".. image:: data:image/png;base64,") == 2

@@ -14,6 +14,9 @@ def test_paths_of_one_run_and_their_wildcard_patterns():
     assert layout.validation_run("pbm_dem", "450", 2) == "results/validation/rpm450/pbm_dem/rep2"
     assert layout.validation_run("pbm_ann", validation_dir="v") == "v/rpm{rpm}/pbm_ann"
     assert layout.report("tables/settings.csv") == "results/report/tables/settings.csv"
+    assert layout.feed_check_run() == "results/validation/feed_check/pbm_dem/rep{rep}"
+    assert layout.feed_check_run(2, root="out") == "out/validation/feed_check/pbm_dem/rep2"
+    assert layout.feed_check("pbm_ann.csv") == "results/validation/feed_check/pbm_ann.csv"
     assert layout.MODEL == "results/surrogate/model.skops"
     with pytest.raises(
         ValueError, match=r"validation method 'pbm_x'; allowed: \['pbm_dem', 'pbm_ann', 'pbm_constant'\]"

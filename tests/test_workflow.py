@@ -228,6 +228,7 @@ def test_a_copied_project_with_its_results_reruns_nothing(tiny_workflow, root, t
     cfg = load_config(configfile)
     runs = len(cfg.grid.points()) * cfg.dem_replicates
     intervals = len(cfg.validation.rpm) * cfg.validation.dem_replicates * cfg.validation.coupling_intervals
+    intervals += cfg.validation.feed_check.replicates * cfg.validation.coupling_intervals  # the feed check's loops
     assert f"pbmdem runtime estimate: {runs} DEM grid run(s)" in dry.stderr, dry.stderr[-2000:]
     assert f"and {intervals} PBM-DEM coupling interval(s)" in dry.stderr
     assert f"from the throughput of the {runs} finished runs in results/dem/runs.csv" in dry.stderr
@@ -365,9 +366,16 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
         assert (pd.read_csv(rep / "intervals.csv").dem_collisions > 0).all(), rep
     findings = (res / "report" / "findings" / "findings.rst").read_text()
     assert "Findings" in findings
-    # the findings first (speed, feed), then how far to trust them, each figure inside the text
+    # the findings first (speed, feed and its PBM-DEM check), then how far to trust them, each figure
+    # inside the text
     order = [
-        findings.find(p) for p in ("**Impeller speed.**", "**Feed size distribution.**", "**How far to trust them.**")
+        findings.find(p)
+        for p in (
+            "**Impeller speed.**",
+            "**Feed size distribution.**",
+            "**PBM-DEM check of the feed result.**",
+            "**How far to trust them.**",
+        )
     ]
     assert -1 not in order and order == sorted(order), order
     # the three findings figures (speed, feed, and with pbm.breakage on the breakage study)
@@ -388,6 +396,30 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
     assert learned in findings, findings[findings.find("**How far") :][:3000]
     assert findings.index("**How far to trust them.**") < findings.index(learned)
     assert "cross-validation" in findings and "the noise floor" in findings
+    # the feed check: its replicate loops ran LIGGGHTS for the configured case at the feed study's speed
+    from pbmdem.validation.feed_check import CHECK_COLUMNS, STUDY_COLUMNS, most_surprising
+
+    check_cfg = load_config(configfile).validation.feed_check
+    check = pd.read_csv(res / "validation" / "feed_check.csv")
+    assert list(check.columns) == list(CHECK_COLUMNS) and len(check) == 1
+    row = check.iloc[0]
+    assert (row.feed, row.rpm, row.dem_replicates) == (check_cfg.feed, check_cfg.rpm, check_cfg.replicates)
+    loops = sorted((res / "validation" / "feed_check" / "pbm_dem").glob("rep*"))
+    assert len(loops) == check_cfg.replicates
+    for rep in loops:
+        assert (pd.read_csv(rep / "intervals.csv").dem_collisions > 0).all(), rep
+        assert json.loads((rep / "timing.json").read_text())["distribution"] == check_cfg.feed
+    finals = [pd.read_csv(rep / "summary.csv").d50.iloc[-1] for rep in loops]
+    assert (row.dem_d50_min, row.dem_d50_max) == (min(finals), max(finals))
+    assert row.dem_d50_mean == pytest.approx(np.mean(finals))
+    assert row.dem_confirms in ("yes", "partly", "no")
+    assert 0 <= row.dem_replicates_confirming <= row.dem_replicates
+    # PBM-ANN of the case at the feed study's speed is the feed study's own row
+    study = pd.read_csv(res / "validation" / "feed_study.csv")
+    assert row.ann_d50 == pytest.approx(study.set_index("feed").loc[check_cfg.feed, "d50"], rel=1e-12)
+    top = most_surprising(study[list(STUDY_COLUMNS)])
+    assert row.most_surprising == top.feed and row.is_most_surprising == (top.feed == check_cfg.feed)
+    assert f"PBM-ANN predicts that ``{check_cfg.feed}``" in findings
     response = pd.read_csv(res / "dem" / "speed_response.csv")
     assert len(response) == len(cfg["grid"]["impeller_rpm"]) * len(cfg["grid"]["size_distributions"])
     assert (response.n_replicates == cfg["dem"]["replicates"]).all()
@@ -439,6 +471,7 @@ def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
         assert files[f"{name}.csv"] == 1 and files[f"{name}.html"] == 1, (name, files)
     for name in (
         "comparison.csv",
+        "feed_check.csv",
         "proposals.csv",
         "rpm_sweep.png",
         "speed_response.png",

@@ -12,6 +12,8 @@ text (Snakemake wants paths relative to its working directory) under `root` (def
     <root>/pbm/<kernel>/rpm<rpm>_<dist>/    one PBM batch (pbm_run)
     <root>/validation/rpm<rpm>/             one validation speed: pbm_dem/rep<k>/, pbm_ann/,
                                             pbm_constant/, bands.csv (validation_run)
+    <root>/validation/feed_check/           the feed check: pbm_dem/rep<k>/, pbm_ann.csv (feed_check_run);
+                                            its table <root>/validation/feed_check.csv
     <root>/design/                          the design space and the calibration check (design)
     <root>/report/                          the report's figures and tables
     <root>/logs/                            one log per job
@@ -86,6 +88,17 @@ def validation_dir_of(path) -> str:
     if not at:
         raise ValueError(f"{path} is not below a validation speed's folder (rpm<rpm>/)")
     return str(PurePosixPath(*parts[: at[-1]]))
+
+
+def feed_check(name: str = "", root: str = RESULTS) -> str:
+    """<root>/validation/feed_check/<name>: the runs of the feed check (the feed and speed of
+    validation.feed_check)."""
+    return validation(f"feed_check/{name}", root).rstrip("/")
+
+
+def feed_check_run(rep="{rep}", root: str = RESULTS) -> str:
+    """The folder of one PBM-DEM loop of the feed check: <root>/validation/feed_check/pbm_dem/rep<rep>."""
+    return feed_check(f"pbm_dem/rep{rep}", root)
 
 
 def design(name: str = "", root: str = RESULTS) -> str:

@@ -15,6 +15,7 @@ write_findings(
     breakage=sm.input.breakage,
     training=sm.input.training,
     metadata=sm.input.metadata,
+    feed_check=sm.input.get("feed_check"),
     out={
         "speed_png": sm.output.speed_png,
         "feed_png": sm.output.feed_png,

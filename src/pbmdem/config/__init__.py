@@ -14,11 +14,20 @@ from .design import Calibration, DesignSpace, Factor, Specification
 from .errors import RPM_MAX, ConfigError, check_rpm
 from .granulator import Bed, Bowl, Granulator, Impeller, Material
 from .pbm import Pbm, Solver
-from .points import ExtraPoint, OperatingGrid, SizeDistribution, point_id, rpm_text
+from .points import (
+    BLEND_JOIN,
+    ExtraPoint,
+    OperatingGrid,
+    SizeDistribution,
+    feed_case_names,
+    feed_case_parents,
+    point_id,
+    rpm_text,
+)
 from .schema import complete, non_finite_values, schema_dir, section_defaults
 from .settings import Config, CoupledLoop, DemPoint, PbmBatch, SurrogateTraining
 from .surrogate import Surrogate
-from .validation import SampleRule, Sweep, Validation
+from .validation import FeedCheck, SampleRule, Sweep, Validation
 from .yamlfile import load_yaml
 
 
@@ -50,6 +59,9 @@ __all__ = [
     "ExtraPoint",
     "OperatingGrid",
     "point_id",
+    "feed_case_names",
+    "feed_case_parents",
+    "BLEND_JOIN",
     "rpm_text",
     "Dem",
     "DemExecution",
@@ -58,6 +70,7 @@ __all__ = [
     "Surrogate",
     "Validation",
     "Sweep",
+    "FeedCheck",
     "SampleRule",
     "DemPoint",
     "PbmBatch",

@@ -85,6 +85,7 @@ def check(cfg) -> None:
         problems.append(
             f"validation.distribution: {cfg.validation.distribution!r} is not defined; defined names: {defined}"
         )
+    problems += _feed_check_problems(cfg)
     sweep = cfg.validation.sweep
     if not sweep.stop > sweep.start:
         problems.append(f"validation.sweep: stop = {sweep.stop:g} must be greater than start = {sweep.start:g}")
@@ -92,3 +93,20 @@ def check(cfg) -> None:
     problems += design_problems(cfg)
     if problems:
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
+
+
+def _feed_check_problems(cfg) -> list[str]:
+    """validation.feed_check.feed: a case of the feed study with a grid feed on either side."""
+    from .points import feed_case_names, feed_case_parents
+
+    feed = cfg.validation.feed_check.feed
+    grid = cfg.grid.size_distributions
+    if feed is None or any(name not in cfg.size_distributions for name in grid):
+        return []  # no check, or the grid's own names are wrong (reported above)
+    cases = feed_case_parents(feed_case_names({name: cfg.size_distributions[name] for name in grid}))
+    if feed in cases:
+        return []
+    return [
+        f"validation.feed_check.feed = {feed!r}: not a case of the feed study with a grid feed on either side "
+        f"(allowed: {list(cases) or 'none: the grid has fewer than two size distributions'}, or null for no check)"
+    ]

@@ -1,4 +1,5 @@
-"""Operating points: the grid of impeller speeds x size distributions, and their ids."""
+"""Operating points: the grid of impeller speeds x size distributions, and their ids; the feed
+study's cases (the grid's feeds and the 50:50 blends between neighbours) by name."""
 
 from __future__ import annotations
 
@@ -33,6 +34,55 @@ class SizeDistribution(Settings):
     def mean_particle_volume(self) -> float:
         """Number-weighted mean particle volume sum_k f_k pi d_k^3 / 6 (m3)."""
         return math.fsum(f * math.pi / 6.0 * d**3 for d, f in zip(self.diameters, self.number_fractions))
+
+    @property
+    def mass_median(self) -> float:
+        """The mass-median diameter (m): the class where the cumulative mass passes 50 %,
+        interpolated in ln d between class diameters."""
+        import numpy as np
+
+        d = np.asarray(self.diameters, float)
+        mass = np.asarray(self.number_fractions, float) * d**3
+        cum = np.cumsum(mass) / mass.sum()
+        k = int(np.searchsorted(cum, 0.5))
+        if k == 0:
+            return float(d[0])
+        lo, hi = cum[k - 1], cum[k]
+        w = (0.5 - lo) / (hi - lo) if hi > lo else 0.0
+        return float(math.exp(math.log(d[k - 1]) + w * (math.log(d[k]) - math.log(d[k - 1]))))
+
+
+#: the name of the 50:50 blend of two neighbouring feeds of the feed study: "<finer>+<coarser>"
+#: (a distribution's name cannot hold "+", so a blend's name is never a feed's)
+BLEND_JOIN = "+"
+
+
+def feed_case_names(distributions: dict[str, SizeDistribution]) -> list[tuple[str, bool]]:
+    """The feed study's cases, (name, a feed of the DEM grid): the feeds ordered by mass-median
+    diameter, with the 50:50 blend of each pair of neighbours between them ("fine+medium")."""
+    named = sorted(distributions, key=lambda name: distributions[name].mass_median)
+    cases: list[tuple[str, bool]] = []
+    for k, name in enumerate(named):
+        if k:
+            cases.append((f"{named[k - 1]}{BLEND_JOIN}{name}", False))
+        cases.append((name, True))
+    return cases
+
+
+def feed_case_parents(cases) -> dict[str, tuple[str, str]]:
+    """The parents of the feed study's cases (`cases`: (name, a feed of the DEM grid) in the
+    feed study's order, :func:`feed_case_names`): the nearest grid feeds before and after a case,
+    i.e. the two feeds of a blend, and a feed's finer and coarser neighbours. The cases at either
+    end have one neighbour only and are left out."""
+    cases = list(cases)
+    grid = [k for k, (_, in_grid) in enumerate(cases) if in_grid]
+    out = {}
+    for k, (name, _) in enumerate(cases):
+        before = [j for j in grid if j < k]
+        after = [j for j in grid if j > k]
+        if before and after:
+            out[name] = (cases[before[-1]][0], cases[after[0]][0])
+    return out
 
 
 @dataclass(frozen=True)
@@ -71,6 +121,12 @@ class OperatingGrid(Settings):
     def speeds(self) -> list[float]:
         """Every impeller speed that some operating point runs at, ascending."""
         return sorted({rpm for rpm, _ in self.points()})
+
+    def middle_speed(self) -> float:
+        """The middle impeller speed of the grid's speeds (`impeller_rpm`; of two middle ones the
+        lower): the feed study's speed, one the surrogate was trained at."""
+        speeds = sorted(self.impeller_rpm)
+        return float(speeds[(len(speeds) - 1) // 2])
 
     def replicates(self, distribution: str, default: int) -> int:
         """DEM runs per operating point of `distribution`: `design_replicates` for a design point's

@@ -136,6 +136,9 @@ class Config:
             pbm_section["grid"]["min_diameter"] = min(min(d.diameters) for d in dists.values())
         val_section = json.loads(json.dumps(full["validation"]))
         design = json.loads(json.dumps(full["design_space"]))
+        # the feed check's speed: null is the feed study's, the grid's middle speed
+        if val_section["feed_check"]["rpm"] is None:
+            val_section["feed_check"]["rpm"] = grid.middle_speed()
         # the speed ranges of the PBM-ANN sweep and of the design space: null ends are the grid's
         for span in (val_section["sweep"], design["impeller_rpm"]):
             if span["start"] is None:

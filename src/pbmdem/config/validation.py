@@ -40,6 +40,16 @@ class Proposals(Settings):
 
 
 @dataclass(frozen=True)
+class FeedCheck(Settings):
+    """The PBM-DEM check of one case of the feed study (`feed`, None: no check) at `rpm`, with
+    `replicates` PBM-DEM loops (docs/validation.md, "The feed check")."""
+
+    feed: str | None
+    rpm: float
+    replicates: int
+
+
+@dataclass(frozen=True)
 class Validation(Settings):
     """Speeds, feed, coupling intervals and DEM sampling window of the validation loops."""
 
@@ -52,3 +62,4 @@ class Validation(Settings):
     min_particles_per_class: int
     sweep: Sweep
     proposals: Proposals
+    feed_check: FeedCheck

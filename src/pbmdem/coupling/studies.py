@@ -12,7 +12,6 @@ in seconds.
 from __future__ import annotations
 
 import logging
-import math
 import tempfile
 import time
 from pathlib import Path
@@ -20,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pbmdem.config import CoupledLoop, SizeDistribution
+from pbmdem.config import BLEND_JOIN, CoupledLoop, SizeDistribution, feed_case_names, feed_case_parents
 from pbmdem.pbm.errors import PBMError
 
 from .loop import CouplingError
@@ -32,17 +31,8 @@ STATISTICS = ("d10", "d50", "d90")
 
 
 def mass_median(sizes: SizeDistribution) -> float:
-    """The mass-median diameter (m) of a discrete distribution: the class where the cumulative mass
-    passes 50 %, interpolated in ln d between class diameters."""
-    d = np.asarray(sizes.diameters, float)
-    mass = np.asarray(sizes.number_fractions, float) * d**3
-    cum = np.cumsum(mass) / mass.sum()
-    k = int(np.searchsorted(cum, 0.5))
-    if k == 0:
-        return float(d[0])
-    lo, hi = cum[k - 1], cum[k]
-    w = (0.5 - lo) / (hi - lo) if hi > lo else 0.0
-    return float(math.exp(math.log(d[k - 1]) + w * (math.log(d[k]) - math.log(d[k - 1]))))
+    """The mass-median diameter (m) of a discrete distribution (`SizeDistribution.mass_median`)."""
+    return sizes.mass_median
 
 
 def blend(a: SizeDistribution, b: SizeDistribution, mass_share_a: float = 0.5) -> SizeDistribution:
@@ -62,15 +52,30 @@ def blend(a: SizeDistribution, b: SizeDistribution, mass_share_a: float = 0.5) -
 
 def feed_cases(distributions: dict[str, SizeDistribution]) -> list[tuple[str, SizeDistribution, bool]]:
     """(name, sizes, in the DEM grid) of the grid's feeds ordered by mass-median diameter, with a
-    50:50 blend by mass between each pair of neighbours ("fine+medium")."""
-    named = sorted(distributions.items(), key=lambda kv: mass_median(kv[1]))
+    50:50 blend by mass between each pair of neighbours ("fine+medium"): the cases and their names
+    are `pbmdem.config.feed_case_names`."""
     cases = []
-    for k, (name, sizes) in enumerate(named):
-        if k:
-            prev, prev_sizes = named[k - 1]
-            cases.append((f"{prev}+{name}", blend(prev_sizes, sizes), False))
-        cases.append((name, sizes, True))
+    for name, in_grid in feed_case_names(distributions):
+        if in_grid:
+            cases.append((name, distributions[name], True))
+        else:
+            finer, coarser = name.split(BLEND_JOIN)
+            cases.append((name, blend(distributions[finer], distributions[coarser]), False))
     return cases
+
+
+def feed_case(distributions: dict[str, SizeDistribution], name: str) -> SizeDistribution:
+    """The sizes of the feed study's case `name` (a feed or a blend, `feed_cases`)."""
+    cases = feed_cases(distributions)
+    for case, sizes, _ in cases:
+        if case == name:
+            return sizes
+    raise ValueError(f"feed {name!r} is not a case of the feed study; its cases: {[c for c, _, _ in cases]}")
+
+
+def with_feed(loop: CoupledLoop, name: str, sizes: SizeDistribution) -> CoupledLoop:
+    """The coupled loop `loop` started from the feed `sizes` (named `name`)."""
+    return loop.replace(batch=loop.batch.replace(distribution=name, sizes=sizes))
 
 
 def _final(summary: pd.DataFrame) -> dict:
@@ -84,7 +89,7 @@ def run_case(loop: CoupledLoop, model_path: str | Path, rpm: float, feed: str, s
     the wall time."""
     from pbmdem.surrogate import load_surrogate
 
-    case = loop.replace(batch=loop.batch.replace(distribution=feed, sizes=sizes))
+    case = with_feed(loop, feed, sizes)
     n_members = load_surrogate(model_path).n_members
     row: dict = {"rpm": float(rpm), "feed": feed, "feed_d50": mass_median(sizes)}
     t0 = time.perf_counter()
@@ -157,6 +162,25 @@ def feed_study(
         row = run_case(loop, model_path, rpm, name, sizes)
         row["in_grid"] = in_grid
         rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def feed_case_study(
+    loop: CoupledLoop, model_path: str | Path, rpm: float, distributions: dict[str, SizeDistribution], name: str
+) -> pd.DataFrame:
+    """:func:`feed_study`'s rows of the case `name` and of its parents (the grid feeds on either
+    side, `pbmdem.config.feed_case_parents`) at `rpm`, in the feed study's order: what the feed
+    check compares PBM-DEM with."""
+    cases = feed_cases(distributions)
+    parents = feed_case_parents([(case, in_grid) for case, _, in_grid in cases])
+    if name not in parents:
+        raise ValueError(
+            f"feed {name!r}: not a case of the feed study with a grid feed on either side; such cases: {list(parents)}"
+        )
+    rows = []
+    for case, sizes, in_grid in cases:
+        if case == name or case in parents[name]:
+            rows.append(run_case(loop, model_path, rpm, case, sizes) | {"in_grid": in_grid})
     return pd.DataFrame(rows)
 
 

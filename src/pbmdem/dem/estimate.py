@@ -106,9 +106,9 @@ class StudyEstimate:
 def study_estimate(cfg, grid_runs, loops, results: str | Path = layout.RESULTS) -> StudyEstimate:
     """The wall time of the DEM runs a workflow run will do: `grid_runs`, (rpm, distribution,
     replicate) of the grid's DEM jobs (each from a settled bed, one per distribution and
-    replicate), and `loops`, (rpm, replicate) of the PBM-DEM coupled loops
-    (one DEM run per coupling interval), on `cfg` (a pbmdem Config); the throughput from the
-    finished runs in `results`."""
+    replicate), and `loops`, (rpm, replicate) of the PBM-DEM coupled loops of the validation feed
+    or (rpm, replicate, CoupledLoop) of another loop (the feed check's), one DEM run per coupling
+    interval, on `cfg` (a pbmdem Config); the throughput from the finished runs in `results`."""
     from .plan import plan_point
 
     throughput = measured_throughput(layout.dem("runs.csv", str(results)))
@@ -122,11 +122,11 @@ def study_estimate(cfg, grid_runs, loops, results: str | Path = layout.RESULTS) 
         if (dist, int(rep)) not in beds:
             beds.add((dist, int(rep)))
             grid_seconds += throughput.seconds(float(plan.n_particles) * plan.settle_steps, plan.n_particles, ranks)
-    loop = cfg.coupled_loop()
-    loop_seconds = 0.0
-    for rpm, rep in loops:
+    validation_loop = cfg.coupled_loop()
+    loop_seconds, intervals = 0.0, 0
+    for rpm, rep, *other in loops:
+        loop = other[0] if other else validation_loop
         plan = plan_point(loop.dem_point(), float(rpm), replicate=int(rep))
         loop_seconds += loop.coupling_intervals * throughput.seconds(plan.particle_steps, plan.n_particles, ranks)
-    return StudyEstimate(
-        len(grid_runs), grid_seconds, len(loops) * loop.coupling_intervals, loop_seconds, ranks, throughput.source
-    )
+        intervals += loop.coupling_intervals
+    return StudyEstimate(len(grid_runs), grid_seconds, intervals, loop_seconds, ranks, throughput.source)

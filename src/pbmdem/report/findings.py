@@ -267,13 +267,94 @@ def _feed_paragraph(feed: pd.DataFrame, feed_rpm: float) -> str:
             + "between the grid's feeds ("
             + ", ".join(f"``{b}``" for b in blends.feed)
             + (") was" if len(blends) == 1 else ") were")
-            + " never run in DEM; PBM-ANN predicts such feeds in seconds. "
+            + " not in the DEM grid; PBM-ANN predicts such feeds in seconds. "
             if len(blends)
             else ""
         )
         + _disagree(max(_spread(r) for _, r in f.iterrows()))
         + _domain_words(f, "feed", "feed")
     )
+
+
+#: what each kind of statement of the feed check (pbmdem.validation.feed_check) says a PBM-DEM
+#: replicate does when it confirms the statement
+_CONFIRMING = {
+    "below_parents": "ends{} below both parents' PBM-ANN d50",
+    "above_parents": "ends{} above both parents' PBM-ANN d50",
+}
+
+
+def _side(check) -> str:
+    if check["kind"] in _CONFIRMING:
+        return _CONFIRMING[check["kind"]]
+    return "ends{} " + ("below" if check["ann_deviation"] < 0 else "above") + " the parents' log-interpolation"
+
+
+def feed_check_words(check) -> str:
+    """The PBM-DEM check of the feed study's most surprising result in one paragraph (`check`: the
+    row of results/validation/feed_check.csv, `pbmdem.validation.feed_check.check_table`)."""
+    n, k = int(check["dem_replicates"]), int(check["dem_replicates_confirming"])
+    side = _side(check)
+    verdict = {
+        "yes": f"PBM-DEM confirms it: {'every' if n > 1 else 'the'} replicate " + side.format("") + ". ",
+        "no": "PBM-DEM does not confirm it: "
+        + ("no replicate " if n > 1 else "the replicate does not ")
+        + (side.format("") if n > 1 else side.replace("ends{}", "end"))
+        + ". ",
+        "partly": f"PBM-DEM confirms it in part: {k} of {n} replicates " + side.replace("ends{}", "end") + ". ",
+    }[check["dem_confirms"]]
+    outside = float(check["ann_d50_outside_dem_range"])
+    agreement = (
+        "PBM-ANN's final d50 lies inside the PBM-DEM replicates' range. "
+        if outside == 0
+        else f"PBM-ANN's final d50 lies {PERCENT * outside:.1f} % of d50 outside the PBM-DEM replicates' range. "
+    )
+    domain = ""
+    if int(check["ann_out_of_domain_intervals"]):
+        domain += (
+            f"PBM-ANN left its training domain in {int(check['ann_out_of_domain_intervals'])} of "
+            f"{int(check['ann_intervals'])} intervals of this batch. "
+        )
+    for p in ("finer", "coarser"):
+        if m := int(check[f"parent_{p}_out_of_domain_intervals"]):
+            domain += (
+                f"The parent ``{check[f'parent_{p}']}`` left the training domain in {m} interval{'s' if m > 1 else ''} "
+                "of its batch: its d50 is partly an extrapolation. "
+            )
+    if check["is_most_surprising"]:
+        choice = (
+            "It is the feed study's most surprising in-domain result by the stated rule (the case whose final d50 "
+            "lies furthest outside the interval of its parent feeds' d50, else furthest off their log-interpolation)."
+        )
+    elif isinstance(check["most_surprising"], str) and check["most_surprising"]:
+        choice = (
+            f"It was configured (``validation.feed_check.feed``) before this run; by the stated rule the feed "
+            f"study's most surprising in-domain result at {float(check['feed_study_rpm']):g} rpm is now that "
+            f"{check['most_surprising_statement']}: set ``validation.feed_check.feed: {check['most_surprising']}`` "
+            "to check that one."
+        )
+    else:
+        choice = "No case of the feed study with a parent feed on either side stayed inside the training domain."
+    return (
+        f"**PBM-DEM check of the feed result.** At {float(check['rpm']):g} rpm PBM-ANN predicts that "
+        f"{check['statement']}: final d50 {_mm(check['ann_d50'])} (the surrogate's members "
+        f"{MM * float(check['ann_d50_member_min']):.2f}-{_mm(check['ann_d50_member_max'])}). {n} PBM-DEM "
+        f"loop{'s' if n > 1 else ''} (LIGGGHTS at every coupling interval, DEM insertion seeds apart) "
+        f"end{'' if n > 1 else 's'} at d50 {_range(check, 'd50')}, d10 {_range(check, 'd10')} and d90 "
+        f"{_range(check, 'd90')}. "
+        + verdict
+        + agreement
+        + "The parents' d50 are PBM-ANN's (no PBM-DEM loop runs them). "
+        + domain
+        + choice
+    )
+
+
+def _range(check, stat: str) -> str:
+    lo, hi, mean = (check[f"dem_{stat}_{k}"] for k in ("min", "max", "mean"))
+    if int(check["dem_replicates"]) == 1:
+        return _mm(mean)
+    return f"{MM * float(lo):.2f}-{_mm(hi)} (mean {_mm(mean)})"
 
 
 def findings_rst(
@@ -288,13 +369,15 @@ def findings_rst(
     feed_png: str,
     extra: tuple[str, ...] = (),
     training: str | None = None,
+    feed_check=None,
 ) -> str:
     """The findings as reStructuredText: the two answers with their figures (the PNGs at
     `speed_png`, `feed_png` embedded as data URIs, so that the text shows them wherever it is
-    included: Snakemake's own `embeddedimage` directive does not embed), then `extra` (further
-    findings, lines of rst), then how far to trust them: the validation and, with `training` (the
-    paragraph of `pbmdem.report.training.training_words`), what the surrogate was trained on and
-    its accuracy on DEM runs it never saw."""
+    included: Snakemake's own `embeddedimage` directive does not embed), with `feed_check` (the
+    row of the feed check's table, or None) its PBM-DEM check after the feed's, then `extra`
+    (further findings, lines of rst), then how far to trust them: the validation and, with
+    `training` (the paragraph of `pbmdem.report.training.training_words`), what the surrogate was
+    trained on and its accuracy on DEM runs it never saw."""
     lines = [
         "Findings",
         "--------",
@@ -311,6 +394,7 @@ def findings_rst(
         "   :width: 640px",
         "   :alt: final d10, d50, d90 against the feed size distribution",
         "",
+        *((feed_check_words(feed_check), "") if feed_check is not None else ()),
         *extra,
         "**How far to trust them.** " + trust_words(comparison),
         "",

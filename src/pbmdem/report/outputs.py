@@ -203,12 +203,14 @@ def write_findings(
     breakage=None,
     training=None,
     metadata=None,
+    feed_check=None,
 ) -> None:
     """The findings: the figures (speed, feed, and with `breakage` the breakage study) and their
     text (rst), atomically. `speed`, `feed`, `breakage`: the PBM-ANN study tables; `comparison`: the
     validation's comparison table; `training`, `metadata`: the grid collision table the surrogate
     was trained on and its metadata (model.json), for its training set and held-out accuracy beside
-    the validation; `out`: speed_png, feed_png, breakage_png, rst."""
+    the validation; `feed_check`: the feed check's table (or None: no check); `out`: speed_png,
+    feed_png, breakage_png, rst."""
     from pbmdem.atomic import write_text
     from pbmdem.plotting import save_figure as save
 
@@ -239,6 +241,12 @@ def write_findings(
         meta = read_metadata(metadata)
         table = GRID_PAIRS.read(training, need=("point_id", "rpm", "distribution", "n_replicates"))
         learned = training_words(training_set(table, str(training), meta["training_point_ids"]), meta, str(training))
+    check = None
+    if feed_check is not None:
+        from pbmdem.validation.feed_check import CHECK_COLUMNS
+
+        check_table = read_table(feed_check, "feed check table", columns=CHECK_COLUMNS)
+        check = check_table.iloc[0].to_dict()
     text = findings_rst(
         speed_table,
         feed_table,
@@ -250,5 +258,6 @@ def write_findings(
         feed_png=str(out["feed_png"]),
         extra=extra,
         training=learned,
+        feed_check=check,
     )
     write_text(out["rst"], text)

@@ -6,4 +6,5 @@
 | `bands` | the PBM-DEM replicate band and a model's distance outside it |
 | `comparison` | the comparison table (`results/report/comparison.csv`) |
 | `proposals` | the next operating points where the surrogate is least sure or out of its domain |
+| `feed_check` | the feed study's most surprising case (a stated rule) and its PBM-DEM check |
 """

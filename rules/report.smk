@@ -9,12 +9,14 @@ report: "../workflow/report/workflow.rst"
 
 # The findings the report opens with (category "1. Findings", and the text included at the top of
 # workflow/report/workflow.rst): final sizes against impeller speed and against the feed, in words
-# and one figure each, then how far to trust them (the comparison with PBM-DEM).
+# and one figure each, breakage, the factor d50 depends on most (the Sobol' indices), then how far
+# to trust them (the comparison with PBM-DEM).
 rule report_findings:
     input:
         speed=layout.validation("speed_study.csv"),
         feed=layout.validation("feed_study.csv"),
         breakage=layout.validation("breakage_study.csv"),
+        sensitivity=layout.design("sensitivity.csv"),
         comparison=layout.report("comparison.csv"),
     output:
         speed_png=registered(
@@ -44,6 +46,7 @@ rule report_findings:
         speed_feed=CFG.validation.distribution,
         feed_rpm=FEED_STUDY_RPM,
         batch_s=CFG.pbm.process.end,
+        confidence=CFG.sensitivity.confidence,
     script:
         "../workflow/scripts/report_findings.py"
 

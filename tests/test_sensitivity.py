@@ -147,3 +147,32 @@ def test_sensitivity_rule_files_of_the_tiny_batch(tiny_config, tiny_surrogate, t
     assert set(info["out_of_domain_samples"]) == {"mean", "0", "1"}
     # the tiny surrogate saw 600-900 rpm: the faster half of the samples extrapolate, and say so
     assert info["out_of_domain_samples"]["mean"] > 0
+
+
+def _indices(member, st, s1):
+    return [
+        {"parameter": p, "output": "d50", "member": member, "S1": a, "S1_conf": 0.05, "ST": b, "ST_conf": 0.05}
+        for p, a, b in zip(("impeller_rpm", "pbm.aggregation.beta0", "pbm.process.wet_massing_time"), s1, st)
+    ]
+
+
+def test_sensitivity_words_name_the_first_factor_and_the_members_agreement():
+    from pbmdem.report.sensitivity import sensitivity_words
+
+    rows = _indices("mean", (0.6, 0.3, 0.02), (0.5, 0.25, 0.01))
+    rows += _indices("0", (0.55, 0.35, 0.02), (0.5, 0.3, 0.0))  # the mean's order
+    rows += _indices("1", (0.3, 0.5, 0.03), (0.25, 0.45, 0.0))  # beta0 first
+    words = sensitivity_words(pd.DataFrame(rows), 0.95)
+    assert words.startswith("**Global sensitivity.**")
+    assert "depends most on the impeller speed (ST = 0.60 ± 0.05, S1 = 0.50 ± 0.05; 95 % intervals)" in words
+    assert "then on the beta0 (ST = 0.30" in words and "not told apart" not in words
+    assert "The wet-massing time causes less than 5 % of its variance." in words
+    assert "impeller speed comes first for 1 of 2 (ST from 0.30 to 0.55); the others put beta0 first" in words
+    assert "1 of 2 rank all 3 factors as the mean does." in words
+    # overlapping intervals; every member agrees
+    rows = _indices("mean", (0.45, 0.42, 0.1), (0.4, 0.4, 0.1)) + _indices("0", (0.5, 0.4, 0.1), (0.4, 0.4, 0.1))
+    words = sensitivity_words(pd.DataFrame(rows), 0.95)
+    assert "within their intervals these two are not told apart" in words
+    assert "the surrogate's uncertainty does not change the answer" in words
+    nan = pd.DataFrame(_indices("mean", (np.nan,) * 3, (np.nan,) * 3))
+    assert "undefined" in sensitivity_words(nan, 0.95)

@@ -13,6 +13,8 @@ write_findings(
     feed_rpm=sm.params.feed_rpm,
     batch_s=sm.params.batch_s,
     breakage=sm.input.breakage,
+    sensitivity=sm.input.sensitivity,
+    confidence=sm.params.confidence,
     out={
         "speed_png": sm.output.speed_png,
         "feed_png": sm.output.feed_png,

@@ -191,10 +191,21 @@ def write_provenance(*, config: dict, settings: dict, basedir, runs, metadata, o
 
 
 def write_findings(
-    *, speed, feed, comparison, speed_feed: str, feed_rpm: float, batch_s: float, out: dict, breakage=None
+    *,
+    speed,
+    feed,
+    comparison,
+    speed_feed: str,
+    feed_rpm: float,
+    batch_s: float,
+    out: dict,
+    breakage=None,
+    sensitivity=None,
+    confidence: float = 0.95,
 ) -> None:
     """The findings: the figures (speed, feed, and with `breakage` the breakage study) and their
-    text (rst), atomically. `speed`, `feed`, `breakage`: the PBM-ANN study tables; `comparison`: the
+    text (rst), atomically. `speed`, `feed`, `breakage`: the PBM-ANN study tables; `sensitivity`:
+    the Sobol' indices (their words; `confidence`: the level of their intervals); `comparison`: the
     validation's comparison table; `out`: speed_png, feed_png, breakage_png, rst."""
     from pbmdem.atomic import write_text
     from pbmdem.plotting import save_figure as save
@@ -214,6 +225,16 @@ def write_findings(
         study = read_table(breakage, "PBM-ANN breakage study", columns=("variant", "rpm", "d50", "critical_speed"))
         save(breakage_figure(study), out["breakage_png"])
         extra = (breakage_words(study), "", _image_directive(out["breakage_png"]), "   :width: 640px", "")
+    if sensitivity is not None:
+        from .sensitivity import sensitivity_words
+
+        indices = read_table(
+            sensitivity,
+            "Sobol' indices",
+            columns=("parameter", "output", "member", "S1", "S1_conf", "ST", "ST_conf"),
+            dtype={"member": str},
+        )
+        extra = (*extra, sensitivity_words(indices, confidence), "")
     text = findings_rst(
         speed_table,
         feed_table,

@@ -176,3 +176,24 @@ def test_sensitivity_words_name_the_first_factor_and_the_members_agreement():
     assert "the surrogate's uncertainty does not change the answer" in words
     nan = pd.DataFrame(_indices("mean", (np.nan,) * 3, (np.nan,) * 3))
     assert "undefined" in sensitivity_words(nan, 0.95)
+
+
+def test_an_output_without_variance_or_with_a_failed_sample_has_undefined_indices(caplog):
+    """No variance to share out, or a sample without a result: NaN indices, said in the log; the
+    other outputs of the same model keep theirs."""
+    factors = [SobolFactor(f"x{k}", -np.pi, np.pi, "linear") for k in (1, 2, 3)]
+
+    def model(x):
+        out = ishigami(x).assign(flat=0.004, broken=ishigami(x).y)
+        out.loc[5, "broken"] = np.nan
+        return out
+
+    study = sobol_study(
+        factors, {"mean": model}, ["y", "flat", "broken"], base_samples=64, seed=2, confidence=0.95, resamples=100
+    )
+    t = study.table.set_index("output")
+    assert np.isfinite(t.loc["y", ["S1", "ST", "S1_conf", "ST_conf"]].to_numpy()).all()
+    for output in ("flat", "broken"):
+        assert t.loc[output, ["S1", "ST", "S1_conf", "ST_conf"]].isna().all().all(), output
+    assert "flat does not vary over the samples" in caplog.text
+    assert "mean: 1 of 320 samples without a result" in caplog.text

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import logging
 import time
-import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -76,19 +75,15 @@ def indices(problem: dict, outputs: pd.DataFrame, columns: Sequence[str], *, con
     rows = []
     for column in columns:
         y = outputs[column].to_numpy(float)
-        if not np.isfinite(y).all() or np.ptp(y) <= 1e-12 * np.abs(y).max():
+        constant = np.isfinite(y).all() and np.ptp(y) <= 1e-12 * np.abs(y).max()
+        if constant:
+            log.warning("sensitivity: %s does not vary over the samples: its indices are undefined", column)
+        if constant or not np.isfinite(y).all():
             s = dict.fromkeys(("S1", "S1_conf", "ST", "ST_conf"), np.full(len(problem["names"]), np.nan))
         else:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)  # a bootstrap resample without variance
-                s = sobol.analyze(
-                    problem,
-                    y,
-                    calc_second_order=False,
-                    num_resamples=resamples,
-                    conf_level=confidence,
-                    seed=seed,
-                )
+            s = sobol.analyze(
+                problem, y, calc_second_order=False, num_resamples=resamples, conf_level=confidence, seed=seed
+            )
         for k, name in enumerate(problem["names"]):
             rows.append({"parameter": name, "output": column, **{key: float(s[key][k]) for key in COLUMNS[3:]}})
     return pd.DataFrame(rows)

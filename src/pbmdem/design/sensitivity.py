@@ -40,7 +40,7 @@ LABELS = {
     "pbm.liquid_addition.rate": "binder rate",
     "pbm.process.wet_massing_time": "wet-massing time",
     "pbm.breakage.yield_strength": "granule strength Y",
-    "pbm.aggregation.beta0": "beta0",
+    "pbm.aggregation.beta0": "coalescence fraction beta0",
 }
 #: SALib's name of each scale's distribution
 _DISTS = {"linear": "unif", "log": "logunif"}

@@ -17,6 +17,7 @@ rule report_findings:
         feed=layout.validation("feed_study.csv"),
         breakage=layout.validation("breakage_study.csv"),
         sensitivity=layout.design("sensitivity.csv"),
+        sensitivity_info=layout.design("sensitivity.json"),
         comparison=layout.report("comparison.csv"),
     output:
         speed_png=registered(

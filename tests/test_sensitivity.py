@@ -167,8 +167,15 @@ def test_sensitivity_words_name_the_first_factor_and_the_members_agreement():
     assert "depends most on the impeller speed (ST = 0.60 ± 0.05, S1 = 0.50 ± 0.05; 95 % intervals)" in words
     assert "then on the coalescence fraction beta0 (ST = 0.30" in words and "not told apart" not in words
     assert "The wet-massing time causes less than 5 % of its variance." in words
-    assert "impeller speed comes first for 1 of 2 (ST from 0.30 to 0.55); the others put coalescence fraction beta0 first" in words
+    assert (
+        "impeller speed comes first for 1 of 2 (ST from 0.30 to 0.55); the others put coalescence fraction beta0 first"
+        in words
+    )
     assert "1 of 2 rank all 3 factors as the mean does." in words
+    info = {"samples": 640, "out_of_domain_samples": {"mean": 64, "0": 70}}
+    assert "On 64 of the mean's 640 samples (10 %) the surrogate left its training domain" in sensitivity_words(
+        pd.DataFrame(rows), 0.95, info
+    )
     # overlapping intervals; every member agrees
     rows = _indices("mean", (0.45, 0.42, 0.1), (0.4, 0.4, 0.1)) + _indices("0", (0.5, 0.4, 0.1), (0.4, 0.4, 0.1))
     words = sensitivity_words(pd.DataFrame(rows), 0.95)

@@ -14,6 +14,7 @@ write_findings(
     batch_s=sm.params.batch_s,
     breakage=sm.input.breakage,
     sensitivity=sm.input.sensitivity,
+    sensitivity_info=sm.input.sensitivity_info,
     confidence=sm.params.confidence,
     out={
         "speed_png": sm.output.speed_png,

@@ -201,11 +201,13 @@ def write_findings(
     out: dict,
     breakage=None,
     sensitivity=None,
+    sensitivity_info=None,
     confidence: float = 0.95,
 ) -> None:
     """The findings: the figures (speed, feed, and with `breakage` the breakage study) and their
     text (rst), atomically. `speed`, `feed`, `breakage`: the PBM-ANN study tables; `sensitivity`:
-    the Sobol' indices (their words; `confidence`: the level of their intervals); `comparison`: the
+    the Sobol' indices and `sensitivity_info` their figures of merit (JSON; their words;
+    `confidence`: the level of their intervals); `comparison`: the
     validation's comparison table; `out`: speed_png, feed_png, breakage_png, rst."""
     from pbmdem.atomic import write_text
     from pbmdem.plotting import save_figure as save
@@ -234,7 +236,12 @@ def write_findings(
             columns=("parameter", "output", "member", "S1", "S1_conf", "ST", "ST_conf"),
             dtype={"member": str},
         )
-        extra = (*extra, sensitivity_words(indices, confidence), "")
+        info = None
+        if sensitivity_info is not None:
+            import json
+
+            info = json.loads(Path(sensitivity_info).read_text())
+        extra = (*extra, sensitivity_words(indices, confidence, info), "")
     text = findings_rst(
         speed_table,
         feed_table,

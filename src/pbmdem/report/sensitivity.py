@@ -49,8 +49,22 @@ def _members_words(d50: pd.DataFrame, order: list[str]) -> str:
     )
 
 
-def sensitivity_words(table: pd.DataFrame, confidence: float) -> str:
-    """The finding in words from the indices table (`pbmdem.design.sensitivity.COLUMNS`)."""
+def _domain_words(info: dict | None) -> str:
+    if not info:
+        return ""
+    outside = info.get("out_of_domain_samples", {}).get("mean", 0)
+    if not outside:
+        return "The surrogate stayed inside its training domain on every sample of the mean. "
+    return (
+        f"On {outside} of the mean's {info['samples']} samples ({100 * outside / info['samples']:.0f} %) the surrogate "
+        "left its training domain (granules or beds unlike any the DEM grid held): those batches are "
+        "extrapolations, kept in the indices. "
+    )
+
+
+def sensitivity_words(table: pd.DataFrame, confidence: float, info: dict | None = None) -> str:
+    """The finding in words from the indices table (`pbmdem.design.sensitivity.COLUMNS`) and, with
+    `info` (the rule's sensitivity.json), the samples outside the surrogate's training domain."""
     d50 = table[table.output == "d50"]
     mean = d50[d50.member.astype(str) == "mean"]
     head = "**Global sensitivity.** "
@@ -77,4 +91,4 @@ def sensitivity_words(table: pd.DataFrame, confidence: float) -> str:
             f"The total indices exceed the first-order ones by {interactions:.2f} in sum: part of the variance "
             "comes from factors acting together. "
         )
-    return head + words + _members_words(d50, order)
+    return head + words + _members_words(d50, order) + _domain_words(info)

@@ -1,8 +1,9 @@
 # What the fast model is for (docs/design.md, docs/calibration.md): the PBM-ANN design space over
-# impeller speed x binder rate x a third pbm setting with the specification region, and the check
-# of the parameter estimation on data of known parameters (PBM-DEM's own output; PBM-constant's
-# output with known noise). Both run many in-memory PBM batches over the job's threads; their
-# tables reach the report in display form through rule report_design.
+# impeller speed x binder rate x a third pbm setting with the specification region, the check of
+# the parameter estimation on data of known parameters (PBM-DEM's own output; PBM-constant's
+# output with known noise), and the global sensitivity analysis. All run many in-memory PBM
+# batches over the job's threads; the design-space and calibration tables reach the report in
+# display form through rule report_design, the Sobol' indices as their CSV.
 
 
 rule design_space:
@@ -28,6 +29,40 @@ rule design_space:
         design=CFG.design_space.to_dict(),
     script:
         "../workflow/scripts/design_space.py"
+
+
+# The global sensitivity analysis (docs/design.md, "Global sensitivity"): Sobol' indices of PBM-ANN's
+# final d10/d50/d90 to speed and pbm settings over the ranges of `sensitivity:`, mean and members.
+rule sensitivity:
+    input:
+        model=MODEL,
+    output:
+        table=registered(
+            layout.design("sensitivity.csv"),
+            "sensitivity_table",
+            CATEGORIES["findings"],
+            "global sensitivity",
+            table="Sobol indices",
+            format="CSV",
+        ),
+        figure=registered(
+            layout.design("sensitivity.png"),
+            "sensitivity",
+            CATEGORIES["findings"],
+            "global sensitivity",
+            result="Sobol indices of the final sizes",
+        ),
+        info=layout.design("sensitivity.json"),
+    log:
+        layout.log("design/sensitivity.log"),
+    conda:
+        "../envs/validation.yaml"
+    threads: CFG.sensitivity.n_jobs
+    params:
+        loop=loop_params,
+        sensitivity=CFG.sensitivity.to_dict(),
+    script:
+        "../workflow/scripts/sensitivity.py"
 
 
 rule calibration_check:
@@ -65,4 +100,8 @@ rule calibration_check:
         "../workflow/scripts/calibration_check.py"
 
 
-extra_targets += [layout.design("design_space.png"), layout.design("calibration_check.png")]
+extra_targets += [
+    layout.design("design_space.png"),
+    layout.design("calibration_check.png"),
+    layout.design("sensitivity.png"),
+]

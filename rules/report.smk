@@ -9,9 +9,10 @@ report: "../workflow/report/workflow.rst"
 
 # The findings the report opens with (category "1. Findings", and the text included at the top of
 # workflow/report/workflow.rst): final sizes against impeller speed and against the feed, in words
-# and one figure each, then how far to trust them (the comparison with PBM-DEM, and what the
-# surrogate was trained on with its accuracy on DEM runs it never saw); with
-# validation.feed_check.feed set, the PBM-DEM check of the feed result (rules/validation.smk).
+# and one figure each, breakage, the factor d50 depends on most (the Sobol' indices), then how far
+# to trust them (the comparison with PBM-DEM, and what the surrogate was trained on with its
+# accuracy on DEM runs it never saw); with validation.feed_check.feed set, the PBM-DEM check of the
+# feed result (rules/validation.smk).
 rule report_findings:
     input:
         **(
@@ -22,6 +23,8 @@ rule report_findings:
         speed=layout.validation("speed_study.csv"),
         feed=layout.validation("feed_study.csv"),
         breakage=layout.validation("breakage_study.csv"),
+        sensitivity=layout.design("sensitivity.csv"),
+        sensitivity_info=layout.design("sensitivity.json"),
         comparison=layout.report("comparison.csv"),
         # what the surrogate was trained on, and its held-out accuracy, beside the validation
         training=layout.dem("collisions.csv"),
@@ -54,6 +57,7 @@ rule report_findings:
         speed_feed=CFG.validation.distribution,
         feed_rpm=FEED_STUDY_RPM,
         batch_s=CFG.pbm.process.end,
+        confidence=CFG.sensitivity.confidence,
     script:
         "../workflow/scripts/report_findings.py"
 

@@ -11,6 +11,8 @@ import copy
 import os
 import shutil
 import sys
+import warnings
+from functools import partial
 from pathlib import Path
 
 import pytest
@@ -142,3 +144,44 @@ def tiny_run(tmp_path_factory, tiny_config):
     run_dir = tmp_path_factory.mktemp("tiny_run")
     summary = run_point(point, plan, run_dir, tiny_config.dem_execution.replace(timeout=600))
     return {"dir": run_dir, "plan": plan, "summary": summary, "config": tiny_config, "point": point}
+
+
+@pytest.fixture(scope="session")
+def tiny_surrogate(tmp_path_factory, tiny_config):
+    """A small MLP surrogate trained on synthetic tables at 600-900 rpm for the tiny granulator, with
+    frequencies near the tiny config's constant kernel (~3 1/s per pair for its ~300 granules)."""
+    from pbmdem.surrogate import CollisionSurrogate, EnsembleMLPRegressorCV, save_surrogate, training_data
+    from pbmdem.surrogate.synthetic import make_synthetic_tables, power_law
+    from pbmdem.surrogate.velocity import attach_velocity_bins
+
+    radius = tiny_config.granulator.impeller.blade_length
+    table = attach_velocity_bins(
+        *make_synthetic_tables(
+            radius,
+            rpms=(600, 750, 900),
+            diameters=(0.0015, 0.003, 0.006),
+            n_total_range=(20, 2000),
+            seed=2,
+            law=partial(power_law, c0=0.6),
+        )
+    )
+    data = training_data(table, radius)
+    model = CollisionSurrogate(
+        frequency_model=EnsembleMLPRegressorCV(
+            hidden_layer_sizes=((4,),),
+            alpha=(0.1,),
+            seeds=(0, 1),
+            max_iter=300,
+            solver="lbfgs",
+            cv="group_kfold",
+            n_splits=3,
+        ),
+        impeller_radius=radius,
+        physics_offset="cross_section",
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
+    path = tmp_path_factory.mktemp("surrogate") / "model.skops"
+    save_surrogate(model, path)
+    return path

@@ -2,7 +2,6 @@
 estimation (recovery of known parameters, non-identifiable pairs, measured-data errors)."""
 
 import warnings
-from functools import partial
 
 import numpy as np
 import pandas as pd
@@ -252,47 +251,6 @@ def test_batches_do_not_depend_on_the_number_of_processes(tiny_config):
 
 
 # --------------------------------------------------------------------------- design space with a surrogate
-@pytest.fixture(scope="module")
-def tiny_surrogate(tmp_path_factory, tiny_config):
-    """A small MLP surrogate trained on synthetic tables at 600-900 rpm for the tiny granulator, with
-    frequencies near the tiny config's constant kernel (~3 1/s per pair for its ~300 granules)."""
-    from pbmdem.surrogate import CollisionSurrogate, EnsembleMLPRegressorCV, save_surrogate, training_data
-    from pbmdem.surrogate.synthetic import make_synthetic_tables, power_law
-    from pbmdem.surrogate.velocity import attach_velocity_bins
-
-    radius = tiny_config.granulator.impeller.blade_length
-    table = attach_velocity_bins(
-        *make_synthetic_tables(
-            radius,
-            rpms=(600, 750, 900),
-            diameters=(0.0015, 0.003, 0.006),
-            n_total_range=(20, 2000),
-            seed=2,
-            law=partial(power_law, c0=0.6),
-        )
-    )
-    data = training_data(table, radius)
-    model = CollisionSurrogate(
-        frequency_model=EnsembleMLPRegressorCV(
-            hidden_layer_sizes=((4,),),
-            alpha=(0.1,),
-            seeds=(0, 1),
-            max_iter=300,
-            solver="lbfgs",
-            cv="group_kfold",
-            n_splits=3,
-        ),
-        impeller_radius=radius,
-        physics_offset="cross_section",
-    )
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        model.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
-    path = tmp_path_factory.mktemp("surrogate") / "model.skops"
-    save_surrogate(model, path)
-    return path
-
-
 def test_design_space_marks_points_outside_the_training_domain(tiny_config, tiny_surrogate, caplog):
     design = tiny_config.design_space  # 600-1200 rpm: the surrogate saw 600-900 only
     table, info = design_space(tiny_config.coupled_loop(), tiny_surrogate, design)

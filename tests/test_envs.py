@@ -28,9 +28,14 @@ IMPORT_NAME = {
     "meshio": "meshio",
     "pyvista": "pyvista",
     "numba": "numba",
+    "salib": "SALib",
 }
 # packages that come with the ones listed (conda installs their dependencies too)
-IMPLIED = {"jsonschema": ["referencing", "jsonschema_specifications", "rpds", "attrs"], "numba": ["llvmlite"]}
+IMPLIED = {
+    "jsonschema": ["referencing", "jsonschema_specifications", "rpds", "attrs"],
+    "numba": ["llvmlite"],
+    "salib": ["multiprocess", "dill"],
+}
 
 # what each stage's rules load, including imports made inside functions on the rule's path
 STAGE_MODULES = {
@@ -64,6 +69,11 @@ STAGE_MODULES = {
         "pbmdem.dem",
         "pbmdem.dem.collisions",
         "pbmdem.dem.vtk_series",
+        "pbmdem.design.outputs",
+        "pbmdem.design.sensitivity",
+        "pbmdem.design.sensitivity_bars",
+        "SALib.sample.sobol",
+        "SALib.analyze.sobol",
     ],
 }
 

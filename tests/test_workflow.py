@@ -420,6 +420,7 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
     top = most_surprising(study[list(STUDY_COLUMNS)])
     assert row.most_surprising == top.feed and row.is_most_surprising == (top.feed == check_cfg.feed)
     assert f"PBM-ANN predicts that ``{check_cfg.feed}``" in findings
+    assert "**Global sensitivity.** Over the stated ranges" in findings
     response = pd.read_csv(res / "dem" / "speed_response.csv")
     assert len(response) == len(cfg["grid"]["impeller_rpm"]) * len(cfg["grid"]["size_distributions"])
     assert (response.n_replicates == cfg["dem"]["replicates"]).all()
@@ -481,6 +482,8 @@ def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
         "runs.csv",
         "design_space.png",
         "calibration_check.png",
+        "sensitivity.png",
+        "sensitivity.csv",
     ):
         assert files[name] == 1, (name, files)
     assert "surrogate kernel source" in provenance and "Kernel source: " in provenance
@@ -504,6 +507,8 @@ def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
         "The surrogate on DEM runs it never saw",
         "PBM-ANN design space",
         "Parameter estimation on data of known parameters",
+        "Global sensitivity of PBM-ANN",
+        "The Sobol' indices of the global sensitivity analysis",
     ):
         assert phrase in flat, phrase
 
@@ -560,9 +565,9 @@ def test_report_in_a_browser_opens_with_the_findings_and_shows_everything(tiny_w
     assert len(findings) == 2, found["landing_alts"]
     speeds = len(yaml.safe_load(configfile.read_text())["validation"]["rpm"])
     # per speed 4; the sweep, parity, speed response, impact velocities; the three findings figures
-    # (speed, feed, and with pbm.breakage on the breakage study); the design-space maps and the
-    # calibration check's fits
-    assert found["images"] == 4 * speeds + 9 and found["broken"] == [], found
+    # (speed, feed, and with pbm.breakage on the breakage study); the design-space maps, the
+    # calibration check's fits and the Sobol' indices
+    assert found["images"] == 4 * speeds + 10 and found["broken"] == [], found
     # the display tables and each speed's out-of-domain table
     assert found["pages"] == len(REPORT_TABLES) + speeds and found["page_broken"] == [] and found["overflow"] == [], (
         found
@@ -790,8 +795,9 @@ def test_adding_the_proposed_points_removes_the_out_of_domain_intervals(tiny_wor
 
 
 def test_design_space_and_calibration_check_of_the_tiny_workflow(tiny_workflow):
-    """The default targets hold the design space (every grid point judged or marked) and the
-    calibration check (both cases, every parameter, true against estimated with an interval)."""
+    """The default targets hold the design space (every grid point judged or marked), the
+    calibration check (both cases, every parameter, true against estimated with an interval) and
+    the Sobol' indices."""
     from pbmdem.config import load_config
     from pbmdem.design.space import STATUSES
     from pbmdem.tables import MEASURED
@@ -810,3 +816,11 @@ def test_design_space_and_calibration_check_of_the_tiny_workflow(tiny_workflow):
     assert (check.recovered == ((check.ci_low <= check.true) & (check.true <= check.ci_high))).all()
     measured = MEASURED.read(workdir / "results/design/measured_pbm_dem.csv")
     assert set(measured.rpm) == {float(r) for r in cfg.validation.rpm}
+    # the Sobol' indices of every factor and size statistic, for the mean and each member
+    indices = pd.read_csv(workdir / "results/design/sensitivity.csv", dtype={"member": str})
+    factors = [f.key for f in cfg.sensitivity.factors()]
+    members = {"mean", *(str(k) for k in range(cfg.surrogate.ensemble_size))}
+    assert set(indices.parameter) == set(factors) and set(indices.member) == members
+    assert len(indices) == len(factors) * 3 * len(members)
+    info = json.loads((workdir / "results/design/sensitivity.json").read_text())
+    assert info["batches"] == cfg.sensitivity.base_samples * (len(factors) + 2) * len(members)

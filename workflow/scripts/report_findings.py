@@ -16,6 +16,9 @@ write_findings(
     training=sm.input.training,
     metadata=sm.input.metadata,
     feed_check=sm.input.get("feed_check"),
+    sensitivity=sm.input.sensitivity,
+    sensitivity_info=sm.input.sensitivity_info,
+    confidence=sm.params.confidence,
     out={
         "speed_png": sm.output.speed_png,
         "feed_png": sm.output.feed_png,

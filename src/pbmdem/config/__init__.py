@@ -10,7 +10,7 @@ defaults live; `Config.from_mapping` validates once, fills them in, and builds t
 """
 
 from .dem import Dem, DemExecution
-from .design import Calibration, DesignSpace, Factor, Specification
+from .design import Calibration, DesignSpace, Factor, Sensitivity, SobolFactor, Specification
 from .errors import RPM_MAX, ConfigError, check_rpm
 from .granulator import Bed, Bowl, Granulator, Impeller, Material
 from .pbm import Pbm, Solver
@@ -80,4 +80,6 @@ __all__ = [
     "Calibration",
     "Factor",
     "Specification",
+    "Sensitivity",
+    "SobolFactor",
 ]

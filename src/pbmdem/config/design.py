@@ -1,4 +1,5 @@
-"""Settings of the design space and of the parameter estimation (`design_space:`, `calibration:`)."""
+"""Settings of what the fast model is for: the design space (`design_space:`), the parameter
+estimation (`calibration:`) and the global sensitivity analysis (`sensitivity:`)."""
 
 from __future__ import annotations
 
@@ -77,9 +78,83 @@ class Calibration(Settings):
     proof: Proof
 
 
+#: the name of the impeller speed among the factors of the sensitivity analysis
+SPEED = "impeller_rpm"
+
+
+@dataclass(frozen=True)
+class SpeedRange(Settings):
+    """The impeller speed range (rpm) of the sensitivity analysis (null ends are resolved from the
+    DEM grid); low = high: a fixed speed, not a factor."""
+
+    low: float | None
+    high: float | None
+
+
+@dataclass(frozen=True)
+class SobolFactor(Settings):
+    """A factor of the sensitivity analysis: `key` (a pbm config key, or `SPEED`) varied over
+    [low, high], uniformly (`scale` linear) or uniformly in ln (log)."""
+
+    key: str
+    low: float
+    high: float
+    scale: str
+
+
+@dataclass(frozen=True)
+class Sensitivity(Settings):
+    """The global sensitivity analysis: the factors and their ranges, Saltelli's base sample N,
+    the seed, the confidence level and bootstrap resamples of the intervals, the processes."""
+
+    impeller_rpm: SpeedRange
+    parameters: tuple[SobolFactor, ...]
+    base_samples: int
+    seed: int
+    confidence: float
+    resamples: int
+    n_jobs: int
+
+    def factors(self) -> tuple[SobolFactor, ...]:
+        """The factors in their order: the speed first (unless fixed), then `parameters`."""
+        speed = self.impeller_rpm
+        if speed.low == speed.high:
+            return self.parameters
+        return (SobolFactor(SPEED, float(speed.low), float(speed.high), "linear"), *self.parameters)
+
+
+def _sensitivity_problems(s: Sensitivity, pbm) -> list[str]:
+    out = []
+    if s.impeller_rpm.high < s.impeller_rpm.low:
+        out.append(
+            f"sensitivity.impeller_rpm: high = {s.impeller_rpm.high:g} must not be below low = "
+            f"{s.impeller_rpm.low:g} (equal: a fixed speed)"
+        )
+    seen = set()
+    for k, p in enumerate(s.parameters):
+        where = f"sensitivity.parameters[{k}]"
+        if not p.high > p.low:
+            out.append(f"{where} ({p.key}): high = {p.high:g} must exceed low = {p.low:g}")
+        if p.key in seen:
+            out.append(f"{where}.key = {p.key!r}: named twice; allowed: each pbm setting once")
+        seen.add(p.key)
+        try:
+            pbm_value(pbm, p.key)
+        except ConfigError as exc:
+            out.append(f"{where}.key: {exc}")
+    n = s.base_samples
+    if n & (n - 1):
+        out.append(
+            f"sensitivity.base_samples = {n}: allowed: a power of 2 (2, 4, ..., 65536), the sizes at which the "
+            "Sobol' sequence is balanced"
+        )
+    return out
+
+
 def problems(cfg) -> list[str]:
-    """What the schema cannot check of `design_space` and `calibration`: ascending ranges,
-    parameter keys that name positive pbm numbers, a specification that can be met."""
+    """What the schema cannot check of `design_space`, `calibration` and `sensitivity`: ascending
+    ranges, parameter keys that name positive pbm numbers, a specification that can be met, a
+    base sample that is a power of 2."""
     out: list[str] = []
     ds = cfg.design_space
     for name, span in (("impeller_rpm", ds.impeller_rpm), ("liquid_rate", ds.liquid_rate)):
@@ -97,7 +172,7 @@ def problems(cfg) -> list[str]:
     spec = ds.specification
     if spec.d50_min is not None and spec.d50_max is not None and not spec.d50_max > spec.d50_min:
         out.append(f"design_space.specification: d50_max = {spec.d50_max:g} must exceed d50_min = {spec.d50_min:g}")
-    return out
+    return out + _sensitivity_problems(cfg.sensitivity, cfg.pbm)
 
 
 def _path(key: str) -> list[str]:

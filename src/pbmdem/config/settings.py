@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .dem import BED_KEYS, EXECUTION_KEYS, REPLICATES_KEY, Dem, DemExecution
-from .design import Calibration, DesignSpace
+from .design import Calibration, DesignSpace, Sensitivity
 from .errors import ConfigError
 from .granulator import Bed, Bowl, Granulator, Impeller, Material
 from .pbm import Pbm
@@ -96,6 +96,7 @@ class Config:
     validation: Validation
     design_space: DesignSpace
     calibration: Calibration
+    sensitivity: Sensitivity
     mapping: dict  # the completed configuration mapping (defaults filled in), for provenance
 
     # ------------------------------------------------------------------ construction
@@ -139,12 +140,18 @@ class Config:
         # the feed check's speed: null is the feed study's, the grid's middle speed
         if val_section["feed_check"]["rpm"] is None:
             val_section["feed_check"]["rpm"] = grid.middle_speed()
-        # the speed ranges of the PBM-ANN sweep and of the design space: null ends are the grid's
-        for span in (val_section["sweep"], design["impeller_rpm"]):
-            if span["start"] is None:
-                span["start"] = min(grid.impeller_rpm)
-            if span["stop"] is None:
-                span["stop"] = max(grid.impeller_rpm)
+        sensitivity = json.loads(json.dumps(full["sensitivity"]))
+        # the speed ranges of the PBM-ANN sweep, the design space and the sensitivity analysis:
+        # null ends are the grid's
+        for span, (low, high) in (
+            (val_section["sweep"], ("start", "stop")),
+            (design["impeller_rpm"], ("start", "stop")),
+            (sensitivity["impeller_rpm"], ("low", "high")),
+        ):
+            if span[low] is None:
+                span[low] = min(grid.impeller_rpm)
+            if span[high] is None:
+                span[high] = max(grid.impeller_rpm)
         return cls(
             granulator=granulator,
             material=Material.from_dict(full["material"], "material"),
@@ -158,6 +165,7 @@ class Config:
             validation=Validation.from_dict(val_section, "validation"),
             design_space=DesignSpace.from_dict(design, "design_space"),
             calibration=Calibration.from_dict(full["calibration"], "calibration"),
+            sensitivity=Sensitivity.from_dict(sensitivity, "sensitivity"),
             mapping=full,
         )
 

@@ -1,5 +1,6 @@
-"""The files of a calibration (`pbmdem calibrate`, rule calibration_check) and of the design space:
-tables as CSV, a JSON of the figures of merit, and the fit figure; all written atomically."""
+"""The files of a calibration (`pbmdem calibrate`, rule calibration_check), of the design space and
+of the sensitivity analysis: tables as CSV, a JSON of the figures of merit, and their figures; all
+written atomically."""
 
 from __future__ import annotations
 
@@ -92,6 +93,19 @@ def write_design_space(loop, model_path, design, table_path, maps_path, info_pat
     write_json(
         info_path, {**info, "specification": design.specification.to_dict(), "third_factor": design.third_factor.key}
     )
+    return table
+
+
+def write_sensitivity(loop, model_path, settings, table_path, figure_path, info_path) -> pd.DataFrame:
+    """Rule sensitivity: the Sobol' indices (CSV), their bars (PNG) and the figures of merit (JSON:
+    factors, batches, wall time, samples out of the training domain or failed)."""
+    from .sensitivity import sensitivity
+    from .sensitivity_bars import plot_sensitivity
+
+    table, info = sensitivity(loop, model_path, settings)
+    write_csv(table_path, table)
+    plot_sensitivity(table, figure_path, settings.confidence)
+    write_json(info_path, {**info, "confidence": settings.confidence, "seed": settings.seed})
     return table
 
 

@@ -62,6 +62,11 @@ GLOSSARY = (
     ),
     ("noise floor", "how well one DEM replicate predicts another; no surrogate can be more accurate."),
     (
+        "Sobol' indices S1, ST",
+        "the share of the variance of an output over the factors' stated ranges that a factor causes alone (first "
+        "order, S1) or alone and together with the other factors (total, ST).",
+    ),
+    (
         "tip speed, Froude number",
         "impeller tip speed (m/s) and the ratio of centrifugal to gravity acceleration at the tip.",
     ),

@@ -204,13 +204,17 @@ def write_findings(
     training=None,
     metadata=None,
     feed_check=None,
+    sensitivity=None,
+    sensitivity_info=None,
+    confidence: float = 0.95,
 ) -> None:
     """The findings: the figures (speed, feed, and with `breakage` the breakage study) and their
     text (rst), atomically. `speed`, `feed`, `breakage`: the PBM-ANN study tables; `comparison`: the
     validation's comparison table; `training`, `metadata`: the grid collision table the surrogate
     was trained on and its metadata (model.json), for its training set and held-out accuracy beside
-    the validation; `feed_check`: the feed check's table (or None: no check); `out`: speed_png,
-    feed_png, breakage_png, rst."""
+    the validation; `feed_check`: the feed check's table (or None: no check); `sensitivity`: the
+    Sobol' indices and `sensitivity_info` their figures of merit (JSON; their words; `confidence`:
+    the level of their intervals); `out`: speed_png, feed_png, breakage_png, rst."""
     from pbmdem.atomic import write_text
     from pbmdem.plotting import save_figure as save
 
@@ -247,6 +251,21 @@ def write_findings(
 
         check_table = read_table(feed_check, "feed check table", columns=CHECK_COLUMNS)
         check = check_table.iloc[0].to_dict()
+    if sensitivity is not None:
+        from .sensitivity import sensitivity_words
+
+        indices = read_table(
+            sensitivity,
+            "Sobol' indices",
+            columns=("parameter", "output", "member", "S1", "S1_conf", "ST", "ST_conf"),
+            dtype={"member": str},
+        )
+        info = None
+        if sensitivity_info is not None:
+            import json
+
+            info = json.loads(Path(sensitivity_info).read_text())
+        extra = (*extra, sensitivity_words(indices, confidence, info), "")
     text = findings_rst(
         speed_table,
         feed_table,

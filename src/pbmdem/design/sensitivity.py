@@ -1,0 +1,221 @@
+"""Global sensitivity analysis: Sobol' indices of PBM-ANN's final d10/d50/d90 to impeller speed and
+pbm settings over stated ranges (config `sensitivity:`, docs/design.md "Global sensitivity").
+
+The estimator is SALib's (`SALib.sample.sobol.sample`: Saltelli's scheme on a scrambled Sobol'
+sequence, without second-order indices; `SALib.analyze.sobol.analyze`: first-order S1 and total
+ST with bootstrap confidence intervals); this module only states the problem, evaluates the model
+and tabulates. A model is anything in SALib's shape: a function of a sample matrix (one row per
+sample, one column per factor, in the problem's order) that returns a table with one row per
+sample and a column per output (`PbmAnnOutputs`: d10, d50, d90 in m). `sobol_study` samples once
+and evaluates every model on the same samples (PBM-ANN: the ensemble mean and each member), so that
+the members' indices differ only by the surrogate.
+
+A failed batch (NaN sizes) leaves its model's indices undefined (NaN, logged); an output that
+does not vary over the samples has no variance to share out, and its indices are NaN too.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pbmdem.config import CoupledLoop, Sensitivity, SobolFactor
+from pbmdem.config.design import SPEED
+
+from .batches import STATISTICS, Case, outcomes_table, run_cases
+
+log = logging.getLogger(__name__)
+
+#: the columns of the indices table
+COLUMNS = ("parameter", "output", "member", "S1", "S1_conf", "ST", "ST_conf")
+#: the words for the factors in figures and text
+LABELS = {
+    SPEED: "impeller speed",
+    "pbm.liquid_addition.rate": "binder rate",
+    "pbm.process.wet_massing_time": "wet-massing time",
+    "pbm.breakage.yield_strength": "granule strength Y",
+    "pbm.aggregation.beta0": "coalescence fraction beta0",
+}
+#: SALib's name of each scale's distribution
+_DISTS = {"linear": "unif", "log": "logunif"}
+
+
+def label(key: str) -> str:
+    """A factor's name in words (its config key if it has none)."""
+    return LABELS.get(key, key)
+
+
+def salib_problem(factors: Sequence[SobolFactor]) -> dict:
+    """SALib's problem of `factors`: names, bounds and distributions (uniform, log-uniform)."""
+    return {
+        "num_vars": len(factors),
+        "names": [f.key for f in factors],
+        "bounds": [[f.low, f.high] for f in factors],
+        "dists": [_DISTS[f.scale] for f in factors],
+    }
+
+
+def sample(problem: dict, base_samples: int, seed: int) -> np.ndarray:
+    """Saltelli's sample matrix, N (D + 2) rows of the D factors (SALib; no second-order indices)."""
+    from SALib.sample import sobol
+
+    return sobol.sample(problem, base_samples, calc_second_order=False, scramble=True, seed=seed)
+
+
+def indices(problem: dict, outputs: pd.DataFrame, columns: Sequence[str], *, confidence, resamples, seed):
+    """S1, ST and their interval half-widths of each output column (rows: parameter, output)."""
+    from SALib.analyze import sobol
+
+    rows = []
+    for column in columns:
+        y = outputs[column].to_numpy(float)
+        constant = np.isfinite(y).all() and np.ptp(y) <= 1e-12 * np.abs(y).max()
+        if constant:
+            log.warning("sensitivity: %s does not vary over the samples: its indices are undefined", column)
+        if constant or not np.isfinite(y).all():
+            s = dict.fromkeys(("S1", "S1_conf", "ST", "ST_conf"), np.full(len(problem["names"]), np.nan))
+        else:
+            s = sobol.analyze(
+                problem, y, calc_second_order=False, num_resamples=resamples, conf_level=confidence, seed=seed
+            )
+        for k, name in enumerate(problem["names"]):
+            rows.append({"parameter": name, "output": column, **{key: float(s[key][k]) for key in COLUMNS[3:]}})
+    return pd.DataFrame(rows)
+
+
+@dataclass(frozen=True)
+class Study:
+    """A finished study: the indices table (`COLUMNS`), the sample matrix and each model's outputs."""
+
+    table: pd.DataFrame
+    samples: np.ndarray
+    outputs: dict[str, pd.DataFrame]
+
+
+def sobol_study(
+    factors: Sequence[SobolFactor],
+    models: Mapping[str, Callable[[np.ndarray], pd.DataFrame]],
+    columns: Sequence[str],
+    *,
+    base_samples: int,
+    seed: int,
+    confidence: float,
+    resamples: int,
+) -> Study:
+    """Sobol' indices of the output `columns` of every model (name -> function of the sample
+    matrix) over `factors`, all models on one sample. The table's `member` is the model's name."""
+    problem = salib_problem(factors)
+    x = sample(problem, base_samples, seed)
+    tables, outputs = [], {}
+    for name, model in models.items():
+        y = model(x)
+        if len(y) != len(x):
+            raise ValueError(f"model {name!r} returned {len(y)} rows for {len(x)} samples")
+        missing = [c for c in columns if c not in y]
+        if missing:
+            raise ValueError(f"model {name!r} returned no column(s) {missing}")
+        bad = int((~np.isfinite(y[list(columns)].to_numpy(float))).any(axis=1).sum())
+        if bad:
+            log.warning(
+                "sensitivity: %s: %d of %d samples without a result; its indices are undefined", name, bad, len(x)
+            )
+        table = indices(problem, y, columns, confidence=confidence, resamples=resamples, seed=seed)
+        tables.append(table.assign(member=name))
+        outputs[name] = y
+    return Study(pd.concat(tables, ignore_index=True)[list(COLUMNS)], x, outputs)
+
+
+@dataclass(frozen=True)
+class PbmAnnOutputs:
+    """PBM-ANN as a model in SALib's shape: the final d10/d50/d90 (m) of one batch per row of a
+    sample matrix whose columns are `keys` (`SPEED` or pbm config keys), with the surrogate's
+    ensemble mean (`member` None) or one member, over `n_jobs` processes. The table also holds
+    each batch's out-of-domain coupling intervals and failure."""
+
+    loop: CoupledLoop
+    model_path: str
+    keys: tuple[str, ...]
+    member: int | None
+    n_jobs: int
+    rpm: float  # the speed when it is not a factor
+
+    def cases(self, x: np.ndarray) -> list[Case]:
+        cases = []
+        for row in np.asarray(x, float):
+            values = dict(zip(self.keys, (float(v) for v in row)))
+            rpm = values.pop(SPEED, self.rpm)
+            cases.append(Case(rpm, tuple(values.items()), self.member))
+        return cases
+
+    def __call__(self, x: np.ndarray) -> pd.DataFrame:
+        table = outcomes_table(run_cases(self.loop, self.model_path, self.cases(x), self.n_jobs))
+        return table[[*STATISTICS, "out_of_domain_intervals", "failed"]]
+
+
+def sensitivity(
+    loop: CoupledLoop, model_path: str | Path, settings: Sensitivity, members: bool = True
+) -> tuple[pd.DataFrame, dict]:
+    """Rule sensitivity: the indices table of PBM-ANN's final d10/d50/d90 (the ensemble mean and,
+    with `members`, every member; `member` 'mean' or k) and the figures of merit: batches, wall
+    time, samples out of the surrogate's training domain or failed, per model."""
+    from pbmdem.surrogate import load_surrogate
+
+    n_members = load_surrogate(model_path).n_members if members else 0
+    factors = settings.factors()
+    keys = tuple(f.key for f in factors)
+    speed = float(settings.impeller_rpm.low)
+    models = {
+        ("mean" if m is None else str(m)): PbmAnnOutputs(loop, str(model_path), keys, m, settings.n_jobs, speed)
+        for m in (None, *range(n_members))
+    }
+    t0 = time.perf_counter()
+    study = sobol_study(
+        factors,
+        models,
+        STATISTICS,
+        base_samples=settings.base_samples,
+        seed=settings.seed,
+        confidence=settings.confidence,
+        resamples=settings.resamples,
+    )
+    wall = time.perf_counter() - t0
+    n = len(study.samples)
+    out_of_domain = {m: int((y.out_of_domain_intervals > 0).sum()) for m, y in study.outputs.items()}
+    failed = {m: int((y.failed.astype(str) != "").sum()) for m, y in study.outputs.items()}
+    info = {
+        "factors": [f.to_dict() for f in factors],
+        "base_samples": settings.base_samples,
+        "samples": n,
+        "batches": n * len(models),
+        "wall_time_s": wall,
+        "wall_time_per_batch_s": wall / (n * len(models)),
+        "n_jobs": settings.n_jobs,
+        "out_of_domain_samples": out_of_domain,
+        "failed_samples": failed,
+    }
+    log.info(
+        "sensitivity: %d PBM-ANN batches (%d samples x (mean + %d members), N = %d, %d factors) in %.1f s on %d "
+        "process(es): %.1f ms per batch",
+        info["batches"],
+        n,
+        n_members,
+        settings.base_samples,
+        len(factors),
+        wall,
+        settings.n_jobs,
+        1e3 * info["wall_time_per_batch_s"],
+    )
+    if any(out_of_domain.values()):
+        log.warning(
+            "sensitivity: samples with the surrogate outside its training domain (extrapolated, included in the "
+            "indices), of %d per model: %s",
+            n,
+            out_of_domain,
+        )
+    return study.table, info

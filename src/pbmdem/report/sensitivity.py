@@ -84,7 +84,8 @@ def sensitivity_words(table: pd.DataFrame, confidence: float, info: dict | None 
     words += ". "
     small = [label(p) for p in order if rows.loc[p, "ST"] < NEGLIGIBLE]
     if small:
-        words += f"The {', '.join(small)} cause{'s' if len(small) == 1 else ''} less than 5 % of its variance. "
+        names = small[0] if len(small) == 1 else ", ".join(small[:-1]) + " and " + small[-1]
+        words += f"The {names} cause{'s' if len(small) == 1 else ''} less than 5 % of its variance. "
     interactions = float(mean.ST.sum() - mean.S1.sum())
     if interactions > 0.1:
         words += (

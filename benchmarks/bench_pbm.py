@@ -150,17 +150,6 @@ def _checkout(ref: str, dest: Path) -> Path:
     return dest / "src"
 
 
-def batch_with(cfg, section: dict, distribution: str = "fine"):
-    """The config's batch with its pbm settings replaced by a (partial) pbm section over the
-    schema's defaults (the first pivot stays the config's)."""
-    from pbmdem.config import Pbm
-
-    pbm = Pbm.from_section(section)
-    if section.get("grid", {}).get("min_diameter") is None:
-        pbm = pbm.replace(grid=pbm.grid.replace(min_diameter=cfg.pbm.grid.min_diameter))
-    return cfg.pbm_batch(distribution).replace(pbm=pbm)
-
-
 def train_surrogate(cfg, folder: Path) -> tuple[Path, float]:
     """A small surrogate (pairs, walls, the config's speed law) trained on synthetic tables
     (benchmarks/quick.py) in ``folder``: its path and the fit time."""
@@ -279,6 +268,8 @@ def main():
     tmp.cleanup()
     if args.quick:
         return
+
+    from bench_pbm_accuracy import batch_with  # the config's batch with a pbm section over the defaults
 
     from pbmdem.pbm import SCHEMES, Grid
     from pbmdem.pbm.setup import run_batch

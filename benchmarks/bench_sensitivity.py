@@ -27,8 +27,6 @@ import resource
 import statistics
 import tempfile
 import time
-import warnings
-from functools import partial
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,45 +35,6 @@ ROOT = Path(__file__).resolve().parents[1]
 def cpu_seconds() -> float:
     own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
     return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
-
-
-def quick_surrogate(cfg, path: Path) -> Path:
-    """A small MLP surrogate (2 members) on synthetic tables at 600-900 rpm for the tiny granulator
-    (as tests/conftest.py's `tiny_surrogate`)."""
-    from pbmdem.surrogate import CollisionSurrogate, EnsembleMLPRegressorCV, save_surrogate, training_data
-    from pbmdem.surrogate.synthetic import make_synthetic_tables, power_law
-    from pbmdem.surrogate.velocity import attach_velocity_bins
-
-    radius = cfg.granulator.impeller.blade_length
-    table = attach_velocity_bins(
-        *make_synthetic_tables(
-            radius,
-            rpms=(600, 750, 900),
-            diameters=(0.0015, 0.003, 0.006),
-            n_total_range=(20, 2000),
-            seed=2,
-            law=partial(power_law, c0=0.6),
-        )
-    )
-    data = training_data(table, radius)
-    model = CollisionSurrogate(
-        frequency_model=EnsembleMLPRegressorCV(
-            hidden_layer_sizes=((4,),),
-            alpha=(0.1,),
-            seeds=(0, 1),
-            max_iter=300,
-            solver="lbfgs",
-            cv="group_kfold",
-            n_splits=3,
-        ),
-        impeller_radius=radius,
-        physics_offset="cross_section",
-    )
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        model.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
-    save_surrogate(model, path)
-    return path
 
 
 def run(loop, model, settings, members: bool) -> tuple:
@@ -164,7 +123,9 @@ def main() -> None:
     tmp = tempfile.TemporaryDirectory()
     if args.quick:
         cfg = load_config(ROOT / "config/test.yaml")
-        model = quick_surrogate(cfg, Path(tmp.name) / "model.skops")
+        import quick  # benchmarks/quick.py: a small surrogate on synthetic tables
+
+        model = quick.surrogate(Path(tmp.name), cfg)
         n, factors_of_n = 4, (1, 2)
     else:
         cfg = load_config(args.config)

@@ -47,7 +47,7 @@ QUICK = {
     ),
     "bench_pbm.py --quick": (
         r"surrogate for PBM-ANN: trained in [\d.]+ s",
-        r"batch  min +[\d.]+ ms, median +[\d.]+ ms \| \d+ steps, 37 bins",
+        r"batch  min +[\d.]+ ms, median +[\d.]+ ms \| \d+ steps, \d+ bins",
         r"PBM-ANN surrogate \+ PBM min +[\d.]+ ms",
     ),
     "bench_pbm2d.py --quick": (

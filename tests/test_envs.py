@@ -142,3 +142,27 @@ def test_the_blocker_really_blocks(root):
         env={"PYTHONPATH": str(root / "src"), "PATH": "/usr/bin:/bin"},
     )
     assert proc.returncode != 0 and "pandas is not in the environment" in proc.stderr
+
+
+def test_every_rule_that_runs_liggghts_gets_the_mpi_launcher_in_the_slurm_profile(root):
+    """A rule with LIGGGHTS ranks as its `tasks` runs LIGGGHTS (an MPI program): inside a SLURM job
+    it must be started by the job's launcher (the profile's `mpi`), or Open MPI aborts in MPI_Init
+    (a rule added without its profile entry failed this way under the cluster test)."""
+    import re
+
+    import yaml
+
+    rules = {}
+    for smk in sorted((root / "rules").glob("*.smk")):
+        for block in re.split(r"\n(?=rule )", smk.read_text()):
+            name = re.match(r"rule (\w+):", block)
+            if name and "tasks=DEM_RANKS" in block:
+                rules[name.group(1)] = smk.name
+    assert {"dem_bed", "dem_point", "pbm_dem_coupled"} <= set(rules), rules
+    profile = yaml.safe_load((root / "profiles" / "slurm" / "config.yaml").read_text())
+    for rule, where in rules.items():
+        resources = profile["set-resources"].get(rule, {})
+        assert "mpi" in resources and resources.get("tasks", 0) >= 1, (
+            f"rule {rule} ({where}) has no mpi in profiles/slurm"
+        )
+        assert profile["set-threads"].get(rule) == 1, f"rule {rule} ({where}): set-threads 1 (ranks are tasks)"

@@ -149,6 +149,14 @@ def test_the_report_states_the_surrogates_training_set_beside_its_accuracy(tmp_p
     assert f"R2 = {held_out['pooled_r2_log10']:.3f}" in words
     assert f"mean absolute error of {held_out['pooled_mae_log10']:.3f} decades" in words
     assert f"allows R2 = {held_out['noise_floor_r2_log10']:.3f} at best" in words
+    # single-replicate points: the metadata holds no noise floor (None), and the words say so
+    import copy
+
+    single = copy.deepcopy(meta)
+    single["cv_scores"]["outer_summary"]["mlp"]["noise_floor_r2_log10"] = None
+    words = training_words(training, single, "results/dem/collisions.csv")
+    assert "the noise floor is not known (no point was run more than once)" in words
+    assert f"R2 = {held_out['pooled_r2_log10']:.3f}" in words
     # a point the surrogate was trained on that the table lacks: the table changed after training
     with pytest.raises(InputFileError, match=r"collisions.csv: the surrogate was trained on operating point\(s\) "
                                              r"\['rpm1500_fine'\] that it lacks"):  # fmt: skip

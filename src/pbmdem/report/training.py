@@ -94,13 +94,20 @@ def _accuracy_words(meta: dict) -> str:
     label = MODEL_LABELS.get(str(family), str(family))
     if not summary:
         return f"Its kernel source, the {label}, has no held-out score (a single operating point: nothing to hold out)."
-    r2, mae, floor = (float(summary.get(k, np.nan)) for k in ("pooled_r2_log10", "pooled_mae_log10",
-                                                             "noise_floor_r2_log10"))  # fmt: skip
-    folds = int(summary.get("n_folds", 0))
+    # a score the metadata left empty (None: e.g. no noise floor from single-replicate points) is NaN
+    r2, mae, floor = (
+        float(np.nan if summary.get(k) is None else summary[k])
+        for k in ("pooled_r2_log10", "pooled_mae_log10", "noise_floor_r2_log10")
+    )
+    folds = int(summary.get("n_folds") or 0)
     strategy = str(scores.get("strategy", "grouped")).replace("_", " ")
+    ceiling = (
+        f"the spread between DEM replicates allows R2 = {floor:.3f} at best (the noise floor)"
+        if np.isfinite(floor)
+        else "the noise floor is not known (no point was run more than once)"
+    )
     return (
         f"On operating points it never saw ({strategy} cross-validation, {folds} folds, whole points held out) "
         f"its kernel source, the {label}, predicts log10 of the encounter frequency per particle pair with "
-        f"R2 = {r2:.3f} and a mean absolute error of {mae:.3f} decades; the spread between DEM replicates "
-        f"allows R2 = {floor:.3f} at best (the noise floor)."
+        f"R2 = {r2:.3f} and a mean absolute error of {mae:.3f} decades; {ceiling}."
     )

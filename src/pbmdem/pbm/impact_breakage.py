@@ -193,17 +193,21 @@ class ImpactSelection:
         d, n = inp.per_bin()
         return selection_rates(self._rates, n, self._speeds(inp), self.walls, self.pairs, self.strength_spread)
 
+    def _porosity(self, inp: KernelInput) -> np.ndarray | None:
+        """The porosity of each pivot's aggregates (feed granules do not break), or None when the
+        strength does not depend on porosity."""
+        if self.porosity_exponent == 0.0:
+            return None
+        if inp.porosity is None:
+            raise PBMInputError(
+                "a strength that depends on porosity (porosity_exponent > 0) needs the classes' porosity "
+                "in the KernelInput; it has none"
+            )
+        return inp.porosity[: inp.pivots]
+
     def _speeds(self, inp: KernelInput):
         """v* of the pivots of ``inp`` (one v* when the strength depends on neither size nor porosity)."""
-        eps = None
-        if self.porosity_exponent != 0.0:
-            if inp.porosity is None:
-                raise PBMInputError(
-                    "a strength that depends on porosity (porosity_exponent > 0) needs the classes' porosity "
-                    "in the KernelInput; it has none"
-                )
-            eps = inp.porosity[: inp.pivots]  # the aggregates of each pivot: feed granules do not break
-        return self.critical_speeds(inp.per_bin()[0], eps)
+        return self.critical_speeds(inp.per_bin()[0], self._porosity(inp))
 
     def critical_speeds(self, diameters, porosity=None) -> float | np.ndarray:
         """v* of granules of each diameter (m) and porosity: Y (d / d_ref)^(-e) with e =
@@ -233,14 +237,8 @@ class ImpactSelection:
         if self._rates is None:
             self.prepare(inp)
         d, n = inp.per_bin()
-        eps = self._no_porosity
-        if self.porosity_exponent != 0.0:
-            if inp.porosity is None:
-                raise PBMInputError(
-                    "a strength that depends on porosity (porosity_exponent > 0) needs the classes' porosity "
-                    "in the KernelInput; it has none"
-                )
-            eps = np.ascontiguousarray(inp.porosity[: inp.pivots], dtype=float)
+        eps = self._porosity(inp)
+        eps = self._no_porosity if eps is None else np.ascontiguousarray(eps, dtype=float)
         out = np.empty(d.size)
         _compiled.selection_of_impacts(
             np.ascontiguousarray(d, dtype=float),

@@ -47,15 +47,9 @@ def _study(x, d50, **extra) -> pd.DataFrame:
     return frame.assign(**extra)
 
 
-def test_findings_state_the_answers_with_their_numbers(tmp_path):
-    speed = _study({"rpm": [300.0, 600.0, 1200.0]}, [0.004, 0.0042, 0.0045], in_grid_range=True, dem_speed=True)
-    speed.loc[2, "out_of_domain_intervals"] = 1
-    feed = _study(
-        {"feed": ["fine", "fine+coarse", "coarse"], "feed_d50": [0.003, 0.004, 0.006]},
-        [0.0040, 0.0050, 0.0070],
-        in_grid=[True, False, True],
-    )
-    comparison = pd.DataFrame(
+def _one_speed_comparison() -> pd.DataFrame:
+    """A comparison table of one validation speed, PBM-ANN just inside the PBM-DEM band."""
+    return pd.DataFrame(
         [
             {
                 "rpm": 300.0,
@@ -70,6 +64,17 @@ def test_findings_state_the_answers_with_their_numbers(tmp_path):
             }
         ]
     )
+
+
+def test_findings_state_the_answers_with_their_numbers(tmp_path):
+    speed = _study({"rpm": [300.0, 600.0, 1200.0]}, [0.004, 0.0042, 0.0045], in_grid_range=True, dem_speed=True)
+    speed.loc[2, "out_of_domain_intervals"] = 1
+    feed = _study(
+        {"feed": ["fine", "fine+coarse", "coarse"], "feed_d50": [0.003, 0.004, 0.006]},
+        [0.0040, 0.0050, 0.0070],
+        in_grid=[True, False, True],
+    )
+    comparison = _one_speed_comparison()
     for name in ("speed.png", "feed.png"):
         fig = (
             findings.speed_figure(speed, "fine", 480.0) if name == "speed.png" else findings.feed_figure(feed, 600, 480)
@@ -266,21 +271,7 @@ def test_the_breakage_finding_is_followed_by_the_clipping_line(tmp_path):
             for v, d in (("off", 0.005), ("default", 0.0045))
         ]
     )
-    comparison = pd.DataFrame(
-        [
-            {
-                "rpm": 300.0,
-                "in_training_grid": True,
-                "n_dem_replicates": 3,
-                "d50_end_ann_mm": 4.01,
-                "d50_end_dem_mm": 4.0,
-                "d50_end_dem_min_mm": 3.98,
-                "d50_end_dem_max_mm": 4.02,
-                "ann_d50_outside_band_max": 0.003,
-                "wall_time_ratio_dem_over_ann": 5000.0,
-            }
-        ]
-    )
+    comparison = _one_speed_comparison()
     paths = {}
     for name, frame in (("speed", speed), ("feed", feed), ("breakage", breakage), ("comparison", comparison)):
         paths[name] = tmp_path / f"{name}.csv"

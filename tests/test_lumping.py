@@ -195,3 +195,32 @@ def test_the_figure_and_the_findings_section(tmp_path):
     assert len(shown) == len(cases) and "d50 2-D vs 1-D (%)" in shown.columns
     page = out["lumping_html"].read_text()
     assert "the speed above which the granules get smaller: 900 rpm and 900 rpm (1-D and 2-D)" in page
+
+
+def test_a_broken_lumping_table_or_cost_file_is_named(tmp_path):
+    """write_findings refuses a lumping table without its columns and an unreadable cost file,
+    naming the file (no traceback of pandas or json)."""
+    from test_findings import _one_speed_comparison, _study
+
+    from pbmdem.readers import InputFileError
+    from pbmdem.report.outputs import write_findings
+
+    speed = _study({"rpm": [300.0, 900.0]}, [0.004, 0.005], feed="fine", in_grid_range=True, dem_speed=True)
+    feed = _study({"feed": ["fine"], "feed_d50": [0.003]}, [0.004], in_grid=True, rpm=300.0)
+    for name, frame in (("speed", speed), ("feed", feed), ("comparison", _one_speed_comparison())):
+        frame.to_csv(tmp_path / f"{name}.csv", index=False)
+    cases = _cases([0.006, 0.009, 0.010, 0.007], [0.006, 0.009, 0.010, 0.007])
+    cases.drop(columns="d50_2d").to_csv(tmp_path / "bad.csv", index=False)
+    cases.to_csv(tmp_path / "lumping.csv", index=False)
+    _liquid().to_csv(tmp_path / "liquid.csv", index=False)
+    (tmp_path / "lumping.json").write_text("{not json")
+    out = {k: tmp_path / f"{k}.png" for k in ("speed_png", "feed_png", "breakage_png", "lumping_png")}
+    out |= {"rst": tmp_path / "f.rst", "lumping_csv": tmp_path / "t.csv", "lumping_html": tmp_path / "t.html"}
+    common = {"speed": tmp_path / "speed.csv", "feed": tmp_path / "feed.csv", "comparison": tmp_path / "comparison.csv"}
+    common |= {"speed_feed": "fine", "feed_rpm": 300.0, "batch_s": 480.0, "out": out}
+    common |= {"lumping_liquid": tmp_path / "liquid.csv", "lumping_info": tmp_path / "lumping.json"}
+    with pytest.raises(InputFileError, match=r"bad.csv: missing column\(s\) \['d50_2d'\]"):
+        write_findings(**common, lumping=tmp_path / "bad.csv")
+    with pytest.raises(InputFileError, match="lumping.json cannot be read as JSON"):
+        write_findings(**common, lumping=tmp_path / "lumping.csv")
+    assert not out["rst"].exists()

@@ -303,7 +303,12 @@ def _lumping_section(cases, liquid, info, out: dict) -> tuple[str, ...]:
     table = read_table(cases, what, columns=CASE_COLUMNS, dtype={"feed": str, "failed": str})
     table["failed"] = table.failed.fillna("")
     per_size = read_table(liquid, "lumping study's liquid per size class", columns=LIQUID_COLUMNS)
-    facts = json.loads(Path(info).read_text()) if info is not None else {}
+    facts = {}
+    if info is not None:
+        try:
+            facts = json.loads(Path(info).read_text())
+        except (OSError, ValueError) as exc:
+            raise InputFileError(f"lumping study's cost {info} cannot be read as JSON: {exc}") from None
     save_figure(lumping_figure(table, per_size), out["lumping_png"])
     turn1, turn2 = turn_speeds(table)
     turns = " and ".join(f"{t:g} rpm" if t is not None else "none" for t in (turn1, turn2))

@@ -246,4 +246,5 @@ REPORT_TABLES = (
     "comparison_domain",
     "design_space_table",
     "calibration_check",
+    "lumping",
 )

@@ -9,10 +9,11 @@ report: "../workflow/report/workflow.rst"
 
 # The findings the report opens with (category "1. Findings", and the text included at the top of
 # workflow/report/workflow.rst): final sizes against impeller speed and against the feed, in words
-# and one figure each, breakage, the factor d50 depends on most (the Sobol' indices), then how far
-# to trust them (the comparison with PBM-DEM, and what the surrogate was trained on with its
-# accuracy on DEM runs it never saw); with validation.feed_check.feed set, the PBM-DEM check of the
-# feed result (rules/validation.smk).
+# and one figure each, breakage, the factor d50 depends on most (the Sobol' indices), what lumping
+# leaves out (the 1-D against the 2-D PBM: figure, table and words), then how far to trust them (the
+# comparison with PBM-DEM, and what the surrogate was trained on with its accuracy on DEM runs it
+# never saw); with validation.feed_check.feed set, the PBM-DEM check of the feed result
+# (rules/validation.smk).
 rule report_findings:
     input:
         **(
@@ -29,7 +30,12 @@ rule report_findings:
         # what the surrogate was trained on, and its held-out accuracy, beside the validation
         training=layout.dem("collisions.csv"),
         metadata=layout.surrogate("model.json"),
+        # what lumping leaves out: the 1-D against the 2-D PBM (rules/validation.smk, rule lumping)
+        lumping=layout.validation("lumping.csv"),
+        lumping_liquid=layout.validation("lumping_liquid.csv"),
+        lumping_info=layout.validation("lumping.json"),
     output:
+        **registered_tables(("lumping",), CATEGORIES["findings"], "lumping"),
         speed_png=registered(
             layout.report("findings/speed.png"),
             "findings_speed",
@@ -47,6 +53,12 @@ rule report_findings:
             "findings_breakage",
             CATEGORIES["findings"],
             result="granule size against impeller speed with breakage",
+        ),
+        lumping_png=registered(
+            layout.report("findings/lumping.png"),
+            "findings_lumping",
+            CATEGORIES["findings"],
+            result="what lumping leaves out: 1-D against 2-D PBM",
         ),
         rst=layout.report("findings/findings.rst"),
     log:

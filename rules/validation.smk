@@ -172,6 +172,33 @@ rule pbm_ann_studies:
         "../workflow/scripts/pbm_ann_studies.py"
 
 
+# What lumping leaves out (docs/pbm.md, "What lumping leaves out"): PBM-ANN (the surrogate's
+# ensemble mean) with the lumped one-dimensional PBM and with the size x liquid one (pbm.dimensions
+# 2) on the same cases, whatever pbm.dimensions says: the default batch (validation feed at the feed
+# study's speed), the speed study's speeds, the design space's binder rates and the feed study's
+# feeds at that speed; final d10/d50/d90 of both and the liquid content per size class at the end of
+# the default batch. About 15 s of CPU on the default config (36 batches; docs/measurements.md).
+rule lumping:
+    input:
+        model=MODEL,
+    output:
+        cases=layout.validation("lumping.csv"),
+        liquid=layout.validation("lumping_liquid.csv"),
+        info=layout.validation("lumping.json"),
+    log:
+        layout.log("validation/lumping.log"),
+    conda:
+        "../envs/validation.yaml"
+    params:
+        loop=loop_params,
+        rpm=FEED_STUDY_RPM,
+        speeds=lambda wc: CFG.validation.sweep.speeds(),
+        liquid_rates=lambda wc: CFG.design_space.liquid_rate.values(),
+        feeds={name: CFG.distribution(name).to_dict() for name in CFG.grid.size_distributions},
+    script:
+        "../workflow/scripts/lumping.py"
+
+
 # The feed check (validation.feed_check, docs/validation.md): PBM-DEM loops (one job per replicate,
 # run in parallel like pbm_dem_coupled) and PBM-ANN (ensemble mean and members, with the case's
 # parent feeds) for one case of the feed study, configured so that the DAG is known before the feed

@@ -378,9 +378,28 @@ def test_surrogate_pbm_and_report_from_the_real_tables(tiny_workflow):
         )
     ]
     assert -1 not in order and order == sorted(order), order
-    # the three findings figures (speed, feed, and with pbm.breakage on the breakage study)
-    assert findings.count(".. image:: data:image/png;base64,") == 3
+    # the four findings figures (speed, feed, with pbm.breakage on the breakage study, and what
+    # lumping leaves out)
+    assert findings.count(".. image:: data:image/png;base64,") == 4
     assert "**Breakage.**" in findings
+    # the PBM in 2-D (issue 37): rule lumping ran PBM-ANN with the lumped and the size x liquid PBM
+    from pbmdem.coupling.lumping import CASE_COLUMNS, LIQUID_COLUMNS
+
+    lumping = pd.read_csv(res / "validation" / "lumping.csv", dtype={"failed": str})
+    assert list(lumping.columns) == list(CASE_COLUMNS)
+    assert set(lumping.study) == {"default", "speed", "binder", "feed"}
+    assert len(lumping[lumping.study == "speed"]) == cfg["validation"]["sweep"]["num"]
+    assert len(lumping[lumping.study == "binder"]) == cfg["design_space"]["liquid_rate"]["num"]
+    assert lumping.failed.isna().all()  # no batch failed (an empty text)
+    for m in ("1d", "2d"):
+        assert np.isfinite(lumping[f"d50_{m}"]).all() and (lumping[f"d50_{m}"] > 0).all()
+    assert np.abs(lumping.solid_rel_change_2d).max() < 1e-12  # solid conserved by the 2-D batches
+    assert (lumping.cpu_time_s_2d > 0).all()
+    liquid = pd.read_csv(res / "validation" / "lumping_liquid.csv")
+    assert list(liquid.columns) == list(LIQUID_COLUMNS) and len(liquid) > 0
+    assert liquid.solid_fraction_2d.sum() == pytest.approx(1.0, rel=1e-9)
+    assert json.loads((res / "validation" / "lumping.json").read_text())["batches"] > 0
+    assert "**What lumping leaves out.**" in findings and "with the two-dimensional one" in findings
     # beside the validation, what the surrogate was trained on (every grid point and replicate of
     # the run) and its accuracy on points it never saw
     grid = cfg["grid"]
@@ -443,6 +462,7 @@ REPORT_TABLES = (
     "comparison_domain",
     "design_space_table",
     "calibration_check",
+    "lumping",
 )
 
 
@@ -509,6 +529,7 @@ def test_snakemake_report_zip_holds_the_study(tiny_workflow, root, tmp_path):
         "Parameter estimation on data of known parameters",
         "Global sensitivity of PBM-ANN",
         "The Sobol' indices of the global sensitivity analysis",
+        "What lumping leaves out.",
     ):
         assert phrase in flat, phrase
 
@@ -564,10 +585,10 @@ def test_report_in_a_browser_opens_with_the_findings_and_shows_everything(tiny_w
     findings = [alt for alt in found["landing_alts"] if alt.startswith("final d10, d50, d90 against")]
     assert len(findings) == 2, found["landing_alts"]
     speeds = len(yaml.safe_load(configfile.read_text())["validation"]["rpm"])
-    # per speed 4; the sweep, parity, speed response, impact velocities; the three findings figures
-    # (speed, feed, and with pbm.breakage on the breakage study); the design-space maps, the
-    # calibration check's fits and the Sobol' indices
-    assert found["images"] == 4 * speeds + 10 and found["broken"] == [], found
+    # per speed 4; the sweep, parity, speed response, impact velocities; the four findings figures
+    # (speed, feed, with pbm.breakage on the breakage study, and what lumping leaves out); the
+    # design-space maps, the calibration check's fits and the Sobol' indices
+    assert found["images"] == 4 * speeds + 11 and found["broken"] == [], found
     # the display tables and each speed's out-of-domain table
     assert found["pages"] == len(REPORT_TABLES) + speeds and found["page_broken"] == [] and found["overflow"] == [], (
         found

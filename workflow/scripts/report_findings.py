@@ -19,10 +19,16 @@ write_findings(
     sensitivity=sm.input.sensitivity,
     sensitivity_info=sm.input.sensitivity_info,
     confidence=sm.params.confidence,
+    lumping=sm.input.lumping,
+    lumping_liquid=sm.input.lumping_liquid,
+    lumping_info=sm.input.lumping_info,
     out={
         "speed_png": sm.output.speed_png,
         "feed_png": sm.output.feed_png,
         "breakage_png": sm.output.breakage_png,
+        "lumping_png": sm.output.lumping_png,
+        "lumping_csv": sm.output.lumping_csv,
+        "lumping_html": sm.output.lumping_html,
         "rst": sm.output.rst,
     },
 )

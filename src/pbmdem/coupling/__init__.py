@@ -9,6 +9,8 @@
 | `loop` | the PBM over coupling intervals with a provider |
 | `methods` | PBM-DEM, PBM-ANN and the calibrated PBM-constant |
 | `sweep` | the PBM-ANN impeller-speed sweep |
+| `studies` | the PBM-ANN studies of the findings (speed, feed, breakage) |
+| `lumping` | PBM-ANN with the lumped (1-D) and the size x liquid (2-D) PBM side by side |
 """
 
 from .loop import CouplingError, run_loop

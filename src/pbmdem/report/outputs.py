@@ -207,6 +207,9 @@ def write_findings(
     sensitivity=None,
     sensitivity_info=None,
     confidence: float = 0.95,
+    lumping=None,
+    lumping_liquid=None,
+    lumping_info=None,
 ) -> None:
     """The findings: the figures (speed, feed, and with `breakage` the breakage study) and their
     text (rst), atomically. `speed`, `feed`, `breakage`: the PBM-ANN study tables; `comparison`: the
@@ -214,7 +217,9 @@ def write_findings(
     was trained on and its metadata (model.json), for its training set and held-out accuracy beside
     the validation; `feed_check`: the feed check's table (or None: no check); `sensitivity`: the
     Sobol' indices and `sensitivity_info` their figures of merit (JSON; their words; `confidence`:
-    the level of their intervals); `out`: speed_png, feed_png, breakage_png, rst."""
+    the level of their intervals); `lumping`, `lumping_liquid`, `lumping_info`: the 1-D against 2-D
+    study (pbmdem.coupling.lumping; its figure, display table and words); `out`: speed_png,
+    feed_png, breakage_png, rst, and with `lumping` lumping_png, lumping_csv, lumping_html."""
     from pbmdem.atomic import write_text
     from pbmdem.plotting import save_figure as save
 
@@ -266,6 +271,8 @@ def write_findings(
 
             info = json.loads(Path(sensitivity_info).read_text())
         extra = (*extra, sensitivity_words(indices, confidence, info), "")
+    if lumping is not None:
+        extra = (*extra, *_lumping_section(lumping, lumping_liquid, lumping_info, out))
     text = findings_rst(
         speed_table,
         feed_table,
@@ -280,3 +287,45 @@ def write_findings(
         feed_check=check,
     )
     write_text(out["rst"], text)
+
+
+def _lumping_section(cases, liquid, info, out: dict) -> tuple[str, ...]:
+    """The lumping study's figure and display table written, and its words with the figure (rst lines)."""
+    import json
+
+    from pbmdem.coupling.lumping import CASE_COLUMNS, LIQUID_COLUMNS
+    from pbmdem.plotting import save_figure
+
+    from .findings import _image_directive
+    from .lumping import lumping_figure, lumping_table, lumping_words, turn_speeds
+
+    what = "lumping study (1-D against 2-D PBM)"
+    table = read_table(cases, what, columns=CASE_COLUMNS, dtype={"feed": str, "failed": str})
+    table["failed"] = table.failed.fillna("")
+    per_size = read_table(liquid, "lumping study's liquid per size class", columns=LIQUID_COLUMNS)
+    facts = {}
+    if info is not None:
+        try:
+            facts = json.loads(Path(info).read_text())
+        except (OSError, ValueError) as exc:
+            raise InputFileError(f"lumping study's cost {info} cannot be read as JSON: {exc}") from None
+    save_figure(lumping_figure(table, per_size), out["lumping_png"])
+    turn1, turn2 = turn_speeds(table)
+    turns = " and ".join(f"{t:g} rpm" if t is not None else "none" for t in (turn1, turn2))
+    write_table(
+        out["lumping_csv"],
+        out["lumping_html"],
+        lumping_table(table),
+        "What lumping leaves out: final sizes of the 1-D and the 2-D PBM",
+        f"PBM-ANN (the surrogate's mean) with the lumped and the size x liquid PBM on the same cases; the speed "
+        f"above which the granules get smaller: {turns} (1-D and 2-D). Relative differences (2-D - 1-D) / 1-D.",
+        keys=2,
+    )
+    return (
+        lumping_words(table, per_size, facts),
+        "",
+        _image_directive(out["lumping_png"]),
+        "   :width: 640px",
+        "   :alt: final d50 of the lumped and the two-dimensional PBM against speed, binder rate and feed",
+        "",
+    )

@@ -25,6 +25,7 @@ IMPORT_NAME = {
     "matplotlib-base": "matplotlib",
     "pyyaml": "yaml",
     "jsonschema": "jsonschema",
+    "pydantic": "pydantic",
     "meshio": "meshio",
     "pyvista": "pyvista",
     "numba": "numba",
@@ -34,6 +35,7 @@ IMPORT_NAME = {
 IMPLIED = {
     "jsonschema": ["referencing", "jsonschema_specifications", "rpds", "attrs"],
     "numba": ["llvmlite"],
+    "pydantic": ["pydantic_core", "annotated_types", "typing_extensions", "typing_inspection"],
     "salib": ["multiprocess", "dill"],
 }
 

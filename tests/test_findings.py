@@ -13,8 +13,8 @@ from pbmdem.report import findings
 from pbmdem.report.provenance import hyperparameters, kernel_source
 from pbmdem.report.training import training_set, training_words
 
-FINE = SizeDistribution((0.002, 0.003, 0.004), (0.5, 0.3, 0.2))
-COARSE = SizeDistribution((0.0032, 0.005, 0.008), (0.3, 0.4, 0.3))
+FINE = SizeDistribution(diameters=(0.002, 0.003, 0.004), number_fractions=(0.5, 0.3, 0.2))
+COARSE = SizeDistribution(diameters=(0.0032, 0.005, 0.008), number_fractions=(0.3, 0.4, 0.3))
 
 
 def test_a_blend_holds_each_feed_by_mass_and_lies_between_them():

@@ -6,6 +6,7 @@
     pbmdem surrogate train|predict ...
     pbmdem design-space --config ... --model MODEL --out DIR
     pbmdem calibrate --config ... --model MODEL --data measured.csv --out DIR
+    pbmdem config --show-defaults | --schema | --check FILE
 
 Every subcommand reads its configuration through `pbmdem.config.load_config` (validated once,
 defaults filled in), the same path the workflow takes. Bad input gets one line naming the file,
@@ -231,11 +232,13 @@ def build_parser() -> argparse.ArgumentParser:
     _add_dem(sub)
     _add_pbm(sub)
 
+    from pbmdem.config import describe as config_cli
     from pbmdem.dem import viewer
     from pbmdem.design import cli as design_cli
     from pbmdem.surrogate import cli as surrogate_cli
 
     viewer.add_cli(sub)
+    config_cli.add_cli(sub)
     design_cli.add_cli(sub)
     surrogate = surrogate_cli.add_cli(sub)
     _with_examples(surrogate, SURROGATE_EXAMPLES[None])

@@ -29,12 +29,14 @@ IMPORT_NAME = {
     "pyvista": "pyvista",
     "numba": "numba",
     "salib": "SALib",
+    "jinja2": "jinja2",
 }
 # packages that come with the ones listed (conda installs their dependencies too)
 IMPLIED = {
     "jsonschema": ["referencing", "jsonschema_specifications", "rpds", "attrs"],
     "numba": ["llvmlite"],
     "salib": ["multiprocess", "dill"],
+    "jinja2": ["markupsafe"],
 }
 
 # what each stage's rules load, including imports made inside functions on the rule's path
@@ -63,6 +65,12 @@ STAGE_MODULES = {
         "pbmdem.report.provenance",
         "pbmdem.report.statements",
         "pbmdem.report.tables",
+        "pbmdem.report.words",
+        "pbmdem.report.findings",
+        "pbmdem.report.breakage",
+        "pbmdem.report.sensitivity",
+        "pbmdem.report.lumping",
+        "pbmdem.report.training",
         "pbmdem.validation.results",
         "pbmdem.surrogate",
         "pbmdem.pbm.setup",

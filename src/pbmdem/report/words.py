@@ -6,8 +6,8 @@ gap in the text.
 
 A paragraph template is written one clause per line for reading; `paragraph` folds it into the
 one line of text that reStructuredText wants: every line break with the indentation around it
-becomes one space, and ``{{ space }}`` is a space that folding keeps (at the end of a paragraph that
-text follows on its line). The same folding is the filter ``fold`` (``{% filter fold %}``).
+becomes one space, and ``{{ space }}`` is one space that folding keeps (the white space before it joins it), for
+the end of a paragraph that text follows on its line. The same folding is the filter ``fold`` (``{% filter fold %}``).
 
 A document template (`render`: the findings' reStructuredText) keeps its lines; a block tag there
 takes no line of its own.
@@ -32,7 +32,7 @@ _KEPT = "\ue000"
 
 def fold(text: str) -> str:
     """Lines joined by one space (blank lines and indentation dropped); ``{{ space }}`` kept."""
-    return re.sub(r"\s*\n\s*", " ", str(text)).strip().replace(_KEPT, " ")
+    return re.sub(rf"\s*{_KEPT}", " ", re.sub(r"\s*\n\s*", " ", str(text)).strip())
 
 
 def _fmt(value, spec: str = "g") -> str:

@@ -21,23 +21,16 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pbmdem.plotting import pyplot
+from pbmdem.plotting import SIZE_STYLES, final_sizes, pyplot
 
 from . import words
 from .breakage import peak_speed
 from .display import MM
 
-STATS = (("d90", "^", "tab:red"), ("d50", "o", "black"), ("d10", "v", "tab:blue"))
-
-
-def _band(ax, x, frame: pd.DataFrame, stat: str, color: str) -> None:
-    lo, hi = MM * frame[f"{stat}_member_min"], MM * frame[f"{stat}_member_max"]
-    ax.fill_between(x, lo, hi, color=color, alpha=0.18, lw=0)
-
 
 def _domain_marks(ax, x, frame: pd.DataFrame) -> bool:
     outside = frame.out_of_domain_intervals.to_numpy(int) > 0
-    for stat, _, _ in STATS:
+    for stat, _, _ in SIZE_STYLES:
         ax.scatter(
             np.asarray(x)[outside],
             MM * frame[stat].to_numpy(float)[outside],
@@ -55,9 +48,7 @@ def speed_figure(study: pd.DataFrame, feed: str, batch_s: float):
     plt = pyplot()
     s = study.sort_values("rpm")
     fig, ax = plt.subplots(figsize=(8.0, 5.6))
-    for stat, marker, color in STATS:
-        _band(ax, s.rpm, s, stat, color)
-        ax.plot(s.rpm, MM * s[stat], marker=marker, color=color, lw=1.8, label=f"final {stat}")
+    final_sizes(ax, s.rpm, s, band=True)
     ax.fill_between([], [], [], color="0.5", alpha=0.25, label="range of the surrogate's members")
     dem = s[s.dem_speed.astype(bool)]
     ax.scatter(dem.rpm, np.full(len(dem), 0.0), marker="|", s=300, color="0.3", clip_on=False, zorder=6)
@@ -73,10 +64,8 @@ def speed_figure(study: pd.DataFrame, feed: str, batch_s: float):
         ax.set_xticks(s.rpm, [f"{v:g}" for v in s.rpm])
     ax.set(
         xlabel="impeller speed (rpm)   (| = speeds with DEM runs)",
-        ylabel="final granule size (mm)",
         title=f"Granule size after the {batch_text(batch_s)} batch against impeller speed (PBM-ANN, feed {feed})",
     )
-    ax.grid(alpha=0.3)
     _legend_below(fig, ax)
     return fig
 
@@ -104,7 +93,7 @@ def feed_figure(study: pd.DataFrame, rpm: float, batch_s: float):
     s = study.sort_values("feed_d50").reset_index(drop=True)
     x = np.arange(len(s))
     fig, ax = plt.subplots(figsize=(8.0, 5.6))
-    for stat, marker, color in STATS:
+    for stat, marker, color in SIZE_STYLES:
         lo = MM * (s[stat] - s[f"{stat}_member_min"])
         hi = MM * (s[f"{stat}_member_max"] - s[stat])
         ax.errorbar(

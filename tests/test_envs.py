@@ -30,6 +30,7 @@ IMPORT_NAME = {
     "pyvista": "pyvista",
     "numba": "numba",
     "salib": "SALib",
+    "jinja2": "jinja2",
 }
 # packages that come with the ones listed (conda installs their dependencies too)
 IMPLIED = {
@@ -37,6 +38,7 @@ IMPLIED = {
     "numba": ["llvmlite"],
     "pydantic": ["pydantic_core", "annotated_types", "typing_extensions", "typing_inspection"],
     "salib": ["multiprocess", "dill"],
+    "jinja2": ["markupsafe"],
 }
 
 # what each stage's rules load, including imports made inside functions on the rule's path
@@ -65,6 +67,12 @@ STAGE_MODULES = {
         "pbmdem.report.provenance",
         "pbmdem.report.statements",
         "pbmdem.report.tables",
+        "pbmdem.report.words",
+        "pbmdem.report.findings",
+        "pbmdem.report.breakage",
+        "pbmdem.report.sensitivity",
+        "pbmdem.report.lumping",
+        "pbmdem.report.training",
         "pbmdem.validation.results",
         "pbmdem.surrogate",
         "pbmdem.pbm.setup",

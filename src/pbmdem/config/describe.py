@@ -100,8 +100,9 @@ def _plain(value):
     return value
 
 
-def show_defaults(out=sys.stdout) -> None:
-    """Print every setting: key = default [unit] (bounds), then its description."""
+def show_defaults(out=None) -> None:
+    """Print every setting: key = default [unit] (bounds), then its description (to `out`, stdout)."""
+    out = out or sys.stdout
     for key, default, unit, bounds, description in settings_table():
         unit = f" [{unit}]" if unit else ""
         bounds = f" ({bounds})" if bounds else ""

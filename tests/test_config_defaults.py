@@ -89,3 +89,36 @@ def test_the_check_finds_a_bare_default(tmp_path):
         "  # the sampling window\n  sampling_revolutions: 0\n  history_time: 0.05\n\n  position_every: 2\n"
     )
     assert restated_defaults(path) == ["dem.seed", "dem.position_every"]
+
+
+def test_pbmdem_config_lists_checks_and_describes(root, tmp_path, capsys):
+    """`pbmdem config`: every setting with its default, unit and meaning; a file checked with the
+    key, the value and what is allowed (exit status 2, no traceback); the generated JSON schema."""
+    from pbmdem.cli import main
+
+    assert main(["config", "--show-defaults"]) == 0
+    listing = capsys.readouterr().out
+    assert "dem.timeout = 7200.0 [s] (> 0)\n    wall-time limit per run" in listing
+    assert "pbm.solver.rtol = 0.001 (> 0, <= 1)" in listing
+    assert listing.count(" = ") >= 150
+    assert main(["config", "--check", str(root / "config" / "config.yaml")]) == 0
+    assert "valid" in capsys.readouterr().out
+    bad = tmp_path / "bad.yaml"
+    mapping = yaml.safe_load((root / "config" / "test.yaml").read_text())
+    mapping["pbm"]["solver"] = {"rtol": 2.0}
+    bad.write_text(yaml.safe_dump(mapping))
+    assert main(["config", "--check", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert f"config file {bad}" in err and "pbm.solver.rtol = 2.0" in err and "<= 1" in err
+    assert "Traceback" not in err
+    assert main(["config", "--schema"]) == 0
+    schema = json.loads(capsys.readouterr().out)
+    assert schema["$schema"].endswith("2020-12/schema") and schema["additionalProperties"] is False
+    assert schema["$defs"]["Solver"]["properties"]["rtol"] == {
+        "default": 0.001,
+        "description": "relative local error per step (ssp3, heun)",
+        "exclusiveMinimum": 0,
+        "maximum": 1,
+        "title": "Rtol",
+        "type": "number",
+    }

@@ -23,6 +23,13 @@ from .settings import ConfigFile
 _BOUNDS = (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<"), ("min_length", "items >="), ("max_length", "items <="))
 
 
+EXAMPLES = """examples:
+  pbmdem config --show-defaults                 # every setting: default, unit, bounds, meaning
+  pbmdem config --check config/config.yaml      # the problems of a file, or 'valid'
+  pbmdem config --schema > config.schema.json   # JSON schema for an editor
+"""
+
+
 def config_schema() -> dict:
     """The JSON schema (draft 2020-12) of a configuration file, generated from `ConfigFile`."""
     return {"$schema": "https://json-schema.org/draft/2020-12/schema", **ConfigFile.model_json_schema()}
@@ -93,8 +100,9 @@ def _plain(value):
     return value
 
 
-def show_defaults(out=sys.stdout) -> None:
-    """Print every setting: key = default [unit] (bounds), then its description."""
+def show_defaults(out=None) -> None:
+    """Print every setting: key = default [unit] (bounds), then its description (to `out`, stdout)."""
+    out = out or sys.stdout
     for key, default, unit, bounds, description in settings_table():
         unit = f" [{unit}]" if unit else ""
         bounds = f" ({bounds})" if bounds else ""
@@ -107,6 +115,8 @@ def add_cli(sub) -> argparse.ArgumentParser:
         "config",
         help="list every setting with its default, print the config schema, or check a config file",
         description="Every setting of a pbmdem configuration, declared once in pbmdem.config.",
+        epilog=EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     what = parser.add_mutually_exclusive_group(required=True)
     what.add_argument("--show-defaults", action="store_true", help="every setting: default, unit, bounds, meaning")

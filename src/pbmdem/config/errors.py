@@ -84,7 +84,7 @@ def _choice(s: dict) -> str:
 
 
 def _allowed(s: dict) -> str:
-    choices = [_choice(b) or b.get("type", "") for b in s.get("anyOf", [s]) if b.get("type") != "null"]
+    choices = [_choice(b) or b.get("type", "") for b in s.get("anyOf", [s])]
     if len(choices) > 1 or (choices and choices[0] and choices[0] != s.get("type")):
         return f" (allowed: {' or '.join(choices)})"
     return ""
@@ -129,7 +129,8 @@ def describe_errors(exc, model, prefix: str = "") -> list[str]:
                 word = "not allowed"  # a union: one message naming every choice
             elif kind in _WORDS:
                 bounds = {"ge": "minimum", "gt": "exclusiveMinimum", "le": "maximum", "lt": "exclusiveMaximum"}
-                word = _WORDS[kind].format(**ctx | {k: s[v] for k, v in bounds.items() if v in s})
+                b = next((x for x in s.get("anyOf", [s]) if x.get("type") != "null"), s)
+                word = _WORDS[kind].format(**ctx | {k: b[v] for k, v in bounds.items() if v in b})
             elif kind.endswith("_type") or kind.endswith("_parsing"):
                 word = f"is not of type {' or '.join(repr(t) for t in sorted(types)) or kind}"
             else:

@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from synthetic_tables import make_synthetic_table, make_synthetic_tables
 
 from pbmdem.config import ConfigError, Surrogate, load_config, section_defaults
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES
@@ -16,7 +17,6 @@ from pbmdem.surrogate import load_surrogate
 from pbmdem.surrogate.cli import add_cli, main
 from pbmdem.surrogate.features import check_impeller_radius
 from pbmdem.surrogate.settings import build_baselines, build_surrogate
-from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables
 from pbmdem.surrogate.train import train_and_report
 
 REPO = Path(__file__).resolve().parents[1]
@@ -311,7 +311,7 @@ def test_single_run_table_still_trains(tmp_path):
 
 
 def test_wall_models_learn_the_wall_impacts_with_the_same_held_out_evaluation(tmp_path):
-    from pbmdem.surrogate.synthetic import make_synthetic_wall_tables, wall_law
+    from synthetic_tables import make_synthetic_wall_tables, wall_law
 
     table, velocity = make_synthetic_tables(R, rpms=(300, 600, 900), seed=11)
     walls, wall_velocity = make_synthetic_wall_tables(table, R, seed=12)

@@ -4,9 +4,9 @@ import copy
 import math
 
 import pytest
+from design_points import CORNER_NAME, DesignSpace, corner_point, design_names, design_points
 
 from pbmdem.config import Config, ConfigError, SizeDistribution
-from pbmdem.dem.design import CORNER_NAME, DesignSpace, corner_point, design_names, design_points
 from pbmdem.dem.plan import bed_particle_count, class_counts
 
 #: the default bed's solid volume (m3): 18 mm x pi/4 (60 mm)^2 x 0.60 (granulator.bed_solid_volume)

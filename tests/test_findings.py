@@ -114,9 +114,10 @@ def test_the_report_states_the_surrogates_training_set_beside_its_accuracy(tmp_p
     table the surrogate was trained on, the accuracy from its metadata: a real (tiny) training."""
     import warnings
 
+    from synthetic_tables import make_synthetic_tables
+
     from pbmdem.config import Surrogate
     from pbmdem.readers import InputFileError
-    from pbmdem.surrogate.synthetic import make_synthetic_tables
     from pbmdem.surrogate.train import train_and_report
     from pbmdem.tables import GRID_PAIRS
 

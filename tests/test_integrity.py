@@ -283,8 +283,9 @@ def small_surrogate(tmp_path_factory):
     """A surrogate trained on synthetic tables at 300-900 rpm (so 5000 rpm is outside its domain)."""
     import warnings
 
+    from synthetic_tables import make_synthetic_table
+
     from pbmdem.surrogate import CollisionSurrogate, EnsembleMLPRegressorCV, save_surrogate, training_data
-    from pbmdem.surrogate.synthetic import make_synthetic_table
 
     radius = 0.0265
     table = make_synthetic_table(radius, rpms=(300, 600, 900), diameters=(0.002, 0.0025, 0.003), seed=4)
@@ -583,9 +584,10 @@ def test_surrogate_cross_validation_logs_each_fold_and_candidate(caplog):
     import logging
     import warnings
 
+    from synthetic_tables import make_synthetic_table
+
     from pbmdem.surrogate import CollisionSurrogate, EnsembleMLPRegressorCV, cross_validate_models, training_data
     from pbmdem.surrogate.evaluation import default_baselines
-    from pbmdem.surrogate.synthetic import make_synthetic_table
 
     table = make_synthetic_table(0.0265, rpms=(300, 600, 900), seed=4)
     model = CollisionSurrogate(

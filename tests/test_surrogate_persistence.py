@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import skops.io as sio
 from sklearn.linear_model import LinearRegression
+from synthetic_tables import make_synthetic_table, make_synthetic_tables
 
 from pbmdem.surrogate import (
     CollisionSurrogate,
@@ -19,7 +20,6 @@ from pbmdem.surrogate import (
     training_data,
 )
 from pbmdem.surrogate.persistence import ALLOWED_TYPES, FORMAT_VERSION, schema_types, sha256_file
-from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables
 from pbmdem.surrogate.velocity import attach_velocity_bins
 
 R = 0.0265  # impeller radius (m) of the synthetic tables and models

@@ -17,7 +17,7 @@ from pydantic import BaseModel
 from pydantic_core import PydanticUndefined
 
 from . import load_config
-from .errors import ConfigError, _choice
+from .errors import _choice
 from .settings import ConfigFile
 
 _BOUNDS = (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<"), ("min_length", "items >="), ("max_length", "items <="))
@@ -109,21 +109,13 @@ def show_defaults(out=None) -> None:
         print(f"{key} = {default}{unit}{bounds}\n    {description}", file=out)
 
 
-def add_cli(sub) -> argparse.ArgumentParser:
-    """The `pbmdem config` command on the subparsers `sub`."""
-    parser = sub.add_parser(
-        "config",
-        help="list every setting with its default, print the config schema, or check a config file",
-        description="Every setting of a pbmdem configuration, declared once in pbmdem.config.",
-        epilog=EXAMPLES,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+def add_options(parser: argparse.ArgumentParser) -> None:
+    """The options of `pbmdem config`."""
     what = parser.add_mutually_exclusive_group(required=True)
     what.add_argument("--show-defaults", action="store_true", help="every setting: default, unit, bounds, meaning")
     what.add_argument("--schema", action="store_true", help="the JSON schema of a config file (generated)")
     what.add_argument("--check", metavar="FILE", help="check a config file (exit status 2 and the problems if invalid)")
     parser.set_defaults(func=run)
-    return parser
 
 
 def run(args: argparse.Namespace) -> int:
@@ -135,19 +127,3 @@ def run(args: argparse.Namespace) -> int:
         cfg = load_config(args.check)
         print(f"{args.check}: valid (config sha256 {cfg.sha256()})")
     return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    """`pbmdem config ...` on its own: ConfigError as one message, exit status 2."""
-    parser = argparse.ArgumentParser(prog="pbmdem")
-    add_cli(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(["config", *(sys.argv[1:] if argv is None else argv)])
-    try:
-        return run(args)
-    except ConfigError as exc:
-        print(f"pbmdem: error: {exc}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":
-    sys.exit(main())

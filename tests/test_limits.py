@@ -59,7 +59,7 @@ def test_run_point_refuses_an_unbounded_plan_before_touching_the_disk(tiny_confi
     execution = tiny_config.dem_execution
     execution = execution.replace(limits=execution.limits.replace(max_steps=plan.total_steps - 1))
     with pytest.raises(ConfigError, match=r"dem\.limits\.max_steps"):
-        run_point(point, plan, tmp_path / "run", execution)
+        run_point(plan, tmp_path / "run", execution)
     assert not any(tmp_path.iterdir())
 
 

@@ -25,7 +25,7 @@ from pbmdem.readers import InputFileError, read_json
 
 from . import engine, geometry
 from .deck import render_bed, render_granulator
-from .plan import BedPlan, DemPlan, check_limits
+from .plan import BedPlan, DemPlan
 
 #: the settled bed in a bed folder and in a run folder that starts from it
 BED_FILE = "bed.restart"
@@ -238,9 +238,9 @@ def run_point(
     With `bed_dir` (a folder written by `settle_bed` for `plan.bed`) the run starts from that
     settled bed instead of settling its own.
 
-    Everything is validated before any file is touched: the plan against `execution.limits` and
-    the whole deck (rendered once, here), and a
-    finished run in `run_dir` is refused unless `force`. The run is made in a staging folder
+    The plan was checked against dem.limits where it was made (the workflow's configuration, the
+    command line); the deck is rendered once, here, before any file is touched, and a finished run
+    in `run_dir` is refused unless `force`. The run is made in a staging folder
     beside `run_dir` and moved into place only after it succeeded, so a failure (or a signal)
     never removes a finished run. Returns a summary dict (also `run_dir/summary.json`). Raises
     LiggghtsError on failure, leaving `crash.json` and the log in `run_dir` (or, when `run_dir`
@@ -248,8 +248,6 @@ def run_point(
     `execution`: MPI ranks and wall-time limit (s).
     """
     run_dir = Path(run_dir)
-    check_limits(plan, execution.limits)
-    # raises on any bad value, before any I/O
     deck = render_granulator(plan, execution.mpi_ranks, from_bed=bed_dir is not None)
     bed = check_bed(plan, bed_dir) if bed_dir is not None else None
     finished = is_finished(run_dir)

@@ -2,13 +2,15 @@
 
 For each grid point and replicate: the bed deck (1 rank and dem.mpi_ranks), the fresh deck and the
 deck from a settled bed; for each validation speed: the coupled loop's call with the largest
-sample (dem.max_particles), as the Snakefile's limit check plans it. Works with the renderer's
+sample (dem.max_particles), as the Snakefile's limit check plans it; and each plan's record
+(`to_dict`, written to plan.json and bed.json). Works with the renderer's
 API before (point, plan) and after (plan) issue 36.
 
     python benchmarks/render_decks.py CONFIG OUT_DIR
 """
 
 import inspect
+import json
 import sys
 from pathlib import Path
 
@@ -33,6 +35,9 @@ def write_decks(cfg, out: Path) -> int:
     for point, rpm, rep, counts, kind in runs:
         plan = plan_point(point, rpm, replicate=rep, counts=counts)
         stem = f"{kind}_{plan.point_id}_rep{rep}"
+        # the plan's record (plan.json, and bed.json's "bed")
+        record = {"plan": plan.to_dict(), "bed": plan.bed.to_dict()}
+        (out / f"{stem}_plan.json").write_text(json.dumps(record, indent=1))
         for r in sorted({1, ranks}):
             bed = deck.render_bed(plan.bed, r) if NEW_API else deck.render_bed(point, plan.bed, r)
             (out / f"{stem}_bed_{r}rank.in").write_text(bed)

@@ -50,29 +50,17 @@ def template_path(name: str = GRANULATOR_TEMPLATE) -> Path:
     return template_dir() / name
 
 
-def number(
-    name: str,
-    value,
-    *,
-    minimum: float | None = None,
-    maximum: float | None = None,
-    integer: bool = False,
-    exclusive_minimum: bool = False,
-) -> str:
-    """Validate `value` as a finite number in range and return its text for a deck."""
+def number(name: str, value, *, integer: bool = False, minimum: float | None = None) -> str:
+    """`value` as text for a deck: a finite number (an integer if `integer`; at least `minimum`
+    if given), or DeckValueError naming it."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise DeckValueError(f"{name} = {value!r}: a number is required, got {type(value).__name__}")
     if not math.isfinite(value):
         raise DeckValueError(f"{name} = {value!r}: a finite number is required")
     if integer and float(value) != int(value):
         raise DeckValueError(f"{name} = {value!r}: an integer is required")
-    if minimum is not None:
-        if exclusive_minimum and not value > minimum:
-            raise DeckValueError(f"{name} = {value!r}: must be greater than {minimum}")
-        if not exclusive_minimum and value < minimum:
-            raise DeckValueError(f"{name} = {value!r}: must be at least {minimum}")
-    if maximum is not None and value > maximum:
-        raise DeckValueError(f"{name} = {value!r}: must be at most {maximum}")
+    if minimum is not None and value < minimum:
+        raise DeckValueError(f"{name} = {value!r}: must be at least {minimum}")
     return str(int(value)) if integer else repr(float(value))
 
 
@@ -90,11 +78,6 @@ def known_name(name: str, value, allowed: set[str] | None = None) -> str:
             "'_' or '-' (at most 64 characters)"
         )
     return value
-
-
-def numbers(name: str, values, **limits) -> str:
-    """Validate a sequence of numbers; return them space-separated."""
-    return " ".join(number(f"{name}[{k}]", v, **limits) for k, v in enumerate(values))
 
 
 def sections(template_name: str) -> dict[str, str]:
@@ -149,7 +132,7 @@ def bed_values(bed: BedPlan, ranks: int) -> dict[str, str]:
     weights = " ".join(f"pts{k + 1} {num(f'number_fractions[{k}]', w)}" for k, w in enumerate(bed.number_fractions))
     box = dict(zip(("box_xlo", "box_xhi", "box_ylo", "box_yhi", "box_zlo", "box_zhi"), bed.box))
     return {
-        "point_id": known_name("point_id", bed.deck_name),
+        "point_id": known_name("point_id", bed.bed_id.replace(".", "p")),
         "processors": f"{num('mpi_ranks', ranks, integer=True, minimum=1)} 1 1",
         **{key: num(key, value) for key, value in box.items()},
         "n_types": num("n_classes", n, integer=True),
@@ -186,6 +169,7 @@ def granulator_values(plan: DemPlan, ranks: int) -> dict[str, str]:
     MPI ranks."""
     num = number
     return bed_values(plan, ranks) | {
+        "point_id": known_name("point_id", plan.point_id.replace(".", "p")),
         "neighbor_skin": num("neighbor_skin", plan.neighbor_skin),
         "spinup_steps": num("spinup_steps", plan.spinup_steps, integer=True),
         "sampling_steps": num("sampling_steps", plan.sampling_steps, integer=True),

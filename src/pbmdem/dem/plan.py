@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from pbmdem.config import ConfigError, DemPoint, SizeDistribution, point_id
-from pbmdem.config.dem import DemLimits
+from pbmdem.config.dem import Dem, DemLimits
 from pbmdem.config.granulator import Granulator, Material
 
 from .progress import thermo_interval
@@ -134,11 +134,6 @@ class BedPlan:
         """`<distribution>_rep<k>`: the bed's name in paths and decks."""
         return f"{self.distribution}_rep{self.replicate}"
 
-    @property
-    def deck_name(self) -> str:
-        """The name heading the deck."""
-        return self.bed_id.replace(".", "p")
-
     def to_dict(self) -> dict:
         """The record of the plan (plan.json, bed.json): every field but the deck's."""
         return {f.name: _copy(getattr(self, f.name)) for f in fields(self) if not f.metadata.get("deck")}
@@ -168,20 +163,29 @@ class DemPlan(BedPlan):
     neighbor_skin: float = field(metadata=DECK)
     rotation_period: float = field(metadata=DECK)
     keep_contact_dumps: bool = field(metadata=DECK)
+    #: spin-up steps before the position history (recorded before the window) starts, and the
+    #: steps with dumps: the position history, then the sampling window
+    spinup_pre_steps: int = field(metadata=DECK)
+    record_steps: int = field(metadata=DECK)
 
     @property
-    def deck_name(self) -> str:
-        return self.point_id.replace(".", "p")
+    def dumps(self) -> dict[str, tuple[int, int]]:
+        """What is dumped (liggghts_templates/granulator.in): the frames and last step of each
+        dump of a finished run, one at the start of the recording (`dump_modify first yes`, the
+        position history before the sampling window), then one at every multiple of its interval
+        up to the end."""
+        start, end = self.window_start_step - self.history_steps, self.window_start_step + self.sampling_steps
 
-    @property
-    def spinup_pre_steps(self) -> int:
-        """Spin-up steps before the position history (recorded before the window) starts."""
-        return self.spinup_steps - self.history_steps
+        def frames_and_last(every: int) -> tuple[int, int]:
+            multiples = end // every - (start + every - 1) // every + 1
+            return multiples + (1 if start % every else 0), (end // every * every if multiples > 0 else start)
 
-    @property
-    def record_steps(self) -> int:
-        """Steps with dumps: the position history, then the sampling window."""
-        return self.history_steps + self.sampling_steps
+        contacts = frames_and_last(self.collision_interval)
+        return {
+            "post/pairs.dump": contacts,
+            "post/walls.dump": contacts,
+            "post/positions.bin": frames_and_last(self.position_interval),
+        }
 
     @property
     def sampling_time(self) -> float:
@@ -291,6 +295,16 @@ def _steps(seconds: float, dt: float) -> int:
     return max(1, int(math.ceil(seconds / dt)))
 
 
+def _whole(steps: int, every: int) -> int:
+    return int(math.ceil(steps / every) * every)
+
+
+def phase_time(dem: Dem, phase: str, rpm: float) -> float:
+    """Length (s) of the spin-up or sampling phase at `rpm`: `dem.<phase>_revolutions` impeller
+    revolutions, but at least `dem.<phase>_time` seconds."""
+    return max(getattr(dem, f"{phase}_time"), getattr(dem, f"{phase}_revolutions") * 60.0 / float(rpm))
+
+
 def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[int] | None = None) -> DemPlan:
     """Plan one run of `point` at `rpm`: its bed (`plan_bed`, same `replicate` and `counts`), then
     the spin-up and the sampling window at this speed. `rpm` was checked where it entered (the
@@ -302,7 +316,7 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
         raise ConfigError(str(exc).replace(f"distribution {point.distribution}", f"operating point {pid}", 1)) from None
     mat, dem, granulator = point.material, point.dem, point.granulator
     dt = bed.timestep
-    tip_speed = float(granulator.tip_speed(rpm))
+    tip_speed, omega = float(granulator.tip_speed(rpm)), float(granulator.angular_speed(rpm))
     t_c = hertz_contact_time(
         0.5 * min(bed.diameters), mat.density, mat.youngs_modulus, mat.poisson_ratio, max(tip_speed, MIN_CONTACT_SPEED)
     )
@@ -310,9 +324,10 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
     if interval == "auto":
         interval = max(1, int(t_c / (SNAPSHOTS_PER_CONTACT * dt)))
     position_interval = dem.position_every * interval
-    sampling_steps = int(math.ceil(_steps(dem.phase_time("sampling", rpm), dt) / position_interval) * position_interval)
-    spinup_steps = _steps(dem.phase_time("spinup", rpm), dt)
-    history_steps = int(math.ceil(_steps(dem.history_time, dt) / position_interval) * position_interval)
+    spinup_steps = _steps(phase_time(dem, "spinup", rpm), dt)
+    # the window and the position history before it: whole position intervals
+    sampling_steps = _whole(_steps(phase_time(dem, "sampling", rpm), dt), position_interval)
+    history_steps = _whole(_steps(dem.history_time, dt), position_interval)
     if history_steps >= spinup_steps:
         raise ConfigError(
             f"dem.history_time = {dem.history_time} s: the position history before the sampling "
@@ -330,10 +345,12 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
         history_steps=history_steps,
         position_interval=int(position_interval),
         encounter_gap_fraction=dem.encounter_gap_fraction,
-        omega=float(granulator.angular_speed(rpm)),
+        omega=omega,
         neighbor_skin=neighbor_skin(bed.diameters, dt, tip_speed),
         rotation_period=60.0 / rpm,
         keep_contact_dumps=dem.keep_contact_dumps,
+        spinup_pre_steps=spinup_steps - history_steps,
+        record_steps=history_steps + sampling_steps,
     )
 
 

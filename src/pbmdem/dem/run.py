@@ -199,30 +199,11 @@ def _move_into(stage: Path, run_dir: Path) -> None:
     stage.rmdir()
 
 
-def planned_dumps(plan: DemPlan) -> dict[str, tuple[int, int]]:
-    """Frames and last step each dump of a finished run holds: one at the start of the recording
-    (`dump_modify first yes`, the position history before the sampling window), then one at every
-    multiple of its interval up to the end."""
-    start = plan.window_start_step - plan.history_steps
-    end = plan.window_start_step + plan.sampling_steps
-
-    def frames_and_last(every: int) -> tuple[int, int]:
-        multiples = end // every - (start + every - 1) // every + 1
-        return multiples + (1 if start % every else 0), (end // every * every if multiples > 0 else start)
-
-    contacts = frames_and_last(plan.collision_interval)
-    return {
-        "post/pairs.dump": contacts,
-        "post/walls.dump": contacts,
-        "post/positions.bin": frames_and_last(plan.position_interval),
-    }
-
-
 def check_finished(plan: DemPlan, run_dir: str | Path) -> None:
     """Raise LiggghtsError (and write crash.json) unless the run reached every planned step and
     contact snapshot. LIGGGHTS exits 0 when interrupted, so the exit code proves nothing. (A run
     from a settled bed goes on from the bed's last step, so its plan's steps are the same.)"""
-    engine.check_finished(run_dir, plan.total_steps, planned_dumps(plan))
+    engine.check_finished(run_dir, plan.total_steps, plan.dumps)
 
 
 def run_point(
@@ -309,8 +290,8 @@ def _run_in(
     collisions.write_tables(tables, run_dir)
     series = vtk_series.write_series(run_dir / "post", plan.timestep)
     if not plan.keep_contact_dumps:
-        for dump in ("pairs.dump", "walls.dump", "positions.bin"):
-            (run_dir / "post" / dump).unlink(missing_ok=True)
+        for dump in plan.dumps:
+            (run_dir / dump).unlink(missing_ok=True)
     thermo = engine.thermo_table(result.log)
     # fix check/timestep/gran: ts[1] = dt / Rayleigh time, ts[2] = dt / Hertz time (LIGGGHTS' own)
     checks = {

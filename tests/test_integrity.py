@@ -140,9 +140,8 @@ def test_nan_in_a_real_contact_dump_fails_the_tabulation(tiny_run, tmp_path):
     parts = lines[k].split()
     lines[k] = f"{parts[0]} {parts[1]} nan"
     (post / "pairs.dump").write_text("\n".join(lines) + "\n")
-    granulator = tiny_run["config"].granulator
     with pytest.raises(dumps.DumpFormatError, match="pairs.dump: non-finite value nan in column 3"):
-        collisions.tabulate_run(post, tiny_run["plan"], granulator.bowl, granulator.impeller)
+        collisions.tabulate_run(post, tiny_run["plan"])
 
 
 # ----------------------------------------------------------------------------- defect 5: operating-point ids

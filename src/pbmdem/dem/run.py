@@ -285,7 +285,7 @@ def _run_in(
     check_finished(plan, run_dir)
     (run_dir / BED_FILE).unlink(missing_ok=True)  # a copy; the bed stays in its folder
     t0 = time.perf_counter()
-    tables = collisions.tabulate_run(run_dir / "post", plan, plan.granulator.bowl, plan.granulator.impeller)
+    tables = collisions.tabulate_run(run_dir / "post", plan)
     parse_time = time.perf_counter() - t0
     collisions.write_tables(tables, run_dir)
     series = vtk_series.write_series(run_dir / "post", plan.timestep)

@@ -6,6 +6,7 @@
     pbmdem surrogate train|predict ...
     pbmdem design-space --config ... --model MODEL --out DIR
     pbmdem calibrate --config ... --model MODEL --data measured.csv --out DIR
+    pbmdem config --show-defaults | --schema | --check FILE
 
 Every subcommand reads its configuration through `pbmdem.config.load_config` (validated once,
 defaults filled in), the same path the workflow takes. Bad input gets one line naming the file,
@@ -21,6 +22,7 @@ import sys
 from pathlib import Path
 
 from pbmdem import layout
+from pbmdem.config import RPM_MAX
 
 
 def _dem(args: argparse.Namespace) -> int:
@@ -231,11 +233,13 @@ def build_parser() -> argparse.ArgumentParser:
     _add_dem(sub)
     _add_pbm(sub)
 
+    from pbmdem.config import describe as config_cli
     from pbmdem.dem import viewer
     from pbmdem.design import cli as design_cli
     from pbmdem.surrogate import cli as surrogate_cli
 
     viewer.add_cli(sub)
+    config_cli.add_cli(sub)
     design_cli.add_cli(sub)
     surrogate = surrogate_cli.add_cli(sub)
     _with_examples(surrogate, SURROGATE_EXAMPLES[None])
@@ -255,7 +259,7 @@ def _add_dem(sub) -> None:
     )
     _with_examples(dem, DEM_EXAMPLES)
     dem.add_argument("--config", required=True, help="workflow config (YAML)")
-    dem.add_argument("--rpm", required=True, help="impeller speed (1/min), 0 < rpm <= 20000")
+    dem.add_argument("--rpm", required=True, help=f"impeller speed (1/min), 0 < rpm <= {RPM_MAX}")
     dem.add_argument("--distribution", required=True, help="size distribution name from the config")
     dem.add_argument("--replicate", type=int, default=0, help="replicate (insertion seeds), 0 .. dem.replicates-1")
     dem.add_argument("--out", default=None, help="run folder (default results/dem/<point id>/rep<replicate>)")
@@ -311,7 +315,7 @@ def _add_pbm(sub) -> None:
             help=f"results/dem/{name} (with --kernel table); needed when pbm.breakage.enabled is true",
         )
     pbm.add_argument("--model", type=Path, help="surrogate model file (with --kernel ann)")
-    pbm.add_argument("--rpm", required=True, help="impeller speed (1/min), 0 < rpm <= 20000")
+    pbm.add_argument("--rpm", required=True, help=f"impeller speed (1/min), 0 < rpm <= {RPM_MAX}")
     pbm.add_argument("--distribution", default=None, help="size distribution name (default: first of the grid)")
     pbm.add_argument("--out", required=True, type=Path, help="output folder (tables, plots, run.json)")
     pbm.set_defaults(func=_pbm)

@@ -77,7 +77,7 @@ def _particles(bed_solid_volume: float, diameters, fractions) -> list[int]:
 
     from .plan import bed_particle_count, class_counts
 
-    sizes = SizeDistribution(tuple(diameters), tuple(fractions))
+    sizes = SizeDistribution(diameters=tuple(diameters), number_fractions=tuple(fractions))
     return class_counts(bed_particle_count(bed_solid_volume, sizes), fractions)
 
 

@@ -1,19 +1,15 @@
-"""The plan of one DEM run: particle numbers, time step, phases and snapshot intervals.
+"""The plan of one DEM run: every decision about it, in one frozen object.
 
 `plan_bed` turns the settings of an operating point (`pbmdem.config.DemPoint`) and its replicate
 into a `BedPlan`, everything that does not depend on the impeller speed: particle numbers per class
 (the bed's solid volume divided by the mean particle volume), the time step (a fraction of the
-Rayleigh time of the smallest particle), the settling steps, the insertion seeds, region and rate,
-the simulation box, the thermo interval and the neighbour skin at rest. One settled bed serves every
+Rayleigh time of the smallest particle), the settling steps, LIGGGHTS' seeds, the box, the insertion
+region and rate, the thermo interval and the neighbour skin at rest. One settled bed serves every
 speed (docs/dem.md, "One settled bed for every speed"). `plan_point` adds the speed: the spin-up
 and sampling steps, the contact-snapshot interval (a fraction of the Hertz contact duration), the
-neighbour skin at the tip speed and what is kept of the dumps.
-
-The planner owns every decision about a run; `deck.py` only formats a plan into a LIGGGHTS input
-and `run.py` only runs it and judges the run against it. The settings were checked when the
-config (or the command line) was read, so nothing here checks them again. `to_dict` is the plan's
-record (plan.json, bed.json): the fields a run is named by; the deck's values derived from them
-(marked `DECK`) are not repeated there (bed.json holds the deck's hash).
+skin at the tip speed and what is dumped. `deck.py` only formats a plan; `run.py` only runs it and
+judges the run against it. `to_dict` is the plan's record (plan.json, bed.json); the values the
+deck derives from it (fields marked `DECK`) are not repeated there (bed.json holds the deck's hash).
 """
 
 from __future__ import annotations
@@ -136,11 +132,8 @@ class BedPlan:
 
     def to_dict(self) -> dict:
         """The record of the plan (plan.json, bed.json): every field but the deck's."""
-        return {f.name: _copy(getattr(self, f.name)) for f in fields(self) if not f.metadata.get("deck")}
-
-
-def _copy(value):
-    return list(value) if isinstance(value, list) else value
+        record = {f.name: getattr(self, f.name) for f in fields(self) if not f.metadata.get("deck")}
+        return {k: list(v) if isinstance(v, list) else v for k, v in record.items()}
 
 
 @dataclass(frozen=True)
@@ -307,8 +300,8 @@ def phase_time(dem: Dem, phase: str, rpm: float) -> float:
 
 def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[int] | None = None) -> DemPlan:
     """Plan one run of `point` at `rpm`: its bed (`plan_bed`, same `replicate` and `counts`), then
-    the spin-up and the sampling window at this speed. `rpm` was checked where it entered (the
-    config or the command line)."""
+    the spin-up and the sampling window at this speed."""
+    rpm = float(rpm)  # checked where it entered (the config's Rpm type, or check_rpm on a command line)
     pid = point_id(rpm, point.distribution)
     try:
         bed = plan_bed(point, replicate=replicate, counts=counts)

@@ -1,5 +1,6 @@
 """Deck rendering: only validated numbers and names reach a LIGGGHTS script."""
 
+import dataclasses
 import math
 
 import pytest
@@ -129,3 +130,24 @@ def test_a_point_deck_sets_its_speed_s_skin_and_the_bed_deck_the_resting_one(def
     assert skin["bed"] == skin["slow"] == 0.5 * d_min
     assert 0.5 * d_min < skin["fast"] <= 0.5 * d_max
     assert skin["fast"] == pytest.approx(2 * SKIN_STEPS_AT_TIP_SPEED * fast.tip_speed * fast.timestep)
+
+
+def test_the_deck_formats_the_plan_and_decides_nothing(tiny_config):
+    """Every value of a deck is the plan's: change a decision in the plan and the deck follows."""
+    plan = plan_point(tiny_config.dem_point("small"), 600)
+    other = dataclasses.replace(
+        plan, neighbor_skin=0.00123, thermo_every=17, insertion_seed=10037, rotation_period=0.25, rayleigh_limit=0.3
+    )
+    words = {
+        line.split()[0] + (" " + line.split()[3] if line.startswith("fix") else ""): line.split()
+        for line in deck.render_granulator(other, 1).splitlines()
+        if line.strip() and not line.startswith("#")
+    }
+    assert words["neighbor"][1] == "0.00123"
+    assert words["thermo"][1] == "17"
+    assert words["fix insert/rate/region"][5] == "10037"
+    assert words["fix move/mesh"][-1] == "0.25"
+    assert words["fix check/timestep/gran"][4:6] == ["17", "0.3"]
+    # the plan's record (plan.json, bed.json) holds the fields a run is named by, not the deck's
+    assert not {"neighbor_skin", "thermo_every", "insertion_seed", "material"} & set(plan.to_dict())
+    assert {"rpm", "seed", "timestep", "collision_interval", "sampling_time"} <= set(plan.to_dict())

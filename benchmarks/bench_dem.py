@@ -74,7 +74,7 @@ def bench_point(args) -> None:
     point = point.replace(dem=point.dem.replace(keep_contact_dumps=True))
     plan = plan_point(point, args.rpm)
     with tempfile.TemporaryDirectory() as tmp:
-        summary = run_point(point, plan, tmp, cfg.dem_execution)
+        summary = run_point(plan, tmp, cfg.dem_execution)
         post = Path(tmp) / "post"
         t0 = time.perf_counter()
         naive_total = naive_parse(post / "pairs.dump")
@@ -318,10 +318,10 @@ def _cost_job(job):
     out = Path(out) / side
     if side == "old" and not baseline:
         point = _old_point(point, rpm)
-        summary = run_point(point, plan_point(point, rpm), out / "run", cfg.dem_execution, force=True)
+        summary = run_point(plan_point(point, rpm), out / "run", cfg.dem_execution, force=True)
         return side, summary, None
-    bed = settle_bed(point, plan_bed(point), out / "bed", cfg.dem_execution)
-    summary = run_point(point, plan_point(point, rpm), out / "run", cfg.dem_execution, force=True, bed_dir=out / "bed")
+    bed = settle_bed(plan_bed(point), out / "bed", cfg.dem_execution)
+    summary = run_point(plan_point(point, rpm), out / "run", cfg.dem_execution, force=True, bed_dir=out / "bed")
     return side, summary, bed
 
 

@@ -48,7 +48,7 @@ def main() -> None:
             execution = base.dem_execution.replace(mpi_ranks=ranks, timeout=3600.0)
             with tempfile.TemporaryDirectory() as tmp:
                 t0 = time.perf_counter()
-                summary = run_point(point, plan, tmp, execution)
+                summary = run_point(plan, tmp, execution)
                 wall = time.perf_counter() - t0
             results.setdefault(ranks, []).append((summary["liggghts_wall_time_s"], summary["total_collisions"]))
             print(

@@ -161,9 +161,9 @@ def dem_grid(root: str | Path, cfg=None, rpm: float = 600.0, distribution: str =
     runs = []
     for rep in range(replicates):
         bed = Path(layout.dem_bed(distribution, rep, root=str(root)))
-        settle_bed(point, plan_bed(point, replicate=rep), bed, cfg.dem_execution)
+        settle_bed(plan_bed(point, replicate=rep), bed, cfg.dem_execution)
         run = Path(layout.dem_run(f"{rpm:g}", distribution, rep, root=str(root)))
-        run_point(point, plan_point(point, rpm, replicate=rep), run, cfg.dem_execution, bed_dir=bed)
+        run_point(plan_point(point, rpm, replicate=rep), run, cfg.dem_execution, bed_dir=bed)
         runs.append(run)
     dem = Path(layout.dem(root=str(root)))
     for kind, name in TABLE_FILES.items():

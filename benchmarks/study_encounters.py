@@ -40,7 +40,7 @@ def run(cfg, point, rpm, replicate, workdir, keep=True):
     point = point.replace(dem=point.dem.replace(keep_contact_dumps=keep))
     plan = plan_point(point, rpm, replicate=replicate)
     t0 = time.perf_counter()
-    summary = run_point(point, plan, workdir, cfg.dem_execution.replace(timeout=7200.0))
+    summary = run_point(plan, workdir, cfg.dem_execution.replace(timeout=7200.0))
     summary["study_wall_time_s"] = time.perf_counter() - t0
     return plan, summary
 

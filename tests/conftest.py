@@ -142,7 +142,7 @@ def tiny_run(tmp_path_factory, tiny_config):
     point = point.replace(dem=point.dem.replace(keep_contact_dumps=True))
     plan = plan_point(point, 600)
     run_dir = tmp_path_factory.mktemp("tiny_run")
-    summary = run_point(point, plan, run_dir, tiny_config.dem_execution.replace(timeout=600))
+    summary = run_point(plan, run_dir, tiny_config.dem_execution.replace(timeout=600))
     return {"dir": run_dir, "plan": plan, "summary": summary, "config": tiny_config, "point": point}
 
 

@@ -1,12 +1,13 @@
 """Deck rendering: only validated numbers and names reach a LIGGGHTS script."""
 
+import dataclasses
 import math
 
 import pytest
 
 from pbmdem.dem import deck
 from pbmdem.dem.deck import DeckValueError
-from pbmdem.dem.plan import SNAPSHOTS_PER_CONTACT, plan_point
+from pbmdem.dem.plan import SKIN_STEPS_AT_TIP_SPEED, SNAPSHOTS_PER_CONTACT, neighbor_skin, plan_point
 
 
 @pytest.mark.parametrize("value", ["1\nshell rm -rf /", "0.1", None, True, math.nan, math.inf, [1]])
@@ -44,7 +45,7 @@ def test_render_refuses_unvalidated_text():
 def test_rendered_deck_is_complete_and_has_no_shell(tiny_config):
     point = tiny_config.dem_point("small")
     plan = plan_point(point, 600)
-    text = deck.render_granulator(point, plan, ranks=1)
+    text = deck.render_granulator(plan, ranks=1)
     assert "${" not in text
     assert "shell" not in text
     assert f"timestep        {plan.timestep!r}" in text
@@ -60,7 +61,7 @@ def test_injected_distribution_name_never_reaches_a_deck(tiny_config):
     point = tiny_config.dem_point("small").replace(distribution=evil)
     plan = plan_point(point, 600)
     with pytest.raises(DeckValueError, match="name must start"):
-        deck.render_granulator(point, plan, ranks=1)
+        deck.render_granulator(plan, ranks=1)
 
 
 def test_timestep_from_rayleigh_time(tiny_config):
@@ -86,7 +87,7 @@ def test_rayleigh_warning_limit_follows_a_planned_fraction_above_20_percent(tiny
         point = small.replace(dem=small.dem.replace(timestep_fraction=fraction))
         plan = plan_point(point, 600)
         assert plan.timestep / plan.rayleigh_time == pytest.approx(fraction)
-        text = deck.render_granulator(point, plan, ranks=1)
+        text = deck.render_granulator(plan, ranks=1)
         line = next(ln for ln in text.splitlines() if "check/timestep/gran" in ln)
         assert float(line.split()[-2]) == pytest.approx(limit) and line.split()[-1] == "0.2", line
 
@@ -105,13 +106,13 @@ def test_particle_count_fills_the_bed(default_config):
 
 def test_neighbour_skin_follows_the_tip_speed_between_half_the_smallest_and_largest_diameter():
     d = (0.002, 0.003, 0.004)
-    assert deck.neighbor_skin(d, 1.0e-5) == 0.001  # impeller at rest: half the smallest
-    travel = 2 * deck.SKIN_STEPS_AT_TIP_SPEED * 3.0 * 1.0e-5
+    assert neighbor_skin(d, 1.0e-5) == 0.001  # impeller at rest: half the smallest
+    travel = 2 * SKIN_STEPS_AT_TIP_SPEED * 3.0 * 1.0e-5
     assert 0.001 < travel < 0.002
-    assert deck.neighbor_skin(d, 1.0e-5, 3.0) == pytest.approx(travel)
-    assert deck.neighbor_skin(d, 1.0e-5, 50.0) == 0.002  # half the largest at most
+    assert neighbor_skin(d, 1.0e-5, 3.0) == pytest.approx(travel)
+    assert neighbor_skin(d, 1.0e-5, 50.0) == 0.002  # half the largest at most
     # no unit in it: millimetres and milliseconds give the same skin in millimetres
-    assert deck.neighbor_skin([x * 1e3 for x in d], 1.0e-2, 3.0) == pytest.approx(1e3 * travel)
+    assert neighbor_skin([x * 1e3 for x in d], 1.0e-2, 3.0) == pytest.approx(1e3 * travel)
 
 
 def test_a_point_deck_sets_its_speed_s_skin_and_the_bed_deck_the_resting_one(default_config):
@@ -119,13 +120,34 @@ def test_a_point_deck_sets_its_speed_s_skin_and_the_bed_deck_the_resting_one(def
     slow, fast = plan_point(point, 150), plan_point(point, 1200)
     skin = {}
     for name, text in {
-        "bed": deck.render_bed(point, slow.bed, 1),
-        "slow": deck.render_granulator(point, slow, 1, from_bed=True),
-        "fast": deck.render_granulator(point, fast, 1, from_bed=True),
+        "bed": deck.render_bed(slow.bed, 1),
+        "slow": deck.render_granulator(slow, 1, from_bed=True),
+        "fast": deck.render_granulator(fast, 1, from_bed=True),
     }.items():
         (line,) = [x for x in text.splitlines() if x.startswith("neighbor ")]
         skin[name] = float(line.split()[1])
     d_min, d_max = min(slow.bed.diameters), max(slow.bed.diameters)
     assert skin["bed"] == skin["slow"] == 0.5 * d_min
     assert 0.5 * d_min < skin["fast"] <= 0.5 * d_max
-    assert skin["fast"] == pytest.approx(2 * deck.SKIN_STEPS_AT_TIP_SPEED * fast.tip_speed * fast.timestep)
+    assert skin["fast"] == pytest.approx(2 * SKIN_STEPS_AT_TIP_SPEED * fast.tip_speed * fast.timestep)
+
+
+def test_the_deck_formats_the_plan_and_decides_nothing(tiny_config):
+    """Every value of a deck is the plan's: change a decision in the plan and the deck follows."""
+    plan = plan_point(tiny_config.dem_point("small"), 600)
+    other = dataclasses.replace(
+        plan, neighbor_skin=0.00123, thermo_every=17, insertion_seed=10037, rotation_period=0.25, rayleigh_limit=0.3
+    )
+    words = {
+        line.split()[0] + (" " + line.split()[3] if line.startswith("fix") else ""): line.split()
+        for line in deck.render_granulator(other, 1).splitlines()
+        if line.strip() and not line.startswith("#")
+    }
+    assert words["neighbor"][1] == "0.00123"
+    assert words["thermo"][1] == "17"
+    assert words["fix insert/rate/region"][5] == "10037"
+    assert words["fix move/mesh"][-1] == "0.25"
+    assert words["fix check/timestep/gran"][4:6] == ["17", "0.3"]
+    # the plan's record (plan.json, bed.json) holds the fields a run is named by, not the deck's
+    assert not {"neighbor_skin", "thermo_every", "insertion_seed", "material"} & set(plan.to_dict())
+    assert {"rpm", "seed", "timestep", "collision_interval", "sampling_time"} <= set(plan.to_dict())

@@ -23,11 +23,11 @@ def bed_runs(tiny_config, tmp_path_factory):
     point = tiny_config.dem_point("small")
     execution = tiny_config.dem_execution
     bed = plan_bed(point, replicate=0)
-    record = settle_bed(point, bed, root / "bed", execution)
+    record = settle_bed(bed, root / "bed", execution)
     plans = {rpm: plan_point(point, rpm) for rpm in SPEEDS}
     for rpm, plan in plans.items():
-        run_point(point, plan, root / f"rpm{rpm}", execution, bed_dir=root / "bed")
-    run_point(point, plans[SPEEDS[0]], root / "fresh", execution)
+        run_point(plan, root / f"rpm{rpm}", execution, bed_dir=root / "bed")
+    run_point(plans[SPEEDS[0]], root / "fresh", execution)
     return {"root": root, "point": point, "bed": bed, "record": record, "plans": plans}
 
 
@@ -98,10 +98,10 @@ def test_a_run_refuses_a_bed_that_is_not_its_own(bed_runs, tiny_config):
     root, point = bed_runs["root"], bed_runs["point"]
     other = plan_point(point, 600, replicate=1)  # other insertion seeds: another bed
     with pytest.raises(ConfigError, match=r"bed\.json: bed\.replicate = 0, but the run rpm600_small \(replicate 1\)"):
-        check_bed(point, other, root / "bed")
+        check_bed(other, root / "bed")
     softer = point.replace(material=point.material.replace(youngs_modulus=0.5 * point.material.youngs_modulus))
     with pytest.raises(ConfigError, match=r"bed\.json: bed\.timestep"):
-        check_bed(softer, plan_point(softer, 600), root / "bed")
+        check_bed(plan_point(softer, 600), root / "bed")
 
 
 def test_the_logs_time_each_phase(bed_runs):
@@ -144,7 +144,7 @@ def test_a_bed_that_fails_leaves_its_crash_record_and_no_bed(tiny_config, tmp_pa
     point = tiny_config.dem_point("small")
     bed_dir = tmp_path / "bed"
     with pytest.raises(engine.LiggghtsError, match=str(bed_dir)):
-        settle_bed(point, plan_bed(point), bed_dir, tiny_config.dem_execution)
+        settle_bed(plan_bed(point), bed_dir, tiny_config.dem_execution)
     crash = json.loads((bed_dir / "crash.json").read_text())
     assert "no/such/style" in crash["log_tail"]
     assert not (bed_dir / BED_RECORD).exists() and not (bed_dir / BED_FILE).exists()

@@ -61,7 +61,7 @@ def test_halving_the_snapshot_interval_changes_encounters_by_less_than_5_percent
         dem=point.dem.replace(collision_interval=auto // 2, keep_contact_dumps=True, sampling_time=0.03)
     )
     plan = plan_point(point, 1200)
-    run_point(point, plan, tmp_path, tiny_config.dem_execution)
+    run_point(plan, tmp_path, tiny_config.dem_execution)
     analysis = collisions.RunAnalysis(
         tmp_path / "post", plan, tiny_config.granulator.bowl, tiny_config.granulator.impeller
     )
@@ -90,8 +90,10 @@ def test_replicates_differ_only_by_seed_and_aggregate_to_mean_and_se(tiny_run, t
     base = dataclasses.asdict(plans[0])
     for plan in plans[1:]:
         other = dataclasses.asdict(plan)
-        assert {k for k in base if base[k] != other[k]} == {"seed", "replicate"}
-    decks = [deck.granulator_values(point, p, ranks=1) for p in plans]
+        # the replicate and its seeds (dem.seed's and the LIGGGHTS primes the plan derives from it)
+        seeds = {"seed", "template_seeds", "distribution_seed", "insertion_seed"}
+        assert {k for k in base if base[k] != other[k]} == {"replicate", *seeds}
+    decks = [deck.granulator_values(p, ranks=1) for p in plans]
     assert {k for k in decks[0] if decks[0][k] != decks[1][k]} <= {
         "seed_dist",
         "seed_insert",
@@ -100,7 +102,7 @@ def test_replicates_differ_only_by_seed_and_aggregate_to_mean_and_se(tiny_run, t
     tables = [tiny_run["dir"] / "collisions.csv"]
     for plan in plans[1:]:
         run_dir = tmp_path / f"rep{plan.replicate}"
-        run_point(point, plan, run_dir, tiny_config.dem_execution)
+        run_point(plan, run_dir, tiny_config.dem_execution)
         tables.append(run_dir / "collisions.csv")
     runs = [pd.read_csv(t) for t in tables]
     assert [int(r["replicate"].iloc[0]) for r in runs] == [0, 1, 2]
@@ -158,7 +160,7 @@ def test_a_failing_run_reports_the_log_and_leaves_no_table(tiny_config, tmp_path
     plan = plan_point(point, 600)
     run_dir = tmp_path / "run"
     with pytest.raises(engine.LiggghtsError) as info:
-        run_point(point, plan, run_dir, tiny_config.dem_execution)
+        run_point(plan, run_dir, tiny_config.dem_execution)
     msg = str(info.value)
     assert "ERROR" in msg and "no/such/style" in msg  # the tail of the log is in the message
     assert not (run_dir / "collisions.csv").exists()
@@ -180,7 +182,7 @@ def test_insertion_shortfall_is_an_error(tiny_config, tmp_path):
     point = point.replace(dem=point.dem.replace(settle_time=0.004))  # far too short to drop ~400 particles
     plan = plan_point(point, 600)
     with pytest.raises(DumpFormatError, match="insertion did not place them all"):
-        run_point(point, plan, tmp_path, tiny_config.dem_execution)
+        run_point(plan, tmp_path, tiny_config.dem_execution)
     assert not (tmp_path / "collisions.csv").exists()
 
 
@@ -226,7 +228,7 @@ def test_two_mpi_ranks(tiny_config, tmp_path):
     """The same deck under `mpirun -np 2` (as on a cluster): domain split along x, same bed."""
     point = tiny_config.dem_point("small")
     plan = plan_point(point, 600)
-    summary = run_point(point, plan, tmp_path, tiny_config.dem_execution.replace(mpi_ranks=2))
+    summary = run_point(plan, tmp_path, tiny_config.dem_execution.replace(mpi_ranks=2))
     assert "processors      2 1 1" in (tmp_path / "in.granulator").read_text()
     assert "2 by 1 by 1 MPI processor grid" in (tmp_path / "log.liggghts").read_text()
     table = pd.read_csv(tmp_path / "collisions.csv")

@@ -141,9 +141,8 @@ def test_nan_in_a_real_contact_dump_fails_the_tabulation(tiny_run, tmp_path):
     parts = lines[k].split()
     lines[k] = f"{parts[0]} {parts[1]} nan"
     (post / "pairs.dump").write_text("\n".join(lines) + "\n")
-    granulator = tiny_run["config"].granulator
     with pytest.raises(dumps.DumpFormatError, match="pairs.dump: non-finite value nan in column 3"):
-        collisions.tabulate_run(post, tiny_run["plan"], granulator.bowl, granulator.impeller)
+        collisions.tabulate_run(post, tiny_run["plan"])
 
 
 # ----------------------------------------------------------------------------- defect 5: operating-point ids
@@ -268,8 +267,8 @@ def test_forced_run_replaces_a_finished_point(tiny_config, tmp_path):
     _write(run / "crash.json", "{}")  # a stale crash of an earlier attempt
     _write(run / "summary.json", json.dumps({"old": True}))
     with pytest.raises(FinishedRunError):
-        run_point(point, plan, run, execution)
-    summary = run_point(point, plan, run, execution, force=True)
+        run_point(plan, run, execution)
+    summary = run_point(plan, run, execution, force=True)
     assert json.loads((run / "summary.json").read_text()) == json.loads(json.dumps(summary))
     assert (run / "collisions.csv").exists() and not (run / "crash.json").exists()
     assert (run / "notes.txt").read_text() == "the user's own file"
@@ -448,7 +447,7 @@ def test_dem_progress_is_read_from_liggghts_thermo_while_it_runs(tiny_config, tm
     point = tiny_config.dem_point("small")
     point = point.replace(dem=point.dem.replace(vtk_interval=0.002))  # ~60 thermo lines: less than a stdio buffer
     plan = plan_point(point, 600)
-    deck = prepare_run(point, plan, tmp_path, ranks=1)
+    deck = prepare_run(plan, tmp_path, ranks=1)
     seen = []
 
     class Recording(ThermoProgress):
@@ -655,7 +654,7 @@ def test_a_failed_first_run_is_kept_in_and_named_by_its_run_folder(tiny_config, 
     run = tmp_path / "run"
     point = tiny_config.dem_point("small")
     with pytest.raises(engine.LiggghtsError) as info:
-        run_point(point, plan_point(point, 600), run, tiny_config.dem_execution)
+        run_point(plan_point(point, 600), run, tiny_config.dem_execution)
     assert str(run) in str(info.value) and "staging" not in str(info.value)
     assert (run / "crash.json").exists() and (run / "log.liggghts").exists() and not is_finished(run)
     assert not list(tmp_path.glob(".*staging"))

@@ -12,7 +12,7 @@ from conftest import config_of, snakemake_command
 
 from pbmdem.cli import main
 from pbmdem.config import ConfigError
-from pbmdem.dem import plan_point, run_point
+from pbmdem.dem import plan_point
 from pbmdem.dem.plan import check_limits, check_workflow_plans
 
 
@@ -53,13 +53,18 @@ def test_each_bound_is_enforced_alone(tiny_config, key, value):
     assert str(err.value).count("dem.limits.") == 1
 
 
-def test_run_point_refuses_an_unbounded_plan_before_touching_the_disk(tiny_config, tmp_path):
-    point = tiny_config.dem_point("small")
-    plan = plan_point(point, 600)
-    execution = tiny_config.dem_execution
-    execution = execution.replace(limits=execution.limits.replace(max_steps=plan.total_steps - 1))
-    with pytest.raises(ConfigError, match=r"dem\.limits\.max_steps"):
-        run_point(point, plan, tmp_path / "run", execution)
+def test_the_dem_command_refuses_an_unbounded_run_before_touching_the_disk(root, tmp_path, capsys):
+    """The command line is where a single run's speed enters: its plan is checked against
+    dem.limits there (the workflow's runs when the Snakefile reads the config), once."""
+    out = tmp_path / "run"
+    code = main(
+        ["dem", "--config", str(root / "config" / "config.yaml"), "--rpm", "1e-9", "--distribution", "fine"]
+        + ["--out", str(out)]
+    )
+    captured = capsys.readouterr()
+    assert code == 2
+    assert "dem.limits.max_steps = " in captured.err
+    assert "Traceback" not in captured.err
     assert not any(tmp_path.iterdir())
 
 

@@ -66,7 +66,7 @@ def _dem(args: argparse.Namespace) -> int:
     bar = sys.stderr.isatty()
     if not bar:
         logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stderr)
-    summary = run_point(point, plan, out, cfg.dem_execution, force=args.force, progress_bar=bar)
+    summary = run_point(plan, out, cfg.dem_execution, force=args.force, progress_bar=bar)
     print(json.dumps(summary, indent=2))
     return 0
 

@@ -14,5 +14,5 @@ execution = DemExecution.of_job(snakemake.config, snakemake.resources)  # noqa: 
 if snakemake.resources.get("mpi"):  # noqa: F821
     os.environ["PBMDEM_MPI_LAUNCHER"] = str(snakemake.resources.mpi)  # noqa: F821
 bed = plan_bed(point, replicate=int(snakemake.wildcards.rep))  # noqa: F821
-record = settle_bed(point, bed, snakemake.params.bed_dir, execution)  # noqa: F821
+record = settle_bed(bed, snakemake.params.bed_dir, execution)  # noqa: F821
 logging.info("settled bed %s: %.1f s of LIGGGHTS", bed.bed_id, record["liggghts_wall_time_s"])

@@ -63,7 +63,7 @@ class DemProvider:
         if earlier is None:
             run_dir = interval_dir / "dem"
             # an interval without interval.json is unfinished, whatever its DEM folder holds
-            summary = run_point(point, plan, run_dir, self.execution, force=True)
+            summary = run_point(plan, run_dir, self.execution, force=True)
             info = {
                 "dem_wall_time_s": summary["liggghts_wall_time_s"] + summary["parse_time_s"],
                 # the LIGGGHTS processes' CPU seconds: the run and, if it settled its own bed, the bed's

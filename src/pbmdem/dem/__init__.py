@@ -3,8 +3,8 @@
 | module | concept |
 | --- | --- |
 | `geometry` | bowl and impeller STL meshes |
-| `plan` | the plan of one run (particles, time step, phases, snapshot intervals, seeds) |
-| `deck` | the LIGGGHTS deck, every substituted value validated |
+| `plan` | the plan of one run: every decision (particles, time step, phases, snapshots, seeds, deck values) |
+| `deck` | the LIGGGHTS deck: a plan formatted as text |
 | `engine` | running LIGGGHTS, judging a run against its plan, recording crashes |
 | `progress` | progress of a running job from its thermo output |
 | `run` | one run end to end in a staging folder |
@@ -18,6 +18,6 @@
 """
 
 from .plan import DemPlan, plan_point
-from .run import run_operating_point, run_point
+from .run import run_point
 
-__all__ = ["DemPlan", "plan_point", "run_point", "run_operating_point"]
+__all__ = ["DemPlan", "plan_point", "run_point"]

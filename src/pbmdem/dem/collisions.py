@@ -363,9 +363,9 @@ class RunAnalysis:
         )
 
 
-def tabulate_run(post_dir: str | Path, plan, bowl, impeller) -> RunTables:
-    """Collision and encounter tables of one finished run."""
-    return RunAnalysis(post_dir, plan, bowl, impeller).tables()
+def tabulate_run(post_dir: str | Path, plan) -> RunTables:
+    """Collision and encounter tables of one finished run of `plan` (a DemPlan)."""
+    return RunAnalysis(post_dir, plan, plan.granulator.bowl, plan.granulator.impeller).tables()
 
 
 def write_tables(tables: RunTables, run_dir: str | Path) -> None:

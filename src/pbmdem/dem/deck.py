@@ -1,13 +1,15 @@
-"""Render LIGGGHTS input decks from the templates in `liggghts_templates/`.
+"""Render LIGGGHTS input decks from the templates in `liggghts_templates/`: format a plan.
+
+Every value of a deck is decided by the planner (`plan.py`); this module only writes it as text.
 
 The templates are package data (`pbmdem/data/liggghts_templates/`, the same files as the
 project's `liggghts_templates/`), so an installed pbmdem renders decks from any directory.
 
 A LIGGGHTS input script can run shell commands (`shell ...`), so nothing from a config file is
 pasted into a deck as text. Every substituted value passes through `number()` (a finite float or
-int within a stated range, formatted by Python) or `known_name()` (a member of a fixed set or a
-plain identifier), and the template is filled with `string.Template.substitute`, which fails on
-any placeholder left unfilled.
+int, formatted by Python; its range was checked where the setting entered) or `known_name()` (a
+member of a fixed set or a plain identifier), and the template is filled with
+`string.Template.substitute`, which fails on any placeholder left unfilled.
 """
 
 from __future__ import annotations
@@ -18,10 +20,7 @@ import string
 from importlib import resources
 from pathlib import Path
 
-from pbmdem.config import DemPoint
-
-from .plan import BedPlan, DemPlan, next_prime
-from .progress import thermo_interval
+from .plan import BedPlan, DemPlan
 
 #: the deck of a granulator run
 GRANULATOR_TEMPLATE = "granulator.in"
@@ -51,29 +50,17 @@ def template_path(name: str = GRANULATOR_TEMPLATE) -> Path:
     return template_dir() / name
 
 
-def number(
-    name: str,
-    value,
-    *,
-    minimum: float | None = None,
-    maximum: float | None = None,
-    integer: bool = False,
-    exclusive_minimum: bool = False,
-) -> str:
-    """Validate `value` as a finite number in range and return its text for a deck."""
+def number(name: str, value, *, integer: bool = False, minimum: float | None = None) -> str:
+    """`value` as text for a deck: a finite number (an integer if `integer`; at least `minimum`
+    if given), or DeckValueError naming it."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise DeckValueError(f"{name} = {value!r}: a number is required, got {type(value).__name__}")
     if not math.isfinite(value):
         raise DeckValueError(f"{name} = {value!r}: a finite number is required")
     if integer and float(value) != int(value):
         raise DeckValueError(f"{name} = {value!r}: an integer is required")
-    if minimum is not None:
-        if exclusive_minimum and not value > minimum:
-            raise DeckValueError(f"{name} = {value!r}: must be greater than {minimum}")
-        if not exclusive_minimum and value < minimum:
-            raise DeckValueError(f"{name} = {value!r}: must be at least {minimum}")
-    if maximum is not None and value > maximum:
-        raise DeckValueError(f"{name} = {value!r}: must be at most {maximum}")
+    if minimum is not None and value < minimum:
+        raise DeckValueError(f"{name} = {value!r}: must be at least {minimum}")
     return str(int(value)) if integer else repr(float(value))
 
 
@@ -91,11 +78,6 @@ def known_name(name: str, value, allowed: set[str] | None = None) -> str:
             "'_' or '-' (at most 64 characters)"
         )
     return value
-
-
-def numbers(name: str, values, **limits) -> str:
-    """Validate a sequence of numbers; return them space-separated."""
-    return " ".join(number(f"{name}[{k}]", v, **limits) for k, v in enumerate(values))
 
 
 def sections(template_name: str) -> dict[str, str]:
@@ -133,136 +115,78 @@ def render(template_name: str, values: dict[str, str], kind: str | None = None) 
         raise DeckValueError(f"template {template_name} needs a value for {exc.args[0]}") from None
 
 
-def _matrix(name: str, value: float, n: int) -> str:
-    return " ".join([number(name, value, minimum=0.0)] * (n * n))
+def _matrix(value: float, n: int) -> str:
+    return " ".join([number("matrix", value)] * (n * n))
 
 
-def bed_values(point: DemPoint, bed: BedPlan, ranks: int, name: str | None = None) -> dict[str, str]:
-    """Validated text for the speed-independent placeholders of liggghts_templates/granulator.in
-    (box, material, insertion and settling): the settled bed `bed` of `point` on `ranks` MPI
-    ranks. `name` (default: the bed's id) heads the deck."""
-    num = number
-    mat = point.material
-    bowl, imp = point.granulator.bowl, point.granulator.impeller
-    n = len(bed.diameters)
-    d_max = max(bed.diameters)
-    margin = 0.05 * bowl.diameter
-    templates = []
-    seed = next_prime(bed.seed)
-    for k, d in enumerate(bed.diameters):
-        seed = next_prime(seed + 1)
-        templates.append(
-            f"fix             pts{k + 1} all particletemplate/sphere {num('seed', seed, integer=True)} "
-            f"atom_type {k + 1} density constant {num('material.density', mat.density, minimum=1.0)} "
-            f"radius constant {num(f'diameters[{k}]', 0.5 * d, exclusive_minimum=True, minimum=0.0)}"
-        )
-    weights = " ".join(
-        f"pts{k + 1} {num(f'number_fractions[{k}]', w, minimum=0.0, maximum=1.0)}"
-        for k, w in enumerate(bed.number_fractions)
-    )
-    fill_zlo = imp.top + d_max
-    fill_zhi = bowl.height - d_max
-    # insert in small batches over the first 60 % of the settling phase, so that the fill region
-    # never saturates (a saturated region inserts the large templates first and skews the PSD)
-    insert_time = 0.6 * bed.settle_steps * bed.timestep
-    insert_every = max(1, int(0.002 / bed.timestep))
-    every = thermo_interval(bed.n_particles, bed.vtk_every)
+def bed_values(bed: BedPlan, ranks: int) -> dict[str, str]:
+    """Text for the speed-independent placeholders of liggghts_templates/granulator.in (box,
+    material, insertion and settling) of the settled bed `bed` on `ranks` MPI ranks."""
+    num, mat, n = number, bed.material, len(bed.diameters)
+    templates = [
+        f"fix             pts{k + 1} all particletemplate/sphere {num('seed', seed, integer=True)} "
+        f"atom_type {k + 1} density constant {num('density', mat.density)} "
+        f"radius constant {num(f'diameters[{k}]', 0.5 * d)}"
+        for k, (seed, d) in enumerate(zip(bed.template_seeds, bed.diameters))
+    ]
+    weights = " ".join(f"pts{k + 1} {num(f'number_fractions[{k}]', w)}" for k, w in enumerate(bed.number_fractions))
+    box = dict(zip(("box_xlo", "box_xhi", "box_ylo", "box_yhi", "box_zlo", "box_zhi"), bed.box))
     return {
-        "point_id": known_name("point_id", (name or bed.bed_id).replace(".", "p")),
+        "point_id": known_name("point_id", bed.bed_id.replace(".", "p")),
         "processors": f"{num('mpi_ranks', ranks, integer=True, minimum=1)} 1 1",
-        "box_xlo": num("box", -bowl.radius - margin),
-        "box_xhi": num("box", bowl.radius + margin),
-        "box_ylo": num("box", -bowl.radius - margin),
-        "box_yhi": num("box", bowl.radius + margin),
-        "box_zlo": num("box", -margin),
-        "box_zhi": num("box", bowl.height + margin),
-        "n_types": num("n_classes", n, integer=True, minimum=1),
-        "neighbor_skin": num(
-            "neighbor_skin", neighbor_skin(bed.diameters, bed.timestep), exclusive_minimum=True, minimum=0.0
-        ),
-        "youngs_list": " ".join(
-            [num("material.youngs_modulus", mat.youngs_modulus, exclusive_minimum=True, minimum=0.0)] * n
-        ),
-        "poisson_list": " ".join([num("material.poisson_ratio", mat.poisson_ratio, minimum=0.0, maximum=0.5)] * n),
-        "restitution_matrix": _matrix("material.restitution", mat.restitution, n),
-        "friction_matrix": _matrix("material.friction", mat.friction, n),
-        "rolling_matrix": _matrix("material.rolling_friction", mat.rolling_friction, n),
-        "timestep": num("timestep", bed.timestep, exclusive_minimum=True, minimum=0.0),
+        **{key: num(key, value) for key, value in box.items()},
+        "n_types": num("n_classes", n, integer=True),
+        "neighbor_skin": num("neighbor_skin", bed.settle_skin),
+        "youngs_list": " ".join([num("youngs_modulus", mat.youngs_modulus)] * n),
+        "poisson_list": " ".join([num("poisson_ratio", mat.poisson_ratio)] * n),
+        "restitution_matrix": _matrix(mat.restitution, n),
+        "friction_matrix": _matrix(mat.friction, n),
+        "rolling_matrix": _matrix(mat.rolling_friction, n),
+        "timestep": num("timestep", bed.timestep),
         "bowl_stl": "bowl.stl",
         "impeller_stl": "impeller.stl",
         "post_dir": "post",
-        # thermo reads fix check/timestep/gran, so both run at the same interval (LIGGGHTS requires it)
-        "check_every": num("check_every", every, integer=True, minimum=1),
-        "rayleigh_limit": num("rayleigh_limit", rayleigh_limit(bed), exclusive_minimum=True, minimum=0.0),
+        "check_every": num("check_every", bed.thermo_every, integer=True),
+        "rayleigh_limit": num("rayleigh_limit", bed.rayleigh_limit),
         "particle_templates_block": "\n".join(templates),
-        "seed_dist": num("seed", next_prime(seed + 1), integer=True),
+        "seed_dist": num("seed", bed.distribution_seed, integer=True),
         "distribution_weights": weights,
-        "fill_radius": num("fill_radius", bowl.radius - d_max, exclusive_minimum=True, minimum=0.0),
-        "fill_zlo": num("fill_zlo", fill_zlo, minimum=0.0),
-        "fill_zhi": num("fill_zhi", fill_zhi, exclusive_minimum=True, minimum=fill_zlo),
-        "seed_insert": num("seed", next_prime(seed + 100), integer=True),
-        "n_particles": num("n_particles", bed.n_particles, integer=True, minimum=1),
-        "insert_rate": num("insert_rate", bed.n_particles / insert_time, exclusive_minimum=True, minimum=0.0),
-        "insert_every": num("insert_every", insert_every, integer=True, minimum=1),
-        "thermo_every": num("thermo_every", every, integer=True, minimum=1),
-        "vtk_every": num("vtk_every", bed.vtk_every, integer=True, minimum=1),
-        "settle_steps": num("settle_steps", bed.settle_steps, integer=True, minimum=1),
+        "fill_radius": num("fill_radius", bed.fill_radius),
+        "fill_zlo": num("fill_zlo", bed.fill_zlo),
+        "fill_zhi": num("fill_zhi", bed.fill_zhi),
+        "seed_insert": num("seed", bed.insertion_seed, integer=True),
+        "n_particles": num("n_particles", bed.n_particles, integer=True),
+        "insert_rate": num("insert_rate", bed.insert_rate),
+        "insert_every": num("insert_every", bed.insert_every, integer=True),
+        "thermo_every": num("thermo_every", bed.thermo_every, integer=True),
+        "vtk_every": num("vtk_every", bed.vtk_every, integer=True),
+        "settle_steps": num("settle_steps", bed.settle_steps, integer=True),
     }
 
 
-#: steps between neighbour-list rebuilds that the skin allows a granule moving at the blade tip
-#: speed (LIGGGHTS rebuilds the lists when a granule has moved half the skin)
-SKIN_STEPS_AT_TIP_SPEED = 22
-
-
-def neighbor_skin(diameters, timestep: float, tip_speed: float = 0.0) -> float:
-    """The neighbour-list skin of a bed of granules of `diameters` at the impeller tip speed
-    `tip_speed`: the distance a granule at the tip speed travels in 2 x SKIN_STEPS_AT_TIP_SPEED
-    steps, between half the smallest and half the largest diameter.
-
-    Every skin gives the same contacts (the lists are checked every step); it only trades list
-    rebuilds (a small skin at a high speed) against pair checks (a large skin around small
-    granules). Measured on the default grid (docs/dem.md, "Cost of a run"): half the largest
-    diameter, the old skin, cost the fine bed 12 % at 600 rpm and the coupled loops' wide samples
-    18-29 %; half the smallest cost the fine bed 24 % at 1200 rpm."""
-    travel = 2 * SKIN_STEPS_AT_TIP_SPEED * tip_speed * timestep
-    return min(max(0.5 * min(diameters), travel), 0.5 * max(diameters))
-
-
-def granulator_values(point: DemPoint, plan: DemPlan, ranks: int) -> dict[str, str]:
-    """Validated text for every placeholder of liggghts_templates/granulator.in: the run `plan` of
-    `point` on `ranks` MPI ranks."""
+def granulator_values(plan: DemPlan, ranks: int) -> dict[str, str]:
+    """Text for every placeholder of liggghts_templates/granulator.in: the run `plan` on `ranks`
+    MPI ranks."""
     num = number
-    skin = neighbor_skin(plan.bed.diameters, plan.timestep, plan.tip_speed)
-    return bed_values(point, plan.bed, ranks, name=plan.point_id) | {
-        "neighbor_skin": num("neighbor_skin", skin, exclusive_minimum=True, minimum=0.0),
-        "spinup_steps": num("spinup_steps", plan.spinup_steps, integer=True, minimum=1),
-        "sampling_steps": num("sampling_steps", plan.sampling_steps, integer=True, minimum=1),
-        "spinup_pre_steps": num("spinup_pre_steps", plan.spinup_steps - plan.history_steps, integer=True, minimum=1),
-        "record_steps": num("record_steps", plan.history_steps + plan.sampling_steps, integer=True, minimum=1),
-        "position_interval": num("position_interval", plan.position_interval, integer=True, minimum=1),
-        "rotation_period": num("rotation_period", 60.0 / plan.rpm, exclusive_minimum=True, minimum=0.0),
-        "collision_interval": num("collision_interval", plan.collision_interval, integer=True, minimum=1),
+    return bed_values(plan, ranks) | {
+        "point_id": known_name("point_id", plan.point_id.replace(".", "p")),
+        "neighbor_skin": num("neighbor_skin", plan.neighbor_skin),
+        "spinup_steps": num("spinup_steps", plan.spinup_steps, integer=True),
+        "sampling_steps": num("sampling_steps", plan.sampling_steps, integer=True),
+        "spinup_pre_steps": num("spinup_pre_steps", plan.spinup_pre_steps, integer=True),
+        "record_steps": num("record_steps", plan.record_steps, integer=True),
+        "position_interval": num("position_interval", plan.position_interval, integer=True),
+        "rotation_period": num("rotation_period", plan.rotation_period),
+        "collision_interval": num("collision_interval", plan.collision_interval, integer=True),
     }
 
 
-#: LIGGGHTS' warning limit of dt over the Rayleigh time when the plan's fraction is below it
-RAYLEIGH_WARNING_FRACTION = 0.2
+def render_granulator(plan: DemPlan, ranks: int, *, from_bed: bool = False) -> str:
+    """The granulator deck of a run (raises DeckValueError before any I/O): a fresh run that
+    settles its own bed, or (`from_bed`) one that starts from bed.restart."""
+    return render(GRANULATOR_TEMPLATE, granulator_values(plan, ranks), "from_bed" if from_bed else "fresh")
 
 
-def rayleigh_limit(bed: BedPlan) -> float:
-    """The fraction of the Rayleigh time above which fix check/timestep/gran warns: 20 %, or 2 %
-    above the planned fraction dt / t_R where that is larger (the fraction is a documented choice,
-    docs/dem.md "Cost of a run"; a particle smaller than planned still makes it warn)."""
-    return max(RAYLEIGH_WARNING_FRACTION, 1.02 * bed.timestep / bed.rayleigh_time)
-
-
-def render_granulator(point: DemPoint, plan: DemPlan, ranks: int, *, from_bed: bool = False) -> str:
-    """The granulator deck of a run, every value validated (raises DeckValueError before any I/O):
-    a fresh run that settles its own bed, or (`from_bed`) one that starts from bed.restart."""
-    return render(GRANULATOR_TEMPLATE, granulator_values(point, plan, ranks), "from_bed" if from_bed else "fresh")
-
-
-def render_bed(point: DemPoint, bed: BedPlan, ranks: int) -> str:
+def render_bed(bed: BedPlan, ranks: int) -> str:
     """The deck that inserts and settles the bed `bed` and writes it to bed.restart."""
-    return render(GRANULATOR_TEMPLATE, bed_values(point, bed, ranks), "bed")
+    return render(GRANULATOR_TEMPLATE, bed_values(bed, ranks), "bed")

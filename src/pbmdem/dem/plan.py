@@ -1,23 +1,29 @@
-"""The plan of one DEM run: particle numbers, time step, phases and snapshot intervals.
+"""The plan of one DEM run: every decision about it, in one frozen object.
 
 `plan_bed` turns the settings of an operating point (`pbmdem.config.DemPoint`) and its replicate
 into a `BedPlan`, everything that does not depend on the impeller speed: particle numbers per class
 (the bed's solid volume divided by the mean particle volume), the time step (a fraction of the
-Rayleigh time of the smallest particle), the settling steps and the insertion seeds. One settled
-bed serves every speed (docs/dem.md, "One settled bed for every speed"). `plan_point` adds the
-speed: the spin-up and sampling steps and the contact-snapshot interval (a fraction of the Hertz
-contact duration).
+Rayleigh time of the smallest particle), the settling steps, LIGGGHTS' seeds, the box, the insertion
+region and rate, the thermo interval and the neighbour skin at rest. One settled bed serves every
+speed (docs/dem.md, "One settled bed for every speed"). `plan_point` adds the speed: the spin-up
+and sampling steps, the contact-snapshot interval (a fraction of the Hertz contact duration), the
+skin at the tip speed and what is dumped. `deck.py` only formats a plan; `run.py` only runs it and
+judges the run against it. `to_dict` is the plan's record (plan.json, bed.json); the values the
+deck derives from it (fields marked `DECK`) are not repeated there (bed.json holds the deck's hash).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
 from pbmdem.config import ConfigError, DemPoint, SizeDistribution, point_id
-from pbmdem.config.dem import DemLimits
+from pbmdem.config.dem import Dem, DemLimits
+from pbmdem.config.granulator import Granulator, Material
+
+from .progress import thermo_interval
 
 # Hertz contact duration t_c = 2.87 (m*^2 / (R* E*^2 v))^(1/5) (Johnson 1985); contact snapshots
 # are taken every t_c / SNAPSHOTS_PER_CONTACT, t_c of a head-on contact between two of the smallest
@@ -30,6 +36,13 @@ SNAPSHOTS_PER_CONTACT = 1
 REPLICATE_SEED_STRIDE = 7919
 #: impact speed (m/s) below which the contact time is not evaluated (an impeller at rest)
 MIN_CONTACT_SPEED = 0.1
+#: steps between neighbour-list rebuilds that the skin allows a granule moving at the blade tip
+#: speed (LIGGGHTS rebuilds the lists when a granule has moved half the skin)
+SKIN_STEPS_AT_TIP_SPEED = 22
+#: LIGGGHTS' warning limit of dt over the Rayleigh time when the plan's fraction is below it
+RAYLEIGH_WARNING_FRACTION = 0.2
+#: a field of the deck only (derived from the recorded fields and the settings), not in `to_dict`
+DECK = {"deck": True}
 
 
 def rayleigh_time(radius: float, density: float, youngs: float, poisson: float) -> float:
@@ -44,6 +57,27 @@ def hertz_contact_time(radius: float, density: float, youngs: float, poisson: fl
     m_eff, r_eff = mass / 2.0, radius / 2.0
     e_eff = youngs / (2.0 * (1.0 - poisson**2))
     return 2.87 * (m_eff**2 / (r_eff * e_eff**2 * speed)) ** 0.2
+
+
+def neighbor_skin(diameters, timestep: float, tip_speed: float = 0.0) -> float:
+    """The neighbour-list skin of a bed of granules of `diameters` at the impeller tip speed
+    `tip_speed`: the distance a granule at the tip speed travels in 2 x SKIN_STEPS_AT_TIP_SPEED
+    steps, between half the smallest and half the largest diameter.
+
+    Every skin gives the same contacts (the lists are checked every step); it only trades list
+    rebuilds (a small skin at a high speed) against pair checks (a large skin around small
+    granules). Measured on the default grid (docs/dem.md, "Cost of a run"): half the largest
+    diameter, the old skin, cost the fine bed 12 % at 600 rpm and the coupled loops' wide samples
+    18-29 %; half the smallest cost the fine bed 24 % at 1200 rpm."""
+    travel = 2 * SKIN_STEPS_AT_TIP_SPEED * tip_speed * timestep
+    return min(max(0.5 * min(diameters), travel), 0.5 * max(diameters))
+
+
+def rayleigh_limit(timestep: float, rayleigh_time: float) -> float:
+    """The fraction of the Rayleigh time above which fix check/timestep/gran warns: 20 %, or 2 %
+    above the planned fraction dt / t_R where that is larger (the fraction is a documented choice,
+    docs/dem.md "Cost of a run"; a particle smaller than planned still makes it warn)."""
+    return max(RAYLEIGH_WARNING_FRACTION, 1.02 * timestep / rayleigh_time)
 
 
 def next_prime(n: int) -> int:
@@ -70,6 +104,26 @@ class BedPlan:
     vtk_every: int
     replicate: int
     seed: int
+    # what the deck is made of (DECK: derived, not recorded)
+    material: Material = field(metadata=DECK)
+    granulator: Granulator = field(metadata=DECK)
+    #: LIGGGHTS' prime seeds: one per particle template, the distribution's, the insertion's
+    template_seeds: tuple[int, ...] = field(metadata=DECK)
+    distribution_seed: int = field(metadata=DECK)
+    insertion_seed: int = field(metadata=DECK)
+    #: simulation box (xlo, xhi, ylo, yhi, zlo, zhi) and the insertion cylinder (radius, zlo, zhi), m
+    box: tuple[float, ...] = field(metadata=DECK)
+    fill_radius: float = field(metadata=DECK)
+    fill_zlo: float = field(metadata=DECK)
+    fill_zhi: float = field(metadata=DECK)
+    #: particles per second inserted, every `insert_every` steps
+    insert_rate: float = field(metadata=DECK)
+    insert_every: int = field(metadata=DECK)
+    #: steps between thermo lines (and the time-step check, which thermo reads)
+    thermo_every: int = field(metadata=DECK)
+    #: neighbour skin (m) of the settling, the impeller at rest
+    settle_skin: float = field(metadata=DECK)
+    rayleigh_limit: float = field(metadata=DECK)
 
     @property
     def bed_id(self) -> str:
@@ -77,7 +131,9 @@ class BedPlan:
         return f"{self.distribution}_rep{self.replicate}"
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """The record of the plan (plan.json, bed.json): every field but the deck's."""
+        record = {f.name: getattr(self, f.name) for f in fields(self) if not f.metadata.get("deck")}
+        return {k: list(v) if isinstance(v, list) else v for k, v in record.items()}
 
 
 @dataclass(frozen=True)
@@ -95,6 +151,34 @@ class DemPlan(BedPlan):
     position_interval: int
     encounter_gap_fraction: float
     omega: float
+    #: neighbour skin (m) at this speed, one impeller revolution (s), and whether the contact and
+    #: position dumps are kept after the tables are made
+    neighbor_skin: float = field(metadata=DECK)
+    rotation_period: float = field(metadata=DECK)
+    keep_contact_dumps: bool = field(metadata=DECK)
+    #: spin-up steps before the position history (recorded before the window) starts, and the
+    #: steps with dumps: the position history, then the sampling window
+    spinup_pre_steps: int = field(metadata=DECK)
+    record_steps: int = field(metadata=DECK)
+
+    @property
+    def dumps(self) -> dict[str, tuple[int, int]]:
+        """What is dumped (liggghts_templates/granulator.in): the frames and last step of each
+        dump of a finished run, one at the start of the recording (`dump_modify first yes`, the
+        position history before the sampling window), then one at every multiple of its interval
+        up to the end."""
+        start, end = self.window_start_step - self.history_steps, self.window_start_step + self.sampling_steps
+
+        def frames_and_last(every: int) -> tuple[int, int]:
+            multiples = end // every - (start + every - 1) // every + 1
+            return multiples + (1 if start % every else 0), (end // every * every if multiples > 0 else start)
+
+        contacts = frames_and_last(self.collision_interval)
+        return {
+            "post/pairs.dump": contacts,
+            "post/walls.dump": contacts,
+            "post/positions.bin": frames_and_last(self.position_interval),
+        }
 
     @property
     def sampling_time(self) -> float:
@@ -124,7 +208,7 @@ class DemPlan(BedPlan):
         return BedPlan(**{f: getattr(self, f) for f in BedPlan.__dataclass_fields__})
 
     def to_dict(self) -> dict:
-        return asdict(self) | {"sampling_time": self.sampling_time}
+        return super().to_dict() | {"sampling_time": self.sampling_time}
 
 
 def class_counts(n_particles: int, fractions) -> list[int]:
@@ -156,25 +240,62 @@ def plan_bed(point: DemPoint, *, replicate: int = 0, counts: list[int] | None = 
     if n_particles < 2:
         raise ConfigError(f"{where}: the bed holds {n_particles} particles; raise dem.bed_height")
     counts = class_counts(n_particles, sizes.number_fractions) if counts is None else [int(c) for c in counts]
+    n_particles = int(sum(counts))
     t_r = rayleigh_time(0.5 * min(sizes.diameters), mat.density, mat.youngs_modulus, mat.poisson_ratio)
     dt = dem.timestep_fraction * t_r
+    settle_steps, vtk_every = _steps(dem.settle_time, dt), _steps(dem.vtk_interval, dt)
+    seed = dem.seed + REPLICATE_SEED_STRIDE * int(replicate)
+    template_seeds, prime = [], next_prime(seed)
+    for _ in sizes.diameters:
+        prime = next_prime(prime + 1)
+        template_seeds.append(prime)
+    bowl, d_max = granulator.bowl, max(sizes.diameters)
+    margin, half = 0.05 * bowl.diameter, bowl.radius + 0.05 * bowl.diameter
+    # insert in small batches over the first 60 % of the settling phase, so that the fill region
+    # never saturates (a saturated region inserts the large templates first and skews the PSD)
+    insert_time = 0.6 * settle_steps * dt
     return BedPlan(
         distribution=point.distribution,
         diameters=list(sizes.diameters),
         number_fractions=list(sizes.number_fractions),
         counts=counts,
-        n_particles=int(sum(counts)),
+        n_particles=n_particles,
         timestep=dt,
         rayleigh_time=t_r,
-        settle_steps=_steps(dem.settle_time, dt),
-        vtk_every=_steps(dem.vtk_interval, dt),
+        settle_steps=settle_steps,
+        vtk_every=vtk_every,
         replicate=int(replicate),
-        seed=dem.seed + REPLICATE_SEED_STRIDE * int(replicate),
+        seed=seed,
+        material=mat,
+        granulator=granulator,
+        template_seeds=tuple(template_seeds),
+        distribution_seed=next_prime(prime + 1),
+        insertion_seed=next_prime(prime + 100),
+        box=(-half, half, -half, half, -margin, bowl.height + margin),
+        fill_radius=bowl.radius - d_max,
+        fill_zlo=granulator.impeller.top + d_max,
+        fill_zhi=bowl.height - d_max,
+        insert_rate=n_particles / insert_time,
+        insert_every=max(1, int(0.002 / dt)),
+        # thermo reads fix check/timestep/gran, so both run at the same interval (LIGGGHTS requires it)
+        thermo_every=thermo_interval(n_particles, vtk_every),
+        settle_skin=neighbor_skin(sizes.diameters, dt),
+        rayleigh_limit=rayleigh_limit(dt, t_r),
     )
 
 
 def _steps(seconds: float, dt: float) -> int:
     return max(1, int(math.ceil(seconds / dt)))
+
+
+def _whole(steps: int, every: int) -> int:
+    return int(math.ceil(steps / every) * every)
+
+
+def phase_time(dem: Dem, phase: str, rpm: float) -> float:
+    """Length (s) of the spin-up or sampling phase at `rpm`: `dem.<phase>_revolutions` impeller
+    revolutions, but at least `dem.<phase>_time` seconds."""
+    return max(getattr(dem, f"{phase}_time"), getattr(dem, f"{phase}_revolutions") * 60.0 / float(rpm))
 
 
 def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[int] | None = None) -> DemPlan:
@@ -188,7 +309,7 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
         raise ConfigError(str(exc).replace(f"distribution {point.distribution}", f"operating point {pid}", 1)) from None
     mat, dem, granulator = point.material, point.dem, point.granulator
     dt = bed.timestep
-    tip_speed = float(granulator.tip_speed(rpm))
+    tip_speed, omega = float(granulator.tip_speed(rpm)), float(granulator.angular_speed(rpm))
     t_c = hertz_contact_time(
         0.5 * min(bed.diameters), mat.density, mat.youngs_modulus, mat.poisson_ratio, max(tip_speed, MIN_CONTACT_SPEED)
     )
@@ -196,9 +317,10 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
     if interval == "auto":
         interval = max(1, int(t_c / (SNAPSHOTS_PER_CONTACT * dt)))
     position_interval = dem.position_every * interval
-    sampling_steps = int(math.ceil(_steps(dem.phase_time("sampling", rpm), dt) / position_interval) * position_interval)
-    spinup_steps = _steps(dem.phase_time("spinup", rpm), dt)
-    history_steps = int(math.ceil(_steps(dem.history_time, dt) / position_interval) * position_interval)
+    spinup_steps = _steps(phase_time(dem, "spinup", rpm), dt)
+    # the window and the position history before it: whole position intervals
+    sampling_steps = _whole(_steps(phase_time(dem, "sampling", rpm), dt), position_interval)
+    history_steps = _whole(_steps(dem.history_time, dt), position_interval)
     if history_steps >= spinup_steps:
         raise ConfigError(
             f"dem.history_time = {dem.history_time} s: the position history before the sampling "
@@ -216,7 +338,12 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
         history_steps=history_steps,
         position_interval=int(position_interval),
         encounter_gap_fraction=dem.encounter_gap_fraction,
-        omega=float(granulator.angular_speed(rpm)),
+        omega=omega,
+        neighbor_skin=neighbor_skin(bed.diameters, dt, tip_speed),
+        rotation_period=60.0 / rpm,
+        keep_contact_dumps=dem.keep_contact_dumps,
+        spinup_pre_steps=spinup_steps - history_steps,
+        record_steps=history_steps + sampling_steps,
     )
 
 

@@ -1,4 +1,4 @@
-"""Run one DEM point: geometry, deck, LIGGGHTS, tables, VTK index, in a staging folder.
+"""Run one DEM plan: geometry, deck, LIGGGHTS, tables, VTK index, in a staging folder.
 
 `run_point` writes the geometry and deck of a `DemPlan` into a staging folder beside the run
 folder, runs LIGGGHTS, judges the run against its plan (the exit code proves nothing), parses the
@@ -8,6 +8,7 @@ moved into place, its finished markers last. A failure never removes a finished 
 `settle_bed` inserts and settles the bed of a `BedPlan` once and writes it to `bed.restart`
 (with `bed.json`, which names the bed); `run_point(..., bed_dir=...)` then starts from that bed
 instead of settling its own, after checking that the bed is the one its plan would settle.
+This module decides nothing about a run: the plan (`plan.py`) holds every decision.
 """
 
 from __future__ import annotations
@@ -19,12 +20,12 @@ import time
 from pathlib import Path
 
 from pbmdem.atomic import write_json, write_text
-from pbmdem.config import ConfigError, DemExecution, DemPoint
+from pbmdem.config import ConfigError, DemExecution
 from pbmdem.readers import InputFileError, read_json
 
 from . import engine, geometry
 from .deck import render_bed, render_granulator
-from .plan import BedPlan, DemPlan, check_limits, plan_point
+from .plan import BedPlan, DemPlan
 
 #: the settled bed in a bed folder and in a run folder that starts from it
 BED_FILE = "bed.restart"
@@ -32,14 +33,14 @@ BED_FILE = "bed.restart"
 BED_RECORD = "bed.json"
 
 
-def bed_key(point: DemPoint, bed: BedPlan) -> dict:
+def bed_key(bed: BedPlan) -> dict:
     """What makes two beds the same: the plan and the deck that settles it (on one rank; the rank
     count changes the floating-point order, not what the bed is)."""
-    deck = render_bed(point, bed, 1)
+    deck = render_bed(bed, 1)
     return {"bed": bed.to_dict(), "deck_sha256": hashlib.sha256(deck.encode()).hexdigest()}
 
 
-def check_bed(point: DemPoint, plan: DemPlan, bed_dir: str | Path) -> Path:
+def check_bed(plan: DemPlan, bed_dir: str | Path) -> Path:
     """The restart file of the settled bed in `bed_dir`, after checking that `bed.json` names the
     bed `plan` would settle (ConfigError naming the file and the first value that differs)."""
     bed_dir = Path(bed_dir)
@@ -48,7 +49,7 @@ def check_bed(point: DemPoint, plan: DemPlan, bed_dir: str | Path) -> Path:
     if not restart.exists():
         raise InputFileError(f"settled bed {restart} does not exist (run the bed first: pbmdem.dem.run.settle_bed)")
     found = read_json(record, "settled-bed record")
-    want = bed_key(point, plan.bed)
+    want = bed_key(plan.bed)
     for key in (*(f"bed.{k}" for k in want["bed"]), "deck_sha256"):
         have = found.get("bed", {}).get(key[4:]) if key.startswith("bed.") else found.get(key)
         need = want["bed"][key[4:]] if key.startswith("bed.") else want[key]
@@ -61,7 +62,6 @@ def check_bed(point: DemPoint, plan: DemPlan, bed_dir: str | Path) -> Path:
 
 
 def prepare_run(
-    point: DemPoint,
     plan: DemPlan,
     run_dir: str | Path,
     ranks: int,
@@ -78,11 +78,11 @@ def prepare_run(
     post.mkdir(parents=True)
     for stale in ("crash.json", "log.liggghts", BED_FILE):
         (run_dir / stale).unlink(missing_ok=True)
-    geometry.write_granulator(point.granulator, run_dir)
+    geometry.write_granulator(plan.granulator, run_dir)
     if bed is not None:
         shutil.copyfile(bed, run_dir / BED_FILE)
     if deck is None:
-        deck = render_granulator(point, plan, ranks, from_bed=bed is not None)
+        deck = render_granulator(plan, ranks, from_bed=bed is not None)
     write_text(run_dir / "in.granulator", deck)
     # a run from a settled bed names it; a fresh run's plan.json is its plan (coupled loops compare them)
     named = {"settled_bed": str(bed)} if bed is not None else {}
@@ -90,19 +90,19 @@ def prepare_run(
     return run_dir / "in.granulator"
 
 
-def settle_bed(point: DemPoint, bed: BedPlan, bed_dir: str | Path, execution: DemExecution) -> dict:
-    """Insert and settle the bed `bed` of `point` in `bed_dir` and write it to `bed.restart`, then
+def settle_bed(bed: BedPlan, bed_dir: str | Path, execution: DemExecution) -> dict:
+    """Insert and settle the bed `bed` in `bed_dir` and write it to `bed.restart`, then
     `bed.json` (the bed's plan, the deck's hash, the wall time), last, as the finished marker.
     Made in a staging folder and moved into place only when LIGGGHTS reached the planned step."""
     bed_dir = Path(bed_dir)
-    key = bed_key(point, bed)  # raises on any bad value, before any I/O
+    key = bed_key(bed)  # raises on any bad value, before any I/O
     where = bed_dir.resolve()
     stage = where.parent / f".{where.name}.staging"
     if stage.exists():
         shutil.rmtree(stage)
     (stage / "post").mkdir(parents=True)
-    geometry.write_granulator(point.granulator, stage)
-    write_text(stage / "in.bed", render_bed(point, bed, execution.mpi_ranks))
+    geometry.write_granulator(bed.granulator, stage)
+    write_text(stage / "in.bed", render_bed(bed, execution.mpi_ranks))
     try:
         result = engine.run("in.bed", stage, ranks=execution.mpi_ranks, timeout=execution.timeout)
         engine.check_finished(stage, bed.settle_steps, {})
@@ -199,34 +199,14 @@ def _move_into(stage: Path, run_dir: Path) -> None:
     stage.rmdir()
 
 
-def planned_dumps(plan: DemPlan) -> dict[str, tuple[int, int]]:
-    """Frames and last step each dump of a finished run holds: one at the start of the recording
-    (`dump_modify first yes`, the position history before the sampling window), then one at every
-    multiple of its interval up to the end."""
-    start = plan.window_start_step - plan.history_steps
-    end = plan.window_start_step + plan.sampling_steps
-
-    def frames_and_last(every: int) -> tuple[int, int]:
-        multiples = end // every - (start + every - 1) // every + 1
-        return multiples + (1 if start % every else 0), (end // every * every if multiples > 0 else start)
-
-    contacts = frames_and_last(plan.collision_interval)
-    return {
-        "post/pairs.dump": contacts,
-        "post/walls.dump": contacts,
-        "post/positions.bin": frames_and_last(plan.position_interval),
-    }
-
-
 def check_finished(plan: DemPlan, run_dir: str | Path) -> None:
     """Raise LiggghtsError (and write crash.json) unless the run reached every planned step and
     contact snapshot. LIGGGHTS exits 0 when interrupted, so the exit code proves nothing. (A run
     from a settled bed goes on from the bed's last step, so its plan's steps are the same.)"""
-    engine.check_finished(run_dir, plan.total_steps, planned_dumps(plan))
+    engine.check_finished(run_dir, plan.total_steps, plan.dumps)
 
 
 def run_point(
-    point: DemPoint,
     plan: DemPlan,
     run_dir: str | Path,
     execution: DemExecution,
@@ -239,9 +219,9 @@ def run_point(
     With `bed_dir` (a folder written by `settle_bed` for `plan.bed`) the run starts from that
     settled bed instead of settling its own.
 
-    Everything is validated before any file is touched: the plan against `execution.limits` and
-    the whole deck (rendered once, here; the speed was checked when the plan was made), and a
-    finished run in `run_dir` is refused unless `force`. The run is made in a staging folder
+    The plan was checked against dem.limits where it was made (the workflow's configuration, the
+    command line); the deck is rendered once, here, before any file is touched, and a finished run
+    in `run_dir` is refused unless `force`. The run is made in a staging folder
     beside `run_dir` and moved into place only after it succeeded, so a failure (or a signal)
     never removes a finished run. Returns a summary dict (also `run_dir/summary.json`). Raises
     LiggghtsError on failure, leaving `crash.json` and the log in `run_dir` (or, when `run_dir`
@@ -249,10 +229,8 @@ def run_point(
     `execution`: MPI ranks and wall-time limit (s).
     """
     run_dir = Path(run_dir)
-    check_limits(plan, execution.limits)
-    # raises on any bad value, before any I/O
-    deck = render_granulator(point, plan, execution.mpi_ranks, from_bed=bed_dir is not None)
-    bed = check_bed(point, plan, bed_dir) if bed_dir is not None else None
+    deck = render_granulator(plan, execution.mpi_ranks, from_bed=bed_dir is not None)
+    bed = check_bed(plan, bed_dir) if bed_dir is not None else None
     finished = is_finished(run_dir)
     if finished and not force:
         markers = ", ".join(n for n in FINISHED_MARKERS if (run_dir / n).exists())
@@ -267,7 +245,7 @@ def run_point(
         shutil.rmtree(stage)
     stage.mkdir(parents=True)
     try:
-        summary = _run_in(point, plan, stage, run_dir, execution, deck, progress_bar, bed)
+        summary = _run_in(plan, stage, run_dir, execution, deck, progress_bar, bed)
     except BaseException as exc:
         if not finished:  # nothing to protect: keep the crash and the logs in the run folder
             _move_into(stage, run_dir)
@@ -281,7 +259,6 @@ def run_point(
 
 
 def _run_in(
-    point: DemPoint,
     plan: DemPlan,
     run_dir: Path,
     final_dir: Path,
@@ -295,7 +272,7 @@ def _run_in(
     from . import collisions, vtk_series  # local: keep this module light to import
     from .progress import ThermoProgress
 
-    deck_path = prepare_run(point, plan, run_dir, execution.mpi_ranks, bed, deck)
+    deck_path = prepare_run(plan, run_dir, execution.mpi_ranks, bed, deck)
     phases = [("spin-up", plan.spinup_steps), ("sampling", plan.sampling_steps)]
     watcher = ThermoProgress(
         run_dir / "log.liggghts",
@@ -308,13 +285,13 @@ def _run_in(
     check_finished(plan, run_dir)
     (run_dir / BED_FILE).unlink(missing_ok=True)  # a copy; the bed stays in its folder
     t0 = time.perf_counter()
-    tables = collisions.tabulate_run(run_dir / "post", plan, point.granulator.bowl, point.granulator.impeller)
+    tables = collisions.tabulate_run(run_dir / "post", plan)
     parse_time = time.perf_counter() - t0
     collisions.write_tables(tables, run_dir)
     series = vtk_series.write_series(run_dir / "post", plan.timestep)
-    if not point.dem.keep_contact_dumps:
-        for dump in ("pairs.dump", "walls.dump", "positions.bin"):
-            (run_dir / "post" / dump).unlink(missing_ok=True)
+    if not plan.keep_contact_dumps:
+        for dump in plan.dumps:
+            (run_dir / dump).unlink(missing_ok=True)
     thermo = engine.thermo_table(result.log)
     # fix check/timestep/gran: ts[1] = dt / Rayleigh time, ts[2] = dt / Hertz time (LIGGGHTS' own)
     checks = {
@@ -365,16 +342,3 @@ def _cost(plan: DemPlan, result: engine.LiggghtsRun, bed: Path | None) -> dict:
         "bed_liggghts_wall_time_s": record.get("liggghts_wall_time_s", 0.0),
         "bed_liggghts_cpu_time_s": record.get("liggghts_cpu_time_s", 0.0),
     }
-
-
-def run_operating_point(
-    point: DemPoint,
-    rpm: float,
-    run_dir: str | Path,
-    execution: DemExecution,
-    replicate: int = 0,
-    bed_dir: str | Path | None = None,
-) -> dict:
-    """Plan and run one replicate of a grid point (the Snakemake rule's entry point), from the
-    settled bed in `bed_dir` if given."""
-    return run_point(point, plan_point(point, rpm, replicate=replicate), run_dir, execution, bed_dir=bed_dir)

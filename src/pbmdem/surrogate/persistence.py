@@ -235,7 +235,7 @@ def trusted_types(path: str | os.PathLike, name: str | os.PathLike) -> list[str]
     untrusted = [] if bad else sio.get_untrusted_types(file=path)
     bad += sorted(set(untrusted) - ALLOWED_TYPES)
     if bad:
-        raise UntrustedTypesError(f"{name} contains types outside the allow-list (not loaded): {bad}")
+        raise UntrustedTypesError(f"{name} contains types outside the allow-list (ALLOWED_TYPES), refused: {bad}")
     return untrusted
 
 

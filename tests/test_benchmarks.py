@@ -66,6 +66,10 @@ QUICK = {
         r"ranking by ST of d50 \(first to last\)",
         r"wall ms per batch \(ensemble mean, 20 warm batches in one process\): min [\d.]+, median [\d.]+, max [\d.]+",
     ),
+    "bench_surrogate_persistence.py --quick": (
+        r"model\.skops [\d.]+ kB, model\.json [\d.]+ kB; family EnsembleMLPRegressorCV, wall models bowl, impeller",
+        r"load ms \(11 loads in one process\): min [\d.]+, median [\d.]+, max [\d.]+",
+    ),
     "bench_surrogate_reproducibility.py --quick": (
         r"\| Prescott, 2 thread\(s\) \| [\d.e+-]+; [\d.e+-]+ \|",
         r"held-out pooled R2 of log10 c",

@@ -558,20 +558,20 @@ def test_bad_tables_and_summaries_name_the_file(tmp_path):
         load_run(folder, "PBM-ANN result")
 
 
-@pytest.mark.parametrize("edit", ["unknown_param", "missing_field", "missing_param"])
-def test_model_metadata_with_unknown_or_missing_fields_is_a_version_error(small_surrogate, tmp_path, edit):
+@pytest.mark.parametrize("edit", ["format_version", "versions", "velocity_edges"])
+def test_a_model_sidecar_of_another_version_is_a_version_error(small_surrogate, tmp_path, edit):
     from pbmdem.surrogate import load_surrogate
     from pbmdem.surrogate.persistence import IncompatibleVersionError, metadata_path_for
 
     model = tmp_path / "model.skops"
     shutil.copy(small_surrogate, model)
     meta = json.loads(metadata_path_for(small_surrogate).read_text())
-    if edit == "unknown_param":
-        meta["params"]["new_option_of_a_later_version"] = 3
-    elif edit == "missing_field":
-        del meta["feature_ranges"]
+    if edit == "format_version":
+        meta["format_version"] = 4  # the layout before the surrogate object itself was stored
+    elif edit == "versions":
+        del meta["versions"]
     else:
-        del meta["params"]["frequency_model"]["params"]["alpha"]
+        meta["velocity_edges"] = meta["velocity_edges"][1:]
     metadata_path_for(model).write_text(json.dumps(meta))
     with pytest.raises(IncompatibleVersionError) as info:
         load_surrogate(model)

@@ -185,24 +185,3 @@ def test_baseline_and_evaluation_follow_the_data_law(data):
     )
     with pytest.raises(ValueError, match="another impact-speed law"):
         cross_validate_models(data, {"physical": PhysicalScaling()}, "group_kfold", 3)
-
-
-def test_a_surrogate_saved_before_the_law_option_loads_as_lognormal(data, tmp_path):
-    import json
-
-    from pbmdem.surrogate import load_surrogate, save_surrogate
-
-    lognormal = training_data(data.table, R)
-    model = CollisionSurrogate(frequency_model=ResponseSurface(degree=(1,), n_members=3), impeller_radius=R)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        model.fit(lognormal.X, lognormal.y, groups=lognormal.groups, velocity=lognormal.velocity)
-    save_surrogate(model, tmp_path / "model.skops", tmp_path / "model.json")
-    meta = json.loads((tmp_path / "model.json").read_text())
-    del meta["params"]["speed_law"]  # the metadata of the version before
-    (tmp_path / "model.json").write_text(json.dumps(meta))
-    loaded = load_surrogate(tmp_path / "model.skops")
-    assert loaded.speed_law == "lognormal"
-    assert np.array_equal(
-        loaded.velocity_fractions(lognormal.X.iloc[:4]), model.velocity_fractions(lognormal.X.iloc[:4])
-    )

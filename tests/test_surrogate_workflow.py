@@ -1,5 +1,6 @@
 """Settings (schema, defaults), training entry point, CLI and Snakemake rule of the surrogate."""
 
+import hashlib
 import json
 import re
 import warnings
@@ -183,6 +184,8 @@ def test_train_and_report_writes_outputs(tmp_path):
     )
     assert set(meta["cv_scores"]["velocity_summary"]) == families | {"physical"}
     assert meta["velocity_table"] == str(vcsv) and meta["n_velocity_rows"] == len(table) - 1
+    # the sidecar names the training data by its hash
+    assert meta["training_data_sha256"] == {str(p): hashlib.sha256(p.read_bytes()).hexdigest() for p in (csv, vcsv)}
     assert (out / "parity.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert load_surrogate(out / "model.skops").n_training_rows_ == len(table) - 1
 

@@ -373,14 +373,8 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         X = np.asarray(X, dtype=np.float64)
         return np.stack([_forward(m, X) for m in self.estimators_])
 
-    # ------------------------------------------------------------------ persistence
-    def fitted_parts(self) -> list:
-        """The fitted member pipelines that persistence stores."""
-        check_is_fitted(self)
-        return list(self.estimators_)
-
     def fitted_state(self) -> dict:
-        """JSON-able fitted information besides the pipelines: the search and its choice."""
+        """JSON-able description of the fit (for the model's sidecar): the search and its choice."""
         check_is_fitted(self)
         rmse = None if not np.isfinite(self.best_score_) else float(np.sqrt(-self.best_score_))
         return {
@@ -389,33 +383,6 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
             "search": {"best_rmse_log10": rmse, "results": search_table(self).to_dict(orient="records")},
             "search_cv_folds": self.cv_folds_,
         }
-
-    def restore(self, parts: list, state: dict, feature_names: list[str]):
-        """The fitted state from stored member pipelines and :meth:`fitted_state`."""
-        best, search = state["best_params"], state["search"]
-        self.estimators_ = list(parts)
-        self.best_params_ = {"hidden_layer_sizes": tuple(best["hidden_layer_sizes"]), "alpha": float(best["alpha"])}
-        rmse = search["best_rmse_log10"]
-        self.best_score_ = float("nan") if rmse is None else -(float(rmse) ** 2)
-        rows = [r for r in search["results"] if r.get("rmse_log10") is not None]
-        self.cv_results_ = None
-        if rows:
-            params = [
-                {"hidden_layer_sizes": tuple(int(u) for u in r["hidden_layer_sizes"]), "alpha": float(r["alpha"])}
-                for r in rows
-            ]
-            self.cv_results_ = _search_results(
-                params,
-                -(np.array([r["rmse_log10"] for r in rows], dtype=float) ** 2),
-                [np.nan if r["fold_mse_log10_std"] is None else r["fold_mse_log10_std"] for r in rows],
-                [r["rank"] for r in rows],
-            )
-        self.cv_folds_ = [list(f) for f in state["search_cv_folds"]]
-        self.n_features_in_ = len(feature_names)
-        self.feature_names_in_ = np.asarray(feature_names, dtype=object)
-        self.n_outputs_ = int(state["n_outputs"])
-        self.n_iter_ = np.array([m[-1].n_iter_ for m in self.estimators_], dtype=int)
-        return self
 
 
 def search_table(estimator: EnsembleMLPRegressorCV) -> pd.DataFrame:

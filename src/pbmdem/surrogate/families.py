@@ -12,7 +12,7 @@ posterior), and share the interface the surrogate uses with the MLP ensemble:
   through ``sklearn.config_context``),
 * :meth:`predict_members` (``n_members`` quantiles ``mean + z_k std`` of the predictive normal,
   ``z_k = Phi^-1((k + 1/2) / n)``), so that PBM-ANN can run once per member as with the ensemble,
-* :meth:`fitted_parts` / :meth:`restore` for persistence (only scikit-learn objects are stored).
+* :meth:`fitted_state`, what the model's sidecar (``model.json``) says of the fit.
 
 Fits are single-threaded (:func:`~pbmdem.surrogate._threads.single_threaded`): the matrices are
 tiny, and one thread makes the optimiser's path independent of the thread count.
@@ -147,25 +147,9 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
         z = member_quantiles(self.n_members).reshape((-1,) + (1,) * mean.ndim)
         return mean[None] + z * std[None]
 
-    # ------------------------------------------------------------------ persistence
-    def fitted_parts(self) -> list:
-        """The fitted scikit-learn pipelines (one per output) that persistence stores."""
-        check_is_fitted(self)
-        return list(self.estimators_)
-
     def fitted_state(self) -> dict:
-        """JSON-able fitted information besides the pipelines (for the metadata)."""
+        """JSON-able description of the fit (for the model's sidecar)."""
         return {"n_outputs": self.n_outputs_, "fitted": self.describe()}
-
-    def restore(self, parts: list, state: dict, feature_names: list[str]):
-        """The fitted state from stored pipelines (inverse of :meth:`fitted_parts`/:meth:`fitted_state`)."""
-        self.estimators_ = list(parts)
-        self.n_outputs_ = int(state["n_outputs"])
-        if len(self.estimators_) != max(1, self.n_outputs_):
-            raise ValueError(f"{len(self.estimators_)} stored model(s) for {self.n_outputs_} output(s)")
-        self.n_features_in_ = len(feature_names)
-        self.feature_names_in_ = np.asarray(feature_names, dtype=object)
-        return self
 
 
 class KrigingRegressor(_PerOutputRegressor):
@@ -318,12 +302,6 @@ class ResponseSurface(_PerOutputRegressor):
                 self.cv_mse_.append(mse)
                 self.estimators_.append(self._pipeline_of(best).fit(X, Y[:, j]))
         self.n_outputs_ = 1 if y.ndim == 1 else int(Y.shape[1])
-        return self
-
-    def restore(self, parts: list, state: dict, feature_names: list[str]):
-        super().restore(parts, state, feature_names)
-        self.degrees_ = [int(est["poly"].degree) for est in self.estimators_]
-        self.cv_mse_ = [{int(k): float(v) for k, v in m.items()} for m in state["cv_mse"]]
         return self
 
     def fitted_state(self) -> dict:

@@ -1,22 +1,21 @@
-"""Save and load a fitted :class:`CollisionSurrogate` without pickle execution risk.
+"""Save and load a fitted :class:`CollisionSurrogate`: the object in a skops file, a JSON sidecar for users.
 
-Two files:
+* ``model.skops`` - the fitted surrogate itself (frequency and impact-velocity models, the wall
+  models under ``wall_models_``), written by :func:`skops.io.dump` (deflate-compressed).
+* ``model.json`` - the sidecar a user (and the report) reads: format and version, the SHA-256 of
+  ``model.skops``, library versions, family and parameters, features and their training ranges
+  (the domain), training points, what was fitted, held-out scores and what training adds. Loading
+  reads only the format version, the hash, the scikit-learn version and the velocity bins from it.
 
-* ``model.skops`` - the fitted ensembles, ``{"frequency": [...], "velocity": [...]}`` (lists of
-  ``Pipeline(StandardScaler, MLPRegressor)``; ``velocity`` is empty for a surrogate trained
-  without impact-velocity bins) written with :func:`skops.io.dump`. Only scikit-learn/numpy
-  objects are stored; the wrapper class itself is rebuilt from the metadata, so no project class has to be trusted.
-* ``model.json`` - metadata: estimator parameters (the impeller radius among them), feature names
-  and training ranges, training runs, CV scores, library versions and the SHA-256 of ``model.skops``.
-
-:func:`load_surrogate` checks, before deserialising anything, that the metadata format is known
-and the metadata fulfils its contract (:mod:`.metadata`), the SHA-256 matches (else
-:class:`TamperedModelError`) and the scikit-learn major.minor equals the installed one (else
-:class:`IncompatibleVersionError`). It then refuses any type outside :data:`ALLOWED_TYPES`
-(:class:`UntrustedTypesError`), of those in the skops schema and of those skops itself does not
-trust (``skops.io.get_untrusted_types``), and passes the latter as ``trusted``. The allow-list is
-written out because skops' own is wider: since skops 0.10 it trusts every scikit-learn estimator
-by default (a ``LinearRegression`` would load), and a surrogate file holds only a few of them.
+:func:`load_surrogate` refuses, before anything is deserialised: a missing or unreadable sidecar
+(:class:`SurrogateLoadError`), another format version, scikit-learn major.minor or velocity bins
+(:class:`IncompatibleVersionError`: the file, the version found and the one expected), a model file
+whose SHA-256 differs from the sidecar's (:class:`TamperedModelError`) and any type outside
+:data:`ALLOWED_TYPES` (:class:`UntrustedTypesError`). The allow-list is checked against every type
+in the file's schema because skops' own trust is wider (since skops 0.10 every scikit-learn
+estimator: a ``LinearRegression`` would load); the types skops does not trust by itself
+(``skops.io.get_untrusted_types``: the project's classes, the Gaussian-process kernels) are then
+passed as ``trusted``. :func:`save_surrogate` checks its file the same way before moving it into place.
 """
 
 from __future__ import annotations
@@ -36,61 +35,43 @@ import scipy
 import sklearn
 import skops
 import skops.io as sio
-from sklearn.base import clone
 
+from pbmdem.atomic import atomic_path, write_json
 from pbmdem.impact import VELOCITY_EDGES
 
-from ._io import atomic_write
 from .ensemble import EnsembleMLPRegressorCV
 from .families import KrigingRegressor, ResponseSurface
 from .features import FEATURE_NAMES, TARGET_NAME
-from .metadata import check_metadata
 from .model import CollisionSurrogate
 
-#: The model families a saved surrogate may use, by their name in the metadata (``surrogate.model``).
+#: The model families a saved surrogate may use, by their name in the sidecar (``surrogate.model``).
 FAMILY_CLASSES = {"mlp": EnsembleMLPRegressorCV, "kriging": KrigingRegressor, "rsm": ResponseSurface}
 
 FORMAT = "pbmdem-surrogate"
-#: 4: the model family of each inner model ({"family", "params"}) and its fitted state
-#: (``frequency_state``, ``velocity_state``); the skops file holds each model's fitted pipelines.
-#: (3: MLP ensembles only; 2: the former single-class parameters; 1: raw collision target.)
-FORMAT_VERSION = 4
+#: 5: the fitted CollisionSurrogate itself in the skops file, the sidecar for users (4: fitted
+#: pipelines, the rest rebuilt from the metadata; 3: MLP only; 2: one class; 1: raw target).
+FORMAT_VERSION = 5
 
 #: Every type that may appear in a surrogate model file (module.qualname).
 ALLOWED_TYPES = frozenset(
-    {
-        "builtins.dict",
-        "builtins.list",
-        "builtins.tuple",
-        "builtins.str",
-        "builtins.int",
-        "builtins.float",
-        "builtins.bool",
-        "builtins.NoneType",
-        "numpy.ndarray",
-        "numpy.dtype",
-        "numpy.float64",
-        "numpy.float32",
-        "numpy.int64",
-        "numpy.int32",
-        "numpy.bool_",
-        "numpy.bool",
-        "numpy.random.mtrand.RandomState",
-        "numpy.random._mt19937.MT19937",
+    {f"{cls.__module__}.{cls.__qualname__}" for cls in (CollisionSurrogate, *FAMILY_CLASSES.values())}
+    | {f"builtins.{t}" for t in ("dict", "list", "tuple", "str", "int", "float", "bool", "NoneType")}
+    | {f"numpy.{t}" for t in ("ndarray", "dtype", "float64", "float32", "int64", "int32", "bool_", "bool")}
+    | {"numpy.random.mtrand.RandomState", "numpy.random._mt19937.MT19937"}
+    | {
         "sklearn.pipeline.Pipeline",
         "sklearn.preprocessing._data.StandardScaler",
         "sklearn.neural_network._multilayer_perceptron.MLPRegressor",
+        "sklearn.neural_network._stochastic_optimizers.AdamOptimizer",  # surrogate.solver: adam
         "sklearn.gaussian_process._gpr.GaussianProcessRegressor",
-        "sklearn.gaussian_process.kernels.ConstantKernel",
-        "sklearn.gaussian_process.kernels.Product",
-        "sklearn.gaussian_process.kernels.Sum",
-        "sklearn.gaussian_process.kernels.RBF",
-        "sklearn.gaussian_process.kernels.DotProduct",
-        "sklearn.gaussian_process.kernels.WhiteKernel",
         "sklearn.preprocessing._polynomial.PolynomialFeatures",
         "sklearn.linear_model._bayes.BayesianRidge",
     }
+    | {f"sklearn.gaussian_process.kernels.{k}" for k in ("ConstantKernel", "Product", "Sum", "RBF", "DotProduct")}
+    | {"sklearn.gaussian_process.kernels.WhiteKernel"}
 )
+
+RETRAIN = "; retrain the surrogate (pbmdem surrogate train, or the workflow's rule train_surrogate)"
 
 
 class SurrogateLoadError(RuntimeError):
@@ -98,7 +79,7 @@ class SurrogateLoadError(RuntimeError):
 
 
 class TamperedModelError(SurrogateLoadError):
-    """The model file does not match the SHA-256 recorded in its metadata."""
+    """The model file does not match the SHA-256 recorded in its sidecar."""
 
 
 class IncompatibleVersionError(SurrogateLoadError):
@@ -110,11 +91,7 @@ class UntrustedTypesError(SurrogateLoadError):
 
 
 def sha256_file(path: str | os.PathLike) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def library_versions() -> dict[str, str]:
@@ -126,10 +103,6 @@ def library_versions() -> dict[str, str]:
         "skops": skops.__version__,
         "pandas": pd.__version__,
     }
-
-
-def _major_minor(version: str) -> tuple[str, ...]:
-    return tuple(str(version).split(".")[:2])
 
 
 def _jsonable(obj):
@@ -161,29 +134,15 @@ def family_name(model) -> str:
     raise ValueError(f"{type(model).__name__} is not a surrogate model family {sorted(FAMILY_CLASSES)}")
 
 
-def _surrogate_params(surrogate: CollisionSurrogate) -> dict:
-    """JSON form of the surrogate's parameters: each inner model as its family and parameters."""
+def _model_metadata(surrogate: CollisionSurrogate) -> dict:
+    """What a user reads of one fitted surrogate (the pair model, or a wall model under ``walls``)."""
+    freq, vel = surrogate.frequency_model_, surrogate.velocity_model_
     params = surrogate.get_params(deep=False)
     for key in ("frequency_model", "velocity_model"):
         if params[key] is not None:
             params[key] = {"family": family_name(params[key]), "params": params[key].get_params(deep=False)}
-    return params
-
-
-def _fitted_parts(surrogate: CollisionSurrogate) -> dict:
-    """What the skops file holds of one fitted surrogate: its inner models' fitted pipelines."""
-    vel = surrogate.velocity_model_
     return {
-        "frequency": surrogate.frequency_model_.fitted_parts(),
-        "velocity": [] if vel is None else vel.fitted_parts(),
-    }
-
-
-def _model_metadata(surrogate: CollisionSurrogate) -> dict:
-    """The metadata that rebuilds one fitted surrogate around its stored parts (_from_metadata)."""
-    freq, vel = surrogate.frequency_model_, surrogate.velocity_model_
-    return {
-        "params": _surrogate_params(surrogate),
+        "params": params,
         "family": family_name(freq),
         "frequency_state": freq.fitted_state(),
         "velocity_state": None if vel is None else vel.fitted_state(),
@@ -203,7 +162,7 @@ def save_surrogate(
     cv_scores: dict | None = None,
     extra: dict | None = None,
 ) -> dict:
-    """Write ``model.skops`` and its JSON metadata (atomically); return the metadata dict."""
+    """Write ``model.skops`` and its JSON sidecar (atomically); return the sidecar's dict."""
     if not hasattr(surrogate, "frequency_model_"):
         raise ValueError("only a fitted CollisionSurrogate can be saved")
     names = [str(n) for n in getattr(surrogate, "feature_names_in_", [])]
@@ -214,10 +173,10 @@ def save_surrogate(
         )
     model_path = Path(model_path)
     metadata_path = metadata_path_for(model_path) if metadata_path is None else Path(metadata_path)
+    with atomic_path(model_path) as tmp:
+        sio.dump(surrogate, tmp, compression=zipfile.ZIP_DEFLATED)
+        trusted_types(tmp, model_path)  # never write a file that load_surrogate refuses
     walls = getattr(surrogate, "wall_models_", None) or {}
-    parts = {"walls": {wall: _fitted_parts(model) for wall, model in walls.items()}, **_fitted_parts(surrogate)}
-    atomic_write(model_path, lambda tmp: sio.dump(parts, tmp))
-    vel = surrogate.velocity_model_
     meta = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -230,7 +189,7 @@ def save_surrogate(
             "log-normal impact-speed law per pair: [log10 median speed (m/s) minus the "
             "physics offset, log10 sigma (decades)], fitted by ML to the bins of "
             "pbmdem.impact.VELOCITY_EDGES"
-            if vel is not None
+            if surrogate.velocity_model_ is not None
             else None
         ),
         "velocity_edges": [float(e) for e in VELOCITY_EDGES],
@@ -239,12 +198,10 @@ def save_surrogate(
         "walls": {wall: _model_metadata(model) for wall, model in walls.items()},
         "cv_scores": cv_scores or {},
         "versions": library_versions(),
+        **(extra or {}),
     }
-    if extra:
-        meta.update(extra)
     meta = _jsonable(meta)
-    text = json.dumps(meta, indent=2, sort_keys=False) + "\n"
-    atomic_write(metadata_path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
+    write_json(metadata_path, meta, sort_keys=False)
     return meta
 
 
@@ -253,7 +210,7 @@ def schema_types(model_path: str | os.PathLike) -> set[str]:
     try:
         with zipfile.ZipFile(model_path) as zf:
             schema = json.loads(zf.read("schema.json"))
-    except (zipfile.BadZipFile, KeyError, json.JSONDecodeError) as exc:
+    except (OSError, zipfile.BadZipFile, KeyError, json.JSONDecodeError) as exc:
         raise SurrogateLoadError(f"{model_path} is not a readable skops file: {exc}") from exc
     found: set[str] = set()
 
@@ -271,19 +228,52 @@ def schema_types(model_path: str | os.PathLike) -> set[str]:
     return found
 
 
+def trusted_types(path: str | os.PathLike, name: str | os.PathLike) -> list[str]:
+    """The types of the skops file at `path` that skops does not trust by itself, once every type
+    in it is known to be in :data:`ALLOWED_TYPES` (else :class:`UntrustedTypesError` naming `name`)."""
+    bad = sorted(schema_types(path) - ALLOWED_TYPES)
+    untrusted = [] if bad else sio.get_untrusted_types(file=path)
+    bad += sorted(set(untrusted) - ALLOWED_TYPES)
+    if bad:
+        raise UntrustedTypesError(f"{name} contains types outside the allow-list (ALLOWED_TYPES), refused: {bad}")
+    return untrusted
+
+
+def _require(meta: dict, key: str, kind, where: str):
+    value = meta.get(key)
+    if not isinstance(value, kind) or isinstance(value, bool):
+        raise IncompatibleVersionError(f"{where}: key {key} = {value!r:.60}: {kind.__name__} required{RETRAIN}")
+    return value
+
+
 def read_metadata(metadata_path: str | os.PathLike) -> dict:
+    """The sidecar at `metadata_path`, after its format version and the keys the loader and the
+    report read (the hash, the library versions, the velocity bins, the training points)."""
+    path = Path(metadata_path)
+    if not path.is_file():
+        raise SurrogateLoadError(
+            f"surrogate metadata {path} is missing: save_surrogate writes it beside the model file (copy both){RETRAIN}"
+        )
     try:
-        meta = json.loads(Path(metadata_path).read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        raise SurrogateLoadError(f"cannot read surrogate metadata {metadata_path}: {exc}") from exc
-    meta = check_metadata(meta, metadata_path, FORMAT, FORMAT_VERSION, IncompatibleVersionError)  # metadata.py
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise SurrogateLoadError(f"cannot read surrogate metadata {path}: {exc}") from exc
+    where = f"surrogate metadata {path}"
+    if not isinstance(meta, dict):
+        raise SurrogateLoadError(f"{where}: a JSON object is required, found {type(meta).__name__} {meta!r:.60}")
     if meta.get("format") != FORMAT:
-        raise SurrogateLoadError(f"{metadata_path} is not {FORMAT} metadata")
+        raise SurrogateLoadError(f"{where}: key format = {meta.get('format')!r:.60}, expected {FORMAT!r}")
     if meta.get("format_version") != FORMAT_VERSION:
         raise IncompatibleVersionError(
-            f"{metadata_path}: metadata format version {meta.get('format_version')} "
-            f"(this pbmdem reads version {FORMAT_VERSION}); retrain the surrogate"
+            f"{where}: format version {meta.get('format_version')!r:.20} (this pbmdem reads version "
+            f"{FORMAT_VERSION}){RETRAIN}"
         )
+    _require(meta, "model_sha256", str, where)
+    _require(meta, "training_point_ids", list, where)
+    _require(_require(meta, "versions", dict, where), "sklearn", str, f"{where}, versions")
+    for e in _require(meta, "velocity_edges", list, where):
+        if not isinstance(e, (int, float)) or isinstance(e, bool):
+            raise IncompatibleVersionError(f"{where}: key velocity_edges holds {e!r:.60}: numbers required{RETRAIN}")
     return meta
 
 
@@ -292,112 +282,31 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
     model_path = Path(model_path)
     metadata_path = metadata_path_for(model_path) if metadata_path is None else Path(metadata_path)
     meta = read_metadata(metadata_path)
-
-    # read_metadata checked the contract: the keys below are there, with values of their type
-    digest = sha256_file(model_path)
+    try:
+        digest = sha256_file(model_path)
+    except OSError as exc:
+        raise SurrogateLoadError(f"cannot read the surrogate model file {model_path}: {exc}") from exc
     if digest != meta["model_sha256"]:
         raise TamperedModelError(
             f"{model_path}: SHA-256 {digest} does not match {meta['model_sha256']} recorded in "
-            f"{metadata_path}; the model file was modified or belongs to another training run"
+            f"{metadata_path}; the model file was modified, damaged or belongs to another training run"
         )
-
-    saved = meta["versions"]["sklearn"]
-    if _major_minor(saved) != _major_minor(sklearn.__version__):
+    saved, installed = meta["versions"]["sklearn"], sklearn.__version__
+    if saved.split(".")[:2] != installed.split(".")[:2]:
         raise IncompatibleVersionError(
-            f"{model_path} was written with scikit-learn {saved}, installed is {sklearn.__version__} "
-            f"(major.minor must match); retrain the surrogate with the installed version"
+            f"{model_path} was written with scikit-learn {saved}, installed is {installed} "
+            f"(major.minor must match){RETRAIN}"
         )
-
-    types = schema_types(model_path)
-    untrusted = sio.get_untrusted_types(file=model_path) if types <= ALLOWED_TYPES else []
-    bad = sorted((types | set(untrusted)) - ALLOWED_TYPES)
-    if bad:
-        raise UntrustedTypesError(f"{model_path} contains types outside the allow-list: {bad}")
-    stored = sio.load(model_path, trusted=list(untrusted))
-    if (
-        not isinstance(stored, dict)
-        or not isinstance(stored.get("frequency"), list)
-        or not stored["frequency"]
-        or not isinstance(stored.get("velocity"), list)
-    ):
-        raise SurrogateLoadError(f"{model_path} does not hold the fitted frequency and velocity pipelines")
     edges = meta["velocity_edges"]
     if len(edges) != len(VELOCITY_EDGES) or not np.allclose(edges, VELOCITY_EDGES, rtol=1e-9):
         raise IncompatibleVersionError(
-            f"{metadata_path}: velocity bins {edges} differ from this version's pbmdem.impact.VELOCITY_EDGES; "
-            f"retrain the surrogate"
+            f"{metadata_path}: velocity bins {edges} differ from this version's pbmdem.impact.VELOCITY_EDGES{RETRAIN}"
         )
-
-    try:
-        surrogate = _from_metadata(stored, meta, metadata_path)
-        surrogate.wall_models_ = {
-            wall: _from_metadata(stored["walls"][wall], wall_meta, metadata_path)
-            for wall, wall_meta in meta.get("walls", {}).items()
-        }
-        return surrogate
-    except (KeyError, TypeError, ValueError, IndexError) as exc:
-        what = f"missing field {exc}" if isinstance(exc, KeyError) else str(exc)
+    surrogate = sio.load(model_path, trusted=trusted_types(model_path, model_path))
+    names = [str(n) for n in getattr(surrogate, "feature_names_in_", [])]
+    if not isinstance(surrogate, CollisionSurrogate) or names != list(FEATURE_NAMES):
         raise IncompatibleVersionError(
-            f"{metadata_path}: metadata does not fit this pbmdem version ({type(exc).__name__}: {what}); "
-            "it was written by another version or edited; retrain the surrogate"
-        ) from None
-
-
-def _build(cls, params: dict, what: str):
-    """``cls(**params)`` with exactly the parameters ``cls`` has (a missing one would silently
-    take its default: refused like an unknown one)."""
-    expected = set(cls().get_params(deep=False))
-    if set(params) != expected:
-        raise ValueError(
-            f"{what} parameters differ from this version's: missing {sorted(expected - set(params))}, "
-            f"unknown {sorted(set(params) - expected)}"
+            f"{model_path} holds a {type(surrogate).__name__} on the features {names}, expected a fitted "
+            f"CollisionSurrogate on {list(FEATURE_NAMES)}{RETRAIN}"
         )
-    return cls(**params)
-
-
-def _inner_model(spec: dict, what: str):
-    """An unfitted inner model from its metadata ``{"family": name, "params": {...}}``."""
-    family = spec["family"]
-    if family not in FAMILY_CLASSES:
-        raise ValueError(f"{what}.family = {family!r}; allowed: {sorted(FAMILY_CLASSES)}")
-    params = dict(spec["params"])
-    if family == "mlp":
-        params["hidden_layer_sizes"] = tuple(tuple(h) for h in params["hidden_layer_sizes"])
-        params["alpha"] = tuple(params["alpha"])
-        params["seeds"] = tuple(params["seeds"])
-    return _build(FAMILY_CLASSES[family], params, what)
-
-
-def _from_metadata(stored: dict, meta: dict, metadata_path) -> CollisionSurrogate:
-    """The surrogate object from its fitted estimators (`stored`: the skops file's frequency and
-    velocity lists) and metadata (KeyError/TypeError/ValueError when the metadata has missing or
-    unknown fields)."""
-    names = list(meta["feature_names"])
-    if names != list(FEATURE_NAMES):
-        raise IncompatibleVersionError(
-            f"{metadata_path}: features {meta['feature_names']} differ from this version's {list(FEATURE_NAMES)}"
-        )
-    params = dict(meta["params"])
-    # a surrogate saved before the speed law was a setting learned the log-normal law
-    params.setdefault("speed_law", "lognormal")
-    params["frequency_model"] = _inner_model(params["frequency_model"], "params.frequency_model")
-    if params["velocity_model"] is not None:
-        params["velocity_model"] = _inner_model(params["velocity_model"], "params.velocity_model")
-    surrogate = _build(CollisionSurrogate, params, "surrogate")
-    freq_template = surrogate.frequency_model
-    vel_template = freq_template if surrogate.velocity_model is None else surrogate.velocity_model
-    surrogate.frequency_model_ = clone(freq_template).restore(stored["frequency"], meta["frequency_state"], names)
-    surrogate.velocity_model_ = None
-    if stored["velocity"]:
-        surrogate.velocity_model_ = clone(vel_template).restore(stored["velocity"], meta["velocity_state"], names)
-    ranges = meta["feature_ranges"]
-    surrogate.n_features_in_ = len(names)
-    surrogate.feature_names_in_ = np.asarray(names, dtype=object)
-    surrogate.feature_min_ = np.array([ranges[n][0] for n in names], dtype=float)
-    surrogate.feature_max_ = np.array([ranges[n][1] for n in names], dtype=float)
-    surrogate.duplicated_features_ = [tuple(p) for p in meta["duplicated_features"]]
-    surrogate.training_point_ids_ = list(meta["training_point_ids"])
-    surrogate.n_training_rows_ = int(meta["n_training_rows"])
-    surrogate.n_velocity_rows_ = int(meta["n_velocity_rows"])
-    surrogate.metadata_ = meta
     return surrogate

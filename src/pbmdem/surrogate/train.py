@@ -16,7 +16,7 @@ from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES
 from ._io import atomic_write
 from .evaluation import METRIC_COLUMNS, cross_validate_models, select_family, summarise
 from .features import training_data
-from .persistence import save_surrogate
+from .persistence import save_surrogate, sha256_file
 from .plots import empty_plot, parity_plot
 from .settings import FAMILIES, build_baselines, build_families
 
@@ -143,6 +143,7 @@ def train_and_report(
         extra={
             "training_table": source,
             "velocity_table": velocity_source,
+            "training_data_sha256": _file_hashes(table, velocity_table, wall_table, wall_velocity_table),
             "settings": settings,
             "n_dropped_rows": data.n_dropped,
             "n_floored_rows": data.n_floored,
@@ -167,6 +168,11 @@ def _cv_summaries(metrics: pd.DataFrame, summary: dict, velocity_summary: dict, 
         "wall_summary": wall_summary,
         "outer_folds": metrics[~metrics["fold"].isin(["pooled", "mean"])].to_dict(orient="records"),
     }
+
+
+def _file_hashes(*tables) -> dict[str, str]:
+    """The SHA-256 of every training table read from a file (one given as a DataFrame has none)."""
+    return {str(t): sha256_file(t) for t in tables if t is not None and not isinstance(t, pd.DataFrame)}
 
 
 def _logged(fn, *args, **kwargs):

@@ -32,6 +32,7 @@ from pbmdem.config import Solver
 from .aggregation import SCHEMES
 from .breakage import Breakage, breakage_arrays
 from .errors import GridOverflowError, KernelShapeError, NegativePopulationError, PBMInputError, positive
+from .fast_steps import FastSteps
 from .grid import Grid, diameter_of
 from .kernels import Kernel, KernelInput
 from .processes import Consolidation, LiquidAddition
@@ -43,6 +44,10 @@ __all__ = ["GranulationPBM", "check_solver"]
 
 
 class GranulationPBM:
+    #: run the steps between events in one compiled call where the kernel and selection allow it
+    #: (``fast_steps``; False: the Python loop, step by step, as the tests' reference)
+    fast_steps = True
+
     """Batch granulator PBM: aggregation (+ optional liquid addition, consolidation, breakage).
 
     ``kernel``: any :class:`Kernel`; ``liquid``/``consolidation``: the processes or None (off);
@@ -434,12 +439,31 @@ class GranulationPBM:
         jit.flush(u, M, flush_n, flush_v)
         refresh0 = getattr(self.kernel, "evaluations", None)
         t, ev = t_start, 0
+        fast = FastSteps.of(self, ctl, allowed_refused) if self.fast_steps else None
         while t < t_end:
             while events[ev] <= t:
                 ev += 1
             t_next = events[ev]
             spraying = self.liquid is not None and self.liquid.active(t)
             self._prepare(self._input(t, u.reshape(3, M)))
+            if fast is not None and self._factored is not None:
+                # the steps up to the event in one compiled call (fast_steps); a step it leaves to
+                # Python (FALLBACK) is repeated below and raises its error
+                tallies = [refused, merged_n, merged_v, s.liquid_added]
+                taken = ctl.taken
+                code = fast.advance(u, t, t_next, t_end, spraying, tallies)
+                s.steps += ctl.taken - taken
+                t, (refused, merged_n, merged_v, s.liquid_added) = fast.t, tallies
+                if code == fast.OVERFLOW:
+                    self._overflow(t, refused, total_solid)
+                if code == fast.CHECK:
+                    ctl.check_limits(t)
+                if code != fast.FALLBACK:
+                    if fast.capped and (t in outs or t == t_end):
+                        self._store(s, t, u, refused, (merged_n, merged_v))
+                        rec.add(s)
+                    continue
+                self._prepare(self._input(t, u.reshape(3, M)))
             self._rates(t, u, spraying, 0)
             k1 = self._k[0]
             if not jit.all_finite(k1):

@@ -1,6 +1,6 @@
-"""The PBM's step loop, compiled: the steps of ``GranulationPBM.run`` between two of its events
-(output times, spray-window edges, the end) in one call, for a run whose kernel and breakage
-selection need no Python between steps (``pbm.fast_steps``: a factored kernel whose frequencies
+"""The PBM's step loop, compiled: the steps of ``GranulationPBM.run`` in one call (the states at
+its output times recorded into buffers), for a run whose kernel and breakage selection need no
+Python between steps (``pbm.fast_steps``: a factored kernel whose frequencies
 stay fixed in the run, and no breakage or an impact selection from fixed impacts).
 
 Per step it does what the Python loop does (``model.run``, ``stepping.StepControl.step``), in the
@@ -33,12 +33,12 @@ from ._compiled import (
 
 #: why ``advance`` returned: the event reached, a check of the run's limits due, refused solid over
 #: the allowed share, a step for the Python loop (it raises the error of the step)
-CAPPED, CHECK, OVERFLOW, FALLBACK = 0, 1, 2, 3
+DONE, CHECK, OVERFLOW, FALLBACK = 0, 1, 2, 3
 #: ``ctl`` entries: safety, proposed step, max_step, rtol, 1/order, selection interval, last selection time
 SAFETY, DT_PROP, MAX_STEP, RTOL, EXPO, INTERVAL, T_EVAL = range(7)
 #: ``acc`` entries: time, refused solid, merged fragments, their solid (x_0 units), liquid added (m3),
-#: 1 if the last step ended at the event
-TIME, REFUSED, MERGED_N, MERGED_V, LIQUID, CAPPED_STEP = range(6)
+#: the states recorded (rows of the buffers); a row of ``rec_s`` holds the first five and the steps
+TIME, REFUSED, MERGED_N, MERGED_V, LIQUID, ROWS = range(6)
 #: ``counts`` entries: the step limits of ``stepping.STEP_LIMITS``, then the steps taken
 TAKEN = 6
 MAX_HALVINGS = 60
@@ -72,18 +72,27 @@ def _refresh_selection(u, M, K, xc, feed_w, eps, nbin, porous, diameters, streng
 
 
 @njit(cache=True, nogil=True)
-def advance(u, t_next, t_end, first, order, ctl, acc, counts, floor, k, r, beta, model, vectors, params, K,
+def advance(u, events, is_out, t_end, order, ctl, acc, counts, floor, k, r, beta, model, vectors, params, K,
             cell_average, target, weight, factors, work, sel, tab, bf, below, pw, u_new, u_low, stage, flush_n, flush_v,
-            spray_rate, allowed_refused, max_steps, feed_w, eps, nbin, porous, diameters, strength, spread, edges,
-            impacts, pairs, speeds, probability, sel_new):  # fmt: skip
-    """Steps from the class state u at ``acc[TIME]`` towards ``t_next``, in place (u, ``acc``, ``ctl``
-    [DT_PROP, T_EVAL], ``counts``, ``sel``). ``first``: the selection of the first step is the one
-    in ``sel`` (prepared in Python). Returns CAPPED, CHECK, OVERFLOW or FALLBACK (module doc)."""
+            spray, allowed_refused, max_steps, feed_w, eps, nbin, porous, diameters, strength, spread, edges,
+            impacts, pairs, speeds, probability, sel_new, rec_u, rec_s):  # fmt: skip
+    """Steps from the class state u at ``acc[TIME]`` to ``t_end``, in place (u, ``acc``, ``ctl``
+    [DT_PROP, T_EVAL], ``counts``, ``sel``); the selection of the first step is the one in ``sel``
+    (prepared in Python). ``events``: the run's sorted event times, ``is_out``: 1 where the state is
+    recorded (into row ``acc[ROWS]`` of ``rec_u`` (3M) and ``rec_s``); ``params`` (2, 6): the rates'
+    parameters not spraying and spraying; ``spray``: window start, end and rate (m3/s). Returns DONE,
+    CHECK, OVERFLOW or FALLBACK (module doc)."""
     M = vectors.shape[1]
     expo = ctl[EXPO]
-    acc[CAPPED_STEP] = 0.0
-    while True:
+    first = True
+    ev = 0
+    while acc[TIME] < t_end:
         t = acc[TIME]
+        while events[ev] <= t:
+            ev += 1
+        t_next = events[ev]
+        spraying = spray[0] <= t < spray[1]
+        par = params[1] if spraying else params[0]
         if not first and sel.size > 0 and t >= ctl[T_EVAL] + ctl[INTERVAL]:
             if not _refresh_selection(u, M, K, vectors[0], feed_w, eps, nbin, porous, diameters, strength, spread,
                                       edges, impacts, pairs, speeds, probability, sel_new):  # fmt: skip
@@ -92,7 +101,7 @@ def advance(u, t_next, t_end, first, order, ctl, acc, counts, floor, k, r, beta,
             ctl[T_EVAL] = t
         first = False
         k1 = k[0]
-        class_rates(u, beta, model, vectors, params, K, cell_average, target, weight, factors, work, sel, tab, bf,
+        class_rates(u, beta, model, vectors, par, K, cell_average, target, weight, factors, work, sel, tab, bf,
                     below, pw, k1.reshape((3, M)), r[0])  # fmt: skip
         if not all_finite(k1):
             return FALLBACK
@@ -108,7 +117,7 @@ def advance(u, t_next, t_end, first, order, ctl, acc, counts, floor, k, r, beta,
         err = 0.0
         ok = False
         for _ in range(MAX_HALVINGS + 1):
-            ssp_step(u, k, r, dt, order, beta, model, vectors, params, K, cell_average, target, weight, factors, work,
+            ssp_step(u, k, r, dt, order, beta, model, vectors, par, K, cell_average, target, weight, factors, work,
                      sel, tab, bf, below, pw, u_new, u_low, stage)  # fmt: skip
             err = 0.0
             if not all_nonnegative(u_new):
@@ -140,18 +149,23 @@ def advance(u, t_next, t_end, first, order, ctl, acc, counts, floor, k, r, beta,
         capped = dt == t_next - t
         t = t_next if capped else t + dt
         acc[TIME] = t
-        acc[CAPPED_STEP] = 1.0 if capped else 0.0
         flush(u, M, flush_n, flush_v)
         tally = r[3]
         acc[REFUSED] += tally[0] * dt
         acc[MERGED_N] += tally[1] * dt
         acc[MERGED_V] += tally[2] * dt
-        if spray_rate > 0.0:
-            acc[LIQUID] += spray_rate * dt
+        if spraying:
+            acc[LIQUID] += spray[2] * dt
         if acc[REFUSED] > allowed_refused:
             return OVERFLOW
         taken = counts[TAKEN]
-        if t < t_end and (taken >= max_steps or taken % 64 == 0):
+        check = t < t_end and (taken >= max_steps or taken % 64 == 0)
+        if capped and is_out[ev]:
+            row = int(acc[ROWS])
+            rec_u[row] = u
+            rec_s[row, :5] = acc[:5]
+            rec_s[row, 5] = taken
+            acc[ROWS] = row + 1
+        if check:
             return CHECK
-        if capped:
-            return CAPPED
+    return DONE

@@ -439,31 +439,27 @@ class GranulationPBM:
         jit.flush(u, M, flush_n, flush_v)
         refresh0 = getattr(self.kernel, "evaluations", None)
         t, ev = t_start, 0
-        fast = FastSteps.of(self, ctl, allowed_refused) if self.fast_steps else None
+        fast = FastSteps.of(self, ctl, events, outs, allowed_refused) if self.fast_steps else None
+        python_step = False  # the next step is the Python loop's (the compiled one left it to it)
         while t < t_end:
             while events[ev] <= t:
                 ev += 1
             t_next = events[ev]
             spraying = self.liquid is not None and self.liquid.active(t)
             self._prepare(self._input(t, u.reshape(3, M)))
-            if fast is not None and self._factored is not None:
-                # the steps up to the event in one compiled call (fast_steps); a step it leaves to
-                # Python (FALLBACK) is repeated below and raises its error
+            if fast is not None and self._factored is not None and not python_step:
+                # the rest of the run in one compiled call (fast_steps); a step it leaves to Python
+                # (FALLBACK) is taken below and raises its error
                 tallies = [refused, merged_n, merged_v, s.liquid_added]
-                taken = ctl.taken
-                code = fast.advance(u, t, t_next, t_end, spraying, tallies)
-                s.steps += ctl.taken - taken
+                code = self._advance_compiled(fast, s, rec, t, u, tallies)
                 t, (refused, merged_n, merged_v, s.liquid_added) = fast.t, tallies
                 if code == fast.OVERFLOW:
                     self._overflow(t, refused, total_solid)
                 if code == fast.CHECK:
                     ctl.check_limits(t)
-                if code != fast.FALLBACK:
-                    if fast.capped and (t in outs or t == t_end):
-                        self._store(s, t, u, refused, (merged_n, merged_v))
-                        rec.add(s)
-                    continue
-                self._prepare(self._input(t, u.reshape(3, M)))
+                python_step = code == fast.FALLBACK
+                continue
+            python_step = False
             self._rates(t, u, spraying, 0)
             k1 = self._k[0]
             if not jit.all_finite(k1):
@@ -491,6 +487,18 @@ class GranulationPBM:
         res = Result(self.grid, rec, s, self._info(ctl))
         res.info["grid_floor"] = res.grid_floor()  # fragments merged into the first pivot since the batch began
         return res
+
+    def _advance_compiled(self, fast: FastSteps, s: State, rec: Records, t: float, u: np.ndarray, tallies: list):
+        """The compiled steps from u at t (``fast.advance``, u in place): the states at the output
+        times it reached stored into ``s`` and added to ``rec`` as the Python loop does. Returns its code."""
+        base = s.steps - fast.ctl.taken  # the start state's steps (a resumed run)
+        code = fast.advance(u, t, tallies)
+        for v, (t_out, refused, merged_n, merged_v, liquid, taken) in fast.records:
+            s.liquid_added, s.steps = liquid, base + int(taken)
+            self._store(s, t_out, v, refused, (merged_n, merged_v))
+            rec.add(s)
+        s.steps = base + fast.ctl.taken
+        return code
 
     def _overflow(self, t: float, refused: float, total_solid: float) -> None:
         """GridOverflowError: the refused solid (x_0 units) exceeds the allowed fraction."""

@@ -136,7 +136,7 @@ class TableFrequency:
         interval's classes). Diameters that are not strictly ascending go through the table."""
         d = np.asarray(diameters, float)
         m = np.asarray(matrix, float)
-        if d.ndim != 1 or d.size < 2 or m.shape != (d.size, d.size) or not np.all(np.diff(d) > 0):
+        if d.ndim != 1 or d.size < 2 or m.shape != (d.size, d.size) or not np.all(np.diff(d) >= 0):
             iu, ju = np.triu_indices(d.size) if d.ndim == 1 else (np.zeros(0, int),) * 2
             m2 = np.atleast_2d(m)
             table = pd.DataFrame({"d_i": d[iu], "d_j": d[ju], column: m2[iu, ju]})
@@ -147,11 +147,14 @@ class TableFrequency:
         _check_diameters(d, "d_i")
         iu, ju = np.triu_indices(d.size)
         f = _checked_frequencies(m[iu, ju], column)
-        # the table's symmetric mean: each off-diagonal pair once per order, the diagonal twice
-        F = np.empty((d.size, d.size))
-        F[iu, ju] = f
-        F[ju, iu] = f
         floor = self.zero_floor * f[f > 0].min()
+        if np.all(np.diff(d) > 0):
+            # the table's symmetric mean: each off-diagonal pair once per order, the diagonal twice
+            F = np.empty((d.size, d.size))
+            F[iu, ju] = f
+            F[ju, iu] = f
+        else:  # classes of equal diameter (a feed class on a pivot): the table's mean of their pairs
+            d, F = _merged_pairs(d, iu, ju, f)
         lu = np.log(d)
         self.rpms = np.array([np.nan])
         self._interp = [self._interpolator(RegularGridInterpolator, lu, np.log(np.maximum(F, floor)))]
@@ -350,6 +353,26 @@ def speed_weights(rpms: np.ndarray, rpm) -> list[tuple[int, float]]:
         return [(k, 1.0)]
     w = (rpm - rpms[k]) / (rpms[k + 1] - rpms[k])
     return [(k, 1.0 - w), (k + 1, w)]
+
+
+def _merged_pairs(d: np.ndarray, iu: np.ndarray, ju: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(unique diameters u, (u, u) mean frequency of every pair of them) of the upper-triangle
+    table (d[iu], d[ju], f) with repeated diameters, as the constructor's pandas mean of the
+    symmetric table computes it (each row in both orders, rows in table order, compensated sums):
+    the same numbers without the DataFrames (tests/test_pbm_kernels.py compares them to the bit)."""
+    u, inv = np.unique(d, return_inverse=True)
+    n = u.size
+    total, comp, count = [[0.0] * n for _ in range(n)], [[0.0] * n for _ in range(n)], [[0] * n for _ in range(n)]
+    a, b, values = inv[iu].tolist(), inv[ju].tolist(), f.tolist()
+    for i, j in ((a, b), (b, a)):
+        for p, q, v in zip(i, j, values, strict=True):
+            y = v - comp[p][q]
+            t = total[p][q] + y
+            c = t - total[p][q] - y
+            comp[p][q] = 0.0 if c != c else c
+            total[p][q] = t
+            count[p][q] += 1
+    return u, np.array([[total[p][q] / count[p][q] for q in range(n)] for p in range(n)])
 
 
 def _check_diameters(d: np.ndarray, column: str) -> None:

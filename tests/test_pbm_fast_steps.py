@@ -121,3 +121,33 @@ def test_a_run_that_fails_fails_the_same_way(tiny_config, surrogate, monkeypatch
                 pbm_ann(loop, surrogate, 900.0, None, log_each=False)
             messages.append(str(info.value))
         assert messages[0] == messages[1]
+
+
+def test_a_step_handed_back_to_python_and_the_compiled_rest_give_the_python_loop(tiny_config, surrogate, monkeypatch):
+    """The hand-over (FALLBACK) between the loops: every compiled call first hands its step back
+    to the Python loop, which takes it, and the compiled loop then resumes from the state, step
+    size, selection time and counts the Python step left; the batch is the Python loop's to the bit."""
+    from pbmdem.pbm import _compiled_steps
+
+    original = FastSteps.advance
+    handed, compiled = [], []
+
+    def hand_back_first(self, u, t, tallies):
+        if self not in handed:  # the first step of every run
+            handed.append(self)
+            self.t, self.records = t, []  # as the compiled call leaves them when it hands back its first step
+            return _compiled_steps.FALLBACK
+        compiled.append(self.ctl.taken)
+        code = original(self, u, t, tallies)
+        compiled[-1] = self.ctl.taken - compiled[-1]
+        return code
+
+    loop = _loop(tiny_config, True, 2.0)
+    slow = None
+    for mode in ("python", "mixed"):
+        monkeypatch.setattr(GranulationPBM, "fast_steps", mode == "mixed")
+        monkeypatch.setattr(FastSteps, "advance", hand_back_first)
+        out = pbm_ann(loop, surrogate, 900.0, None, log_each=False)
+        slow = slow or out
+    assert len(handed) >= 3 and sum(compiled) > 10 * len(handed)  # one hand-over per run, most steps compiled
+    _assert_same(out, slow)

@@ -311,6 +311,27 @@ def test_table_frequency_from_matrix_merges_classes_of_equal_diameter_as_the_tab
         assert new.ranges == ref.ranges and repr(new) == repr(ref)
 
 
+def test_bilinear_is_the_regular_grid_interpolator_to_the_bit():
+    """TableFrequency's log frequencies: ``Bilinear`` gives what scipy's RegularGridInterpolator
+    (linear, extrapolating) gives, to the bit, on random tables at points inside the grid, on its
+    nodes and beyond it."""
+    from scipy.interpolate import RegularGridInterpolator
+
+    from pbmdem.pbm.bilinear import Bilinear
+
+    rng = np.random.default_rng(3)
+    for trial in range(300):
+        lu = np.log(np.sort(rng.uniform(1e-3, 1e-2, rng.integers(2, 9))))
+        values = rng.normal(0.0, 3.0, (lu.size, lu.size))
+        ref = RegularGridInterpolator((lu, lu), values, method="linear", bounds_error=False, fill_value=None)
+        ld = np.log(np.sort(rng.uniform(5e-4, 2e-2, rng.integers(1, 30))))
+        if trial % 3 == 0:
+            ld = np.concatenate([ld, lu])  # the nodes themselves
+        a, b = np.meshgrid(ld, ld, indexing="ij")
+        points = np.column_stack([a.ravel(), b.ravel()])
+        np.testing.assert_array_equal(Bilinear(lu, values)(points), ref(points))
+
+
 class _Unfactored:
     """The same kernel without its factors: the model calls it at every evaluation."""
 

@@ -18,6 +18,7 @@ from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_KEYS, EncounterRates, binned
 from pbmdem.readers import InputFileError, first_index
 from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES, GRID_WALL_VELOCITIES, GRID_WALLS
 
+from .bilinear import Bilinear
 from .errors import PBMInputError, positive
 
 _KEY_TYPES = {"point_id": str, "class_i": int, "class_j": int}
@@ -114,7 +115,7 @@ class TableFrequency:
             logF = np.log(np.maximum(F, floor))
             lu = np.log(u)
             self.rpms.append(float(rpm))
-            self._interp.append(self._interpolator(RegularGridInterpolator, lu, logF))
+            self._interp.append(self._interpolator(Bilinear, lu, logF))
             self.ranges.append((float(u[0]), float(u[-1])))
             if counts is not None:
                 fr = self._fraction_grid(g, counts[g.index.to_numpy()], u, rpm)
@@ -157,16 +158,20 @@ class TableFrequency:
             d, F = _merged_pairs(d, iu, ju, f)
         lu = np.log(d)
         self.rpms = np.array([np.nan])
-        self._interp = [self._interpolator(RegularGridInterpolator, lu, np.log(np.maximum(F, floor)))]
+        self._interp = [self._interpolator(Bilinear, lu, np.log(np.maximum(F, floor)))]
         self._frac_interp = []
         self.ranges = [(float(d[0]), float(d[-1]))]
         return self
 
     @staticmethod
-    def _interpolator(rgi, lu: np.ndarray, values: np.ndarray):
+    def _interpolator(kind, lu: np.ndarray, values: np.ndarray):
+        """Linear in (log d_i, log d_j), extrapolated linearly: ``Bilinear`` (the log frequencies)
+        or scipy's RegularGridInterpolator (the velocity fractions, (n, n, V))."""
         if lu.size == 1:
             return (lambda value: lambda pts: np.repeat(value[None], pts.shape[0], axis=0))(values[0, 0])
-        return rgi((lu, lu), values, method="linear", bounds_error=False, fill_value=None)
+        if kind is Bilinear:
+            return Bilinear(lu, values)
+        return kind((lu, lu), values, method="linear", bounds_error=False, fill_value=None)
 
     @staticmethod
     def _velocity_counts(t: pd.DataFrame, velocity_table: pd.DataFrame) -> np.ndarray:

@@ -7,7 +7,9 @@ analysis and the calibration). Prints figures, no assertions.
    at the validation's speeds in turn: min / median / max of the wall and CPU time of this process,
    with breakage on (the default) and off. Then the median batch split into its parts: the
    surrogate's calls (`provider_wall_time_s`), the PBM's integration (`pbm_wall_time_s`), of it the
-   breakage selection (timed by wrapping `ImpactSelection.__call__`), and the rest of the loop
+   breakage selection's evaluations in Python (timed by wrapping `ImpactSelection.__call__`: the
+   first step of a run; the compiled step loop, `pbm.fast_steps`, evaluates it at the other steps,
+   so the PBM's time with breakage minus that without is its cost), and the rest of the loop
    (sample, class-frequency source).
 2. **Throughput**: `--batches` batches (speeds over the grid's range; the ensemble mean and each
    member in turn, as the design space runs them) with `pbmdem.design.batches.run_cases` on 1 and
@@ -106,7 +108,8 @@ def one_batch(loop, model, speeds, repeat: int, label: str) -> None:
     surrogate, pbm, selection, calls = parts[k]
     print(
         f"  the median batch ({1e3 * walls[k]:.2f} ms): surrogate {1e3 * surrogate:.2f} ms, PBM {1e3 * pbm:.2f} ms "
-        f"(of it the breakage selection {1e3 * selection:.2f} ms in {calls} evaluations), rest of the loop "
+        f"(of it the breakage selection in Python {1e3 * selection:.2f} ms in {calls} evaluations; the others "
+        f"are inside the compiled step loop: compare the PBM's time without breakage), rest of the loop "
         f"{1e3 * (walls[k] - surrogate - pbm):.2f} ms"
     )
     for rpm, final in finals:

@@ -287,6 +287,51 @@ def test_table_frequency_from_matrix_is_the_table_of_the_matrix():
         TableFrequency.from_matrix([2e-3, 3e-3], np.zeros((2, 2)))
 
 
+def test_table_frequency_from_matrix_merges_classes_of_equal_diameter_as_the_table_does():
+    """A coupling interval's classes can repeat a diameter (a feed class on a pivot): from_matrix
+    then averages their pairs without DataFrames, to the bit of the table's pandas mean (its
+    compensated sums), on random matrices spanning decades with 2 and 3 copies and zeros."""
+    import pandas as pd
+
+    rng = np.random.default_rng(11)
+    x = np.geomspace(5e-4, 2e-2, 25)
+    for trial in range(200):
+        base = np.sort(rng.uniform(1e-3, 1e-2, rng.integers(2, 7)))
+        d = np.sort(np.concatenate([base, rng.choice(base, size=rng.integers(1, 3))]))
+        c = rng.lognormal(0.0, 2.0, (d.size, d.size))
+        c = 0.5 * (c + c.T)
+        if trial % 4 == 0:
+            c[0, :] = c[:, 0] = 0.0  # zeros are floored as in the table
+        iu, ju = np.triu_indices(d.size)
+        table = pd.DataFrame({"d_i": d[iu], "d_j": d[ju], "frequency_per_pair": c[iu, ju]})
+        ref = TableFrequency(table, column="frequency_per_pair")
+        new = TableFrequency.from_matrix(d, c)
+        np.testing.assert_array_equal(new._interp[0].values, ref._interp[0].values)
+        np.testing.assert_array_equal(new(x, None, 600.0), ref(x, None, 600.0))
+        assert new.ranges == ref.ranges and repr(new) == repr(ref)
+
+
+def test_bilinear_is_the_regular_grid_interpolator_to_the_bit():
+    """TableFrequency's log frequencies: ``Bilinear`` gives what scipy's RegularGridInterpolator
+    (linear, extrapolating) gives, to the bit, on random tables at points inside the grid, on its
+    nodes and beyond it."""
+    from scipy.interpolate import RegularGridInterpolator
+
+    from pbmdem.pbm.bilinear import Bilinear
+
+    rng = np.random.default_rng(3)
+    for trial in range(300):
+        lu = np.log(np.sort(rng.uniform(1e-3, 1e-2, rng.integers(2, 9))))
+        values = rng.normal(0.0, 3.0, (lu.size, lu.size))
+        ref = RegularGridInterpolator((lu, lu), values, method="linear", bounds_error=False, fill_value=None)
+        ld = np.log(np.sort(rng.uniform(5e-4, 2e-2, rng.integers(1, 30))))
+        if trial % 3 == 0:
+            ld = np.concatenate([ld, lu])  # the nodes themselves
+        a, b = np.meshgrid(ld, ld, indexing="ij")
+        points = np.column_stack([a.ravel(), b.ravel()])
+        np.testing.assert_array_equal(Bilinear(lu, values)(points), ref(points))
+
+
 class _Unfactored:
     """The same kernel without its factors: the model calls it at every evaluation."""
 

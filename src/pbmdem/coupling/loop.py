@@ -99,6 +99,7 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
     state = initial_state(loop.batch, model)
     bounds = interval_bounds(loop)
     results, rows = [], []
+    previous = None  # (rates, class diameters, source) of the last interval run here
     for k in range(n_intervals):
         folder = None if outdir is None else outdir / f"interval_{k:02d}"
         if folder is not None and intervals.is_finished(folder):
@@ -121,10 +122,18 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
                 f"Intervals 0..{k - 1} are kept in {outdir}; rerun to resume."
             ) from exc
         provider_wall, provider_cpu = time.perf_counter() - t_provider, cpu() - cpu_provider
-        source = ClassFrequencySource(sample.diameters, rates, f"{provider.name} interval {k}")
-        model.kernel.set_source(source)
-        if selection is not None:
-            selection.set_source(source)
+        label = f"{provider.name} interval {k}"
+        if previous is not None and previous[0] is rates and previous[1] == list(sample.diameters):
+            # the provider's prediction of the interval before (the same sample): the same source,
+            # whose interpolation and the selection's impacts on the pivots are those computed then
+            source = previous[2]
+            source.label = label
+        else:
+            source = ClassFrequencySource(sample.diameters, rates, label)
+            model.kernel.set_source(source)
+            if selection is not None:
+                selection.set_source(source)
+        previous = (rates, list(sample.diameters), source)
         pairs = rates.pairs if isinstance(rates, ImpactRates) else rates
         matrix = pairs.frequency if isinstance(pairs, EncounterRates) else np.asarray(pairs, float)
         t_pbm, cpu_pbm = time.perf_counter(), cpu()

@@ -92,6 +92,10 @@ class ImpactSelection:
     (:meth:`set_source`, a coupling interval's) changed; a call weights them with the current
     numbers (the pair term)."""
 
+    #: its impacts are fixed for the pivots and the speed and its rates are those of
+    #: ``_compiled.selection_of_impacts``: the compiled step loop evaluates it (``pbm.fast_steps``)
+    compiled_steps = True
+
     def __init__(
         self,
         source,

@@ -32,6 +32,7 @@ from pbmdem.config import Solver
 from .aggregation import SCHEMES
 from .breakage import Breakage, breakage_arrays
 from .errors import GridOverflowError, KernelShapeError, NegativePopulationError, PBMInputError, positive
+from .fast_steps import FastSteps
 from .grid import Grid, diameter_of
 from .kernels import Kernel, KernelInput
 from .processes import Consolidation, LiquidAddition
@@ -43,6 +44,10 @@ __all__ = ["GranulationPBM", "check_solver"]
 
 
 class GranulationPBM:
+    #: run the steps between events in one compiled call where the kernel and selection allow it
+    #: (``fast_steps``; False: the Python loop, step by step, as the tests' reference)
+    fast_steps = True
+
     """Batch granulator PBM: aggregation (+ optional liquid addition, consolidation, breakage).
 
     ``kernel``: any :class:`Kernel`; ``liquid``/``consolidation``: the processes or None (off);
@@ -434,12 +439,27 @@ class GranulationPBM:
         jit.flush(u, M, flush_n, flush_v)
         refresh0 = getattr(self.kernel, "evaluations", None)
         t, ev = t_start, 0
+        fast = FastSteps.of(self, ctl, events, outs, allowed_refused) if self.fast_steps else None
+        python_step = False  # the next step is the Python loop's (the compiled one left it to it)
         while t < t_end:
             while events[ev] <= t:
                 ev += 1
             t_next = events[ev]
             spraying = self.liquid is not None and self.liquid.active(t)
             self._prepare(self._input(t, u.reshape(3, M)))
+            if fast is not None and self._factored is not None and not python_step:
+                # the rest of the run in one compiled call (fast_steps); a step it leaves to Python
+                # (FALLBACK) is taken below and raises its error
+                tallies = [refused, merged_n, merged_v, s.liquid_added]
+                code = self._advance_compiled(fast, s, rec, t, u, tallies)
+                t, (refused, merged_n, merged_v, s.liquid_added) = fast.t, tallies
+                if code == fast.OVERFLOW:
+                    self._overflow(t, refused, total_solid)
+                if code == fast.CHECK:
+                    ctl.check_limits(t)
+                python_step = code == fast.FALLBACK
+                continue
+            python_step = False
             self._rates(t, u, spraying, 0)
             k1 = self._k[0]
             if not jit.all_finite(k1):
@@ -467,6 +487,18 @@ class GranulationPBM:
         res = Result(self.grid, rec, s, self._info(ctl))
         res.info["grid_floor"] = res.grid_floor()  # fragments merged into the first pivot since the batch began
         return res
+
+    def _advance_compiled(self, fast: FastSteps, s: State, rec: Records, t: float, u: np.ndarray, tallies: list):
+        """The compiled steps from u at t (``fast.advance``, u in place): the states at the output
+        times it reached stored into ``s`` and added to ``rec`` as the Python loop does. Returns its code."""
+        base = s.steps - fast.ctl.taken  # the start state's steps (a resumed run)
+        code = fast.advance(u, t, tallies)
+        for v, (t_out, refused, merged_n, merged_v, liquid, taken) in fast.records:
+            s.liquid_added, s.steps = liquid, base + int(taken)
+            self._store(s, t_out, v, refused, (merged_n, merged_v))
+            rec.add(s)
+        s.steps = base + fast.ctl.taken
+        return code
 
     def _overflow(self, t: float, refused: float, total_solid: float) -> None:
         """GridOverflowError: the refused solid (x_0 units) exceeds the allowed fraction."""

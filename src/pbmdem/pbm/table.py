@@ -18,6 +18,7 @@ from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_KEYS, EncounterRates, binned
 from pbmdem.readers import InputFileError, first_index
 from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES, GRID_WALL_VELOCITIES, GRID_WALLS
 
+from .bilinear import Bilinear
 from .errors import PBMInputError, positive
 
 _KEY_TYPES = {"point_id": str, "class_i": int, "class_j": int}
@@ -114,7 +115,7 @@ class TableFrequency:
             logF = np.log(np.maximum(F, floor))
             lu = np.log(u)
             self.rpms.append(float(rpm))
-            self._interp.append(self._interpolator(RegularGridInterpolator, lu, logF))
+            self._interp.append(self._interpolator(Bilinear, lu, logF))
             self.ranges.append((float(u[0]), float(u[-1])))
             if counts is not None:
                 fr = self._fraction_grid(g, counts[g.index.to_numpy()], u, rpm)
@@ -136,7 +137,7 @@ class TableFrequency:
         interval's classes). Diameters that are not strictly ascending go through the table."""
         d = np.asarray(diameters, float)
         m = np.asarray(matrix, float)
-        if d.ndim != 1 or d.size < 2 or m.shape != (d.size, d.size) or not np.all(np.diff(d) > 0):
+        if d.ndim != 1 or d.size < 2 or m.shape != (d.size, d.size) or not np.all(np.diff(d) >= 0):
             iu, ju = np.triu_indices(d.size) if d.ndim == 1 else (np.zeros(0, int),) * 2
             m2 = np.atleast_2d(m)
             table = pd.DataFrame({"d_i": d[iu], "d_j": d[ju], column: m2[iu, ju]})
@@ -147,23 +148,30 @@ class TableFrequency:
         _check_diameters(d, "d_i")
         iu, ju = np.triu_indices(d.size)
         f = _checked_frequencies(m[iu, ju], column)
-        # the table's symmetric mean: each off-diagonal pair once per order, the diagonal twice
-        F = np.empty((d.size, d.size))
-        F[iu, ju] = f
-        F[ju, iu] = f
         floor = self.zero_floor * f[f > 0].min()
+        if np.all(np.diff(d) > 0):
+            # the table's symmetric mean: each off-diagonal pair once per order, the diagonal twice
+            F = np.empty((d.size, d.size))
+            F[iu, ju] = f
+            F[ju, iu] = f
+        else:  # classes of equal diameter (a feed class on a pivot): the table's mean of their pairs
+            d, F = _merged_pairs(d, iu, ju, f)
         lu = np.log(d)
         self.rpms = np.array([np.nan])
-        self._interp = [self._interpolator(RegularGridInterpolator, lu, np.log(np.maximum(F, floor)))]
+        self._interp = [self._interpolator(Bilinear, lu, np.log(np.maximum(F, floor)))]
         self._frac_interp = []
         self.ranges = [(float(d[0]), float(d[-1]))]
         return self
 
     @staticmethod
-    def _interpolator(rgi, lu: np.ndarray, values: np.ndarray):
+    def _interpolator(kind, lu: np.ndarray, values: np.ndarray):
+        """Linear in (log d_i, log d_j), extrapolated linearly: ``Bilinear`` (the log frequencies)
+        or scipy's RegularGridInterpolator (the velocity fractions, (n, n, V))."""
         if lu.size == 1:
             return (lambda value: lambda pts: np.repeat(value[None], pts.shape[0], axis=0))(values[0, 0])
-        return rgi((lu, lu), values, method="linear", bounds_error=False, fill_value=None)
+        if kind is Bilinear:
+            return Bilinear(lu, values)
+        return kind((lu, lu), values, method="linear", bounds_error=False, fill_value=None)
 
     @staticmethod
     def _velocity_counts(t: pd.DataFrame, velocity_table: pd.DataFrame) -> np.ndarray:
@@ -350,6 +358,26 @@ def speed_weights(rpms: np.ndarray, rpm) -> list[tuple[int, float]]:
         return [(k, 1.0)]
     w = (rpm - rpms[k]) / (rpms[k + 1] - rpms[k])
     return [(k, 1.0 - w), (k + 1, w)]
+
+
+def _merged_pairs(d: np.ndarray, iu: np.ndarray, ju: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(unique diameters u, (u, u) mean frequency of every pair of them) of the upper-triangle
+    table (d[iu], d[ju], f) with repeated diameters, as the constructor's pandas mean of the
+    symmetric table computes it (each row in both orders, rows in table order, compensated sums):
+    the same numbers without the DataFrames (tests/test_pbm_kernels.py compares them to the bit)."""
+    u, inv = np.unique(d, return_inverse=True)
+    n = u.size
+    total, comp, count = [[0.0] * n for _ in range(n)], [[0.0] * n for _ in range(n)], [[0] * n for _ in range(n)]
+    a, b, values = inv[iu].tolist(), inv[ju].tolist(), f.tolist()
+    for i, j in ((a, b), (b, a)):
+        for p, q, v in zip(i, j, values, strict=True):
+            y = v - comp[p][q]
+            t = total[p][q] + y
+            c = t - total[p][q] - y
+            comp[p][q] = 0.0 if c != c else c
+            total[p][q] = t
+            count[p][q] += 1
+    return u, np.array([[total[p][q] / count[p][q] for q in range(n)] for p in range(n)])
 
 
 def _check_diameters(d: np.ndarray, column: str) -> None:

@@ -4,6 +4,7 @@ model's field); each stage handed exactly the settings it uses."""
 from __future__ import annotations
 
 import copy
+import json
 
 import pytest
 from conftest import config_of
@@ -140,3 +141,13 @@ def test_errors_name_the_key_the_value_and_what_is_allowed(tiny_mapping):
         config_of(tiny_mapping)
     msg = str(info.value)
     assert "surrogate.seeds = [1]" in msg and "validation.distribution: 'huge' is not defined" in msg
+
+
+def test_the_completed_mapping_does_not_depend_on_the_order_of_keys(tiny_mapping):
+    """The params of a rule holding the mapping stay the same when a file lists its keys in
+    another order (yaml.safe_dump sorts them, for one)."""
+    reordered = dict(reversed(list(tiny_mapping.items())))
+    reordered["size_distributions"] = dict(reversed(list(tiny_mapping["size_distributions"].items())))
+    a, b = config_of(tiny_mapping).to_dict(), config_of(reordered).to_dict()
+    assert list(a["size_distributions"]) == list(b["size_distributions"]) and list(a) == list(b)
+    assert json.dumps(a) == json.dumps(b)

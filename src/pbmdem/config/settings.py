@@ -259,8 +259,9 @@ class Config:
 
     # ------------------------------------------------------------------ provenance
     def to_dict(self) -> dict:
-        """The completed configuration mapping (every default filled in)."""
-        return json.loads(json.dumps(self.mapping))
+        """The completed configuration mapping (every default filled in), keys sorted at every level
+        (so a rule's params do not depend on the order of the keys in the file)."""
+        return json.loads(json.dumps(self.mapping, sort_keys=True))
 
     def sha256(self) -> str:
         """Hash of the completed configuration (key order and formatting do not matter)."""

@@ -15,7 +15,9 @@ Sizes in mm. Inputs: the tables of `pbmdem.coupling.studies` and the comparison 
 
 from __future__ import annotations
 
+import base64
 import math
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -422,9 +424,6 @@ def _image_directive(png) -> str:
 
 def data_uri(png) -> str:
     """A PNG file as a data URI."""
-    import base64
-    from pathlib import Path
-
     return "data:image/png;base64," + base64.b64encode(Path(png).read_bytes()).decode()
 
 

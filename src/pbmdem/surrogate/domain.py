@@ -6,6 +6,8 @@ import contextlib
 import logging
 import warnings
 
+from .model import OutOfDomainWarning
+
 log = logging.getLogger(__name__)
 
 
@@ -14,8 +16,6 @@ def out_of_domain_recorded(where: str, log_each: bool = True):
     """Collect the surrogate's OutOfDomainWarning messages (its own mechanism for inputs outside
     the training range) into the yielded list and log each one; every other warning is passed on
     unchanged. Nothing is silenced: the caller counts and reports what was collected."""
-    from .model import OutOfDomainWarning
-
     found: list[str] = []
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", OutOfDomainWarning)

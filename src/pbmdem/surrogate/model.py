@@ -20,6 +20,7 @@ and :meth:`~CollisionSurrogate.predict_velocity` on collision tables or feature 
 
 from __future__ import annotations
 
+import copy
 import warnings
 
 import numpy as np
@@ -27,7 +28,7 @@ import pandas as pd
 from sklearn.base import BaseEstimator, RegressorMixin, clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from pbmdem.impact import EncounterRates
+from pbmdem.impact import EncounterRates, ImpactRates
 
 from .ensemble import EnsembleMLPRegressorCV
 from .errors import require_fitted
@@ -40,6 +41,7 @@ from .features import (
     pair_table,
 )
 from .velocity import check_speed_law, n_law_parameters, speed_fractions
+from .walls import wall_rates
 
 PHYSICS_OFFSETS = ("cross_section", "none")
 FEATURE_TRANSFORMS = ("log", "none")
@@ -436,10 +438,6 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
     def impacts(self, diameters, numbers, rpm: float, check_domain: bool = True):
         """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall impacts per granule
         of the wall models (``wall_models_``, :mod:`pbmdem.surrogate.walls`), for breakage."""
-        from pbmdem.impact import ImpactRates
-
-        from .walls import wall_rates
-
         pairs = self.encounters(diameters, numbers, rpm, check_domain=check_domain)
         return ImpactRates(pairs, wall_rates(self, diameters, numbers, rpm, check_domain=check_domain))
 
@@ -459,8 +457,6 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         (MLP) or predictive quantile (Kriging, RSM) and ``scale`` the calibrated
         ``uncertainty_scale`` (``velocity_uncertainty_scale`` for the impact-speed law). Running
         the PBM once per member gives the spread of PBM-ANN that the uncertainty implies."""
-        import copy
-
         n = self.n_members
         if not 0 <= int(k) < n:
             raise ValueError(f"surrogate member {k!r}: allowed 0 .. {n - 1}")

@@ -20,7 +20,9 @@ and :meth:`~CollisionSurrogate.predict_velocity` on collision tables or feature 
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import logging
 import warnings
 
 import numpy as np
@@ -43,6 +45,8 @@ from .features import (
 from .velocity import check_speed_law, n_law_parameters, speed_fractions
 from .walls import wall_rates
 
+log = logging.getLogger(__name__)
+
 PHYSICS_OFFSETS = ("cross_section", "none")
 FEATURE_TRANSFORMS = ("log", "none")
 
@@ -52,6 +56,25 @@ OFFSET_FEATURES = ("d_small", "d_large", "tip_speed")
 
 class OutOfDomainWarning(UserWarning):
     """A prediction was requested outside the training domain of the surrogate."""
+
+
+@contextlib.contextmanager
+def out_of_domain_recorded(where: str, log_each: bool = True):
+    """Collect the surrogate's OutOfDomainWarning messages (its own mechanism for inputs outside
+    the training range) into the yielded list and log each one; every other warning is passed on
+    unchanged. Nothing is silenced: the caller counts and reports what was collected."""
+    found: list[str] = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", OutOfDomainWarning)
+        yield found
+    for w in caught:
+        if issubclass(w.category, OutOfDomainWarning):
+            found.append(str(w.message))
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    if log_each:
+        for message in found:
+            log.warning("%s: surrogate out of its training domain: %s", where, message)
 
 
 class VelocityModelMissingError(RuntimeError):

@@ -81,7 +81,7 @@ def _fractions(u: float, v: float, floor: float) -> list[float]:
 
 def _particles(bed_solid_volume: float, diameters, fractions) -> list[int]:
     """Particles per class of a bed of `bed_solid_volume` (m3): the counts a DEM run would plan."""
-    sizes = SizeDistribution(tuple(diameters), tuple(fractions))
+    sizes = SizeDistribution(diameters=tuple(diameters), number_fractions=tuple(fractions))
     return class_counts(bed_particle_count(bed_solid_volume, sizes), fractions)
 
 

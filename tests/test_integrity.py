@@ -16,6 +16,7 @@ import yaml
 from conftest import config_of, snakemake_command
 
 from pbmdem.config import ConfigError, load_config, point_id, rpm_text
+from pbmdem.config.describe import config_schema
 from pbmdem.dem import collisions, dumps, engine
 from pbmdem.dem.grid_tables import aggregate, run_table
 from pbmdem.dem.plan import plan_point
@@ -149,8 +150,7 @@ def test_nan_in_a_real_contact_dump_fails_the_tabulation(tiny_run, tmp_path):
 def test_every_allowed_speed_gives_an_id_the_rule_wildcard_accepts(root):
     snakefile = (root / "Snakefile").read_text()
     wildcard = re.search(r'rpm=r"([^"]+)"', snakefile).group(1)
-    schema = yaml.safe_load((root / "workflow" / "schemas" / "config.schema.yaml").read_text())
-    limits = schema["properties"]["grid"]["properties"]["impeller_rpm"]["items"]
+    limits = config_schema()["$defs"]["OperatingGrid"]["properties"]["impeller_rpm"]["items"]
     assert limits["exclusiveMinimum"] == 0
     speeds = [1e-9, 1.5e-7, 0.1 + 0.2, 0.5, 1, 600, 1234.567, 1234.5678901, 19999.999999, limits["maximum"]]
     ids = set()

@@ -12,7 +12,8 @@ import yaml
 from synthetic_tables import make_synthetic_table, make_synthetic_tables
 
 from pbmdem.cli import build_parser, main
-from pbmdem.config import ConfigError, Surrogate, load_config, section_defaults
+from pbmdem.config import ConfigError, Surrogate, load_config
+from pbmdem.config.describe import config_schema
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES
 from pbmdem.surrogate import load_surrogate
 from pbmdem.surrogate.features import check_impeller_radius
@@ -37,12 +38,14 @@ def tiny_settings() -> dict:
     return Surrogate.from_section(TINY).to_dict()
 
 
-def test_schema_holds_the_defaults():
-    schema = yaml.safe_load((REPO / "workflow" / "schemas" / "surrogate.schema.yaml").read_text())
+def test_the_generated_schema_holds_the_defaults():
+    schema = config_schema()
     assert schema["$schema"].endswith("draft/2020-12/schema")
-    assert schema["additionalProperties"] is False
-    assert set(section_defaults("surrogate")) == set(schema["properties"])
-    # the project config states every default again (with its reasons), except the explicit seeds
+    section = schema["$defs"]["Surrogate"]
+    assert section["additionalProperties"] is False
+    assert set(Surrogate().to_dict()) == set(section["properties"])
+    assert section["properties"]["max_iter"]["default"] == Surrogate().max_iter
+    # the project config's surrogate section keeps the default seeds
     section = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["surrogate"]
     assert Surrogate.from_section(section).member_seeds == Surrogate.from_section({}).member_seeds
 

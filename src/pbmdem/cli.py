@@ -6,6 +6,7 @@
     pbmdem surrogate train|predict ...
     pbmdem design-space --config ... --model MODEL --out DIR
     pbmdem calibrate --config ... --model MODEL --data measured.csv --out DIR
+    pbmdem config --show-defaults | --schema | --check FILE
 
 Every subcommand reads its configuration through `pbmdem.config.load_config` (validated once,
 defaults filled in), the same path the workflow takes. Bad input gets one line naming the file,
@@ -21,7 +22,8 @@ import sys
 from pathlib import Path
 
 from pbmdem import __version__, layout
-from pbmdem.config import check_rpm, load_config, rpm_text
+from pbmdem.config import RPM_MAX, check_rpm, load_config, rpm_text
+from pbmdem.config import describe as config_cli
 from pbmdem.coupling import pbm_ann
 from pbmdem.dem import plan_point, run_point, viewer
 from pbmdem.dem.estimate import duration_text, measured_throughput
@@ -214,7 +216,7 @@ d50_sd, d90_sd (m), one row per speed and time, times ascending per speed."""
 def _dem_options(dem: argparse.ArgumentParser) -> None:
     """The options of `pbmdem dem`."""
     dem.add_argument("--config", required=True, help="workflow config (YAML)")
-    dem.add_argument("--rpm", required=True, help="impeller speed (1/min), 0 < rpm <= 20000")
+    dem.add_argument("--rpm", required=True, help=f"impeller speed (1/min), 0 < rpm <= {RPM_MAX}")
     dem.add_argument("--distribution", required=True, help="size distribution name from the config")
     dem.add_argument("--replicate", type=int, default=0, help="replicate (insertion seeds), 0 .. dem.replicates-1")
     dem.add_argument("--out", default=None, help="run folder (default results/dem/<point id>/rep<replicate>)")
@@ -264,7 +266,7 @@ def _pbm_options(pbm: argparse.ArgumentParser) -> None:
             help=f"results/dem/{name} (with --kernel table); needed when pbm.breakage.enabled is true",
         )
     pbm.add_argument("--model", type=Path, help="surrogate model file (with --kernel ann)")
-    pbm.add_argument("--rpm", required=True, help="impeller speed (1/min), 0 < rpm <= 20000")
+    pbm.add_argument("--rpm", required=True, help=f"impeller speed (1/min), 0 < rpm <= {RPM_MAX}")
     pbm.add_argument("--distribution", default=None, help="size distribution name (default: first of the grid)")
     pbm.add_argument("--out", required=True, type=Path, help="output folder (tables, plots, run.json)")
     pbm.set_defaults(func=_pbm)
@@ -319,6 +321,13 @@ COMMANDS = (
         "surrogate's uncertainty, their correlation, the residuals and a fit figure.",
         CALIBRATE_EXAMPLES,
         design_cli.calibrate_options,
+    ),
+    (
+        "config",
+        "list every setting with its default, print the config schema, or check a config file",
+        "Every setting of a pbmdem configuration, declared once in pbmdem.config.",
+        config_cli.EXAMPLES,
+        config_cli.add_options,
     ),
 )
 

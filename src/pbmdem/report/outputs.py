@@ -22,7 +22,7 @@ from pbmdem.validation.results import load_speed, run_folder
 from . import figures
 from .breakage import breakage_figure, breakage_words, clipping_words
 from .display import write_table
-from .findings import _image_directive, feed_figure, findings_rst, speed_figure
+from .findings import feed_figure, findings_rst, image_directive, speed_figure
 from .lumping import lumping_figure, lumping_table, lumping_words, turn_speeds
 from .provenance import provenance
 from .statements import out_of_domain, out_of_domain_sentence, target_sentences, targets
@@ -225,7 +225,7 @@ def write_findings(
         study = read_table(breakage, "PBM-ANN breakage study", columns=("variant", "rpm", "d50", "critical_speed"))
         save(breakage_figure(study), out["breakage_png"])
         studies = {"speed study": speed_table, "feed study": feed_table, "breakage study": study}
-        extra = (breakage_words(study), "", _image_directive(out["breakage_png"]), "   :width: 640px", "")
+        extra = (breakage_words(study), "", image_directive(out["breakage_png"]), "   :width: 640px", "")
         extra += (clipping_words(studies), "")
     learned = None
     if training is not None and metadata is not None:
@@ -300,7 +300,7 @@ def _lumping_section(cases, liquid, info, out: dict) -> tuple[str, ...]:
     return (
         lumping_words(table, per_size, facts),
         "",
-        _image_directive(out["lumping_png"]),
+        image_directive(out["lumping_png"]),
         "   :width: 640px",
         "   :alt: final d50 of the lumped and the two-dimensional PBM against speed, binder rate and feed",
         "",

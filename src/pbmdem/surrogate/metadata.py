@@ -18,7 +18,7 @@ import os
 
 from jsonschema import Draft202012Validator
 
-from pbmdem.config.schema import key_path
+from pbmdem.config.errors import key_path
 
 from .velocity import SPEED_LAWS
 

@@ -110,7 +110,7 @@ def show_defaults(out=None) -> None:
 
 
 def add_options(parser: argparse.ArgumentParser) -> None:
-    """The options of `pbmdem config` (a row of `pbmdem.cli.COMMANDS`)."""
+    """The options of `pbmdem config`."""
     what = parser.add_mutually_exclusive_group(required=True)
     what.add_argument("--show-defaults", action="store_true", help="every setting: default, unit, bounds, meaning")
     what.add_argument("--schema", action="store_true", help="the JSON schema of a config file (generated)")

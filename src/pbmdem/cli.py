@@ -22,18 +22,23 @@ import sys
 from pathlib import Path
 
 from pbmdem import __version__, layout
-from pbmdem.config import RPM_MAX
+from pbmdem.config import RPM_MAX, check_rpm, load_config, rpm_text
 from pbmdem.config import describe as config_cli
-from pbmdem.dem import viewer
+from pbmdem.coupling import pbm_ann
+from pbmdem.dem import plan_point, run_point, viewer
+from pbmdem.dem.estimate import duration_text, measured_throughput
+from pbmdem.dem.plan import check_limits
 from pbmdem.design import cli as design_cli
+from pbmdem.pbm.errors import PBMInputError
+from pbmdem.pbm.impact_breakage import impact_selection
+from pbmdem.pbm.kernels import TableFrequency
+from pbmdem.pbm.results import floor_words
+from pbmdem.pbm.setup import run_batch
+from pbmdem.pbm.wall_table import WallTable
 from pbmdem.surrogate import cli as surrogate_cli
 
 
 def _dem(args: argparse.Namespace) -> int:
-    from pbmdem.config import check_rpm, load_config, rpm_text
-    from pbmdem.dem import plan_point, run_point
-    from pbmdem.dem.plan import check_limits
-
     rpm = check_rpm(args.rpm, "--rpm")
     cfg = load_config(args.config)
     point = cfg.dem_point(args.distribution)
@@ -41,8 +46,6 @@ def _dem(args: argparse.Namespace) -> int:
         raise ValueError(f"--replicate {args.replicate}: allowed 0 .. dem.replicates - 1 = {cfg.dem_replicates - 1}")
     plan = check_limits(plan_point(point, rpm, replicate=args.replicate), cfg.dem_execution.limits)
     if args.plan_only:
-        from pbmdem.dem.estimate import duration_text, measured_throughput
-
         throughput = measured_throughput(args.runs)
         ranks = cfg.dem_execution.mpi_ranks
         seconds = throughput.seconds(plan.particle_steps, plan.n_particles, ranks)
@@ -72,8 +75,6 @@ def _dem(args: argparse.Namespace) -> int:
 
 
 def _pbm(args: argparse.Namespace) -> int:
-    from pbmdem.config import check_rpm, load_config
-
     rpm = check_rpm(args.rpm, "--rpm")
     cfg = load_config(args.config)
     distribution = args.distribution or cfg.grid.size_distributions[0]
@@ -91,8 +92,6 @@ def _pbm(args: argparse.Namespace) -> int:
             )
     info: dict = {"kernel_source": args.kernel}
     if args.kernel == "ann":
-        from pbmdem.coupling import pbm_ann
-
         if args.model is None:
             raise ValueError("--kernel ann needs --model PATH (a saved surrogate, results/surrogate/model.skops)")
         outcome = pbm_ann(cfg.coupled_loop().replace(batch=batch), args.model, rpm, args.out)
@@ -109,17 +108,12 @@ def _pbm(args: argparse.Namespace) -> int:
             )
         info["surrogate_domain"] = {k: totals.get(k, 0) for k in ("out_of_domain_count", "out_of_domain_intervals")}
     else:
-        from pbmdem.pbm.impact_breakage import impact_selection
-        from pbmdem.pbm.setup import run_batch
-
         source = _table_source(batch, args) if args.kernel == "table" else None
         selection = impact_selection(batch.pbm, source) if source is not None else None
         result = run_batch(batch, source, rpm, selection=selection)
     result.info.update(info)
     floor = result.info["grid_floor"]  # breakage fragments merged at the grid's first pivot (run.json)
     if floor["flagged"]:
-        from pbmdem.pbm.results import floor_words
-
         print(f"warning: {floor_words(floor, f'this batch ({distribution}, {rpm:g} rpm)')}", file=sys.stderr)
     paths = result.save(args.out)
     last = result.summary().iloc[-1]
@@ -141,10 +135,6 @@ def _pbm(args: argparse.Namespace) -> int:
 
 
 def _table_source(batch, args):
-    from pbmdem.pbm.errors import PBMInputError
-    from pbmdem.pbm.kernels import TableFrequency
-    from pbmdem.pbm.wall_table import WallTable
-
     success = batch.pbm.aggregation.success
     if args.table is None:
         raise PBMInputError("--kernel table needs --table PATH (a DEM collision table CSV)")

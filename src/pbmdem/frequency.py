@@ -15,7 +15,7 @@ import functools
 
 import numpy as np
 
-from pbmdem.impact import N_VELOCITY_BINS, binned_counts
+from pbmdem.impact import N_VELOCITY_BINS, WALLS, WallRates, binned_counts, velocity_bin
 
 
 def upper_pairs(k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -94,8 +94,6 @@ def wall_rates_from_tables(walls, velocities, k: int):
     """:class:`pbmdem.impact.WallRates` of K classes from one DEM run's wall_collisions.csv (rows
     wall, class_i, encounter_frequency_per_particle) and wall_impact_velocity.csv (rows wall,
     class_i, v_lo, encounters); a class without wall encounters gets the wall's pooled speeds."""
-    from pbmdem.impact import N_VELOCITY_BINS, WALLS, WallRates, velocity_bin
-
     frequency = np.zeros((len(WALLS), k))
     counts = np.zeros((len(WALLS), k, N_VELOCITY_BINS))
     w = np.array([WALLS.index(x) for x in walls["wall"]], int)

@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
+from scipy.special import ndtr
 
 from pbmdem.readers import InputFileError, first_index
 from pbmdem.tables import GRID_VELOCITIES
@@ -116,8 +117,6 @@ def breaking_probability(speed, spread: float = 0.0) -> np.ndarray:
     exact: the integral of Phi is z Phi(z) + phi(z)), evenly in v in bin 0 (64-point midpoint
     rule), and the last bin ends at 10 m/s.
     """
-    from scipy.special import ndtr
-
     s = float(spread)
     if not (np.isfinite(s) and s >= 0):
         raise ValueError(f"spread of ln Y {spread!r}: allowed are finite values >= 0")

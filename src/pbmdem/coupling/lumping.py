@@ -27,6 +27,7 @@ from pbmdem.config import CoupledLoop, SizeDistribution
 from pbmdem.config.design import with_pbm_values
 from pbmdem.pbm.errors import PBMError
 from pbmdem.pbm.state import surface_fraction
+from pbmdem.surrogate import load_surrogate
 
 from .loop import CouplingError
 from .methods import pbm_ann
@@ -133,8 +134,6 @@ def lumping_study(
     validation's coupled loop (its feed is the default batch's); `rpm`: the speed of the default
     batch, the binder rates and the feeds; `speeds`: the speed study's; `liquid_rates`: the design
     space's binder rates (m3/s); `feeds`: the grid's named feeds (`feed_cases` adds the blends)."""
-    from pbmdem.surrogate import load_surrogate
-
     model = load_surrogate(model_path) if isinstance(model_path, (str, Path)) else model_path
     t0, c0 = time.perf_counter(), time.process_time()
     base_rate = float(loop.batch.pbm.liquid_addition.rate)

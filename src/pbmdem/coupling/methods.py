@@ -27,6 +27,8 @@ from pbmdem.pbm.errors import PBMError
 from pbmdem.pbm.kernels import ConstantFrequency
 from pbmdem.pbm.results import floor_words
 from pbmdem.pbm.setup import build_model, initial_state, run_batch
+from pbmdem.surrogate import load_surrogate
+from pbmdem.surrogate.model import out_of_domain_recorded
 
 from .loop import CouplingError, LoopOutcome, interval_bounds, run_loop, write_outputs
 from .providers import DemProvider, SurrogateProvider, surrogate_needs
@@ -65,8 +67,6 @@ def warm_batch_times(loop: CoupledLoop, model, rpm: float, repeats: int = WARM_B
     then `repeats` batches in memory. Returns the median, min and max of their wall and CPU
     seconds (CPU: this process's), keys ``warm_{wall,cpu}_time_s_{median,min,max}`` and
     ``warm_batches``: what the comparison's speed ratio uses (docs/validation.md)."""
-    from pbmdem.surrogate import load_surrogate
-
     loaded = load_surrogate(model) if isinstance(model, (str, Path)) else model
     pbm_ann(loop, loaded, rpm, None, log_each=False)
     walls, cpus = [], []
@@ -91,8 +91,6 @@ def pbm_ann_members(loop: CoupledLoop, model_path: str | Path, rpm: float):
     The members' spread is PBM-ANN's uncertainty band (docs/validation.md). A member whose PBM
     fails (e.g. its extrapolated frequencies grow granules beyond the grid) is kept as one row
     with its error in `failed` and no sizes, and logged: it is reported, not dropped."""
-    from pbmdem.surrogate import load_surrogate
-
     n = load_surrogate(model_path).n_members
     frames = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -136,9 +134,6 @@ def pbm_ann_members(loop: CoupledLoop, model_path: str | Path, rpm: float):
 def calibrated_frequency(loop: CoupledLoop, model_path: str | Path, rpm: float) -> tuple[float, list[str]]:
     """The surrogate's pair-weighted mean per-pair frequency of the initial sample (1/s), and its
     out-of-domain warnings (logged)."""
-    from pbmdem.surrogate import load_surrogate
-    from pbmdem.surrogate.domain import out_of_domain_recorded
-
     model = build_model(loop.batch.pbm, ConstantFrequency(1.0), rpm=rpm, selection=constant_selection(loop))
     state = initial_state(loop.batch, model)
     sample = representative_sample(*model.particle_classes(state), loop.sample)

@@ -22,9 +22,13 @@ from pathlib import Path
 import numpy as np
 
 from pbmdem.config import CoupledLoop, DemExecution
+from pbmdem.dem import plan_point, run_point
+from pbmdem.dem.run import is_finished
 from pbmdem.frequency import matrix_from_table, velocity_fractions_from_table, wall_rates_from_tables
 from pbmdem.impact import EncounterRates, ImpactRates
 from pbmdem.readers import read_json
+from pbmdem.surrogate import load_surrogate
+from pbmdem.surrogate.model import out_of_domain_recorded
 from pbmdem.tables import RUN_PAIRS, RUN_VELOCITIES, RUN_WALL_VELOCITIES, RUN_WALLS
 
 from .sample import DemSample
@@ -55,8 +59,6 @@ class DemProvider:
         return {"name": self.name, "dem": self.point.dem.to_dict(), "rpm": self.rpm, "replicate": self.replicate}
 
     def __call__(self, sample: DemSample, interval_dir: Path, index: int):
-        from pbmdem.dem import plan_point, run_point
-
         point = self.point.replace(distribution=f"interval{index:02d}", sizes=sample.sizes())
         plan = plan_point(point, self.rpm, replicate=self.replicate, counts=sample.counts)
         earlier = self._identical_earlier_run(plan, interval_dir, index)
@@ -96,8 +98,6 @@ class DemProvider:
     def _identical_earlier_run(self, plan, interval_dir: Path, index: int) -> tuple[int, Path] | None:
         """(interval, run folder) of an earlier interval of this loop whose finished DEM run had
         this very plan on as many ranks, else None."""
-        from pbmdem.dem.run import is_finished
-
         wanted = {k: v for k, v in plan.to_dict().items() if k not in _NAME_KEYS}
         wanted = json.loads(json.dumps(wanted | {"mpi_ranks": self.execution.mpi_ranks}))  # as stored
         for j in range(index):
@@ -137,8 +137,6 @@ class SurrogateProvider:
     name = "pbm_ann"
 
     def __init__(self, model, rpm: float, member: int | None = None, log_each: bool = True, needs=None):
-        from pbmdem.surrogate import load_surrogate
-
         if isinstance(model, (str, Path)):
             self.model_path = Path(model)
             model = load_surrogate(model)
@@ -167,8 +165,6 @@ class SurrogateProvider:
         }
 
     def __call__(self, sample: DemSample, interval_dir: Path | None, index: int):
-        from pbmdem.surrogate.domain import out_of_domain_recorded
-
         t0 = time.perf_counter()
         d, n = np.asarray(sample.diameters, float), np.asarray(sample.counts, float)
         key = d.tobytes() + n.tobytes()

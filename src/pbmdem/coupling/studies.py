@@ -21,6 +21,8 @@ import pandas as pd
 
 from pbmdem.config import BLEND_JOIN, CoupledLoop, SizeDistribution, feed_case_names, feed_case_parents
 from pbmdem.pbm.errors import PBMError
+from pbmdem.pbm.impact_breakage import critical_speed
+from pbmdem.surrogate import load_surrogate
 
 from .loop import CouplingError
 from .methods import pbm_ann
@@ -89,8 +91,6 @@ def run_case(loop: CoupledLoop, model_path: str | Path, rpm: float, feed: str, s
     """PBM-ANN for one (speed, feed): final d10/d50/d90 (m) of the ensemble mean, the members'
     min and max of each, the members that failed, the intervals outside the training domain and
     the wall time."""
-    from pbmdem.surrogate import load_surrogate
-
     case = with_feed(loop, feed, sizes)
     n_members = load_surrogate(model_path).n_members
     row: dict = {"rpm": float(rpm), "feed": feed, "feed_d50": mass_median(sizes)}
@@ -219,8 +219,6 @@ def breakage_study(
     criterion): final sizes against impeller speed; columns ``variant``, ``yield_strength``,
     ``critical_stokes``, ``strength_spread``, ``strength_porosity_exponent``, ``critical_speed`` (m/s,
     v* = sqrt(2 Y St_def* / rho) of a granule at the reference size and porosity) beside the speed study's."""
-    from pbmdem.pbm.impact_breakage import critical_speed
-
     pbm = loop.batch.pbm
     # a variant whose breakage is so fast that the explicit solver's positivity limit takes
     # 30x the default batch's ~170 steps is reported as failed after BREAKAGE_STUDY_MAX_STEPS,

@@ -20,7 +20,9 @@ import pandas as pd
 
 from pbmdem.atomic import write_csv
 from pbmdem.frequency import pair_counts
+from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, velocity_bin
 
+from . import encounters
 from .dumps import DumpFormatError, Snapshots, read_classes, read_dump, read_trajectories
 from .dumps import class_lookup as _class_lookup
 
@@ -107,8 +109,6 @@ class Tally:
 
 
 def _tally(group: np.ndarray, events, shape: tuple[int, ...]) -> Tally:
-    from pbmdem.impact import N_VELOCITY_BINS, velocity_bin
-
     size = int(np.prod(shape))
     raw = np.bincount(group, minlength=size)
     g, v = group[events.encounter], events.velocity[events.encounter]
@@ -158,8 +158,6 @@ def pair_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, met
 
 def velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
     """Encounters per class pair and impact-velocity bin (long format, docs/architecture.md)."""
-    from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES
-
     k = tally.raw.shape[0]
     i, j = np.triu_indices(k)
     b = np.arange(N_VELOCITY_BINS)
@@ -180,8 +178,6 @@ def velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
 
 def wall_velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
     """Wall encounters per wall, class and impact-velocity bin (long format, docs/architecture.md)."""
-    from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES
-
     walls, k = tally.raw.shape
     w, c = np.repeat(np.arange(walls), k), np.tile(np.arange(k), walls)
     return pd.DataFrame(
@@ -241,8 +237,6 @@ class RunAnalysis:
     """Contact starts and encounters of one finished run (`plan`: its pbmdem.dem.DemPlan)."""
 
     def __init__(self, post_dir: str | Path, plan, bowl, impeller):
-        from . import encounters
-
         post_dir = Path(post_dir)
         self.plan, self.bowl, self.impeller = plan, bowl, impeller
         ids, classes = read_classes(post_dir / "classes.dump")

@@ -19,6 +19,8 @@ import pandas as pd
 
 from pbmdem.readers import first_index
 
+from .encounters import Trajectories
+
 _HEADER = re.compile(
     rb"ITEM: TIMESTEP\n(\d+)\nITEM: NUMBER OF (?:ENTRIES|ATOMS)\n(\d+)\n"
     rb"ITEM: BOX BOUNDS[^\n]*\n[^\n]*\n[^\n]*\n[^\n]*\nITEM: (?:ENTRIES|ATOMS)[^\n]*\n"
@@ -372,8 +374,6 @@ def class_lookup(ids: np.ndarray, classes: np.ndarray) -> np.ndarray:
 
 def read_trajectories(path: str | Path, n_particles: int):
     """Position snapshots (`dump custom ... id x y z vx vy vz`, sorted by id; text or binary) as Trajectories."""
-    from .encounters import Trajectories
-
     snaps = read_dump(path, 7, ids=(0,))
     counts = np.diff(snaps.offsets)
     if snaps.frames == 0 or (counts != n_particles).any():

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pbmdem.atomic import write_json
+from pbmdem.readers import InputFileError
 
 from .dumps import BINARY_SUFFIX, DumpFormatError, binary_frames, find_damage
 
@@ -375,8 +376,6 @@ def _corruption(workdir: Path, name: str, found: list[int], frames: int, last_st
 def version_of_log(log: str | Path) -> str:
     """The engine version from the header line "LIGGGHTS (Version ...)" of a LIGGGHTS log
     (InputFileError naming the log if it has no such line in its first lines)."""
-    from pbmdem.readers import InputFileError
-
     path = Path(log)
     try:
         with path.open(encoding="utf-8", errors="replace") as f:

@@ -13,7 +13,11 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import pandas as pd
+
 from pbmdem import layout
+
+from .plan import plan_point
 
 # Reference throughput (particles, particle-steps/s on one rank, two runs at once on 2 cores),
 # measured on the project's 2-core reference machine with the default grid (runs.csv of a default
@@ -52,8 +56,6 @@ def measured_throughput(runs_csv: str | Path | None = None) -> Throughput:
     """The throughput of the finished runs in `runs_csv` (median per particle number), or the
     reference if the file is missing or holds no usable rows."""
     if runs_csv is not None and Path(runs_csv).is_file():
-        import pandas as pd
-
         try:
             runs = pd.read_csv(runs_csv, usecols=["n_particles", "particle_steps_per_s"]).dropna()
         except ValueError:
@@ -109,8 +111,6 @@ def study_estimate(cfg, grid_runs, loops, results: str | Path = layout.RESULTS) 
     replicate), and `loops`, (rpm, replicate) of the PBM-DEM coupled loops of the validation feed
     or (rpm, replicate, CoupledLoop) of another loop (the feed check's), one DEM run per coupling
     interval, on `cfg` (a pbmdem Config); the throughput from the finished runs in `results`."""
-    from .plan import plan_point
-
     throughput = measured_throughput(layout.dem("runs.csv", str(results)))
     ranks = cfg.dem_execution.mpi_ranks
     grid_seconds = 0.0

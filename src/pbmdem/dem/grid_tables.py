@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.atomic import write_csv
+from pbmdem.readers import read_json
 from pbmdem.tables import KEYS, RUN_TABLES, SE_COLUMNS
 
 # per kind (the contracts of pbmdem.tables): the keys of the replicate mean; every other column is
@@ -57,8 +58,6 @@ def aggregate(tables: list[str | Path], out: str | Path, kind: str = "pairs") ->
 
 def run_table(summaries: list[str | Path], out: str | Path):
     """One row per run with its size, cost and convergence figures (atomically written CSV)."""
-    from pbmdem.readers import read_json
-
     rows = [read_json(p, "DEM run summary") for p in summaries]
     frame = pd.DataFrame(rows).drop(columns=[c for c in ("particles_per_class",) if c in rows[0]], errors="ignore")
     frame = frame.sort_values(["rpm", "distribution"]).reset_index(drop=True)

@@ -23,9 +23,10 @@ from pbmdem.atomic import write_json, write_text
 from pbmdem.config import ConfigError, DemExecution
 from pbmdem.readers import InputFileError, read_json
 
-from . import engine, geometry
+from . import collisions, engine, geometry, vtk_series
 from .deck import render_bed, render_granulator
 from .plan import BedPlan, DemPlan
+from .progress import ThermoProgress
 
 #: the settled bed in a bed folder and in a run folder that starts from it
 BED_FILE = "bed.restart"
@@ -269,9 +270,6 @@ def _run_in(
 ) -> dict:
     """run_point's work in the (staging) folder `run_dir`; paths in the summary name `final_dir`;
     `bed`: the checked settled bed's restart file, if the run starts from one."""
-    from . import collisions, vtk_series  # local: keep this module light to import
-    from .progress import ThermoProgress
-
     deck_path = prepare_run(plan, run_dir, execution.mpi_ranks, bed, deck)
     phases = [("spin-up", plan.spinup_steps), ("sampling", plan.sampling_steps)]
     watcher = ThermoProgress(

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from pbmdem import layout
 from pbmdem.atomic import atomic_path
+from pbmdem.config import check_rpm, rpm_text
 
 from .vtk_series import point_count, snapshots
 
@@ -40,8 +41,6 @@ class Frame:
 
 def run_folder(results: str | Path, rpm: str, distribution: str, replicate: int = 0) -> Path:
     """results/dem/rpm<rpm>_<distribution>/rep<replicate>, the folder of one operating point's run."""
-    from pbmdem.config import check_rpm, rpm_text
-
     folder = Path(layout.dem_run(rpm_text(check_rpm(rpm, "--rpm")), distribution, replicate, str(results)))
     if not folder.is_dir():
         runs = sorted(str(p.relative_to(results)) for p in Path(results).glob("dem/rpm*/rep*") if p.is_dir())
@@ -114,7 +113,7 @@ def build_scene(
     step: int | None = None,
 ):
     """A pyvista Plotter with the particles of one frame (see `pick`), the impeller and the bowl."""
-    import pyvista as pv
+    import pyvista as pv  # lazy: pyvista costs ~1.1 s to import (measured), only `pbmdem view` draws
 
     run_dir = Path(run_dir)
     frame = pick(run_dir, time, step)

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import functools
 import logging
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,6 +29,12 @@ import pandas as pd
 
 from pbmdem.config import CoupledLoop
 from pbmdem.config.design import with_pbm_values
+from pbmdem.coupling import pbm_ann
+from pbmdem.coupling.loop import CouplingError
+from pbmdem.pbm.errors import PBMError
+from pbmdem.pbm.setup import run_batch
+from pbmdem.surrogate import load_surrogate
+from pbmdem.surrogate._threads import single_threaded
 
 #: the size statistics a case reports (m)
 STATISTICS = ("d10", "d50", "d90")
@@ -82,8 +90,6 @@ class Outcome:
 @functools.lru_cache(maxsize=2)
 def _surrogate(path: str, mtime: float):
     """The surrogate at `path` with its members, loaded once per process (and per file version)."""
-    from pbmdem.surrogate import load_surrogate
-
     model = load_surrogate(path)
     return model, [model.member(k) for k in range(model.n_members)]
 
@@ -91,11 +97,6 @@ def _surrogate(path: str, mtime: float):
 def run_case(loop: CoupledLoop, model_path: str | Path | None, case: Case) -> Outcome:
     """Run one case in memory. Out-of-domain warnings are counted in the outcome (the caller
     reports them); a batch the PBM or the loop refuses is a failed outcome with the error."""
-    from pbmdem.coupling import pbm_ann
-    from pbmdem.coupling.loop import CouplingError
-    from pbmdem.pbm.errors import PBMError
-    from pbmdem.pbm.setup import run_batch
-
     case_loop = case.loop(loop)  # a bad config key raises here, not as a failed case
     try:
         if case.kernel == "constant":
@@ -131,8 +132,6 @@ MIN_POOLED_CASES = 8
 
 
 def _run_chunk(loop: CoupledLoop, model_path, cases: list[Case]) -> list[Outcome]:
-    from pbmdem.surrogate._threads import single_threaded
-
     with single_threaded():
         return [run_case(loop, model_path, case) for case in cases]
 
@@ -143,9 +142,6 @@ def run_cases(loop: CoupledLoop, model_path, cases: list[Case], n_jobs: int = 1)
     The processes are forked from this one after it has loaded the surrogate (and compiled the
     PBM), so that they start in milliseconds with both, and they end with the call: nothing is
     left running."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
     cases = list(cases)
     if n_jobs <= 1 or len(cases) < MIN_POOLED_CASES:
         return _run_chunk(loop, model_path, cases)

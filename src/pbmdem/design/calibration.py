@@ -35,13 +35,18 @@ from __future__ import annotations
 
 import logging
 import math
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
+from scipy.optimize import least_squares
+from scipy.stats import norm, qmc
 
 from pbmdem.config import Calibration, CoupledLoop
 from pbmdem.config.design import pbm_value
+from pbmdem.surrogate import load_surrogate
 
 from .batches import Case, run_cases
 from .measured import STATISTICS
@@ -156,8 +161,6 @@ def profile_chi2(
 ) -> tuple[float, np.ndarray]:
     """(sum of squares, ln theta) with parameter `index` held at `value` and the others fitted
     again, started from `x`."""
-    from scipy.optimize import least_squares
-
     if x.size == 1:
         point = np.array([value])
         return float(np.sum(residuals(point) ** 2)), point
@@ -228,9 +231,6 @@ def profile_widths(residuals: Residuals, x: np.ndarray, lower, upper, z: float, 
     _PROFILE = (residuals, x, lower, upper, z * z)
     try:
         if n_jobs > 1 and len(sides) > 1:
-            import multiprocessing
-            from concurrent.futures import ProcessPoolExecutor
-
             context = multiprocessing.get_context("fork")
             with ProcessPoolExecutor(max_workers=min(n_jobs, len(sides)), mp_context=context) as pool:
                 ends = list(pool.map(_profile_side_in_process, sides))
@@ -258,8 +258,6 @@ def screen(residuals: Residuals, x0: np.ndarray, lower: np.ndarray, upper: np.nd
     points on every machine; 8 per parameter, at least 16), by their sum of squares: the starts
     of the local fits. The sum of squares of a PBM in its parameters can have more than one
     valley (a larger beta0 with a higher threshold grows the granules later but faster)."""
-    from scipy.stats import qmc
-
     n = 2 ** max(4, math.ceil(math.log2(8 * x0.size)))
     sample = qmc.scale(qmc.Sobol(x0.size, scramble=True, seed=0).random(n), lower, upper)
     points = [x0, *sample]
@@ -270,8 +268,6 @@ def screen(residuals: Residuals, x0: np.ndarray, lower: np.ndarray, upper: np.nd
 def fit(residuals: Residuals, x0: np.ndarray, max_factor: float, starts: int = 3):
     """(ln theta estimate, Jacobian there, optimiser figures) of the least-squares fit: local fits
     from the `starts` best points of `screen` (from `x0` alone if `starts` is 1), the lowest kept."""
-    from scipy.optimize import least_squares
-
     span = math.log(max_factor)
     lower, upper = x0 - span, x0 + span
     candidates = [x0] if starts <= 1 else screen(residuals, x0, lower, upper, starts)
@@ -374,8 +370,6 @@ def calibrate(model: Model, data: pd.DataFrame, settings: Calibration, start: di
     cov_surr = np.zeros_like(cov_meas)
     members = np.empty((0, len(keys)))
     if model.kernel == "ann" and model.member is None:
-        from pbmdem.surrogate import load_surrogate
-
         members = _member_estimates(model, data, settings, x, load_surrogate(model.model_path).n_members)
         if len(members) > 1:
             cov_surr = np.atleast_2d(np.cov(members, rowvar=False, ddof=1))
@@ -435,8 +429,6 @@ def calibrate(model: Model, data: pd.DataFrame, settings: Calibration, start: di
 
 
 def _z(confidence: float) -> float:
-    from scipy.stats import norm
-
     return float(norm.ppf(0.5 + confidence / 2))
 
 

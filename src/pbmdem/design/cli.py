@@ -9,6 +9,13 @@ import logging
 import sys
 from pathlib import Path
 
+from pbmdem.config import load_config
+from pbmdem.config.design import pbm_value
+
+from .calibration import Model, calibrate
+from .measured import read_measured
+from .outputs import write_design_space, write_estimate
+
 
 def _jobs(jobs: int | None) -> int | None:
     if jobs is not None and jobs < 1:
@@ -42,10 +49,6 @@ def _with_logging(command):
 
 
 def _design_space(args: argparse.Namespace) -> int:
-    from pbmdem.config import load_config
-
-    from .outputs import write_design_space
-
     cfg = load_config(args.config)
     jobs = _jobs(args.jobs)
     design = cfg.design_space if jobs is None else cfg.design_space.replace(n_jobs=jobs)
@@ -64,13 +67,6 @@ def _design_space(args: argparse.Namespace) -> int:
 
 
 def _calibrate(args: argparse.Namespace) -> int:
-    from pbmdem.config import load_config
-    from pbmdem.config.design import pbm_value
-
-    from .calibration import Model, calibrate
-    from .measured import read_measured
-    from .outputs import write_estimate
-
     cfg = load_config(args.config)
     settings = cfg.calibration
     if args.parameters:

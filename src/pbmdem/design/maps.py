@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.config import Specification
+from pbmdem.plotting import pyplot, save_figure
 
 #: marker and colour of each specification status
 STYLE = {
@@ -48,8 +49,6 @@ def _spec_text(spec: Specification) -> str:
 
 def plot_design_space(table: pd.DataFrame, third_key: str, spec: Specification, path: str | Path) -> None:
     """The maps of `table` (`space.design_space`) as a PNG at `path`."""
-    from pbmdem.plotting import pyplot, save_figure
-
     plt = pyplot()
 
     thirds = sorted(table[third_key].unique())

@@ -4,13 +4,20 @@ written atomically."""
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import pandas as pd
 
 from pbmdem.atomic import write_csv, write_json
+from pbmdem.plotting import pyplot, save_figure
 
 from .calibration import Estimate
+from .maps import plot_design_space
+from .proof import calibration_check
+from .sensitivity import sensitivity
+from .sensitivity_bars import plot_sensitivity
+from .space import design_space
 
 MARKERS = {"d10": "^", "d50": "o", "d90": "s"}
 COLORS = {"d10": "tab:blue", "d50": "tab:green", "d90": "tab:purple"}
@@ -50,8 +57,6 @@ def write_estimate(estimate: Estimate, outdir: str | Path, title: str = "calibra
 def plot_fit(cases: dict[str, pd.DataFrame], path: str | Path) -> None:
     """Measured d10/d50/d90 with their sd (error bars) and the fitted model, one row per case
     (name -> residual table), one column per impeller speed."""
-    from pbmdem.plotting import pyplot, save_figure
-
     plt = pyplot()
 
     n_cols = max(frame.rpm.nunique() for frame in cases.values())
@@ -84,9 +89,6 @@ def plot_fit(cases: dict[str, pd.DataFrame], path: str | Path) -> None:
 def write_design_space(loop, model_path, design, table_path, maps_path, info_path) -> pd.DataFrame:
     """Rule design_space: the design-space table (CSV), its maps (PNG) and its figures of merit
     (JSON: batches, wall time, processes, points of each status)."""
-    from .maps import plot_design_space
-    from .space import design_space
-
     table, info = design_space(loop, model_path, design)
     write_csv(table_path, table)
     plot_design_space(table, design.third_factor.key, design.specification, maps_path)
@@ -99,9 +101,6 @@ def write_design_space(loop, model_path, design, table_path, maps_path, info_pat
 def write_sensitivity(loop, model_path, settings, table_path, figure_path, info_path) -> pd.DataFrame:
     """Rule sensitivity: the Sobol' indices (CSV), their bars (PNG) and the figures of merit (JSON:
     factors, batches, wall time, samples out of the training domain or failed)."""
-    from .sensitivity import sensitivity
-    from .sensitivity_bars import plot_sensitivity
-
     table, info = sensitivity(loop, model_path, settings)
     write_csv(table_path, table)
     plot_sensitivity(table, figure_path, settings.confidence)
@@ -113,10 +112,6 @@ def write_calibration_check(loop, model_path, validation_dir, rpms, replicates, 
     """Rule calibration_check: the recovery table (true against estimated, with intervals) of both
     cases, their fit figure, PBM-DEM's measured table (the example data of docs/calibration.md) and
     each case's calibration summary (JSON). `out`: table, figure, measured, summary."""
-    import logging
-
-    from .proof import calibration_check
-
     table, estimates, data = calibration_check(loop, model_path, validation_dir, rpms, replicates, settings, n_jobs)
     write_csv(out["table"], table)
     write_csv(out["measured"], data["pbm_dem"])

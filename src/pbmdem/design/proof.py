@@ -12,6 +12,8 @@ docs/calibration.md). Two cases, each fitted from start values `proof.start_fact
 
 from __future__ import annotations
 
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +21,7 @@ import pandas as pd
 
 from pbmdem.config import Calibration, CoupledLoop
 from pbmdem.config.design import pbm_value
+from pbmdem.coupling.methods import calibrated_frequency
 from pbmdem.validation.results import load_run, run_folder
 
 from .batches import Case, run_cases
@@ -45,8 +48,6 @@ def dem_measured(validation_dir, rpms, replicates: int, times) -> pd.DataFrame:
 
 def constant_measured(loop: CoupledLoop, model_path, rpms, times, noise: float, seed: int):
     """(measured table with noise, PBM-constant's frequency per speed) at `rpms`."""
-    from pbmdem.coupling.methods import calibrated_frequency
-
     fixed = {float(r): ((FREQUENCY_KEY, calibrated_frequency(loop, model_path, float(r))[0]),) for r in rpms}
     outcomes = run_cases(loop, model_path, [Case(r, fixed[r], kernel="constant") for r in fixed])
     series = {}
@@ -119,8 +120,6 @@ def _calibrate_all(models: dict, data: dict, settings: Calibration, start: dict,
     cases = list(models)
     if n_jobs <= 1 or len(cases) < 2:
         return [calibrate(models[c], data[c], settings, start) for c in cases]
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
 
     with ProcessPoolExecutor(
         max_workers=min(n_jobs, len(cases)), mp_context=multiprocessing.get_context("fork")

@@ -27,6 +27,7 @@ import pandas as pd
 
 from pbmdem.config import CoupledLoop, Sensitivity, SobolFactor
 from pbmdem.config.design import SPEED
+from pbmdem.surrogate import load_surrogate
 
 from .batches import STATISTICS, Case, outcomes_table, run_cases
 
@@ -63,14 +64,14 @@ def salib_problem(factors: Sequence[SobolFactor]) -> dict:
 
 def sample(problem: dict, base_samples: int, seed: int) -> np.ndarray:
     """Saltelli's sample matrix, N (D + 2) rows of the D factors (SALib; no second-order indices)."""
-    from SALib.sample import sobol
+    from SALib.sample import sobol  # lazy: SALib ~2.4 s (measured); report/ imports this module's labels
 
     return sobol.sample(problem, base_samples, calc_second_order=False, scramble=True, seed=seed)
 
 
 def indices(problem: dict, outputs: pd.DataFrame, columns: Sequence[str], *, confidence, resamples, seed):
     """S1, ST and their interval half-widths of each output column (rows: parameter, output)."""
-    from SALib.analyze import sobol
+    from SALib.analyze import sobol  # lazy: SALib ~2.4 s (measured), as above
 
     rows = []
     for column in columns:
@@ -164,8 +165,6 @@ def sensitivity(
     """Rule sensitivity: the indices table of PBM-ANN's final d10/d50/d90 (the ensemble mean and,
     with `members`, every member; `member` 'mean' or k) and the figures of merit: batches, wall
     time, samples out of the surrogate's training domain or failed, per model."""
-    from pbmdem.surrogate import load_surrogate
-
     n_members = load_surrogate(model_path).n_members if members else 0
     factors = settings.factors()
     keys = tuple(f.key for f in factors)

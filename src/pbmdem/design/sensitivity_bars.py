@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pbmdem.plotting import pyplot, save_figure
+
 from .batches import STATISTICS
 from .sensitivity import label
 
@@ -19,8 +21,6 @@ COLORS = {"ST": "#4575b4", "S1": "#fdae61"}
 
 def plot_sensitivity(table: pd.DataFrame, path: str | Path, confidence: float) -> None:
     """The bars of `table` (`sensitivity.COLUMNS`) as a PNG at `path`."""
-    from pbmdem.plotting import pyplot, save_figure
-
     plt = pyplot()
 
     outputs = [s for s in STATISTICS if s in set(table.output)]

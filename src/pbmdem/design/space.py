@@ -17,12 +17,14 @@ validation, docs/validation.md). A point meets the specification only if the who
 from __future__ import annotations
 
 import logging
+import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from pbmdem.config import CoupledLoop, DesignSpace, Specification
+from pbmdem.surrogate import load_surrogate
 
 from .batches import STATISTICS, Case, outcomes_table, run_cases
 
@@ -99,10 +101,6 @@ def specification_status(table: pd.DataFrame, spec: Specification) -> pd.Series:
 def design_space(loop: CoupledLoop, model_path: str | Path, design: DesignSpace) -> tuple[pd.DataFrame, dict]:
     """The design-space table (one row per grid point, with `spec_status`) and its figures of
     merit: the batches run, their wall time and the points of each status."""
-    import time
-
-    from pbmdem.surrogate import load_surrogate
-
     n_members = load_surrogate(model_path).n_members
     cases = grid_cases(design, n_members)
     t0 = time.perf_counter()

@@ -107,7 +107,7 @@ __all__ = [
 def __getattr__(name):
     # the settings-driven entry points, imported when first used
     if name in ("build_model", "initial_state", "run_batch"):
-        from . import setup
+        from . import setup  # lazy: keeps `import pbmdem.pbm` free of the settings layer (docstring)
 
         return getattr(setup, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

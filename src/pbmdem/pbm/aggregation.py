@@ -86,7 +86,7 @@ class PivotAggregation:
         """The arrays of the compiled evaluation (numba, imported here: building an operator loads
         or compiles it, :mod:`._compiled`): the target cell or lower pivot of every ordered pair
         (-1 beyond the grid), its weights, and the scheme's split factors."""
-        from . import _compiled
+        from . import _compiled  # lazy: numba + compiled cache ~3 s (measured), loaded when a model is built
 
         self._totals = _compiled.aggregation_totals
         target, weight = self._pair_weights()

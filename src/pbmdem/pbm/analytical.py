@@ -31,6 +31,8 @@ births (beta/2) A^2 v e^(-lambda v) balance breakage deaths s v A e^(-lambda v);
 from __future__ import annotations
 
 import numpy as np
+from scipy import integrate, special
+from scipy.special import erfcx, gammaln
 
 
 def constant_number_density(v, t, beta, N0, m):
@@ -55,8 +57,6 @@ def sum_tau(t, b, N0, m):
 
 
 def sum_number_density(v, t, b, N0, m):
-    from scipy import special
-
     v = np.asarray(v, float)
     tau = sum_tau(t, b, N0, m)
     if tau == 0.0:
@@ -94,8 +94,6 @@ def breakage_number_density(v, t, a, exponent, N0, m):
 
 def breakage_moments(t, a, exponent, N0, m):
     """(M0, M1, M2) of :func:`breakage_number_density`."""
-    from scipy.special import erfcx
-
     tau = _breakage_tau(t, a, exponent, m)
     if exponent == 1:
         return N0 * (1.0 + tau), N0 * m, 2.0 * N0 * m * m / (1.0 + tau)
@@ -124,8 +122,6 @@ def aggregation_breakage_steady_density(v, beta, s, M1):
 
 def cell_integrals(density, edges):
     """Number and volume of a number density ``density(v)`` in each cell [edges[k], edges[k+1]]."""
-    from scipy import integrate
-
     num, vol = [], []
     for a, b in zip(edges[:-1], edges[1:]):
         num.append(integrate.quad(density, a, b, limit=200, epsrel=1e-12, epsabs=0)[0])
@@ -158,8 +154,6 @@ def monodisperse_numbers(kernel: str, t: float, k) -> np.ndarray:
     volume, c_1(0) = 1, for the kernels beta = 1 (``"constant"``), i + j (``"sum"``) and i j
     (``"product"``, before gelation at t = 1): the classical discrete solutions (Smoluchowski;
     Golovin; McLeod 1962), evaluated in logs so that large k do not overflow."""
-    from scipy.special import gammaln
-
     k = np.asarray(k, float)
     if kernel == "constant":
         tau = 0.5 * t  # c_k = tau^(k-1) / (1 + tau)^(k+1)

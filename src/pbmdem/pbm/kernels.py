@@ -21,6 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from pbmdem.impact import N_VELOCITY_BINS, EncounterRates, representative_velocities, velocity_bin
 from pbmdem.readers import first_index
 
 from . import analytical
@@ -215,8 +216,6 @@ def check_encounter_rates(rates, K: int, name: str):
     :func:`check_frequency_matrix` and whose (K, K, V) velocity fractions are finite, >= 0,
     symmetric in (i, j) and sum to 1 (or to 0 for a pair without encounters) over the bins.
     Returns (frequency, fractions), both symmetrised."""
-    from pbmdem.impact import N_VELOCITY_BINS
-
     for attr in ("frequency", "velocity_fractions"):
         if not hasattr(rates, attr):
             raise KernelShapeError(
@@ -273,8 +272,6 @@ class CollisionKernel(Kernel):
         self.beta0 = positive("aggregation beta0", beta0)
         self.success = success if success is not None else SuccessProbability()
         if self.success.velocity_dependent:
-            from pbmdem.impact import representative_velocities
-
             self._speeds = representative_velocities()
             if not np.all(np.diff(self._speeds) > 0):  # pragma: no cover - guards pbmdem.impact
                 raise PBMInputError("representative impact speeds must rise with the velocity bin")
@@ -451,8 +448,6 @@ class ConstantFrequency:
 
     def encounters(self, diameters, numbers, rpm):
         """EncounterRates: c_ij = value, every encounter in the bin of ``impact_velocity``."""
-        from pbmdem.impact import N_VELOCITY_BINS, EncounterRates, velocity_bin
-
         if self.impact_velocity is None:
             raise PBMInputError(
                 "ConstantFrequency.encounters needs an impact velocity (pbm.aggregation.constant_impact_velocity, m/s)"

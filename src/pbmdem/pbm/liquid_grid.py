@@ -66,7 +66,7 @@ class LiquidGrid:
 
     def classify(self, ratios) -> np.ndarray:
         """The class of every liquid-to-solid ratio (>= 0): the compiled classification of the model."""
-        from ._compiled2d import ratio_classes
+        from ._compiled2d import ratio_classes  # lazy: numba + compiled cache ~2.6 s (measured)
 
         w = np.ascontiguousarray(np.atleast_1d(np.asarray(ratios, dtype=float)))
         out = np.empty(w.size, dtype=np.int64)

@@ -86,7 +86,7 @@ class GranulationPBM:
         # building the operator imports the compiled evaluation (numba, ``_compiled``): it is loaded
         # from numba's cache, or compiled, here and not in a run
         self.aggregation = SCHEMES[scheme](grid.x, grid.edges[1:-1])
-        from . import _compiled
+        from . import _compiled  # lazy: numba + compiled cache ~3 s (measured), loaded when a model is built
 
         self._jit = _compiled
         self._operators = {(): self.aggregation}

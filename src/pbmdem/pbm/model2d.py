@@ -49,7 +49,7 @@ class GranulationPBM2D(GranulationPBM):
         self.liquid_grid = LiquidGrid.uniform(0.02, 1.0) if liquid_grid is None else liquid_grid
         if not isinstance(self.liquid_grid, LiquidGrid):
             raise PBMInputError(f"liquid_grid = {liquid_grid!r}; allowed: a pbmdem.pbm.liquid_grid.LiquidGrid")
-        from . import _compiled2d
+        from . import _compiled2d  # lazy: numba + compiled cache ~2.6 s (measured)
 
         self._jit2 = _compiled2d
         super().__init__(grid, kernel, *args, **kwargs)

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+import pandas as pd
 
 from pbmdem.atomic import atomic_path
 from pbmdem.plotting import pyplot, save_figure, size_distribution
@@ -171,7 +172,6 @@ class Result:
         N, S, L, G = self.number, self.solid, self.liquid, self.gas
         Ntot, Stot, Ltot, Gtot = N.sum(1), S.sum(1), L.sum(1), G.sum(1)
         q = mass_quantiles(S, self.grid.d_edges)
-        import pandas as pd
 
         return pd.DataFrame(
             {
@@ -206,7 +206,6 @@ class Result:
         dlog = np.log(g.d_edges[1:] / g.d_edges[:-1])
         lc = np.divide(self.liquid, S, out=np.zeros_like(S), where=S > 0)
         eps = np.divide(self.gas, S + self.gas, out=np.zeros_like(S), where=(S + self.gas) > 0)
-        import pandas as pd
 
         return pd.DataFrame(
             {

@@ -17,7 +17,9 @@ from .breakage import Breakage, ConstantSelection
 from .errors import PBMInputError
 from .grid import Grid, volume_of
 from .kernels import CollisionKernel, ConstantFrequency
+from .liquid_grid import LiquidGrid
 from .model import GranulationPBM
+from .model2d import GranulationPBM2D
 from .processes import Consolidation, LiquidAddition
 from .state import State
 from .success import StokesCriterion, SuccessProbability
@@ -109,9 +111,6 @@ def build_model(pbm: Pbm, source=None, rpm: float = 0.0, selection=None) -> Gran
     kwargs = {"rpm": rpm, "scheme": agg.scheme, "separate_feed": pbm.grid.separate_feed}
     kwargs["breakage"] = build_breakage(pbm, selection)
     if pbm.dimensions == 2:
-        from .liquid_grid import LiquidGrid
-        from .model2d import GranulationPBM2D
-
         lg = LiquidGrid.uniform(pbm.grid.liquid_step, pbm.grid.liquid_max)
         return GranulationPBM2D(grid, kernel, liquid, cons, pbm.solver, liquid_grid=lg, **kwargs)
     return GranulationPBM(grid, kernel, liquid, cons, pbm.solver, **kwargs)

@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 from scipy.interpolate import RegularGridInterpolator
 
-from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_KEYS, EncounterRates, binned_counts
+from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_KEYS, EncounterRates, ImpactRates, binned_counts
 from pbmdem.readers import InputFileError, first_index
 from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES, GRID_WALL_VELOCITIES, GRID_WALLS
 
@@ -333,8 +333,6 @@ class TableFrequency:
         """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall impacts of the
         DEM's wall tables (``walls``: a :class:`pbmdem.pbm.wall_table.WallTable`, from_csv's
         ``wall_path`` and ``wall_velocity_path``), what breakage from impacts needs."""
-        from pbmdem.impact import ImpactRates
-
         if self.walls is None:
             raise PBMInputError(
                 "TableFrequency.impacts needs the wall tables (results/dem/wall_collisions.csv and "

@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from pbmdem.pbm.results import FLOOR_LIMIT
+
 from . import words
 from .display import MM
 from .figures import pyplot
@@ -112,8 +114,6 @@ def clipping_words(studies: dict[str, pd.DataFrame]) -> str:
     largest share of a batch's granules merged there (``merged_fraction``, the ensemble mean's, and
     ``merged_fraction_member_max``; pbmdem.pbm.results.grid_floor) and the batches above
     FLOOR_LIMIT (1 %), flagged. ``studies``: name -> study table (speed, feed, breakage)."""
-    from pbmdem.pbm.results import FLOOR_LIMIT
-
     cases = []  # (share, batch)
     batches = 0
     for name, table in studies.items():

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from pbmdem.plotting import pyplot, save_figure, size_distribution
+from pbmdem.plotting import log_ticks, pyplot, save_figure, size_distribution
 from pbmdem.readers import InputFileError
 
 from .display import MM, PERCENT
@@ -60,8 +60,6 @@ def _column(frame: pd.DataFrame, name: str, what: str) -> np.ndarray:
 
 def _plain_log(ax, axes: str = "x") -> None:
     """Readable log-axis tick labels (no overlapping minor labels): `pbmdem.plotting.log_ticks`."""
-    from pbmdem.plotting import log_ticks
-
     log_ticks(ax, axes)
 
 

@@ -19,6 +19,7 @@ import pandas as pd
 
 from pbmdem.frequency import upper_pairs
 from pbmdem.readers import InputFileError
+from pbmdem.surrogate.model import out_of_domain_recorded
 from pbmdem.tables import INTERVALS
 
 #: the interval columns these tables read
@@ -89,8 +90,6 @@ def surrogate_on_dem_samples(speed, surrogate) -> pd.DataFrame:
     """One row per class pair of every PBM-DEM interval sample: replicate, interval, class_i,
     class_j, d_i, d_j (m), dem and surrogate c_ij (1/s per pair), out_of_domain (the surrogate
     warned on this sample) and warnings (their messages)."""
-    from pbmdem.surrogate.domain import out_of_domain_recorded
-
     rows = []
     for k, rep in enumerate(speed.dem):
         for r in _intervals(rep, f"PBM-DEM replicate {k} result").itertuples():

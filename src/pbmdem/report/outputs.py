@@ -6,12 +6,27 @@ Snakemake's report shows HTML inline and offers CSV for download).
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
+from pbmdem.atomic import write_text
+from pbmdem.config import Config, Granulator, Pbm, SizeDistribution
+from pbmdem.config.pbm import ProcessSettings
+from pbmdem.plotting import save_figure
+from pbmdem.plotting import save_figure as save
 from pbmdem.readers import InputFileError, read_table
+from pbmdem.tables import COMPARISON, GRID_PAIRS
+from pbmdem.validation.feed_check import CHECK_COLUMNS
+from pbmdem.validation.results import load_speed, run_folder
 
 from . import figures
+from .breakage import breakage_figure, breakage_words, clipping_words
 from .display import write_table
+from .findings import feed_figure, findings_rst, image_directive, speed_figure
+from .lumping import lumping_figure, lumping_table, lumping_words, turn_speeds
+from .provenance import provenance
+from .statements import out_of_domain, out_of_domain_sentence, target_sentences, targets
+from .tables import calibration_check_table, comparison_tables, design_space_table, process_settings, speeds
 
 #: summary.csv columns the figures of a speed read
 SUMMARY_COLUMNS = ("time", "d10", "d50", "d90", "mean_liquid_content", "mean_porosity")
@@ -27,12 +42,9 @@ def _require(frame, columns, path: Path, what: str) -> None:
 def write_speed(*, validation_dir, rpm: str, replicates: int, process: dict, bands, model, out: dict) -> None:
     """The figures and the out-of-domain table of one validation speed. `out`: sizes, psd, liquid,
     frequency (PNG), domain_csv, domain_html."""
-    from pbmdem.config.pbm import ProcessSettings
-    from pbmdem.surrogate import load_surrogate
-    from pbmdem.validation.results import load_speed, run_folder
+    from pbmdem.surrogate import load_surrogate  # lazy: scikit-learn, ~3 s measured
 
-    from .frequencies import interval_frequencies, surrogate_on_dem_samples
-    from .statements import out_of_domain, out_of_domain_sentence
+    from .frequencies import interval_frequencies, surrogate_on_dem_samples  # lazy: scikit-learn, ~3 s measured
 
     process = ProcessSettings.from_dict(process, "pbm.process")
     speed = load_speed(validation_dir, rpm, replicates)
@@ -89,10 +101,6 @@ def write_settings(
     out: dict,
 ) -> None:
     """The process-settings and speeds tables. `out`: settings_csv, settings_html, speeds_csv, speeds_html."""
-    from pbmdem.config import Granulator, Pbm, SizeDistribution
-
-    from .tables import process_settings, speeds
-
     pbm_settings = Pbm.from_dict(pbm, "pbm")
     machine = Granulator.from_dict(granulator, "granulator")
     settings = process_settings(
@@ -124,11 +132,6 @@ def write_settings(
 def write_comparison(*, comparison, out: dict) -> None:
     """The comparison table in display form and the targets. `out`: comparison_<name>_csv and
     comparison_<name>_html for name in d50, tails, accuracy, cost, domain; targets_csv, targets_html."""
-    from pbmdem.tables import COMPARISON
-
-    from .statements import target_sentences, targets
-    from .tables import comparison_tables
-
     table = COMPARISON.read(comparison)
     titles = {
         "d50": "d50 at the start and the end of the batch",
@@ -147,10 +150,6 @@ def write_comparison(*, comparison, out: dict) -> None:
 def write_design_tables(*, design, check, third_key: str, confidence: float, out: dict) -> None:
     """The design space and the calibration check in display form. `out`: design_space_table_csv,
     design_space_table_html, calibration_check_csv, calibration_check_html."""
-    from pbmdem.readers import read_table
-
-    from .tables import calibration_check_table, design_space_table
-
     table = read_table(design, "design-space table", columns=("rpm", "liquid_rate", third_key, "spec_status"))
     counts = ", ".join(f"{n} {s.replace('_', ' ')}" for s, n in table.spec_status.value_counts().items())
     write_table(
@@ -177,10 +176,6 @@ def write_provenance(*, config: dict, settings: dict, basedir, runs, metadata, o
     """The provenance table. `config`: the completed configuration of the job (for its
     `Config.sha256()`); `settings`: the same without the execution settings; `basedir`: the
     project; `workdir`: where the workflow ran (recorded, not compared). `out`: csv, html."""
-    from pbmdem.config import Config
-
-    from .provenance import provenance
-
     table = provenance(Config.from_mapping(config).sha256(), settings, basedir, runs, metadata, workdir=workdir)
     write_table(
         out["csv"],
@@ -220,11 +215,6 @@ def write_findings(
     the level of their intervals); `lumping`, `lumping_liquid`, `lumping_info`: the 1-D against 2-D
     study (pbmdem.coupling.lumping; its figure, display table and words); `out`: speed_png,
     feed_png, breakage_png, rst, and with `lumping` lumping_png, lumping_csv, lumping_html."""
-    from pbmdem.atomic import write_text
-    from pbmdem.plotting import save_figure as save
-
-    from .findings import feed_figure, findings_rst, speed_figure
-
     speed_table = read_table(speed, "PBM-ANN speed study", columns=("rpm", "d10", "d50", "d90"))
     feed_table = read_table(feed, "PBM-ANN feed study", columns=("feed", "feed_d50", "d10", "d50", "d90"))
     comparison_table = read_table(comparison, "comparison table", columns=("rpm",))
@@ -232,9 +222,6 @@ def write_findings(
     save(feed_figure(feed_table, feed_rpm, batch_s), out["feed_png"])
     extra: tuple[str, ...] = ()
     if breakage is not None:
-        from .breakage import breakage_figure, breakage_words, clipping_words
-        from .findings import image_directive
-
         study = read_table(breakage, "PBM-ANN breakage study", columns=("variant", "rpm", "d50", "critical_speed"))
         save(breakage_figure(study), out["breakage_png"])
         studies = {"speed study": speed_table, "feed study": feed_table, "breakage study": study}
@@ -242,22 +229,19 @@ def write_findings(
         extra += (clipping_words(studies), "")
     learned = None
     if training is not None and metadata is not None:
-        from pbmdem.surrogate.persistence import read_metadata
-        from pbmdem.tables import GRID_PAIRS
+        from pbmdem.surrogate.persistence import read_metadata  # lazy: scikit-learn, ~3 s measured
 
-        from .training import training_set, training_words
+        from .training import training_set, training_words  # lazy: scikit-learn, ~3 s measured
 
         meta = read_metadata(metadata)
         table = GRID_PAIRS.read(training, need=("point_id", "rpm", "distribution", "n_replicates"))
         learned = training_words(training_set(table, str(training), meta["training_point_ids"]), meta, str(training))
     check = None
     if feed_check is not None:
-        from pbmdem.validation.feed_check import CHECK_COLUMNS
-
         check_table = read_table(feed_check, "feed check table", columns=CHECK_COLUMNS)
         check = check_table.iloc[0].to_dict()
     if sensitivity is not None:
-        from .sensitivity import sensitivity_words
+        from .sensitivity import sensitivity_words  # lazy: scikit-learn, ~3 s measured
 
         indices = read_table(
             sensitivity,
@@ -267,8 +251,6 @@ def write_findings(
         )
         info = None
         if sensitivity_info is not None:
-            import json
-
             info = json.loads(Path(sensitivity_info).read_text())
         extra = (*extra, sensitivity_words(indices, confidence, info), "")
     if lumping is not None:
@@ -291,13 +273,7 @@ def write_findings(
 
 def _lumping_section(cases, liquid, info, out: dict) -> tuple[str, ...]:
     """The lumping study's figure and display table written, and its words with the figure (rst lines)."""
-    import json
-
-    from pbmdem.coupling.lumping import CASE_COLUMNS, LIQUID_COLUMNS
-    from pbmdem.plotting import save_figure
-
-    from .findings import image_directive
-    from .lumping import lumping_figure, lumping_table, lumping_words, turn_speeds
+    from pbmdem.coupling.lumping import CASE_COLUMNS, LIQUID_COLUMNS  # lazy: scikit-learn, ~3 s measured
 
     what = "lumping study (1-D against 2-D PBM)"
     table = read_table(cases, what, columns=CASE_COLUMNS, dtype={"feed": str, "failed": str})

@@ -26,7 +26,12 @@ from collections import Counter
 from datetime import UTC, datetime
 from pathlib import Path
 
+import pandas as pd
+
+import pbmdem
 from pbmdem.config.dem import EXECUTION_KEYS
+from pbmdem.readers import read_json
+from pbmdem.tables import RUNS
 
 #: distributions whose versions are recorded (PyPI names)
 LIBRARIES = ("numpy", "scipy", "pandas", "scikit-learn", "matplotlib", "skops", "pyyaml", "jsonschema", "snakemake")
@@ -51,8 +56,6 @@ def liggghts_versions(runs_table: str | Path) -> str:
     """The LIGGGHTS version(s) of the DEM runs, each with its number of runs: the DEM run table's
     column `liggghts_version`, which every DEM run reads from the header line "LIGGGHTS (Version
     ...)" of its log.liggghts (`pbmdem.dem.engine.version_of_log`)."""
-    from pbmdem.tables import RUNS
-
     runs = RUNS.read(runs_table, need=("point_id",))
     if "liggghts_version" not in runs.columns:
         return (
@@ -87,8 +90,6 @@ def git_commit(basedir: str | Path) -> tuple[str, str]:
 
 def library_versions() -> dict[str, str]:
     """Python, pbmdem (with the folder it was imported from) and the LIBRARIES installed in this environment."""
-    import pbmdem
-
     out = {
         "Python": platform.python_version(),
         "pbmdem": f"{pbmdem.__version__} (imported from {Path(pbmdem.__file__).parent})",
@@ -149,10 +150,6 @@ def provenance(
 ):
     """The provenance table (a DataFrame): quantity, value, source. `settings`: the completed
     configuration without the execution settings (`settings_mapping`)."""
-    import pandas as pd
-
-    from pbmdem.readers import read_json
-
     commit, state = git_commit(basedir)
     rows = [
         ("config sha256", config_sha256, "Config.sha256() of the configuration this table was written under"),

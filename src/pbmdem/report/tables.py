@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.config import Granulator, Pbm, SizeDistribution
+from pbmdem.pbm.results import FLOOR_LIMIT
 
 from .display import MM, PERCENT, number, percent, value_range, yes_no
 
@@ -276,8 +277,6 @@ def comparison_tables(table: pd.DataFrame) -> dict[str, pd.DataFrame]:
 
 def _floor(fraction) -> str:
     """A share of a run's final number merged at the grid floor in %, FLAGGED above FLOOR_LIMIT."""
-    from pbmdem.pbm.results import FLOOR_LIMIT
-
     if fraction is None or not np.isfinite(float(fraction)):
         return "n/a"
     shown = f"{PERCENT * float(fraction):.3g}"

@@ -8,6 +8,8 @@ on a two-core machine whose cores are busy with DEM runs, the surrogate tests ra
 
 from __future__ import annotations
 
+from threadpoolctl import ThreadpoolController
+
 _controller = None
 
 
@@ -15,7 +17,5 @@ def single_threaded():
     """Context manager limiting BLAS and OpenMP pools to one thread (cheap after the first call)."""
     global _controller
     if _controller is None:
-        from threadpoolctl import ThreadpoolController
-
         _controller = ThreadpoolController()
     return _controller.limit(limits=1)

@@ -11,6 +11,14 @@ from pathlib import Path
 
 import numpy as np
 
+from pbmdem.config import check_rpm, load_config
+from pbmdem.impact import VELOCITY_EDGES
+from pbmdem.tables import GRID_PAIRS
+
+from .model import OutOfDomainWarning
+from .persistence import load_surrogate
+from .train import train_and_report
+
 TRAIN_EXAMPLES = """examples:
   pbmdem surrogate train --config config/config.yaml --table results/dem/collisions.csv \\
       --velocity-table results/dem/impact_velocity.csv --out out/surrogate --jobs 2
@@ -74,10 +82,6 @@ def add_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _train(args) -> int:
-    from pbmdem.config import load_config
-
-    from .train import train_and_report
-
     cfg = load_config(args.config)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     meta = train_and_report(
@@ -111,15 +115,10 @@ def _fmt(x) -> str:
 
 def _predict(args) -> int:
 
-    from .model import OutOfDomainWarning
-    from .persistence import load_surrogate
-
     model = load_surrogate(args.model, args.metadata)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", OutOfDomainWarning)
         if args.table is not None:
-            from pbmdem.tables import GRID_PAIRS
-
             table = GRID_PAIRS.read(args.table, need=())  # the features' columns: checked by the model
             log_c, std = model.predict_log10(table, return_std=True)
             out = table.assign(predicted_encounter_frequency_per_pair=10.0**log_c, predicted_std_log10=std)
@@ -133,7 +132,6 @@ def _predict(args) -> int:
         else:
             if args.numbers is None or args.rpm is None:
                 raise SystemExit("--diameters needs --numbers and --rpm")
-            from pbmdem.config import check_rpm
 
             args.rpm = check_rpm(args.rpm, "--rpm")
             for flag, values in (("--diameters", args.diameters), ("--numbers", args.numbers)):
@@ -149,8 +147,6 @@ def _predict(args) -> int:
                 "std_log10": s.tolist(),
             }
             if model.has_velocity_model():
-                from pbmdem.impact import VELOCITY_EDGES
-
                 rates = model.encounters(np.array(args.diameters), np.array(args.numbers), args.rpm, check_domain=False)
                 result.update(
                     velocity_edges=VELOCITY_EDGES.tolist(), velocity_fractions=rates.velocity_fractions.tolist()

@@ -16,6 +16,7 @@ import warnings
 
 import numpy as np
 import pandas as pd
+from scipy.special import expit
 from sklearn.base import BaseEstimator, RegressorMixin, clone
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.model_selection import GridSearchCV, GroupKFold, LeaveOneGroupOut
@@ -449,8 +450,6 @@ def _forward(member, X: np.ndarray) -> np.ndarray:
 
 
 def _logistic(a):
-    from scipy.special import expit
-
     expit(a, out=a)
 
 

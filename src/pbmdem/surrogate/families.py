@@ -38,6 +38,7 @@ from sklearn.preprocessing import PolynomialFeatures, StandardScaler
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._threads import single_threaded
+from .ensemble import grouped_splits
 from .errors import require_fitted
 
 log = logging.getLogger(__name__)
@@ -278,8 +279,6 @@ class ResponseSurface(_PerOutputRegressor):
     def fit(self, X, y, groups=None):
         """Choose the degree of every output by grouped CV over ``groups`` (with one candidate or
         fewer than two groups: the lowest candidate), then fit it on all rows."""
-        from .ensemble import grouped_splits
-
         self._check_params()
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=np.float64)
         Y = y.reshape(len(y), -1)

@@ -28,9 +28,11 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from pbmdem.config.granulator import tip_speed as granulator_tip_speed
 from pbmdem.frequency import upper_pairs
 
 from .errors import CollisionTableError
+from .velocity import attach_velocity_bins, bin_counts, fit_speed_law, n_law_parameters, velocity_rows
 
 #: Columns that name a row of the collision table: its run, its class pair and their diameters.
 PAIR_ID_COLUMNS = ("point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j")
@@ -108,8 +110,6 @@ def check_impeller_radius(impeller_radius) -> float:
 
 def tip_speed(rpm, impeller_radius: float):
     """Impeller tip speed (m/s) for a speed in rpm and a radius in m (pbmdem.config's formula)."""
-    from pbmdem.config.granulator import tip_speed as granulator_tip_speed
-
     return granulator_tip_speed(np.asarray(rpm, dtype=float), check_impeller_radius(impeller_radius))
 
 
@@ -429,8 +429,6 @@ def training_data(
     ``granulator.impeller.blade_length``, for the tip-speed feature. ``speed_law`` is the
     impact-speed law fitted to every row's bins (:data:`~pbmdem.surrogate.velocity.SPEED_LAWS`).
     """
-    from .velocity import attach_velocity_bins, bin_counts, fit_speed_law, n_law_parameters, velocity_rows
-
     n_par = n_law_parameters(speed_law)
 
     if velocity_table is not None:

@@ -20,6 +20,9 @@ and :meth:`~CollisionSurrogate.predict_velocity` on collision tables or feature 
 
 from __future__ import annotations
 
+import contextlib
+import copy
+import logging
 import warnings
 
 import numpy as np
@@ -27,7 +30,7 @@ import pandas as pd
 from sklearn.base import BaseEstimator, RegressorMixin, clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from pbmdem.impact import EncounterRates
+from pbmdem.impact import EncounterRates, ImpactRates
 
 from .ensemble import EnsembleMLPRegressorCV
 from .errors import require_fitted
@@ -40,6 +43,9 @@ from .features import (
     pair_table,
 )
 from .velocity import check_speed_law, n_law_parameters, speed_fractions
+from .walls import wall_rates
+
+log = logging.getLogger(__name__)
 
 PHYSICS_OFFSETS = ("cross_section", "none")
 FEATURE_TRANSFORMS = ("log", "none")
@@ -50,6 +56,25 @@ OFFSET_FEATURES = ("d_small", "d_large", "tip_speed")
 
 class OutOfDomainWarning(UserWarning):
     """A prediction was requested outside the training domain of the surrogate."""
+
+
+@contextlib.contextmanager
+def out_of_domain_recorded(where: str, log_each: bool = True):
+    """Collect the surrogate's OutOfDomainWarning messages (its own mechanism for inputs outside
+    the training range) into the yielded list and log each one; every other warning is passed on
+    unchanged. Nothing is silenced: the caller counts and reports what was collected."""
+    found: list[str] = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", OutOfDomainWarning)
+        yield found
+    for w in caught:
+        if issubclass(w.category, OutOfDomainWarning):
+            found.append(str(w.message))
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    if log_each:
+        for message in found:
+            log.warning("%s: surrogate out of its training domain: %s", where, message)
 
 
 class VelocityModelMissingError(RuntimeError):
@@ -436,10 +461,6 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
     def impacts(self, diameters, numbers, rpm: float, check_domain: bool = True):
         """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall impacts per granule
         of the wall models (``wall_models_``, :mod:`pbmdem.surrogate.walls`), for breakage."""
-        from pbmdem.impact import ImpactRates
-
-        from .walls import wall_rates
-
         pairs = self.encounters(diameters, numbers, rpm, check_domain=check_domain)
         return ImpactRates(pairs, wall_rates(self, diameters, numbers, rpm, check_domain=check_domain))
 
@@ -459,8 +480,6 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         (MLP) or predictive quantile (Kriging, RSM) and ``scale`` the calibrated
         ``uncertainty_scale`` (``velocity_uncertainty_scale`` for the impact-speed law). Running
         the PBM once per member gives the spread of PBM-ANN that the uncertainty implies."""
-        import copy
-
         n = self.n_members
         if not 0 <= int(k) < n:
             raise ValueError(f"surrogate member {k!r}: allowed 0 .. {n - 1}")

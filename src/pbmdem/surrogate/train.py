@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES
+from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES, GRID_WALL_VELOCITIES, GRID_WALLS
 
 from ._io import atomic_write
 from .evaluation import METRIC_COLUMNS, cross_validate_models, select_family, summarise
@@ -19,6 +19,7 @@ from .features import training_data
 from .persistence import save_surrogate, sha256_file
 from .plots import empty_plot, parity_plot
 from .settings import FAMILIES, build_baselines, build_families
+from .walls import train_wall_models
 
 log = logging.getLogger(__name__)
 
@@ -39,10 +40,6 @@ def _train_walls(surrogate, selected: str, metrics, tables, settings, impeller_r
     """The wall models (pbmdem.surrogate.walls) of the wall ``tables`` (collisions, impact
     velocities) into ``surrogate.wall_models_``: (``metrics`` with theirs appended, their summary);
     without wall tables (None) ``metrics`` and no summary."""
-    from pbmdem.tables import GRID_WALL_VELOCITIES, GRID_WALLS
-
-    from .walls import train_wall_models
-
     wall_table, wall_velocity_table = tables
     if wall_table is None:
         return metrics, {}

@@ -16,12 +16,16 @@ after the tip speed.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pandas as pd
+from sklearn.base import clone
 
 from pbmdem.impact import N_VELOCITY_BINS, WALLS, WallRates
 
-from .features import pair_features
+from .evaluation import cross_validate_models, summarise
+from .features import pair_features, training_data
 
 #: wall-table columns -> collision-table columns of the diagonal pair
 _RENAME = {"encounter_frequency_per_particle": "encounter_frequency_per_pair"}
@@ -52,8 +56,6 @@ def wall_training_data(
     walls, velocities, wall: str, impeller_radius: float, zero_policy: str, speed_law: str = "lognormal"
 ):
     """:class:`~pbmdem.surrogate.features.TrainingData` of one wall (impact-speed law ``speed_law``)."""
-    from .features import training_data
-
     return training_data(
         wall_collision_table(walls, wall),
         impeller_radius,
@@ -112,12 +114,6 @@ def train_wall_models(walls, velocities, template, candidates: dict, settings: d
     with ``target`` prefixed by the wall (``impeller_encounter_frequency``, ...); wall -> the
     pooled held-out summary of the frequency and the speed law (:func:`~.evaluation.summarise`).
     """
-    import warnings
-
-    from sklearn.base import clone
-
-    from .evaluation import cross_validate_models, summarise
-
     family = next(name for name, model in candidates.items() if model is template)
     models, frames, summaries = {}, [], {}
     for wall in WALLS:

@@ -33,9 +33,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+import yaml
 
+from pbmdem.atomic import write_text
 from pbmdem.config import Granulator, OperatingGrid, rpm_text
 from pbmdem.frequency import pair_counts, pairs_of
+from pbmdem.surrogate.features import make_features, pair_table
 
 #: rounding of proposed class diameters (m) and number fractions
 DIAMETER_STEP = 1e-4
@@ -64,8 +67,6 @@ class Assessment:
 
 def assess(surrogate, rpm: float, intervals: pd.DataFrame) -> list[Assessment]:
     """One Assessment per interval of a PBM-ANN run's intervals.csv."""
-    from pbmdem.surrogate.features import make_features, pair_table
-
     ranges = surrogate.feature_ranges()
     out = []
     for row in intervals.itertuples():
@@ -247,10 +248,6 @@ def fragment(grid: OperatingGrid, proposals: pd.DataFrame) -> dict:
 
 def write_fragment(grid: OperatingGrid, proposals: pd.DataFrame, path, source: str) -> None:
     """`proposals` as a YAML config fragment with a header saying where it comes from and how to use it."""
-    import yaml
-
-    from pbmdem.atomic import write_text
-
     lines = [
         f"# Operating points proposed by pbmdem's active learning from {source}.",
         "# Add them to the grid with (only the new DEM points run, then the surrogate and what follows):",

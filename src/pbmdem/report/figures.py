@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from pbmdem.plotting import pyplot, save_figure, size_distribution
+from pbmdem.plotting import log_ticks, pyplot, save_figure, size_distribution
 from pbmdem.readers import InputFileError
 
 from .display import MM, PERCENT
@@ -56,13 +56,6 @@ def _column(frame: pd.DataFrame, name: str, what: str) -> np.ndarray:
     if name not in frame.columns:
         raise InputFileError(f"{what}: missing column {name!r}; present: {list(frame.columns)}")
     return frame[name].to_numpy(float)
-
-
-def _plain_log(ax, axes: str = "x") -> None:
-    """Readable log-axis tick labels (no overlapping minor labels): `pbmdem.plotting.log_ticks`."""
-    from pbmdem.plotting import log_ticks
-
-    log_ticks(ax, axes)
 
 
 def _figure_legend(fig, ax, ncol: int = 4) -> None:
@@ -294,7 +287,7 @@ def collision_frequency(frequencies: pd.DataFrame, pairs: pd.DataFrame, rpm: str
         fontsize=8,
     )
     right.grid(alpha=0.3, which="both")
-    _plain_log(right, "xy")
+    log_ticks(right, "xy")
     right.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     return fig

@@ -11,7 +11,7 @@ from pbmdem.report import words
 
 def test_every_template_parses():
     names = words.ENV.list_templates(extensions=["j2"])
-    assert {"findings.rst.j2", "speed.j2", "feed.j2", "lumping.j2", "target.j2"} <= set(names)
+    assert {"findings.rst.j2", "speed.j2", "feed.j2", "lumping.j2", "target.j2", "tables.j2"} <= set(names)
     for name in names:
         words.ENV.get_template(name)
 

@@ -58,11 +58,6 @@ def _column(frame: pd.DataFrame, name: str, what: str) -> np.ndarray:
     return frame[name].to_numpy(float)
 
 
-def _plain_log(ax, axes: str = "x") -> None:
-    """Readable log-axis tick labels (no overlapping minor labels): `pbmdem.plotting.log_ticks`."""
-    log_ticks(ax, axes)
-
-
 def _figure_legend(fig, ax, ncol: int = 4) -> None:
     handles, labels = ax.get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
@@ -292,7 +287,7 @@ def collision_frequency(frequencies: pd.DataFrame, pairs: pd.DataFrame, rpm: str
         fontsize=8,
     )
     right.grid(alpha=0.3, which="both")
-    _plain_log(right, "xy")
+    log_ticks(right, "xy")
     right.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     return fig

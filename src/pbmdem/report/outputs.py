@@ -19,7 +19,7 @@ from pbmdem.tables import COMPARISON, GRID_PAIRS
 from pbmdem.validation.feed_check import CHECK_COLUMNS
 from pbmdem.validation.results import load_speed, run_folder
 
-from . import figures
+from . import figures, words
 from .breakage import breakage_figure, breakage_words, clipping_words
 from .display import write_table
 from .findings import feed_figure, findings_rst, image_directive, speed_figure
@@ -37,6 +37,15 @@ def _require(frame, columns, path: Path, what: str) -> None:
     missing = [c for c in columns if c not in frame.columns]
     if missing:
         raise InputFileError(f"{what} {path}: missing column(s) {missing}; present: {list(frame.columns)}")
+
+
+def _write(csv, html, frame, name: str, numbers: dict | None = None, caption: str | None = None, **kwargs) -> None:
+    """A display table with its title and caption from the template tables.j2 (`numbers` fill them;
+    `caption`: a caption written elsewhere)."""
+    numbers = numbers or {}
+    if caption is None:
+        caption = words.macro("tables", "caption")(name, numbers)
+    write_table(csv, html, frame, words.macro("tables", "title")(name, numbers), caption, **kwargs)
 
 
 def write_speed(*, validation_dir, rpm: str, replicates: int, process: dict, bands, model, out: dict) -> None:
@@ -77,11 +86,12 @@ def write_speed(*, validation_dir, rpm: str, replicates: int, process: dict, ban
     pairs = surrogate_on_dem_samples(speed, load_surrogate(model))
     figures.save(figures.collision_frequency(frequency, pairs, rpm), out["frequency"])
     domain = out_of_domain(speed)
-    write_table(
+    _write(
         out["domain_csv"],
         out["domain_html"],
         domain,
-        f"Surrogate training domain, {rpm} rpm",
+        "out_of_domain",
+        {"rpm": rpm},
         out_of_domain_sentence(rpm, domain),
         keys=2,
     )
@@ -112,20 +122,13 @@ def write_settings(
         dem_replicates,
         dem_sampling_time,
     )
-    write_table(
-        out["settings_csv"],
-        out["settings_html"],
-        settings,
-        "Process settings",
-        "The batch that PBM-DEM, PBM-ANN and PBM-constant run at every validation speed.",
-    )
-    write_table(
+    _write(out["settings_csv"], out["settings_html"], settings, "settings")
+    _write(
         out["speeds_csv"],
         out["speeds_html"],
         speeds(machine, validation_rpm, grid_rpm),
-        "Impeller speeds",
-        f"Tip speed 2 pi R rpm / 60 and Froude number omega^2 R / g at the blade tip "
-        f"(R = {1e3 * machine.impeller.tip_radius:g} mm).",
+        "speeds",
+        {"tip_radius_mm": 1e3 * machine.impeller.tip_radius},
     )
 
 
@@ -133,17 +136,16 @@ def write_comparison(*, comparison, out: dict) -> None:
     """The comparison table in display form and the targets. `out`: comparison_<name>_csv and
     comparison_<name>_html for name in d50, tails, accuracy, cost, domain; targets_csv, targets_html."""
     table = COMPARISON.read(comparison)
-    titles = {
-        "d50": "d50 at the start and the end of the batch",
-        "tails": "d10 and d90 at the end of the batch",
-        "accuracy": "Accuracy against PBM-DEM",
-        "cost": "Computing time",
-        "domain": "Surrogate training domain",
-    }
     for name, frame in comparison_tables(table).items():
-        write_table(out[f"comparison_{name}_csv"], out[f"comparison_{name}_html"], frame, titles[name])
-    write_table(
-        out["targets_csv"], out["targets_html"], targets(table), "Targets", " ".join(target_sentences(table)), keys=3
+        _write(out[f"comparison_{name}_csv"], out[f"comparison_{name}_html"], frame, f"comparison_{name}")
+    _write(
+        out["targets_csv"],
+        out["targets_html"],
+        targets(table),
+        "targets",
+        {},
+        " ".join(target_sentences(table)),
+        keys=3,
     )
 
 
@@ -151,23 +153,22 @@ def write_design_tables(*, design, check, third_key: str, confidence: float, out
     """The design space and the calibration check in display form. `out`: design_space_table_csv,
     design_space_table_html, calibration_check_csv, calibration_check_html."""
     table = read_table(design, "design-space table", columns=("rpm", "liquid_rate", third_key, "spec_status"))
-    counts = ", ".join(f"{n} {s.replace('_', ' ')}" for s, n in table.spec_status.value_counts().items())
-    write_table(
+    _write(
         out["design_space_table_csv"],
         out["design_space_table_html"],
         design_space_table(table, third_key),
-        "Design space",
-        f"{len(table)} grid points: {counts}. A point meets the specification only if every ensemble member does.",
+        "design_space",
+        {"points": len(table), "counts": list(table.spec_status.value_counts().items())},
         keys=3,
     )
     recovery = read_table(check, "calibration check", columns=("case", "parameter", "true", "estimate", "recovered"))
     recovered = int(recovery.recovered.astype(str).str.lower().eq("true").sum())
-    write_table(
+    _write(
         out["calibration_check_csv"],
         out["calibration_check_html"],
         calibration_check_table(recovery, confidence),
-        "Parameter estimation on data of known parameters",
-        f"{recovered} of {len(recovery)} true values inside their interval.",
+        "calibration_check",
+        {"recovered": recovered, "cases": len(recovery)},
         keys=2,
     )
 
@@ -177,13 +178,7 @@ def write_provenance(*, config: dict, settings: dict, basedir, runs, metadata, o
     `Config.sha256()`); `settings`: the same without the execution settings; `basedir`: the
     project; `workdir`: where the workflow ran (recorded, not compared). `out`: csv, html."""
     table = provenance(Config.from_mapping(config).sha256(), settings, basedir, runs, metadata, workdir=workdir)
-    write_table(
-        out["csv"],
-        out["html"],
-        table,
-        "Provenance",
-        "Configuration hashes, the workflow's git commit and the versions of the software.",
-    )
+    _write(out["csv"], out["html"], table, "provenance")
 
 
 def write_findings(
@@ -287,16 +282,7 @@ def _lumping_section(cases, liquid, info, out: dict) -> tuple[str, ...]:
             raise InputFileError(f"lumping study's cost {info} cannot be read as JSON: {exc}") from None
     save_figure(lumping_figure(table, per_size), out["lumping_png"])
     turn1, turn2 = turn_speeds(table)
-    turns = " and ".join(f"{t:g} rpm" if t is not None else "none" for t in (turn1, turn2))
-    write_table(
-        out["lumping_csv"],
-        out["lumping_html"],
-        lumping_table(table),
-        "What lumping leaves out: final sizes of the 1-D and the 2-D PBM",
-        f"PBM-ANN (the surrogate's mean) with the lumped and the size x liquid PBM on the same cases; the speed "
-        f"above which the granules get smaller: {turns} (1-D and 2-D). Relative differences (2-D - 1-D) / 1-D.",
-        keys=2,
-    )
+    _write(out["lumping_csv"], out["lumping_html"], lumping_table(table), "lumping", {"turns": [turn1, turn2]}, keys=2)
     return (
         lumping_words(table, per_size, facts),
         "",

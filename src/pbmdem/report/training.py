@@ -11,7 +11,7 @@ feeds, and how well the surrogate predicts the points it did not see.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import pandas as pd
@@ -72,11 +72,7 @@ def training_words(training: TrainingSet, meta: dict, table: str = "results/dem/
     )
     return words.paragraph(
         "training",
-        runs=training.runs,
-        points=training.points,
-        replicates=training.replicates,
-        speeds=training.speeds,
-        feeds=training.feeds,
+        **asdict(training),
         table=table,
         family=MODEL_LABELS.get(str(family), str(family)),
         scored=bool(summary),

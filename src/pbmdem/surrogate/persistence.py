@@ -11,11 +11,12 @@
 (:class:`SurrogateLoadError`), another format version, scikit-learn major.minor or velocity bins
 (:class:`IncompatibleVersionError`: the file, the version found and the one expected), a model file
 whose SHA-256 differs from the sidecar's (:class:`TamperedModelError`) and any type outside
-:data:`ALLOWED_TYPES` (:class:`UntrustedTypesError`). The allow-list is checked against every type
-in the file's schema because skops' own trust is wider (since skops 0.10 every scikit-learn
-estimator: a ``LinearRegression`` would load); the types skops does not trust by itself
-(``skops.io.get_untrusted_types``: the project's classes, the Gaussian-process kernels) are then
-passed as ``trusted``. :func:`save_surrogate` checks its file the same way before moving it into place.
+:data:`ALLOWED_TYPES` (:class:`UntrustedTypesError`). Every type named in the file's schema is
+checked, because skops' own trust is wider (since skops 0.10 every scikit-learn estimator: a
+``LinearRegression`` would load); they are then all passed as ``trusted`` (skops audits the file
+again while loading: a type it finds that the schema did not name is refused too).
+:func:`save_surrogate` checks its file before moving it into place: the schema's types and those
+``skops.io.get_untrusted_types`` reports (the project's classes, the Gaussian-process kernels).
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ import scipy
 import sklearn
 import skops
 import skops.io as sio
+from skops.io.exceptions import UntrustedTypesFoundException
 
 from pbmdem.atomic import atomic_path, write_json
 from pbmdem.impact import VELOCITY_EDGES
@@ -175,7 +177,8 @@ def save_surrogate(
     metadata_path = metadata_path_for(model_path) if metadata_path is None else Path(metadata_path)
     with atomic_path(model_path) as tmp:
         sio.dump(surrogate, tmp, compression=zipfile.ZIP_DEFLATED)
-        trusted_types(tmp, model_path)  # never write a file that load_surrogate refuses
+        # never write a file that load_surrogate refuses
+        refuse_unknown(schema_types(tmp) | set(sio.get_untrusted_types(file=tmp)), model_path)
     walls = getattr(surrogate, "wall_models_", None) or {}
     meta = {
         "format": FORMAT,
@@ -228,15 +231,12 @@ def schema_types(model_path: str | os.PathLike) -> set[str]:
     return found
 
 
-def trusted_types(path: str | os.PathLike, name: str | os.PathLike) -> list[str]:
-    """The types of the skops file at `path` that skops does not trust by itself, once every type
-    in it is known to be in :data:`ALLOWED_TYPES` (else :class:`UntrustedTypesError` naming `name`)."""
-    bad = sorted(schema_types(path) - ALLOWED_TYPES)
-    untrusted = [] if bad else sio.get_untrusted_types(file=path)
-    bad += sorted(set(untrusted) - ALLOWED_TYPES)
+def refuse_unknown(types: set[str], name: str | os.PathLike) -> list[str]:
+    """`types` (sorted) if they are all in :data:`ALLOWED_TYPES`, else :class:`UntrustedTypesError` naming `name`."""
+    bad = sorted(set(types) - ALLOWED_TYPES)
     if bad:
         raise UntrustedTypesError(f"{name} contains types outside the allow-list (ALLOWED_TYPES), refused: {bad}")
-    return untrusted
+    return sorted(types)
 
 
 def _require(meta: dict, key: str, kind, where: str):
@@ -302,7 +302,12 @@ def load_surrogate(model_path: str | os.PathLike, metadata_path: str | os.PathLi
         raise IncompatibleVersionError(
             f"{metadata_path}: velocity bins {edges} differ from this version's pbmdem.impact.VELOCITY_EDGES{RETRAIN}"
         )
-    surrogate = sio.load(model_path, trusted=trusted_types(model_path, model_path))
+    # every type in the file is allowed, so all are trusted (the loader need not audit it twice)
+    trusted = refuse_unknown(schema_types(model_path), model_path)
+    try:
+        surrogate = sio.load(model_path, trusted=trusted)
+    except UntrustedTypesFoundException as exc:  # a type skops sees that the schema does not name
+        raise UntrustedTypesError(f"{model_path} contains types outside the allow-list, refused: {exc}") from None
     names = [str(n) for n in getattr(surrogate, "feature_names_in_", [])]
     if not isinstance(surrogate, CollisionSurrogate) or names != list(FEATURE_NAMES):
         raise IncompatibleVersionError(

@@ -67,9 +67,7 @@ def stored_intervals(rep_dir: Path) -> list[dict]:
         info = read_json(folder / "interval.json", "coupling interval record")
         sample = info["sample"]
         reused = info.get("dem_reused_from_interval")
-        run_dir = (
-            folder / "dem" if reused is None or reused != reused else rep_dir / f"interval_{int(reused):02d}" / "dem"
-        )
+        run_dir = folder / "dem" if reused is None else rep_dir / f"interval_{int(reused):02d}" / "dem"
         d = np.asarray(sample["diameters"], float)
         out.append({"d": d, "n": np.asarray(sample["counts"], float), "rates": dem_rates(run_dir, d.size)})
     if not out:

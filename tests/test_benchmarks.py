@@ -66,6 +66,7 @@ QUICK = {
         r"all surrogate +[\d.]+ \([\d.]+-[\d.]+\)",
         r"DEM pair_speed only +[\d.]+",
         r"all DEM reproduces the stored PBM-DEM loops: max \|difference\| of final d10/d50/d90 [\d.e+-]+",
+        r"all surrogate reproduces the stored PBM-ANN batch: max \|difference\|",
     ),
     "bench_sensitivity.py --quick": (
         r"ranking by ST of d50 \(first to last\)",

@@ -50,7 +50,8 @@ from pbmdem.coupling.class_source import ClassFrequencySource
 from pbmdem.coupling.loop import run_loop
 from pbmdem.coupling.providers import SurrogateProvider, dem_rates, surrogate_needs
 from pbmdem.impact import EncounterRates, ImpactRates, WallRates
-from pbmdem.readers import read_json
+from pbmdem.readers import InputFileError, read_json
+from pbmdem.surrogate.persistence import SurrogateLoadError
 
 ROOT = Path(__file__).resolve().parents[1]
 #: the provider's inputs, in the order of the table
@@ -152,10 +153,13 @@ def replay_speed(results: Path, rpm: str, model_path: Path) -> dict:
         raise SystemExit(
             f"{speed_dir}/pbm_dem: no replicate loops rep*/ (validation speeds: rpm* in {results}/validation)"
         )
+    unfinished = [rep.name for rep in reps if not (rep / "summary.csv").exists()]
+    if unfinished:
+        raise SystemExit(f"{speed_dir}/pbm_dem: loop(s) {unfinished} not finished (no summary.csv)")
+    stored = {rep.name: (stored_loop(rep), stored_intervals(rep), final_sizes(rep / "summary.csv")) for rep in reps}
     from pbmdem.surrogate import load_surrogate
 
     model = load_surrogate(model_path)
-    stored = {rep.name: (stored_loop(rep), stored_intervals(rep), final_sizes(rep / "summary.csv")) for rep in reps}
     rows, check = [], []
     t0 = time.perf_counter()
     for label, from_dem in combinations():
@@ -302,7 +306,13 @@ def main(argv=None) -> None:
         model = args.model or _model(args.results)
         tables = []
         for rpm in args.rpm:
-            out = replay_speed(args.results, rpm, model)
+            try:
+                out = replay_speed(args.results, rpm, model)
+            except (
+                InputFileError,
+                SurrogateLoadError,
+            ) as exc:  # a missing or broken file of the run: named, no traceback
+                raise SystemExit(f"bench_replay.py: {exc}") from None
             tables.append(out["table"].assign(rpm=rpm))
         if args.csv:
             pd.concat(tables).to_csv(args.csv, index=False)

@@ -20,7 +20,9 @@ loops. "All DEM" must reproduce the stored PBM-DEM loops: the replay prints the 
 of its final d10/d50/d90 from the stored summary.csv and in how many intervals the replay's sample
 was the stored one (the same code as the run that wrote them gives 0 and all of them).
 
-Run: .venv/bin/python benchmarks/bench_replay.py --results /work/base/results --rpm 900 1200
+Run: .venv/bin/python benchmarks/bench_replay.py --results results --rpm 750 900 1200 [--model m.skops]
+     [--csv replays.csv] [--finished-only] (--finished-only: a run still running, its finished
+     loops only, said in the output; otherwise an unfinished loop is an error naming it.)
 About 1 s per replayed batch on the default configuration (10 combinations x 3 replicates per
 speed). Measured numbers in docs/validation.md ("Why PBM-ANN misses above 900 rpm") and
 docs/measurements.md.
@@ -145,7 +147,7 @@ def combinations() -> list[tuple[str, frozenset]]:
     return rows
 
 
-def replay_speed(results: Path, rpm: str, model_path: Path) -> dict:
+def replay_speed(results: Path, rpm: str, model_path: Path, finished_only: bool = False) -> dict:
     """Replay every stored PBM-DEM loop of one speed in every combination; prints the table."""
     speed_dir = results / "validation" / f"rpm{rpm}"
     reps = sorted((speed_dir / "pbm_dem").glob("rep*"))
@@ -154,8 +156,11 @@ def replay_speed(results: Path, rpm: str, model_path: Path) -> dict:
             f"{speed_dir}/pbm_dem: no replicate loops rep*/ (validation speeds: rpm* in {results}/validation)"
         )
     unfinished = [rep.name for rep in reps if not (rep / "summary.csv").exists()]
-    if unfinished:
+    if unfinished and not (finished_only and len(unfinished) < len(reps)):
         raise SystemExit(f"{speed_dir}/pbm_dem: loop(s) {unfinished} not finished (no summary.csv)")
+    if unfinished:
+        print(f"rpm {rpm}: loop(s) {unfinished} not finished: replaying the finished ones only (--finished-only)")
+        reps = [rep for rep in reps if rep.name not in unfinished]
     stored = {rep.name: (stored_loop(rep), stored_intervals(rep), final_sizes(rep / "summary.csv")) for rep in reps}
     from pbmdem.surrogate import load_surrogate
 
@@ -294,6 +299,9 @@ def main(argv=None) -> None:
     parser.add_argument("--rpm", nargs="+", help="validation speeds to replay (rpm<rpm>/ of results/validation)")
     parser.add_argument("--model", type=Path, help="surrogate file (default: the only results/surrogate/*.skops)")
     parser.add_argument("--csv", type=Path, help="write every replay's final sizes here")
+    parser.add_argument(
+        "--finished-only", action="store_true", help="replay the finished loops of a run still running (said)"
+    )
     parser.add_argument("--quick", action="store_true", help="synthetic stored loops, seconds (the suite's smoke test)")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
@@ -307,7 +315,7 @@ def main(argv=None) -> None:
         tables = []
         for rpm in args.rpm:
             try:
-                out = replay_speed(args.results, rpm, model)
+                out = replay_speed(args.results, rpm, model, args.finished_only)
             except (
                 InputFileError,
                 SurrogateLoadError,

@@ -62,6 +62,12 @@ QUICK = {
     ),
     "bench_porosity_strength.py --quick": (r"variant +rpm +d10 +d50 +d90", r"n=2 +1200 +[\d.]+ +[\d.]+"),
     "bench_ranks.py --quick": (r"ranks 2: LIGGGHTS wall [\d.]+ s", r"2 vs 1 ranks: difference [+-]\d+"),
+    "bench_replay.py --quick": (
+        r"all surrogate +[\d.]+ \([\d.]+-[\d.]+\)",
+        r"DEM pair_speed only +[\d.]+",
+        r"all DEM reproduces the stored PBM-DEM loops: max \|difference\| of final d10/d50/d90 [\d.e+-]+",
+        r"all surrogate reproduces the stored PBM-ANN batch: max \|difference\|",
+    ),
     "bench_sensitivity.py --quick": (
         r"ranking by ST of d50 \(first to last\)",
         r"wall ms per batch \(ensemble mean, 20 warm batches in one process\): min [\d.]+, median [\d.]+, max [\d.]+",

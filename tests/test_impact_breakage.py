@@ -9,6 +9,7 @@ from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, EncounterRates, Impac
 from pbmdem.pbm.errors import PBMInputError
 from pbmdem.pbm.impact_breakage import ImpactSelection, critical_speed, selection_rates
 from pbmdem.pbm.kernels import KernelInput
+from pbmdem.readers import InputFileError
 
 RHO, Y, ST = 1000.0, 1.0e4, 0.2  # v* = sqrt(2 * 1e4 * 0.2 / 1000) = 2 m/s
 
@@ -442,3 +443,33 @@ def test_the_compiled_selection_equals_the_numpy_form_on_random_impacts(spread):
     out = np.empty((v.size, N_VELOCITY_BINS))
     _compiled.breaking_probability(v, spread, VELOCITY_EDGES, out)
     np.testing.assert_allclose(out, breaking_probability(v, spread), rtol=1e-12, atol=1e-15)
+
+
+def test_a_coupling_intervals_dem_run_is_read_as_pbm_dem_hands_it_to_the_pbm(tmp_path):
+    """pbmdem.coupling.providers.dem_rates: the four tables of one DEM run (what PBM-DEM reads at
+    each interval, and what benchmarks/bench_replay.py reads back from a finished run)."""
+    from pbmdem.coupling.providers import dem_rates
+    from pbmdem.surrogate.synthetic import make_synthetic_tables, make_synthetic_wall_tables
+
+    pairs, velocities = make_synthetic_tables(
+        0.1, rpms=(600,), distributions={"feed": (0.625, 0.375)}, diameters=(0.002, 0.004),
+        n_total_range=(80, 80), law=lambda *a: 0.05, n_replicates=1, noise_log10=0.0,
+    )  # fmt: skip
+    walls, wall_velocities = make_synthetic_wall_tables(pairs, 0.1)
+    frames = dict(zip(("collisions", "impact_velocity", "wall_collisions", "wall_impact_velocity"),
+                      (pairs, velocities, walls, wall_velocities), strict=True))  # fmt: skip
+    for name, frame in frames.items():
+        frame = frames[name] = frame.assign(replicate=0)
+        for col in {"collisions", "encounters"} & set(frame):  # whole counts in a run's tables
+            frame[col] = frame[col].round().astype(int)
+        frame.to_csv(tmp_path / f"{name}.csv", index=False)
+    rates = dem_rates(tmp_path, 2)
+    np.testing.assert_allclose(rates.pairs.frequency, np.full((2, 2), 0.05))
+    # the pair (0, 1)'s fractions are its encounters per bin over all of them
+    counts = frames["impact_velocity"].query("class_i == 0 and class_j == 1")["encounters"].to_numpy(float)
+    np.testing.assert_allclose(rates.pairs.velocity_fractions[1, 0], counts / counts.sum())
+    bowl = frames["wall_collisions"].query("wall == 'bowl'").sort_values("class_i")
+    np.testing.assert_allclose(rates.walls.of("bowl")[0], bowl["encounter_frequency_per_particle"])
+    (tmp_path / "wall_collisions.csv").unlink()
+    with pytest.raises(InputFileError, match="wall_collisions.csv"):
+        dem_rates(tmp_path, 2)

@@ -37,6 +37,22 @@ from .sample import DemSample
 _NAME_KEYS = ("distribution", "point_id")
 
 
+def dem_rates(run_dir: Path, k: int) -> ImpactRates:
+    """The impacts of the K classes of one DEM run of a coupling interval, from the run's tables in
+    `run_dir` (collisions.csv, impact_velocity.csv, wall_collisions.csv, wall_impact_velocity.csv):
+    what PBM-DEM hands to the PBM (benchmarks/bench_replay.py reads the stored intervals with it)."""
+    table = RUN_PAIRS.read(run_dir / "collisions.csv", "collision table of a coupling interval")
+    velocities = RUN_VELOCITIES.read(run_dir / "impact_velocity.csv", "impact-velocity table of a coupling interval")
+    walls = RUN_WALLS.read(run_dir / "wall_collisions.csv", "wall-collision table of a coupling interval")
+    wall_velocities = RUN_WALL_VELOCITIES.read(
+        run_dir / "wall_impact_velocity.csv", "wall impact-velocity table of a coupling interval"
+    )
+    return ImpactRates(
+        EncounterRates(matrix_from_table(table, k), velocity_fractions_from_table(velocities, k)),
+        wall_rates_from_tables(walls, wall_velocities, k),
+    )
+
+
 class DemProvider:
     """Class encounter frequencies from a LIGGGHTS run of the representative sample.
 
@@ -75,19 +91,7 @@ class DemProvider:
             reused_from, run_dir = earlier
             summary = read_json(run_dir / "summary.json", "DEM run summary of a coupling interval")
             info = {"dem_wall_time_s": 0.0, "dem_cpu_time_s": 0.0, "dem_reused_from_interval": reused_from}
-        table = RUN_PAIRS.read(run_dir / "collisions.csv", "collision table of a coupling interval")
-        velocities = RUN_VELOCITIES.read(
-            run_dir / "impact_velocity.csv", "impact-velocity table of a coupling interval"
-        )
-        walls = RUN_WALLS.read(run_dir / "wall_collisions.csv", "wall-collision table of a coupling interval")
-        wall_velocities = RUN_WALL_VELOCITIES.read(
-            run_dir / "wall_impact_velocity.csv", "wall impact-velocity table of a coupling interval"
-        )
-        k = len(sample.diameters)
-        rates = ImpactRates(
-            EncounterRates(matrix_from_table(table, k), velocity_fractions_from_table(velocities, k)),
-            wall_rates_from_tables(walls, wall_velocities, k),
-        )
+        rates = dem_rates(run_dir, len(sample.diameters))
         return rates, {
             **info,
             "dem_particles": summary["n_particles"],

@@ -3,22 +3,21 @@
 For each grid point and replicate: the bed deck (1 rank and dem.mpi_ranks), the fresh deck and the
 deck from a settled bed; for each validation speed: the coupled loop's call with the largest
 sample (dem.max_particles), as the Snakefile's limit check plans it; and each plan's record
-(`to_dict`, written to plan.json and bed.json). Works with the renderer's
-API before (point, plan) and after (plan) issue 36.
+(`to_dict`, written to plan.json and bed.json). Used to show that a change of the planner or the
+renderer leaves every deck byte-identical: render with both versions, then `diff -r`.
 
     python benchmarks/render_decks.py CONFIG OUT_DIR
+    python benchmarks/render_decks.py --quick     (config/test.yaml into a temporary folder)
 """
 
-import inspect
 import json
 import sys
+import tempfile
 from pathlib import Path
 
 from pbmdem.config import load_config
 from pbmdem.dem import deck
 from pbmdem.dem.plan import class_counts, plan_point
-
-NEW_API = "point" not in inspect.signature(deck.render_granulator).parameters
 
 
 def write_decks(cfg, out: Path) -> int:
@@ -39,18 +38,24 @@ def write_decks(cfg, out: Path) -> int:
         record = {"plan": plan.to_dict(), "bed": plan.bed.to_dict()}
         (out / f"{stem}_plan.json").write_text(json.dumps(record, indent=1))
         for r in sorted({1, ranks}):
-            bed = deck.render_bed(plan.bed, r) if NEW_API else deck.render_bed(point, plan.bed, r)
+            bed = deck.render_bed(plan.bed, r)
             (out / f"{stem}_bed_{r}rank.in").write_text(bed)
             n += 1
         for from_bed in (False, True):
-            args = (plan, ranks) if NEW_API else (point, plan, ranks)
-            text = deck.render_granulator(*args, from_bed=from_bed)
+            text = deck.render_granulator(plan, ranks, from_bed=from_bed)
             (out / f"{stem}_{'from_bed' if from_bed else 'fresh'}.in").write_text(text)
             n += 1
     return n
 
 
-if __name__ == "__main__":
-    config, out = Path(sys.argv[1]), Path(sys.argv[2])
+def main(config: Path, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     print(f"{config}: {write_decks(load_config(config), out)} decks in {out}")
+
+
+if __name__ == "__main__":
+    if sys.argv[1:] == ["--quick"]:
+        with tempfile.TemporaryDirectory() as tmp:
+            main(Path(__file__).resolve().parents[1] / "config" / "test.yaml", Path(tmp))
+    else:
+        main(Path(sys.argv[1]), Path(sys.argv[2]))

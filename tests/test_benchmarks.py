@@ -28,6 +28,7 @@ BENCHMARKS = ROOT / "benchmarks"
 HELPERS = {"quick.py"}
 #: command (after ``python benchmarks/``) -> regular expressions its output must contain
 QUICK = {
+    "render_decks.py --quick": (r"test\.yaml: [1-9]\d* decks in ",),
     "bench_breakage_tail.py --quick": (r"gengamma held out s=0\.5 +pairs", r"number-weighted selection rate S"),
     "bench_calibration.py --quick": (r"PBM-constant \+ noise, 2 noise seeds", r"pbm\.aggregation\.beta0 +2 "),
     "bench_dem.py --quick": (

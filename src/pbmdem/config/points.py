@@ -100,7 +100,7 @@ class ExtraPoint(Settings):
 class OperatingGrid(Settings):
     """The DEM grid: every impeller speed (rpm) with every named size distribution, single extra
     points (the active learning's proposals) and the points of a space-filling design (each a
-    distribution at one speed, `pbmdem.dem.design`)."""
+    distribution at one speed, tests/design_points.py)."""
 
     impeller_rpm: Unique[Rpm] = setting(..., "impeller speeds of the full grid", "rpm", min_length=1)
     size_distributions: Unique[Name] = setting(..., "size distributions of the full grid", min_length=1)
@@ -114,7 +114,7 @@ class OperatingGrid(Settings):
         ge=1,
     )
     design_points: Unique[ExtraPoint] = setting(
-        (), "points of a space-filling design over the surrogate's features (pbmdem.dem.design, docs/dem.md)"
+        (), "points of a space-filling design over the surrogate's features (tests/design_points.py, docs/dem.md)"
     )
     design_replicates: int | None = setting(None, "DEM runs per design point (null: dem.replicates)", ge=1, le=1000)
 

@@ -5,7 +5,7 @@
   constant c_ij, 600 rpm, 'fine'), wall time of the whole call (settings, grid, run), with the
   number of steps and what limited them, and its d10 / d50 / d90;
 * PBM-ANN: the coupled loop of the config (``validation.coupling_intervals`` = 6 intervals) with
-  a small surrogate trained here on ``pbmdem.surrogate.synthetic.make_synthetic_tables`` (the
+  a small surrogate trained here on ``make_synthetic_tables`` of tests/synthetic_tables.py (the
   config's ``surrogate:`` settings with one hyperparameter candidate: 5 + 5 MLP members), split
   into the surrogate's time (``provider_wall_time_s``: one ``encounters`` call per interval with
   its out-of-domain check), the PBM's time (``pbm_wall_time_s``) and the rest of ``run_loop``

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))  # the verification harness lives with the tests
 RPM = 600.0
 
 _BUILD_PROBE = r"""
@@ -105,7 +106,8 @@ def build_cost() -> None:
 
 
 def accuracy(qs=(1, 2, 3, 4)) -> None:
-    from pbmdem.pbm import verification2d as v2
+    import pbm_verification2d as v2
+
     from pbmdem.pbm.grid import Grid
     from pbmdem.pbm.liquid_grid import LiquidGrid
 

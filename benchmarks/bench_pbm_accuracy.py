@@ -44,8 +44,10 @@ test, about 20 s: q = 1, 2, 4, the grid convergence up to q = 16)
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 from scipy.integrate import IntegrationWarning
@@ -53,9 +55,11 @@ from scipy.integrate import IntegrationWarning
 from pbmdem.config import Solver
 from pbmdem.pbm import ConstantKernel, GranulationPBM, Grid, GridOverflowError, State, SumKernel, surface_fraction
 from pbmdem.pbm import analytical as an
-from pbmdem.pbm import verification as ver
 from pbmdem.pbm.breakage import Breakage, PowerLawSelection
 from pbmdem.pbm.kernels import Kernel
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the verification harness
+import pbm_verification as ver  # noqa: E402 (found on the tests folder added above)
 
 
 class ProductKernel(Kernel):

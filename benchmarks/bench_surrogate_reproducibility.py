@@ -9,7 +9,7 @@ every family's held-out pooled R2 under every setting. Usage:
 
     .venv/bin/python benchmarks/bench_surrogate_reproducibility.py [collisions.csv impact_velocity.csv] [--quick]
 
-Without tables, the synthetic tables of pbmdem.surrogate.synthetic are used. ``--quick`` (the
+Without tables, the synthetic tables of tests/synthetic_tables.py are used. ``--quick`` (the
 suite's smoke test, about 20 s): config/test.yaml with 2 grouped folds and Kriging without
 restarts, the synthetic tables of benchmarks/quick.py, and two settings (QUICK_SETTINGS).
 """
@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the synthetic tables live with the tests
 KERNELS = ("default", "Haswell", "Prescott")
 THREADS = (1, 2)
 #: the settings of ``--quick`` (kernel, threads): one against another kernel and thread count
@@ -92,7 +93,7 @@ def main(argv: list[str]) -> None:
         elif args.tables:
             tables = args.tables
         else:
-            from pbmdem.surrogate.synthetic import make_synthetic_tables
+            from synthetic_tables import make_synthetic_tables
 
             t, v = make_synthetic_tables(0.0265, rpms=(300, 600, 1200), sample_velocities=True)
             tables = [Path(tmp) / "c.csv", Path(tmp) / "v.csv"]

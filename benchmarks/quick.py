@@ -5,7 +5,7 @@ runs every one); its numbers are for the machinery, not for science. Where a ben
 workflow's outputs, this module makes small stand-ins with known laws:
 
 * :func:`dem_tables`: the grid tables of ``results/dem`` (pairs, impact speeds, walls and their
-  impact speeds) from :mod:`pbmdem.surrogate.synthetic`, for the tiny configuration's impeller;
+  impact speeds) from tests/synthetic_tables.py, for the tiny configuration's impeller;
 * :func:`dem_grid`: a real (tiny) ``results/dem``: LIGGGHTS runs of one point of the tiny
   configuration, replicated, from settled beds, tabulated as the workflow's collision_tables and
   speed_response rules do;
@@ -19,11 +19,13 @@ Not part of the package: src/pbmdem holds the product; this is a benchmark helpe
 
 from __future__ import annotations
 
+import sys
 import time
 import warnings
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))  # the synthetic tables live with the tests
 #: the tiny configuration of the tests: a 30 mm bowl, a few hundred particles
 TEST_CONFIG = ROOT / "config" / "test.yaml"
 #: synthetic DEM grid: speeds, class diameters (m) and feeds (number fractions) that span the tiny
@@ -52,12 +54,12 @@ def config(path: str | Path = TEST_CONFIG):
 
 def dem_tables(folder: str | Path, cfg=None, seed: int = 0) -> Path:
     """The four grid tables of a DEM grid (``TABLE_FILES``) written to ``folder`` and returned:
-    synthetic tables (:mod:`pbmdem.surrogate.synthetic`: a power law for the encounter frequency,
-    log-normal impact speeds, walls by :func:`~pbmdem.surrogate.synthetic.wall_law`) for the
+    synthetic tables (tests/synthetic_tables.py: a power law for the encounter frequency,
+    log-normal impact speeds, walls by `synthetic_tables.wall_law`) for the
     impeller of ``cfg`` (default: the tiny configuration), speeds :data:`RPMS`, sizes :data:`DIAMETERS`."""
     from functools import partial
 
-    from pbmdem.surrogate.synthetic import (
+    from synthetic_tables import (
         CONTACTS_PER_ENCOUNTER,
         make_synthetic_tables,
         make_synthetic_wall_tables,

@@ -150,8 +150,9 @@ def tiny_run(tmp_path_factory, tiny_config):
 def tiny_surrogate(tmp_path_factory, tiny_config):
     """A small MLP surrogate trained on synthetic tables at 600-900 rpm for the tiny granulator, with
     frequencies near the tiny config's constant kernel (~3 1/s per pair for its ~300 granules)."""
+    from synthetic_tables import make_synthetic_tables, power_law
+
     from pbmdem.surrogate import CollisionSurrogate, EnsembleMLPRegressorCV, save_surrogate, training_data
-    from pbmdem.surrogate.synthetic import make_synthetic_tables, power_law
     from pbmdem.surrogate.velocity import attach_velocity_bins
 
     radius = tiny_config.granulator.impeller.blade_length

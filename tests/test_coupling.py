@@ -16,7 +16,9 @@ from pbmdem.dem import engine
 
 
 def rule(max_classes=5, min_particles_per_class=20, max_particles=10_000):
-    return SampleRule(max_classes, min_particles_per_class, max_particles)
+    return SampleRule(
+        max_classes=max_classes, min_particles_per_class=min_particles_per_class, max_particles=max_particles
+    )
 
 
 def test_sample_conserves_number_and_volume_up_to_rounding():

@@ -4,9 +4,9 @@ import copy
 import math
 
 import pytest
+from design_points import CORNER_NAME, DesignSpace, corner_point, design_names, design_points
 
 from pbmdem.config import Config, ConfigError, SizeDistribution
-from pbmdem.dem.design import CORNER_NAME, DesignSpace, corner_point, design_names, design_points
 from pbmdem.dem.plan import bed_particle_count, class_counts
 
 #: the default bed's solid volume (m3): 18 mm x pi/4 (60 mm)^2 x 0.60 (granulator.bed_solid_volume)
@@ -69,7 +69,9 @@ def test_the_corner_holds_the_largest_granules_as_rare_classes_at_the_fastest_sp
     assert math.isclose(sum(f), 1.0, abs_tol=1e-9) and f[1] == f[2] < f[0]
 
     def planned(fractions):  # the DEM plan's own counts, rounded to whole particles
-        return class_counts(bed_particle_count(BED, SizeDistribution(tuple(d), tuple(fractions))), fractions)
+        return class_counts(
+            bed_particle_count(BED, SizeDistribution(diameters=tuple(d), number_fractions=tuple(fractions))), fractions
+        )
 
     assert min(planned(f)) >= space.min_class_particles
     # the rarest that holds 50: one step (0.001) rarer leaves the largest classes short

@@ -61,7 +61,7 @@ def test_specification_region_on_a_hand_made_table():
         "meets",
     ]
     # without bounds every in-domain point meets it
-    free = specification_status(table, Specification(None, None, None)).tolist()
+    free = specification_status(table, Specification(d50_min=None, d50_max=None, d90_max=None)).tolist()
     assert free == ["meets"] * 6 + ["out_of_domain", "failed", "meets"]
 
 
@@ -359,7 +359,7 @@ def test_maps_are_drawn_for_a_grid_of_one_speed_and_for_failed_points(tmp_path):
     the status markers only; NaN sizes of failed points are left blank."""
     from pbmdem.design.maps import plot_design_space
 
-    spec = Specification(0.008, 0.010, 0.014)
+    spec = Specification(d50_min=0.008, d50_max=0.010, d90_max=0.014)
     rows = []
     for rpm in (600.0, 900.0):
         for rate in (1e-7, 1.2e-7):

@@ -25,16 +25,20 @@ IMPORT_NAME = {
     "matplotlib-base": "matplotlib",
     "pyyaml": "yaml",
     "jsonschema": "jsonschema",
+    "pydantic": "pydantic",
     "meshio": "meshio",
     "pyvista": "pyvista",
     "numba": "numba",
     "salib": "SALib",
+    "jinja2": "jinja2",
 }
 # packages that come with the ones listed (conda installs their dependencies too)
 IMPLIED = {
     "jsonschema": ["referencing", "jsonschema_specifications", "rpds", "attrs"],
     "numba": ["llvmlite"],
+    "pydantic": ["pydantic_core", "annotated_types", "typing_extensions", "typing_inspection"],
     "salib": ["multiprocess", "dill"],
+    "jinja2": ["markupsafe"],
 }
 
 # what each stage's rules load, including imports made inside functions on the rule's path
@@ -63,6 +67,12 @@ STAGE_MODULES = {
         "pbmdem.report.provenance",
         "pbmdem.report.statements",
         "pbmdem.report.tables",
+        "pbmdem.report.words",
+        "pbmdem.report.findings",
+        "pbmdem.report.breakage",
+        "pbmdem.report.sensitivity",
+        "pbmdem.report.lumping",
+        "pbmdem.report.training",
         "pbmdem.validation.results",
         "pbmdem.surrogate",
         "pbmdem.pbm.setup",

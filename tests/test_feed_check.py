@@ -60,8 +60,8 @@ def test_parents_are_the_nearest_grid_feeds_on_either_side():
         "medium+coarse": ("medium", "coarse"),
     }
     # the feed study's cases by name, ordered by the feeds' mass-median diameter
-    fine = SizeDistribution((0.002, 0.003, 0.004), (0.5, 0.3, 0.2))
-    coarse = SizeDistribution((0.0032, 0.005, 0.008), (0.3, 0.4, 0.3))
+    fine = SizeDistribution(diameters=(0.002, 0.003, 0.004), number_fractions=(0.5, 0.3, 0.2))
+    coarse = SizeDistribution(diameters=(0.0032, 0.005, 0.008), number_fractions=(0.3, 0.4, 0.3))
     assert feed_case_names({"coarse": coarse, "fine": fine}) == [
         ("fine", True),
         ("fine+coarse", False),

@@ -13,8 +13,8 @@ from pbmdem.report import findings
 from pbmdem.report.provenance import hyperparameters, kernel_source
 from pbmdem.report.training import training_set, training_words
 
-FINE = SizeDistribution((0.002, 0.003, 0.004), (0.5, 0.3, 0.2))
-COARSE = SizeDistribution((0.0032, 0.005, 0.008), (0.3, 0.4, 0.3))
+FINE = SizeDistribution(diameters=(0.002, 0.003, 0.004), number_fractions=(0.5, 0.3, 0.2))
+COARSE = SizeDistribution(diameters=(0.0032, 0.005, 0.008), number_fractions=(0.3, 0.4, 0.3))
 
 
 def test_a_blend_holds_each_feed_by_mass_and_lies_between_them():
@@ -114,9 +114,10 @@ def test_the_report_states_the_surrogates_training_set_beside_its_accuracy(tmp_p
     table the surrogate was trained on, the accuracy from its metadata: a real (tiny) training."""
     import warnings
 
+    from synthetic_tables import make_synthetic_tables
+
     from pbmdem.config import Surrogate
     from pbmdem.readers import InputFileError
-    from pbmdem.surrogate.synthetic import make_synthetic_tables
     from pbmdem.surrogate.train import train_and_report
     from pbmdem.tables import GRID_PAIRS
 
@@ -172,11 +173,11 @@ def test_a_speed_above_which_the_granules_get_smaller_is_named():
     """With breakage the final d50 can peak inside the speed range: the words say where, not that more
     collisions make larger granules; a fall within the members' spread is not called a peak."""
     speed = _study({"rpm": [150.0, 600.0, 900.0, 1200.0]}, [0.0058, 0.0103, 0.0105, 0.0075])
-    words = findings._speed_paragraph(speed, "fine", 480.0)
+    words = findings.speed_paragraph(speed, "fine", 480.0)
     assert "grows with the speed up to 900 rpm (d50 = 10.50 mm) and falls above it" in words
     assert "more collisions make larger granules" not in words
     flat = _study({"rpm": [150.0, 600.0, 900.0, 1200.0]}, [0.0058, 0.0103, 0.0105, 0.010495])
-    words = findings._speed_paragraph(flat, "fine", 480.0)
+    words = findings.speed_paragraph(flat, "fine", 480.0)
     assert "falls above it" not in words and "more collisions make larger granules" in words
 
 
@@ -186,10 +187,10 @@ def test_a_feed_that_breaks_the_trend_is_named():
         [0.0097, 0.0068, 0.0132],
         in_grid=[True, False, True],
     )
-    assert findings._feed_trend(feed) == (
-        "the final size does not simply follow the feed: it is smaller for ``fine+coarse`` than for the next "
-        "finer feed."
-    )
+    assert (
+        "; the final size does not simply follow the feed: it is smaller for ``fine+coarse`` than for the next "
+        "finer feed. "
+    ) in findings.feed_paragraph(feed, 900.0)
 
 
 def test_findings_figures_name_axes_speed_feed_and_uncertainty():

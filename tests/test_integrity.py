@@ -16,6 +16,7 @@ import yaml
 from conftest import config_of, snakemake_command
 
 from pbmdem.config import ConfigError, load_config, point_id, rpm_text
+from pbmdem.config.describe import config_schema
 from pbmdem.dem import collisions, dumps, engine
 from pbmdem.dem.grid_tables import aggregate, run_table
 from pbmdem.dem.plan import plan_point
@@ -149,8 +150,7 @@ def test_nan_in_a_real_contact_dump_fails_the_tabulation(tiny_run, tmp_path):
 def test_every_allowed_speed_gives_an_id_the_rule_wildcard_accepts(root):
     snakefile = (root / "Snakefile").read_text()
     wildcard = re.search(r'rpm=r"([^"]+)"', snakefile).group(1)
-    schema = yaml.safe_load((root / "workflow" / "schemas" / "config.schema.yaml").read_text())
-    limits = schema["properties"]["grid"]["properties"]["impeller_rpm"]["items"]
+    limits = config_schema()["$defs"]["OperatingGrid"]["properties"]["impeller_rpm"]["items"]
     assert limits["exclusiveMinimum"] == 0
     speeds = [1e-9, 1.5e-7, 0.1 + 0.2, 0.5, 1, 600, 1234.567, 1234.5678901, 19999.999999, limits["maximum"]]
     ids = set()
@@ -283,8 +283,9 @@ def small_surrogate(tmp_path_factory):
     """A surrogate trained on synthetic tables at 300-900 rpm (so 5000 rpm is outside its domain)."""
     import warnings
 
+    from synthetic_tables import make_synthetic_table
+
     from pbmdem.surrogate import CollisionSurrogate, EnsembleMLPRegressorCV, save_surrogate, training_data
-    from pbmdem.surrogate.synthetic import make_synthetic_table
 
     radius = 0.0265
     table = make_synthetic_table(radius, rpms=(300, 600, 900), diameters=(0.002, 0.0025, 0.003), seed=4)
@@ -583,9 +584,10 @@ def test_surrogate_cross_validation_logs_each_fold_and_candidate(caplog):
     import logging
     import warnings
 
+    from synthetic_tables import make_synthetic_table
+
     from pbmdem.surrogate import CollisionSurrogate, EnsembleMLPRegressorCV, cross_validate_models, training_data
     from pbmdem.surrogate.evaluation import default_baselines
-    from pbmdem.surrogate.synthetic import make_synthetic_table
 
     table = make_synthetic_table(0.0265, rpms=(300, 600, 900), seed=4)
     model = CollisionSurrogate(

@@ -24,7 +24,7 @@ def test_the_shipped_configs_plan_well_inside_the_limits(root, name):
     check_workflow_plans(cfg)  # raises if any run of the workflow is beyond the bounds
     limits = cfg.dem_execution.limits
     plans = [plan_point(cfg.dem_point(dist), rpm) for rpm, dist in cfg.grid.points()]
-    # the defaults sit a comfortable factor above the largest run (config/config.yaml states it)
+    # the defaults sit a comfortable factor above the largest run (pbmdem.config.dem.DemLimits states it)
     assert max(p.total_steps for p in plans) * 10 < limits.max_steps
     assert max(p.total_steps * p.timestep for p in plans) * 10 < limits.max_simulated_time
     assert max(p.particle_steps for p in plans) * 10 < limits.max_particle_steps

@@ -1,5 +1,5 @@
-"""A normal (non-editable) install runs `pbmdem` from any directory: schemas and templates are
-package data, nothing is looked up beside the sources."""
+"""A normal (non-editable) install runs `pbmdem` from any directory: schemas, templates and the
+report's word templates are package data, nothing is looked up beside the sources."""
 
 from __future__ import annotations
 
@@ -71,8 +71,9 @@ def test_a_wheel_installed_into_a_fresh_venv_runs_outside_the_checkout(root, tmp
     where = run(
         str(python),
         "-c",
-        "import pbmdem, pbmdem.config, pbmdem.dem.deck as d; "
-        "print(pbmdem.__file__); print(pbmdem.config.schema_dir()); print(d.template_dir())",
+        "import pbmdem, pbmdem.config, pbmdem.dem.deck as d, pbmdem.report.words as w; "
+        "print(pbmdem.__file__); print(d.template_dir()); "
+        "print(w.ENV.get_template('findings.rst.j2').filename)",
     )
     assert where.returncode == 0, where.stderr
     for line in where.stdout.split():

@@ -4,11 +4,11 @@ distribution: constant and sum (Golovin) kernels, moments, PSD, and grid converg
 from __future__ import annotations
 
 import numpy as np
+import pbm_verification as ver
 import pytest
 
 from pbmdem.pbm import ConstantKernel, SumKernel
 from pbmdem.pbm import analytical as an
-from pbmdem.pbm import verification as ver
 
 N0, M = 1.0, 1.0  # initial number and mean volume (dimensionless units)
 T_CONST = 18.0  # beta N0 t = 18: mean volume grows 10x

@@ -11,6 +11,7 @@ import warnings
 
 import numpy as np
 import pbm_oracle as oracle
+import pbm_verification as ver
 import pytest
 from conftest import config_of
 from scipy import integrate
@@ -28,7 +29,6 @@ from pbmdem.pbm import (
     State,
 )
 from pbmdem.pbm import analytical as an
-from pbmdem.pbm import verification as ver
 from pbmdem.pbm.breakage import FRAGMENTS, Breakage, ConstantSelection, PowerLawSelection
 from pbmdem.pbm.setup import build_model
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pbm_verification as ver
 import pytest
 from conftest import config_of
 
@@ -26,7 +27,6 @@ from pbmdem.pbm import (
     SumKernel,
     run_batch,
 )
-from pbmdem.pbm import verification as ver
 
 
 def test_errors_are_value_errors():

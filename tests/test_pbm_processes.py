@@ -208,8 +208,9 @@ def test_mass_quantiles_interpolate_in_log_d():
 
 def test_constant_frequency_equals_constant_kernel():
     g = Grid(25, 2.0, v0=1e-3)
+    import pbm_verification as ver
+
     from pbmdem.pbm import State
-    from pbmdem.pbm import verification as ver
 
     N = ver.discretise_exponential(g, 1.0, 1.0)
     s = State(0.0, N, np.zeros(g.bins), np.zeros(g.bins))

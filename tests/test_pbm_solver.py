@@ -4,6 +4,7 @@ solver defaults, the grid fitted to the process."""
 from __future__ import annotations
 
 import numpy as np
+import pbm_verification as ver
 import pytest
 
 from pbmdem.config import Pbm, Solver
@@ -20,7 +21,6 @@ from pbmdem.pbm import (
     SumKernel,
 )
 from pbmdem.pbm import analytical as an
-from pbmdem.pbm import verification as ver
 from pbmdem.pbm.errors import PBMInputError, SolverLimitError
 from pbmdem.pbm.kernels import Kernel
 from pbmdem.pbm.setup import build_grid, build_model, run_batch
@@ -115,7 +115,7 @@ def test_pure_aggregation_in_si_volumes_on_a_wide_grid(name):
 def test_step_limits_are_recorded_and_add_up():
     res = _process_run(1.0, bins=20)
     lim = res.info["step_limits"]
-    assert set(Solver.__dataclass_fields__) >= {"max_steps", "max_wall_time"}
+    assert set(Solver.model_fields) >= {"max_steps", "max_wall_time"}
     accepted = sum(lim[k] for k in ("positivity", "error", "max_step", "event"))
     assert accepted == res.info["steps"]
     assert lim["event"] + lim["max_step"] >= 48  # at least one step per 10 s output
@@ -145,12 +145,10 @@ def test_wall_time_guard_stops_with_a_clear_error():
 
 
 def test_solver_settings_defaults_are_the_config_defaults():
-    """A model made without solver settings uses the schema's pbm.solver defaults (the config's,
-    where it sets none); settings made in code are checked by the model."""
-    from pbmdem.config import section_defaults
-
+    """A model made without solver settings uses the pbm.solver defaults (the config's, where it
+    sets none); settings made in code are checked by the model."""
     model = GranulationPBM(Grid(5, 2.0, v0=1.0), ConstantKernel(1.0))
-    assert model.solver == Solver.defaults() and model.solver.to_dict() == section_defaults("pbm")["solver"]
+    assert model.solver == Solver.defaults() and model.solver.to_dict() == Pbm().solver.to_dict()
     with pytest.raises(PBMInputError, match=r"solver max_steps = 0; allowed: an integer >= 1"):
         GranulationPBM(Grid(5, 2.0, v0=1.0), ConstantKernel(1.0), solver=Solver.defaults().replace(max_steps=0))
     with pytest.raises(PBMInputError, match=r"solver method = 'rk4'; allowed: \['ssp3', 'heun', 'euler'\]"):

@@ -33,7 +33,7 @@ def test_sobol_indices_recover_the_ishigami_function():
     own 95 % interval of the analytical value. N = 1024 (5120 evaluations) makes the intervals
     narrow enough (half-widths <= 0.09, asserted) that the test can fail; scrambled Sobol'
     sampling errs less than the bootstrap interval, which assumes independent random samples."""
-    factors = [SobolFactor(f"x{k}", -np.pi, np.pi, "linear") for k in (1, 2, 3)]
+    factors = [SobolFactor(key=f"x{k}", low=-np.pi, high=np.pi, scale="linear") for k in (1, 2, 3)]
     calls = []
 
     def model(x):
@@ -59,13 +59,19 @@ def test_sobol_indices_recover_the_ishigami_function():
 def test_log_scale_samples_uniformly_in_ln_and_units_do_not_matter():
     """A log-scaled factor is uniform in ln between its bounds, whatever its unit: the same range in
     other units (x 1e6) gives the same sample, scaled."""
-    factors = [SobolFactor("pbm.aggregation.beta0", 1e-4, 4e-4, "log"), SobolFactor("b", 5e3, 1e5, "log")]
+    factors = [
+        SobolFactor(key="pbm.aggregation.beta0", low=1e-4, high=4e-4, scale="log"),
+        SobolFactor(key="b", low=5e3, high=1e5, scale="log"),
+    ]
     x = sample(salib_problem(factors), 256, seed=3)
     assert x.shape == (256 * 4, 2)
     assert (x[:, 0] >= 1e-4).all() and (x[:, 0] <= 4e-4).all()
     below_middle = np.mean(x[:, 0] < 2e-4)  # the geometric middle of [1e-4, 4e-4]
     assert abs(below_middle - 0.5) < 0.02, below_middle
-    scaled = [SobolFactor("pbm.aggregation.beta0", 1e2, 4e2, "log"), SobolFactor("b", 5e9, 1e11, "log")]
+    scaled = [
+        SobolFactor(key="pbm.aggregation.beta0", low=1e2, high=4e2, scale="log"),
+        SobolFactor(key="b", low=5e9, high=1e11, scale="log"),
+    ]
     np.testing.assert_allclose(sample(salib_problem(scaled), 256, seed=3), x * 1e6, rtol=1e-12)
 
 
@@ -103,7 +109,7 @@ def test_config_refuses_bad_sensitivity_settings(tiny_mapping):
 
 def test_speed_range_defaults_to_the_dem_grid_and_a_fixed_speed_is_no_factor(tiny_config, tiny_mapping):
     factors = tiny_config.sensitivity.factors()
-    assert factors[0] == SobolFactor("impeller_rpm", 600.0, 1200.0, "linear")  # the grid's speeds
+    assert factors[0] == SobolFactor(key="impeller_rpm", low=600.0, high=1200.0, scale="linear")  # the grid's speeds
     assert [f.key for f in factors[1:]] == [p.key for p in tiny_config.sensitivity.parameters]
     tiny_mapping["sensitivity"]["impeller_rpm"] = {"low": 700, "high": 700}
     assert [f.key for f in config_of(tiny_mapping).sensitivity.factors()] == [f.key for f in factors[1:]]
@@ -188,7 +194,7 @@ def test_sensitivity_words_name_the_first_factor_and_the_members_agreement():
 def test_an_output_without_variance_or_with_a_failed_sample_has_undefined_indices(caplog):
     """No variance to share out, or a sample without a result: NaN indices, said in the log; the
     other outputs of the same model keep theirs."""
-    factors = [SobolFactor(f"x{k}", -np.pi, np.pi, "linear") for k in (1, 2, 3)]
+    factors = [SobolFactor(key=f"x{k}", low=-np.pi, high=np.pi, scale="linear") for k in (1, 2, 3)]
 
     def model(x):
         out = ishigami(x).assign(flat=0.004, broken=ishigami(x).y)

@@ -1,14 +1,13 @@
-"""The settings layer: one validated, typed configuration; defaults only in the schema; each
-stage handed exactly the settings it uses."""
+"""The settings layer: one validated, typed configuration; each setting declared once (its
+model's field); each stage handed exactly the settings it uses."""
 
 from __future__ import annotations
 
 import copy
-import dataclasses
 
 import pytest
-import yaml
 from conftest import config_of
+from pydantic import ValidationError
 
 from pbmdem.config import (
     Config,
@@ -20,12 +19,12 @@ from pbmdem.config import (
     Solver,
     SurrogateTraining,
     load_config,
-    schema_dir,
-    section_defaults,
 )
+from pbmdem.config.dem import DemSection
+from pbmdem.config.validation import Validation
 
 
-def test_a_minimal_config_is_completed_with_the_schema_defaults(tiny_config):
+def test_a_minimal_config_is_completed_with_the_model_defaults(tiny_config):
     required = {k: v for k, v in tiny_config.to_dict().items() if k not in ("pbm", "surrogate")}
     required["dem"] = {
         k: required["dem"][k]
@@ -33,18 +32,16 @@ def test_a_minimal_config_is_completed_with_the_schema_defaults(tiny_config):
     }
     required["validation"] = {"rpm": [600], "distribution": "small"}
     cfg = Config.from_mapping(required)
-    schema = yaml.safe_load((schema_dir() / "config.schema.yaml").read_text())
-    dem_schema = schema["properties"]["dem"]["properties"]
-    assert cfg.dem.seed == dem_schema["seed"]["default"]
-    assert cfg.dem_execution.timeout == dem_schema["timeout"]["default"]
-    assert cfg.dem_replicates == dem_schema["replicates"]["default"]
+    dem_fields = DemSection.model_fields
+    assert cfg.dem.seed == dem_fields["seed"].default
+    assert cfg.dem_execution.timeout == dem_fields["timeout"].default
+    assert cfg.dem_replicates == dem_fields["replicates"].default
     assert cfg.pbm == Pbm.from_section({}).replace(
         grid=Pbm.from_section({}).grid.replace(
             min_diameter=min(min(d.diameters) for d in cfg.size_distributions.values())
         )
     )
-    validation_schema = yaml.safe_load((schema_dir() / "validation.schema.yaml").read_text())
-    assert cfg.validation.coupling_intervals == validation_schema["properties"]["coupling_intervals"]["default"]
+    assert cfg.validation.coupling_intervals == Validation.model_fields["coupling_intervals"].default
     # the derived defaults: the sweep spans the grid's speeds, the PBM grid starts at the smallest feed class
     assert (cfg.validation.sweep.start, cfg.validation.sweep.stop) == (
         min(cfg.grid.impeller_rpm),
@@ -52,7 +49,7 @@ def test_a_minimal_config_is_completed_with_the_schema_defaults(tiny_config):
     )
     assert cfg.pbm.grid.min_diameter == 0.002
     # the completed mapping is what Snakemake's config holds too
-    assert cfg.to_dict()["dem"]["timeout"] == dem_schema["timeout"]["default"]
+    assert cfg.to_dict()["dem"]["timeout"] == dem_fields["timeout"].default
 
 
 def test_the_cli_and_the_workflow_see_the_same_execution_settings(root):
@@ -72,26 +69,31 @@ def test_settings_objects_are_frozen_and_round_trip(default_config):
         (default_config.coupled_loop(), CoupledLoop),
     ):
         assert cls.from_dict(bundle.to_dict()) == bundle
-        with pytest.raises(dataclasses.FrozenInstanceError):
+        with pytest.raises(ValidationError, match="frozen"):
             bundle.granulator = None if hasattr(bundle, "granulator") else bundle.pbm
     assert default_config.granulator.bed_solid_volume == pytest.approx(0.018 * 3.14159265 / 4 * 0.06**2 * 0.6)
     assert default_config.granulator.tip_speed(600) == pytest.approx(2 * 3.14159265 * 0.0265 * 10)
     assert default_config.granulator.froude_number(1200) == pytest.approx(42.67, rel=1e-3)
 
 
-def test_no_settings_class_has_defaults():
-    """Defaults live in the schema only (`Solver.defaults()` reads them from there)."""
-    from pbmdem.config import dem, granulator, pbm, points, settings, surrogate, validation
+def test_every_setting_carries_a_description_and_its_default():
+    """Each setting is declared once, as a field of its section's model with a description; the
+    defaults are those fields' (`Solver.defaults()` is the model's)."""
+    from pbmdem.config import ConfigFile, Settings
 
-    for module in (dem, granulator, pbm, points, settings, surrogate, validation):
-        for obj in vars(module).values():
-            if dataclasses.is_dataclass(obj) and obj.__module__ == module.__name__:
-                for f in dataclasses.fields(obj):
-                    assert f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING, (
-                        obj.__name__,
-                        f.name,
-                    )
-    assert Solver.defaults().to_dict() == section_defaults("pbm")["solver"]
+    seen, todo = set(), [ConfigFile]
+    while todo:
+        model = todo.pop()
+        if model in seen:
+            continue
+        seen.add(model)
+        for name, field in model.model_fields.items():
+            assert field.description, (model.__name__, name)
+            for sub in getattr(field.annotation, "__args__", ()) + (field.annotation,):
+                if isinstance(sub, type) and issubclass(sub, Settings):
+                    todo.append(sub)
+    assert len(seen) >= 30
+    assert Solver.defaults() == Pbm().solver and Solver.defaults().rtol == Solver.model_fields["rtol"].default
 
 
 def test_each_stage_fingerprint_holds_only_what_it_uses(tiny_config, tiny_mapping):

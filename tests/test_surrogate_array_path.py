@@ -9,6 +9,7 @@ from functools import partial
 import numpy as np
 import pandas as pd
 import pytest
+from synthetic_tables import make_synthetic_tables
 
 from pbmdem.surrogate import (
     CollisionSurrogate,
@@ -23,7 +24,6 @@ from pbmdem.surrogate.features import (
     pair_features,
     pair_table,
 )
-from pbmdem.surrogate.synthetic import make_synthetic_tables
 
 R = 0.0265
 

@@ -22,6 +22,7 @@ from sklearn.exceptions import DataConversionWarning, NotFittedError
 from sklearn.metrics import r2_score
 from sklearn.utils.estimator_checks import parametrize_with_checks
 from sklearn.utils.validation import check_is_fitted
+from synthetic_tables import make_synthetic_table
 
 from pbmdem.surrogate import (
     CollisionSurrogate,
@@ -32,7 +33,6 @@ from pbmdem.surrogate import (
     ResponseSurface,
     training_data,
 )
-from pbmdem.surrogate.synthetic import make_synthetic_table
 
 #: A small ensemble: two members, one tiny architecture, quick lbfgs fits.
 SMALL = dict(hidden_layer_sizes=((5,),), alpha=(0.01,), seeds=(0, 1), max_iter=200, activation="tanh", solver="lbfgs")

@@ -8,11 +8,13 @@ import platform
 import subprocess
 import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 from sklearn.base import clone
+from synthetic_tables import make_synthetic_tables, power_law
 from threadpoolctl import threadpool_limits
 
 from pbmdem.config import Surrogate
@@ -36,7 +38,6 @@ from pbmdem.surrogate.evaluation import (
 )
 from pbmdem.surrogate.families import member_quantiles
 from pbmdem.surrogate.settings import FAMILIES, build_families
-from pbmdem.surrogate.synthetic import make_synthetic_tables, power_law
 
 R = 0.0265
 #: Small but complete settings: every family, fast MLP candidates, 3 outer folds.
@@ -263,10 +264,11 @@ def test_response_surface_chooses_its_degree_by_grouped_cv():
 
 REFIT = r"""
 import sys, warnings
+sys.path.insert(0, sys.argv[2])  # the tests folder, home of synthetic_tables
 import numpy as np
 from pbmdem.surrogate import training_data
 from pbmdem.surrogate.settings import build_families
-from pbmdem.surrogate.synthetic import make_synthetic_tables
+from synthetic_tables import make_synthetic_tables
 from pbmdem.config import Surrogate
 R = 0.0265
 table, velocity = make_synthetic_tables(R, rpms=(300, 600, 1200), sample_velocities=True)
@@ -292,7 +294,7 @@ def test_closed_form_families_do_not_depend_on_the_blas_kernel(tmp_path):
             env["OPENBLAS_CORETYPE"] = kernel
         out = tmp_path / str(kernel)
         out.mkdir()
-        subprocess.run([sys.executable, "-c", REFIT, str(out)], env=env, check=True)
+        subprocess.run([sys.executable, "-c", REFIT, str(out), str(Path(__file__).parent)], env=env, check=True)
         runs[kernel] = {name: np.load(out / f"{name}.npy") for name in ("kriging", "rsm")}
     for name in ("kriging", "rsm"):
         np.testing.assert_allclose(runs["Prescott"][name], runs[None][name], rtol=1e-6, atol=0)

@@ -6,6 +6,7 @@ import warnings
 import numpy as np
 import pandas as pd
 import pytest
+from synthetic_tables import make_synthetic_table, make_synthetic_tables, velocity_law
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES
 from pbmdem.surrogate.features import (
@@ -22,7 +23,6 @@ from pbmdem.surrogate.features import (
     tip_speed,
     training_data,
 )
-from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables, velocity_law
 from pbmdem.surrogate.velocity import (
     VELOCITY_COUNT_COLUMNS,
     attach_velocity_bins,

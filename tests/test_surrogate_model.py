@@ -13,6 +13,7 @@ from sklearn.model_selection import GridSearchCV, KFold
 from sklearn.neural_network import MLPRegressor
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
+from synthetic_tables import make_synthetic_table, make_synthetic_tables, power_law
 
 from pbmdem.surrogate import (
     FEATURE_NAMES,
@@ -28,7 +29,6 @@ from pbmdem.surrogate import (
 from pbmdem.surrogate._threads import single_threaded
 from pbmdem.surrogate.evaluation import default_baselines
 from pbmdem.surrogate.features import make_features, pair_table
-from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables, power_law
 from pbmdem.surrogate.velocity import attach_velocity_bins
 
 R = 0.0265  # impeller radius (m) of the synthetic tables and models

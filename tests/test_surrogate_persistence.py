@@ -11,6 +11,7 @@ import pytest
 import sklearn
 import skops.io as sio
 from sklearn.linear_model import LinearRegression
+from synthetic_tables import make_synthetic_table, make_synthetic_tables, make_synthetic_wall_tables
 
 from pbmdem.impact import WALLS
 from pbmdem.surrogate import (
@@ -27,7 +28,6 @@ from pbmdem.surrogate import (
     training_data,
 )
 from pbmdem.surrogate.persistence import ALLOWED_TYPES, FORMAT_VERSION, schema_types, sha256_file
-from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables, make_synthetic_wall_tables
 from pbmdem.surrogate.velocity import attach_velocity_bins
 from pbmdem.surrogate.walls import wall_training_data
 

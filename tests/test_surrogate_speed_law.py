@@ -9,12 +9,12 @@ import numpy as np
 import pandas as pd
 import pytest
 from scipy.stats import weibull_min
+from synthetic_tables import make_synthetic_tables
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, fraction_above, velocity_bin
 from pbmdem.surrogate import CollisionSurrogate, training_data
 from pbmdem.surrogate.baselines import PhysicalScaling
 from pbmdem.surrogate.families import ResponseSurface
-from pbmdem.surrogate.synthetic import make_synthetic_tables
 from pbmdem.surrogate.velocity import (
     attach_velocity_bins,
     fit_speed_law,

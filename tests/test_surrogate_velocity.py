@@ -5,6 +5,7 @@ import warnings
 
 import numpy as np
 import pytest
+from synthetic_tables import make_synthetic_table, make_synthetic_tables, velocity_law
 
 from pbmdem.impact import N_VELOCITY_BINS, EncounterRates
 from pbmdem.surrogate import (
@@ -19,7 +20,6 @@ from pbmdem.surrogate import (
 )
 from pbmdem.surrogate.evaluation import default_baselines
 from pbmdem.surrogate.features import TARGET_NAME, pair_table
-from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables, velocity_law
 from pbmdem.surrogate.velocity import attach_velocity_bins, lognormal_fractions
 
 R = 0.0265  # impeller radius (m) of the synthetic tables and models

@@ -1,8 +1,8 @@
 """Settings (schema, defaults), training entry point, CLI and Snakemake rule of the surrogate."""
 
-import argparse
 import hashlib
 import json
+import re
 import warnings
 from pathlib import Path
 
@@ -10,14 +10,15 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from synthetic_tables import make_synthetic_table, make_synthetic_tables
 
-from pbmdem.config import ConfigError, Surrogate, load_config, section_defaults
+from pbmdem.cli import build_parser, main
+from pbmdem.config import ConfigError, Surrogate, load_config
+from pbmdem.config.describe import config_schema
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES
 from pbmdem.surrogate import load_surrogate
-from pbmdem.surrogate.cli import add_cli, main
 from pbmdem.surrogate.features import check_impeller_radius
 from pbmdem.surrogate.settings import build_baselines, build_surrogate
-from pbmdem.surrogate.synthetic import make_synthetic_table, make_synthetic_tables
 from pbmdem.surrogate.train import train_and_report
 
 REPO = Path(__file__).resolve().parents[1]
@@ -38,12 +39,14 @@ def tiny_settings() -> dict:
     return Surrogate.from_section(TINY).to_dict()
 
 
-def test_schema_holds_the_defaults():
-    schema = yaml.safe_load((REPO / "workflow" / "schemas" / "surrogate.schema.yaml").read_text())
+def test_the_generated_schema_holds_the_defaults():
+    schema = config_schema()
     assert schema["$schema"].endswith("draft/2020-12/schema")
-    assert schema["additionalProperties"] is False
-    assert set(section_defaults("surrogate")) == set(schema["properties"])
-    # the project config states every default again (with its reasons), except the explicit seeds
+    section = schema["$defs"]["Surrogate"]
+    assert section["additionalProperties"] is False
+    assert set(Surrogate().to_dict()) == set(section["properties"])
+    assert section["properties"]["max_iter"]["default"] == Surrogate().max_iter
+    # the project config's surrogate section keeps the default seeds
     section = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["surrogate"]
     assert Surrogate.from_section(section).member_seeds == Surrogate.from_section({}).member_seeds
 
@@ -269,13 +272,13 @@ def test_cli_train_and_predict(tmp_path, capsys):
     # a config without the granulator has no impeller radius: refused, naming the key
     bare = tmp_path / "bare.yaml"
     bare.write_text(yaml.safe_dump({"surrogate": TINY}))
-    with pytest.raises(ConfigError, match=f"(?s)config file {bare}: .*'granulator' is a required property"):
-        main(["surrogate", "train", "--table", str(csv), "--config", str(bare), "--out", str(out)])
+    assert main(["surrogate", "train", "--table", str(csv), "--config", str(bare), "--out", str(out)]) == 2
+    message = f"(?s)pbmdem: error: config file {re.escape(str(bare))}: .*'granulator' is a required property"
+    assert re.search(message, capsys.readouterr().err)
 
 
-def test_add_cli_registers_subcommands():
-    parser = argparse.ArgumentParser()
-    add_cli(parser.add_subparsers(dest="command"))
+def test_pbmdem_registers_the_surrogate_subcommands():
+    parser = build_parser()
     args = parser.parse_args(["surrogate", "train", "--table", "t.csv", "--config", "c.yaml", "--out", "o"])
     assert args.surrogate_command == "train" and args.table == Path("t.csv") and args.config == Path("c.yaml")
     args = parser.parse_args(["surrogate", "predict", "--model", "m.skops", "--table", "t.csv"])
@@ -314,7 +317,7 @@ def test_single_run_table_still_trains(tmp_path):
 
 
 def test_wall_models_learn_the_wall_impacts_with_the_same_held_out_evaluation(tmp_path):
-    from pbmdem.surrogate.synthetic import make_synthetic_wall_tables, wall_law
+    from synthetic_tables import make_synthetic_wall_tables, wall_law
 
     table, velocity = make_synthetic_tables(R, rpms=(300, 600, 900), seed=11)
     walls, wall_velocity = make_synthetic_wall_tables(table, R, seed=12)

@@ -6,6 +6,7 @@
     pbmdem surrogate train|predict ...
     pbmdem design-space --config ... --model MODEL --out DIR
     pbmdem calibrate --config ... --model MODEL --data measured.csv --out DIR
+    pbmdem config --show-defaults | --schema | --check FILE
 
 Every subcommand reads its configuration through `pbmdem.config.load_config` (validated once,
 defaults filled in), the same path the workflow takes. Bad input gets one line naming the file,
@@ -20,7 +21,12 @@ import logging
 import sys
 from pathlib import Path
 
-from pbmdem import layout
+from pbmdem import __version__, layout
+from pbmdem.config import RPM_MAX
+from pbmdem.config import describe as config_cli
+from pbmdem.dem import viewer
+from pbmdem.design import cli as design_cli
+from pbmdem.surrogate import cli as surrogate_cli
 
 
 def _dem(args: argparse.Namespace) -> int:
@@ -196,66 +202,31 @@ PBM_EXAMPLES = """examples:
       --rpm 900 --distribution medium --out out/ann
 """
 
-SURROGATE_EXAMPLES = {
-    None: """examples:
+SURROGATE_EXAMPLES = """examples:
   pbmdem surrogate train --config config/config.yaml --table results/dem/collisions.csv \\
       --velocity-table results/dem/impact_velocity.csv --out out/surrogate
   pbmdem surrogate predict --model results/surrogate/model.skops --table results/dem/collisions.csv
-""",
-    "train": """examples:
-  pbmdem surrogate train --config config/config.yaml --table results/dem/collisions.csv \\
-      --velocity-table results/dem/impact_velocity.csv --out out/surrogate --jobs 2
-""",
-    "predict": """examples:
-  pbmdem surrogate predict --model results/surrogate/model.skops --table results/dem/collisions.csv --output pred.csv
-  pbmdem surrogate predict --model results/surrogate/model.skops --diameters 0.002 0.004 \\
-      --numbers 500 100 --rpm 900
-""",
-}
+"""
+
+DESIGN_EXAMPLES = """examples:
+  pbmdem design-space --config config/config.yaml --model results/surrogate/model.skops --out out/design
+  pbmdem design-space --config my.yaml --model results/surrogate/model.skops --out out/design --jobs 1
+"""
+
+CALIBRATE_EXAMPLES = """examples:
+  pbmdem calibrate --config config/config.yaml --model results/surrogate/model.skops \\
+      --data results/design/measured_pbm_dem.csv --out out/calibration
+  pbmdem calibrate --config my.yaml --model results/surrogate/model.skops --data measured.csv \\
+      --parameters pbm.aggregation.beta0 --out out/beta0
+
+The measured table (docs/calibration.md): columns rpm, time (s), d10, d50, d90 (m) and d10_sd,
+d50_sd, d90_sd (m), one row per speed and time, times ascending per speed."""
 
 
-def _with_examples(parser: argparse.ArgumentParser, examples: str) -> None:
-    """Show `examples` below the options of `parser` (kept as written)."""
-    parser.epilog = examples
-    parser.formatter_class = argparse.RawDescriptionHelpFormatter
-
-
-def build_parser() -> argparse.ArgumentParser:
-    from pbmdem import __version__
-
-    parser = argparse.ArgumentParser(
-        prog="pbmdem", description=DESCRIPTION, epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    parser.add_argument("--version", action="version", version=f"pbmdem {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    _add_dem(sub)
-    _add_pbm(sub)
-
-    from pbmdem.dem import viewer
-    from pbmdem.design import cli as design_cli
-    from pbmdem.surrogate import cli as surrogate_cli
-
-    viewer.add_cli(sub)
-    design_cli.add_cli(sub)
-    surrogate = surrogate_cli.add_cli(sub)
-    _with_examples(surrogate, SURROGATE_EXAMPLES[None])
-    for action in surrogate._subparsers._group_actions:
-        for name, child in action.choices.items():
-            _with_examples(child, SURROGATE_EXAMPLES[name])
-    return parser
-
-
-def _add_dem(sub) -> None:
-    """The `pbmdem dem` command."""
-    dem = sub.add_parser(
-        "dem",
-        help="run one DEM operating point with LIGGGHTS (or only plan it, with a runtime estimate)",
-        description="Run LIGGGHTS for one operating point (impeller speed x size distribution) and "
-        "tabulate its collisions between size classes.",
-    )
-    _with_examples(dem, DEM_EXAMPLES)
+def _dem_options(dem: argparse.ArgumentParser) -> None:
+    """The options of `pbmdem dem`."""
     dem.add_argument("--config", required=True, help="workflow config (YAML)")
-    dem.add_argument("--rpm", required=True, help="impeller speed (1/min), 0 < rpm <= 20000")
+    dem.add_argument("--rpm", required=True, help=f"impeller speed (1/min), 0 < rpm <= {RPM_MAX}")
     dem.add_argument("--distribution", required=True, help="size distribution name from the config")
     dem.add_argument("--replicate", type=int, default=0, help="replicate (insertion seeds), 0 .. dem.replicates-1")
     dem.add_argument("--out", default=None, help="run folder (default results/dem/<point id>/rep<replicate>)")
@@ -279,14 +250,8 @@ def _add_dem(sub) -> None:
     dem.set_defaults(func=_dem)
 
 
-def _add_pbm(sub) -> None:
-    """The `pbmdem pbm` command."""
-    pbm = sub.add_parser(
-        "pbm",
-        help="run the population balance model of the batch granulator",
-        description="Run the PBM for one impeller speed and size distribution.",
-    )
-    _with_examples(pbm, PBM_EXAMPLES)
+def _pbm_options(pbm: argparse.ArgumentParser) -> None:
+    """The options of `pbmdem pbm`."""
     pbm.add_argument("--config", required=True, type=Path, help="workflow config (YAML)")
     pbm.add_argument(
         "--kernel",
@@ -311,10 +276,89 @@ def _add_pbm(sub) -> None:
             help=f"results/dem/{name} (with --kernel table); needed when pbm.breakage.enabled is true",
         )
     pbm.add_argument("--model", type=Path, help="surrogate model file (with --kernel ann)")
-    pbm.add_argument("--rpm", required=True, help="impeller speed (1/min), 0 < rpm <= 20000")
+    pbm.add_argument("--rpm", required=True, help=f"impeller speed (1/min), 0 < rpm <= {RPM_MAX}")
     pbm.add_argument("--distribution", default=None, help="size distribution name (default: first of the grid)")
     pbm.add_argument("--out", required=True, type=Path, help="output folder (tables, plots, run.json)")
     pbm.set_defaults(func=_pbm)
+
+
+#: Every command of `pbmdem`: (name, one-line help, description, examples, options), where
+#: options(parser) adds the command's arguments and its handler (`set_defaults(func=...)`). A new
+#: command is one more row.
+COMMANDS = (
+    (
+        "dem",
+        "run one DEM operating point with LIGGGHTS (or only plan it, with a runtime estimate)",
+        "Run LIGGGHTS for one operating point (impeller speed x size distribution) and tabulate its "
+        "collisions between size classes.",
+        DEM_EXAMPLES,
+        _dem_options,
+    ),
+    (
+        "pbm",
+        "run the population balance model of the batch granulator",
+        "Run the PBM for one impeller speed and size distribution.",
+        PBM_EXAMPLES,
+        _pbm_options,
+    ),
+    (
+        "view",
+        "show a DEM run (particles coloured by size, impeller) at a time in seconds",
+        viewer.__doc__.split("\n\n")[1].strip(),
+        viewer.EXAMPLES,
+        viewer.add_options,
+    ),
+    (
+        "surrogate",
+        "encounter surrogate: train the model families, predict",
+        "Train or query the encounter surrogate (encounter frequency and impact-velocity distribution per class pair).",
+        SURROGATE_EXAMPLES,
+        surrogate_cli.add_options,
+    ),
+    (
+        "design-space",
+        "PBM-ANN over impeller speed x binder rate x a third factor: final sizes and the specification region",
+        "Run PBM-ANN (ensemble mean and every member) over the grid of the config's design_space section "
+        "and write the table, the maps and the figures of merit.",
+        DESIGN_EXAMPLES,
+        design_cli.design_space_options,
+    ),
+    (
+        "calibrate",
+        "estimate PBM parameters from measured d10/d50/d90 over time with PBM-ANN",
+        "Least-squares estimate of the pbm settings of calibration.parameters (or --parameters) from a "
+        "measured size table, with confidence intervals that hold the measurement error and the "
+        "surrogate's uncertainty, their correlation, the residuals and a fit figure.",
+        CALIBRATE_EXAMPLES,
+        design_cli.calibrate_options,
+    ),
+    (
+        "config",
+        "list every setting with its default, print the config schema, or check a config file",
+        "Every setting of a pbmdem configuration, declared once in pbmdem.config.",
+        config_cli.EXAMPLES,
+        config_cli.add_options,
+    ),
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The `pbmdem` parser: one subcommand per row of :data:`COMMANDS`, each with its examples."""
+    parser = argparse.ArgumentParser(
+        prog="pbmdem", description=DESCRIPTION, epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--version", action="version", version=f"pbmdem {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name, help_, description, examples, options in COMMANDS:
+        command = sub.add_parser(
+            name,
+            help=help_,
+            description=description,
+            epilog=examples,
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
+        options(command)
+    return parser
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -5,13 +5,15 @@
     cfg.granulator.tip_speed(600)                   # m/s
     cfg.dem_point("fine")                           # what one DEM run of feed 'fine' uses
 
-The schema (`workflow/schemas/*.schema.yaml`, shipped as package data) is the only place
-defaults live; `Config.from_mapping` validates once, fills them in, and builds the typed objects.
+Every setting is declared once, in the pydantic models of this package (type, default, bounds,
+unit, description); `Config.from_mapping` checks a file once, fills in the defaults and builds the
+typed objects. `pbmdem config --show-defaults` lists every setting, `--schema` prints the JSON
+schema generated from the models, `--check FILE` checks a file.
 """
 
 from .dem import Dem, DemExecution
 from .design import Calibration, DesignSpace, Factor, Sensitivity, SobolFactor, Specification
-from .errors import RPM_MAX, ConfigError, check_rpm
+from .errors import ConfigError
 from .granulator import Bed, Bowl, Granulator, Impeller, Material
 from .pbm import Pbm, Solver
 from .points import (
@@ -24,9 +26,9 @@ from .points import (
     point_id,
     rpm_text,
 )
-from .schema import complete, non_finite_values, schema_dir, section_defaults
-from .settings import Config, CoupledLoop, DemPoint, PbmBatch, SurrogateTraining
+from .settings import Config, ConfigFile, CoupledLoop, DemPoint, PbmBatch, SurrogateTraining, non_finite_values
 from .surrogate import Surrogate
+from .typed import RPM_MAX, Settings, check_rpm, setting
 from .validation import FeedCheck, SampleRule, Sweep, Validation
 from .yamlfile import load_yaml
 
@@ -46,10 +48,10 @@ __all__ = [
     "load_yaml",
     "check_rpm",
     "RPM_MAX",
-    "complete",
+    "ConfigFile",
+    "Settings",
+    "setting",
     "non_finite_values",
-    "schema_dir",
-    "section_defaults",
     "Granulator",
     "Bowl",
     "Impeller",

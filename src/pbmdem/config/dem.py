@@ -2,31 +2,47 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import Annotated, Literal
 
-from .typed import Settings
+from pydantic import Field
+
+from .typed import Settings, setting
 
 
-@dataclass(frozen=True)
 class Dem(Settings):
     """What one DEM run computes (the `dem:` section without the bed, which belongs to the
     granulator, without `replicates`, which decides which runs exist, and without the execution
     settings, which change how a run is executed but not its result)."""
 
-    max_particles: int
-    timestep_fraction: float
-    settle_time: float
-    spinup_time: float
-    spinup_revolutions: float
-    sampling_time: float
-    sampling_revolutions: float
-    history_time: float
-    encounter_gap_fraction: float
-    position_every: int
-    collision_interval: int | str
-    vtk_interval: float
-    keep_contact_dumps: bool
-    seed: int
+    max_particles: int = setting(20000, "most particles of one DEM bed", ge=2, le=10000000)
+    timestep_fraction: float = setting(
+        ..., "time step as a fraction of the smallest particle's Rayleigh time", gt=0, le=0.3
+    )
+    settle_time: float = setting(..., "settling of the poured bed", "s", gt=0, le=100)
+    spinup_time: float = setting(
+        ..., "minimum spin-up; the spin-up lasts at least spinup_revolutions", "s", gt=0, le=100
+    )
+    spinup_revolutions: float = setting(0.0, "minimum spin-up in impeller revolutions", ge=0, le=1000)
+    sampling_time: float = setting(
+        ..., "minimum sampling window; it lasts at least sampling_revolutions", "s", gt=0, le=100
+    )
+    sampling_revolutions: float = setting(0.0, "minimum sampling window in impeller revolutions", ge=0, le=1000)
+    history_time: float = setting(
+        0.05, "position history recorded before the sampling window, part of the spin-up", "s", gt=0, le=100
+    )
+    encounter_gap_fraction: float = setting(
+        0.25,
+        "an encounter needs a surface gap above this fraction of the smaller diameter since the previous contact",
+        gt=0,
+        le=10,
+    )
+    position_every: int = setting(2, "contact snapshots between two position snapshots", ge=1, le=1000)
+    collision_interval: Annotated[int, Field(ge=1, le=100000)] | Literal["auto"] = setting(
+        "auto", "steps between contact snapshots, or auto (half the Hertz contact time)"
+    )
+    vtk_interval: float = setting(0.02, "time between VTK snapshots", "s", gt=0, le=100)
+    keep_contact_dumps: bool = setting(False, "keep the raw contact dumps of a run")
+    seed: int = setting(20141, "insertion seed of the first replicate", ge=1, le=1000000000)
 
     def phase_time(self, phase: str, rpm: float) -> float:
         """Length (s) of the spin-up or sampling phase at `rpm`: `<phase>_revolutions` impeller
@@ -35,25 +51,32 @@ class Dem(Settings):
         return max(getattr(self, f"{phase}_time"), revolutions * 60.0 / float(rpm))
 
 
-@dataclass(frozen=True)
 class DemLimits(Settings):
     """Bounds on what one DEM run may cost (`dem.limits`): a plan above any of them is refused
-    before anything runs (`pbmdem.dem.plan.check_limits`). Guards, not settings of a result."""
+    before anything runs (`pbmdem.dem.plan.check_limits`). Guards against a typo such as an rpm of
+    1e-9, which would plan 7e15 steps; execution settings, not params: changing them reruns nothing.
+    The default grid's largest run (rpm150_fine) plans 9.2e4 steps, 1.25 s simulated and 2.2e8
+    particle-steps: the bounds sit 24-54x above it; 30 s is ~150 revolutions at 300 rpm."""
 
-    max_steps: int
-    max_simulated_time: float
-    max_particle_steps: float
+    max_steps: int = setting(
+        5000000, "time steps of settling + spin-up + sampling (~40x the default grid's longest run, 1.2e5)", ge=1
+    )
+    max_simulated_time: float = setting(
+        30.0, "simulated time of one run (the default grid's longest: 0.95 s)", "s", gt=0
+    )
+    max_particle_steps: float = setting(
+        1.0e10, "particles x steps of one run, its cost: ~4e6 particle-steps/s on one core, so 1e10 is ~40 min", gt=0
+    )
 
 
-@dataclass(frozen=True)
 class DemExecution(Settings):
     """How DEM runs are executed (`dem.mpi_ranks`, `dem.timeout` in s, the cost bounds
     `dem.limits`): never part of a result, so never part of a rule's params (changing them
     reruns nothing)."""
 
-    mpi_ranks: int
-    timeout: float
-    limits: DemLimits
+    mpi_ranks: int = setting(1, "MPI ranks of one LIGGGHTS run", ge=1, le=4096)
+    timeout: float = setting(7200.0, "wall-time limit per run", "s", gt=0)
+    limits: DemLimits = setting(DemLimits, "bounds on the plan of one DEM run")
 
     @classmethod
     def of_job(cls, config: dict, resources=None) -> DemExecution:
@@ -65,11 +88,16 @@ class DemExecution(Settings):
         tasks = resources.get("tasks") if resources is not None else None
         if tasks:
             ranks = int(tasks)
-        limits = DemLimits.from_dict(dem["limits"], "dem.limits")
-        return cls(mpi_ranks=ranks, timeout=float(dem["timeout"]), limits=limits)
+        return cls(mpi_ranks=ranks, timeout=dem["timeout"], limits=dem["limits"])
 
 
-#: keys of the `dem:` section that are not in `Dem`
-BED_KEYS = ("bed_height", "packing_fraction")
-EXECUTION_KEYS = ("mpi_ranks", "timeout", "limits")
-REPLICATES_KEY = "replicates"
+class DemSection(Dem, DemExecution):
+    """The `dem:` section: what a run computes, its execution, the bed and the replicates."""
+
+    bed_height: float = setting(..., "settled bed height", "m", gt=0, le=10)
+    packing_fraction: float = setting(..., "packing fraction of the settled bed", ge=0.3, le=0.74)
+    replicates: int = setting(3, "DEM runs per operating point, differing only by their insertion seeds", ge=1, le=1000)
+
+
+#: keys of the `dem:` section that change how a run is executed, not its result
+EXECUTION_KEYS = tuple(DemExecution.model_fields)

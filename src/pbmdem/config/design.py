@@ -3,95 +3,113 @@ estimation (`calibration:`) and the global sensitivity analysis (`sensitivity:`)
 
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import Field
 
 from .errors import ConfigError
-from .typed import Settings
+from .typed import PbmKey, Rpm, Settings, Unique, setting
+
+Positive = Annotated[float, Field(gt=0)]
 
 
-@dataclass(frozen=True)
-class Span(Settings):
-    """`num` values evenly from `start` to `stop` (null ends are resolved from the DEM grid); one
-    value if start = stop (a grid of one speed)."""
+class LiquidSpan(Settings):
+    """`num` binder addition rates (m3/s) evenly from `start` to `stop`."""
 
-    start: float | None
-    stop: float | None
-    num: int
+    start: Positive = setting(..., "lowest binder rate", "m3/s")
+    stop: Positive = setting(..., "highest binder rate", "m3/s")
+    num: int = setting(7, "rates of the span", ge=2, le=200)
 
     def values(self) -> list[float]:
-        import numpy as np
-
         if self.stop == self.start:
             return [float(self.start)]
         return [float(v) for v in np.linspace(self.start, self.stop, self.num)]
 
 
-@dataclass(frozen=True)
+class Span(LiquidSpan):
+    """`num` impeller speeds evenly from `start` to `stop` (null ends are resolved from the DEM
+    grid); one value if start = stop (a grid of one speed)."""
+
+    start: Rpm | None = setting(None, "lowest speed; null: the DEM grid's lowest", "rpm")
+    stop: Rpm | None = setting(None, "highest speed; null: the DEM grid's highest", "rpm")
+
+
 class Factor(Settings):
     """A numeric pbm setting (its config key) and the values it takes."""
 
-    key: str
-    values: tuple[float, ...]
+    key: PbmKey = setting("pbm.process.wet_massing_time", "a numeric pbm setting (its config key)")
+    values: Unique[Positive] = setting(
+        (120.0, 240.0, 360.0), "its values; one map per value", min_length=1, max_length=20
+    )
 
 
-@dataclass(frozen=True)
 class Specification(Settings):
     """The product specification (m): d50 within [d50_min, d50_max], d90 at most d90_max (None: no bound)."""
 
-    d50_min: float | None
-    d50_max: float | None
-    d90_max: float | None
+    d50_min: float | None = setting(0.008, "lowest d50; null: no bound", "m", gt=0, le=1)
+    d50_max: float | None = setting(0.0105, "highest d50; null: no bound", "m", gt=0, le=1)
+    d90_max: float | None = setting(0.014, "highest d90; null: no bound", "m", gt=0, le=1)
 
 
-@dataclass(frozen=True)
 class DesignSpace(Settings):
-    """Impeller speed x binder rate x a third factor, the specification, and the processes."""
+    """The PBM-ANN design space (docs/design.md): final d10/d50/d90 with the surrogate's
+    uncertainty over impeller speed x binder rate x a third factor, and the region that meets a
+    specification."""
 
-    impeller_rpm: Span
-    liquid_rate: Span
-    third_factor: Factor
-    specification: Specification
-    n_jobs: int
+    impeller_rpm: Span = setting(Span, "speeds: num evenly from start to stop")
+    liquid_rate: LiquidSpan = setting(
+        LiquidSpan(start=5.6e-8, stop=8.0e-8, num=7), "binder addition rates (the values of pbm.liquid_addition.rate)"
+    )
+    third_factor: Factor = setting(Factor, "the third factor: a numeric pbm setting and its values")
+    specification: Specification = setting(Specification, "the product specification")
+    n_jobs: int = setting(2, "processes running the batches (the results do not depend on it)", ge=1, le=256)
 
 
-@dataclass(frozen=True)
 class Proof(Settings):
-    """The check of the calibration on data of known parameters."""
+    """The check of the calibration on data of known parameters (rule calibration_check)."""
 
-    time_step: float
-    start_factor: float
-    noise: float
-    seed: int
+    time_step: float = setting(60.0, "time between the measured times taken from PBM-DEM and PBM-constant", "s", gt=0)
+    start_factor: float = setting(1.5, "the fit starts from the true values times this factor", gt=0)
+    noise: float = setting(0.03, "relative sd of the noise added to PBM-constant's output", gt=0, le=0.5)
+    seed: int = setting(2026, "seed of the noise", ge=0)
 
 
-@dataclass(frozen=True)
 class Calibration(Settings):
-    """Which pbm settings to estimate, from which statistics, and how to judge the estimates."""
+    """Parameter estimation with PBM-ANN from measured d10/d50/d90 over time (docs/calibration.md)."""
 
-    parameters: tuple[str, ...]
-    statistics: tuple[str, ...]
-    relative_error_floor: float
-    max_factor: float
-    confidence: float
-    identifiability_correlation: float
-    proof: Proof
+    parameters: Unique[PbmKey] = setting(
+        ("pbm.aggregation.beta0", "pbm.aggregation.success.threshold"),
+        "the PBM settings to estimate, config keys of positive numbers (estimated in ln)",
+        min_length=1,
+        max_length=10,
+    )
+    statistics: Unique[Literal["d10", "d50", "d90"]] = setting(
+        ("d10", "d50", "d90"), "the size statistics of the measured table that enter the fit", min_length=1
+    )
+    relative_error_floor: float = setting(0.01, "the smallest measurement sd, a fraction of the value", gt=0, le=1)
+    max_factor: float = setting(
+        10.0, "each parameter is searched within [start / max_factor, start x max_factor]", gt=1, le=1000
+    )
+    confidence: float = setting(0.95, "confidence level of the intervals", gt=0, lt=1)
+    identifiability_correlation: float = setting(
+        0.95, "|correlation| of two estimates above which the data do not separate them (flagged)", gt=0, le=1
+    )
+    proof: Proof = setting(Proof, "the check on data of known parameters")
 
 
 #: the name of the impeller speed among the factors of the sensitivity analysis
 SPEED = "impeller_rpm"
 
 
-@dataclass(frozen=True)
 class SpeedRange(Settings):
     """The impeller speed range (rpm) of the sensitivity analysis (null ends are resolved from the
     DEM grid); low = high: a fixed speed, not a factor."""
 
-    low: float | None
-    high: float | None
+    low: Rpm | None = setting(None, "lowest speed; null: the DEM grid's lowest", "rpm")
+    high: Rpm | None = setting(None, "highest speed; null: the DEM grid's highest", "rpm")
 
 
-@dataclass(frozen=True)
 class SobolFactor(Settings):
     """A factor of the sensitivity analysis: `key` (a pbm config key, or `SPEED`) varied over
     [low, high], uniformly (`scale` linear) or uniformly in ln (log)."""
@@ -99,28 +117,48 @@ class SobolFactor(Settings):
     key: str
     low: float
     high: float
-    scale: str
+    scale: Literal["linear", "log"] = "linear"
 
 
-@dataclass(frozen=True)
+class SobolParameter(SobolFactor):
+    """A pbm setting varied by the sensitivity analysis (an item of `sensitivity.parameters`)."""
+
+    key: PbmKey = setting(..., "a pbm setting (its config key)")
+    low: Positive = setting(..., "lowest value")
+    high: Positive = setting(..., "highest value")
+    scale: Literal["linear", "log"] = setting("linear", "sampled uniformly (linear) or uniformly in ln (log)")
+
+
 class Sensitivity(Settings):
-    """The global sensitivity analysis: the factors and their ranges, Saltelli's base sample N,
-    the seed, the confidence level and bootstrap resamples of the intervals, the processes."""
+    """The global sensitivity analysis (docs/design.md, "Global sensitivity"): Sobol' indices of
+    PBM-ANN's final d10/d50/d90 to impeller speed and to pbm settings."""
 
-    impeller_rpm: SpeedRange
-    parameters: tuple[SobolFactor, ...]
-    base_samples: int
-    seed: int
-    confidence: float
-    resamples: int
-    n_jobs: int
+    impeller_rpm: SpeedRange = setting(SpeedRange, "the speed range, sampled uniformly; low = high: fixed")
+    parameters: tuple[SobolParameter, ...] = setting(
+        (
+            SobolParameter(key="pbm.liquid_addition.rate", low=5.6e-8, high=8.0e-8, scale="linear"),
+            SobolParameter(key="pbm.process.wet_massing_time", low=120.0, high=360.0, scale="linear"),
+            SobolParameter(key="pbm.breakage.yield_strength", low=5.0e3, high=1.0e5, scale="log"),
+            SobolParameter(key="pbm.aggregation.beta0", low=1.0e-4, high=4.0e-4, scale="log"),
+        ),
+        "the pbm settings varied, each over [low, high]",
+        min_length=1,
+        max_length=20,
+    )
+    base_samples: int = setting(
+        128, "N of Saltelli's scheme (a power of 2): N (D + 2) batches for D factors", ge=2, le=65536
+    )
+    seed: int = setting(1, "seed of the scrambled Sobol' sequence and of the bootstrap", ge=1, le=1000000000)
+    confidence: float = setting(0.95, "level of the confidence intervals of the indices", gt=0, lt=1)
+    resamples: int = setting(1000, "bootstrap resamples of the confidence intervals", ge=10, le=100000)
+    n_jobs: int = setting(2, "processes running the batches (the results do not depend on it)", ge=1, le=256)
 
     def factors(self) -> tuple[SobolFactor, ...]:
         """The factors in their order: the speed first (unless fixed), then `parameters`."""
         speed = self.impeller_rpm
         if speed.low == speed.high:
             return self.parameters
-        return (SobolFactor(SPEED, float(speed.low), float(speed.high), "linear"), *self.parameters)
+        return (SobolFactor(key=SPEED, low=float(speed.low), high=float(speed.high), scale="linear"), *self.parameters)
 
 
 def _sensitivity_problems(s: Sensitivity, pbm) -> list[str]:
@@ -187,7 +225,7 @@ def pbm_value(pbm, key: str) -> float:
     the settings `pbm`; ConfigError naming the key if it is not a positive number there."""
     obj = pbm
     for name in _path(key):
-        if not dataclasses.is_dataclass(obj) or name not in {f.name for f in dataclasses.fields(obj)}:
+        if not isinstance(obj, Settings) or name not in type(obj).model_fields:
             raise ConfigError(f"config key {key!r}: {name!r} is not a pbm setting; allowed: a numeric key of pbm")
         obj = getattr(obj, name)
     if isinstance(obj, bool) or not isinstance(obj, (int, float)) or not obj > 0:
@@ -207,4 +245,4 @@ def _replaced(obj, names: list[str], value):
     head, *rest = names
     current = getattr(obj, head)
     new = _replaced(current, rest, value) if rest else type(current)(value)
-    return dataclasses.replace(obj, **{head: new})
+    return obj.replace(**{head: new})

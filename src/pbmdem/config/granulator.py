@@ -9,9 +9,8 @@ number of granules is the DEM's particle count).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
-from .typed import Settings
+from .typed import Settings, setting
 
 #: standard gravity (m/s2), for the Froude number
 GRAVITY = 9.80665
@@ -23,30 +22,28 @@ def tip_speed(rpm, tip_radius: float):
     return 2.0 * math.pi * tip_radius * rpm / 60.0
 
 
-@dataclass(frozen=True)
 class Bowl(Settings):
     """Closed cylindrical bowl: inner diameter and height up to the lid (m), facets of its STL."""
 
-    diameter: float
-    height: float
-    segments: int
+    diameter: float = setting(..., "inner bowl diameter", "m", gt=0, le=10)
+    height: float = setting(..., "bowl height up to the lid", "m", gt=0, le=10)
+    segments: int = setting(48, "facets around the bowl (its STL)", ge=8, le=720)
 
     @property
     def radius(self) -> float:
         return 0.5 * self.diameter
 
 
-@dataclass(frozen=True)
 class Impeller(Settings):
     """Bladed impeller on the bowl's axis (lengths in m, pitch in degrees)."""
 
-    blades: int
-    blade_length: float
-    blade_height: float
-    blade_thickness: float
-    clearance: float
-    pitch_deg: float
-    hub_diameter: float
+    blades: int = setting(..., "number of blades", ge=1, le=12)
+    blade_length: float = setting(..., "axis to blade tip", "m", gt=0, le=10)
+    blade_height: float = setting(..., "blade height", "m", gt=0, le=10)
+    blade_thickness: float = setting(..., "blade thickness", "m", gt=0, le=10)
+    clearance: float = setting(..., "gap under the blades", "m", ge=0, le=10)
+    pitch_deg: float = setting(0.0, "blade pitch", "degree", ge=-60, le=60)
+    hub_diameter: float = setting(0.01, "hub diameter", "m", gt=0, le=10)
 
     @property
     def tip_radius(self) -> float:
@@ -61,21 +58,24 @@ class Impeller(Settings):
         return self.clearance + 0.5 * self.blade_height + half_extent
 
 
-@dataclass(frozen=True)
 class Bed(Settings):
     """The settled bed of granules: its height (m) and the packing fraction of its granules
-    (config keys dem.bed_height and dem.packing_fraction)."""
+    (config keys dem.bed_height and dem.packing_fraction, whose bounds are checked there)."""
 
     height: float
     packing_fraction: float
 
 
-@dataclass(frozen=True)
-class Granulator(Settings):
+class GranulatorSection(Settings):
+    """The `granulator:` section: bowl and impeller."""
+
+    bowl: Bowl = setting(..., "the closed cylindrical bowl")
+    impeller: Impeller = setting(..., "the bladed impeller on the bowl's axis")
+
+
+class Granulator(GranulatorSection):
     """Bowl, impeller and settled bed of the batch granulator."""
 
-    bowl: Bowl
-    impeller: Impeller
     bed: Bed
 
     @staticmethod
@@ -104,14 +104,13 @@ class Granulator(Settings):
         return self.bed.height * math.pi / 4 * self.bowl.diameter**2 * self.bed.packing_fraction
 
 
-@dataclass(frozen=True)
 class Material(Settings):
     """Granule material of the DEM: density (kg/m3), Young's modulus (Pa), Poisson ratio,
     restitution, sliding and rolling friction."""
 
-    density: float
-    youngs_modulus: float
-    poisson_ratio: float
-    restitution: float
-    friction: float
-    rolling_friction: float
+    density: float = setting(..., "particle density", "kg/m3", ge=10, le=25000)
+    youngs_modulus: float = setting(..., "Young's modulus", "Pa", ge=1.0e4, le=1.0e12)
+    poisson_ratio: float = setting(..., "Poisson ratio", ge=0, le=0.5)
+    restitution: float = setting(..., "coefficient of restitution", gt=0, le=1)
+    friction: float = setting(..., "sliding friction coefficient", ge=0, le=2)
+    rolling_friction: float = setting(..., "rolling friction coefficient", ge=0, le=1)

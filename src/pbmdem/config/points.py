@@ -4,9 +4,11 @@ study's cases (the grid's feeds and the 50:50 blends between neighbours) by name
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import Annotated
 
-from .typed import Settings
+from pydantic import Field
+
+from .typed import Name, Rpm, Settings, Unique, setting
 
 
 def rpm_text(rpm: float) -> str:
@@ -23,12 +25,15 @@ def point_id(rpm: float, distribution: str) -> str:
     return f"rpm{rpm_text(rpm)}_{distribution}"
 
 
-@dataclass(frozen=True)
 class SizeDistribution(Settings):
     """A discrete size distribution: class diameters (m, ascending) and number fractions (sum 1)."""
 
-    diameters: tuple[float, ...]
-    number_fractions: tuple[float, ...]
+    diameters: tuple[Annotated[float, Field(ge=1.0e-5, le=0.1)], ...] = setting(
+        ..., "class diameters, ascending", "m", min_length=1, max_length=20
+    )
+    number_fractions: tuple[Annotated[float, Field(ge=0, le=1)], ...] = setting(
+        ..., "number fraction of each class (sum 1)", min_length=1, max_length=20
+    )
 
     @property
     def mean_particle_volume(self) -> float:
@@ -85,26 +90,33 @@ def feed_case_parents(cases) -> dict[str, tuple[str, str]]:
     return out
 
 
-@dataclass(frozen=True)
 class ExtraPoint(Settings):
     """One operating point beyond the full grid: a size distribution at one impeller speed."""
 
-    rpm: float
-    distribution: str
+    rpm: Rpm = setting(..., "impeller speed", "rpm")
+    distribution: Name = setting(..., "a name from size_distributions")
 
 
-@dataclass(frozen=True)
 class OperatingGrid(Settings):
     """The DEM grid: every impeller speed (rpm) with every named size distribution, single extra
     points (the active learning's proposals) and the points of a space-filling design (each a
     distribution at one speed, `pbmdem.dem.design`)."""
 
-    impeller_rpm: tuple[float, ...]
-    size_distributions: tuple[str, ...]
-    extra_points: tuple[ExtraPoint, ...]
-    max_points: int
-    design_points: tuple[ExtraPoint, ...]
-    design_replicates: int | None
+    impeller_rpm: Unique[Rpm] = setting(..., "impeller speeds of the full grid", "rpm", min_length=1)
+    size_distributions: Unique[Name] = setting(..., "size distributions of the full grid", min_length=1)
+    extra_points: Unique[ExtraPoint] = setting(
+        (), "single operating points beyond the full grid (the active learning's proposals, docs/validation.md)"
+    )
+    max_points: int = setting(
+        1000,
+        "most operating points the grid may hold; a larger grid is refused before Snakemake builds its DAG "
+        "(~80x the default grid's 12 points; 1000 points x 3 replicates of a minute each is two days of DEM)",
+        ge=1,
+    )
+    design_points: Unique[ExtraPoint] = setting(
+        (), "points of a space-filling design over the surrogate's features (pbmdem.dem.design, docs/dem.md)"
+    )
+    design_replicates: int | None = setting(None, "DEM runs per design point (null: dem.replicates)", ge=1, le=1000)
 
     def count(self) -> int:
         """Number of operating points of the full grid plus the extra and design points (an upper

@@ -1,10 +1,12 @@
 """The whole configuration as one frozen, typed object, and the settings each stage uses.
 
-`Config.from_mapping(cfg)` validates a configuration against the schema once, fills in the
-schema's defaults, resolves the defaults that depend on other sections (the PBM grid's first
-pivot, the sweep's speed range), makes the checks a schema cannot express, and returns a
-`Config`. Every path goes through it: the Snakefile, the `pbmdem` command line, the library's
-entry points and the tests.
+`ConfigFile` is the file: one model per section, each setting declared once with its type,
+default, bounds, unit and description (`pbmdem config --show-defaults` lists them,
+`pbmdem config --schema` prints the JSON schema generated from them).
+`Config.from_mapping(cfg)` checks a configuration once, fills in the defaults, resolves the
+defaults that depend on other sections (the PBM grid's first pivot, the sweeps' speed ranges),
+makes the checks that span sections, and returns a `Config`. Every path goes through it: the
+Snakefile, the `pbmdem` command line, the library's entry points and the tests.
 
 A stage is handed only the settings it uses, as one of the bundles below (`DemPoint`,
 `PbmBatch`, `SurrogateTraining`, `CoupledLoop`). A bundle's plain form (`to_dict()`) is also the
@@ -16,21 +18,71 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from .dem import BED_KEYS, EXECUTION_KEYS, REPLICATES_KEY, Dem, DemExecution
+from pydantic import ValidationError
+
+from .dem import Dem, DemExecution, DemSection
 from .design import Calibration, DesignSpace, Sensitivity
-from .errors import ConfigError
-from .granulator import Bed, Bowl, Granulator, Impeller, Material
+from .errors import ConfigError, describe_errors
+from .granulator import Bed, Granulator, GranulatorSection, Material
 from .pbm import Pbm
 from .points import OperatingGrid, SizeDistribution
 from .surrogate import Surrogate
-from .typed import Settings, plain
+from .typed import Name, Settings, setting
 from .validation import SampleRule, Validation
 
 
-@dataclass(frozen=True)
+class ConfigFile(Settings):
+    """The configuration file: SI units throughout (m, s, kg, Pa), impeller speed in rpm."""
+
+    granulator: GranulatorSection = setting(..., "the granulator: bowl and impeller")
+    material: Material = setting(..., "the granule material of the DEM")
+    size_distributions: dict[Name, SizeDistribution] = setting(..., "named feed size distributions", min_length=1)
+    dem: DemSection = setting(..., "the DEM runs: bed, phases, output, execution")
+    grid: OperatingGrid = setting(..., "the DEM grid of operating points")
+    pbm: Pbm = setting(Pbm, "population balance model of the batch high-shear wet granulator")
+    surrogate: Surrogate = setting(Surrogate, "encounter surrogate trained on the DEM tables")
+    validation: Validation = setting(..., "PBM-DEM vs PBM-ANN vs PBM-constant and the PBM-ANN speed sweep")
+    design_space: DesignSpace = setting(DesignSpace, "the PBM-ANN design space (docs/design.md)")
+    calibration: Calibration = setting(Calibration, "parameter estimation (docs/calibration.md)")
+    sensitivity: Sensitivity = setting(Sensitivity, "global sensitivity analysis (docs/design.md)")
+
+
+def non_finite_values(obj, prefix: str = "") -> list[str]:
+    """Every NaN or infinite number in a nested config, as 'config key K = V: ...' messages."""
+    out: list[str] = []
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            out += non_finite_values(v, f"{prefix}.{k}" if prefix else str(k))
+    elif isinstance(obj, (list, tuple)):
+        for i, v in enumerate(obj):
+            out += non_finite_values(v, f"{prefix}[{i}]")
+    elif isinstance(obj, float) and not math.isfinite(obj):
+        out.append(
+            f"config key {prefix or '(top level)'} = {obj!r}: not a finite number (allowed: finite numbers "
+            "within the key's range)"
+        )
+    return out
+
+
+def parse(cfg: dict) -> ConfigFile:
+    """The checked configuration file `cfg` (a parsed YAML mapping) with its defaults; ConfigError
+    listing every problem otherwise. Types are checked as strictly as JSON: a number is not a
+    string, an integer not a fraction, a boolean not a number."""
+    if not isinstance(cfg, dict):
+        raise ConfigError("the top level of a configuration must be a mapping of sections")
+    problems = non_finite_values(cfg)
+    if not problems:
+        try:
+            return ConfigFile.model_validate_json(json.dumps(cfg, default=repr), strict=True)
+        except ValidationError as exc:
+            problems = describe_errors(exc, ConfigFile)
+    raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
+
+
 class DemPoint(Settings):
     """What one DEM run of an operating point uses: granulator, material, DEM settings and its size
     distribution (the rpm and the replicate are the run's wildcards)."""
@@ -42,7 +94,6 @@ class DemPoint(Settings):
     sizes: SizeDistribution
 
 
-@dataclass(frozen=True)
 class PbmBatch(Settings):
     """What one PBM batch uses: the pbm settings, the bed's solid volume (m3, owned by the
     granulator) and the initial size distribution."""
@@ -53,7 +104,6 @@ class PbmBatch(Settings):
     sizes: SizeDistribution
 
 
-@dataclass(frozen=True)
 class SurrogateTraining(Settings):
     """What training the surrogate uses: its settings and the granulator (tip speed feature)."""
 
@@ -61,7 +111,6 @@ class SurrogateTraining(Settings):
     granulator: Granulator
 
 
-@dataclass(frozen=True)
 class CoupledLoop(Settings):
     """What one speed's coupled loop (PBM-DEM, PBM-ANN, PBM-constant) uses."""
 
@@ -77,7 +126,13 @@ class CoupledLoop(Settings):
         """The DEM settings of the loop's calls: the minimum sampling window is
         validation.dem_sampling_time (dem.sampling_revolutions still applies); no contact dumps kept."""
         dem = self.dem.replace(sampling_time=self.dem_sampling_time, keep_contact_dumps=False)
-        return DemPoint(self.granulator, self.material, dem, self.batch.distribution, self.batch.sizes)
+        return DemPoint(
+            granulator=self.granulator,
+            material=self.material,
+            dem=dem,
+            distribution=self.batch.distribution,
+            sizes=self.batch.sizes,
+        )
 
 
 @dataclass(frozen=True)
@@ -102,14 +157,12 @@ class Config:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_mapping(cls, cfg: dict, source: str | Path | None = None) -> Config:
-        """Validate `cfg` (a parsed config file), fill in the defaults and build the Config;
+        """Check `cfg` (a parsed config file), fill in the defaults and build the Config;
         ConfigError listing every problem (prefixed with the file, if `source` is given)."""
         from .checks import check
-        from .schema import complete
 
         try:
-            full = complete(cfg)
-            config = cls._build(full)
+            config = cls._build(parse(cfg))
             check(config)
         except ConfigError as exc:
             if source is None:
@@ -118,55 +171,39 @@ class Config:
         return config
 
     @classmethod
-    def _build(cls, full: dict) -> Config:
-        dists = {
-            name: SizeDistribution.from_dict(d, f"size_distributions.{name}")
-            for name, d in full["size_distributions"].items()
-        }
-        dem_section = full["dem"]
-        bed = Bed(height=float(dem_section["bed_height"]), packing_fraction=float(dem_section["packing_fraction"]))
-        g = full["granulator"]
-        granulator = Granulator(
-            Bowl.from_dict(g["bowl"], "granulator.bowl"), Impeller.from_dict(g["impeller"], "granulator.impeller"), bed
-        )
-        run_keys = {k: v for k, v in dem_section.items() if k not in (*BED_KEYS, *EXECUTION_KEYS, REPLICATES_KEY)}
-        grid = OperatingGrid.from_dict(full["grid"], "grid")
-        # defaults that depend on other sections
-        pbm_section = json.loads(json.dumps(full["pbm"]))
-        if pbm_section["grid"]["min_diameter"] is None:
-            pbm_section["grid"]["min_diameter"] = min(min(d.diameters) for d in dists.values())
-        val_section = json.loads(json.dumps(full["validation"]))
-        design = json.loads(json.dumps(full["design_space"]))
-        # the feed check's speed: null is the feed study's, the grid's middle speed
-        if val_section["feed_check"]["rpm"] is None:
-            val_section["feed_check"]["rpm"] = grid.middle_speed()
-        sensitivity = json.loads(json.dumps(full["sensitivity"]))
-        # the speed ranges of the PBM-ANN sweep, the design space and the sensitivity analysis:
-        # null ends are the grid's
-        for span, (low, high) in (
-            (val_section["sweep"], ("start", "stop")),
-            (design["impeller_rpm"], ("start", "stop")),
-            (sensitivity["impeller_rpm"], ("low", "high")),
-        ):
-            if span[low] is None:
-                span[low] = min(grid.impeller_rpm)
-            if span[high] is None:
-                span[high] = max(grid.impeller_rpm)
+    def _build(cls, f: ConfigFile) -> Config:
+        dem, grid, dists = f.dem, f.grid, f.size_distributions
+        bed = Bed(height=dem.bed_height, packing_fraction=dem.packing_fraction)
+        granulator = Granulator(**dict(f.granulator), bed=bed)
+        # defaults that depend on other sections: the PBM grid's first pivot is the smallest feed
+        # class; the feed check's speed is the feed study's, the grid's middle speed; null ends of
+        # the PBM-ANN sweep, the design space and the sensitivity analysis are the grid's speeds
+        pbm = f.pbm
+        if pbm.grid.min_diameter is None:
+            pbm = pbm.replace(grid=pbm.grid.replace(min_diameter=min(min(d.diameters) for d in dists.values())))
+        low, high = min(grid.impeller_rpm), max(grid.impeller_rpm)
+        val = f.validation
+        sweep = val.sweep.replace(start=_or(val.sweep.start, low), stop=_or(val.sweep.stop, high))
+        check = val.feed_check.replace(rpm=_or(val.feed_check.rpm, grid.middle_speed()))
+        speeds = f.design_space.impeller_rpm
+        speeds = speeds.replace(start=_or(speeds.start, low), stop=_or(speeds.stop, high))
+        sens = f.sensitivity.impeller_rpm
+        sens = sens.replace(low=_or(sens.low, low), high=_or(sens.high, high))
         return cls(
             granulator=granulator,
-            material=Material.from_dict(full["material"], "material"),
-            size_distributions=dists,
-            dem=Dem.from_dict(run_keys, "dem"),
-            dem_replicates=int(dem_section[REPLICATES_KEY]),
-            dem_execution=DemExecution.from_dict({k: dem_section[k] for k in EXECUTION_KEYS}, "dem"),
+            material=f.material,
+            size_distributions=dict(dists),
+            dem=Dem(**{k: getattr(dem, k) for k in Dem.model_fields}),
+            dem_replicates=dem.replicates,
+            dem_execution=DemExecution(**{k: getattr(dem, k) for k in DemExecution.model_fields}),
             grid=grid,
-            pbm=Pbm.from_dict(pbm_section, "pbm"),
-            surrogate=Surrogate.from_dict(full["surrogate"], "surrogate"),
-            validation=Validation.from_dict(val_section, "validation"),
-            design_space=DesignSpace.from_dict(design, "design_space"),
-            calibration=Calibration.from_dict(full["calibration"], "calibration"),
-            sensitivity=Sensitivity.from_dict(sensitivity, "sensitivity"),
-            mapping=full,
+            pbm=pbm,
+            surrogate=f.surrogate,
+            validation=val.replace(sweep=sweep, feed_check=check),
+            design_space=f.design_space.replace(impeller_rpm=speeds),
+            calibration=f.calibration,
+            sensitivity=f.sensitivity.replace(impeller_rpm=sens),
+            mapping=f.to_dict(),
         )
 
     # ------------------------------------------------------------------ stage settings
@@ -182,34 +219,54 @@ class Config:
         return self.size_distributions[name]
 
     def dem_point(self, distribution: str) -> DemPoint:
-        return DemPoint(self.granulator, self.material, self.dem, distribution, self.distribution(distribution))
+        return DemPoint(
+            granulator=self.granulator,
+            material=self.material,
+            dem=self.dem,
+            distribution=distribution,
+            sizes=self.distribution(distribution),
+        )
 
     def pbm_batch(self, distribution: str) -> PbmBatch:
-        return PbmBatch(self.pbm, self.granulator.bed_solid_volume, distribution, self.distribution(distribution))
+        return PbmBatch(
+            pbm=self.pbm,
+            bed_solid_volume=self.granulator.bed_solid_volume,
+            distribution=distribution,
+            sizes=self.distribution(distribution),
+        )
 
     def surrogate_training(self) -> SurrogateTraining:
-        return SurrogateTraining(self.surrogate, self.granulator)
+        return SurrogateTraining(surrogate=self.surrogate, granulator=self.granulator)
 
     def sample_rule(self) -> SampleRule:
-        return SampleRule(self.validation.max_classes, self.validation.min_particles_per_class, self.dem.max_particles)
+        return SampleRule(
+            max_classes=self.validation.max_classes,
+            min_particles_per_class=self.validation.min_particles_per_class,
+            max_particles=self.dem.max_particles,
+        )
 
     def coupled_loop(self) -> CoupledLoop:
         v = self.validation
         return CoupledLoop(
-            self.pbm_batch(v.distribution),
-            self.granulator,
-            self.material,
-            self.dem,
-            v.coupling_intervals,
-            v.dem_sampling_time,
-            self.sample_rule(),
+            batch=self.pbm_batch(v.distribution),
+            granulator=self.granulator,
+            material=self.material,
+            dem=self.dem,
+            coupling_intervals=v.coupling_intervals,
+            dem_sampling_time=v.dem_sampling_time,
+            sample=self.sample_rule(),
         )
 
     # ------------------------------------------------------------------ provenance
     def to_dict(self) -> dict:
         """The completed configuration mapping (every default filled in)."""
-        return plain(self.mapping)
+        return json.loads(json.dumps(self.mapping))
 
     def sha256(self) -> str:
         """Hash of the completed configuration (key order and formatting do not matter)."""
         return hashlib.sha256(json.dumps(self.to_dict(), sort_keys=True).encode()).hexdigest()
+
+
+def _or(value, default):
+    """`value`, or `default` where the config says null."""
+    return default if value is None else float(value)

@@ -2,71 +2,102 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import Annotated, Literal
 
-from .typed import Settings
+from pydantic import Field
+
+from .errors import ConfigError
+from .typed import Settings, setting
 
 
-@dataclass(frozen=True)
 class SurrogateCV(Settings):
-    """Grouped cross-validation: strategy and folds of group_kfold."""
+    """Grouped cross-validation (groups are DEM runs, point_id)."""
 
-    strategy: str
-    n_splits: int
+    strategy: Literal["leave_one_group_out", "group_kfold"] = setting(
+        "group_kfold",
+        "group_kfold: n_splits folds of whole runs (the cost stays flat as the grid grows); "
+        "leave_one_group_out: one fold per run",
+    )
+    n_splits: int = setting(5, "folds of group_kfold (capped at the number of runs)", ge=2)
 
 
-@dataclass(frozen=True)
 class KrigingSettings(Settings):
-    """Gaussian-process (Kriging) family: optimiser restarts and the linear trend."""
+    """Gaussian-process (Kriging) family."""
 
-    n_restarts_optimizer: int
-    linear_trend: bool
+    n_restarts_optimizer: int = setting(
+        5, "random restarts of the kernel's likelihood optimisation (seeded with random_state)", ge=0, le=50
+    )
+    linear_trend: bool = setting(True, "add a linear trend (universal Kriging) to the anisotropic RBF kernel")
 
 
-@dataclass(frozen=True)
 class ResponseSurfaceSettings(Settings):
-    """Polynomial response-surface family: its candidate degrees (chosen by grouped CV)."""
+    """Response-surface family (polynomial with Bayesian ridge)."""
 
-    degree: tuple[int, ...]
+    degree: tuple[Annotated[int, Field(ge=1, le=4)], ...] = setting(
+        (1, 2),
+        "candidate polynomial degrees, chosen per output by grouped CV (1: a power law in the log "
+        "features; 2: the classical quadratic response surface)",
+        min_length=1,
+    )
 
 
-@dataclass(frozen=True)
 class Surrogate(Settings):
     """Hyperparameter candidates, ensemble, cross-validation and target options of the surrogate."""
 
-    hidden_layer_sizes: tuple[tuple[int, ...], ...]
-    alpha: tuple[float, ...]
-    ensemble_size: int
-    seeds: tuple[int, ...] | None
-    random_state: int
-    max_iter: int
-    activation: str
-    solver: str
-    cv: SurrogateCV
-    zero_collisions: str
-    domain_margin: float
-    physics_offset: str
-    speed_law: str
-    model: str
-    feature_transform: str
-    kriging: KrigingSettings
-    rsm: ResponseSurfaceSettings
+    hidden_layer_sizes: tuple[
+        Annotated[tuple[Annotated[int, Field(ge=1, le=256)], ...], Field(min_length=1, max_length=4)], ...
+    ] = setting(
+        ((8,), (16,), (8, 8)),
+        "candidate hidden-layer sizes of the grid search (layer widths per candidate)",
+        min_length=1,
+    )
+    alpha: tuple[Annotated[float, Field(gt=0)], ...] = setting(
+        (0.01, 0.1, 1.0), "candidate L2 penalties of the grid search", min_length=1
+    )
+    ensemble_size: int = setting(5, "MLPs fitted with different seeds; their spread is the uncertainty", ge=1, le=50)
+    seeds: tuple[Annotated[int, Field(ge=0)], ...] | None = setting(
+        None,
+        "seeds of the ensemble members (ensemble_size of them); null: random_state, random_state+1, ...",
+        min_length=1,
+    )
+    random_state: int = setting(0, "base seed when seeds is null; also the gradient-boosting baseline's", ge=0)
+    max_iter: int = setting(2000, "iteration limit of every MLP fit", ge=1)
+    activation: Literal["tanh", "relu", "logistic"] = setting(
+        "relu", "relu: piecewise linear, so with log features and target the network extrapolates as a power law"
+    )
+    solver: Literal["lbfgs", "adam"] = setting("lbfgs", "lbfgs suits the small data sets of a DEM grid")
+    cv: SurrogateCV = setting(SurrogateCV, "grouped cross-validation")
+    zero_collisions: Literal["drop", "floor"] = setting(
+        "drop", "rows with zero collisions: drop them (warning) or floor at half a collision"
+    )
+    domain_margin: float = setting(
+        0.0, "relative slack of each feature's training range before an OutOfDomainWarning (at most 1)", ge=0, le=1
+    )
+    physics_offset: Literal["cross_section", "none"] = setting(
+        "cross_section", "cross_section: learn log10 c_ij - 2 log10(d_i + d_j); none: plain log10 c_ij"
+    )
+    speed_law: Literal["lognormal", "weibull", "gengamma"] = setting(
+        "gengamma", "the law of the impact speeds the surrogate learns (docs/surrogate.md)"
+    )
+    model: Literal["auto", "mlp", "kriging", "rsm"] = setting(
+        "auto", "the family PBM-ANN uses: auto, the smallest held-out error of log10 c; or mlp, kriging, rsm"
+    )
+    feature_transform: Literal["log", "none"] = setting("log", "log: the models see log10 of every feature")
+    kriging: KrigingSettings = setting(KrigingSettings, "Gaussian-process (Kriging) family")
+    rsm: ResponseSurfaceSettings = setting(ResponseSurfaceSettings, "response-surface family")
 
     @classmethod
     def from_section(cls, section: dict) -> Surrogate:
-        """Settings from a (partial) `surrogate:` section, validated and completed with the
-        schema's defaults (for library use without a whole configuration)."""
-        from .errors import ConfigError
-        from .schema import complete_section
-
-        settings = cls.from_dict(complete_section("surrogate", section), "surrogate")
+        """Settings from a (partial) `surrogate:` section, checked and completed with the defaults
+        (for library use without a whole configuration)."""
+        settings = cls.from_dict(section, "surrogate")
         problems = settings.problems()
         if problems:
             raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
         return settings
 
     def problems(self) -> list[str]:
-        """What the schema cannot check: one seed per ensemble member."""
+        """What a field cannot check alone: one seed per ensemble member."""
         if self.seeds is not None and len(self.seeds) != self.ensemble_size:
             return [
                 f"surrogate.seeds = {list(self.seeds)}: {len(self.seeds)} seeds but ensemble_size = "

@@ -1,102 +1,82 @@
-"""Frozen, typed settings objects built from validated configuration mappings.
+"""The base of every settings model, and `setting(...)`: one line per setting.
 
-Every settings class of `pbmdem.config` is a frozen dataclass whose fields mirror the keys of its
-config section. `build(cls, mapping, key)` turns a mapping that the schema has already validated
-(and completed with its defaults) into an instance, converting YAML numbers and lists to the
-field types (lists become tuples, so the objects are immutable and hashable); `plain(obj)` turns
-an instance back into plain JSON-able data (tuples become lists), the form Snakemake params and
-JSON files need. No defaults live here: a missing key is a programming error, reported with its
-config key.
+Every section of the configuration is a frozen pydantic model whose fields are declared with
+`setting(default, description, unit, bounds)`: its type, default, bounds, unit and description
+in one place, from which the JSON schema (`pbmdem config --schema`), the list of defaults
+(`pbmdem config --show-defaults`) and the checks of a config file all come. `...` as the default
+makes a setting required.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import functools
-import types
-import typing
+from typing import Annotated, Any, TypeVar
 
-from .errors import ConfigError
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StringConstraints, TypeAdapter, ValidationError
 
+from .errors import ConfigError, describe_errors
 
-@functools.cache
-def _hints(cls) -> dict:
-    return typing.get_type_hints(cls)
+#: the largest impeller speed a configuration or command line may give (rpm): the one owner of
+#: the limit, through the type `Rpm` of every speed setting and `check_rpm`
+RPM_MAX = 20000
 
 
-def _convert(hint, value, key: str):
-    origin = typing.get_origin(hint)
-    args = typing.get_args(hint)
-    if origin in (typing.Union, types.UnionType):
-        if value is None and type(None) in args:
-            return None
-        options = [a for a in args if a is not type(None)]
-        for option in options:  # e.g. int | str: the first type the value already is
-            base = typing.get_origin(option) or option
-            if isinstance(base, type) and isinstance(value, base) and not (base is int and isinstance(value, bool)):
-                return _convert(option, value, key)
-        return _convert(options[0], value, key)
-    if dataclasses.is_dataclass(hint):
-        return build(hint, value, key)
-    if origin is tuple:
-        if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"config key {key} = {value!r}: a list is required")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(args[0], v, f"{key}[{k}]") for k, v in enumerate(value))
-        return tuple(_convert(a, v, f"{key}[{k}]") for k, (a, v) in enumerate(zip(args, value)))
-    if origin is dict:
-        if not isinstance(value, dict):
-            raise ConfigError(f"config key {key} = {value!r}: a mapping is required")
-        return {str(k): _convert(args[1], v, f"{key}.{k}") for k, v in value.items()}
-    if hint is float:
-        return float(value)
-    if hint is int:
-        return int(value)
-    if hint is bool:
-        return bool(value)
-    if hint is str:
-        return str(value)
-    return value
+def setting(default: Any = ..., description: str = "", unit: str | None = None, **bounds) -> Any:
+    """A settings field: default (`...`: required), description, unit, and bounds (ge, gt, le,
+    lt, min_length, max_length, pattern); a model default is given as the model class."""
+    extra = {"unit": unit} if unit else None
+    if isinstance(default, type) and issubclass(default, BaseModel):
+        return Field(default_factory=default, description=description, json_schema_extra=extra, **bounds)
+    return Field(default, description=description, json_schema_extra=extra, **bounds)
 
 
-def build(cls, data, key: str):
-    """An instance of the frozen dataclass `cls` from the validated mapping `data` (config key `key`)."""
-    if not isinstance(data, dict):
-        raise ConfigError(f"config key {key} = {data!r}: a mapping is required")
-    hints = _hints(cls)
-    kwargs = {}
-    for f in dataclasses.fields(cls):
-        if not f.init:
-            continue
-        if f.name not in data:
-            raise ConfigError(
-                f"config key {key}.{f.name} is missing (the configuration was not completed by "
-                "pbmdem.config.load_config / validate)"
-            )
-        kwargs[f.name] = _convert(hints[f.name], data[f.name], f"{key}.{f.name}")
-    return cls(**kwargs)
+def _unique(values):
+    if len(set(values)) != len(values):
+        raise ValueError("has non-unique elements")
+    return values
 
 
-def plain(obj):
-    """Plain data (dicts, lists, numbers, strings) of a settings object, for params and JSON."""
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return {f.name: plain(getattr(obj, f.name)) for f in dataclasses.fields(obj) if f.init}
-    if isinstance(obj, dict):
-        return {str(k): plain(v) for k, v in sorted(obj.items())}
-    if isinstance(obj, (list, tuple)):
-        return [plain(v) for v in obj]
-    return obj
+T = TypeVar("T")
+#: a list of distinct values (JSON schema uniqueItems), e.g. Unique[float]
+Unique = Annotated[tuple[T, ...], AfterValidator(_unique), Field(json_schema_extra={"uniqueItems": True})]
+#: a plain name of a size distribution (letter first; letters, digits, '_' or '-')
+Name = Annotated[str, StringConstraints(pattern=r"^[A-Za-z][A-Za-z0-9_-]{0,63}$")]
+#: a config key of a pbm setting, e.g. pbm.aggregation.beta0
+PbmKey = Annotated[str, StringConstraints(pattern=r"^pbm(\.[a-z_0-9]+)+$")]
+#: an impeller speed (rpm)
+Rpm = Annotated[float, Field(gt=0, le=RPM_MAX)]
 
 
-class Settings:
-    """Mixin of the settings dataclasses: `from_dict`, `to_dict` and `replace`."""
+class Settings(BaseModel):
+    """A frozen settings model: unknown keys refused, NaN and infinities refused."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False, validate_default=True)
 
     @classmethod
     def from_dict(cls, data: dict, key: str = ""):
-        return build(cls, data, key or cls.__name__)
+        """The settings of the plain data `data` (a rule's params, a JSON file); ConfigError
+        naming `key` and what is allowed otherwise."""
+        try:
+            return cls.model_validate(data)
+        except ValidationError as exc:
+            raise ConfigError("invalid settings:\n  " + "\n  ".join(describe_errors(exc, cls, key))) from None
 
     def to_dict(self) -> dict:
-        return plain(self)
+        """Plain data (dicts, lists, numbers, strings), for params and JSON."""
+        return self.model_dump(mode="json")
 
     def replace(self, **changes):
-        return dataclasses.replace(self, **changes)
+        """A copy with `changes` (trusted values of the fields' types)."""
+        return self.model_copy(update=changes)
+
+
+_RPM = TypeAdapter(Rpm)
+
+
+def check_rpm(rpm, key: str = "--rpm") -> float:
+    """An impeller speed as a float, or ConfigError naming `key` and the value (0 < rpm <= RPM_MAX)."""
+    try:
+        return _RPM.validate_python(rpm)
+    except ValidationError:
+        raise ConfigError(
+            f"{key} = {rpm!r}: impossible impeller speed (allowed: a finite number, 0 < rpm <= {RPM_MAX:g})"
+        ) from None

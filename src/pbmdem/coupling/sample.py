@@ -47,7 +47,7 @@ class DemSample:
         return (n / n.sum()).tolist()
 
     def sizes(self) -> SizeDistribution:
-        return SizeDistribution(tuple(self.diameters), tuple(self.number_fractions))
+        return SizeDistribution(diameters=tuple(self.diameters), number_fractions=tuple(self.number_fractions))
 
 
 def representative_sample(volumes, numbers, rule: SampleRule) -> DemSample:

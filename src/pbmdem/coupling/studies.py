@@ -47,7 +47,9 @@ def blend(a: SizeDistribution, b: SizeDistribution, mass_share_a: float = 0.5) -
             mass[float(dk)] = mass.get(float(dk), 0.0) + float(mk)
     diameters = sorted(mass)
     numbers = np.array([mass[dk] / dk**3 for dk in diameters])
-    return SizeDistribution(tuple(diameters), tuple(float(x) for x in numbers / numbers.sum()))
+    return SizeDistribution(
+        diameters=tuple(diameters), number_fractions=tuple(float(x) for x in numbers / numbers.sum())
+    )
 
 
 def feed_cases(distributions: dict[str, SizeDistribution]) -> list[tuple[str, SizeDistribution, bool]]:

@@ -12,7 +12,7 @@ import pandas as pd
 
 from pbmdem.atomic import write_csv
 from pbmdem.config import CoupledLoop, Sweep
-from pbmdem.plotting import pyplot, save_figure
+from pbmdem.plotting import final_sizes, pyplot, save_figure
 from pbmdem.readers import read_table
 from pbmdem.tables import INTERVALS
 
@@ -85,12 +85,9 @@ def plot_sweep(table: pd.DataFrame, curves: list, path: str | Path) -> None:
     ax1.set_ylabel("d50 (mm)")
     ax1.set_title("PBM-ANN: d50 over the batch")
     ax1.legend(fontsize=7, ncol=2)
-    ax2.plot(table.rpm, 1e3 * table.d50, "o-", label="d50")
-    ax2.plot(table.rpm, 1e3 * table.d90, "s--", label="d90")
-    ax2.plot(table.rpm, 1e3 * table.d10, "^--", label="d10")
-    ax2.set_xlabel("impeller speed (rpm)")
-    ax2.set_ylabel("final size (mm)")
+    final_sizes(ax2, table.rpm, table)
+    ax2.set_ylim(bottom=0.0)
     ax2.set_title("PBM-ANN: final sizes vs impeller speed")
-    ax2.legend()
+    ax2.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
     save_figure(fig, path)

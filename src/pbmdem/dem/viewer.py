@@ -185,14 +185,8 @@ def _view(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_cli(subparsers) -> None:
-    view = subparsers.add_parser(
-        "view",
-        help="show a DEM run (particles coloured by size, impeller) at a time in seconds",
-        description=__doc__.split("\n\n")[1].strip(),
-        epilog=EXAMPLES,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+def add_options(view: argparse.ArgumentParser) -> None:
+    """The options of `pbmdem view`."""
     view.add_argument("run_dir", nargs="?", default=None, help="a run folder, e.g. results/dem/rpm600_fine/rep0")
     view.add_argument("--rpm", default=None, help="impeller speed (1/min) of the operating point")
     view.add_argument("--distribution", default=None, help="size distribution (feed) name of the operating point")

@@ -1,4 +1,4 @@
-"""The `pbmdem design-space` and `pbmdem calibrate` commands (registered by `pbmdem.cli`)."""
+"""The `pbmdem design-space` and `pbmdem calibrate` commands (rows of `pbmdem.cli.COMMANDS`)."""
 
 from __future__ import annotations
 
@@ -8,20 +8,6 @@ import json
 import logging
 import sys
 from pathlib import Path
-
-DESIGN_EXAMPLES = """examples:
-  pbmdem design-space --config config/config.yaml --model results/surrogate/model.skops --out out/design
-  pbmdem design-space --config my.yaml --model results/surrogate/model.skops --out out/design --jobs 1
-"""
-
-CALIBRATE_EXAMPLES = """examples:
-  pbmdem calibrate --config config/config.yaml --model results/surrogate/model.skops \\
-      --data results/design/measured_pbm_dem.csv --out out/calibration
-  pbmdem calibrate --config my.yaml --model results/surrogate/model.skops --data measured.csv \\
-      --parameters pbm.aggregation.beta0 --out out/beta0
-
-The measured table (docs/calibration.md): columns rpm, time (s), d10, d50, d90 (m) and d10_sd,
-d50_sd, d90_sd (m), one row per speed and time, times ascending per speed."""
 
 
 def _jobs(jobs: int | None) -> int | None:
@@ -111,29 +97,15 @@ def _common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, type=Path, help="output folder")
 
 
-def add_cli(sub) -> None:
-    """Register `design-space` and `calibrate` on the subcommand parsers `sub`."""
-    design = sub.add_parser(
-        "design-space",
-        help="PBM-ANN over impeller speed x binder rate x a third factor: final sizes and the specification region",
-        description="Run PBM-ANN (ensemble mean and every member) over the grid of the config's "
-        "design_space section and write the table, the maps and the figures of merit.",
-        epilog=DESIGN_EXAMPLES,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+def design_space_options(design: argparse.ArgumentParser) -> None:
+    """The options of `pbmdem design-space`."""
     _common(design)
     design.add_argument("--jobs", type=int, default=None, help="processes (default: design_space.n_jobs)")
     design.set_defaults(func=_with_logging(_design_space))
 
-    cal = sub.add_parser(
-        "calibrate",
-        help="estimate PBM parameters from measured d10/d50/d90 over time with PBM-ANN",
-        description="Least-squares estimate of the pbm settings of calibration.parameters (or "
-        "--parameters) from a measured size table, with confidence intervals that hold the "
-        "measurement error and the surrogate's uncertainty, their correlation, the residuals and a fit figure.",
-        epilog=CALIBRATE_EXAMPLES,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+
+def calibrate_options(cal: argparse.ArgumentParser) -> None:
+    """The options of `pbmdem calibrate`."""
     _common(cal)
     cal.add_argument("--data", required=True, type=Path, help="measured size table (CSV, docs/calibration.md)")
     cal.add_argument(

@@ -27,9 +27,6 @@ positivity-preserving explicit integration.
 | `results` | time series, size statistics, tables, plots |
 | `setup` | a model and a batch from the typed settings (pbmdem.config) |
 | `analytical` | closed-form solutions of pure aggregation, pure breakage and both |
-| `analytical2d` | the closed form of two-component aggregation (the two-dimensional model's check) |
-| `verification` | the harness that checks the model against them |
-| `verification2d` | the harness of the two-dimensional model |
 | `errors` | the PBM's exceptions |
 
 `setup` (and with it the settings layer) is imported on first use, so `import pbmdem.pbm` stays light.

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from pbmdem.atomic import atomic_path
-from pbmdem.plotting import log_ticks, pyplot, save_figure
+from pbmdem.plotting import pyplot, save_figure, size_distribution
 
 from .grid import Grid
 from .state import State, surface_fraction
@@ -252,29 +252,19 @@ class Result:
         mass = self.mass_fractions()
         cum = 100.0 * np.cumsum(mass, axis=1) / np.maximum(mass.sum(axis=1, keepdims=True), 1e-300)
         idx = np.unique(np.linspace(0, self.times.size - 1, min(n_curves, self.times.size)).round().astype(int))
-        cmap = plt.get_cmap("viridis")
-        styles = ("-", "--", "-.", ":")
         occupied = np.nonzero(self.number.max(axis=0) > 1e-6 * self.number.max())[0]
         lo, hi = occupied.min(), occupied.max()
-        for n, i in enumerate(idx):
-            ax.plot(
-                g.d_edges[1:] * 1e3,
-                cum[i],
-                ls=styles[n % len(styles)],
-                lw=1.8,
-                color=cmap(0.85 * n / max(1, len(idx) - 1)),
-                label=f"t = {self.times[i]:g} s",
-            )
-        ax.set_xscale("log")
-        ax.set_xlim(g.d_edges[max(lo - 1, 0)] * 1e3, g.d_edges[min(hi + 2, g.bins)] * 1e3)
-        ax.set_ylim(0, 100)
-        log_ticks(ax, "x")
-        ax.grid(alpha=0.3, which="both")
-        ax.set_xlabel("solid-equivalent diameter (mm)")
-        ax.set_ylabel("mass finer than d (%)")
+        curves = [
+            (f"t = {self.times[i]:g} s", g.d_edges[1:] * 1e3, cum[i], 0.85 * n / max(1, len(idx) - 1))
+            for n, i in enumerate(idx)
+        ]
         where = self._where()
-        ax.set_title("granule size distribution over the batch" + (f"\n{where}" if where else ""), fontsize=10)
-        ax.legend(fontsize=7, loc="lower right")
+        size_distribution(
+            ax,
+            curves,
+            "granule size distribution over the batch" + (f"\n{where}" if where else ""),
+            xlim=(g.d_edges[max(lo - 1, 0)] * 1e3, g.d_edges[min(hi + 2, g.bins)] * 1e3),
+        )
         if own and path is not None:
             self._savefig(fig, path)
             plt.close(fig)

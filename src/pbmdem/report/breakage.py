@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from .display import MM, PERCENT
+from . import words
+from .display import MM
 from .figures import pyplot
 
 #: line style per variant of the study
@@ -78,36 +79,31 @@ def breakage_words(study: pd.DataFrame) -> str:
     off = study[study.variant == "off"].sort_values("rpm")
     on = study[study.variant == "default"].sort_values("rpm")
     lo, hi = on.iloc[0], on.iloc[-1]
-    change = (hi.d50 - lo.d50) / lo.d50
-    change_off = (off.d50.iloc[-1] - off.d50.iloc[0]) / off.d50.iloc[0]
     peaks = {name: peak_speed(s) for name, s in study.groupby("variant")}
-    with_peak = [f"{name} ({rpm:g} rpm)" for name, rpm in peaks.items() if rpm is not None]
-    falling = [name for name, s in study.groupby("variant") if falls_throughout(s)]
-    n = float(on.strength_porosity_exponent.iloc[0]) if "strength_porosity_exponent" in on else 0.0
-    v_star = f"v* = {on.critical_speed.iloc[0]:.2g} m/s"
-    if n > 0:  # v* of a fresh granule; consolidation raises it
-        v_star += f" for a fresh granule, rising as it consolidates (strength ~ ((1 - eps)/eps)^{n:g})"
-    return (
-        f"**Breakage.** With breakage from impacts (St_def = rho v^2 / (2 Y) > St_def*, critical speed "
-        f"{v_star}) the final d50 goes from {MM * lo.d50:.2f} mm at {lo.rpm:g} rpm "
-        f"to {MM * hi.d50:.2f} mm at {hi.rpm:g} rpm ({PERCENT * change:+.1f} %); without breakage "
-        f"{PERCENT * change_off:+.1f} %. "
-        + (
-            f"The final d50 peaks inside the speed range and falls above it for: {', '.join(with_peak)}. "
-            if with_peak
-            else "No variant shows a speed above which the granules get smaller within the speeds studied. "
-        )
-        + (f"It falls from the lowest speed studied on for: {', '.join(falling)}. " if falling else "")
-        + "Impacts break granules where the fastest of them, at the impeller and between granules, approach or "
-        "exceed their v*."
+    return words.paragraph(
+        "breakage",
+        lo={"rpm": lo.rpm, "d50": lo.d50},
+        hi={"rpm": hi.rpm, "d50": hi.d50},
+        change=(hi.d50 - lo.d50) / lo.d50,
+        change_off=(off.d50.iloc[-1] - off.d50.iloc[0]) / off.d50.iloc[0],
+        critical_speed=on.critical_speed.iloc[0],
+        exponent=float(on.strength_porosity_exponent.iloc[0]) if "strength_porosity_exponent" in on else 0.0,
+        peaks=[(name, rpm) for name, rpm in peaks.items() if rpm is not None],
+        falling=[name for name, s in study.groupby("variant") if falls_throughout(s)],
     )
 
 
 def _batch_name(study: str, row: dict, member: bool) -> str:
     """'the breakage study's Y/2 batch at 1200 rpm, feed fine (an ensemble member)'."""
-    variant = f" {row['variant']}" if isinstance(row.get("variant"), str) else ""
-    who = "an ensemble member" if member else "the ensemble mean"
-    return f"the {study}'s{variant} batch at {float(row['rpm']):g} rpm, feed {row.get('feed', '?')} ({who})"
+    variant = row.get("variant")
+    batch = {
+        "study": study,
+        "variant": variant if isinstance(variant, str) else None,
+        "rpm": float(row["rpm"]),
+        "feed": row.get("feed", "?"),
+        "member": member,
+    }
+    return words.macro("_parts", "batch")(batch)
 
 
 def clipping_words(studies: dict[str, pd.DataFrame]) -> str:
@@ -129,28 +125,5 @@ def clipping_words(studies: dict[str, pd.DataFrame]) -> str:
                 share = float(row.get(column, float("nan")))
                 if np.isfinite(share):
                     cases.append((share, _batch_name(name, row, member)))
-    head = "**Clipping at the grid floor.** "
-    if not batches:
-        return head + "clipping: not measured (the studies' tables have no merged_fraction column)."
     merged = sorted((c for c in cases if c[0] > 0), reverse=True)
-    if not merged:
-        return head + (
-            f"clipping: none: no breakage fragment fell below the grid's first pivot in any of the {batches} "
-            "PBM-ANN batches of the studies (ensemble means and members)."
-        )
-    share, worst = merged[0]
-    flagged = [c for c in merged if c[0] > FLOOR_LIMIT]
-    text = head + (
-        f"clipping: breakage fragments merged at the grid floor amount to {PERCENT * share:.3g} % of the final "
-        f"number of granules in {worst}, the most of any batch: fragments smaller than the grid's first pivot "
-        "are counted as first-pivot granules (their solid kept, their number not). Batch results that merged "
-        f"some: {len(merged)} of {len(cases)} (ensemble means, and the members' largest); "
-    )
-    if flagged:
-        names = "; ".join(f"{b}: {PERCENT * s:.3g} %" for s, b in flagged[:5])
-        more = f" and {len(flagged) - 5} more" if len(flagged) > 5 else ""
-        return text + (
-            f"FLAGGED: {len(flagged)} above {PERCENT * FLOOR_LIMIT:g} % of their final number ({names}{more}); "
-            "a smaller pbm.grid.min_diameter gives their fragments bins of their own."
-        )
-    return text + f"none above {PERCENT * FLOOR_LIMIT:g} % of its final number."
+    return words.paragraph("clipping", batches=batches, results=len(cases), merged=merged, limit=FLOOR_LIMIT)

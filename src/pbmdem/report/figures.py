@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from pbmdem.plotting import pyplot, save_figure
+from pbmdem.plotting import pyplot, save_figure, size_distribution
 from pbmdem.readers import InputFileError
 
 from .display import MM, PERCENT
@@ -138,7 +138,6 @@ def cumulative_undersize(diameter: np.ndarray, density_lnd: np.ndarray) -> np.nd
 
 
 #: line styles of the snapshot times, so that curves lying on each other stay distinguishable
-TIME_STYLES = ("-", "--", "-.", ":", (0, (5, 1, 1, 1, 1, 1)))
 
 
 def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str, what: dict[str, str] | None = None):
@@ -148,12 +147,11 @@ def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str, what: dict[s
     plt = pyplot()
     what = what or {}
     fig, axes = plt.subplots(1, len(bins), figsize=(4.4 * len(bins), 4.3), sharex=True, sharey=True, squeeze=False)
-    axes = axes[0]
     first = next(iter(bins.values()))
     times = snapshot_times(_column(first, "time", what.get(next(iter(bins)), "bins table")), process)
-    colors = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, len(times)))
     shown = []  # diameters (m) where the mass is, for the common x range
-    for ax, (title, frame) in zip(axes, bins.items()):
+    panels = {}
+    for title, frame in bins.items():
         label = what.get(title, f"{title} bins table")
         t = _column(frame, "time", label)
         d = _column(frame, "diameter", label)
@@ -171,26 +169,18 @@ def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str, what: dict[s
             curves.append(([time], dd, cum))
             inside = (cum > 0.5) & (cum < 99.5)
             shown += list(dd[inside])
-        for k, (ts, dd, cum) in enumerate(curves):
-            when = " = ".join(f"{x:g}" for x in ts)
-            ax.semilogx(
-                MM * dd,
-                cum,
-                color=colors[times.index(ts[0])],
-                ls=TIME_STYLES[k % len(TIME_STYLES)],
-                lw=2.0,
-                label=f"t = {when} s",
-            )
-        ax.axhline(50.0, color="0.6", lw=0.8)
-        ax.set(xlabel="diameter (mm)", title=f"{title}, {rpm} rpm")
-        ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=7, loc="lower right")
-    if shown:  # the grid runs far beyond the granules: show where the mass is
-        axes[0].set_xlim(MM * min(shown) / 1.3, MM * max(shown) * 1.3)
-    for ax in axes:
-        _plain_log(ax, "x")
-    axes[0].set_ylabel("mass finer than d (%)")
-    axes[0].set_ylim(0, 100)
+        panels[title] = curves
+    # the grid runs far beyond the granules: show where the mass is
+    xlim = (MM * min(shown) / 1.3, MM * max(shown) * 1.3) if shown else None
+    shade = 0.85 / max(1, len(times) - 1)
+    for k, (ax, (title, curves)) in enumerate(zip(axes[0], panels.items())):
+        drawn = [
+            ("t = " + " = ".join(f"{x:g}" for x in ts) + " s", MM * dd, cum, shade * times.index(ts[0]))
+            for ts, dd, cum in curves
+        ]
+        size_distribution(ax, drawn, f"{title}, {rpm} rpm", xlim=xlim)
+        if k:
+            ax.set_ylabel("")
     fig.tight_layout()
     return fig
 

@@ -11,6 +11,7 @@ import pandas as pd
 
 from pbmdem.plotting import log_ticks
 
+from . import words
 from .breakage import peak_speed
 from .display import MM, PERCENT, mm, number
 from .figures import pyplot
@@ -143,18 +144,41 @@ def lumping_figure(cases: pd.DataFrame, liquid: pd.DataFrame):
     return fig
 
 
-def _per_study(cases: pd.DataFrame) -> list[str]:
+def _per_study(cases: pd.DataFrame) -> list[tuple]:
+    """Per study: its name, its largest difference between the models and the case where it is
+    largest (None for the default batch)."""
     worst = largest_difference(cases)
     parts = []
     for study in ("default", "speed", "binder", "feed"):
         mask = cases.study == study
         if not mask.any():
             continue
-        k = worst[mask].idxmax()
-        case = cases.loc[k]
-        where = "" if study == "default" else f" (largest at {_case_label(case)})"
-        parts.append(f"{STUDY_NAMES[study]} {PERCENT * worst[mask].max():.2g} %{where}")
+        case = cases.loc[worst[mask].idxmax()]
+        parts.append((STUDY_NAMES[study], worst[mask].max(), None if study == "default" else _case_label(case)))
     return parts
+
+
+def _liquid(liquid: pd.DataFrame, info: dict) -> dict | None:
+    """The widest liquid spread within a size class holding 1 % of the solid or more at the end of
+    the default batch, and the share of the solid below the success threshold in each model."""
+    if not len(liquid):
+        return None
+    big = liquid[np.maximum(liquid.solid_fraction_1d.fillna(0), liquid.solid_fraction_2d.fillna(0)) >= 0.01]
+    big = big if len(big) else liquid
+    row = liquid.loc[big.liquid_content_2d_sd.idxmax()]
+    return {
+        "sd": row.liquid_content_2d_sd,
+        "diameter": row.diameter,
+        "min": row.liquid_content_2d_min,
+        "max": row.liquid_content_2d_max,
+        "mean": row.liquid_content_2d_mean,
+        "lumped": row.liquid_content_1d,
+        # the share of the batch's solid whose surface liquid is below the success threshold
+        "dry1": float(np.nansum(liquid.dry_solid_fraction_1d * liquid.solid_fraction_1d)),
+        "dry2": float(np.nansum(liquid.dry_solid_fraction_2d * liquid.solid_fraction_2d)),
+        "threshold": info.get("success_threshold"),
+        "no_dry": NO_DRY,
+    }
 
 
 def lumping_words(cases: pd.DataFrame, liquid: pd.DataFrame, info: dict) -> str:
@@ -162,78 +186,26 @@ def lumping_words(cases: pd.DataFrame, liquid: pd.DataFrame, info: dict) -> str:
     turn speed and the feed order change, the liquid spread within the size classes of the default
     batch and the share of solid below the success threshold, and where the lumped model is adequate."""
     worst = largest_difference(cases)
-    finite = cases[np.isfinite(worst)]
     failed = cases[cases.failed.fillna("").astype(str) != ""]
     turn1, turn2 = turn_speeds(cases)
-
-    def turn(v):
-        return f"{v:g} rpm" if v is not None else "none in the range"
-
-    same_turn = turn1 == turn2
-    order1, order2 = feed_order(cases, "1d"), feed_order(cases, "2d")
-    text = (
-        "**What lumping leaves out.** The PBM gives every size class one mean liquid content (lumped); the "
-        "two-dimensional PBM (``pbm.dimensions: 2``) splits every size class into classes of liquid-to-solid ratio, "
-        "each with its own surface liquid and success. With the same kernel source (PBM-ANN, the surrogate's mean) "
-        f"on {len(cases)} cases the final d10/d50/d90 of the two differ by at most {PERCENT * worst.max():.2g} % "
-        f"({'; '.join(_per_study(finite))}). "
-    )
-    if len(failed):
-        text += (
-            f"{len(failed)} case(s) failed in one of the models: {', '.join(map(_case_label, failed.itertuples()))}. "
-        )
-    text += (
-        f"The speed above which the granules get smaller is {turn(turn1)} with the lumped model and {turn(turn2)} "
-        f"with the two-dimensional one{' (unchanged)' if same_turn else ' (CHANGED)'}; "
-        + (
-            f"the feeds end in the same order of final d50 ({', '.join(order1)}). "
-            if order1 == order2
-            else f"the order of the feeds by final d50 CHANGES: {', '.join(order1)} (1-D) against "
-            f"{', '.join(order2)} (2-D). "
-        )
-    )
-    if len(liquid):
-        big = liquid[np.maximum(liquid.solid_fraction_1d.fillna(0), liquid.solid_fraction_2d.fillna(0)) >= 0.01]
-        big = big if len(big) else liquid
-        k = big.liquid_content_2d_sd.idxmax()
-        row = liquid.loc[k]
-        # the share of the batch's solid whose surface liquid is below the success threshold
-        dry2 = float(np.nansum(liquid.dry_solid_fraction_2d * liquid.solid_fraction_2d))
-        dry1 = float(np.nansum(liquid.dry_solid_fraction_1d * liquid.solid_fraction_1d))
-        text += (
-            f"At the end of the default batch the liquid content within a size class holding 1 % of the solid or more "
-            f"spreads by a standard deviation of up to {row.liquid_content_2d_sd:.3f} (at {MM * row.diameter:.2f} mm: "
-            f"liquid classes from {row.liquid_content_2d_min:.2f} to {row.liquid_content_2d_max:.2f} around the mean "
-            f"{row.liquid_content_2d_mean:.3f}; the lumped class mean {row.liquid_content_1d:.3f}). "
-        )
-        threshold = info.get("success_threshold")
-        below = f"below the success threshold (surface liquid fraction {threshold:g})" if threshold else "dry"
-        if max(dry1, dry2) < NO_DRY:
-            text += (
-                f"Less than {NO_DRY:g} of the batch's solid is {below} in either model: every granule that "
-                "meets another can coalesce, so the class mean decides success as the classes of liquid do. "
-            )
-        else:
-            text += (
-                f"{PERCENT * dry2:.3g} % of the batch's solid is {below} in the two-dimensional model, "
-                f"{PERCENT * dry1:.3g} % in the lumped one. "
-            )
     studies = [s for s in ("default", "speed", "binder", "feed") if (cases.study == s).any()]
     fine = {s: float(worst[cases.study == s].max()) < ADEQUATE for s in studies}
-    adequate = [STUDY_NAMES[s] for s in studies if fine[s]]
-    not_adequate = [STUDY_NAMES[s] for s in studies if not fine[s]]
-    if adequate:
-        text += (
-            f"The lumped model is adequate (sizes within {PERCENT * ADEQUATE:g} %, the reproducibility of a "
-            f"measured d50) for: {', '.join(adequate)}. "
-        )
-    if not_adequate:
-        text += f"It is not for: {', '.join(not_adequate)}: use ``pbm.dimensions: 2`` there. "
     cpu1, cpu2 = info.get("cpu_time_s_1d"), info.get("cpu_time_s_2d")
-    if cpu1 is not None and cpu2 is not None:
-        batches = int(info.get("batches", 0)) // 2
-        text += (
-            f"Cost: {batches} batches per model, {cpu1:.2f} s of CPU for the lumped and {cpu2:.1f} s for the "
-            f"two-dimensional model ({cpu2 / max(cpu1, 1e-12):.0f}x)."
-        )
-    return text
+    return words.paragraph(
+        "lumping",
+        cases=len(cases),
+        worst=worst.max(),
+        per_study=_per_study(cases[np.isfinite(worst)]),
+        failed=[_case_label(row) for row in failed.itertuples()],
+        turn1=turn1,
+        turn2=turn2,
+        order1=feed_order(cases, "1d"),
+        order2=feed_order(cases, "2d"),
+        liquid=_liquid(liquid, info),
+        adequate=[STUDY_NAMES[s] for s in studies if fine[s]],
+        not_adequate=[STUDY_NAMES[s] for s in studies if not fine[s]],
+        limit=ADEQUATE,
+        cost=None
+        if cpu1 is None or cpu2 is None
+        else {"batches": int(info.get("batches", 0)) // 2, "cpu1": cpu1, "cpu2": cpu2},
+    )

@@ -233,12 +233,12 @@ def write_findings(
     extra: tuple[str, ...] = ()
     if breakage is not None:
         from .breakage import breakage_figure, breakage_words, clipping_words
-        from .findings import _image_directive
+        from .findings import image_directive
 
         study = read_table(breakage, "PBM-ANN breakage study", columns=("variant", "rpm", "d50", "critical_speed"))
         save(breakage_figure(study), out["breakage_png"])
         studies = {"speed study": speed_table, "feed study": feed_table, "breakage study": study}
-        extra = (breakage_words(study), "", _image_directive(out["breakage_png"]), "   :width: 640px", "")
+        extra = (breakage_words(study), "", image_directive(out["breakage_png"]), "   :width: 640px", "")
         extra += (clipping_words(studies), "")
     learned = None
     if training is not None and metadata is not None:
@@ -296,7 +296,7 @@ def _lumping_section(cases, liquid, info, out: dict) -> tuple[str, ...]:
     from pbmdem.coupling.lumping import CASE_COLUMNS, LIQUID_COLUMNS
     from pbmdem.plotting import save_figure
 
-    from .findings import _image_directive
+    from .findings import image_directive
     from .lumping import lumping_figure, lumping_table, lumping_words, turn_speeds
 
     what = "lumping study (1-D against 2-D PBM)"
@@ -324,7 +324,7 @@ def _lumping_section(cases, liquid, info, out: dict) -> tuple[str, ...]:
     return (
         lumping_words(table, per_size, facts),
         "",
-        _image_directive(out["lumping_png"]),
+        image_directive(out["lumping_png"]),
         "   :width: 640px",
         "   :alt: final d50 of the lumped and the two-dimensional PBM against speed, binder rate and feed",
         "",

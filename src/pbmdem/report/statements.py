@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import pandas as pd
 
+from . import words
 from .display import MM, number, percent
 
 
@@ -88,13 +89,15 @@ def target_sentences(table: pd.DataFrame) -> list[str]:
     out = []
     for target in TARGETS:
         mine = rows[rows.target == target.goal]
-        values = ", ".join(f"{r['measured']} at {r['speed (rpm)']} rpm" for _, r in mine.iterrows())
-        verdict = (
-            "met at every speed"
-            if (mine.met == "met").all()
-            else ("not met at " + ", ".join(f"{s} rpm" for s in mine.loc[mine.met != "met", "speed (rpm)"]))
+        out.append(
+            words.paragraph(
+                "target",
+                goal=target.goal,
+                criterion=target.criterion,
+                measured=list(zip(mine.measured, mine["speed (rpm)"])),
+                not_met=list(mine.loc[mine.met != "met", "speed (rpm)"]),
+            )
         )
-        out.append(f"{target.goal} ({target.criterion}): {verdict}; measured {values}.")
     return out
 
 
@@ -179,35 +182,24 @@ def out_of_domain_sentence(rpm: str, table: pd.DataFrame) -> str:
     """The statement of one speed in words, from `out_of_domain(speed)`."""
     ann = table[table.model == "PBM-ANN (ensemble mean)"]
     outside = ann[ann["outside the training domain"] == "yes"]
-    unknown = ann[ann["outside the training domain"] == "not recorded"]
-    if len(unknown):
-        text = (
-            f"{rpm} rpm: whether PBM-ANN left the surrogate's training domain was not recorded for "
-            f"{len(unknown)} of {len(ann)} coupling intervals"
-        )
-    elif len(outside):
-        where = "; ".join(
-            f"interval {r['interval']} ({r['start (s)']}-{r['end (s)']} s, {r['warnings (count)']} "
-            f"warnings): {r.get('what lay outside', '') or 'not recorded'}"
-            for _, r in outside.iterrows()
-        )
-        text = (
-            f"{rpm} rpm: PBM-ANN used the surrogate outside its training domain in {len(outside)} of "
-            f"{len(ann)} coupling intervals, where its frequencies are extrapolations: {where}"
-        )
-    else:
-        text = f"{rpm} rpm: PBM-ANN stayed inside the surrogate's training domain in all {len(ann)} coupling intervals"
     members = table[table.model.str.startswith("PBM-ANN member")]
-    if len(members):
-        text += "; ensemble members: " + ", ".join(
-            f"{r['model'].split()[-1]}: {r['outside the training domain']} outside" for _, r in members.iterrows()
-        )
     cal = table[table.model == "PBM-constant calibration"]
-    if len(cal):
-        state = cal["outside the training domain"].iloc[0]
-        text += {
-            "yes": f"; the constant kernel's calibration sample was outside it ({cal['warnings (count)'].iloc[0]}"
-            " warnings)",
-            "no": "; the constant kernel's calibration sample was inside it",
-        }.get(state, "; the constant kernel's calibration was not recorded")
-    return text + "."
+    return words.paragraph(
+        "out_of_domain",
+        rpm=rpm,
+        intervals=len(ann),
+        unknown=int((ann["outside the training domain"] == "not recorded").sum()),
+        outside=[
+            {
+                "interval": r["interval"],
+                "start": r["start (s)"],
+                "end": r["end (s)"],
+                "warnings": r["warnings (count)"],
+                "what": r.get("what lay outside", ""),
+            }
+            for _, r in outside.iterrows()
+        ],
+        members=[(r["model"].split()[-1], r["outside the training domain"]) for _, r in members.iterrows()],
+        calibration=cal["outside the training domain"].iloc[0] if len(cal) else None,
+        calibration_warnings=cal["warnings (count)"].iloc[0] if len(cal) else None,
+    )

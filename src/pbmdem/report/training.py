@@ -19,6 +19,8 @@ import pandas as pd
 from pbmdem.readers import InputFileError
 from pbmdem.surrogate.plots import MODEL_LABELS
 
+from . import words
+
 
 @dataclass(frozen=True)
 class TrainingSet:
@@ -58,56 +60,29 @@ def training_set(table: pd.DataFrame, source: str = "", point_ids=None) -> Train
     )
 
 
-def _listed(items) -> str:
-    items = list(items)
-    return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
-
-
-def _replicates(replicates: tuple[int, ...]) -> str:
-    if len(replicates) == 1:
-        n = replicates[0]
-        return f"{n} replicate{'s' if n != 1 else ''} each (DEM insertion seeds)"
-    return f"{replicates[0]} to {replicates[-1]} replicates per point (DEM insertion seeds)"
-
-
-def _plural(n: int, noun: str) -> str:
-    return f"{n} {noun}{'s' if n != 1 else ''}"
-
-
 def training_words(training: TrainingSet, meta: dict, table: str = "results/dem/collisions.csv") -> str:
     """The training set and the held-out accuracy of the kernel source in one paragraph (rst)."""
-    speed_noun = "impeller speeds" if len(training.speeds) != 1 else "impeller speed"
-    feed_noun = "feeds" if len(training.feeds) != 1 else "feed"
-    text = (
-        f"The surrogate was trained on {_plural(training.runs, 'DEM run')}: "
-        f"{_plural(training.points, 'operating point')} ({speed_noun} {_listed([f'{s:g}' for s in training.speeds])} "
-        f"rpm; {feed_noun} {_listed(training.feeds)}) with {_replicates(training.replicates)}, the table "
-        f"``{table}``. "
-    )
-    return text + _accuracy_words(meta)
-
-
-def _accuracy_words(meta: dict) -> str:
     scores = meta.get("cv_scores") or {}
     family = scores.get("selected") or meta.get("family")
     summary = (scores.get("outer_summary") or {}).get(family) if family else None
-    label = MODEL_LABELS.get(str(family), str(family))
-    if not summary:
-        return f"Its kernel source, the {label}, has no held-out score (a single operating point: nothing to hold out)."
     # a score the metadata left empty (None: e.g. no noise floor from single-replicate points) is NaN
     r2, mae, floor = (
-        float(np.nan if summary.get(k) is None else summary[k])
+        float(np.nan if not summary or summary.get(k) is None else summary[k])
         for k in ("pooled_r2_log10", "pooled_mae_log10", "noise_floor_r2_log10")
     )
-    folds = int(summary.get("n_folds") or 0)
-    strategy = str(scores.get("strategy", "grouped")).replace("_", " ")
-    ceiling = (
-        f"the spread between DEM replicates allows R2 = {floor:.3f} at best (the noise floor)"
-        if np.isfinite(floor)
-        else "the noise floor is not known (no point was run more than once)"
-    )
-    return (
-        f"On operating points it never saw ({strategy} cross-validation, {folds} folds, whole points held out) "
-        f"its kernel source, the {label}, predicts log10 of the encounter frequency per particle pair with "
-        f"R2 = {r2:.3f} and a mean absolute error of {mae:.3f} decades; {ceiling}."
+    return words.paragraph(
+        "training",
+        runs=training.runs,
+        points=training.points,
+        replicates=training.replicates,
+        speeds=training.speeds,
+        feeds=training.feeds,
+        table=table,
+        family=MODEL_LABELS.get(str(family), str(family)),
+        scored=bool(summary),
+        strategy=str(scores.get("strategy", "grouped")).replace("_", " "),
+        folds=int((summary or {}).get("n_folds") or 0),
+        r2=r2,
+        mae=mae,
+        floor=floor if np.isfinite(floor) else None,
     )

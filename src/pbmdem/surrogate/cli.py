@@ -1,4 +1,4 @@
-"""``pbmdem surrogate train|predict`` subcommands (wired into ``pbmdem`` by ``add_cli``)."""
+"""The ``pbmdem surrogate train|predict`` subcommands (a row of ``pbmdem.cli.COMMANDS``)."""
 
 from __future__ import annotations
 
@@ -11,18 +11,28 @@ from pathlib import Path
 
 import numpy as np
 
+TRAIN_EXAMPLES = """examples:
+  pbmdem surrogate train --config config/config.yaml --table results/dem/collisions.csv \\
+      --velocity-table results/dem/impact_velocity.csv --out out/surrogate --jobs 2
+"""
 
-def add_cli(subparsers) -> argparse.ArgumentParser:
-    """Register ``surrogate`` with subcommands ``train`` and ``predict`` on an argparse subparsers."""
-    parser = subparsers.add_parser(
-        "surrogate",
-        help="encounter surrogate: train the model families, predict",
-        description="Train or query the encounter surrogate (encounter frequency "
-        "and impact-velocity distribution per class pair).",
-    )
+PREDICT_EXAMPLES = """examples:
+  pbmdem surrogate predict --model results/surrogate/model.skops --table results/dem/collisions.csv --output pred.csv
+  pbmdem surrogate predict --model results/surrogate/model.skops --diameters 0.002 0.004 \\
+      --numbers 500 100 --rpm 900
+"""
+
+
+def add_options(parser: argparse.ArgumentParser) -> None:
+    """The options of ``pbmdem surrogate``: its subcommands ``train`` and ``predict``."""
     sub = parser.add_subparsers(dest="surrogate_command", required=True)
 
-    train = sub.add_parser("train", help="train on a collision table (grouped CV, baselines, parity plot)")
+    train = sub.add_parser(
+        "train",
+        help="train on a collision table (grouped CV, baselines, parity plot)",
+        epilog=TRAIN_EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     train.add_argument("--table", required=True, type=Path, help="aggregated collision table (CSV)")
     train.add_argument(
         "--velocity-table",
@@ -44,7 +54,12 @@ def add_cli(subparsers) -> argparse.ArgumentParser:
     train.add_argument("--jobs", type=int, default=None, help="parallel jobs of the grid search")
     train.set_defaults(func=_train)
 
-    pred = sub.add_parser("predict", help="predict collision frequencies with a saved surrogate")
+    pred = sub.add_parser(
+        "predict",
+        help="predict collision frequencies with a saved surrogate",
+        epilog=PREDICT_EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     pred.add_argument("--model", required=True, type=Path, help="model.skops (model.json beside it)")
     pred.add_argument("--metadata", type=Path, default=None, help="metadata JSON (default: model.json)")
     src = pred.add_mutually_exclusive_group(required=True)
@@ -56,7 +71,6 @@ def add_cli(subparsers) -> argparse.ArgumentParser:
         "--output", type=Path, default=None, help="CSV (table mode) or JSON (matrix mode); default stdout"
     )
     pred.set_defaults(func=_predict)
-    return parser
 
 
 def _train(args) -> int:
@@ -149,15 +163,3 @@ def _predict(args) -> int:
     for w in caught:
         print(f"warning: {w.message}", file=sys.stderr)
     return 0
-
-
-def main(argv=None) -> int:
-    """Stand-alone entry (``python -m pbmdem.surrogate.cli``) until the lead wires ``pbmdem``."""
-    parser = argparse.ArgumentParser(prog="pbmdem")
-    add_cli(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(argv)
-    return args.func(args)
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

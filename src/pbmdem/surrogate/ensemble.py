@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import numbers
+import re
 import warnings
 
 import numpy as np
@@ -67,22 +68,37 @@ def n_weights(hidden_layer_sizes, n_features: int, n_outputs: int = 1) -> int:
     return sum((a + 1) * b for a, b in zip(widths[:-1], widths[1:]))
 
 
-def one_standard_error_choice(cv_results: dict, n_features: int, n_splits: int) -> int:
-    """Index of the candidate chosen by the one-standard-error rule (Breiman et al. 1984).
+class OneStandardErrorRule:
+    """``GridSearchCV(refit=...)`` callable: the index of the candidate chosen by the
+    one-standard-error rule (Breiman et al. 1984).
 
     Among the candidates whose mean grouped-CV score lies within one standard error (fold spread
     / sqrt(folds)) of the best, the simplest: fewest weights, then the largest L2 penalty, then the
     first. With a few DEM runs the candidates' scores often differ by less than their fold-to-fold
     noise; taking the top score then lets a rounding difference (another BLAS kernel, a 1e-9 change
-    of the targets) flip the choice and with it the whole model.
+    of the targets) flip the choice and with it the whole model. ``cv_results`` is a
+    ``GridSearchCV.cv_results_`` of a ``Pipeline(..., ("mlp", MLPRegressor))``.
     """
-    mean = np.asarray(cv_results["mean_test_score"], float)
-    std = np.asarray(cv_results["std_test_score"], float)
-    best = int(np.argmax(mean))
-    se = std[best] / np.sqrt(max(1, n_splits)) if np.isfinite(std[best]) else 0.0
-    near = [k for k in range(len(mean)) if mean[k] >= mean[best] - se]
-    params = cv_results["params"]
-    return min(near, key=lambda k: (n_weights(params[k]["hidden_layer_sizes"], n_features), -params[k]["alpha"], k))
+
+    def __init__(self, n_features: int):
+        self.n_features = int(n_features)
+
+    def __call__(self, cv_results: dict) -> int:
+        mean = np.asarray(cv_results["mean_test_score"], float)
+        std = np.asarray(cv_results["std_test_score"], float)
+        n_splits = sum(1 for key in cv_results if re.fullmatch(r"split\d+_test_score", key))
+        best = int(np.argmax(mean))
+        se = std[best] / np.sqrt(max(1, n_splits)) if np.isfinite(std[best]) else 0.0
+        near = [k for k in range(len(mean)) if mean[k] >= mean[best] - se]
+        params = cv_results["params"]
+        return min(
+            near,
+            key=lambda k: (
+                n_weights(params[k]["mlp__hidden_layer_sizes"], self.n_features),
+                -params[k]["mlp__alpha"],
+                k,
+            ),
+        )
 
 
 def _object_array(values) -> np.ndarray:
@@ -248,14 +264,16 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         self.cv_folds_ = []
         self.best_score_ = float("nan")
         best = {"mlp__hidden_layer_sizes": sizes[0], "mlp__alpha": alphas[0]}
+        members = []
         if n_candidates > 1 and n_groups >= 2:
             splits = grouped_splits(groups, self.cv, self.n_splits)
+            # the refit is the first member: the chosen candidate fitted on all rows with seeds[0]
             search = GridSearchCV(
                 self._pipeline().set_params(mlp__random_state=seeds[0]),
                 grid,
                 cv=splits,
                 scoring="neg_mean_squared_error",
-                refit=False,
+                refit=OneStandardErrorRule(X.shape[1]),
                 n_jobs=self.n_jobs,
                 error_score="raise",
             )
@@ -264,10 +282,9 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
                 search.fit(X, y)
             n_conv += sum(issubclass(w.category, ConvergenceWarning) for w in caught)
             self.cv_results_ = self._results(search.cv_results_, len(splits))
-            k_best = one_standard_error_choice(self.cv_results_, X.shape[1], len(splits))
-            chosen = self.cv_results_["params"][k_best]
-            best = {"mlp__hidden_layer_sizes": chosen["hidden_layer_sizes"], "mlp__alpha": chosen["alpha"]}
-            self.best_score_ = float(self.cv_results_["mean_test_score"][k_best])
+            best = search.best_params_
+            members.append(search.best_estimator_)
+            self.best_score_ = float(self.cv_results_["mean_test_score"][search.best_index_])
             self.cv_folds_ = [sorted({str(g) for g in groups[test]}) for _, test in splits]
             rmse = np.sqrt(-self.cv_results_["mean_test_score"])
             for k, params in enumerate(self.cv_results_["params"]):
@@ -284,10 +301,9 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
             "hidden_layer_sizes": tuple(best["mlp__hidden_layer_sizes"]),
             "alpha": float(best["mlp__alpha"]),
         }
-        members = []
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ConvergenceWarning)
-            for seed in seeds:
+            for seed in seeds[len(members) :]:
                 est = clone(self._pipeline()).set_params(
                     mlp__hidden_layer_sizes=self.best_params_["hidden_layer_sizes"],
                     mlp__alpha=self.best_params_["alpha"],

@@ -16,9 +16,8 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.impact import VELOCITY_EDGES
-
-from .features import TABLE_COLUMNS, tip_speed
-from .velocity import lognormal_fractions
+from pbmdem.surrogate.features import TABLE_COLUMNS, tip_speed
+from pbmdem.surrogate.velocity import lognormal_fractions
 
 #: Raw new contacts per encounter in the synthetic tables (re-contacts of a pair that bounces).
 CONTACTS_PER_ENCOUNTER = 1.6

@@ -12,13 +12,12 @@ from __future__ import annotations
 import numpy as np
 
 from pbmdem.config import Solver
-
-from . import analytical
-from .breakage import Breakage
-from .grid import Grid
-from .kernels import Kernel, KernelFactors, KernelInput
-from .model import GranulationPBM
-from .state import State
+from pbmdem.pbm import analytical
+from pbmdem.pbm.breakage import Breakage
+from pbmdem.pbm.grid import Grid
+from pbmdem.pbm.kernels import Kernel, KernelFactors, KernelInput
+from pbmdem.pbm.model import GranulationPBM
+from pbmdem.pbm.state import State
 
 
 def discretise_exponential(grid, N0, m):

@@ -6,14 +6,13 @@ against the closed form of ``analytical2d`` (docs/pbm.md, "Two-dimensional PBM: 
 from __future__ import annotations
 
 import numpy as np
+import pbm_analytical2d as analytical2d
 
 from pbmdem.config import Solver
-
-from . import analytical2d
-from .grid import Grid
-from .kernels import ConstantKernel
-from .liquid_grid import LiquidGrid
-from .model2d import GranulationPBM2D
+from pbmdem.pbm.grid import Grid
+from pbmdem.pbm.kernels import ConstantKernel
+from pbmdem.pbm.liquid_grid import LiquidGrid
+from pbmdem.pbm.model2d import GranulationPBM2D
 
 #: Gauss-Legendre nodes per size cell of the start's integrals (exact to round-off for the
 #: exponentials over a cell of ratio <= 2)

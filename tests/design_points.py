@@ -1,4 +1,6 @@
-"""A space-filling design of operating points for the DEM grid.
+"""A space-filling design of operating points for the DEM grid (the generator of the config's
+`grid.design_points`: `python tests/design_points.py N SEED [CONFIG]` prints the entries;
+tests/test_dem_design.py holds config/config.yaml equal to it).
 
 The surrogate learns the encounter frequency of a class pair from the pair's diameters, the number
 fractions of its two classes, the bed's particle count and the tip speed
@@ -39,7 +41,13 @@ with classes of 8.5-8.8 mm.) Diameters are rounded to 0.1 mm, fractions to 0.001
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass
+
+from scipy.stats import qmc
+
+from pbmdem.config import SizeDistribution, load_config
+from pbmdem.dem.plan import bed_particle_count, class_counts
 
 
 @dataclass(frozen=True)
@@ -73,11 +81,7 @@ def _fractions(u: float, v: float, floor: float) -> list[float]:
 
 def _particles(bed_solid_volume: float, diameters, fractions) -> list[int]:
     """Particles per class of a bed of `bed_solid_volume` (m3): the counts a DEM run would plan."""
-    from pbmdem.config import SizeDistribution
-
-    from .plan import bed_particle_count, class_counts
-
-    sizes = SizeDistribution(tuple(diameters), tuple(fractions))
+    sizes = SizeDistribution(diameters=tuple(diameters), number_fractions=tuple(fractions))
     return class_counts(bed_particle_count(bed_solid_volume, sizes), fractions)
 
 
@@ -86,8 +90,6 @@ def design_points(n: int, seed: int, bed_solid_volume: float, space: DesignSpace
     classes, m, ascending; fractions sum to 1): the first `n` points of a scrambled Sobol sequence
     seeded with `seed` whose every class holds at least `space.min_class_particles` particles in a
     bed of `bed_solid_volume` (m3, `granulator.bed_solid_volume`)."""
-    from scipy.stats import qmc
-
     if n < 1:
         raise ValueError(f"n = {n!r}: at least one design point is needed")
     candidates = qmc.Sobol(d=6, scramble=True, seed=seed).random(2 ** math.ceil(math.log2(64 * n)))
@@ -160,9 +162,5 @@ def design_yaml(n: int, seed: int, bed_solid_volume: float) -> str:
 
 
 if __name__ == "__main__":  # pragma: no cover - prints the config entries
-    import sys
-
-    from pbmdem.config import load_config
-
     config = load_config(sys.argv[3] if len(sys.argv) > 3 else "config/config.yaml")
     print(design_yaml(int(sys.argv[1]), int(sys.argv[2]), config.granulator.bed_solid_volume))

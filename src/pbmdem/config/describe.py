@@ -1,0 +1,129 @@
+"""`pbmdem config`: every setting with its default, unit and description; the JSON schema
+generated from the settings models; the check of a config file.
+
+    pbmdem config --show-defaults            # one line per setting: key, default, unit, bounds, description
+    pbmdem config --schema > config.schema.json
+    pbmdem config --check config/config.yaml
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import typing
+
+from pydantic import BaseModel
+from pydantic_core import PydanticUndefined
+
+from . import load_config
+from .errors import _choice
+from .settings import ConfigFile
+
+_BOUNDS = (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<"), ("min_length", "items >="), ("max_length", "items <="))
+
+
+EXAMPLES = """examples:
+  pbmdem config --show-defaults                 # every setting: default, unit, bounds, meaning
+  pbmdem config --check config/config.yaml      # the problems of a file, or 'valid'
+  pbmdem config --schema > config.schema.json   # JSON schema for an editor
+"""
+
+
+def config_schema() -> dict:
+    """The JSON schema (draft 2020-12) of a configuration file, generated from `ConfigFile`."""
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", **ConfigFile.model_json_schema()}
+
+
+def _model_of(annotation):
+    """The settings model a field holds (itself, or in a tuple, dict or optional), if any."""
+    for arg in (annotation, *typing.get_args(annotation)):
+        if isinstance(arg, type) and issubclass(arg, BaseModel):
+            return arg, arg is not annotation
+    return None, False
+
+
+def settings_table(model=ConfigFile, prefix: str = "") -> list[tuple[str, str, str, str, str]]:
+    """(key, default, unit, bounds, description) of every setting under `model`, depth first."""
+    rows = []
+    for name, field in model.model_fields.items():
+        key = f"{prefix}{name}"
+        sub, container = _model_of(field.annotation)
+        if sub is not None and not (container and field.default not in (PydanticUndefined, ())):
+            inner = (
+                f"{key}.<name>."
+                if typing.get_origin(field.annotation) is dict
+                else f"{key}[]."
+                if container
+                else f"{key}."
+            )
+            rows += settings_table(sub, inner)
+            continue
+        if field.default_factory is not None:
+            default = json.dumps(field.default_factory().model_dump(mode="json"))
+        elif field.default is PydanticUndefined:
+            default = "(required)"
+        else:
+            value = field.default.model_dump(mode="json") if isinstance(field.default, BaseModel) else field.default
+            default = json.dumps(value if not isinstance(value, tuple) else _plain(value))
+        bounds = [
+            f"{word} {getattr(m, attr)}"
+            for m in field.metadata
+            for attr, word in _BOUNDS
+            if getattr(m, attr, None) is not None
+        ]
+        items = _item_bounds(model, name)
+        bounds += [f"each {items}"] if items else []
+        unit = (field.json_schema_extra or {}).get("unit", "") if isinstance(field.json_schema_extra, dict) else ""
+        rows.append((key, default, unit, ", ".join(bounds), field.description or ""))
+    return rows
+
+
+def _item_bounds(model, name: str) -> str:
+    """The bounds of the items of a list setting (from the generated JSON schema)."""
+    root = model.model_json_schema()
+    node = root.get("properties", {}).get(name, {})
+    for branch in [node, *node.get("anyOf", [])]:
+        if "items" in branch:
+            items = branch["items"]
+            while "$ref" in items:
+                items = root["$defs"][items["$ref"].rsplit("/", 1)[1]]
+            return _choice(items) or (f"matches {items['pattern']}" if "pattern" in items else "")
+    return ""
+
+
+def _plain(value):
+    if isinstance(value, BaseModel):
+        return value.model_dump(mode="json")
+    if isinstance(value, (tuple, list)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def show_defaults(out=None) -> None:
+    """Print every setting: key = default [unit] (bounds), then its description (to `out`, stdout)."""
+    out = out or sys.stdout
+    for key, default, unit, bounds, description in settings_table():
+        unit = f" [{unit}]" if unit else ""
+        bounds = f" ({bounds})" if bounds else ""
+        print(f"{key} = {default}{unit}{bounds}\n    {description}", file=out)
+
+
+def add_options(parser: argparse.ArgumentParser) -> None:
+    """The options of `pbmdem config`."""
+    what = parser.add_mutually_exclusive_group(required=True)
+    what.add_argument("--show-defaults", action="store_true", help="every setting: default, unit, bounds, meaning")
+    what.add_argument("--schema", action="store_true", help="the JSON schema of a config file (generated)")
+    what.add_argument("--check", metavar="FILE", help="check a config file (exit status 2 and the problems if invalid)")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.show_defaults:
+        show_defaults()
+    elif args.schema:
+        print(json.dumps(config_schema(), indent=2))
+    else:
+        cfg = load_config(args.check)
+        print(f"{args.check}: valid (config sha256 {cfg.sha256()})")
+    return 0

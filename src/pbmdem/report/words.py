@@ -1,0 +1,86 @@
+"""The report's words: Jinja2 templates (pbmdem/data/report_templates/*.j2, shipped with the
+package) filled from a dict of the run's numbers. The Python beside each finding computes the
+numbers (sizes in m, fractions, speeds in rpm); the template holds every word and every number
+format. A name a template uses and the dict lacks is an error (StrictUndefined), never an empty
+gap in the text.
+
+A paragraph template is written one clause per line for reading; `paragraph` folds it into the
+one line of text that reStructuredText wants: every line break with the indentation around it
+becomes one space, and ``{{ space }}`` is one space that folding keeps (the white space before it joins it), for
+the end of a paragraph that text follows on its line. The same folding is the filter ``fold`` (``{% filter fold %}``).
+
+A document template (`render`: the findings' reStructuredText) keeps its lines; a block tag there
+takes no line of its own.
+
+Filters: ``fmt(spec)`` (Python's format spec, e.g. ``"g"``, ``"+.1f"``), ``pct(spec)`` (a fraction
+in %), ``mm(decimals=2)`` (a size in m as "1.23 mm", "n/a" when missing), ``mmv(spec)`` (a size in m
+as a number in mm), ``codes`` (names as ````a``, ``b````), ``fold``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+import jinja2
+
+from .display import MM, PERCENT
+
+#: a space that `fold` keeps (a private-use character, not whitespace, stands in for it while folding)
+_KEPT = "\ue000"
+
+
+def fold(text: str) -> str:
+    """Lines joined by one space (blank lines and indentation dropped); ``{{ space }}`` kept."""
+    return re.sub(rf"\s*{_KEPT}", " ", re.sub(r"\s*\n\s*", " ", str(text)).strip())
+
+
+def _fmt(value, spec: str = "g") -> str:
+    return format(value, spec)
+
+
+def _pct(fraction, spec: str = ".1f") -> str:
+    return format(PERCENT * float(fraction), spec)
+
+
+def _mmv(value, spec: str = ".2f") -> str:
+    return format(MM * float(value), spec)
+
+
+def _codes(items) -> str:
+    return ", ".join(f"``{item}``" for item in items)
+
+
+def mm(value, decimals: int = 2) -> str:
+    """A size in m as "1.23 mm"; "n/a" when missing."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "n/a"
+    return f"{MM * float(value):.{decimals}f} mm"
+
+
+ENV = jinja2.Environment(
+    loader=jinja2.PackageLoader("pbmdem", "data/report_templates"),
+    undefined=jinja2.StrictUndefined,
+    autoescape=False,  # reStructuredText, not HTML
+    keep_trailing_newline=False,
+)
+ENV.filters.update(fold=fold, fmt=_fmt, pct=_pct, mm=mm, mmv=_mmv, codes=_codes)
+ENV.globals.update(space=_KEPT)
+#: the environment of a document rendered line by line (a block tag takes no line of its own)
+LINES = ENV.overlay(trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+
+
+def render(name: str, **numbers) -> str:
+    """The document template `name` (without .j2) filled from `numbers`, line by line."""
+    return LINES.get_template(f"{name}.j2").render(**numbers)
+
+
+def paragraph(name: str, **numbers) -> str:
+    """The template `name` filled from `numbers` and folded into one line."""
+    return fold(ENV.get_template(f"{name}.j2").render(**numbers))
+
+
+def macro(template: str, name: str):
+    """The macro `name` of the template `template` (without .j2), returning folded text."""
+    found = getattr(ENV.get_template(f"{template}.j2").module, name)
+    return lambda *args, **kwargs: fold(found(*args, **kwargs))

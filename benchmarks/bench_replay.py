@@ -234,7 +234,7 @@ class SyntheticDem:
         return {"name": "synthetic", "rpm": self.rpm, "replicate": self.replicate}
 
     def __call__(self, sample, interval_dir: Path, index: int):
-        from pbmdem.surrogate.synthetic import (
+        from synthetic_tables import (  # tests/ (on the path: quick_results)
             make_synthetic_tables,
             make_synthetic_wall_tables,
             power_law,
@@ -273,6 +273,7 @@ def quick_results(root: Path, rpm: float = 1200.0, replicates: int = 2) -> Path:
     """A run's results/ in ``root`` for the quick mode: the surrogate and the stored PBM-DEM (synthetic
     tables) and PBM-ANN loops of ``rpm``; returns the results folder."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
+    sys.path.insert(0, str(ROOT / "tests"))  # the synthetic tables live with the tests
     import quick
 
     from pbmdem.coupling.methods import pbm_ann

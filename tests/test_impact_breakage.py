@@ -448,8 +448,9 @@ def test_the_compiled_selection_equals_the_numpy_form_on_random_impacts(spread):
 def test_a_coupling_intervals_dem_run_is_read_as_pbm_dem_hands_it_to_the_pbm(tmp_path):
     """pbmdem.coupling.providers.dem_rates: the four tables of one DEM run (what PBM-DEM reads at
     each interval, and what benchmarks/bench_replay.py reads back from a finished run)."""
+    from synthetic_tables import make_synthetic_tables, make_synthetic_wall_tables
+
     from pbmdem.coupling.providers import dem_rates
-    from pbmdem.surrogate.synthetic import make_synthetic_tables, make_synthetic_wall_tables
 
     pairs, velocities = make_synthetic_tables(
         0.1, rpms=(600,), distributions={"feed": (0.625, 0.375)}, diameters=(0.002, 0.004),

@@ -130,7 +130,8 @@ def describe_errors(exc, model, prefix: str = "") -> list[str]:
             elif kind in _WORDS:
                 bounds = {"ge": "minimum", "gt": "exclusiveMinimum", "le": "maximum", "lt": "exclusiveMaximum"}
                 b = next((x for x in s.get("anyOf", [s]) if x.get("type") != "null"), s)
-                word = _WORDS[kind].format(**ctx | {k: b[v] for k, v in bounds.items() if v in b})
+                # the value, then the rule it breaks, as the JSON schema's messages read
+                word = f"{e['input']!r} " + _WORDS[kind].format(**ctx | {k: b[v] for k, v in bounds.items() if v in b})
             elif kind.endswith("_type") or kind.endswith("_parsing"):
                 word = f"is not of type {' or '.join(repr(t) for t in sorted(types)) or kind}"
             else:

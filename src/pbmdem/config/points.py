@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from typing import Annotated
 
+import numpy as np
 from pydantic import Field
 
 from .typed import Name, Rpm, Settings, Unique, setting
@@ -15,8 +16,6 @@ def rpm_text(rpm: float) -> str:
     """The impeller speed as it appears in ids and paths: the shortest decimal that reads back as
     the same float, never in exponent form (so the rules' rpm wildcard `[0-9]+(\\.[0-9]+)?`
     accepts every speed the schema allows, and two different speeds never share an id)."""
-    import numpy as np
-
     return np.format_float_positional(float(rpm), trim="-")
 
 
@@ -44,8 +43,6 @@ class SizeDistribution(Settings):
     def mass_median(self) -> float:
         """The mass-median diameter (m): the class where the cumulative mass passes 50 %,
         interpolated in ln d between class diameters."""
-        import numpy as np
-
         d = np.asarray(self.diameters, float)
         mass = np.asarray(self.number_fractions, float) * d**3
         cum = np.cumsum(mass) / mass.sum()

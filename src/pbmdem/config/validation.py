@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
+import numpy as np
 from pydantic import StringConstraints
 
 from .typed import Name, Rpm, Settings, Unique, setting
@@ -17,8 +18,6 @@ class Sweep(Settings):
     num: int = setting(8, "speeds of the sweep", ge=2, le=1000)
 
     def speeds(self) -> list[float]:
-        import numpy as np
-
         return [float(r) for r in np.linspace(self.start, self.stop, self.num)]
 
 

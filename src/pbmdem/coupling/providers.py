@@ -8,8 +8,8 @@ an `ImpactRates` that adds the wall impacts per granule (what breakage from impa
 out-of-domain warnings). `fingerprint()` names what its rates depend on, so that finished
 intervals of a changed provider are not reused.
 
-The DEM stage and the surrogate are imported where a provider uses them: a PBM-ANN job does not
-load the DEM stage, a PBM-DEM job not scikit-learn.
+The DEM stage and the surrogate are imported with the module (imports at the top): a PBM-DEM job
+loads scikit-learn too (about 1.4 s of its start, measured 2026-12-05), a PBM-ANN job the DEM stage.
 """
 
 from __future__ import annotations

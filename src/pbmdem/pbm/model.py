@@ -44,10 +44,6 @@ __all__ = ["GranulationPBM", "check_solver"]
 
 
 class GranulationPBM:
-    #: run the steps between events in one compiled call where the kernel and selection allow it
-    #: (``fast_steps``; False: the Python loop, step by step, as the tests' reference)
-    fast_steps = True
-
     """Batch granulator PBM: aggregation (+ optional liquid addition, consolidation, breakage).
 
     ``kernel``: any :class:`Kernel`; ``liquid``/``consolidation``: the processes or None (off);
@@ -57,6 +53,10 @@ class GranulationPBM:
     of their bins (:class:`FeedGranules`; default True), False: they share the bin's liquid and gas;
     ``breakage``: a :class:`Breakage` or None (aggregation only).
     """
+
+    #: run the steps between events in one compiled call where the kernel and selection allow it
+    #: (``fast_steps``; False: the Python loop, step by step, as the tests' reference)
+    fast_steps = True
 
     def __init__(
         self,

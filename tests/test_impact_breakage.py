@@ -474,3 +474,35 @@ def test_a_coupling_intervals_dem_run_is_read_as_pbm_dem_hands_it_to_the_pbm(tmp
     (tmp_path / "wall_collisions.csv").unlink()
     with pytest.raises(InputFileError, match="wall_collisions.csv"):
         dem_rates(tmp_path, 2)
+
+
+def test_bins_that_share_their_nearest_class_fractions_give_the_selection_to_the_bit():
+    # a coupling interval's bins take the velocity fractions of their nearest class
+    # (ClassFrequencySource.encounters): the compiled selection sums each shared column once per
+    # row (fraction_columns); against every column summed on its own (the identity map) and the numpy form
+    from pbmdem.pbm import _compiled
+    from pbmdem.pbm.impact_breakage import fraction_columns
+
+    rng = np.random.default_rng(11)
+    K, classes = 12, 4
+    nearest = np.repeat(np.arange(classes), 3)
+    class_f = rng.dirichlet(np.ones(N_VELOCITY_BINS), (classes, classes))
+    pair_f = np.ascontiguousarray(class_f[np.ix_(nearest, nearest)])
+    columns = fraction_columns(pair_f)
+    assert columns.tolist() == [0, 0, 0, 3, 3, 3, 6, 6, 6, 9, 9, 9]
+    c = rng.uniform(0.0, 0.3, (K, K))
+    c = 0.5 * (c + c.T)
+    walls = WallRates(rng.uniform(0.0, 5.0, (2, K)), rng.dirichlet(np.ones(N_VELOCITY_BINS), (2, K)))
+    numbers = rng.uniform(0.0, 40.0, K)
+    numbers[[1, 7]] = 0.0, 0.5  # an empty bin (its column's first member skipped), one partner short
+    v = rng.uniform(0.5, 6.0, K)
+    probability = np.empty((K, N_VELOCITY_BINS))
+    _compiled.breaking_probability(v, 0.5, VELOCITY_EDGES, probability)
+    shared, each = np.empty(K), np.empty(K)
+    args = (walls.frequency, walls.velocity_fractions, probability, numbers, True)
+    _compiled.impact_selection(c, pair_f, columns, *args, shared)
+    _compiled.impact_selection(c, pair_f, np.arange(K), *args, each)
+    assert shared.tobytes() == each.tobytes()
+    rates = ImpactRates(EncounterRates(c, pair_f), walls)
+    np.testing.assert_allclose(shared, np.sum(list(selection_rates(rates, numbers, v, spread=0.5).values()), axis=0),
+                               rtol=1e-12)  # fmt: skip

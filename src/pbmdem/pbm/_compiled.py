@@ -123,6 +123,11 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
     liquid and gas (class i loses N_i, L_i, G_i x sum_j beta_ij N_j over the pairs within the
     grid) and gives birth to an aggregate carrying l_i + l_j and g_i + g_j (sum over both orders
     of beta_ij L_i N_j is the liquid born).
+
+    With ``use_p`` (a factored kernel: beta finite, checked where it enters) a pair with N_j = 0,
+    p_j = 0 or p_i = 0 has q = 0 and adds exact zeros to every sum (a sum never is -0, so x + 0 =
+    x to the bit): its partners j are skipped, and so are the rows of p_i = 0 (deaths -0, as
+    before). The same rates to the bit, fewer pairs (empty classes, dry granules).
     """
     M = nlg.shape[1]
     born = work[:4]  # rows: number, liquid, gas born per cell, first moment D_c
@@ -130,6 +135,12 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
         for c in range(K):
             born[r, c] = 0.0
     refused = 0.0
+    partners = np.empty(M, dtype=np.int64)  # the j whose q may be nonzero
+    n_partners = 0
+    for j in range(M):
+        if not use_p or (nlg[0, j] != 0.0 and p[j] != 0.0):
+            partners[n_partners] = j
+            n_partners += 1
     for i in range(M):
         Ni = nlg[0, i]
         Li = nlg[1, i]
@@ -139,7 +150,8 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
         dG = 0.0
         row = i * M
         pi = p[i]
-        for j in range(M):
+        for jj in range(n_partners if not use_p or pi != 0.0 else 0):
+            j = partners[jj]
             if use_p:
                 q = (beta[i, j] * (pi * p[j])) * nlg[0, j]
             else:
@@ -589,11 +601,11 @@ def breaking_probability(v_star, spread, edges, out):
 
 
 @njit(
-    "void(f8[:, ::1], f8[:, :, ::1], f8[:, ::1], f8[:, :, ::1], f8[:, ::1], f8[::1], b1, f8[::1])",
+    "void(f8[:, ::1], f8[:, :, ::1], i8[::1], f8[:, ::1], f8[:, :, ::1], f8[:, ::1], f8[::1], b1, f8[::1])",
     cache=True,
     nogil=True,
 )
-def impact_selection(frequency, fractions, wall_frequency, wall_fractions, probability, numbers, pairs, out):
+def impact_selection(frequency, fractions, columns, wall_frequency, wall_fractions, probability, numbers, pairs, out):
     """``out[i]``: the breaking impacts per granule and second of class i (1/s),
 
         S_i = sum_j c_ij max(N_j - delta_ij, 0) sum_b f_ijb P_ib  +  sum_w f_wi sum_b f_wib P_ib,
@@ -601,9 +613,15 @@ def impact_selection(frequency, fractions, wall_frequency, wall_fractions, proba
     with the pair encounter ``frequency`` (K, K) per pair and its velocity ``fractions`` (K, K, V)
     (only if ``pairs``), the impacts per granule on the walls ``wall_frequency`` (W, K) and their
     ``wall_fractions`` (W, K, V), and the breaking ``probability`` (K, V) of
-    :func:`breaking_probability`; ``numbers`` (K,) the granules of each class."""
+    :func:`breaking_probability`; ``numbers`` (K,) the granules of each class. ``columns`` (K,):
+    for each partner j the first partner whose fractions ``fractions[:, j, :]`` are the same to the
+    bit (``impact_breakage.fraction_columns``; a coupling interval's bins take the fractions of their nearest
+    class, so a few classes serve all bins): the sum over the velocity bins is taken once per
+    such column and row, the same operations on the same numbers, so the same result to the bit."""
     K = numbers.size
     V = probability.shape[1]
+    dots = np.empty(K)
+    done = np.full(K, -1)  # the row i whose sum dots[c] holds
     for i in range(K):
         total = 0.0
         if pairs:
@@ -611,10 +629,14 @@ def impact_selection(frequency, fractions, wall_frequency, wall_fractions, proba
                 partners = numbers[j] - 1.0 if i == j else numbers[j]
                 if partners <= 0.0 or frequency[i, j] == 0.0:
                     continue
-                breaking = 0.0
-                for b in range(V):
-                    breaking += fractions[i, j, b] * probability[i, b]
-                total += frequency[i, j] * breaking * partners
+                c = columns[j]
+                if done[c] != i:
+                    breaking = 0.0
+                    for b in range(V):
+                        breaking += fractions[i, c, b] * probability[i, b]
+                    dots[c] = breaking
+                    done[c] = i
+                total += frequency[i, j] * dots[c] * partners
         for w in range(wall_frequency.shape[0]):
             breaking = 0.0
             for b in range(V):
@@ -648,8 +670,8 @@ def critical_speeds(diameters, porosity, strength, out):
 
 
 @njit(
-    "void(f8[::1], f8[::1], f8[::1], f8, f8[::1], f8[:, ::1], f8[:, :, ::1], f8[:, ::1], f8[:, :, ::1], f8[::1], "
-    "b1, f8[::1], f8[:, ::1], f8[::1])",
+    "void(f8[::1], f8[::1], f8[::1], f8, f8[::1], f8[:, ::1], f8[:, :, ::1], i8[::1], f8[:, ::1], f8[:, :, ::1], "
+    "f8[::1], b1, f8[::1], f8[:, ::1], f8[::1])",
     cache=True,
     nogil=True,
 )
@@ -661,6 +683,7 @@ def selection_of_impacts(
     edges,
     frequency,
     fractions,
+    columns,
     wall_frequency,
     wall_fractions,
     numbers,
@@ -674,4 +697,4 @@ def selection_of_impacts(
     into ``out`` (``ImpactSelection.__call__``)."""
     critical_speeds(diameters, porosity, strength, speeds)
     breaking_probability(speeds, spread, edges, probability)
-    impact_selection(frequency, fractions, wall_frequency, wall_fractions, probability, numbers, pairs, out)
+    impact_selection(frequency, fractions, columns, wall_frequency, wall_fractions, probability, numbers, pairs, out)

@@ -45,8 +45,8 @@ MAX_HALVINGS = 60
 
 
 @njit(cache=True, nogil=True)
-def _refresh_selection(u, M, K, xc, feed_w, eps, nbin, porous, diameters, strength, spread, edges, impacts, pairs,
-                       speeds, probability, out):  # fmt: skip
+def _refresh_selection(u, M, K, xc, feed_w, eps, nbin, porous, diameters, strength, spread, edges, impacts, columns,
+                       pairs, speeds, probability, out):  # fmt: skip
     """The breakage selection of the bins at the class state u into ``out`` (``Breakage.rates`` of
     ``ImpactSelection``): False if a rate is not finite or negative."""
     nlg = u.reshape((3, M))
@@ -63,8 +63,8 @@ def _refresh_selection(u, M, K, xc, feed_w, eps, nbin, porous, diameters, streng
         por = eps[:K].copy()
     else:
         por = np.zeros(0)
-    selection_of_impacts(diameters, por, strength, spread, edges, impacts[0], impacts[1], impacts[2], impacts[3],
-                         nbin, pairs, speeds, probability, out)  # fmt: skip
+    selection_of_impacts(diameters, por, strength, spread, edges, impacts[0], impacts[1], columns, impacts[2],
+                         impacts[3], nbin, pairs, speeds, probability, out)  # fmt: skip
     for i in range(K):
         if not (np.isfinite(out[i]) and out[i] >= 0):
             return False
@@ -75,7 +75,7 @@ def _refresh_selection(u, M, K, xc, feed_w, eps, nbin, porous, diameters, streng
 def advance(u, events, is_out, t_end, order, ctl, acc, counts, floor, k, r, beta, model, vectors, params, K,
             cell_average, target, weight, factors, work, sel, tab, bf, below, pw, u_new, u_low, stage, flush_n, flush_v,
             spray, allowed_refused, max_steps, feed_w, eps, nbin, porous, diameters, strength, spread, edges,
-            impacts, pairs, speeds, probability, sel_new, rec_u, rec_s):  # fmt: skip
+            impacts, columns, pairs, speeds, probability, sel_new, rec_u, rec_s):  # fmt: skip
     """Steps from the class state u at ``acc[TIME]`` to ``t_end``, in place (u, ``acc``, ``ctl``
     [DT_PROP, T_EVAL], ``counts``, ``sel``); the selection of the first step is the one in ``sel``
     (prepared in Python). ``events``: the run's sorted event times, ``is_out``: 1 where the state is
@@ -95,7 +95,7 @@ def advance(u, events, is_out, t_end, order, ctl, acc, counts, floor, k, r, beta
         par = params[1] if spraying else params[0]
         if not first and sel.size > 0 and t >= ctl[T_EVAL] + ctl[INTERVAL]:
             if not _refresh_selection(u, M, K, vectors[0], feed_w, eps, nbin, porous, diameters, strength, spread,
-                                      edges, impacts, pairs, speeds, probability, sel_new):  # fmt: skip
+                                      edges, impacts, columns, pairs, speeds, probability, sel_new):  # fmt: skip
                 return FALLBACK
             sel[:] = sel_new
             ctl[T_EVAL] = t

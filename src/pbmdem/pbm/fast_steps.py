@@ -76,11 +76,12 @@ class FastSteps:
         if brk is not None:
             sel = brk.selection
             state[cs.T_EVAL] = brk._t_eval
-            impacts, strength = sel._arrays, sel._strength
+            impacts, columns, strength = sel._arrays, sel._columns, sel._strength
             speeds, probability = sel._work
             porous, spread = sel.porosity_exponent != 0.0, sel.strength_spread
         else:
             impacts, strength, speeds, probability = _NO_IMPACTS, np.zeros(6), np.zeros(0), np.zeros((0, 0))
+            columns = np.zeros(0, dtype=np.int64)
             porous, spread = False, 0.0
         acc[:5] = (t, *tallies)
         acc[cs.ROWS] = 0.0
@@ -91,7 +92,7 @@ class FastSteps:
             m._factored, m._success_code, m._vectors, np.stack(m._params), *m._op_arrays, *m._brk_arrays, m._pw,
             *self.work, m._flush_n, m._flush_v, self.spray, self.allowed_refused, ctl.opt.max_steps, self.feed_w,
             self.eps,
-            self.nbin, porous, self.diameters, strength, spread, VELOCITY_EDGES, impacts,
+            self.nbin, porous, self.diameters, strength, spread, VELOCITY_EDGES, impacts, columns,
             sel.pairs if sel is not None else False, speeds, probability, self.sel_new, self.rec_u, self.rec_s,
         )  # fmt: skip
         ctl.dt_prop = float(state[cs.DT_PROP])

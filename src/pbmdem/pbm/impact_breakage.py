@@ -51,6 +51,13 @@ def critical_speed(density: float, yield_strength: float, critical_stokes: float
     return float(np.sqrt(2.0 * yield_strength * critical_stokes / density))
 
 
+def fraction_columns(fractions: np.ndarray) -> np.ndarray:
+    """(K,) for each partner j of the pair velocity ``fractions`` (K, K, V): the first partner
+    whose column ``fractions[:, j, :]`` is the same to the bit (``_compiled.impact_selection``)."""
+    first: dict[bytes, int] = {}
+    return np.array([first.setdefault(fractions[:, j, :].tobytes(), j) for j in range(fractions.shape[1])], np.int64)
+
+
 def selection_rates(
     rates: ImpactRates, numbers, speed: float, walls=WALLS, pairs: bool = True, spread: float = 0.0
 ) -> dict[str, np.ndarray]:
@@ -187,6 +194,7 @@ class ImpactSelection:
             np.ascontiguousarray(walls.frequency[rows], dtype=float).reshape(shape),
             np.ascontiguousarray(walls.velocity_fractions[rows], dtype=float).reshape(*shape, N_VELOCITY_BINS),
         )
+        self._columns = fraction_columns(self._arrays[1])
         self._work = (np.empty(d.size), np.empty((d.size, N_VELOCITY_BINS)))
 
     def contributions(self, inp: KernelInput) -> dict[str, np.ndarray]:
@@ -250,7 +258,10 @@ class ImpactSelection:
             self._strength,
             self.strength_spread,
             VELOCITY_EDGES,
-            *self._arrays,
+            self._arrays[0],
+            self._arrays[1],
+            self._columns,
+            *self._arrays[2:],
             np.ascontiguousarray(n, dtype=float),
             self.pairs,
             *self._work,

@@ -49,6 +49,32 @@ class LoopOutcome:
     totals: dict
 
 
+#: the PBM models built in this process, by batch settings (:func:`_model_of`); few: the design
+#: space and the sensitivity analysis run many batches of one or a few settings in turn
+_MODELS: dict = {}
+_MAX_MODELS = 4
+
+
+def _model_of(batch, rpm: float):
+    """(model, its breakage selection from impacts or None, the initial state) of a loop over the
+    batch settings ``batch`` at ``rpm``: the model built for these settings before in this process,
+    its frequency source and selection's source set anew by every interval and its run state by
+    every run (``GranulationPBM.run``: the classes, the kernel and the breakage reset), so a batch
+    gives the same result to the bit whatever ran before (tests/test_pbm_fast_steps.py); building
+    the model and its operators took about 1 ms of a few-ms batch."""
+    entry = _MODELS.pop(batch, None)
+    if entry is None:
+        selection = impact_selection(batch.pbm)  # breakage from each interval's impacts (None: aggregation only)
+        model = build_model(batch.pbm, ConstantFrequency(1.0), rpm=rpm, selection=selection)  # sources per interval
+        entry = (model, selection, initial_state(batch, model))
+        while len(_MODELS) >= _MAX_MODELS:
+            _MODELS.pop(next(iter(_MODELS)))
+    _MODELS[batch] = entry  # the most recent last
+    model, selection, state = entry
+    model.set_rpm(rpm)
+    return model, selection, state.copy()
+
+
 def _no_clock() -> float:
     """NaN: a CPU time not measured."""
     return float("nan")
@@ -94,9 +120,7 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
     n_intervals = loop.coupling_intervals
     outdir = _prepared(outdir, loop, rpm, provider)
     pbm = loop.batch.pbm
-    selection = impact_selection(pbm)  # breakage from each interval's impacts (None: aggregation only)
-    model = build_model(pbm, ConstantFrequency(1.0), rpm=rpm, selection=selection)  # sources set per interval
-    state = initial_state(loop.batch, model)
+    model, selection, state = _model_of(loop.batch, rpm)
     bounds = interval_bounds(loop)
     results, rows = [], []
     previous = None  # (rates, class diameters, source) of the last interval run here

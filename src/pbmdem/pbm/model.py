@@ -97,6 +97,10 @@ class GranulationPBM:
         self._consolidation_rate = consolidation.rate if consolidation is not None else 0.0
         self._use_classes(np.zeros(0))
 
+    def set_rpm(self, rpm: float) -> None:
+        """The impeller speed of the next runs (the kernel's input; a model reused at another speed)."""
+        self.rpm = positive("impeller speed (rpm)", rpm, allow_zero=True)
+
     def __repr__(self) -> str:
         return (
             f"GranulationPBM({self.grid!r}, {self.kernel!r}, liquid={self.liquid!r}, "

@@ -121,20 +121,32 @@ def test_predict_array_equals_predict(fitted):
         fitted.frequency_model_.predict_array(X[:, :5])
 
 
-def test_array_path_is_one_forward_pass_per_member(fitted, monkeypatch):
+def test_array_path_is_one_stacked_forward_pass_per_model(fitted, monkeypatch):
     rows = []
-    original = ensemble_module._forward
+    original = ensemble_module._members_forward
 
-    def spy(member, X):
+    def spy(ensemble, X):
         rows.append(len(X))
-        return original(member, X)
+        return original(ensemble, X)
 
-    monkeypatch.setattr(ensemble_module, "_forward", spy)
+    monkeypatch.setattr(ensemble_module, "_members_forward", spy)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OutOfDomainWarning)
         fitted.encounters(np.linspace(0.002, 0.004, 5), np.full(5, 400.0), 600.0)
-    members = len(fitted.frequency_model_.estimators_) + len(fitted.velocity_model_.estimators_)
-    assert rows == [15] * members  # K (K + 1) / 2 pairs, one pass per member of both models
+    assert rows == [15, 15]  # K (K + 1) / 2 pairs, one pass over all members of each model
+
+
+def test_the_stacked_members_give_each_members_forward_pass_to_the_bit(fitted):
+    # every member in one pass over the stacked weights (_members_forward) against one pass per
+    # member (_forward, scikit-learn's arithmetic), for each activation, one row and many
+    rng = np.random.default_rng(5)
+    for est in (fitted.frequency_model_, fitted.velocity_model_):
+        assert ensemble_module._stack(est.estimators_) is not None
+        for n in (1, 15, 120):
+            X = rng.normal(0.0, 2.0, (n, est.n_features_in_))
+            each = np.stack([ensemble_module._forward(m, X) for m in est.estimators_])
+            stacked = ensemble_module._members_forward(est, X)
+            assert stacked.shape == each.shape and stacked.tobytes() == each.tobytes()
 
 
 def test_a_surrogate_fitted_on_an_array_keeps_the_frame_path(data):

@@ -13,6 +13,7 @@ import logging
 import numbers
 import re
 import warnings
+import weakref
 
 import numpy as np
 import pandas as pd
@@ -344,7 +345,7 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         X = np.asarray(X, dtype=np.float64)
         if X.ndim != 2 or X.shape[1] != self.n_features_in_:
             raise ValueError(f"predict_array: X must be (n, {self.n_features_in_}), got shape {X.shape}")
-        preds = np.stack([_forward(m, X) for m in self.estimators_])
+        preds = _members_forward(self, X)
         mean = preds.mean(axis=0)
         if not return_std:
             return mean
@@ -371,8 +372,7 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
     def predict_members(self, X) -> np.ndarray:
         """(n_members, n[, n_outputs]): every member's prediction (X as in :meth:`predict_array`)."""
         require_fitted(self, "estimators_")
-        X = np.asarray(X, dtype=np.float64)
-        return np.stack([_forward(m, X) for m in self.estimators_])
+        return _members_forward(self, np.asarray(X, dtype=np.float64))
 
     def fitted_state(self) -> dict:
         """JSON-able description of the fit (for the model's sidecar): the search and its choice."""
@@ -414,15 +414,72 @@ def search_table(estimator: EnsembleMLPRegressorCV) -> pd.DataFrame:
     )
 
 
-def _forward(member, X: np.ndarray) -> np.ndarray:
-    """``member.predict(X)`` of a fitted ``Pipeline(StandardScaler, MLPRegressor)`` on a validated
-    float64 array, by the operations of scikit-learn's ``StandardScaler.transform`` and
-    ``MLPRegressor._forward_pass_fast`` (the same numpy calls in the same order) without their
-    per-call input validation (about 0.7 ms per member and call, against 20 us for the
-    arithmetic). Any other member, or one whose ``predict`` was replaced on the instance, is asked
-    for ``member.predict(X)``."""
+#: the members' weights stacked (:func:`_stack`) per fitted ensemble, with the list they belong to
+_STACKS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _members_forward(ensemble, X: np.ndarray) -> np.ndarray:
+    """(n_members, n[, outputs]): ``np.stack([_forward(m, X) for m in ensemble.estimators_])``. When
+    every member is a ``Pipeline(StandardScaler, MLPRegressor)`` of the same layers and activations
+    (one ensemble's members differ in their seeds), in one pass over the stacked weights: the same
+    elementwise operations, and per member the same matrix products (``np.matmul`` of the stack
+    multiplies each member's slice as ``a @ W`` does), so the same numbers to the bit
+    (tests/test_surrogate_array_path.py), with one set of numpy calls instead of one per member."""
+    members = ensemble.estimators_
+    if not all(_plain(m) for m in members):  # checked at every call: a member's predict may be replaced
+        return np.stack([_forward(m, X) for m in members])
+    entry = _STACKS.get(ensemble)
+    if entry is None or entry[0] is not members:
+        entry = (members, _stack(members))
+        _STACKS[ensemble] = entry
+    stack = entry[1]
+    if stack is None:
+        return np.stack([_forward(m, X) for m in members])
+    mean, scale, coefs, intercepts, hidden, out = stack
+    a = np.repeat(X[None], len(members), axis=0)
+    if mean is not None:
+        a -= mean
+    if scale is not None:
+        a /= scale
+    last = len(coefs) - 1
+    for i, (w, b) in enumerate(zip(coefs, intercepts, strict=True)):
+        a = np.matmul(a, w)
+        a += b
+        if i != last:
+            hidden(a)
+    out(a)
+    return a[:, :, 0] if a.shape[2] == 1 else a
+
+
+def _stack(members) -> tuple | None:
+    """(scaler means (M, 1, d) or None, scales or None, coefs [(M, n_in, n_out)], intercepts
+    [(M, 1, n_out)], hidden and output activation) of members that :func:`_forward` evaluates by
+    its own arithmetic and that share their layers and activations; None otherwise."""
+    if not members or not all(_plain(m) for m in members):
+        return None
+    scalers, mlps = [m.steps[0][1] for m in members], [m.steps[1][1] for m in members]
+    first = mlps[0]
+    same = all(
+        (s.with_mean, s.with_std) == (scalers[0].with_mean, scalers[0].with_std)
+        and (p.activation, p.out_activation_) == (first.activation, first.out_activation_)
+        and [c.shape for c in p.coefs_] == [c.shape for c in first.coefs_]
+        and [b.shape for b in p.intercepts_] == [b.shape for b in first.intercepts_]
+        for s, p in zip(scalers, mlps, strict=True)
+    )
+    if not same:
+        return None
+    mean = np.stack([s.mean_ for s in scalers])[:, None, :] if scalers[0].with_mean else None
+    scale = np.stack([s.scale_ for s in scalers])[:, None, :] if scalers[0].with_std else None
+    coefs = [np.stack([p.coefs_[i] for p in mlps]) for i in range(len(first.coefs_))]
+    intercepts = [np.stack([p.intercepts_[i] for p in mlps])[:, None, :] for i in range(len(first.intercepts_))]
+    return mean, scale, coefs, intercepts, _ACTIVATIONS[first.activation], _ACTIVATIONS[first.out_activation_]
+
+
+def _plain(member) -> bool:
+    """True for a fitted ``Pipeline(StandardScaler, MLPRegressor)`` whose ``predict`` is its class's:
+    what :func:`_forward` evaluates by its own arithmetic."""
     steps = getattr(member, "steps", None)
-    if not (
+    return (
         type(member) is Pipeline
         and "predict" not in vars(member)
         and len(steps) == 2
@@ -430,9 +487,19 @@ def _forward(member, X: np.ndarray) -> np.ndarray:
         and type(steps[1][1]) is MLPRegressor
         and steps[1][1].out_activation_ in _ACTIVATIONS
         and steps[1][1].activation in _ACTIVATIONS
-    ):
+    )
+
+
+def _forward(member, X: np.ndarray) -> np.ndarray:
+    """``member.predict(X)`` of a fitted ``Pipeline(StandardScaler, MLPRegressor)`` on a validated
+    float64 array, by the operations of scikit-learn's ``StandardScaler.transform`` and
+    ``MLPRegressor._forward_pass_fast`` (the same numpy calls in the same order) without their
+    per-call input validation (about 0.7 ms per member and call, against 20 us for the
+    arithmetic). Any other member, or one whose ``predict`` was replaced on the instance, is asked
+    for ``member.predict(X)``."""
+    if not _plain(member):
         return member.predict(X)
-    scaler, mlp = steps[0][1], steps[1][1]
+    scaler, mlp = member.steps[0][1], member.steps[1][1]
     a = np.array(X, dtype=np.float64, copy=True)
     if scaler.with_mean:
         a -= scaler.mean_

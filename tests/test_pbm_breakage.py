@@ -102,7 +102,7 @@ def test_compiled_breakage_rates_and_stages_equal_the_oracle(scheme, fragments):
                           np.zeros((2, M)), d, tally)  # fmt: skip
 
     def oracle_rates(v):
-        return oracle.class_rates(op, v, beta, brk=(brk[0], brk[1], brk[3]))
+        return oracle.class_rates(op, v, beta, brk=(brk[0], brk[1], brk[3][:2]))  # rows 2-3: fragment rows
 
     d_ref, tally_ref = oracle_rates(u)
     np.testing.assert_allclose(d.reshape(-1), d_ref, rtol=1e-12, atol=1e-14 * np.abs(d_ref).max())

@@ -200,24 +200,32 @@ def breakage_totals(sel, nlg, K, tab, factors, below, work, d, tally):
     The fragments smaller than the first pivot are merged into it (``tab`` counts them as
     granules of x_0 with their solid): ``below`` (2, K) holds, per breakage of pivot k, their
     number and solid (x_0 units) (``Breakage.below_floor``), and their rates are added to
-    ``tally[1]`` (fragments merged per second) and ``tally[2]`` (their solid, x_0 units)."""
+    ``tally[1]`` (fragments merged per second) and ``tally[2]`` (their solid, x_0 units).
+    ``below`` rows 2 and 3 (``Breakage.compiled_arrays``; without them, 0 and k + 1): the first
+    row and one past the last of column k of ``tab`` with a nonzero entry; the rows outside, and
+    a pivot with no breakage (R, RL, RG 0), add exact zeros (a sum never is -0): skipped, the same
+    rates to the bit (binary fragments fill one row of each column)."""
     born = work[:4]  # rows: number, liquid, gas born per cell, first moment D_c
     for r in range(4):
         for c in range(K):
             born[r, c] = 0.0
     merged_n = 0.0
     merged_v = 0.0
+    ranged = below.shape[0] >= 4
     for k in range(K):
         s = sel[k]
         R = s * nlg[0, k]
         RL = s * nlg[1, k]
         RG = s * nlg[2, k]
+        if R == 0.0 and RL == 0.0 and RG == 0.0:
+            continue
         d[0, k] -= R
         d[1, k] -= RL
         d[2, k] -= RG
         merged_n += R * below[0, k]
         merged_v += R * below[1, k]
-        for i in range(k + 1):
+        lo, hi = (int(below[2, k]), int(below[3, k])) if ranged else (0, k + 1)
+        for i in range(lo, hi):
             born[0, i] += R * tab[0, i, k]
             born[3, i] += R * tab[1, i, k]
             born[1, i] += RL * tab[2, i, k]

@@ -113,13 +113,20 @@ class Breakage:
 
     def compiled_arrays(self, x: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, ...]:
         """(selection (K,), fragment tables (3, K, K), split factors (4, K), fragments below the
-        first pivot (2, K)): the arguments of the compiled rates (``_compiled.breakage_totals``) on
-        the grid of pivots ``x`` and cell ``edges``; :meth:`prepare` refreshes the selection array
-        in place."""
+        first pivot (4, K): :meth:`below_floor`, then the first row and one past the last of each
+        column of the tables with a nonzero entry): the arguments of the compiled rates
+        (``_compiled.breakage_totals``) on the grid of pivots ``x`` and cell ``edges``;
+        :meth:`prepare` refreshes the selection array in place."""
         x = np.asarray(x, float)
         tab = np.ascontiguousarray(self.fragment_tables(x, edges))
         factors = np.ascontiguousarray(cell_average_factors(x / x[0]))
-        return np.zeros(x.size), tab, factors, np.ascontiguousarray(self.below_floor(x))
+        nonzero = (tab != 0.0).any(axis=0)  # (K rows, K columns)
+        rows = np.zeros((2, x.size))
+        for k in range(x.size):
+            at = np.flatnonzero(nonzero[:, k])
+            if at.size:
+                rows[:, k] = at[0], at[-1] + 1
+        return np.zeros(x.size), tab, factors, np.ascontiguousarray(np.vstack([self.below_floor(x), rows]))
 
     def reset(self) -> None:
         """Start of a run: the next :meth:`prepare` evaluates the selection."""

@@ -126,7 +126,18 @@ class Grid:
     def lever_weights(self, volumes) -> tuple[np.ndarray, np.ndarray]:
         """Lever rule of particles of solid ``volumes`` (n,) in [x_0, x_(K-1)]: (n, K) matrices of
         the number fraction and of the solid-volume fraction each pivot receives (rows sum to 1;
-        at most two pivots per row), as :meth:`map_particles` splits them."""
+        at most two pivots per row), as :meth:`map_particles` splits them. Kept per set of volumes
+        (the feed classes of a batch are asked about at every coupling interval); copies returned."""
+        key = np.asarray(volumes, float).tobytes()
+        cache = self.__dict__.setdefault("_lever_cache", {})
+        if key not in cache:
+            if len(cache) >= 64:
+                cache.clear()
+            cache[key] = self._lever_weights(volumes)
+        number, frac = cache[key]
+        return number.copy(), frac.copy()
+
+    def _lever_weights(self, volumes) -> tuple[np.ndarray, np.ndarray]:
         i, w_hi, f_hi = self._lever(volumes)
         rows = np.arange(i.size)
         number = np.zeros((i.size, self.bins))

@@ -52,10 +52,14 @@ def critical_speed(density: float, yield_strength: float, critical_stokes: float
 
 
 def fraction_columns(fractions: np.ndarray) -> np.ndarray:
-    """(K,) for each partner j of the pair velocity ``fractions`` (K, K, V): the first partner
-    whose column ``fractions[:, j, :]`` is the same to the bit (``_compiled.impact_selection``)."""
-    first: dict[bytes, int] = {}
-    return np.array([first.setdefault(fractions[:, j, :].tobytes(), j) for j in range(fractions.shape[1])], np.int64)
+    """(K,) for each partner j of the pair velocity ``fractions`` (K, K, V): the first partner of
+    the run of neighbours j' <= j whose columns ``fractions[:, j', :]`` equal column j
+    (``_compiled.impact_selection`` sums such a column once per row; the bins sharing their
+    nearest class of a coupling interval are such runs)."""
+    K = fractions.shape[1]
+    same = (fractions[:, 1:, :] == fractions[:, :-1, :]).all(axis=(0, 2))  # column j + 1 equals column j
+    starts = np.flatnonzero(np.concatenate([[True], ~same]))
+    return starts[np.searchsorted(starts, np.arange(K), side="right") - 1].astype(np.int64)
 
 
 def selection_rates(

@@ -497,7 +497,14 @@ class GranulationPBM:
         times it reached stored into ``s`` and added to ``rec`` as the Python loop does. Returns its code."""
         base = s.steps - fast.ctl.taken  # the start state's steps (a resumed run)
         code = fast.advance(u, t, tallies)
-        for v, (t_out, refused, merged_n, merged_v, liquid, taken) in fast.records:
+        x0 = float(self.grid.x[0])
+        last = len(fast.records) - 1
+        for j, (v, (t_out, refused, merged_n, merged_v, liquid, taken)) in enumerate(fast.records):
+            if j < last:  # what _store and rec.add would record, without the state in between
+                tot = self._pivot_totals(v)
+                rec.append(t_out, tot[0], tot[1] * x0, tot[2] * x0, liquid, refused * x0, base + int(taken),
+                           float(merged_n), float(merged_v) * x0)  # fmt: skip
+                continue
             s.liquid_added, s.steps = liquid, base + int(taken)
             self._store(s, t_out, v, refused, (merged_n, merged_v))
             rec.add(s)

@@ -72,15 +72,20 @@ class Records:
     merged_volume: list = field(default_factory=list)
 
     def add(self, s: State):
-        self.times.append(s.t)
-        self.number.append(s.number.copy())
-        self.liquid.append(s.liquid.copy())
-        self.gas.append(s.gas.copy())
-        self.liquid_added.append(s.liquid_added)
-        self.refused.append(s.refused_volume)
-        self.steps.append(s.steps)
-        self.merged_number.append(s.merged_number)
-        self.merged_volume.append(s.merged_volume)
+        self.append(s.t, s.number.copy(), s.liquid.copy(), s.gas.copy(), s.liquid_added, s.refused_volume, s.steps,
+                    s.merged_number, s.merged_volume)  # fmt: skip
+
+    def append(self, t, number, liquid, gas, liquid_added, refused, steps, merged_number, merged_volume):
+        """Record a state given by its parts (arrays kept as given: the caller's to not modify)."""
+        self.times.append(t)
+        self.number.append(number)
+        self.liquid.append(liquid)
+        self.gas.append(gas)
+        self.liquid_added.append(liquid_added)
+        self.refused.append(refused)
+        self.steps.append(steps)
+        self.merged_number.append(merged_number)
+        self.merged_volume.append(merged_volume)
 
 
 class StepControl:

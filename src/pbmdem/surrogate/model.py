@@ -307,6 +307,8 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         """One OutOfDomainWarning per feature with values outside the training range (``vals``:
         validated feature array)."""
         mask = self._domain_mask(vals)
+        if not mask.any():
+            return
         for j, name in enumerate(self._feature_names()):
             col = mask[:, j]
             if col.any():

@@ -118,15 +118,22 @@ class Breakage:
         (``_compiled.breakage_totals``) on the grid of pivots ``x`` and cell ``edges``;
         :meth:`prepare` refreshes the selection array in place."""
         x = np.asarray(x, float)
-        tab = np.ascontiguousarray(self.fragment_tables(x, edges))
-        factors = np.ascontiguousarray(cell_average_factors(x / x[0]))
-        nonzero = (tab != 0.0).any(axis=0)  # (K rows, K columns)
-        rows = np.zeros((2, x.size))
-        for k in range(x.size):
-            at = np.flatnonzero(nonzero[:, k])
-            if at.size:
-                rows[:, k] = at[0], at[-1] + 1
-        return np.zeros(x.size), tab, factors, np.ascontiguousarray(np.vstack([self.below_floor(x), rows]))
+        key = (self.fragments, x.tobytes(), np.asarray(edges, float).tobytes())
+        tables = _TABLES.get(key)
+        if tables is None:  # the same for every model of this grid (a process builds many: design space)
+            tab = np.ascontiguousarray(self.fragment_tables(x, edges))
+            factors = np.ascontiguousarray(cell_average_factors(x / x[0]))
+            nonzero = (tab != 0.0).any(axis=0)  # (K rows, K columns)
+            rows = np.zeros((2, x.size))
+            for k in range(x.size):
+                at = np.flatnonzero(nonzero[:, k])
+                if at.size:
+                    rows[:, k] = at[0], at[-1] + 1
+            tables = tab, factors, np.ascontiguousarray(np.vstack([self.below_floor(x), rows]))
+            if len(_TABLES) >= 8:
+                _TABLES.clear()
+            _TABLES[key] = tables
+        return np.zeros(x.size), *tables
 
     def reset(self) -> None:
         """Start of a run: the next :meth:`prepare` evaluates the selection."""
@@ -191,6 +198,11 @@ class Breakage:
         for k in range(1, x.size):
             out[:, k] = _fragments_of(self.fragments, xr[k], xr, xr[1:])[2]
         return out
+
+
+#: the fragment tables, split factors and fragment rows of each grid (:meth:`Breakage.compiled_arrays`;
+#: shared by the models of the grid: not to be modified)
+_TABLES: dict = {}
 
 
 def breakage_arrays(breakage: Breakage | None, x: np.ndarray, edges: np.ndarray) -> tuple:

@@ -43,6 +43,23 @@ from .stepping import FLUSH, STEP_LIMITS, TIME_EPS, Records, StepControl, check_
 __all__ = ["GranulationPBM", "check_solver"]
 
 
+#: aggregation operators by (scheme, pivots, cell bounds, extra classes): the same for every model
+#: of a grid (a process of the design space builds many; an operator is not modified after its build)
+_OPERATORS: dict = {}
+
+
+def _operator(scheme, grid: Grid, extra: tuple):
+    """The aggregation operator of ``scheme`` on ``grid`` with the ``extra`` class volumes (m3)."""
+    bounds = grid.edges[1:-1]
+    key = (scheme, grid.x.tobytes(), bounds.tobytes(), extra)
+    op = _OPERATORS.get(key)
+    if op is None:
+        if len(_OPERATORS) >= 32:
+            _OPERATORS.clear()
+        op = _OPERATORS[key] = scheme(grid.x, bounds, extra=extra or None)
+    return op
+
+
 class GranulationPBM:
     """Batch granulator PBM: aggregation (+ optional liquid addition, consolidation, breakage).
 
@@ -85,7 +102,7 @@ class GranulationPBM:
         self._brk_arrays = breakage_arrays(breakage, grid.x, grid.edges)  # None: an empty selection
         # building the operator imports the compiled evaluation (numba, ``_compiled``): it is loaded
         # from numba's cache, or compiled, here and not in a run
-        self.aggregation = SCHEMES[scheme](grid.x, grid.edges[1:-1])
+        self.aggregation = _operator(SCHEMES[scheme], grid, ())
         from . import _compiled  # lazy: numba + compiled cache ~3 s (measured), loaded when a model is built
 
         self._jit = _compiled
@@ -117,7 +134,7 @@ class GranulationPBM:
         self._classes_key = key
         op = self._operators.get(key)
         if op is None:
-            op = self._operators[key] = type(self.aggregation)(self.grid.x, self.grid.edges[1:-1], extra=key)
+            op = self._operators[key] = _operator(type(self.aggregation), self.grid, key)
         self._op = op
         self._M = op.M
         g = self.grid

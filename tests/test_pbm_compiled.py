@@ -330,6 +330,8 @@ def test_bilinear_is_the_regular_grid_interpolator_to_the_bit():
         a, b = np.meshgrid(ld, ld, indexing="ij")
         points = np.column_stack([a.ravel(), b.ravel()])
         np.testing.assert_array_equal(Bilinear(lu, values)(points), ref(points))
+        # on the pairs of one set of values (TableFrequency's bins): the same numbers, reshaped
+        assert Bilinear(lu, values).outer(ld).tobytes() == ref(points).reshape(ld.size, ld.size).tobytes()
 
 
 class _Unfactored:

@@ -30,3 +30,17 @@ class Bilinear:
         out = out + v[i, j + 1] * (1 - y0) * y1
         out = out + v[i + 1, j] * y0 * (1 - y1)
         return out + v[i + 1, j + 1] * y0 * y1
+
+    def outer(self, a: np.ndarray) -> np.ndarray:
+        """(n, n): ``self(points)`` at every pair (a[p], a[q]) of ``a`` (n,), reshaped: the cells
+        and distances of the n values once, broadcast over the pairs; elementwise the same
+        operations, so the same numbers to the bit (tests/test_pbm_compiled.py)."""
+        g, v = self.grid, self.values
+        i = np.clip(np.searchsorted(g, a, side="right") - 1, 0, g.size - 2)
+        y = (a - g[i]) / (g[i + 1] - g[i])
+        i0, j0 = i[:, None], i[None, :]
+        y0, y1 = y[:, None], y[None, :]
+        out = 0.0 + v[i0, j0] * (1 - y0) * (1 - y1)
+        out = out + v[i0, j0 + 1] * (1 - y0) * y1
+        out = out + v[i0 + 1, j0] * y0 * (1 - y1)
+        return out + v[i0 + 1, j0 + 1] * y0 * y1

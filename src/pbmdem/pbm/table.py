@@ -290,8 +290,16 @@ class TableFrequency:
         return A.ravel(), B.ravel()
 
     def _log_matrix(self, k: int, d: np.ndarray) -> np.ndarray:
-        A, B = self._log_d(k, d, self.extrapolation == "clamp")
-        L = self._interp[k](np.column_stack([A, B])).reshape(d.size, d.size)
+        interp = self._interp[k]
+        if isinstance(interp, Bilinear):  # on the pairs of the bins' log diameters (the same numbers)
+            ld = np.log(d)
+            if self.extrapolation == "clamp":
+                lo, hi = self.ranges[k]
+                ld = np.clip(ld, np.log(lo), np.log(hi))
+            L = interp.outer(ld)
+        else:
+            A, B = self._log_d(k, d, self.extrapolation == "clamp")
+            L = interp(np.column_stack([A, B])).reshape(d.size, d.size)
         return 0.5 * (L + L.T)
 
     def _fractions(self, k: int, d: np.ndarray) -> np.ndarray:

@@ -7,10 +7,11 @@ analysis and the calibration). Prints figures, no assertions.
    at the validation's speeds in turn: min / median / max of the wall and CPU time of this process,
    with breakage on (the default) and off. Then the median batch split into its parts: the
    surrogate's calls (`provider_wall_time_s`), the PBM's integration (`pbm_wall_time_s`), of it the
-   breakage selection's evaluations in Python (timed by wrapping `ImpactSelection.__call__`: the
-   first step of a run; the compiled step loop, `pbm.fast_steps`, evaluates it at the other steps,
-   so the PBM's time with breakage minus that without is its cost), and the rest of the loop
-   (sample, class-frequency source).
+   compiled step loop (`pbm.fast_steps`, timed by wrapping `FastSteps.advance`; the rest of the
+   PBM's time is Python: the runs' set-up, the kernel's and selection's preparation, the records)
+   and the breakage selection's evaluations in Python (wrapping `ImpactSelection.__call__`: the
+   first step of a run; the compiled loop evaluates it at the other steps), and the rest of the
+   loop (sample, class-frequency source).
 2. **Throughput**: `--batches` batches (speeds over the grid's range; the ensemble mean and each
    member in turn, as the design space runs them) with `pbmdem.design.batches.run_cases` on 1 and
    on `--jobs` processes: wall and CPU time (this process and its children), batches per minute.
@@ -57,26 +58,24 @@ def without_breakage(loop):
     return loop.replace(batch=loop.batch.replace(pbm=pbm.replace(breakage=pbm.breakage.replace(enabled=False))))
 
 
-class SelectionTimer:
-    """Wraps ImpactSelection.__call__ to add up the time of the breakage selection."""
+class Timer:
+    """Wraps the method ``name`` of ``cls`` to add up its time and calls (``close`` restores it)."""
 
-    def __init__(self):
-        from pbmdem.pbm.impact_breakage import ImpactSelection
-
-        self.cls, self.original, self.seconds, self.calls = ImpactSelection, ImpactSelection.__call__, 0.0, 0
+    def __init__(self, cls, name: str):
+        self.cls, self.name, self.original, self.seconds, self.calls = cls, name, getattr(cls, name), 0.0, 0
         timer = self
 
-        def timed(sel, inp):
+        def timed(*args):
             t0 = time.perf_counter()
-            out = timer.original(sel, inp)
+            out = timer.original(*args)
             timer.seconds += time.perf_counter() - t0
             timer.calls += 1
             return out
 
-        ImpactSelection.__call__ = timed
+        setattr(cls, name, timed)
 
     def close(self):
-        self.cls.__call__ = self.original
+        setattr(self.cls, self.name, self.original)
 
 
 def one_batch(loop, model, speeds, repeat: int, label: str) -> None:
@@ -85,32 +84,36 @@ def one_batch(loop, model, speeds, repeat: int, label: str) -> None:
     from pbmdem.coupling import pbm_ann
 
     pbm_ann(loop, model, speeds[0], None, log_each=False)  # warm: numba's cache, thread pools, imports
+    from pbmdem.pbm.fast_steps import FastSteps
+    from pbmdem.pbm.impact_breakage import ImpactSelection
+
     walls, cpus, parts, finals = [], [], [], []
-    timer = SelectionTimer()
+    timer, steps = Timer(ImpactSelection, "__call__"), Timer(FastSteps, "advance")
     try:
         for k in range(repeat):
             rpm = speeds[k % len(speeds)]
-            timer.seconds, timer.calls = 0.0, 0
+            timer.seconds, timer.calls, steps.seconds = 0.0, 0, 0.0
             t0, c0 = time.perf_counter(), time.process_time()
             outcome = pbm_ann(loop, model, rpm, None, log_each=False)
             walls.append(time.perf_counter() - t0)
             cpus.append(time.process_time() - c0)
             t = outcome.totals
-            parts.append((t["provider_wall_time_s"], t["pbm_wall_time_s"], timer.seconds, timer.calls))
+            parts.append((t["provider_wall_time_s"], t["pbm_wall_time_s"], timer.seconds, timer.calls, steps.seconds))
             if k < len(speeds):
                 s = outcome.result.summary()
                 finals.append((rpm, [float(s[q].iloc[-1]) for q in ("d10", "d50", "d90")]))
     finally:
         timer.close()
+        steps.close()
     print(f"one PBM-ANN batch, {label} ({repeat} warm batches at {', '.join(f'{s:g}' for s in speeds)} rpm):")
     print(f"  wall {spread(walls)}; CPU {spread(cpus)}")
     k = int(np.argsort(walls)[len(walls) // 2])
-    surrogate, pbm, selection, calls = parts[k]
+    surrogate, pbm, selection, calls, compiled = parts[k]
     print(
         f"  the median batch ({1e3 * walls[k]:.2f} ms): surrogate {1e3 * surrogate:.2f} ms, PBM {1e3 * pbm:.2f} ms "
-        f"(of it the breakage selection in Python {1e3 * selection:.2f} ms in {calls} evaluations; the others "
-        f"are inside the compiled step loop: compare the PBM's time without breakage), rest of the loop "
-        f"{1e3 * (walls[k] - surrogate - pbm):.2f} ms"
+        f"(of it the compiled step loop {1e3 * compiled:.2f} ms, the breakage selection in Python "
+        f"{1e3 * selection:.2f} ms in {calls} evaluations: the first step of a run; the compiled loop evaluates it "
+        f"at the others), rest of the loop {1e3 * (walls[k] - surrogate - pbm):.2f} ms"
     )
     for rpm, final in finals:
         print(f"  final d10 / d50 / d90 at {rpm:g} rpm: " + " / ".join(f"{1e3 * q:.9f}" for q in final) + " mm")

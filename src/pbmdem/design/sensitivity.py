@@ -194,13 +194,14 @@ def sensitivity(
         "batches": n * len(models),
         "wall_time_s": wall,
         "wall_time_per_batch_s": wall / (n * len(models)),
+        "batches_per_minute": 60.0 * n * len(models) / wall,
         "n_jobs": settings.n_jobs,
         "out_of_domain_samples": out_of_domain,
         "failed_samples": failed,
     }
     log.info(
         "sensitivity: %d PBM-ANN batches (%d samples x (mean + %d members), N = %d, %d factors) in %.1f s on %d "
-        "process(es): %.1f ms per batch",
+        "process(es): %.1f ms per batch, %.0f batches per minute",
         info["batches"],
         n,
         n_members,
@@ -209,6 +210,7 @@ def sensitivity(
         wall,
         settings.n_jobs,
         1e3 * info["wall_time_per_batch_s"],
+        info["batches_per_minute"],
     )
     if any(out_of_domain.values()):
         log.warning(

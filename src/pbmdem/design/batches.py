@@ -9,10 +9,11 @@ the cases one after the other. A case's result does not depend on the process th
 deterministic), so the same cases give the same table on any machine.
 
 Where the time goes (benchmarks/bench_design_space.py): a PBM-ANN batch of the default
-configuration (four coupling intervals) spends about half its time integrating the PBM and half
-in the surrogate's four calls; loading the surrogate (~0.1 s) and writing the loop's files
-(~0.05 s) took longer than both, so the cases run in memory with the surrogate loaded once per
-process.
+configuration (four coupling intervals, breakage on, ~15 ms) spends about two thirds of its time
+integrating the PBM (most of it in the compiled step loop) and a fifth in the surrogate's three
+predictions; loading the surrogate (~0.1 s) and writing the loop's files (~0.05 s) would cost more
+than the batch, so the cases run in memory with the surrogate loaded once per process, and a
+process keeps the PBM model of the settings it ran last (``coupling.loop``).
 """
 
 from __future__ import annotations

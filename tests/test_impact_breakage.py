@@ -439,7 +439,7 @@ def test_the_compiled_selection_equals_the_numpy_form_on_random_impacts(spread):
     # the compiled probability against pbmdem.impact.breaking_probability, one row per v*
     from pbmdem.pbm import _compiled
 
-    v = np.array([1e-4, 5e-4, 0.0316, 0.3, 2.0, 9.9, 12.0])
+    v = np.array([1e-4, 5e-4, 0.0316, 0.3, 0.3, 2.0, 2.0, 2.0, 9.9, 12.0])  # repeated: a row copied
     out = np.empty((v.size, N_VELOCITY_BINS))
     _compiled.breaking_probability(v, spread, VELOCITY_EDGES, out)
     np.testing.assert_allclose(out, breaking_probability(v, spread), rtol=1e-12, atol=1e-15)

@@ -571,7 +571,8 @@ def breaking_probability(v_star, spread, edges, out):
     a log bin (the bin mean of Phi(a ln(v / v*)) is then exact: the difference of the antiderivative
     at the bin's edges over their distance in z), evenly in v in bin 0 (64-point midpoint rule);
     the last bin ends at its upper edge. The logarithms of the edges are taken once per call and
-    the antiderivative once per edge."""
+    the antiderivative once per edge. Bin 0 of a granule whose Phi is saturated (0) at its fastest
+    midpoint is 0 without its 64 points (they rise with m, and so does z: all saturated, their sum 0)."""
     V = edges.size - 1
     log_edges = np.empty(V + 1)
     for e in range(1, V + 1):
@@ -579,10 +580,15 @@ def breaking_probability(v_star, spread, edges, out):
     log_v0 = np.empty(64)
     for m in range(64):
         log_v0[m] = math.log((m + 0.5) / 64 * edges[1])
+    top = log_v0[63]
     integral = np.empty(V + 1)
     z = np.empty(V + 1)
     for i in range(v_star.size):
         s = v_star[i]
+        if i > 0 and s == v_star[i - 1]:  # the same v* as the granule before (empty pivots: v* of eps_ref)
+            for b in range(V):
+                out[i, b] = out[i - 1, b]
+            continue
         if spread == 0.0:
             for b in range(V):
                 lo = edges[b]
@@ -597,8 +603,9 @@ def breaking_probability(v_star, spread, edges, out):
         a = 2.0 / spread
         log_s = math.log(s)
         first = 0.0
-        for m in range(64):
-            first += _phi(a * (log_v0[m] - log_s))
+        if a * (top - log_s) > -_Z_SATURATED:
+            for m in range(64):
+                first += _phi(a * (log_v0[m] - log_s))
         out[i, 0] = min(max(first / 64, 0.0), 1.0)
         for e in range(1, V + 1):
             z[e] = a * (log_edges[e] - log_s)
@@ -623,17 +630,24 @@ def impact_selection(frequency, fractions, columns, wall_frequency, wall_fractio
     ``wall_fractions`` (W, K, V), and the breaking ``probability`` (K, V) of
     :func:`breaking_probability`; ``numbers`` (K,) the granules of each class. ``columns`` (K,):
     for each partner j the first partner whose fractions ``fractions[:, j, :]`` are the same to the
-    bit (``impact_breakage.fraction_columns``; a coupling interval's bins take the fractions of their nearest
-    class, so a few classes serve all bins): the sum over the velocity bins is taken once per
+    bit (``impact_breakage.fraction_columns``; a coupling interval's bins take the fractions of
+    their nearest class, so a few classes serve all bins): the sum over the velocity bins is taken once per
     such column and row, the same operations on the same numbers, so the same result to the bit."""
     K = numbers.size
     V = probability.shape[1]
     dots = np.empty(K)
     done = np.full(K, -1)  # the row i whose sum dots[c] holds
+    present = np.empty(K, dtype=np.int64)  # the partners j not skipped below for numbers[j] <= 0
+    n_present = 0
+    for j in range(K):
+        if not numbers[j] <= 0.0:
+            present[n_present] = j
+            n_present += 1
     for i in range(K):
         total = 0.0
         if pairs:
-            for j in range(K):
+            for jj in range(n_present):
+                j = present[jj]
                 partners = numbers[j] - 1.0 if i == j else numbers[j]
                 if partners <= 0.0 or frequency[i, j] == 0.0:
                     continue

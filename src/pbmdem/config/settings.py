@@ -24,6 +24,7 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
+from .checks import check
 from .dem import Dem, DemExecution, DemSection
 from .design import Calibration, DesignSpace, Sensitivity
 from .errors import ConfigError, describe_errors
@@ -159,8 +160,6 @@ class Config:
     def from_mapping(cls, cfg: dict, source: str | Path | None = None) -> Config:
         """Check `cfg` (a parsed config file), fill in the defaults and build the Config;
         ConfigError listing every problem (prefixed with the file, if `source` is given)."""
-        from .checks import check
-
         try:
             config = cls._build(parse(cfg))
             check(config)

@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from SALib.analyze import sobol as sobol_analyze
+from SALib.sample import sobol as sobol_sample
 
 from pbmdem.config import CoupledLoop, Sensitivity, SobolFactor
 from pbmdem.config.design import SPEED
@@ -64,15 +66,11 @@ def salib_problem(factors: Sequence[SobolFactor]) -> dict:
 
 def sample(problem: dict, base_samples: int, seed: int) -> np.ndarray:
     """Saltelli's sample matrix, N (D + 2) rows of the D factors (SALib; no second-order indices)."""
-    from SALib.sample import sobol  # lazy: SALib ~2.4 s (measured); report/ imports this module's labels
-
-    return sobol.sample(problem, base_samples, calc_second_order=False, scramble=True, seed=seed)
+    return sobol_sample.sample(problem, base_samples, calc_second_order=False, scramble=True, seed=seed)
 
 
 def indices(problem: dict, outputs: pd.DataFrame, columns: Sequence[str], *, confidence, resamples, seed):
     """S1, ST and their interval half-widths of each output column (rows: parameter, output)."""
-    from SALib.analyze import sobol  # lazy: SALib ~2.4 s (measured), as above
-
     rows = []
     for column in columns:
         y = outputs[column].to_numpy(float)
@@ -82,7 +80,7 @@ def indices(problem: dict, outputs: pd.DataFrame, columns: Sequence[str], *, con
         if constant or not np.isfinite(y).all():
             s = dict.fromkeys(("S1", "S1_conf", "ST", "ST_conf"), np.full(len(problem["names"]), np.nan))
         else:
-            s = sobol.analyze(
+            s = sobol_analyze.analyze(
                 problem, y, calc_second_order=False, num_resamples=resamples, conf_level=confidence, seed=seed
             )
         for k, name in enumerate(problem["names"]):

@@ -10,18 +10,27 @@
 * `collision_frequency`: the pair-weighted mean collision frequency of every coupling interval, and
   the surrogate's c_ij against the DEM's on PBM-DEM's own samples.
 
-The liquid-addition window is shaded in every time plot. `save` writes a figure atomically.
+The liquid-addition window is shaded in every time plot. `write_speed` (rule report_speed) reads a
+speed's runs and writes these figures and its out-of-domain table.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
+from pbmdem.config.pbm import ProcessSettings
 from pbmdem.plotting import log_ticks, pyplot, save_figure, size_distribution
-from pbmdem.readers import InputFileError
+from pbmdem.readers import InputFileError, read_table
+from pbmdem.surrogate import load_surrogate
+from pbmdem.validation.results import load_speed, run_folder
 
 from .display import MM, PERCENT
+from .frequencies import interval_frequencies, surrogate_on_dem_samples
+from .statements import out_of_domain, out_of_domain_sentence
+from .words import write_titled_table
 
 STYLES = {
     "PBM-DEM": dict(color="black", lw=2.0),
@@ -43,9 +52,6 @@ def _width_text(lo, hi) -> str:
 
 SPRAY = dict(color="tab:cyan", alpha=0.10, lw=0)
 STATISTICS = ("d10", "d50", "d90")
-
-
-save = save_figure  # the report's figures are written like every other figure
 
 
 def _spray(ax, process) -> None:
@@ -291,3 +297,59 @@ def collision_frequency(frequencies: pd.DataFrame, pairs: pd.DataFrame, rpm: str
     right.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     return fig
+
+
+#: summary.csv columns the figures of a speed read
+SUMMARY_COLUMNS = ("time", "d10", "d50", "d90", "mean_liquid_content", "mean_porosity")
+BINS_COLUMNS = ("time", "diameter", "mass_density_lnd")
+
+
+def _require(frame, columns, path: Path, what: str) -> None:
+    missing = [c for c in columns if c not in frame.columns]
+    if missing:
+        raise InputFileError(f"{what} {path}: missing column(s) {missing}; present: {list(frame.columns)}")
+
+
+def write_speed(*, validation_dir, rpm: str, replicates: int, process: dict, bands, model, out: dict) -> None:
+    """The figures and the out-of-domain table of one validation speed. `out`: sizes, psd, liquid,
+    frequency (PNG), domain_csv, domain_html."""
+    process = ProcessSettings.from_dict(process, "pbm.process")
+    speed = load_speed(validation_dir, rpm, replicates)
+    folders = {f"PBM-DEM replicate {k}": run_folder(validation_dir, rpm, "pbm_dem", k) for k in range(replicates)}
+    folders.update(
+        {
+            "PBM-ANN": run_folder(validation_dir, rpm, "pbm_ann"),
+            "PBM-constant": run_folder(validation_dir, rpm, "pbm_constant"),
+        }
+    )
+    runs = [*speed.dem, speed.ann, speed.constant]
+    for (name, folder), run in zip(folders.items(), runs):
+        _require(run.summary, SUMMARY_COLUMNS, folder / "summary.csv", f"{name} summary")
+    band_table = read_table(
+        bands, "bands table", columns=("statistic", "time", "n_dem_replicates", "dem_mean", "dem_min", "dem_max", "ann")
+    )
+    save_figure(size_bands(band_table, process, rpm, what=f"bands table {bands}"), out["sizes"])
+    shown = {
+        "PBM-DEM replicate 0": folders["PBM-DEM replicate 0"],
+        "PBM-ANN": folders["PBM-ANN"],
+        "PBM-constant": folders["PBM-constant"],
+    }
+    bins = {
+        name: read_table(folder / "bins.csv", f"{name} bins table", columns=BINS_COLUMNS, finite=BINS_COLUMNS)
+        for name, folder in shown.items()
+    }
+    save_figure(psd_evolution(bins, process, rpm), out["psd"])
+    save_figure(liquid_porosity(speed, process, rpm), out["liquid"])
+    frequency = interval_frequencies(speed, folders["PBM-constant"] / "timing.json")
+    pairs = surrogate_on_dem_samples(speed, load_surrogate(model))
+    save_figure(collision_frequency(frequency, pairs, rpm), out["frequency"])
+    domain = out_of_domain(speed)
+    write_titled_table(
+        out["domain_csv"],
+        out["domain_html"],
+        domain,
+        "out_of_domain",
+        {"rpm": rpm},
+        out_of_domain_sentence(rpm, domain),
+        keys=2,
+    )

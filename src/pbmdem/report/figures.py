@@ -25,6 +25,7 @@ from pbmdem.config.pbm import ProcessSettings
 from pbmdem.plotting import log_ticks, pyplot, save_figure, size_distribution
 from pbmdem.readers import InputFileError, read_table
 from pbmdem.surrogate import load_surrogate
+from pbmdem.tables import STATISTICS
 from pbmdem.validation.results import load_speed, run_folder
 
 from .display import MM, PERCENT
@@ -51,7 +52,6 @@ def _width_text(lo, hi) -> str:
 
 
 SPRAY = dict(color="tab:cyan", alpha=0.10, lw=0)
-STATISTICS = ("d10", "d50", "d90")
 
 
 def _spray(ax, process) -> None:

@@ -330,7 +330,7 @@ def test_figures_have_units_legends_and_sizes_in_mm(tmp_path):
     ]
     figures.pyplot().close(fig)
 
-    frequency = interval_frequencies(speed, vdir / f"rpm{RPM}" / "pbm_constant" / "timing.json")
+    frequency = interval_frequencies(speed)
     assert sorted(set(frequency.model)) == ["PBM-ANN", "PBM-DEM", "PBM-constant"]
     assert len(frequency[frequency.model == "PBM-DEM"]) == 4  # 2 replicates x 2 intervals
     pairs = surrogate_on_dem_samples(speed, FakeSurrogate(outside_at={600.0}))

@@ -372,8 +372,6 @@ COMPARISON = Table(
         Column("constant_merged_fraction", empty=_no_floor),
     ),
 )
-#: the comparison columns in their order (the report shows them)
-COMPARISON_COLUMNS = tuple(c.name for c in COMPARISON.columns)
 
 #: measured granule sizes over a batch (docs/calibration.md): one row per (impeller speed, time)
 #: with d10/d50/d90 and their measurement sd (m); what a calibration fits

@@ -81,7 +81,6 @@ STAGE_MODULES = {
         "pbmdem.dem.vtk_series",
         "pbmdem.design.outputs",
         "pbmdem.design.sensitivity",
-        "pbmdem.design.sensitivity_bars",
         "SALib.sample.sobol",
         "SALib.analyze.sobol",
     ],

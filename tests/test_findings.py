@@ -260,7 +260,7 @@ def test_hyperparameters_in_words():
 def test_the_breakage_finding_is_followed_by_the_clipping_line(tmp_path):
     """write_findings puts the grid floor's line (report.breakage.clipping_words) after the breakage
     finding, from the merged_fraction columns of the speed, feed and breakage studies."""
-    from pbmdem.report.outputs import write_findings
+    from pbmdem.report.findings import write_findings
 
     speed = _study({"rpm": [300.0, 900.0]}, [0.004, 0.005], feed="fine", in_grid_range=True, dem_speed=True)
     speed = speed.assign(merged_fraction=[0.0, 0.02], merged_fraction_member_max=[0.0, 0.03])

@@ -155,8 +155,8 @@ def test_the_figure_and_the_findings_section(tmp_path):
     findings before 'How far to trust them', its display table as CSV and HTML."""
     from test_findings import _one_speed_comparison, _study
 
+    from pbmdem.report.findings import write_findings
     from pbmdem.report.lumping import lumping_figure
-    from pbmdem.report.outputs import write_findings
 
     cases = _cases([0.006, 0.009, 0.010, 0.007], [0.006, 0.009, 0.010, 0.007])
     cases = pd.concat([cases, cases[cases.study == "default"].assign(study="binder")], ignore_index=True)
@@ -203,7 +203,7 @@ def test_a_broken_lumping_table_or_cost_file_is_named(tmp_path):
     from test_findings import _one_speed_comparison, _study
 
     from pbmdem.readers import InputFileError
-    from pbmdem.report.outputs import write_findings
+    from pbmdem.report.findings import write_findings
 
     speed = _study({"rpm": [300.0, 900.0]}, [0.004, 0.005], feed="fine", in_grid_range=True, dem_speed=True)
     feed = _study({"feed": ["fine"], "feed_d50": [0.003]}, [0.004], in_grid=True, rpm=300.0)

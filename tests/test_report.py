@@ -330,7 +330,7 @@ def test_figures_have_units_legends_and_sizes_in_mm(tmp_path):
     ]
     figures.pyplot().close(fig)
 
-    frequency = interval_frequencies(speed, vdir / f"rpm{RPM}" / "pbm_constant" / "timing.json")
+    frequency = interval_frequencies(speed)
     assert sorted(set(frequency.model)) == ["PBM-ANN", "PBM-DEM", "PBM-constant"]
     assert len(frequency[frequency.model == "PBM-DEM"]) == 4  # 2 replicates x 2 intervals
     pairs = surrogate_on_dem_samples(speed, FakeSurrogate(outside_at={600.0}))
@@ -349,11 +349,11 @@ def test_figures_have_units_legends_and_sizes_in_mm(tmp_path):
 
 def test_speed_outputs_are_written_whole(tmp_path, monkeypatch):
     """The report files of one speed: valid PNGs and tables, no temporary file left beside them."""
-    import pbmdem.surrogate
-    from pbmdem.report.outputs import write_speed
+    from pbmdem.report import figures
+    from pbmdem.report.figures import write_speed
 
     vdir = write_validation(tmp_path, outside={0: "tip_speed outside the training range"})
-    monkeypatch.setattr(pbmdem.surrogate, "load_surrogate", lambda path: FakeSurrogate())
+    monkeypatch.setattr(figures, "load_surrogate", lambda path: FakeSurrogate())
     out_dir = tmp_path / "report" / f"rpm{RPM}"
     out = {
         "sizes": out_dir / "size_statistics.png",
@@ -382,13 +382,14 @@ def test_speed_outputs_are_written_whole(tmp_path, monkeypatch):
 
 
 def test_bad_inputs_of_the_report_name_the_file(tmp_path, monkeypatch):
-    import pbmdem.surrogate
-    from pbmdem.report.outputs import write_comparison, write_speed
+    from pbmdem.report import figures
+    from pbmdem.report.figures import write_speed
+    from pbmdem.report.outputs import write_comparison
 
     vdir = write_validation(tmp_path)
     bins = vdir / f"rpm{RPM}" / "pbm_ann" / "bins.csv"
     pd.read_csv(bins).drop(columns="mass_density_lnd").to_csv(bins, index=False)
-    monkeypatch.setattr(pbmdem.surrogate, "load_surrogate", lambda path: FakeSurrogate())
+    monkeypatch.setattr(figures, "load_surrogate", lambda path: FakeSurrogate())
     out = {k: tmp_path / "out" / f"{k}.png" for k in ("sizes", "psd", "liquid", "frequency")}
     with pytest.raises(InputFileError, match=re.escape(str(bins)) + ".*mass_density_lnd"):
         write_speed(

@@ -30,9 +30,7 @@ def read_table(path: str | Path, what: str = "table", *, columns=(), finite=(), 
         raise InputFileError(f"{what} {path} is empty (no header, no rows)") from None
     except (OSError, UnicodeDecodeError, pd.errors.ParserError, ValueError) as exc:
         raise InputFileError(f"{what} {path} cannot be read as CSV: {exc}") from None
-    missing = [c for c in columns if c not in frame.columns]
-    if missing:
-        raise InputFileError(f"{what} {path}: missing column(s) {missing}; present: {list(frame.columns)}")
+    require_columns(frame, columns, what, path)
     for name in finite:
         if name not in frame.columns:
             continue
@@ -43,6 +41,13 @@ def read_table(path: str | Path, what: str = "table", *, columns=(), finite=(), 
                 f"a finite number is required ({int(bad.sum())} such row(s))"
             )
     return frame
+
+
+def require_columns(frame: pd.DataFrame, columns, what: str, path) -> None:
+    """InputFileError naming `what` and `path` (where `frame` was read) unless every one of `columns` is present."""
+    missing = [c for c in columns if c not in frame.columns]
+    if missing:
+        raise InputFileError(f"{what} {path}: missing column(s) {missing}; present: {list(frame.columns)}")
 
 
 def first_index(bad):

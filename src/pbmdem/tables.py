@@ -37,6 +37,11 @@ NOUNS = {"int": "integer", "float": "number"}
 SIGNS = {None: "", "nonneg": " >= 0", "positive": " > 0"}
 
 
+#: the size statistics of every granule-size table (summary.csv, the studies, the measured table):
+#: the diameters (m) that 10, 50 and 90 % of the mass is finer than
+STATISTICS = ("d10", "d50", "d90")
+
+
 @dataclass(frozen=True)
 class Column:
     """One column: `kind` int, float or str; `sign` None, nonneg or positive (numbers); `empty`
@@ -367,8 +372,6 @@ COMPARISON = Table(
         Column("constant_merged_fraction", empty=_no_floor),
     ),
 )
-#: the comparison columns in their order (the report shows them)
-COMPARISON_COLUMNS = tuple(c.name for c in COMPARISON.columns)
 
 #: measured granule sizes over a batch (docs/calibration.md): one row per (impeller speed, time)
 #: with d10/d50/d90 and their measurement sd (m); what a calibration fits
@@ -377,7 +380,7 @@ MEASURED = Table(
     (
         Column("rpm", sign="positive"),
         Column("time"),
-        *(Column(s, sign="positive") for s in ("d10", "d50", "d90")),
-        *(Column(f"{s}_sd") for s in ("d10", "d50", "d90")),
+        *(Column(s, sign="positive") for s in STATISTICS),
+        *(Column(f"{s}_sd") for s in STATISTICS),
     ),
 )

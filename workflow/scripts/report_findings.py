@@ -1,7 +1,7 @@
 """Snakemake rule report_findings: the figures and words the report opens with (thin)."""
 
 from pbmdem.joblog import log_job
-from pbmdem.report.outputs import write_findings
+from pbmdem.report.findings import write_findings
 
 sm = snakemake  # noqa: F821
 log_job(sm.log[0])

@@ -1,7 +1,7 @@
 """Snakemake rule report_speed: the figures and the out-of-domain table of one validation speed (thin)."""
 
 from pbmdem.joblog import log_job
-from pbmdem.report.outputs import write_speed
+from pbmdem.report.figures import write_speed
 
 sm = snakemake  # noqa: F821
 log_job(sm.log[0])

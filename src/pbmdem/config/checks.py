@@ -11,6 +11,7 @@ import math
 
 from .design import problems as design_problems
 from .errors import ConfigError
+from .points import feed_case_names, feed_case_parents
 
 FRACTION_TOLERANCE = 1e-6
 
@@ -97,8 +98,6 @@ def check(cfg) -> None:
 
 def _feed_check_problems(cfg) -> list[str]:
     """validation.feed_check.feed: a case of the feed study with a grid feed on either side."""
-    from .points import feed_case_names, feed_case_parents
-
     feed = cfg.validation.feed_check.feed
     grid = cfg.grid.size_distributions
     if feed is None or any(name not in cfg.size_distributions for name in grid):

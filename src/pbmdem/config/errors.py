@@ -10,14 +10,6 @@ class ConfigError(ValueError):
     the value and what is allowed."""
 
 
-def key_path(path, whole: str = "(top level)") -> str:
-    """A key's path in a JSON document as `a.b[2].c` (`whole` for the document itself)."""
-    out = ""
-    for part in path:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
-    return out or whole
-
-
 @functools.cache
 def _schema(model) -> dict:
     return model.model_json_schema()

@@ -24,12 +24,13 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
+from .checks import check
 from .dem import Dem, DemExecution, DemSection
 from .design import Calibration, DesignSpace, Sensitivity
 from .errors import ConfigError, describe_errors
 from .granulator import Bed, Granulator, GranulatorSection, Material
 from .pbm import Pbm
-from .points import OperatingGrid, SizeDistribution
+from .points import OperatingGrid, SizeDistribution, point_id
 from .surrogate import Surrogate
 from .typed import Name, Settings, setting
 from .validation import SampleRule, Validation
@@ -83,6 +84,19 @@ def parse(cfg: dict) -> ConfigFile:
     raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
 
 
+@dataclass(frozen=True)
+class PointSpeed:
+    """What the impeller speed decides for one operating point (`DemPoint.at`)."""
+
+    rpm: float
+    point_id: str
+    omega: float  # impeller angular speed (rad/s)
+    tip_speed: float  # m/s
+    rotation_period: float  # s
+    spinup_time: float  # s, the spin-up phase
+    sampling_time: float  # s, the sampling window
+
+
 class DemPoint(Settings):
     """What one DEM run of an operating point uses: granulator, material, DEM settings and its size
     distribution (the rpm and the replicate are the run's wildcards)."""
@@ -92,6 +106,22 @@ class DemPoint(Settings):
     dem: Dem
     distribution: str
     sizes: SizeDistribution
+
+    def at(self, rpm: float) -> PointSpeed:
+        """Everything the impeller speed `rpm` decides for this point, each from its owner: the
+        point's id, the impeller's angular and tip speed (the granulator), the rotation period and
+        the lengths of the spin-up and sampling phases (the DEM settings). One call: the planner
+        asks the config once."""
+        rpm = float(rpm)
+        return PointSpeed(
+            rpm=rpm,
+            point_id=point_id(rpm, self.distribution),
+            omega=float(self.granulator.angular_speed(rpm)),
+            tip_speed=float(self.granulator.tip_speed(rpm)),
+            rotation_period=60.0 / rpm,
+            spinup_time=self.dem.phase_time("spinup", rpm),
+            sampling_time=self.dem.phase_time("sampling", rpm),
+        )
 
 
 class PbmBatch(Settings):
@@ -159,8 +189,6 @@ class Config:
     def from_mapping(cls, cfg: dict, source: str | Path | None = None) -> Config:
         """Check `cfg` (a parsed config file), fill in the defaults and build the Config;
         ConfigError listing every problem (prefixed with the file, if `source` is given)."""
-        from .checks import check
-
         try:
             config = cls._build(parse(cfg))
             check(config)

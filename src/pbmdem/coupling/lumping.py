@@ -28,6 +28,7 @@ from pbmdem.config.design import with_pbm_values
 from pbmdem.pbm.errors import PBMError
 from pbmdem.pbm.state import surface_fraction
 from pbmdem.surrogate import load_surrogate
+from pbmdem.tables import STATISTICS
 
 from .loop import CouplingError
 from .methods import pbm_ann
@@ -35,7 +36,6 @@ from .studies import feed_cases, with_feed
 
 log = logging.getLogger(__name__)
 
-STATISTICS = ("d10", "d50", "d90")
 LIQUID_KEY = "pbm.liquid_addition.rate"
 #: the columns of the cases table (`lumping_study`), in order
 CASE_COLUMNS = (

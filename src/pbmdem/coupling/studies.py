@@ -23,13 +23,12 @@ from pbmdem.config import BLEND_JOIN, CoupledLoop, SizeDistribution, feed_case_n
 from pbmdem.pbm.errors import PBMError
 from pbmdem.pbm.impact_breakage import critical_speed
 from pbmdem.surrogate import load_surrogate
+from pbmdem.tables import STATISTICS
 
 from .loop import CouplingError
 from .methods import pbm_ann
 
 log = logging.getLogger(__name__)
-
-STATISTICS = ("d10", "d50", "d90")
 
 
 def mass_median(sizes: SizeDistribution) -> float:

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from pbmdem.config import ConfigError, DemPoint, SizeDistribution, point_id
+from pbmdem.config import ConfigError, DemPoint, SizeDistribution
 from pbmdem.config.dem import DemLimits
 from pbmdem.config.granulator import Granulator, Material
 
@@ -295,15 +295,15 @@ def _whole(steps: int, every: int) -> int:
 def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[int] | None = None) -> DemPlan:
     """Plan one run of `point` at `rpm`: its bed (`plan_bed`, same `replicate` and `counts`), then
     the spin-up and the sampling window at this speed."""
-    rpm = float(rpm)  # checked where it entered (the config's Rpm type, or check_rpm on a command line)
-    pid = point_id(rpm, point.distribution)
+    # rpm was checked where it entered (the config's Rpm type, or check_rpm on a command line)
+    speed = point.at(rpm)
+    rpm, pid, tip_speed = speed.rpm, speed.point_id, speed.tip_speed
     try:
         bed = plan_bed(point, replicate=replicate, counts=counts)
     except ConfigError as exc:
         raise ConfigError(str(exc).replace(f"distribution {point.distribution}", f"operating point {pid}", 1)) from None
-    mat, dem, granulator = point.material, point.dem, point.granulator
+    mat, dem = point.material, point.dem
     dt = bed.timestep
-    tip_speed, omega = float(granulator.tip_speed(rpm)), float(granulator.angular_speed(rpm))
     t_c = hertz_contact_time(
         0.5 * min(bed.diameters), mat.density, mat.youngs_modulus, mat.poisson_ratio, max(tip_speed, MIN_CONTACT_SPEED)
     )
@@ -311,9 +311,9 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
     if interval == "auto":
         interval = max(1, int(t_c / (SNAPSHOTS_PER_CONTACT * dt)))
     position_interval = dem.position_every * interval
-    spinup_steps = _steps(dem.phase_time("spinup", rpm), dt)
+    spinup_steps = _steps(speed.spinup_time, dt)
     # the window and the position history before it: whole position intervals
-    sampling_steps = _whole(_steps(dem.phase_time("sampling", rpm), dt), position_interval)
+    sampling_steps = _whole(_steps(speed.sampling_time, dt), position_interval)
     history_steps = _whole(_steps(dem.history_time, dt), position_interval)
     if history_steps >= spinup_steps:
         raise ConfigError(
@@ -323,7 +323,7 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
     return DemPlan(
         **{f: getattr(bed, f) for f in BedPlan.__dataclass_fields__},
         point_id=pid,
-        rpm=float(rpm),
+        rpm=rpm,
         contact_time=t_c,
         collision_interval=int(interval),
         spinup_steps=spinup_steps,
@@ -332,9 +332,9 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
         history_steps=history_steps,
         position_interval=int(position_interval),
         encounter_gap_fraction=dem.encounter_gap_fraction,
-        omega=omega,
+        omega=speed.omega,
         neighbor_skin=neighbor_skin(bed.diameters, dt, tip_speed),
-        rotation_period=60.0 / rpm,
+        rotation_period=speed.rotation_period,
         keep_contact_dumps=dem.keep_contact_dumps,
         spinup_pre_steps=spinup_steps - history_steps,
         record_steps=history_steps + sampling_steps,

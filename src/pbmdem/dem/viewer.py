@@ -185,7 +185,9 @@ def _view(args: argparse.Namespace) -> int:
 
 
 def add_options(view: argparse.ArgumentParser) -> None:
-    """The options of `pbmdem view`."""
+    """The description (this module's second paragraph), examples and options of `pbmdem view`."""
+    view.description = __doc__.split("\n\n")[1].strip()
+    view.epilog = EXAMPLES
     view.add_argument("run_dir", nargs="?", default=None, help="a run folder, e.g. results/dem/rpm600_fine/rep0")
     view.add_argument("--rpm", default=None, help="impeller speed (1/min) of the operating point")
     view.add_argument("--distribution", default=None, help="size distribution (feed) name of the operating point")

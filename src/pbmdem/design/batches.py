@@ -36,9 +36,7 @@ from pbmdem.pbm.errors import PBMError
 from pbmdem.pbm.setup import run_batch
 from pbmdem.surrogate import load_surrogate
 from pbmdem.surrogate._threads import single_threaded
-
-#: the size statistics a case reports (m)
-STATISTICS = ("d10", "d50", "d90")
+from pbmdem.tables import STATISTICS
 
 log = logging.getLogger(__name__)
 

@@ -16,6 +16,20 @@ from .calibration import Model, calibrate
 from .measured import read_measured
 from .outputs import write_design_space, write_estimate
 
+DESIGN_EXAMPLES = """examples:
+  pbmdem design-space --config config/config.yaml --model results/surrogate/model.skops --out out/design
+  pbmdem design-space --config my.yaml --model results/surrogate/model.skops --out out/design --jobs 1
+"""
+
+CALIBRATE_EXAMPLES = """examples:
+  pbmdem calibrate --config config/config.yaml --model results/surrogate/model.skops \\
+      --data results/design/measured_pbm_dem.csv --out out/calibration
+  pbmdem calibrate --config my.yaml --model results/surrogate/model.skops --data measured.csv \\
+      --parameters pbm.aggregation.beta0 --out out/beta0
+
+The measured table (docs/calibration.md): columns rpm, time (s), d10, d50, d90 (m) and d10_sd,
+d50_sd, d90_sd (m), one row per speed and time, times ascending per speed."""
+
 
 def _jobs(jobs: int | None) -> int | None:
     if jobs is not None and jobs < 1:
@@ -94,14 +108,25 @@ def _common(parser: argparse.ArgumentParser) -> None:
 
 
 def design_space_options(design: argparse.ArgumentParser) -> None:
-    """The options of `pbmdem design-space`."""
+    """The description, examples and options of `pbmdem design-space`."""
+    design.description = (
+        "Run PBM-ANN (ensemble mean and every member) over the grid of the config's design_space section "
+        "and write the table, the maps and the figures of merit."
+    )
+    design.epilog = DESIGN_EXAMPLES
     _common(design)
     design.add_argument("--jobs", type=int, default=None, help="processes (default: design_space.n_jobs)")
     design.set_defaults(func=_with_logging(_design_space))
 
 
 def calibrate_options(cal: argparse.ArgumentParser) -> None:
-    """The options of `pbmdem calibrate`."""
+    """The description, examples and options of `pbmdem calibrate`."""
+    cal.description = (
+        "Least-squares estimate of the pbm settings of calibration.parameters (or --parameters) from a "
+        "measured size table, with confidence intervals that hold the measurement error and the "
+        "surrogate's uncertainty, their correlation, the residuals and a fit figure."
+    )
+    cal.epilog = CALIBRATE_EXAMPLES
     _common(cal)
     cal.add_argument("--data", required=True, type=Path, help="measured size table (CSV, docs/calibration.md)")
     cal.add_argument(

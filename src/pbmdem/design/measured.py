@@ -16,9 +16,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.readers import InputFileError, first_index
-from pbmdem.tables import MEASURED
-
-STATISTICS = ("d10", "d50", "d90")
+from pbmdem.tables import MEASURED, STATISTICS
 
 
 def check_measured(frame: pd.DataFrame, source, end_time: float) -> pd.DataFrame:

@@ -15,8 +15,7 @@ from pbmdem.plotting import pyplot, save_figure
 from .calibration import Estimate
 from .maps import plot_design_space
 from .proof import calibration_check
-from .sensitivity import sensitivity
-from .sensitivity_bars import plot_sensitivity
+from .sensitivity import plot_sensitivity, sensitivity
 from .space import design_space
 
 MARKERS = {"d10": "^", "d50": "o", "d90": "s"}

@@ -3,12 +3,17 @@ pbm settings over stated ranges (config `sensitivity:`, docs/design.md "Global s
 
 The estimator is SALib's (`SALib.sample.sobol.sample`: Saltelli's scheme on a scrambled Sobol'
 sequence, without second-order indices; `SALib.analyze.sobol.analyze`: first-order S1 and total
-ST with bootstrap confidence intervals); this module only states the problem, evaluates the model
-and tabulates. A model is anything in SALib's shape: a function of a sample matrix (one row per
+ST with bootstrap confidence intervals); this module only states the problem, evaluates the model,
+tabulates and draws. A model is anything in SALib's shape: a function of a sample matrix (one row per
 sample, one column per factor, in the problem's order) that returns a table with one row per
 sample and a column per output (`PbmAnnOutputs`: d10, d50, d90 in m). `sobol_study` samples once
 and evaluates every model on the same samples (PBM-ANN: the ensemble mean and each member), so that
 the members' indices differ only by the surrogate.
+
+`plot_sensitivity` draws the study's figure: one panel per output (d10, d50, d90), a pair of
+bars per factor: the total index ST and the first-order index S1 of the ensemble mean with their
+confidence intervals, and each ensemble member's index as a dot on its bar (their spread is how
+much of the answer the surrogate's uncertainty could change).
 
 A failed batch (NaN sizes) leaves its model's indices undefined (NaN, logged); an output that
 does not vary over the samples has no variance to share out, and its indices are NaN too.
@@ -24,9 +29,12 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from SALib.analyze import sobol as sobol_analyze
+from SALib.sample import sobol as sobol_sample
 
 from pbmdem.config import CoupledLoop, Sensitivity, SobolFactor
 from pbmdem.config.design import SPEED
+from pbmdem.plotting import pyplot, save_figure
 from pbmdem.surrogate import load_surrogate
 
 from .batches import STATISTICS, Case, outcomes_table, run_cases
@@ -64,15 +72,11 @@ def salib_problem(factors: Sequence[SobolFactor]) -> dict:
 
 def sample(problem: dict, base_samples: int, seed: int) -> np.ndarray:
     """Saltelli's sample matrix, N (D + 2) rows of the D factors (SALib; no second-order indices)."""
-    from SALib.sample import sobol  # lazy: SALib ~2.4 s (measured); report/ imports this module's labels
-
-    return sobol.sample(problem, base_samples, calc_second_order=False, scramble=True, seed=seed)
+    return sobol_sample.sample(problem, base_samples, calc_second_order=False, scramble=True, seed=seed)
 
 
 def indices(problem: dict, outputs: pd.DataFrame, columns: Sequence[str], *, confidence, resamples, seed):
     """S1, ST and their interval half-widths of each output column (rows: parameter, output)."""
-    from SALib.analyze import sobol  # lazy: SALib ~2.4 s (measured), as above
-
     rows = []
     for column in columns:
         y = outputs[column].to_numpy(float)
@@ -82,7 +86,7 @@ def indices(problem: dict, outputs: pd.DataFrame, columns: Sequence[str], *, con
         if constant or not np.isfinite(y).all():
             s = dict.fromkeys(("S1", "S1_conf", "ST", "ST_conf"), np.full(len(problem["names"]), np.nan))
         else:
-            s = sobol.analyze(
+            s = sobol_analyze.analyze(
                 problem, y, calc_second_order=False, num_resamples=resamples, conf_level=confidence, seed=seed
             )
         for k, name in enumerate(problem["names"]):
@@ -220,3 +224,51 @@ def sensitivity(
             out_of_domain,
         )
     return study.table, info
+
+
+#: colour of each index's bar
+COLORS = {"ST": "#4575b4", "S1": "#fdae61"}
+
+
+def plot_sensitivity(table: pd.DataFrame, path: str | Path, confidence: float) -> None:
+    """The bars of `table` (`sensitivity.COLUMNS`) as a PNG at `path`."""
+    plt = pyplot()
+
+    outputs = [s for s in STATISTICS if s in set(table.output)]
+    params = list(dict.fromkeys(table.parameter))
+    fig, axes = plt.subplots(1, len(outputs), figsize=(4.2 * len(outputs) + 0.6, 4.6), squeeze=False, sharey=True)
+    x = np.arange(len(params))
+    width = 0.38
+    for ax, output in zip(axes[0], outputs):
+        rows = table[table.output == output]
+        mean = rows[rows.member.astype(str) == "mean"].set_index("parameter").reindex(params)
+        members = rows[rows.member.astype(str) != "mean"]
+        for offset, index in ((-width / 2, "ST"), (width / 2, "S1")):
+            ax.bar(
+                x + offset,
+                mean[index].to_numpy(float),
+                width,
+                yerr=mean[f"{index}_conf"].to_numpy(float),
+                color=COLORS[index],
+                capsize=3,
+                label=f"{index} (mean; bars {100 * confidence:g} %)",
+            )
+            for k, p in enumerate(params):
+                values = members.loc[members.parameter == p, index].to_numpy(float)
+                ax.scatter(
+                    np.full(values.size, x[k] + offset),
+                    values,
+                    s=12,
+                    color="black",
+                    zorder=5,
+                    label="members" if (k == 0 and index == "ST") else None,
+                )
+        ax.axhline(0.0, color="0.4", lw=0.8)
+        ax.set_xticks(x, [label(p) for p in params], rotation=30, ha="right", fontsize=8)
+        ax.set_title(f"final {output}")
+        ax.grid(alpha=0.3, axis="y")
+    axes[0, 0].set_ylabel("Sobol' index (share of the variance)")
+    axes[0, 0].legend(fontsize=7, loc="upper left")
+    fig.suptitle("Global sensitivity of PBM-ANN's final granule size (ST total, S1 first order)", fontsize=10)
+    fig.tight_layout()
+    save_figure(fig, path)

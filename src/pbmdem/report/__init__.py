@@ -11,7 +11,7 @@ figure and table registered with `report()` in rules/report.smk, captions in wor
 | `statements` | the targets (met or not, with the measured values) and the out-of-domain statement |
 | `training` | the surrogate's training set (DEM runs, points, replicates, speeds, feeds), held-out accuracy |
 | `provenance` | configuration hash, git commit, versions of LIGGGHTS, Python and libraries, the kernel source |
-| `outputs` | the files of the report rules (rules/report.smk), one function per rule |
+| `outputs` | the files of the table rules (figures: `figures.write_speed`, `findings.write_findings`) |
 
 Nothing here recomputes a result: the report reads the files the workflow wrote (docs/validation.md).
 """

@@ -8,10 +8,10 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.pbm.results import FLOOR_LIMIT
+from pbmdem.plotting import pyplot
 
 from . import words
 from .display import MM
-from .figures import pyplot
 
 #: line style per variant of the study
 STYLES = {

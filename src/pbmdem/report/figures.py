@@ -10,7 +10,8 @@
 * `collision_frequency`: the pair-weighted mean collision frequency of every coupling interval, and
   the surrogate's c_ij against the DEM's on PBM-DEM's own samples.
 
-The liquid-addition window is shaded in every time plot. `save` writes a figure atomically.
+The liquid-addition window is shaded in every time plot. `write_speed` (rule report_speed) reads a
+speed's runs and writes these figures and its out-of-domain table.
 """
 
 from __future__ import annotations
@@ -18,10 +19,23 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from pbmdem.config.pbm import ProcessSettings
 from pbmdem.plotting import log_ticks, pyplot, save_figure, size_distribution
-from pbmdem.readers import InputFileError
+from pbmdem.readers import InputFileError, read_table, require_columns
+from pbmdem.surrogate import load_surrogate
+from pbmdem.tables import STATISTICS
+from pbmdem.validation.results import load_speed
 
 from .display import MM, PERCENT
+from .frequencies import interval_frequencies, surrogate_on_dem_samples
+from .statements import out_of_domain, out_of_domain_sentence
+from .words import write_titled_table
+
+#: the columns of the tables these figures read, checked where `write_speed` reads them: a run's
+#: summary.csv, bins.csv (the order of `psd_evolution`'s reading) and a speed's bands.csv
+SUMMARY_COLUMNS = ("time", "d10", "d50", "d90", "mean_liquid_content", "mean_porosity")
+BINS_COLUMNS = ("time", "diameter", "mass_density_lnd")
+BANDS_COLUMNS = ("statistic", "time", "n_dem_replicates", "dem_mean", "dem_min", "dem_max", "ann")
 
 STYLES = {
     "PBM-DEM": dict(color="black", lw=2.0),
@@ -42,19 +56,13 @@ def _width_text(lo, hi) -> str:
 
 
 SPRAY = dict(color="tab:cyan", alpha=0.10, lw=0)
-STATISTICS = ("d10", "d50", "d90")
-
-
-save = save_figure  # the report's figures are written like every other figure
 
 
 def _spray(ax, process) -> None:
     ax.axvspan(process.spray_start, process.spray_end, **SPRAY, label="liquid addition")
 
 
-def _column(frame: pd.DataFrame, name: str, what: str) -> np.ndarray:
-    if name not in frame.columns:
-        raise InputFileError(f"{what}: missing column {name!r}; present: {list(frame.columns)}")
+def _column(frame: pd.DataFrame, name: str) -> np.ndarray:
     return frame[name].to_numpy(float)
 
 
@@ -64,11 +72,8 @@ def _figure_legend(fig, ax, ncol: int = 4) -> None:
 
 
 def size_bands(bands: pd.DataFrame, process, rpm: str, what: str = "bands table"):
-    """d10/d50/d90 (mm) against time (s), one panel each, from a speed's bands.csv."""
+    """d10/d50/d90 (mm) against time (s), one panel each, from a speed's bands.csv (`BANDS_COLUMNS`)."""
     plt = pyplot()
-    for name in ("statistic", "time", "n_dem_replicates", "dem_mean", "dem_min", "dem_max", "ann"):
-        if name not in bands.columns:
-            raise InputFileError(f"{what}: missing column {name!r}; present: {list(bands.columns)}")
     fig, axes = plt.subplots(1, 3, figsize=(12, 4.2))
     for ax, stat in zip(axes, STATISTICS):
         b = bands[bands["statistic"] == stat].sort_values("time")
@@ -133,22 +138,18 @@ def cumulative_undersize(diameter: np.ndarray, density_lnd: np.ndarray) -> np.nd
 #: line styles of the snapshot times, so that curves lying on each other stay distinguishable
 
 
-def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str, what: dict[str, str] | None = None):
+def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str):
     """Cumulative mass undersize (%) against diameter (mm) at `snapshot_times`, one panel per model.
-    `bins`: panel title -> that run's bins.csv (time, diameter, mass_density_lnd). Times whose
-    distribution has not changed yet are drawn once, their label naming every such time."""
+    `bins`: panel title -> that run's bins.csv (`BINS_COLUMNS`). Times whose distribution has not
+    changed yet are drawn once, their label naming every such time."""
     plt = pyplot()
-    what = what or {}
     fig, axes = plt.subplots(1, len(bins), figsize=(4.4 * len(bins), 4.3), sharex=True, sharey=True, squeeze=False)
     first = next(iter(bins.values()))
-    times = snapshot_times(_column(first, "time", what.get(next(iter(bins)), "bins table")), process)
+    times = snapshot_times(_column(first, "time"), process)
     shown = []  # diameters (m) where the mass is, for the common x range
     panels = {}
     for title, frame in bins.items():
-        label = what.get(title, f"{title} bins table")
-        t = _column(frame, "time", label)
-        d = _column(frame, "diameter", label)
-        q = _column(frame, "mass_density_lnd", label)
+        t, d, q = (_column(frame, name) for name in BINS_COLUMNS)
         curves = []  # (times, diameters, cumulative)
         for time in times:
             at = np.isclose(t, time, rtol=0.0, atol=1e-9 * max(1.0, abs(time)))
@@ -203,15 +204,15 @@ def liquid_porosity(speed, process, rpm: str):
         dem = [r.summary for r in speed.dem]
         _band_lines(
             ax,
-            [_column(s, "time", f"PBM-DEM replicate {k} summary") for k, s in enumerate(dem)],
-            [_column(s, column, f"PBM-DEM replicate {k} summary") for k, s in enumerate(dem)],
+            [_column(s, "time") for s in dem],
+            [_column(s, column) for s in dem],
             "PBM-DEM",
             f"PBM-DEM band (min-max of {len(dem)} replicates)",
             "PBM-DEM mean",
             scale,
         )
         ann = speed.ann.summary
-        t_ann = _column(ann, "time", "PBM-ANN summary")
+        t_ann = _column(ann, "time")
         if members is not None and len(members) and column in members.columns:
             per = [g.sort_values("time") for _, g in members.groupby("member")]
             lo = np.min([np.interp(t_ann, g.time, g[column]) for g in per], axis=0) * scale
@@ -219,14 +220,14 @@ def liquid_porosity(speed, process, rpm: str):
             ax.fill_between(t_ann, lo, hi, **BAND["PBM-ANN"], label="PBM-ANN band (min-max of the surrogate's members)")
         ax.plot(
             t_ann,
-            scale * _column(ann, column, "PBM-ANN summary"),
+            scale * _column(ann, column),
             **STYLES["PBM-ANN"],
             label="PBM-ANN (mean prediction)",
         )
         con = speed.constant.summary
         ax.plot(
-            _column(con, "time", "PBM-constant summary"),
-            scale * _column(con, column, "PBM-constant summary"),
+            _column(con, "time"),
+            scale * _column(con, column),
             **STYLES["PBM-constant"],
             label="PBM-constant",
         )
@@ -291,3 +292,34 @@ def collision_frequency(frequencies: pd.DataFrame, pairs: pd.DataFrame, rpm: str
     right.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     return fig
+
+
+def write_speed(*, validation_dir, rpm: str, replicates: int, process: dict, bands, model, out: dict) -> None:
+    """The figures and the out-of-domain table of one validation speed. `out`: sizes, psd, liquid,
+    frequency (PNG), domain_csv, domain_html."""
+    process = ProcessSettings.from_dict(process, "pbm.process")
+    speed = load_speed(validation_dir, rpm, replicates)
+    shown = {"PBM-DEM replicate 0": speed.dem[0], "PBM-ANN": speed.ann, "PBM-constant": speed.constant}
+    for name, run in {**{f"PBM-DEM replicate {k}": r for k, r in enumerate(speed.dem)}, **shown}.items():
+        require_columns(run.summary, SUMMARY_COLUMNS, f"{name} summary", run.folder / "summary.csv")
+    band_table = read_table(bands, "bands table", columns=BANDS_COLUMNS)
+    save_figure(size_bands(band_table, process, rpm, what=f"bands table {bands}"), out["sizes"])
+    bins = {
+        name: read_table(run.folder / "bins.csv", f"{name} bins table", columns=BINS_COLUMNS, finite=BINS_COLUMNS)
+        for name, run in shown.items()
+    }
+    save_figure(psd_evolution(bins, process, rpm), out["psd"])
+    save_figure(liquid_porosity(speed, process, rpm), out["liquid"])
+    frequency = interval_frequencies(speed)
+    pairs = surrogate_on_dem_samples(speed, load_surrogate(model))
+    save_figure(collision_frequency(frequency, pairs, rpm), out["frequency"])
+    domain = out_of_domain(speed)
+    write_titled_table(
+        out["domain_csv"],
+        out["domain_html"],
+        domain,
+        "out_of_domain",
+        {"rpm": rpm},
+        out_of_domain_sentence(rpm, domain),
+        keys=2,
+    )

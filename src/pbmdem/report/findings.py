@@ -11,21 +11,34 @@ distribution change granule growth, in plain words and one figure each, then how
   the glossary of the terms the report uses.
 
 Sizes in mm. Inputs: the tables of `pbmdem.coupling.studies` and the comparison table.
+`write_findings` (rule report_findings) reads them with the other studies' tables (breakage,
+sensitivity, lumping, the surrogate's training set) and writes the figures and the text.
 """
 
 from __future__ import annotations
 
 import base64
+import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from pbmdem.plotting import SIZE_STYLES, final_sizes, pyplot
+from pbmdem.atomic import write_text
+from pbmdem.coupling.lumping import CASE_COLUMNS, LIQUID_COLUMNS
+from pbmdem.plotting import SIZE_STYLES, final_sizes, pyplot, save_figure
+from pbmdem.readers import InputFileError, read_table
+from pbmdem.surrogate.persistence import read_metadata
+from pbmdem.tables import GRID_PAIRS
+from pbmdem.validation.feed_check import CHECK_COLUMNS
 
 from . import words
-from .breakage import peak_speed
+from .breakage import breakage_figure, breakage_words, clipping_words, peak_speed
 from .display import MM
+from .lumping import lumping_figure, lumping_table, lumping_words, turn_speeds
+from .sensitivity import sensitivity_words
+from .training import training_set, training_words
+from .words import write_titled_table
 
 
 def _domain_marks(ax, x, frame: pd.DataFrame) -> bool:
@@ -252,3 +265,109 @@ def trust_words(comparison: pd.DataFrame) -> str:
             }
         )
     return words.paragraph("trust", rows=rows)
+
+
+def write_findings(
+    *,
+    speed,
+    feed,
+    comparison,
+    speed_feed: str,
+    feed_rpm: float,
+    batch_s: float,
+    out: dict,
+    breakage=None,
+    training=None,
+    metadata=None,
+    feed_check=None,
+    sensitivity=None,
+    sensitivity_info=None,
+    confidence: float = 0.95,
+    lumping=None,
+    lumping_liquid=None,
+    lumping_info=None,
+) -> None:
+    """The findings: the figures (speed, feed, and with `breakage` the breakage study) and their
+    text (rst), atomically. `speed`, `feed`, `breakage`: the PBM-ANN study tables; `comparison`: the
+    validation's comparison table; `training`, `metadata`: the grid collision table the surrogate
+    was trained on and its metadata (model.json), for its training set and held-out accuracy beside
+    the validation; `feed_check`: the feed check's table (or None: no check); `sensitivity`: the
+    Sobol' indices and `sensitivity_info` their figures of merit (JSON; their words; `confidence`:
+    the level of their intervals); `lumping`, `lumping_liquid`, `lumping_info`: the 1-D against 2-D
+    study (pbmdem.coupling.lumping; its figure, display table and words); `out`: speed_png,
+    feed_png, breakage_png, rst, and with `lumping` lumping_png, lumping_csv, lumping_html."""
+    speed_table = read_table(speed, "PBM-ANN speed study", columns=("rpm", "d10", "d50", "d90"))
+    feed_table = read_table(feed, "PBM-ANN feed study", columns=("feed", "feed_d50", "d10", "d50", "d90"))
+    comparison_table = read_table(comparison, "comparison table", columns=("rpm",))
+    save_figure(speed_figure(speed_table, speed_feed, batch_s), out["speed_png"])
+    save_figure(feed_figure(feed_table, feed_rpm, batch_s), out["feed_png"])
+    extra: tuple[str, ...] = ()
+    if breakage is not None:
+        study = read_table(breakage, "PBM-ANN breakage study", columns=("variant", "rpm", "d50", "critical_speed"))
+        save_figure(breakage_figure(study), out["breakage_png"])
+        studies = {"speed study": speed_table, "feed study": feed_table, "breakage study": study}
+        extra = (breakage_words(study), "", image_directive(out["breakage_png"]), "   :width: 640px", "")
+        extra += (clipping_words(studies), "")
+    learned = None
+    if training is not None and metadata is not None:
+        meta = read_metadata(metadata)
+        table = GRID_PAIRS.read(training, need=("point_id", "rpm", "distribution", "n_replicates"))
+        learned = training_words(training_set(table, str(training), meta["training_point_ids"]), meta, str(training))
+    check = None
+    if feed_check is not None:
+        check_table = read_table(feed_check, "feed check table", columns=CHECK_COLUMNS)
+        check = check_table.iloc[0].to_dict()
+    if sensitivity is not None:
+        indices = read_table(
+            sensitivity,
+            "Sobol' indices",
+            columns=("parameter", "output", "member", "S1", "S1_conf", "ST", "ST_conf"),
+            dtype={"member": str},
+        )
+        info = None
+        if sensitivity_info is not None:
+            info = json.loads(Path(sensitivity_info).read_text())
+        extra = (*extra, sensitivity_words(indices, confidence, info), "")
+    if lumping is not None:
+        extra = (*extra, *_lumping_section(lumping, lumping_liquid, lumping_info, out))
+    text = findings_rst(
+        speed_table,
+        feed_table,
+        comparison_table,
+        speed_feed=speed_feed,
+        feed_rpm=feed_rpm,
+        batch_s=batch_s,
+        speed_png=str(out["speed_png"]),
+        feed_png=str(out["feed_png"]),
+        extra=extra,
+        training=learned,
+        feed_check=check,
+    )
+    write_text(out["rst"], text)
+
+
+def _lumping_section(cases, liquid, info, out: dict) -> tuple[str, ...]:
+    """The lumping study's figure and display table written, and its words with the figure (rst lines)."""
+    what = "lumping study (1-D against 2-D PBM)"
+    table = read_table(cases, what, columns=CASE_COLUMNS, dtype={"feed": str, "failed": str})
+    table["failed"] = table.failed.fillna("")
+    per_size = read_table(liquid, "lumping study's liquid per size class", columns=LIQUID_COLUMNS)
+    facts = {}
+    if info is not None:
+        try:
+            facts = json.loads(Path(info).read_text())
+        except (OSError, ValueError) as exc:
+            raise InputFileError(f"lumping study's cost {info} cannot be read as JSON: {exc}") from None
+    save_figure(lumping_figure(table, per_size), out["lumping_png"])
+    turn1, turn2 = turn_speeds(table)
+    write_titled_table(
+        out["lumping_csv"], out["lumping_html"], lumping_table(table), "lumping", {"turns": [turn1, turn2]}, keys=2
+    )
+    return (
+        lumping_words(table, per_size, facts),
+        "",
+        image_directive(out["lumping_png"]),
+        "   :width: 640px",
+        "   :alt: final d50 of the lumped and the two-dimensional PBM against speed, binder rate and feed",
+        "",
+    )

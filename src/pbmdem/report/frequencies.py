@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -41,17 +40,19 @@ def _intervals(run, what: str) -> pd.DataFrame:
     return INTERVALS.check(frame, f"({what}) intervals.csv", need=INTERVAL_COLUMNS)
 
 
-def interval_frequencies(speed, constant_timing_path: str | Path | None = None) -> pd.DataFrame:
+def interval_frequencies(speed) -> pd.DataFrame:
     """Long table: model, run, interval, t_start, t_end (s), mean_frequency_per_pair (1/s per pair).
     PBM-constant is one row over the whole batch (`interval` -1) unless its timing has no
-    `frequency` (then an InputFileError naming `constant_timing_path`)."""
+    `frequency` (then an InputFileError naming its timing.json)."""
+    loops = [("PBM-DEM", f"replicate {k}", rep, f"PBM-DEM replicate {k} result") for k, rep in enumerate(speed.dem)]
+    loops.append(("PBM-ANN", "ensemble mean", speed.ann, "PBM-ANN result"))
     rows = []
-    for k, rep in enumerate(speed.dem):
-        frame = _intervals(rep, f"PBM-DEM replicate {k} result")
+    for model, run, result, what in loops:
+        frame = _intervals(result, what)
         rows += [
             {
-                "model": "PBM-DEM",
-                "run": f"replicate {k}",
+                "model": model,
+                "run": run,
                 "interval": int(r.interval),
                 "t_start": r.t_start,
                 "t_end": r.t_end,
@@ -59,27 +60,18 @@ def interval_frequencies(speed, constant_timing_path: str | Path | None = None) 
             }
             for r in frame.itertuples()
         ]
-    ann = _intervals(speed.ann, "PBM-ANN result")
-    rows += [
-        {
-            "model": "PBM-ANN",
-            "run": "ensemble mean",
-            "interval": int(r.interval),
-            "t_start": r.t_start,
-            "t_end": r.t_end,
-            "mean_frequency_per_pair": r.mean_frequency_per_pair,
-        }
-        for r in ann.itertuples()
-    ]
     if "frequency" not in speed.constant.timing:
-        raise InputFileError(f"PBM-constant timing {constant_timing_path}: missing field(s) ['frequency']")
+        raise InputFileError(
+            f"PBM-constant timing {speed.constant.folder / 'timing.json'}: missing field(s) ['frequency']"
+        )
     rows.append(
         {
             "model": "PBM-constant",
             "run": "calibrated",
             "interval": -1,
-            "t_start": float(ann.t_start.min()),
-            "t_end": float(ann.t_end.max()),
+            # over PBM-ANN's batch (the last loop's intervals)
+            "t_start": float(frame.t_start.min()),
+            "t_end": float(frame.t_end.max()),
             "mean_frequency_per_pair": float(speed.constant.timing["frequency"]),
         }
     )

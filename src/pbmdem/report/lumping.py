@@ -9,12 +9,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from pbmdem.plotting import log_ticks
+from pbmdem.plotting import log_ticks, pyplot
 
 from . import words
 from .breakage import peak_speed
 from .display import MM, PERCENT, mm, number
-from .figures import pyplot
 
 #: a difference between the models below 1 % of a size is below the reproducibility of a measured
 #: d50 (a sieve or laser diffraction of the same sample, calibration.relative_error_floor): the lumped

@@ -1,100 +1,21 @@
-"""The files of the report rules, one function per rule (rules/report.smk): each reads its inputs
-(errors name the file), builds the figures and tables of `figures`, `tables`, `statements` and
-`provenance`, and writes them atomically; a table as CSV and as an HTML page (`display.write_table`:
-Snakemake's report shows HTML inline and offers CSV for download).
+"""The files of the report's table rules, one function per rule (rules/report.smk): each reads its
+inputs (errors name the file), builds the tables of `tables`, `statements` and `provenance`, and
+writes them atomically, as CSV and as an HTML page (`words.write_titled_table`: Snakemake's report
+shows HTML inline and offers CSV for download). The rules with figures, report_speed and
+report_findings, are `figures.write_speed` and `findings.write_findings`: they need scikit-learn
+(~3 s to import, measured), which these rules do not.
 """
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
-from pbmdem.atomic import write_text
 from pbmdem.config import Config, Granulator, Pbm, SizeDistribution
-from pbmdem.config.pbm import ProcessSettings
-from pbmdem.plotting import save_figure
-from pbmdem.plotting import save_figure as save
-from pbmdem.readers import InputFileError, read_table
-from pbmdem.tables import COMPARISON, GRID_PAIRS
-from pbmdem.validation.feed_check import CHECK_COLUMNS
-from pbmdem.validation.results import load_speed, run_folder
+from pbmdem.readers import read_table
+from pbmdem.tables import COMPARISON
 
-from . import figures, words
-from .breakage import breakage_figure, breakage_words, clipping_words
-from .display import write_table
-from .findings import feed_figure, findings_rst, image_directive, speed_figure
-from .lumping import lumping_figure, lumping_table, lumping_words, turn_speeds
 from .provenance import provenance
-from .statements import out_of_domain, out_of_domain_sentence, target_sentences, targets
+from .statements import target_sentences, targets
 from .tables import calibration_check_table, comparison_tables, design_space_table, process_settings, speeds
-
-#: summary.csv columns the figures of a speed read
-SUMMARY_COLUMNS = ("time", "d10", "d50", "d90", "mean_liquid_content", "mean_porosity")
-BINS_COLUMNS = ("time", "diameter", "mass_density_lnd")
-
-
-def _require(frame, columns, path: Path, what: str) -> None:
-    missing = [c for c in columns if c not in frame.columns]
-    if missing:
-        raise InputFileError(f"{what} {path}: missing column(s) {missing}; present: {list(frame.columns)}")
-
-
-def _write(csv, html, frame, name: str, numbers: dict | None = None, caption: str | None = None, **kwargs) -> None:
-    """A display table with its title and caption from the template tables.j2 (`numbers` fill them;
-    `caption`: a caption written elsewhere)."""
-    numbers = numbers or {}
-    if caption is None:
-        caption = words.macro("tables", "caption")(name, numbers)
-    write_table(csv, html, frame, words.macro("tables", "title")(name, numbers), caption, **kwargs)
-
-
-def write_speed(*, validation_dir, rpm: str, replicates: int, process: dict, bands, model, out: dict) -> None:
-    """The figures and the out-of-domain table of one validation speed. `out`: sizes, psd, liquid,
-    frequency (PNG), domain_csv, domain_html."""
-    from pbmdem.surrogate import load_surrogate  # lazy: scikit-learn, ~3 s measured
-
-    from .frequencies import interval_frequencies, surrogate_on_dem_samples  # lazy: scikit-learn, ~3 s measured
-
-    process = ProcessSettings.from_dict(process, "pbm.process")
-    speed = load_speed(validation_dir, rpm, replicates)
-    folders = {f"PBM-DEM replicate {k}": run_folder(validation_dir, rpm, "pbm_dem", k) for k in range(replicates)}
-    folders.update(
-        {
-            "PBM-ANN": run_folder(validation_dir, rpm, "pbm_ann"),
-            "PBM-constant": run_folder(validation_dir, rpm, "pbm_constant"),
-        }
-    )
-    runs = [*speed.dem, speed.ann, speed.constant]
-    for (name, folder), run in zip(folders.items(), runs):
-        _require(run.summary, SUMMARY_COLUMNS, folder / "summary.csv", f"{name} summary")
-    band_table = read_table(
-        bands, "bands table", columns=("statistic", "time", "n_dem_replicates", "dem_mean", "dem_min", "dem_max", "ann")
-    )
-    figures.save(figures.size_bands(band_table, process, rpm, what=f"bands table {bands}"), out["sizes"])
-    shown = {
-        "PBM-DEM replicate 0": folders["PBM-DEM replicate 0"],
-        "PBM-ANN": folders["PBM-ANN"],
-        "PBM-constant": folders["PBM-constant"],
-    }
-    bins = {
-        name: read_table(folder / "bins.csv", f"{name} bins table", columns=BINS_COLUMNS, finite=BINS_COLUMNS)
-        for name, folder in shown.items()
-    }
-    figures.save(figures.psd_evolution(bins, process, rpm), out["psd"])
-    figures.save(figures.liquid_porosity(speed, process, rpm), out["liquid"])
-    frequency = interval_frequencies(speed, folders["PBM-constant"] / "timing.json")
-    pairs = surrogate_on_dem_samples(speed, load_surrogate(model))
-    figures.save(figures.collision_frequency(frequency, pairs, rpm), out["frequency"])
-    domain = out_of_domain(speed)
-    _write(
-        out["domain_csv"],
-        out["domain_html"],
-        domain,
-        "out_of_domain",
-        {"rpm": rpm},
-        out_of_domain_sentence(rpm, domain),
-        keys=2,
-    )
+from .words import write_titled_table
 
 
 def write_settings(
@@ -122,8 +43,8 @@ def write_settings(
         dem_replicates,
         dem_sampling_time,
     )
-    _write(out["settings_csv"], out["settings_html"], settings, "settings")
-    _write(
+    write_titled_table(out["settings_csv"], out["settings_html"], settings, "settings")
+    write_titled_table(
         out["speeds_csv"],
         out["speeds_html"],
         speeds(machine, validation_rpm, grid_rpm),
@@ -137,8 +58,8 @@ def write_comparison(*, comparison, out: dict) -> None:
     comparison_<name>_html for name in d50, tails, accuracy, cost, domain; targets_csv, targets_html."""
     table = COMPARISON.read(comparison)
     for name, frame in comparison_tables(table).items():
-        _write(out[f"comparison_{name}_csv"], out[f"comparison_{name}_html"], frame, f"comparison_{name}")
-    _write(
+        write_titled_table(out[f"comparison_{name}_csv"], out[f"comparison_{name}_html"], frame, f"comparison_{name}")
+    write_titled_table(
         out["targets_csv"],
         out["targets_html"],
         targets(table),
@@ -153,7 +74,7 @@ def write_design_tables(*, design, check, third_key: str, confidence: float, out
     """The design space and the calibration check in display form. `out`: design_space_table_csv,
     design_space_table_html, calibration_check_csv, calibration_check_html."""
     table = read_table(design, "design-space table", columns=("rpm", "liquid_rate", third_key, "spec_status"))
-    _write(
+    write_titled_table(
         out["design_space_table_csv"],
         out["design_space_table_html"],
         design_space_table(table, third_key),
@@ -163,7 +84,7 @@ def write_design_tables(*, design, check, third_key: str, confidence: float, out
     )
     recovery = read_table(check, "calibration check", columns=("case", "parameter", "true", "estimate", "recovered"))
     recovered = int(recovery.recovered.astype(str).str.lower().eq("true").sum())
-    _write(
+    write_titled_table(
         out["calibration_check_csv"],
         out["calibration_check_html"],
         calibration_check_table(recovery, confidence),
@@ -178,116 +99,4 @@ def write_provenance(*, config: dict, settings: dict, basedir, runs, metadata, o
     `Config.sha256()`); `settings`: the same without the execution settings; `basedir`: the
     project; `workdir`: where the workflow ran (recorded, not compared). `out`: csv, html."""
     table = provenance(Config.from_mapping(config).sha256(), settings, basedir, runs, metadata, workdir=workdir)
-    _write(out["csv"], out["html"], table, "provenance")
-
-
-def write_findings(
-    *,
-    speed,
-    feed,
-    comparison,
-    speed_feed: str,
-    feed_rpm: float,
-    batch_s: float,
-    out: dict,
-    breakage=None,
-    training=None,
-    metadata=None,
-    feed_check=None,
-    sensitivity=None,
-    sensitivity_info=None,
-    confidence: float = 0.95,
-    lumping=None,
-    lumping_liquid=None,
-    lumping_info=None,
-) -> None:
-    """The findings: the figures (speed, feed, and with `breakage` the breakage study) and their
-    text (rst), atomically. `speed`, `feed`, `breakage`: the PBM-ANN study tables; `comparison`: the
-    validation's comparison table; `training`, `metadata`: the grid collision table the surrogate
-    was trained on and its metadata (model.json), for its training set and held-out accuracy beside
-    the validation; `feed_check`: the feed check's table (or None: no check); `sensitivity`: the
-    Sobol' indices and `sensitivity_info` their figures of merit (JSON; their words; `confidence`:
-    the level of their intervals); `lumping`, `lumping_liquid`, `lumping_info`: the 1-D against 2-D
-    study (pbmdem.coupling.lumping; its figure, display table and words); `out`: speed_png,
-    feed_png, breakage_png, rst, and with `lumping` lumping_png, lumping_csv, lumping_html."""
-    speed_table = read_table(speed, "PBM-ANN speed study", columns=("rpm", "d10", "d50", "d90"))
-    feed_table = read_table(feed, "PBM-ANN feed study", columns=("feed", "feed_d50", "d10", "d50", "d90"))
-    comparison_table = read_table(comparison, "comparison table", columns=("rpm",))
-    save(speed_figure(speed_table, speed_feed, batch_s), out["speed_png"])
-    save(feed_figure(feed_table, feed_rpm, batch_s), out["feed_png"])
-    extra: tuple[str, ...] = ()
-    if breakage is not None:
-        study = read_table(breakage, "PBM-ANN breakage study", columns=("variant", "rpm", "d50", "critical_speed"))
-        save(breakage_figure(study), out["breakage_png"])
-        studies = {"speed study": speed_table, "feed study": feed_table, "breakage study": study}
-        extra = (breakage_words(study), "", image_directive(out["breakage_png"]), "   :width: 640px", "")
-        extra += (clipping_words(studies), "")
-    learned = None
-    if training is not None and metadata is not None:
-        from pbmdem.surrogate.persistence import read_metadata  # lazy: scikit-learn, ~3 s measured
-
-        from .training import training_set, training_words  # lazy: scikit-learn, ~3 s measured
-
-        meta = read_metadata(metadata)
-        table = GRID_PAIRS.read(training, need=("point_id", "rpm", "distribution", "n_replicates"))
-        learned = training_words(training_set(table, str(training), meta["training_point_ids"]), meta, str(training))
-    check = None
-    if feed_check is not None:
-        check_table = read_table(feed_check, "feed check table", columns=CHECK_COLUMNS)
-        check = check_table.iloc[0].to_dict()
-    if sensitivity is not None:
-        from .sensitivity import sensitivity_words  # lazy: scikit-learn, ~3 s measured
-
-        indices = read_table(
-            sensitivity,
-            "Sobol' indices",
-            columns=("parameter", "output", "member", "S1", "S1_conf", "ST", "ST_conf"),
-            dtype={"member": str},
-        )
-        info = None
-        if sensitivity_info is not None:
-            info = json.loads(Path(sensitivity_info).read_text())
-        extra = (*extra, sensitivity_words(indices, confidence, info), "")
-    if lumping is not None:
-        extra = (*extra, *_lumping_section(lumping, lumping_liquid, lumping_info, out))
-    text = findings_rst(
-        speed_table,
-        feed_table,
-        comparison_table,
-        speed_feed=speed_feed,
-        feed_rpm=feed_rpm,
-        batch_s=batch_s,
-        speed_png=str(out["speed_png"]),
-        feed_png=str(out["feed_png"]),
-        extra=extra,
-        training=learned,
-        feed_check=check,
-    )
-    write_text(out["rst"], text)
-
-
-def _lumping_section(cases, liquid, info, out: dict) -> tuple[str, ...]:
-    """The lumping study's figure and display table written, and its words with the figure (rst lines)."""
-    from pbmdem.coupling.lumping import CASE_COLUMNS, LIQUID_COLUMNS  # lazy: scikit-learn, ~3 s measured
-
-    what = "lumping study (1-D against 2-D PBM)"
-    table = read_table(cases, what, columns=CASE_COLUMNS, dtype={"feed": str, "failed": str})
-    table["failed"] = table.failed.fillna("")
-    per_size = read_table(liquid, "lumping study's liquid per size class", columns=LIQUID_COLUMNS)
-    facts = {}
-    if info is not None:
-        try:
-            facts = json.loads(Path(info).read_text())
-        except (OSError, ValueError) as exc:
-            raise InputFileError(f"lumping study's cost {info} cannot be read as JSON: {exc}") from None
-    save_figure(lumping_figure(table, per_size), out["lumping_png"])
-    turn1, turn2 = turn_speeds(table)
-    _write(out["lumping_csv"], out["lumping_html"], lumping_table(table), "lumping", {"turns": [turn1, turn2]}, keys=2)
-    return (
-        lumping_words(table, per_size, facts),
-        "",
-        image_directive(out["lumping_png"]),
-        "   :width: 640px",
-        "   :alt: final d50 of the lumped and the two-dimensional PBM against speed, binder rate and feed",
-        "",
-    )
+    write_titled_table(out["csv"], out["html"], table, "provenance")

@@ -24,7 +24,7 @@ import re
 
 import jinja2
 
-from .display import MM, PERCENT
+from .display import MM, PERCENT, write_table
 
 #: a space that `fold` keeps (a private-use character, not whitespace, stands in for it while folding)
 _KEPT = "\ue000"
@@ -84,3 +84,12 @@ def macro(template: str, name: str):
     """The macro `name` of the template `template` (without .j2), returning folded text."""
     found = getattr(ENV.get_template(f"{template}.j2").module, name)
     return lambda *args, **kwargs: fold(found(*args, **kwargs))
+
+
+def write_titled_table(csv, html, frame, name: str, numbers: dict | None = None, caption: str | None = None, **kwargs):
+    """A display table (`display.write_table`) with its title and caption from the template
+    tables.j2 (`numbers` fill them; `caption`: a caption written elsewhere)."""
+    numbers = numbers or {}
+    if caption is None:
+        caption = macro("tables", "caption")(name, numbers)
+    write_table(csv, html, frame, macro("tables", "title")(name, numbers), caption, **kwargs)

@@ -19,6 +19,12 @@ from .model import OutOfDomainWarning
 from .persistence import load_surrogate
 from .train import train_and_report
 
+EXAMPLES = """examples:
+  pbmdem surrogate train --config config/config.yaml --table results/dem/collisions.csv \\
+      --velocity-table results/dem/impact_velocity.csv --out out/surrogate
+  pbmdem surrogate predict --model results/surrogate/model.skops --table results/dem/collisions.csv
+"""
+
 TRAIN_EXAMPLES = """examples:
   pbmdem surrogate train --config config/config.yaml --table results/dem/collisions.csv \\
       --velocity-table results/dem/impact_velocity.csv --out out/surrogate --jobs 2
@@ -32,7 +38,11 @@ PREDICT_EXAMPLES = """examples:
 
 
 def add_options(parser: argparse.ArgumentParser) -> None:
-    """The options of ``pbmdem surrogate``: its subcommands ``train`` and ``predict``."""
+    """The description, examples and options of ``pbmdem surrogate``: its subcommands ``train`` and ``predict``."""
+    parser.description = (
+        "Train or query the encounter surrogate (encounter frequency and impact-velocity distribution per class pair)."
+    )
+    parser.epilog = EXAMPLES
     sub = parser.add_subparsers(dest="surrogate_command", required=True)
 
     train = sub.add_parser(

@@ -16,8 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-#: the size statistics banded (columns of a PBM summary.csv, m)
-STATISTICS = ("d10", "d50", "d90")
+from pbmdem.tables import STATISTICS
 
 
 def _on_times(summary: pd.DataFrame, column: str, times: np.ndarray) -> np.ndarray:

@@ -32,8 +32,8 @@ import pandas as pd
 
 from pbmdem.config import feed_case_parents
 from pbmdem.readers import InputFileError, read_table
+from pbmdem.tables import STATISTICS
 
-STATISTICS = ("d10", "d50", "d90")
 #: the kinds of statement, in the order of the rule
 BELOW, ABOVE, OFF = "below_parents", "above_parents", "off_interpolation"
 STUDY_COLUMNS = ("feed", "feed_d50", "d50", "out_of_domain_intervals", "in_grid")

@@ -27,9 +27,10 @@ def run_folder(validation_dir: str | Path, rpm: str, method: str, replicate: int
 
 @dataclass
 class Run:
-    """One run of a validation model: its PBM time series, final size distribution, timing and
-    (for the coupled loops) the record of its intervals."""
+    """One run of a validation model: its folder, PBM time series, final size distribution, timing
+    and (for the coupled loops) the record of its intervals."""
 
+    folder: Path
     summary: pd.DataFrame
     final_bins: pd.DataFrame
     timing: dict
@@ -46,6 +47,7 @@ def load_run(folder: Path, what: str) -> Run:
         else None
     )
     return Run(
+        folder,
         summary,
         read_table(folder / "final_bins.csv", what),
         read_json(folder / "timing.json", what, keys=("total_wall_time_s",)),

@@ -3,8 +3,9 @@
 A finished run keeps every PBM-DEM replicate loop of a validation speed on disk
 (``results/validation/rpm<rpm>/pbm_dem/rep<r>/interval_NN/``: the interval's representative sample
 in interval.json and its DEM tables in dem/, or the tables of an earlier interval with the same
-sample, ``dem_reused_from_interval``). This benchmark runs each replicate's loop again (the loop
-settings of its loop_inputs.json, in memory) with a provider that, for interval k, combines
+sample, ``dem_reused_from_interval``, or of the grid run it borrowed, ``dem_borrowed_run``). This
+benchmark runs each replicate's loop again (the loop settings of its loop_inputs.json, in memory)
+with a provider that, for interval k, combines
 
 * the stored DEM rates of that replicate's interval k (``pbmdem.coupling.providers.dem_rates``,
   what PBM-DEM handed to the PBM), put on the replay's current sample by the PBM's own
@@ -50,7 +51,7 @@ import pandas as pd
 from pbmdem.config import CoupledLoop
 from pbmdem.coupling.class_source import ClassFrequencySource
 from pbmdem.coupling.loop import run_loop
-from pbmdem.coupling.providers import SurrogateProvider, dem_rates, surrogate_needs
+from pbmdem.coupling.providers import SurrogateProvider, dem_rates, interval_run_dir, surrogate_needs
 from pbmdem.impact import EncounterRates, ImpactRates, WallRates
 from pbmdem.readers import InputFileError, read_json
 from pbmdem.surrogate.persistence import SurrogateLoadError
@@ -69,8 +70,7 @@ def stored_intervals(rep_dir: Path) -> list[dict]:
     for folder in sorted(rep_dir.glob("interval_*")):
         info = read_json(folder / "interval.json", "coupling interval record")
         sample = info["sample"]
-        reused = info.get("dem_reused_from_interval")
-        run_dir = folder / "dem" if reused is None else rep_dir / f"interval_{int(reused):02d}" / "dem"
+        run_dir = interval_run_dir(rep_dir, info)  # its own, the one it reused or the grid's it borrowed
         d = np.asarray(sample["diameters"], float)
         out.append({"d": d, "n": np.asarray(sample["counts"], float), "rates": dem_rates(run_dir, d.size)})
     if not out:

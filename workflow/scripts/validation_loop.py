@@ -18,7 +18,10 @@ if method == "dem":
     if snakemake.resources.get("mpi"):  # noqa: F821
         os.environ["PBMDEM_MPI_LAUNCHER"] = str(snakemake.resources.mpi)  # noqa: F821
     execution = DemExecution.of_job(snakemake.config, snakemake.resources)  # noqa: F821
-    coupling.pbm_dem(loop, rpm, outdir, execution, replicate=int(snakemake.wildcards.rep))  # noqa: F821
+    # the grid's run of the feed at this speed and its settled bed, where the grid has them
+    grid_dem = snakemake.params.grid_dem  # noqa: F821
+    replicate = int(snakemake.wildcards.rep)  # noqa: F821
+    coupling.pbm_dem(loop, rpm, outdir, execution, replicate, grid_dem.get("grid_run"), grid_dem.get("bed"))
 elif method == "ann":
     outcome = coupling.pbm_ann(loop, snakemake.input.model, rpm, outdir)  # noqa: F821
     # the speed of one batch as a benchmark measures it (warm, median of several; the loop above

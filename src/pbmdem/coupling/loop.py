@@ -146,6 +146,8 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
                 f"Intervals 0..{k - 1} are kept in {outdir}; rerun to resume."
             ) from exc
         provider_wall, provider_cpu = time.perf_counter() - t_provider, cpu() - cpu_provider
+        # LIGGGHTS work borrowed from the DEM grid (a run, a settled bed) counts as the interval's own
+        provider_wall += float(extra.get("dem_borrowed_wall_time_s", 0.0))
         label = f"{provider.name} interval {k}"
         if previous is not None and previous[0] is rates and previous[1] == list(sample.diameters):
             # the provider's prediction of the interval before (the same sample): the same source,

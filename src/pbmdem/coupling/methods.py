@@ -35,10 +35,21 @@ from .providers import DemProvider, SurrogateProvider, surrogate_needs
 from .sample import representative_sample
 
 
-def pbm_dem(loop: CoupledLoop, rpm: float, outdir: str | Path, execution: DemExecution, replicate: int) -> LoopOutcome:
+def pbm_dem(
+    loop: CoupledLoop,
+    rpm: float,
+    outdir: str | Path,
+    execution: DemExecution,
+    replicate: int,
+    grid_run: str | Path | None = None,
+    bed_dir: str | Path | None = None,
+) -> LoopOutcome:
     """PBM-DEM at `rpm`: LIGGGHTS runs the representative sample of every interval (insertion
-    seeds of `replicate`)."""
-    return run_loop(loop, DemProvider(loop, rpm, execution, replicate), rpm, outdir)
+    seeds of `replicate`). `grid_run`, `bed_dir`: the DEM grid's run of the feed at this speed and
+    replicate and its settled bed, which an interval of the feed borrows where they are its own
+    plan's (`providers.DemProvider`)."""
+    provider = DemProvider(loop, rpm, execution, replicate, grid_run=grid_run, bed_dir=bed_dir)
+    return run_loop(loop, provider, rpm, outdir)
 
 
 def pbm_ann(

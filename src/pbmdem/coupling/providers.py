@@ -16,22 +16,27 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import time
 from pathlib import Path
 
 import numpy as np
 
-from pbmdem.config import CoupledLoop, DemExecution
+from pbmdem.config import ConfigError, CoupledLoop, DemExecution
 from pbmdem.dem import plan_point, run_point
-from pbmdem.dem.run import is_finished
+from pbmdem.dem.deck import DeckValueError, known_name
+from pbmdem.dem.plan import class_counts
+from pbmdem.dem.run import BED_RECORD, check_bed, is_finished
 from pbmdem.frequency import matrix_from_table, velocity_fractions_from_table, wall_rates_from_tables
 from pbmdem.impact import EncounterRates, ImpactRates
-from pbmdem.readers import read_json
+from pbmdem.readers import InputFileError, read_json
 from pbmdem.surrogate import load_surrogate
 from pbmdem.surrogate.model import out_of_domain_recorded
 from pbmdem.tables import RUN_PAIRS, RUN_VELOCITIES, RUN_WALL_VELOCITIES, RUN_WALLS
 
-from .sample import DemSample
+from .sample import DIAMETER_RESOLUTION, DemSample
+
+log = logging.getLogger(__name__)
 
 #: plan keys that name a run rather than define it (an interval's DEM bed is named after it)
 _NAME_KEYS = ("distribution", "point_id")
@@ -61,36 +66,93 @@ class DemProvider:
     speed, seeds and settings: typically the feed, until the binder makes granules grow) is not run
     again: its tables are read from that interval's run, and the interval records which
     (`dem_reused_from_interval`) with no DEM wall time.
+
+    A sample that is the loop's feed (its diameters, and the counts the feed's fractions give) is
+    planned with the feed's own name and fractions: its plan is then the DEM grid's plan of the
+    feed at this speed and replicate (docs/validation.md, "Borrowed grid runs"). With `grid_run`
+    (the grid's finished run of the feed at this speed and replicate) such an interval borrows that
+    run when it covers the interval's plan (`covers`: the same plan, a sampling window at least as
+    long): no LIGGGHTS call; its CPU and wall time, with its settled bed's, count as the interval's
+    own (`dem_borrowed_run`, `dem_borrowed_wall_time_s`). With `bed_dir` (the grid's settled bed of
+    the feed and replicate) an interval of the feed that runs starts from that bed when it is the
+    bed its plan would settle (`dem_settled_bed`; the bed's time counts as the interval's).
     """
 
     name = "pbm_dem"
 
-    def __init__(self, loop: CoupledLoop, rpm: float, execution: DemExecution, replicate: int):
+    def __init__(
+        self,
+        loop: CoupledLoop,
+        rpm: float,
+        execution: DemExecution,
+        replicate: int,
+        grid_run: str | Path | None = None,
+        bed_dir: str | Path | None = None,
+    ):
         self.point = loop.dem_point()
         self.rpm = float(rpm)
         self.execution = execution
         self.replicate = int(replicate)
+        self.grid_run = None if grid_run is None else Path(grid_run)
+        self.bed_dir = None if bed_dir is None else Path(bed_dir)
 
     def fingerprint(self) -> dict:
-        return {"name": self.name, "dem": self.point.dem.to_dict(), "rpm": self.rpm, "replicate": self.replicate}
+        return {
+            "name": self.name,
+            "dem": self.point.dem.to_dict(),
+            "rpm": self.rpm,
+            "replicate": self.replicate,
+            # the feed's sample planned with the feed's fractions (2026-12-05): earlier intervals are stale
+            "feed_plan": "feed fractions",
+            "grid_run": _digest(self.grid_run, ("plan.json", "summary.json", "collisions.csv")),
+            "settled_bed": _digest(self.bed_dir, (BED_RECORD,)),
+        }
+
+    def _point_of(self, sample: DemSample, index: int):
+        """The DEM point of `sample`: the loop's feed itself if the sample is the feed and the feed
+        has a deck name (a grid feed; a blend's "fine+medium" is none), else the sample named
+        after its interval."""
+        feed = self.point.sizes
+        rounded = [round(d / DIAMETER_RESOLUTION) * DIAMETER_RESOLUTION for d in feed.diameters]
+        if list(sample.diameters) == rounded and class_counts(sample.n_particles, feed.number_fractions) == list(
+            sample.counts
+        ):
+            try:
+                known_name("distribution", self.point.distribution)
+                return self.point
+            except DeckValueError:
+                pass
+        return self.point.replace(distribution=f"interval{index:02d}", sizes=sample.sizes())
 
     def __call__(self, sample: DemSample, interval_dir: Path, index: int):
-        point = self.point.replace(distribution=f"interval{index:02d}", sizes=sample.sizes())
-        plan = plan_point(point, self.rpm, replicate=self.replicate, counts=sample.counts)
+        plan = plan_point(self._point_of(sample, index), self.rpm, replicate=self.replicate, counts=sample.counts)
         earlier = self._identical_earlier_run(plan, interval_dir, index)
-        if earlier is None:
-            run_dir = interval_dir / "dem"
-            # an interval without interval.json is unfinished, whatever its DEM folder holds
-            summary = run_point(plan, run_dir, self.execution, force=True)
-            info = {
-                "dem_wall_time_s": summary["liggghts_wall_time_s"] + summary["parse_time_s"],
-                # the LIGGGHTS processes' CPU seconds: the run and, if it settled its own bed, the bed's
-                "dem_cpu_time_s": summary["liggghts_cpu_time_s"] + summary.get("bed_liggghts_cpu_time_s", 0.0),
-            }
-        else:
+        if earlier is not None:
             reused_from, run_dir = earlier
             summary = read_json(run_dir / "summary.json", "DEM run summary of a coupling interval")
             info = {"dem_wall_time_s": 0.0, "dem_cpu_time_s": 0.0, "dem_reused_from_interval": reused_from}
+        elif self._borrowable(plan, index):
+            run_dir = self.grid_run
+            summary = read_json(run_dir / "summary.json", "DEM run summary of a grid run")
+            wall = _run_wall(summary)
+            info = {
+                "dem_wall_time_s": wall,
+                "dem_cpu_time_s": summary["liggghts_cpu_time_s"] + summary.get("bed_liggghts_cpu_time_s", 0.0),
+                "dem_borrowed_run": str(run_dir),
+                "dem_borrowed_wall_time_s": wall,
+            }
+        else:
+            run_dir = interval_dir / "dem"
+            bed = self._bed_for(plan, index)
+            # an interval without interval.json is unfinished, whatever its DEM folder holds
+            summary = run_point(plan, run_dir, self.execution, force=True, bed_dir=bed)
+            info = {
+                "dem_wall_time_s": _run_wall(summary),
+                # the LIGGGHTS processes' CPU seconds: the run and, if it settled its own bed, the bed's
+                "dem_cpu_time_s": summary["liggghts_cpu_time_s"] + summary.get("bed_liggghts_cpu_time_s", 0.0),
+            }
+            if bed is not None:
+                info |= {"dem_settled_bed": str(bed), "dem_borrowed_wall_time_s": summary["bed_liggghts_wall_time_s"]}
         rates = dem_rates(run_dir, len(sample.diameters))
         return rates, {
             **info,
@@ -99,19 +161,104 @@ class DemProvider:
             "dem_encounters": summary["total_encounters"],
         }
 
+    def _borrowable(self, plan, index: int) -> bool:
+        """Whether the grid run (if any) covers `plan` (the reason it does not is logged)."""
+        if self.grid_run is None or plan.distribution != self.point.distribution:
+            return False
+        why = covers(self.grid_run, plan)
+        if why:
+            log.info("PBM-DEM at rpm %g, interval %d: runs its own DEM run: %s", self.rpm, index, why)
+        return not why
+
+    def _bed_for(self, plan, index: int) -> Path | None:
+        """The grid's settled bed if it is the bed `plan` would settle, else None (the reason logged)."""
+        if self.bed_dir is None or plan.distribution != self.point.distribution:
+            return None
+        try:
+            check_bed(plan, self.bed_dir)
+        except (ConfigError, InputFileError) as exc:
+            log.info("PBM-DEM at rpm %g, interval %d: settles its own bed: %s", self.rpm, index, exc)
+            return None
+        return self.bed_dir
+
     def _identical_earlier_run(self, plan, interval_dir: Path, index: int) -> tuple[int, Path] | None:
         """(interval, run folder) of an earlier interval of this loop whose finished DEM run had
-        this very plan on as many ranks, else None."""
+        this very plan on as many ranks, or that borrowed a grid run covering it, else None."""
         wanted = {k: v for k, v in plan.to_dict().items() if k not in _NAME_KEYS}
         wanted = json.loads(json.dumps(wanted | {"mpi_ranks": self.execution.mpi_ranks}))  # as stored
         for j in range(index):
-            run_dir = interval_dir.parent / f"interval_{j:02d}" / "dem"
+            folder = interval_dir.parent / f"interval_{j:02d}"
+            if (folder / "interval.json").exists():
+                borrowed = read_json(folder / "interval.json", "coupling interval record").get("dem_borrowed_run")
+                if borrowed and not covers(Path(borrowed), plan):
+                    return j, Path(borrowed)
+            run_dir = folder / "dem"
             if not (is_finished(run_dir) and (run_dir / "summary.json").exists() and (run_dir / "plan.json").exists()):
                 continue
             done = read_json(run_dir / "plan.json", "DEM plan of a coupling interval")
-            if {k: v for k, v in done.items() if k not in _NAME_KEYS} == wanted:
+            if {k: v for k, v in done.items() if k not in (*_NAME_KEYS, "settled_bed")} == wanted:
                 return j, run_dir
         return None
+
+
+def interval_run_dir(rep_dir: str | Path, info: dict) -> Path:
+    """The DEM run whose tables interval `info` (its interval.json) of the stored loop in `rep_dir`
+    used: its own (`interval_NN/dem`), the grid run it borrowed (`dem_borrowed_run`, a path relative
+    to the workflow's folder: found from the working directory or a folder above the loop), or
+    that of the earlier interval it reused."""
+    rep_dir = Path(rep_dir)
+    reused = info.get("dem_reused_from_interval")
+    if reused is not None and reused == reused:  # not NaN
+        earlier = rep_dir / f"interval_{int(reused):02d}"
+        return interval_run_dir(rep_dir, read_json(earlier / "interval.json", "coupling interval record"))
+    borrowed = info.get("dem_borrowed_run")
+    if borrowed:
+        for base in (Path.cwd(), *rep_dir.resolve().parents):
+            if (base / borrowed / "summary.json").exists():
+                return base / borrowed
+        raise InputFileError(f"{rep_dir}: interval {info.get('interval')} borrowed {borrowed}, which is not found")
+    return rep_dir / f"interval_{int(info['interval']):02d}" / "dem"
+
+
+def _run_wall(summary: dict) -> float:
+    """A DEM run's wall time as an interval counts it: LIGGGHTS, the settled bed's (if it started
+    from one) and the parsing of its contacts."""
+    return summary["liggghts_wall_time_s"] + summary.get("bed_liggghts_wall_time_s", 0.0) + summary["parse_time_s"]
+
+
+def _digest(folder: Path | None, names) -> str | None:
+    """SHA-256 of the files `names` in `folder` (None: no folder, or a file missing)."""
+    if folder is None or not all((folder / n).exists() for n in names):
+        return None
+    h = hashlib.sha256()
+    for n in names:
+        h.update((folder / n).read_bytes())
+    return h.hexdigest()
+
+
+def covers(run_dir: Path, plan) -> str:
+    """Why the finished DEM run in `run_dir` does not cover `plan` (empty: it does). It covers it
+    when its plan (plan.json) is `plan` in every recorded value (particles, time step, settling,
+    seeds, spin-up, contact and position intervals, speed) but the names, the settled bed it
+    started from and the MPI ranks, and its sampling window opens at the same step and is at least
+    as long: its tables are then the same rates as `plan`'s, over a longer window."""
+    run_dir = Path(run_dir)
+    if not (is_finished(run_dir) and (run_dir / "plan.json").exists() and (run_dir / "summary.json").exists()):
+        return f"{run_dir} holds no finished run"
+    done = read_json(run_dir / "plan.json", "DEM plan of a grid run")
+    wanted = json.loads(json.dumps(plan.to_dict()))  # as stored
+    window = ("sampling_steps", "sampling_time")
+    for key, value in wanted.items():
+        if key in (*_NAME_KEYS, *window):
+            continue
+        if done.get(key) != value:
+            return f"{run_dir}/plan.json: {key} = {done.get(key)!r}, the interval's plan has {value!r}"
+    if done.get("sampling_steps", -1) < wanted["sampling_steps"]:
+        return (
+            f"{run_dir}/plan.json: sampling_steps = {done.get('sampling_steps')!r}, shorter than the "
+            f"interval's {wanted['sampling_steps']}"
+        )
+    return ""
 
 
 def surrogate_needs(pbm) -> tuple[bool, bool]:

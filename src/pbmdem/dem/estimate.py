@@ -90,6 +90,8 @@ class StudyEstimate:
     loop_seconds: float
     ranks: int
     source: str
+    #: coupling intervals that borrow the grid's run of their feed instead of running LIGGGHTS
+    borrowed_intervals: int = 0
 
     def text(self, cores: int = 2) -> str:
         total = self.grid_seconds + self.loop_seconds
@@ -99,7 +101,8 @@ class StudyEstimate:
         return (
             f"pbmdem runtime estimate: {self.grid_runs} DEM grid run(s), {duration_text(self.grid_seconds)}, and "
             f"{self.loop_intervals} PBM-DEM coupling interval(s), {duration_text(self.loop_seconds)} (an upper "
-            f"bound: granules grow, so later intervals hold fewer particles); {duration_text(total)} of LIGGGHTS "
+            f"bound: granules grow, so later intervals hold fewer particles; {self.borrowed_intervals} borrow the "
+            f"grid's run of their feed); {duration_text(total)} of LIGGGHTS "
             f"on {self.ranks} rank(s) per run, about {duration_text(total / parallel)} with {parallel} run(s) at "
             f"once on {cores} cores; from {self.source}. The PBM, surrogate and report add minutes."
         )
@@ -110,7 +113,10 @@ def study_estimate(cfg, grid_runs, loops, results: str | Path = layout.RESULTS) 
     replicate) of the grid's DEM jobs (each from a settled bed, one per distribution and
     replicate), and `loops`, (rpm, replicate) of the PBM-DEM coupled loops of the validation feed
     or (rpm, replicate, CoupledLoop) of another loop (the feed check's), one DEM run per coupling
-    interval, on `cfg` (a pbmdem Config); the throughput from the finished runs in `results`."""
+    interval, on `cfg` (a pbmdem Config); the throughput from the finished runs in `results`. A
+    validation loop whose feed the grid runs at its speed and replicate borrows that run for its
+    first interval (no LIGGGHTS call); at another speed its first interval starts from the grid's
+    settled bed of the feed (pbmdem.coupling.providers.DemProvider)."""
     throughput = measured_throughput(layout.dem("runs.csv", str(results)))
     ranks = cfg.dem_execution.mpi_ranks
     grid_seconds = 0.0
@@ -123,10 +129,19 @@ def study_estimate(cfg, grid_runs, loops, results: str | Path = layout.RESULTS) 
             beds.add((dist, int(rep)))
             grid_seconds += throughput.seconds(float(plan.n_particles) * plan.settle_steps, plan.n_particles, ranks)
     validation_loop = cfg.coupled_loop()
-    loop_seconds, intervals = 0.0, 0
+    feed, points = validation_loop.batch.distribution, cfg.grid.points()
+    loop_seconds, intervals, borrowed = 0.0, 0, 0
     for rpm, rep, *other in loops:
         loop = other[0] if other else validation_loop
         plan = plan_point(loop.dem_point(), float(rpm), replicate=int(rep))
-        loop_seconds += loop.coupling_intervals * throughput.seconds(plan.particle_steps, plan.n_particles, ranks)
+        one = throughput.seconds(plan.particle_steps, plan.n_particles, ranks)
+        loop_seconds += loop.coupling_intervals * one
         intervals += loop.coupling_intervals
-    return StudyEstimate(len(grid_runs), grid_seconds, intervals, loop_seconds, ranks, throughput.source)
+        if other or int(rep) >= cfg.point_replicates(feed) or all(d != feed for _, d in points):
+            continue
+        if (float(rpm), feed) in points:  # the first interval borrows the grid's run
+            loop_seconds -= one
+            borrowed += 1
+        else:  # the first interval starts from the grid's settled bed
+            loop_seconds -= throughput.seconds(float(plan.n_particles) * plan.settle_steps, plan.n_particles, ranks)
+    return StudyEstimate(len(grid_runs), grid_seconds, intervals, loop_seconds, ranks, throughput.source, borrowed)

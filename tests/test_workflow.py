@@ -689,10 +689,39 @@ def test_job_logs_show_progress(tiny_workflow):
         r"\d+ surrogate out-of-domain",
         loop,
     ), loop[-2000:]
-    assert "pbmdem.dem.progress: DEM" in loop  # the loop's LIGGGHTS calls report progress too
+    # the loop's LIGGGHTS calls report progress too (at 600 rpm, a grid speed, the loop borrows the
+    # grid's run of its feed and calls none; at 900 rpm it runs its own)
+    assert "pbmdem.dem.progress: DEM" in (logs / "validation" / "pbm_dem_rpm900_rep0.log").read_text()
     ann = (logs / "validation" / "pbm_ann_rpm600.log").read_text()
     assert "pbm_ann at rpm 600: interval 1 of" in ann
     assert "rpm sweep: 600 rpm done" in (logs / "validation" / "rpm_sweep.log").read_text()
+
+
+def test_the_loops_borrow_the_grid_runs_of_their_feed(tiny_workflow):
+    """docs/validation.md, "Borrowed grid runs": at a grid speed each PBM-DEM loop's interval 0 (the
+    feed) reads the grid's run of its replicate, at another speed it starts from the grid's settled
+    bed; a replicate the grid does not run settles its own."""
+    workdir, configfile = tiny_workflow
+    cfg = yaml.safe_load(configfile.read_text())
+    feed, grid_reps = cfg["validation"]["distribution"], cfg["dem"]["replicates"]
+    checked = 0
+    for rpm in cfg["validation"]["rpm"]:
+        for rep in range(cfg["validation"].get("dem_replicates", 3)):
+            folder = workdir / "results" / "validation" / f"rpm{rpm}" / "pbm_dem" / f"rep{rep}"
+            first = json.loads((folder / "interval_00" / "interval.json").read_text())
+            if rep >= grid_reps:
+                assert "dem_borrowed_run" not in first and "dem_settled_bed" not in first, first
+            elif rpm in cfg["grid"]["impeller_rpm"]:
+                assert first["dem_borrowed_run"] == f"results/dem/rpm{rpm}_{feed}/rep{rep}"
+                assert not (folder / "interval_00" / "dem").exists()
+                assert first["dem_cpu_time_s"] > 0
+                assert first["provider_wall_time_s"] >= first["dem_borrowed_wall_time_s"] > 0
+                checked += 1
+            else:
+                assert first["dem_settled_bed"] == f"results/dem/beds/{feed}/rep{rep}"
+                assert json.loads((folder / "interval_00" / "dem" / "summary.json").read_text())["from_settled_bed"]
+                checked += 1
+    assert checked >= 2
 
 
 def test_a_manual_dem_run_on_a_finished_point_changes_nothing(tiny_workflow, root):

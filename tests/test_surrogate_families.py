@@ -35,6 +35,8 @@ from pbmdem.surrogate.evaluation import (
     cross_fitted_coverage,
     default_baselines,
     interval_z,
+    sample_scores,
+    select_per_target,
 )
 from pbmdem.surrogate.families import member_quantiles
 from pbmdem.surrogate.settings import FAMILIES, build_families
@@ -298,3 +300,49 @@ def test_closed_form_families_do_not_depend_on_the_blas_kernel(tmp_path):
         runs[kernel] = {name: np.load(out / f"{name}.npy") for name in ("kriging", "rsm")}
     for name in ("kriging", "rsm"):
         np.testing.assert_allclose(runs["Prescott"][name], runs[None][name], rtol=1e-6, atol=0)
+
+
+def test_each_target_gets_its_own_family_by_the_evidence_the_pbm_needs():
+    # pooled: the MLP has the best R2 of log10 c, Kriging the closest impact-speed bins
+    metrics = pd.DataFrame(
+        {
+            "target": ["encounter_frequency"] * 3 + ["impact_velocity"] * 3,
+            "fold": "pooled",
+            "model": ["mlp", "kriging", "rsm"] * 2,
+            "r2_log10": [0.97, 0.95, 0.90, 0.8, 0.8, 0.8],
+            "tv_distance": [np.nan] * 3 + [0.10, 0.05, 0.20],
+        }
+    )
+    for col in ("mae_log10", "noise_floor_r2_log10", "coverage_90", "coverage_90_calibrated", "uncertainty_scale"):
+        metrics[col] = np.nan
+    metrics = pd.concat([metrics, metrics.assign(fold="mean")], ignore_index=True)
+    # no active-learning runs: the frequency by the pooled R2
+    choice = select_per_target(metrics, FAMILIES)
+    assert (choice["frequency"], choice["speed_law"]) == ("mlp", "kriging")
+    assert "pooled held-out R2" in choice["frequency_reason"] and "total-variation" in choice["speed_law_reason"]
+    # on the PBM's own samples Kriging's frequency is closer: it wins there
+    pbm = {name: {"n_runs": 3, "mae_log10": mae} for name, mae in zip(FAMILIES, (0.041, 0.032, 0.054))}
+    choice = select_per_target(metrics, FAMILIES, pbm)
+    assert choice["frequency"] == "kriging" and "3 active-learning runs" in choice["frequency_reason"]
+    assert "kriging 0.032" in choice["frequency_reason"]
+
+
+def test_sample_scores_are_the_held_out_errors_on_the_named_runs(cv_result):
+    metrics, pred = cv_result
+    runs = sorted(pred["point_id"].unique())[:2]
+    scores = sample_scores(pred, FAMILIES, runs)
+    rows = pred[pred["point_id"].isin(runs)]
+    obs = rows["log10_encounter_frequency_per_pair"]
+    for name in FAMILIES:
+        s = scores[name]
+        assert s["n_runs"] == 2 and s["n_rows"] == len(rows)
+        assert s["mean_error_log10"] == pytest.approx(np.mean(rows[f"{name}_log10"] - obs))
+        assert s["mae_log10"] == pytest.approx(np.mean(np.abs(rows[f"{name}_log10"] - obs)))
+        assert s["uncertainty_scale"] == pytest.approx(calibration_scale(obs, rows[f"{name}_log10"], rows[f"{name}_std_log10"]))
+        vobs = rows["velocity_mu_log10"]
+        assert s["velocity_mae_log10"] == pytest.approx(np.mean(np.abs(rows[f"{name}_velocity_mu_log10"] - vobs)))
+    # every run: the pooled MAE of the metrics
+    pooled = summarise(metrics)
+    for name in FAMILIES:
+        assert sample_scores(pred, [name])[name]["mae_log10"] == pytest.approx(pooled[name]["pooled_mae_log10"])
+    assert sample_scores(pred, FAMILIES, ["no_such_run"]) == {}

@@ -355,6 +355,87 @@ def select_family(metrics: pd.DataFrame, families) -> str:
     return next(name for name in families if scores[name] >= best - 1e-9)
 
 
+def sample_scores(pred: pd.DataFrame, models, point_ids=None) -> dict:
+    """Held-out errors of every model in ``models`` on the rows of the runs ``point_ids`` (all rows
+    when None) of the held-out predictions ``pred`` (:func:`cross_validate_models`):
+    {model: {n_runs, n_rows, mae_log10, mean_error_log10 (prediction - DEM, decades),
+    uncertainty_scale (families only: the calibration factor on those rows; NaN for the rest),
+    velocity_mae_log10, velocity_tv_distance, velocity_uncertainty_scale (impact-speed law: log10
+    median speed and bin fractions, where the rows have bins)}}; empty when no row is of
+    ``point_ids``. The active-learning runs (``grid.extra_points``) are samples of the PBM's own
+    states, which the pooled score of every run does not weigh as the PBM does (docs/surrogate.md)."""
+    rows = pred if point_ids is None else pred[pred["point_id"].astype(str).isin({str(p) for p in point_ids})]
+    if rows.empty:
+        return {}
+    obs = rows[TARGET_NAME].to_numpy(float)
+    vrows = rows[np.isfinite(rows["velocity_mu_log10"].to_numpy(float))] if "velocity_mu_log10" in rows else rows[:0]
+    out = {}
+    for name in models:
+        p = rows[f"{name}_log10"].to_numpy(float)
+        std = f"{name}_std_log10"
+        s = {
+            "n_runs": int(rows["point_id"].nunique()),
+            "n_rows": int(len(rows)),
+            "mae_log10": float(np.mean(np.abs(p - obs))),
+            "mean_error_log10": float(np.mean(p - obs)),
+            "uncertainty_scale": calibration_scale(obs, p, rows[std]) if std in rows else float("nan"),
+        }
+        mu = f"{name}_velocity_mu_log10"
+        if mu in vrows and len(vrows):
+            vobs, vp = vrows["velocity_mu_log10"].to_numpy(float), vrows[mu].to_numpy(float)
+            vstd = f"{name}_velocity_mu_std_log10"
+            s["velocity_mae_log10"] = float(np.mean(np.abs(vp - vobs)))
+            s["velocity_tv_distance"] = float(vrows[f"{name}_velocity_tv"].mean())
+            s["velocity_uncertainty_scale"] = (
+                calibration_scale(vobs, vp, vrows[vstd]) if vrows[vstd].notna().any() else float("nan")
+            )
+        out[name] = s
+    return out
+
+
+def _best(scores: dict, families, key: str, sign: float = 1.0) -> str:
+    """The family with the smallest ``sign * scores[family][key]`` (ties within 1e-9 to the earlier)."""
+    values = {name: sign * float(scores[name][key]) for name in families}
+    best = min(values.values())
+    return next(name for name in families if values[name] <= best + 1e-9)
+
+
+def select_per_target(metrics: pd.DataFrame, families, pbm_scores: dict | None = None) -> dict:
+    """The family of each target of the PBM, chosen separately by held-out evidence, and why.
+
+    * ``frequency``: with held-out rows of PBM samples (``pbm_scores``, :func:`sample_scores` on
+      the active-learning runs) the smallest MAE of log10 c on them; else the highest pooled
+      held-out R2 of log10 c (:func:`select_family`).
+    * ``speed_law``: the smallest pooled held-out mean total-variation distance between the
+      predicted and the DEM fractions per impact-speed bin (what breakage from impacts reads);
+      without impact-speed rows the frequency's family.
+
+    Returns {"frequency": name, "frequency_reason": str, "speed_law": name, "speed_law_reason": str}.
+    """
+    families = list(families)
+    pbm_scores = pbm_scores or {}
+    if all(name in pbm_scores for name in families):
+        frequency = _best(pbm_scores, families, "mae_log10")
+        runs = next(iter(pbm_scores.values()))["n_runs"]
+        reason = (
+            f"the smallest held-out MAE of log10 c on the {runs} active-learning runs (samples of the PBM's "
+            "own states), of " + ", ".join(f"{n} {pbm_scores[n]['mae_log10']:.3f}" for n in families)
+        )
+    else:
+        frequency = select_family(metrics, families)
+        reason = "the best pooled held-out R2 of log10 c of " + ", ".join(families) + " (no active-learning runs)"
+    velocity = summarise(metrics, "impact_velocity")
+    if all(name in velocity and np.isfinite(velocity[name]["pooled_tv_distance"]) for name in families):
+        speed = _best(velocity, families, "pooled_tv_distance")
+        speed_reason = (
+            "the smallest pooled held-out total-variation distance of the impact-speed bin fractions, of "
+            + ", ".join(f"{n} {velocity[n]['pooled_tv_distance']:.3f}" for n in families)
+        )
+    else:
+        speed, speed_reason = frequency, "no held-out impact speeds: the frequency's family"
+    return {"frequency": frequency, "frequency_reason": reason, "speed_law": speed, "speed_law_reason": speed_reason}
+
+
 def summarise(metrics: pd.DataFrame, target: str = "encounter_frequency") -> dict:
     """{model: {pooled_r2_log10, pooled_mae_log10, mean_fold_r2_log10, mean_fold_mae_log10, n_folds,
     noise_floor_r2_log10, pooled_tv_distance}} of one target (``encounter_frequency`` or

@@ -488,7 +488,9 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         out = copy.copy(self)
         out.frequency_model_ = CalibratedMember(self.frequency_model_, int(k), self.uncertainty_scale)
         if self.velocity_model_ is not None:
-            out.velocity_model_ = CalibratedMember(self.velocity_model_, int(k), self.velocity_uncertainty_scale)
+            # the impact-speed law may be of another family (pbmdem.surrogate.train), with other members
+            kv = int(k) % self.velocity_model_.n_members_
+            out.velocity_model_ = CalibratedMember(self.velocity_model_, kv, self.velocity_uncertainty_scale)
         walls = getattr(self, "wall_models_", None) or {}
         out.wall_models_ = {wall: model.member(int(k) % model.n_members) for wall, model in walls.items()}
         return out

@@ -346,3 +346,35 @@ def test_sample_scores_are_the_held_out_errors_on_the_named_runs(cv_result):
     for name in FAMILIES:
         assert sample_scores(pred, [name])[name]["mae_log10"] == pytest.approx(pooled[name]["pooled_mae_log10"])
     assert sample_scores(pred, FAMILIES, ["no_such_run"]) == {}
+
+
+def test_members_are_quantiles_shared_by_frequency_and_speed_law_with_the_mean_in_the_middle(data):
+    families = build_families(SETTINGS, R)
+    # the frequency of the MLP, the impact-speed law of Kriging, as `auto` may choose
+    model = clone(families["mlp"]).set_params(
+        velocity_model=clone(families["kriging"].velocity_model), uncertainty_scale=2.0, velocity_uncertainty_scale=0.5
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fitted = model.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
+    n = fitted.n_members
+    assert n == 3
+    d, counts = np.array([0.002, 0.003, 0.004]), np.array([900.0, 600.0, 400.0])
+    c, s = fitted.frequency_matrix(d, counts, 600, return_std=True, check_domain=False)
+    mean = fitted.encounters(d, counts, 600, check_domain=False)
+    X = data.X.iloc[:7]
+    mu, _, mu_std, _ = fitted.predict_velocity(X, return_std=True, check_domain=False)
+    z = member_quantiles(n)
+    for k in range(n):
+        one = fitted.member(k)
+        np.testing.assert_allclose(
+            np.log10(one.frequency_matrix(d, counts, 600, check_domain=False)), np.log10(c) + z[k] * s, atol=1e-12
+        )
+        np.testing.assert_allclose(one.predict_velocity(X, check_domain=False)[0], mu + z[k] * mu_std, atol=1e-12)
+    # the middle member is the mean prediction: PBM-ANN's mean lies inside its members' range
+    middle = fitted.member(n // 2).encounters(d, counts, 600, check_domain=False)
+    np.testing.assert_array_equal(middle.frequency, mean.frequency)
+    np.testing.assert_array_equal(middle.velocity_fractions, mean.velocity_fractions)
+    # member 0 predicts the fewest encounters, the last the most
+    low, high = (fitted.member(k).frequency_matrix(d, counts, 600, check_domain=False) for k in (0, n - 1))
+    assert np.all(low < c) and np.all(high > c)

@@ -338,7 +338,9 @@ def test_sample_scores_are_the_held_out_errors_on_the_named_runs(cv_result):
         assert s["n_runs"] == 2 and s["n_rows"] == len(rows)
         assert s["mean_error_log10"] == pytest.approx(np.mean(rows[f"{name}_log10"] - obs))
         assert s["mae_log10"] == pytest.approx(np.mean(np.abs(rows[f"{name}_log10"] - obs)))
-        assert s["uncertainty_scale"] == pytest.approx(calibration_scale(obs, rows[f"{name}_log10"], rows[f"{name}_std_log10"]))
+        assert s["uncertainty_scale"] == pytest.approx(
+            calibration_scale(obs, rows[f"{name}_log10"], rows[f"{name}_std_log10"])
+        )
         vobs = rows["velocity_mu_log10"]
         assert s["velocity_mae_log10"] == pytest.approx(np.mean(np.abs(rows[f"{name}_velocity_mu_log10"] - vobs)))
     # every run: the pooled MAE of the metrics

@@ -33,8 +33,8 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 from pbmdem.impact import EncounterRates, ImpactRates
 
 from .ensemble import EnsembleMLPRegressorCV
-from .families import member_quantiles
 from .errors import require_fitted
+from .families import member_quantiles
 from .features import (
     FEATURE_NAMES,
     check_impeller_radius,

@@ -39,8 +39,9 @@ def _read_table(table, contract, need=()) -> tuple[pd.DataFrame, str]:
 
 def _train_walls(surrogate, selected: str, metrics, tables, settings, impeller_radius, n_jobs):
     """The wall models (pbmdem.surrogate.walls, of the family ``selected``: the impact-speed law's)
-    of the wall ``tables`` (collisions, impact velocities) into ``surrogate.wall_models_``: (``metrics`` with theirs appended, their summary);
-    without wall tables (None) ``metrics`` and no summary."""
+    of the wall ``tables`` (collisions, impact velocities) into ``surrogate.wall_models_``:
+    (``metrics`` with theirs appended, their summary); without wall tables (None) ``metrics`` and
+    no summary."""
     wall_table, wall_velocity_table = tables
     if wall_table is None:
         return metrics, {}
@@ -279,7 +280,12 @@ def _kernel_source(choice: str, metrics: pd.DataFrame, summary: dict, pbm_scores
         out = {"frequency": choice, "frequency_reason": reason, "speed_law": choice, "speed_law_reason": reason}
     elif not summary:
         reason = "surrogate.model = auto with a single DEM run: no held-out score, the first of " + ", ".join(FAMILIES)
-        out = {"frequency": FAMILIES[0], "frequency_reason": reason, "speed_law": FAMILIES[0], "speed_law_reason": reason}
+        out = {
+            "frequency": FAMILIES[0],
+            "frequency_reason": reason,
+            "speed_law": FAMILIES[0],
+            "speed_law_reason": reason,
+        }
     else:
         out = select_per_target(metrics, FAMILIES, pbm_scores)
         out["frequency_reason"] = "surrogate.model = auto: " + out["frequency_reason"]

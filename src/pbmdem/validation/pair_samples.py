@@ -90,10 +90,20 @@ def sample_errors(model, samples) -> pd.DataFrame:
         ok = s.frequencies > 0
         rows.append(
             pd.DataFrame(
-                {"rpm": s.rpm, "sample": k, "class_i": iu[ok], "class_j": ju[ok], "error": np.log10(c[ok] / s.frequencies[ok])}
+                {
+                    "rpm": s.rpm,
+                    "sample": k,
+                    "class_i": iu[ok],
+                    "class_j": ju[ok],
+                    "error": np.log10(c[ok] / s.frequencies[ok]),
+                }
             )
         )
-    return pd.concat(rows, ignore_index=True) if rows else pd.DataFrame(columns=["rpm", "sample", "class_i", "class_j", "error"])
+    return (
+        pd.concat(rows, ignore_index=True)
+        if rows
+        else pd.DataFrame(columns=["rpm", "sample", "class_i", "class_j", "error"])
+    )
 
 
 def pair_sample_table(model, samples) -> pd.DataFrame:

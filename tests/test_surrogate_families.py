@@ -37,6 +37,7 @@ from pbmdem.surrogate.evaluation import (
     interval_z,
     sample_scores,
     select_per_target,
+    tail_error,
 )
 from pbmdem.surrogate.families import member_quantiles
 from pbmdem.surrogate.settings import FAMILIES, build_families
@@ -303,7 +304,7 @@ def test_closed_form_families_do_not_depend_on_the_blas_kernel(tmp_path):
 
 
 def test_each_target_gets_its_own_family_by_the_evidence_the_pbm_needs():
-    # pooled: the MLP has the best R2 of log10 c, Kriging the closest impact-speed bins
+    # pooled: the MLP has the best R2 of log10 c, Kriging the closest fast tail of the impact speeds
     metrics = pd.DataFrame(
         {
             "target": ["encounter_frequency"] * 3 + ["impact_velocity"] * 3,
@@ -317,12 +318,15 @@ def test_each_target_gets_its_own_family_by_the_evidence_the_pbm_needs():
         metrics[col] = np.nan
     metrics = pd.concat([metrics, metrics.assign(fold="mean")], ignore_index=True)
     # no active-learning runs: the frequency by the pooled R2
-    choice = select_per_target(metrics, FAMILIES)
+    pooled = {name: {"velocity_tail_log10": tail} for name, tail in zip(FAMILIES, (0.3, 0.2, 0.4))}
+    choice = select_per_target(metrics, FAMILIES, pooled=pooled)
     assert (choice["frequency"], choice["speed_law"]) == ("mlp", "kriging")
-    assert "pooled held-out R2" in choice["frequency_reason"] and "total-variation" in choice["speed_law_reason"]
+    assert "pooled held-out R2" in choice["frequency_reason"] and "kriging 0.200" in choice["speed_law_reason"]
+    # without the tail's scores the speed law follows the frequency
+    assert select_per_target(metrics, FAMILIES)["speed_law"] == "mlp"
     # on the PBM's own samples Kriging's frequency is closer: it wins there
     pbm = {name: {"n_runs": 3, "mae_log10": mae} for name, mae in zip(FAMILIES, (0.041, 0.032, 0.054))}
-    choice = select_per_target(metrics, FAMILIES, pbm)
+    choice = select_per_target(metrics, FAMILIES, pbm, pooled)
     assert choice["frequency"] == "kriging" and "3 active-learning runs" in choice["frequency_reason"]
     assert "kriging 0.032" in choice["frequency_reason"]
 
@@ -380,3 +384,24 @@ def test_members_are_quantiles_shared_by_frequency_and_speed_law_with_the_mean_i
     # member 0 predicts the fewest encounters, the last the most
     low, high = (fitted.member(k).frequency_matrix(d, counts, 600, check_domain=False) for k in (0, n - 1))
     assert np.all(low < c) and np.all(high > c)
+
+
+def test_the_tail_error_compares_the_fractions_of_fast_impacts():
+    from pbmdem.impact import VELOCITY_EDGES
+
+    lo = np.asarray(VELOCITY_EDGES[:-1])
+    observed = np.zeros((3, len(lo)))
+    observed[:, lo == 0.1] = 0.9
+    observed[:, lo == 1.0] = 0.08  # 1-1.78 m/s
+    observed[:, np.isclose(lo, 10**0.5)] = 0.02  # 3.16-5.62 m/s
+    predicted = observed.copy()
+    predicted[1] *= 1.0  # identical: no error
+    predicted[0, lo == 0.1], predicted[0, np.isclose(lo, 10**0.5)] = 0.9 + 0.02 - 0.2, 0.2  # 10x the fastest
+    predicted[2] = 0.0
+    predicted[2, lo == 0.1] = 1.0  # no fast impact at all: a finite, large error
+    err = tail_error(predicted, observed)
+    # above 1 and 1.78 m/s: 0.28 / 0.1 and 0.2 / 0.02; above 3.16: 0.2 / 0.02; above 5.62 nothing observed
+    expected = np.mean([np.log10(0.28 / 0.1), np.log10(0.2 / 0.02), np.log10(0.2 / 0.02)])
+    np.testing.assert_allclose(err[:2], [expected, 0.0], atol=1e-12)
+    assert err[2] > 100
+    assert np.isnan(tail_error(predicted[:1], np.eye(1, len(lo))))[0]  # no observed fast impact: no score

@@ -378,8 +378,8 @@ def test_auto_chooses_the_frequency_on_the_pbm_samples_and_the_speed_law_apart(t
     assert set(per) == {"mlp", "kriging", "rsm"} and all(s["n_runs"] == 2 for s in per.values())
     # the frequency: the smallest MAE on the named runs; the speed law: the closest speed bins over all runs
     assert meta["family"] == meta["cv_scores"]["selected"] == min(per, key=lambda n: per[n]["mae_log10"])
-    tv = {n: meta["cv_scores"]["velocity_summary"][n]["pooled_tv_distance"] for n in per}
-    assert meta["velocity_family"] == meta["cv_scores"]["selected_speed_law"] == min(tv, key=tv.get)
+    tail = {n: meta["cv_scores"]["pooled_scores"][n]["velocity_tail_log10"] for n in per}
+    assert meta["velocity_family"] == meta["cv_scores"]["selected_speed_law"] == min(tail, key=tail.get)
     assert "active-learning runs" in meta["cv_scores"]["selection"]
     model = load_surrogate(out / "model.skops")
     assert type(model.frequency_model_) is FAMILY_CLASSES[meta["family"]]

@@ -3,6 +3,8 @@
 # the DEM grid's tables. Its params are the surrogate
 # settings and the granulator (the tip-speed feature): changing them retrains it.
 
+from pbmdem.config import point_id
+
 
 rule train_surrogate:
     input:
@@ -32,5 +34,7 @@ rule train_surrogate:
     threads: 1
     params:
         training=lambda wildcards: CFG.surrogate_training().to_dict(),
+        # the active-learning runs: samples of the PBM's own states, on which the pair frequency's family is chosen
+        pbm_samples=[point_id(p.rpm, p.distribution) for p in CFG.grid.extra_points],
     script:
         "../workflow/scripts/train_surrogate.py"

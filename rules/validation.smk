@@ -114,6 +114,28 @@ rule comparison:
         "../workflow/scripts/comparison.py"
 
 
+rule pair_samples:
+    input:
+        model=MODEL,
+        intervals=[f for rpm in VAL_RPMS for f in dem_replicate_files("intervals.csv", rpm)],
+    output:
+        table=report(
+            layout.validation("pair_samples.csv"),
+            caption="../workflow/report/pair_samples.rst",
+            category=CATEGORIES["validation"],
+        ),
+    log:
+        layout.log("validation/pair_samples.log"),
+    conda:
+        "../envs/validation.yaml"
+    params:
+        validation_dir=lambda wc, input: layout.validation_dir_of(input.intervals[0]),
+        rpms=VAL_RPMS,
+        replicates=CFG.validation.dem_replicates,
+    script:
+        "../workflow/scripts/pair_samples.py"
+
+
 rule propose_points:
     input:
         model=MODEL,
@@ -162,6 +184,7 @@ rule rpm_sweep:
 
 extra_targets += [f"{layout.speed(rpm)}/bands.csv" for rpm in VAL_RPMS]
 extra_targets += [layout.report("comparison.csv"), layout.validation("proposals.yaml")]
+extra_targets += [layout.validation("pair_samples.csv")]
 
 
 # The PBM-ANN studies the report's findings open with: final sizes against impeller speed (the

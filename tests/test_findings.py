@@ -245,6 +245,8 @@ def test_kernel_source_in_words():
     kriging = {"family": "kriging", "cv_scores": {"selection": "auto"}, "frequency_state": {"fitted": ["1**2 * RBF"]}}
     assert kernel_source(kriging) == "Kernel source: kriging (auto); fitted 1**2 * RBF"
     assert kernel_source({}) == "Kernel source: not recorded (not recorded); fitted not recorded"
+    mixed = {**kriging, "velocity_family": "mlp", "cv_scores": {"selection": "auto", "speed_law_selection": "tv"}}
+    assert kernel_source(mixed) == "Kernel source: kriging (auto); fitted 1**2 * RBF; impact-speed law: mlp (tv)"
 
 
 def test_hyperparameters_in_words():

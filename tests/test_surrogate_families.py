@@ -35,6 +35,9 @@ from pbmdem.surrogate.evaluation import (
     cross_fitted_coverage,
     default_baselines,
     interval_z,
+    sample_scores,
+    select_per_target,
+    tail_error,
 )
 from pbmdem.surrogate.families import member_quantiles
 from pbmdem.surrogate.settings import FAMILIES, build_families
@@ -298,3 +301,107 @@ def test_closed_form_families_do_not_depend_on_the_blas_kernel(tmp_path):
         runs[kernel] = {name: np.load(out / f"{name}.npy") for name in ("kriging", "rsm")}
     for name in ("kriging", "rsm"):
         np.testing.assert_allclose(runs["Prescott"][name], runs[None][name], rtol=1e-6, atol=0)
+
+
+def test_each_target_gets_its_own_family_by_the_evidence_the_pbm_needs():
+    # pooled: the MLP has the best R2 of log10 c, Kriging the closest fast tail of the impact speeds
+    metrics = pd.DataFrame(
+        {
+            "target": ["encounter_frequency"] * 3 + ["impact_velocity"] * 3,
+            "fold": "pooled",
+            "model": ["mlp", "kriging", "rsm"] * 2,
+            "r2_log10": [0.97, 0.95, 0.90, 0.8, 0.8, 0.8],
+            "tv_distance": [np.nan] * 3 + [0.10, 0.05, 0.20],
+        }
+    )
+    for col in ("mae_log10", "noise_floor_r2_log10", "coverage_90", "coverage_90_calibrated", "uncertainty_scale"):
+        metrics[col] = np.nan
+    metrics = pd.concat([metrics, metrics.assign(fold="mean")], ignore_index=True)
+    # no active-learning runs: the frequency by the pooled R2
+    pooled = {name: {"velocity_tail_log10": tail} for name, tail in zip(FAMILIES, (0.3, 0.2, 0.4))}
+    choice = select_per_target(metrics, FAMILIES, pooled=pooled)
+    assert (choice["frequency"], choice["speed_law"]) == ("mlp", "kriging")
+    assert "pooled held-out R2" in choice["frequency_reason"] and "kriging 0.200" in choice["speed_law_reason"]
+    # without the tail's scores the speed law follows the frequency
+    assert select_per_target(metrics, FAMILIES)["speed_law"] == "mlp"
+    # on the PBM's own samples Kriging's frequency is closer: it wins there
+    pbm = {name: {"n_runs": 3, "mae_log10": mae} for name, mae in zip(FAMILIES, (0.041, 0.032, 0.054))}
+    choice = select_per_target(metrics, FAMILIES, pbm, pooled)
+    assert choice["frequency"] == "kriging" and "3 active-learning runs" in choice["frequency_reason"]
+    assert "kriging 0.032" in choice["frequency_reason"]
+
+
+def test_sample_scores_are_the_held_out_errors_on_the_named_runs(cv_result):
+    metrics, pred = cv_result
+    runs = sorted(pred["point_id"].unique())[:2]
+    scores = sample_scores(pred, FAMILIES, runs)
+    rows = pred[pred["point_id"].isin(runs)]
+    obs = rows["log10_encounter_frequency_per_pair"]
+    for name in FAMILIES:
+        s = scores[name]
+        assert s["n_runs"] == 2 and s["n_rows"] == len(rows)
+        assert s["mean_error_log10"] == pytest.approx(np.mean(rows[f"{name}_log10"] - obs))
+        assert s["mae_log10"] == pytest.approx(np.mean(np.abs(rows[f"{name}_log10"] - obs)))
+        assert s["uncertainty_scale"] == pytest.approx(
+            calibration_scale(obs, rows[f"{name}_log10"], rows[f"{name}_std_log10"])
+        )
+        vobs = rows["velocity_mu_log10"]
+        assert s["velocity_mae_log10"] == pytest.approx(np.mean(np.abs(rows[f"{name}_velocity_mu_log10"] - vobs)))
+    # every run: the pooled MAE of the metrics
+    pooled = summarise(metrics)
+    for name in FAMILIES:
+        assert sample_scores(pred, [name])[name]["mae_log10"] == pytest.approx(pooled[name]["pooled_mae_log10"])
+    assert sample_scores(pred, FAMILIES, ["no_such_run"]) == {}
+
+
+def test_members_are_quantiles_shared_by_frequency_and_speed_law_with_the_mean_in_the_middle(data):
+    families = build_families(SETTINGS, R)
+    # the frequency of the MLP, the impact-speed law of Kriging, as `auto` may choose
+    model = clone(families["mlp"]).set_params(
+        velocity_model=clone(families["kriging"].velocity_model), uncertainty_scale=2.0, velocity_uncertainty_scale=0.5
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fitted = model.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
+    n = fitted.n_members
+    assert n == 3
+    d, counts = np.array([0.002, 0.003, 0.004]), np.array([900.0, 600.0, 400.0])
+    c, s = fitted.frequency_matrix(d, counts, 600, return_std=True, check_domain=False)
+    mean = fitted.encounters(d, counts, 600, check_domain=False)
+    X = data.X.iloc[:7]
+    mu, _, mu_std, _ = fitted.predict_velocity(X, return_std=True, check_domain=False)
+    z = member_quantiles(n)
+    for k in range(n):
+        one = fitted.member(k)
+        np.testing.assert_allclose(
+            np.log10(one.frequency_matrix(d, counts, 600, check_domain=False)), np.log10(c) + z[k] * s, atol=1e-12
+        )
+        np.testing.assert_allclose(one.predict_velocity(X, check_domain=False)[0], mu + z[k] * mu_std, atol=1e-12)
+    # the middle member is the mean prediction: PBM-ANN's mean lies inside its members' range
+    middle = fitted.member(n // 2).encounters(d, counts, 600, check_domain=False)
+    np.testing.assert_array_equal(middle.frequency, mean.frequency)
+    np.testing.assert_array_equal(middle.velocity_fractions, mean.velocity_fractions)
+    # member 0 predicts the fewest encounters, the last the most
+    low, high = (fitted.member(k).frequency_matrix(d, counts, 600, check_domain=False) for k in (0, n - 1))
+    assert np.all(low < c) and np.all(high > c)
+
+
+def test_the_tail_error_compares_the_fractions_of_fast_impacts():
+    from pbmdem.impact import VELOCITY_EDGES
+
+    lo = np.asarray(VELOCITY_EDGES[:-1])
+    observed = np.zeros((3, len(lo)))
+    observed[:, lo == 0.1] = 0.9
+    observed[:, lo == 1.0] = 0.08  # 1-1.78 m/s
+    observed[:, np.isclose(lo, 10**0.5)] = 0.02  # 3.16-5.62 m/s
+    predicted = observed.copy()
+    predicted[1] *= 1.0  # identical: no error
+    predicted[0, lo == 0.1], predicted[0, np.isclose(lo, 10**0.5)] = 0.9 + 0.02 - 0.2, 0.2  # 10x the fastest
+    predicted[2] = 0.0
+    predicted[2, lo == 0.1] = 1.0  # no fast impact at all: a finite, large error
+    err = tail_error(predicted, observed)
+    # above 1 and 1.78 m/s: 0.28 / 0.1 and 0.2 / 0.02; above 3.16: 0.2 / 0.02; above 5.62 nothing observed
+    expected = np.mean([np.log10(0.28 / 0.1), np.log10(0.2 / 0.02), np.log10(0.2 / 0.02)])
+    np.testing.assert_allclose(err[:2], [expected, 0.0], atol=1e-12)
+    assert err[2] > 100
+    assert np.isnan(tail_error(predicted[:1], np.eye(1, len(lo))))[0]  # no observed fast impact: no score

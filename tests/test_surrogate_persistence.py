@@ -166,7 +166,8 @@ def test_round_trip_keeps_the_fitted_state(fitted, saved, table):
     assert {"sklearn", "numpy", "skops"} <= set(meta["versions"])
     assert meta["cv_scores"]["mlp"]["pooled_r2_log10"] == 0.9
     assert meta["cv_scores"]["mlp"]["nan_value"] is None  # strict JSON, no NaN
-    assert meta["format_version"] == FORMAT_VERSION == 5
+    assert meta["format_version"] == FORMAT_VERSION == 6
+    assert meta["family"] == meta["velocity_family"] == "mlp"
     # the impeller radius the model was trained with, and every estimator parameter
     assert meta["params"]["impeller_radius"] == R
     assert meta["params"]["frequency_model"]["params"] == json.loads(json.dumps(fitted.frequency_model.get_params()))
@@ -261,14 +262,14 @@ def test_patch_version_difference_accepted(saved):
     assert load_surrogate(model).frequency_model_.estimators_
 
 
-@pytest.mark.parametrize("found", [4, 99, None])
+@pytest.mark.parametrize("found", [5, 99, None])
 def test_another_format_version_is_refused_with_retrain(saved, found):
     model, meta_path = saved
     meta = json.loads(meta_path.read_text())
     meta["format_version"] = found
     meta_path.write_text(json.dumps(meta))
     with pytest.raises(
-        IncompatibleVersionError, match=rf"{meta_path}: format version {found} .*reads version 5.*retrain"
+        IncompatibleVersionError, match=rf"{meta_path}: format version {found} .*reads version 6.*retrain"
     ):
         load_surrogate(model)
 

@@ -354,3 +354,41 @@ def test_wall_models_learn_the_wall_impacts_with_the_same_held_out_evaluation(tm
         assert np.all(np.abs(np.log10(median) - mu) < 0.35)  # within about a bin of the law's median
     member = model.member(1).impacts(d, n, 600.0)
     assert member.walls.frequency.shape == (2, 3) and not np.allclose(member.walls.frequency, rates.walls.frequency)
+
+
+def test_auto_chooses_the_frequency_on_the_pbm_samples_and_the_speed_law_apart(tmp_path):
+    from pbmdem.surrogate.persistence import FAMILY_CLASSES
+
+    table, velocity = make_synthetic_tables(R, rpms=(300, 600, 900), seed=13)
+    samples = sorted(table["point_id"].unique())[:2]
+    out = tmp_path / "surrogate"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        meta = train_and_report(
+            table,
+            out / "model.skops",
+            settings={**tiny_settings(), "model": "auto"},
+            impeller_radius=R,
+            velocity_table=velocity,
+            pbm_samples=samples,
+        )
+    scores = meta["cv_scores"]["pbm_samples"]
+    assert scores["point_ids"] == samples
+    per = scores["scores"]
+    assert set(per) == {"mlp", "kriging", "rsm"} and all(s["n_runs"] == 2 for s in per.values())
+    # the frequency: the smallest MAE on the named runs; the speed law: the closest speed bins over all runs
+    assert meta["family"] == meta["cv_scores"]["selected"] == min(per, key=lambda n: per[n]["mae_log10"])
+    tail = {n: meta["cv_scores"]["pooled_scores"][n]["velocity_tail_log10"] for n in per}
+    assert meta["velocity_family"] == meta["cv_scores"]["selected_speed_law"] == min(tail, key=tail.get)
+    assert "active-learning runs" in meta["cv_scores"]["selection"]
+    model = load_surrogate(out / "model.skops")
+    assert type(model.frequency_model_) is FAMILY_CLASSES[meta["family"]]
+    assert type(model.velocity_model_) is FAMILY_CLASSES[meta["velocity_family"]]
+    # each uncertainty calibrated on the named runs
+    calibration = meta["cv_scores"]["calibration"]
+    assert calibration["frequency"]["rows"] == "active-learning runs"
+    assert model.uncertainty_scale == pytest.approx(per[meta["family"]]["uncertainty_scale"])
+    assert model.velocity_uncertainty_scale == pytest.approx(per[meta["velocity_family"]]["velocity_uncertainty_scale"])
+    d, n = np.array([0.002, 0.003, 0.004]), np.array([900.0, 600.0, 300.0])
+    for k in range(model.n_members):
+        assert model.member(k).encounters(d, n, 600.0, check_domain=False).frequency.shape == (3, 3)

@@ -373,6 +373,22 @@ COMPARISON = Table(
     ),
 )
 
+#: the surrogate's pair encounter frequency on the PBM-DEM loops' own samples
+#: (pbmdem.validation.pair_samples): one row per validation speed, then the row ``all``
+PAIR_SAMPLES = Table(
+    "pair-sample table",
+    (
+        _text("rpm"),
+        Column("samples", "int", "positive"),
+        Column("pairs", "int", "positive"),
+        Column("mean_error_log10", sign=None),
+        Column("mae_log10"),
+        Column("mean_error_target", sign="positive"),
+        Column("mae_target", sign="positive"),
+        _text("met"),
+    ),
+)
+
 #: measured granule sizes over a batch (docs/calibration.md): one row per (impeller speed, time)
 #: with d10/d50/d90 and their measurement sd (m); what a calibration fits
 MEASURED = Table(

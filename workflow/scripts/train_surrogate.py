@@ -20,4 +20,5 @@ train_and_report(
     velocity_table=snakemake.input.velocity,  # noqa: F821
     wall_table=snakemake.input.walls,  # noqa: F821
     wall_velocity_table=snakemake.input.wall_velocities,  # noqa: F821
+    pbm_samples=snakemake.params.pbm_samples,  # noqa: F821
 )

@@ -80,7 +80,8 @@ class Surrogate(Settings):
         "gengamma", "the law of the impact speeds the surrogate learns (docs/surrogate.md)"
     )
     model: Literal["auto", "mlp", "kriging", "rsm"] = setting(
-        "auto", "the family PBM-ANN uses: auto, the smallest held-out error of log10 c; or mlp, kriging, rsm"
+        "auto",
+        "the family PBM-ANN uses: auto, per target the least held-out error (docs/surrogate.md); or mlp, kriging, rsm",
     )
     feature_transform: Literal["log", "none"] = setting("log", "log: the models see log10 of every feature")
     kriging: KrigingSettings = setting(KrigingSettings, "Gaussian-process (Kriging) family")

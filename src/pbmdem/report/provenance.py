@@ -117,8 +117,13 @@ def kernel_source(meta: dict) -> str:
         fitted = "selected hyperparameters " + hyperparameters(state["best_params"])
     else:
         fitted = "fitted " + ("; ".join(map(str, state.get("fitted") or [])) or "not recorded")
-    selection = (meta.get("cv_scores") or {}).get("selection") or "not recorded"
-    return f"Kernel source: {meta.get('family', 'not recorded')} ({selection}); {fitted}"
+    scores = meta.get("cv_scores") or {}
+    selection = scores.get("selection") or "not recorded"
+    out = f"Kernel source: {meta.get('family', 'not recorded')} ({selection}); {fitted}"
+    speed = meta.get("velocity_family")
+    if speed and speed != meta.get("family"):  # the impact-speed law of another family (model format 6)
+        out += f"; impact-speed law: {speed} ({scores.get('speed_law_selection') or 'not recorded'})"
+    return out
 
 
 def hyperparameters(params) -> str:

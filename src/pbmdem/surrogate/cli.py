@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pbmdem.config import check_rpm, load_config
+from pbmdem.config import check_rpm, load_config, point_id
 from pbmdem.impact import VELOCITY_EDGES
 from pbmdem.tables import GRID_PAIRS
 
@@ -101,6 +101,7 @@ def _train(args) -> int:
         impeller_radius=cfg.granulator.impeller.tip_radius,
         n_jobs=args.jobs,
         velocity_table=args.velocity_table,
+        pbm_samples=[point_id(p.rpm, p.distribution) for p in cfg.grid.extra_points],
     )
     summary = meta["cv_scores"]["outer_summary"]
     for name, s in summary.items():
@@ -114,7 +115,8 @@ def _train(args) -> int:
             f"{name:9s} held-out median impact speed MAE {_fmt(s['pooled_mae_log10'])} decades, "
             f"bin-fraction distance (TV) {_fmt(s['pooled_tv_distance'])}"
         )
-    print(f"kernel source: {meta['family']} ({meta['cv_scores']['selection']})")
+    print(f"pair encounter frequency: {meta['family']} ({meta['cv_scores']['selection']})")
+    print(f"impact-speed law: {meta['velocity_family']} ({meta['cv_scores']['speed_law_selection']})")
     print(f"wrote {args.out}/model.skops, model.json, metrics.csv, parity.png")
     return 0
 

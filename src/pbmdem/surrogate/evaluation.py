@@ -27,6 +27,8 @@ from scipy.stats import norm
 from sklearn.base import clone
 from sklearn.metrics import mean_absolute_error, r2_score
 
+from pbmdem.impact import VELOCITY_EDGES
+
 from .baselines import HGBBaseline, PhysicalScaling
 from .ensemble import grouped_splits
 from .features import PAIR_ID_COLUMNS, TARGET_COLUMN, TARGET_NAME, TARGET_NOISE_VAR, TrainingData
@@ -52,6 +54,31 @@ METRIC_COLUMNS = [
     "coverage_90_calibrated",
     "uncertainty_scale",
 ]
+
+
+#: Impact speeds (m/s) whose exceedance fractions score an impact-speed law for breakage: the bin
+#: edges from 1 m/s up. The critical speed of breakage sqrt(2 Y St*/rho) is 2 m/s at the default
+#: strength and rises 4x as a granule consolidates (docs/pbm.md); the fast tail is what breakage reads.
+TAIL_SPEEDS = tuple(float(e) for e in VELOCITY_EDGES[1:-1] if e >= 1.0)
+
+
+def tail_error(predicted, observed, speeds=TAIL_SPEEDS) -> np.ndarray:
+    """Per row of bin fractions (:data:`pbmdem.impact.VELOCITY_EDGES`): the mean over ``speeds`` of
+    |log10(predicted / observed fraction of impacts faster than the speed)|, over the speeds where
+    the observed fraction is above zero (NaN for a row without any)."""
+    predicted, observed = np.atleast_2d(predicted), np.atleast_2d(observed)
+    lo = np.asarray(VELOCITY_EDGES[:-1], float)
+    errors = []
+    for v in speeds:
+        above = lo >= v - 1e-12
+        p, o = predicted[:, above].sum(axis=1), observed[:, above].sum(axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            errors.append(np.where(o > 0, np.abs(np.log10(np.maximum(p, 1e-300) / o)), np.nan))
+    errors = np.column_stack(errors)
+    out = np.full(len(errors), np.nan)
+    ok = np.isfinite(errors).any(axis=1)
+    out[ok] = np.nanmean(errors[ok], axis=1)
+    return out
 
 
 def interval_z(level: float = COVERAGE_LEVEL) -> float:
@@ -200,7 +227,7 @@ def _velocity_columns(pred: pd.DataFrame, data: TrainingData, models: dict):
     pred.loc[vmask, "velocity_mu_log10"] = data.velocity[vmask, 0]
     pred.loc[vmask, "velocity_sigma"] = data.velocity[vmask, 1]
     for name in vel_models:
-        for col in ("mu_log10", "sigma", "tv", "mu_std_log10"):
+        for col in ("mu_log10", "sigma", "tv", "tail", "mu_std_log10"):
             pred[f"{name}_velocity_{col}"] = np.nan
     obs_frac_full = np.full((len(data.table), obs_frac.shape[1]), np.nan)
     obs_frac_full[vmask] = obs_frac
@@ -322,6 +349,7 @@ def _velocity_fold(name: str, fitted, X, uncertain: bool, observed, pred: pd.Dat
         frac = fitted.velocity_fractions(X)
     tv = total_variation(frac, observed)
     idx = pred.index[rows]
+    pred.loc[idx, f"{name}_velocity_tail"] = tail_error(frac, observed)
     pred.loc[idx, f"{name}_velocity_mu_log10"] = mu
     pred.loc[idx, f"{name}_velocity_sigma"] = sigma
     pred.loc[idx, f"{name}_velocity_tv"] = tv
@@ -353,6 +381,94 @@ def select_family(metrics: pd.DataFrame, families) -> str:
     scores = {name: float(pooled.loc[pooled["model"] == name, "r2_log10"].iloc[0]) for name in families}
     best = max(scores.values())
     return next(name for name in families if scores[name] >= best - 1e-9)
+
+
+def sample_scores(pred: pd.DataFrame, models, point_ids=None) -> dict:
+    """Held-out errors of every model in ``models`` on the rows of the runs ``point_ids`` (all rows
+    when None) of the held-out predictions ``pred`` (:func:`cross_validate_models`):
+    {model: {n_runs, n_rows, mae_log10, mean_error_log10 (prediction - DEM, decades),
+    uncertainty_scale (families only: the calibration factor on those rows; NaN for the rest),
+    velocity_mae_log10, velocity_tv_distance, velocity_tail_log10 (median over rows of
+    :func:`tail_error`), velocity_uncertainty_scale (impact-speed law: log10 median speed, bin
+    fractions and their fast tail, where the rows have bins)}}; empty when no row is of
+    ``point_ids``. The active-learning runs (``grid.extra_points``) are samples of the PBM's own
+    states, which the pooled score of every run does not weigh as the PBM does (docs/surrogate.md)."""
+    rows = pred if point_ids is None else pred[pred["point_id"].astype(str).isin({str(p) for p in point_ids})]
+    if rows.empty:
+        return {}
+    obs = rows[TARGET_NAME].to_numpy(float)
+    vrows = rows[np.isfinite(rows["velocity_mu_log10"].to_numpy(float))] if "velocity_mu_log10" in rows else rows[:0]
+    out = {}
+    for name in models:
+        p = rows[f"{name}_log10"].to_numpy(float)
+        std = f"{name}_std_log10"
+        s = {
+            "n_runs": int(rows["point_id"].nunique()),
+            "n_rows": int(len(rows)),
+            "mae_log10": float(np.mean(np.abs(p - obs))),
+            "mean_error_log10": float(np.mean(p - obs)),
+            "uncertainty_scale": calibration_scale(obs, p, rows[std]) if std in rows else float("nan"),
+        }
+        mu = f"{name}_velocity_mu_log10"
+        if mu in vrows and len(vrows):
+            vobs, vp = vrows["velocity_mu_log10"].to_numpy(float), vrows[mu].to_numpy(float)
+            vstd = f"{name}_velocity_mu_std_log10"
+            s["velocity_mae_log10"] = float(np.mean(np.abs(vp - vobs)))
+            s["velocity_tv_distance"] = float(vrows[f"{name}_velocity_tv"].mean())
+            tail = vrows[f"{name}_velocity_tail"].to_numpy(float)
+            s["velocity_tail_log10"] = float(np.nanmedian(tail)) if np.isfinite(tail).any() else float("nan")
+            s["velocity_uncertainty_scale"] = (
+                calibration_scale(vobs, vp, vrows[vstd]) if vrows[vstd].notna().any() else float("nan")
+            )
+        out[name] = s
+    return out
+
+
+def _best(scores: dict, families, key: str, sign: float = 1.0) -> str:
+    """The family with the smallest ``sign * scores[family][key]`` (ties within 1e-9 to the earlier)."""
+    values = {name: sign * float(scores[name][key]) for name in families}
+    best = min(values.values())
+    return next(name for name in families if values[name] <= best + 1e-9)
+
+
+def select_per_target(
+    metrics: pd.DataFrame, families, pbm_scores: dict | None = None, pooled: dict | None = None
+) -> dict:
+    """The family of each target of the PBM, chosen separately by held-out evidence, and why.
+
+    * ``frequency``: with held-out rows of PBM samples (``pbm_scores``, :func:`sample_scores` on
+      the active-learning runs) the smallest MAE of log10 c on them; else the highest pooled
+      held-out R2 of log10 c (:func:`select_family`).
+    * ``speed_law``: the smallest held-out error of the fast tail over every run (``pooled``,
+      :func:`sample_scores` of all rows: ``velocity_tail_log10``, the median over rows of
+      :func:`tail_error`, the fractions of impacts faster than :data:`TAIL_SPEEDS` that breakage
+      reads); without it the frequency's family.
+
+    Returns {"frequency": name, "frequency_reason": str, "speed_law": name, "speed_law_reason": str}.
+    """
+    families = list(families)
+    pbm_scores = pbm_scores or {}
+    if all(name in pbm_scores for name in families):
+        frequency = _best(pbm_scores, families, "mae_log10")
+        runs = next(iter(pbm_scores.values()))["n_runs"]
+        reason = (
+            f"the smallest held-out MAE of log10 c on the {runs} active-learning runs (samples of the PBM's "
+            "own states), of " + ", ".join(f"{n} {pbm_scores[n]['mae_log10']:.3f}" for n in families)
+        )
+    else:
+        frequency = select_family(metrics, families)
+        reason = "the best pooled held-out R2 of log10 c of " + ", ".join(families) + " (no active-learning runs)"
+    pooled = pooled or {}
+    if all(np.isfinite(pooled.get(name, {}).get("velocity_tail_log10", np.nan)) for name in families):
+        speed = _best(pooled, families, "velocity_tail_log10")
+        speed_reason = (
+            f"the smallest held-out error of the fractions of impacts faster than {TAIL_SPEEDS[0]:g}-"
+            f"{TAIL_SPEEDS[-1]:.3g} m/s (median |log10 predicted / DEM| over every run's pairs), of "
+            + ", ".join(f"{n} {pooled[n]['velocity_tail_log10']:.3f}" for n in families)
+        )
+    else:
+        speed, speed_reason = frequency, "no held-out impact speeds: the frequency's family"
+    return {"frequency": frequency, "frequency_reason": reason, "speed_law": speed, "speed_law_reason": speed_reason}
 
 
 def summarise(metrics: pd.DataFrame, target: str = "encounter_frequency") -> dict:

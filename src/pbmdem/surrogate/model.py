@@ -34,6 +34,7 @@ from pbmdem.impact import EncounterRates, ImpactRates
 
 from .ensemble import EnsembleMLPRegressorCV
 from .errors import require_fitted
+from .families import member_quantiles
 from .features import (
     FEATURE_NAMES,
     check_impeller_radius,
@@ -478,37 +479,47 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
 
     def member(self, k: int) -> CollisionSurrogate:
         """A copy of the fitted surrogate that predicts with member ``k`` of its calibrated
-        uncertainty alone: ``mean + scale (p_k - mean)``, with ``p_k`` the k-th ensemble network
-        (MLP) or predictive quantile (Kriging, RSM) and ``scale`` the calibrated
-        ``uncertainty_scale`` (``velocity_uncertainty_scale`` for the impact-speed law). Running
-        the PBM once per member gives the spread of PBM-ANN that the uncertainty implies."""
+        uncertainty alone: the k-th of ``n_members`` quantiles of the calibrated predictive
+        normal, ``mean + z_k scale std`` with ``z_k = Phi^-1((k + 1/2) / n)``
+        (:func:`~pbmdem.surrogate.families.member_quantiles`), ``std`` the spread of the ensemble's
+        networks (MLP) or the predictive standard deviation (Kriging, RSM) and ``scale`` the
+        calibrated ``uncertainty_scale`` (``velocity_uncertainty_scale`` for the impact-speed law).
+        The frequency, the impact-speed law and the wall models take the same ``z_k``, whatever
+        their families: member 0 has the fewest and slowest impacts, the last the most and the
+        fastest, and with an odd ``n_members`` the middle member is the mean prediction itself, so
+        that PBM-ANN's mean lies inside its members' range. Running the PBM once per member gives
+        the spread of PBM-ANN that the uncertainty implies."""
         n = self.n_members
         if not 0 <= int(k) < n:
             raise ValueError(f"surrogate member {k!r}: allowed 0 .. {n - 1}")
+        return self._at(float(member_quantiles(n)[int(k)]))
+
+    def _at(self, z: float) -> CollisionSurrogate:
+        """:meth:`member` at the standard-normal quantile ``z`` (walls included)."""
         out = copy.copy(self)
-        out.frequency_model_ = CalibratedMember(self.frequency_model_, int(k), self.uncertainty_scale)
+        out.frequency_model_ = CalibratedMember(self.frequency_model_, z, self.uncertainty_scale)
         if self.velocity_model_ is not None:
-            out.velocity_model_ = CalibratedMember(self.velocity_model_, int(k), self.velocity_uncertainty_scale)
+            out.velocity_model_ = CalibratedMember(self.velocity_model_, z, self.velocity_uncertainty_scale)
         walls = getattr(self, "wall_models_", None) or {}
-        out.wall_models_ = {wall: model.member(int(k) % model.n_members) for wall, model in walls.items()}
+        out.wall_models_ = {wall: model._at(z) for wall, model in walls.items()}
         return out
 
 
 class CalibratedMember:
-    """One member of a fitted model's uncertainty, widened or narrowed by a calibration factor.
+    """One member of a fitted model's uncertainty: the quantile ``z`` of its predictive normal with
+    the standard deviation widened or narrowed by a calibration factor.
 
-    ``model.predict_members(X)`` gives (K, n[, outputs]) member predictions p; member ``k``
-    predicts ``mean_K(p) + scale (p_k - mean_K(p))`` and has no spread of its own.
+    ``model.predict_array(X, return_std=True)`` gives the mean and the standard deviation of every
+    output; the member predicts ``mean + z scale std`` and has no spread of its own.
     """
 
-    def __init__(self, model, k: int, scale: float):
-        self.model, self.k, self.scale = model, int(k), float(scale)
+    def __init__(self, model, z: float, scale: float):
+        self.model, self.z, self.scale = model, float(z), float(scale)
         self.n_members_ = 1
 
     def predict_array(self, X, return_std: bool = False):
-        members = self.model.predict_members(np.asarray(X, dtype=np.float64))
-        mean = members.mean(axis=0)
-        out = mean + self.scale * (members[self.k] - mean)
+        mean, std = self.model.predict_array(np.asarray(X, dtype=np.float64), return_std=True)
+        out = mean + self.z * self.scale * std
         return (out, np.zeros_like(out)) if return_std else out
 
     def predict(self, X, return_std: bool = False):

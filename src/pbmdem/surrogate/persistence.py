@@ -50,9 +50,11 @@ from .model import CollisionSurrogate
 FAMILY_CLASSES = {"mlp": EnsembleMLPRegressorCV, "kriging": KrigingRegressor, "rsm": ResponseSurface}
 
 FORMAT = "pbmdem-surrogate"
-#: 5: the fitted CollisionSurrogate itself in the skops file, the sidecar for users (4: fitted
-#: pipelines, the rest rebuilt from the metadata; 3: MLP only; 2: one class; 1: raw target).
-FORMAT_VERSION = 5
+#: 6: the impact-speed law may be of another family than the frequency (``velocity_family``;
+#: 5: one family for both); 5: the fitted CollisionSurrogate itself in the skops file, the sidecar
+#: for users (4: fitted pipelines, the rest rebuilt from the metadata; 3: MLP only; 2: one class;
+#: 1: raw target).
+FORMAT_VERSION = 6
 
 #: Every type that may appear in a surrogate model file (module.qualname).
 ALLOWED_TYPES = frozenset(
@@ -146,6 +148,7 @@ def _model_metadata(surrogate: CollisionSurrogate) -> dict:
     return {
         "params": params,
         "family": family_name(freq),
+        "velocity_family": None if vel is None else family_name(vel),
         "frequency_state": freq.fitted_state(),
         "velocity_state": None if vel is None else vel.fitted_state(),
         "n_velocity_rows": surrogate.n_velocity_rows_,

@@ -10,11 +10,12 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from sklearn.base import clone
 
 from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES, GRID_WALL_VELOCITIES, GRID_WALLS
 
 from ._io import atomic_write
-from .evaluation import METRIC_COLUMNS, cross_validate_models, select_family, summarise
+from .evaluation import METRIC_COLUMNS, cross_validate_models, sample_scores, select_per_target, summarise
 from .features import training_data
 from .persistence import save_surrogate, sha256_file
 from .plots import empty_plot, parity_plot
@@ -37,9 +38,10 @@ def _read_table(table, contract, need=()) -> tuple[pd.DataFrame, str]:
 
 
 def _train_walls(surrogate, selected: str, metrics, tables, settings, impeller_radius, n_jobs):
-    """The wall models (pbmdem.surrogate.walls) of the wall ``tables`` (collisions, impact
-    velocities) into ``surrogate.wall_models_``: (``metrics`` with theirs appended, their summary);
-    without wall tables (None) ``metrics`` and no summary."""
+    """The wall models (pbmdem.surrogate.walls, of the family ``selected``: the impact-speed law's)
+    of the wall ``tables`` (collisions, impact velocities) into ``surrogate.wall_models_``:
+    (``metrics`` with theirs appended, their summary); without wall tables (None) ``metrics`` and
+    no summary."""
     wall_table, wall_velocity_table = tables
     if wall_table is None:
         return metrics, {}
@@ -89,15 +91,23 @@ def train_and_report(
     velocity_table: str | os.PathLike | pd.DataFrame | None = None,
     wall_table: str | os.PathLike | pd.DataFrame | None = None,
     wall_velocity_table: str | os.PathLike | pd.DataFrame | None = None,
+    pbm_samples=None,
 ) -> dict:
     """Grouped CV of the model families and baselines, choice of the kernel source, final fit on
     every run, then write the outputs.
 
     Every family of :data:`~pbmdem.surrogate.settings.FAMILIES` and every baseline is scored on
-    the same outer folds. The kernel source is ``surrogate.model``, or with ``auto`` the family
-    with the best pooled held-out R2 of log10 c (:func:`~pbmdem.surrogate.evaluation.select_family`;
-    held-out scores only). Its calibration factors (the held-out 90 % interval coverage made
-    nominal) become ``uncertainty_scale`` and ``velocity_uncertainty_scale`` of the final model.
+    the same outer folds. The kernel source is ``surrogate.model`` for both targets, or with
+    ``auto`` one family per target (:func:`~pbmdem.surrogate.evaluation.select_per_target`,
+    held-out scores only): the pair encounter frequency's by its held-out MAE of log10 c on the
+    runs ``pbm_samples`` (point ids of the active-learning runs, ``grid.extra_points``: samples of
+    the PBM's own states; without them the best pooled R2 of log10 c), the impact-speed law's by
+    its held-out error of the fast tail (the fractions of impacts faster than 1-5.6 m/s, which
+    breakage reads) over every run. Each target's
+    calibration factor (the held-out 90 % interval coverage made nominal), on the ``pbm_samples``
+    rows when there are any, else on every held-out row, becomes ``uncertainty_scale`` and
+    ``velocity_uncertainty_scale`` of the final model. The wall models take the speed law's family
+    (their use is breakage from impacts).
 
     ``table`` is the collision table (``results/dem/collisions.csv``), ``velocity_table`` the
     impact-velocity table (``results/dem/impact_velocity.csv``); without it the surrogate learns
@@ -116,11 +126,14 @@ def train_and_report(
     t0 = time.perf_counter()
     metrics, predictions, summary, velocity_summary = _held_out(data, families, settings)
     t_cv = time.perf_counter() - t0
-    selected, reason = _kernel_source(settings["model"], metrics, summary)
-    surrogate = _calibrated(families[selected], selected, summary, velocity_summary)
+    pbm_scores = _pbm_sample_scores(predictions, families, pbm_samples)
+    pooled_scores = {} if predictions is None else sample_scores(predictions, list(families))
+    choice = _kernel_source(settings["model"], metrics, summary, pbm_scores, pooled_scores)
+    selected, speed_family = choice["frequency"], choice["speed_law"]
+    surrogate, calibration = _calibrated(families, choice, summary, velocity_summary, pbm_scores)
     t0 = time.perf_counter()
     _logged(surrogate.fit, data.X, data.y, groups=data.groups, velocity=data.velocity)
-    metrics, wall_summary = _train_walls(surrogate, selected, metrics, (wall_table, wall_velocity_table), settings,
+    metrics, wall_summary = _train_walls(surrogate, speed_family, metrics, (wall_table, wall_velocity_table), settings,
                                          impeller_radius, n_jobs)  # fmt: skip
     t_fit = time.perf_counter() - t0
     state = surrogate.frequency_model_.fitted_state()
@@ -129,7 +142,12 @@ def train_and_report(
     cv_scores = {
         "strategy": settings["cv"]["strategy"],
         "selected": selected,
-        "selection": reason,
+        "selection": choice["frequency_reason"],
+        "selected_speed_law": speed_family,
+        "speed_law_selection": choice["speed_law_reason"],
+        "pbm_samples": {"point_ids": sorted(map(str, pbm_samples or ())), "scores": pbm_scores},
+        "pooled_scores": pooled_scores,
+        "calibration": calibration,
         **_cv_summaries(metrics, summary, velocity_summary, wall_summary),
     }
     meta = save_surrogate(
@@ -240,29 +258,73 @@ def _held_out(data, families: dict, settings: dict):
     return metrics, predictions, summary, velocity_summary
 
 
-def _kernel_source(choice: str, metrics: pd.DataFrame, summary: dict) -> tuple[str, str]:
-    """The family PBM-ANN uses (`surrogate.model`, or with auto the best held-out R2) and why."""
-    selected = choice if choice != "auto" else (select_family(metrics, FAMILIES) if summary else FAMILIES[0])
-    reason = (
-        f"surrogate.model = {choice}"
-        if choice != "auto"
-        else "surrogate.model = auto: the best pooled held-out R2 of log10 c of " + ", ".join(FAMILIES)
-    )
-    log.info("kernel source: %s (%s)", selected, reason)
-    return selected, reason
+def _pbm_sample_scores(predictions, families: dict, pbm_samples) -> dict:
+    """Every family's held-out scores on the rows of the runs ``pbm_samples`` (empty without them or
+    without held-out predictions), logged."""
+    if predictions is None or not pbm_samples:
+        return {}
+    scores = sample_scores(predictions, list(families), pbm_samples)
+    for name, s in scores.items():
+        log.info(
+            "%-8s held-out on the %d active-learning runs: log10 c MAE %.3f, mean error %+.3f decades",
+            name,
+            s["n_runs"],
+            s["mae_log10"],
+            s["mean_error_log10"],
+        )
+    return scores
 
 
-def _calibrated(surrogate, selected: str, summary: dict, velocity_summary: dict):
-    """`surrogate` with the held-out calibration factors of its family as uncertainty scales."""
-    scales = {}
-    for key, s in (("uncertainty_scale", summary), ("velocity_uncertainty_scale", velocity_summary)):
-        scale = s.get(selected, {}).get("uncertainty_scale", float("nan"))
-        scales[key] = float(scale) if np.isfinite(scale) and scale > 0 else 1.0
+def _kernel_source(choice: str, metrics: pd.DataFrame, summary: dict, pbm_scores: dict, pooled: dict) -> dict:
+    """The family of each target PBM-ANN uses (`surrogate.model`, or with auto
+    :func:`~pbmdem.surrogate.evaluation.select_per_target`) and why."""
+    if choice != "auto":
+        reason = f"surrogate.model = {choice}"
+        out = {"frequency": choice, "frequency_reason": reason, "speed_law": choice, "speed_law_reason": reason}
+    elif not summary:
+        reason = "surrogate.model = auto with a single DEM run: no held-out score, the first of " + ", ".join(FAMILIES)
+        out = {
+            "frequency": FAMILIES[0],
+            "frequency_reason": reason,
+            "speed_law": FAMILIES[0],
+            "speed_law_reason": reason,
+        }
+    else:
+        out = select_per_target(metrics, FAMILIES, pbm_scores, pooled)
+        out["frequency_reason"] = "surrogate.model = auto: " + out["frequency_reason"]
+        out["speed_law_reason"] = "surrogate.model = auto: " + out["speed_law_reason"]
+    log.info("pair encounter frequency: %s (%s)", out["frequency"], out["frequency_reason"])
+    log.info("impact-speed law: %s (%s)", out["speed_law"], out["speed_law_reason"])
+    return out
+
+
+def _calibrated(families: dict, choice: dict, summary: dict, velocity_summary: dict, pbm_scores: dict):
+    """The surrogate of the chosen families (frequency model of one, impact-speed law of the other),
+    with the held-out calibration factor of each as its uncertainty scale: on the active-learning
+    runs' rows (``pbm_scores``) when there are any, else on every held-out row. Returns
+    (surrogate, {target: {family, scale, rows}})."""
+    freq, speed = choice["frequency"], choice["speed_law"]
+    surrogate = clone(families[freq]).set_params(velocity_model=clone(families[speed].velocity_model))
+    scales, calibration = {}, {}
+    for key, target, family, pooled, on_samples in (
+        ("uncertainty_scale", "frequency", freq, summary, "uncertainty_scale"),
+        ("velocity_uncertainty_scale", "speed_law", speed, velocity_summary, "velocity_uncertainty_scale"),
+    ):
+        scale, rows = pbm_scores.get(family, {}).get(on_samples, float("nan")), "active-learning runs"
+        if not (np.isfinite(scale) and scale > 0):
+            scale, rows = pooled.get(family, {}).get("uncertainty_scale", float("nan")), "every held-out run"
+        if not (np.isfinite(scale) and scale > 0):
+            scale, rows = 1.0, "none (no held-out rows)"
+        scales[key] = float(scale)
+        calibration[target] = {"family": family, "scale": float(scale), "rows": rows}
     surrogate.set_params(**scales)
     log.info(
-        "calibrated uncertainty of %s: standard deviations x %.3g (frequency), x %.3g (impact speed)",
-        selected,
+        "calibrated uncertainty: standard deviations x %.3g (frequency, %s on %s), x %.3g (impact speed, %s on %s)",
         scales["uncertainty_scale"],
+        freq,
+        calibration["frequency"]["rows"],
         scales["velocity_uncertainty_scale"],
+        speed,
+        calibration["speed_law"]["rows"],
     )
-    return surrogate
+    return surrogate, calibration

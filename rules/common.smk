@@ -124,6 +124,20 @@ def run_outputs(folder, loop=True):
     return {name.split(".")[0]: f"{folder}/{name}" for name in names}
 
 
+def grid_dem_of_loop(wc):
+    """The DEM grid's files that a PBM-DEM loop of the validation feed borrows (docs/validation.md,
+    "Borrowed grid runs"): the settled bed of the feed and replicate, and at a grid speed the run
+    of the feed (its summary); none where the grid has no such replicate."""
+    feed = CFG.validation.distribution
+    points = CFG.grid.points()
+    if all(dist != feed for _, dist in points) or int(wc.rep) >= CFG.point_replicates(feed):
+        return {}
+    files = {"bed": f"{layout.dem_bed(feed, wc.rep)}/bed.json"}
+    if (float(wc.rpm), feed) in points:
+        files["grid_run"] = f"{layout.dem_run(wc.rpm, feed, wc.rep)}/summary.json"
+    return files
+
+
 def dem_replicate_files(name, rpm="{rpm}"):
     """One file of every PBM-DEM replicate of a validation speed."""
     return [f"{layout.validation_run('pbm_dem', rpm, rep)}/{name}" for rep in VAL_REPS]

@@ -5,20 +5,6 @@
 # speed's loop uses (CFG.coupled_loop()): neither the list of speeds nor the number of replicates.
 
 
-def grid_dem_of_loop(wc):
-    """The DEM grid's files that a PBM-DEM loop of the validation feed borrows (docs/validation.md,
-    "Borrowed grid runs"): the settled bed of the feed and replicate, and at a grid speed the run
-    of the feed (its summary); none where the grid has no such replicate."""
-    feed = CFG.validation.distribution
-    points = CFG.grid.points()
-    if all(dist != feed for _, dist in points) or int(wc.rep) >= CFG.point_replicates(feed):
-        return {}
-    files = {"bed": f"{layout.dem_bed(feed, wc.rep)}/bed.json"}
-    if (float(wc.rpm), feed) in points:
-        files["grid_run"] = f"{layout.dem_run(wc.rpm, feed, wc.rep)}/summary.json"
-    return files
-
-
 rule pbm_dem_coupled:
     input:
         unpack(grid_dem_of_loop),

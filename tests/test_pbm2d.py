@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pbm_analytical as an
 import pbm_analytical2d as a2
 import pbm_verification2d as v2
 import pytest
@@ -26,7 +27,6 @@ from pbmdem.pbm import (
     PBMInputError,
     SuccessProbability,
 )
-from pbmdem.pbm import analytical as an
 from pbmdem.pbm.breakage import Breakage, ConstantSelection
 from pbmdem.pbm.liquid_grid import LiquidGrid
 from pbmdem.pbm.model2d import GranulationPBM2D

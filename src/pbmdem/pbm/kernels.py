@@ -3,8 +3,8 @@
 A kernel maps the current population (a :class:`KernelInput`) to the (K, K) symmetric matrix
 beta_ij (1/s per pair) used in the population balance. Provided:
 
-* :class:`ConstantKernel` beta_ij = beta0, with Scott's (1968) analytical solution;
-* :class:`SumKernel` (Golovin) beta_ij = b (v_i + v_j), with its analytical solution;
+* :class:`ConstantKernel` beta_ij = beta0 (Scott's 1968 closed form in tests/pbm_analytical.py);
+* :class:`SumKernel` (Golovin) beta_ij = b (v_i + v_j) (likewise);
 * :class:`CollisionKernel` beta_ij = beta0 c_ij psi_ij: c_ij per-pair collision frequency (1/s)
   from a pluggable source, psi_ij a success probability from the surface liquid of both granules.
 
@@ -24,7 +24,6 @@ import numpy as np
 from pbmdem.impact import N_VELOCITY_BINS, EncounterRates, representative_velocities, velocity_bin
 from pbmdem.readers import first_index
 
-from . import analytical
 from .errors import KernelShapeError, PBMInputError, positive
 from .success import SuccessProbability
 from .table import FREQUENCY_COLUMN, TableFrequency
@@ -143,14 +142,6 @@ class ConstantKernel(Kernel):
     def factors(self, inp: KernelInput) -> KernelFactors:
         return KernelFactors(self(inp))
 
-    def analytical_solution(self, v, t, N0, mean_volume):
-        """Number density n(v, t) (1/m3) for the exponential initial distribution (Scott 1968)."""
-        return analytical.constant_number_density(v, t, self.beta0, N0, mean_volume)
-
-    def analytical_moments(self, t, N0, mean_volume):
-        """(M0, M1, M2) for the exponential initial distribution."""
-        return analytical.constant_moments(t, self.beta0, N0, mean_volume)
-
 
 class SumKernel(Kernel):
     """Golovin's sum kernel beta_ij = b (v_i + v_j), b in 1/(m3 s)."""
@@ -170,13 +161,6 @@ class SumKernel(Kernel):
 
     def factors(self, inp: KernelInput) -> KernelFactors:
         return KernelFactors(self(inp))
-
-    def analytical_solution(self, v, t, N0, mean_volume):
-        """Number density n(v, t) for the exponential initial distribution (Golovin; Scott 1968)."""
-        return analytical.sum_number_density(v, t, self.b, N0, mean_volume)
-
-    def analytical_moments(self, t, N0, mean_volume):
-        return analytical.sum_moments(t, self.b, N0, mean_volume)
 
 
 def check_frequency_matrix(c, K: int, name: str) -> np.ndarray:

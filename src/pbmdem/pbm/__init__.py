@@ -10,7 +10,8 @@ positivity-preserving explicit integration.
 | --- | --- |
 | `grid` | the geometric solid-volume grid and the lever rule |
 | `aggregation` | the cell-average and fixed-pivot aggregation schemes (their pair maps for the compiled rates) |
-| `kernels` | aggregation kernels and collision-frequency sources |
+| `kernels` | aggregation kernels (the collision-frequency sources re-exported) |
+| `sources` | the constant collision-frequency source and the checks of what any source returns |
 | `breakage` | breakage: selection rates, fragment distributions and their cell-average tables |
 | `table` | the DEM collision table as a collision-frequency source (`TableFrequency`, re-exported by `kernels`) |
 | `wall_table` | the DEM's wall impacts per granule and their speeds, interpolated in size and speed (`WallTable`) |

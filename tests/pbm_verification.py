@@ -1,18 +1,17 @@
-"""The verification harness: the PBM against the closed-form solutions of `analytical`.
+"""The verification harness: the PBM against the closed-form solutions of `pbm_analytical`.
 
 Discretised initial distributions, the verification grids of the tests and benchmarks, a pure
 aggregation run and a breakage run (with or without aggregation) from an exponential start, and
-the errors of a result against the analytical solution integrated over the cells. It sits
-beside the kernels (which carry their own analytical solutions, `ConstantKernel.
-analytical_solution`, ...) and the model, and is imported by neither.
+the errors of a result against the analytical solution (`pbm_analytical`) integrated over the
+cells.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import pbm_analytical as analytical
 
 from pbmdem.config import Solver
-from pbmdem.pbm import analytical
 from pbmdem.pbm.breakage import Breakage
 from pbmdem.pbm.grid import Grid
 from pbmdem.pbm.kernels import Kernel, KernelFactors, KernelInput
@@ -52,13 +51,13 @@ def simulate_exponential(
 ):
     """Pure aggregation with ``kernel`` from the discretised exponential n(v, 0) = N0/m e^(-v/m) to
     ``t_end``. Returns ``(result, errors)``: the Result and the relative errors of the moments
-    M0, M1, M2 at ``t_end`` against ``kernel.analytical_moments`` (M_k = sum N x^k)."""
+    M0, M1, M2 at ``t_end`` against ``pbm_analytical.moments`` (M_k = sum N x^k)."""
     N = discretise_exponential(grid, N0, m)
     K = grid.bins
     solver = Solver.defaults().replace(rtol=rtol, atol=atol, max_overflow_fraction=max_overflow_fraction)
     model = GranulationPBM(grid, kernel, scheme=scheme, solver=solver)
     res = model.run(0.0, t_end, State(0.0, N, np.zeros(K), np.zeros(K)))
-    return res, res.moments()[-1] / np.array(kernel.analytical_moments(t_end, N0, m)) - 1.0
+    return res, res.moments()[-1] / np.array(analytical.moments(kernel, t_end, N0, m)) - 1.0
 
 
 def cell_errors(kernel, grid, number, t, N0: float = 1.0, m: float = 1.0):
@@ -66,7 +65,7 @@ def cell_errors(kernel, grid, number, t, N0: float = 1.0, m: float = 1.0):
     solution integrated over the cells (first cell from 0, last to infinity): the L1 error of the
     cell numbers relative to the total number, and the largest error of the cumulative mass
     (solid-volume) fraction over the bins."""
-    return density_errors(lambda v: kernel.analytical_solution(v, t, N0, m), grid, number)
+    return density_errors(lambda v: analytical.solution(kernel, v, t, N0, m), grid, number)
 
 
 class NoAggregation(Kernel):

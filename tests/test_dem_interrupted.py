@@ -234,7 +234,7 @@ def test_a_cancelled_job_ends_within_killwait_even_if_the_engine_ignores_sigterm
     launcher) that ignores it must not keep the job step alive past the cluster's KillWait (after
     which SLURM's SIGKILL misses processes re-parented to init). The engine and everything it
     started are killed SIGNAL_KILL s after the signal, and the run is reported."""
-    from pbmdem.dem.engine import SIGNAL_KILL
+    from pbmdem.dem.signals import SIGNAL_KILL
 
     pids = tmp_path / "pids"
     fake = tmp_path / "stubborn-liggghts"

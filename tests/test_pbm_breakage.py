@@ -10,6 +10,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+import pbm_analytical as an
 import pbm_oracle as oracle
 import pbm_verification as ver
 import pytest
@@ -28,7 +29,6 @@ from pbmdem.pbm import (
     PBMInputError,
     State,
 )
-from pbmdem.pbm import analytical as an
 from pbmdem.pbm.breakage import FRAGMENTS, Breakage, ConstantSelection, PowerLawSelection
 from pbmdem.pbm.setup import build_model
 

@@ -4,6 +4,7 @@ solver defaults, the grid fitted to the process."""
 from __future__ import annotations
 
 import numpy as np
+import pbm_analytical as an
 import pbm_verification as ver
 import pytest
 
@@ -20,7 +21,6 @@ from pbmdem.pbm import (
     SuccessProbability,
     SumKernel,
 )
-from pbmdem.pbm import analytical as an
 from pbmdem.pbm.errors import PBMInputError, SolverLimitError
 from pbmdem.pbm.kernels import Kernel
 from pbmdem.pbm.setup import build_grid, build_model, run_batch

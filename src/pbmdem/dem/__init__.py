@@ -6,6 +6,7 @@
 | `plan` | the plan of one run: every decision (particles, time step, phases, snapshots, seeds, deck values) |
 | `deck` | the LIGGGHTS deck: a plan formatted as text |
 | `engine` | running LIGGGHTS, judging a run against its plan, recording crashes |
+| `signals` | the engine's process: SIGINT/SIGTERM passed on, killed with its children, waited for |
 | `progress` | progress of a running job from its thermo output |
 | `run` | one run end to end in a staging folder |
 | `dumps` | reading LIGGGHTS dump files |

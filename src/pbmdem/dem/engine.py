@@ -19,12 +19,9 @@ from __future__ import annotations
 
 import os
 import re
-import resource
 import shlex
 import shutil
-import signal
 import subprocess
-import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +30,7 @@ from pbmdem.atomic import write_json
 from pbmdem.readers import InputFileError
 
 from .dumps import BINARY_SUFFIX, DumpFormatError, binary_frames, find_damage
+from .signals import PassSignals, children_cpu, wait
 
 _ERROR_LINE = re.compile(r"^(ERROR|ERROR on proc \d+).*$", re.MULTILINE)
 _LOST = re.compile(r"Lost atoms|lost atoms", re.IGNORECASE)
@@ -99,14 +97,8 @@ def _forced_restarts(workdir: Path) -> list[dict]:
     removed = []
     for path in sorted(workdir.glob("restart_forced_*")):
         step = re.search(r"(\d+)", path.name.rsplit("_", 1)[-1])
-        removed.append(
-            {
-                "file": path.name,
-                "bytes": path.stat().st_size,
-                "step": int(step.group(1)) if step else None,
-                "removed": True,
-            }
-        )
+        step = int(step.group(1)) if step else None
+        removed.append({"file": path.name, "bytes": path.stat().st_size, "step": step, "removed": True})
         path.unlink()
     return removed
 
@@ -138,79 +130,6 @@ def record_crash(workdir: Path, problems: list[str], **details) -> None:
     )
 
 
-#: seconds after a SIGINT/SIGTERM before it is passed on to a LIGGGHTS that is still running, and
-#: after which LIGGGHTS (with every process it started) is killed: a cancelled job ends well within
-#: a cluster's KillWait (SLURM's default 30 s; 10 s on the test cluster of scripts/slurm_cluster.sh),
-#: before SLURM's SIGKILL, which misses processes that were re-parented to init.
-SIGNAL_GRACE = 2.0
-SIGNAL_KILL = 5.0
-
-
-def descendants(pid: int) -> list[int]:
-    """PIDs of every process below `pid` (children first), from /proc (empty where unreadable)."""
-    children: dict[int, list[int]] = {}
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            text = stat.read_text()
-        except OSError:
-            continue
-        fields = text[text.rfind(")") + 2 :].split()
-        children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
-    out, todo = [], [pid]
-    while todo:
-        kids = children.get(todo.pop(), [])
-        out += kids
-        todo += kids
-    return out
-
-
-def kill_tree(proc: subprocess.Popen) -> None:
-    """SIGKILL `proc` and every process it started (an MPI launcher's ranks too), by PID."""
-    for pid in [*descendants(proc.pid), proc.pid]:
-        try:
-            os.kill(pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
-
-
-class _PassSignals:
-    """While LIGGGHTS runs, SIGINT/SIGTERM sent to this process are remembered instead of killing
-    Python before it can record the interruption. A signal sent to the whole job (Ctrl-C, `scancel`,
-    a time limit) reaches LIGGGHTS too; only if LIGGGHTS is still running `grace` seconds later is
-    the signal passed on (a second signal at once would make it quit without its restart file), and
-    `run` kills it if it still runs SIGNAL_KILL seconds after the first signal (`deadline`).
-    Only possible in the main thread; elsewhere nothing is changed."""
-
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
-
-    def __init__(self, proc: subprocess.Popen, grace: float = SIGNAL_GRACE):
-        self.proc, self.grace, self.received, self.saved = proc, grace, [], {}
-        self.deadline: float | None = None
-
-    def _forward(self, signum):
-        if self.proc.poll() is None:
-            self.proc.send_signal(signum)
-
-    def _handler(self, signum, frame):
-        self.received.append(signal.Signals(signum).name)
-        if self.deadline is None:
-            self.deadline = time.perf_counter() + SIGNAL_KILL
-        if self.proc.poll() is None:
-            timer = threading.Timer(self.grace, self._forward, args=(signum,))
-            timer.daemon = True
-            timer.start()
-
-    def __enter__(self):
-        if threading.current_thread() is threading.main_thread():
-            for sig in self.SIGNALS:
-                self.saved[sig] = signal.signal(sig, self._handler)
-        return self
-
-    def __exit__(self, *exc):
-        for sig, old in self.saved.items():
-            signal.signal(sig, old)
-
-
 def run(
     deck: str | Path,
     workdir: str | Path,
@@ -230,15 +149,15 @@ def run(
     cmd = command(deck_name, ranks)
     log = workdir / "log.liggghts"
     t0 = time.perf_counter()
-    cpu0 = _children_cpu()
+    cpu0 = children_cpu()
     env = dict(os.environ, OMP_NUM_THREADS="1")
     proc = subprocess.Popen(
         cmd, cwd=workdir, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, errors="replace", env=env
     )
-    with _PassSignals(proc) as signals:
-        stdout, stderr, returncode = _wait(proc, t0, timeout, poll, progress, signals)
+    with PassSignals(proc) as signals:
+        stdout, stderr, returncode = wait(proc, t0, timeout, poll, progress, signals)
     wall = time.perf_counter() - t0
-    cpu = _children_cpu() - cpu0
+    cpu = children_cpu() - cpu0
     screen = workdir / "screen.liggghts"
     screen.write_text(stdout)
     log_text = log.read_text(errors="replace") if log.exists() else ""
@@ -246,47 +165,10 @@ def run(
     log_text += "\n" + stdout
     problems, err = _problems(log_text, returncode, signals.received)
     if problems:
-        record_crash(
-            workdir,
-            problems,
-            command=cmd,
-            returncode=returncode,
-            wall_time_s=wall,
-            stderr_tail=stderr[-4000:],
-            error_line=err.group(0).strip() if err else None,
-        )
+        error_line = err.group(0).strip() if err else None
+        details = {"command": cmd, "returncode": returncode, "wall_time_s": wall, "stderr_tail": stderr[-4000:]}
+        record_crash(workdir, problems, **details, error_line=error_line)
     return LiggghtsRun(log=log, wall_time=wall, returncode=returncode, cpu_time=cpu)
-
-
-def _wait(proc: subprocess.Popen, t0: float, timeout, poll: float, progress, signals: _PassSignals):
-    """``(stdout, stderr, returncode)`` of ``proc`` (started at ``t0``) once it ended, with
-    ``progress.update()`` every ``poll`` seconds meanwhile. Kills it (returncode -9, the reason as
-    stderr) after ``timeout`` s or at the deadline of a received signal; on any exception (e.g.
-    KeyboardInterrupt) kills it and re-raises, so that the engine is never left running."""
-    try:
-        while True:
-            left = None if timeout is None else timeout - (time.perf_counter() - t0)
-            try:
-                stdout, stderr = proc.communicate(timeout=poll if left is None else max(0.0, min(poll, left)))
-                return stdout, stderr, proc.returncode
-            except subprocess.TimeoutExpired:
-                if left is not None and left <= poll:
-                    kill_tree(proc)
-                    stdout, _ = proc.communicate()
-                    return stdout, f"timed out after {timeout} s", -9
-                if signals.deadline is not None and time.perf_counter() >= signals.deadline:
-                    kill_tree(proc)  # a cancelled job must end before the cluster's KillWait
-                    stdout, _ = proc.communicate()
-                    return stdout, f"killed: still running {SIGNAL_KILL:g} s after {signals.received[0]}", -9
-                if progress is not None:
-                    progress.update()
-    except BaseException:  # e.g. KeyboardInterrupt: do not leave the engine running
-        kill_tree(proc)
-        proc.communicate()
-        raise
-    finally:
-        if progress is not None:
-            progress.close()
 
 
 def _problems(log_text: str, returncode: int, received: list) -> tuple[list[str], re.Match | None]:
@@ -305,12 +187,6 @@ def _problems(log_text: str, returncode: int, received: list) -> tuple[list[str]
     if _FORCED_RESTART.search(log_text):
         problems.append("interrupted: LIGGGHTS wrote a forced restart (it received SIGINT or SIGTERM)")
     return problems, err
-
-
-def _children_cpu() -> float:
-    """User + system CPU seconds of this process's finished, waited-for children."""
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
 
 
 def dump_steps(path: str | Path) -> list[int]:

@@ -10,7 +10,8 @@ positivity-preserving explicit integration.
 | --- | --- |
 | `grid` | the geometric solid-volume grid and the lever rule |
 | `aggregation` | the cell-average and fixed-pivot aggregation schemes (their pair maps for the compiled rates) |
-| `kernels` | aggregation kernels and collision-frequency sources (with their analytical solutions) |
+| `kernels` | aggregation kernels (the collision-frequency sources re-exported) |
+| `sources` | the constant collision-frequency source and the checks of what any source returns |
 | `breakage` | breakage: selection rates, fragment distributions and their cell-average tables |
 | `table` | the DEM collision table as a collision-frequency source (`TableFrequency`, re-exported by `kernels`) |
 | `wall_table` | the DEM's wall impacts per granule and their speeds, interpolated in size and speed (`WallTable`) |
@@ -26,7 +27,6 @@ positivity-preserving explicit integration.
 | `_compiled` | the one implementation of the rates and stages (numba), imported when a model is built |
 | `results` | time series, size statistics, tables, plots |
 | `setup` | a model and a batch from the typed settings (pbmdem.config) |
-| `analytical` | closed-form solutions of pure aggregation, pure breakage and both |
 | `errors` | the PBM's exceptions |
 
 `setup` (and with it the settings layer) is imported on first use, so `import pbmdem.pbm` stays light.

@@ -3,15 +3,16 @@
 A kernel maps the current population (a :class:`KernelInput`) to the (K, K) symmetric matrix
 beta_ij (1/s per pair) used in the population balance. Provided:
 
-* :class:`ConstantKernel` beta_ij = beta0, with Scott's (1968) analytical solution;
-* :class:`SumKernel` (Golovin) beta_ij = b (v_i + v_j), with its analytical solution;
+* :class:`ConstantKernel` beta_ij = beta0 (Scott's 1968 closed form in tests/pbm_analytical.py);
+* :class:`SumKernel` (Golovin) beta_ij = b (v_i + v_j) (likewise);
 * :class:`CollisionKernel` beta_ij = beta0 c_ij psi_ij: c_ij per-pair collision frequency (1/s)
   from a pluggable source, psi_ij a success probability from the surface liquid of both granules.
 
 Collision-frequency sources share the interface of docs/architecture.md,
 ``source(diameters (K,), numbers (K,), rpm) -> (K, K)``:
-:class:`ConstantFrequency`, :class:`TableFrequency` (DEM collision table) and the surrogate
-(``pbmdem.surrogate.CollisionSurrogate.frequency_matrix``).
+:class:`ConstantFrequency` and the checks of what a source returns (``sources``),
+:class:`TableFrequency` (DEM collision table, ``table``) and the surrogate
+(``pbmdem.surrogate.CollisionSurrogate.frequency_matrix``); all re-exported here.
 """
 
 from __future__ import annotations
@@ -21,11 +22,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from pbmdem.impact import N_VELOCITY_BINS, EncounterRates, representative_velocities, velocity_bin
-from pbmdem.readers import first_index
+from pbmdem.impact import representative_velocities
 
-from . import analytical
-from .errors import KernelShapeError, PBMInputError, positive
+from .errors import PBMInputError, positive
+from .sources import SYMMETRY_RTOL, ConstantFrequency, check_encounter_rates, check_frequency_matrix
 from .success import SuccessProbability
 from .table import FREQUENCY_COLUMN, TableFrequency
 
@@ -44,8 +44,6 @@ __all__ = [
     "check_encounter_rates",
     "check_frequency_matrix",
 ]
-
-SYMMETRY_RTOL = 1e-8
 
 
 @dataclass
@@ -143,14 +141,6 @@ class ConstantKernel(Kernel):
     def factors(self, inp: KernelInput) -> KernelFactors:
         return KernelFactors(self(inp))
 
-    def analytical_solution(self, v, t, N0, mean_volume):
-        """Number density n(v, t) (1/m3) for the exponential initial distribution (Scott 1968)."""
-        return analytical.constant_number_density(v, t, self.beta0, N0, mean_volume)
-
-    def analytical_moments(self, t, N0, mean_volume):
-        """(M0, M1, M2) for the exponential initial distribution."""
-        return analytical.constant_moments(t, self.beta0, N0, mean_volume)
-
 
 class SumKernel(Kernel):
     """Golovin's sum kernel beta_ij = b (v_i + v_j), b in 1/(m3 s)."""
@@ -170,86 +160,6 @@ class SumKernel(Kernel):
 
     def factors(self, inp: KernelInput) -> KernelFactors:
         return KernelFactors(self(inp))
-
-    def analytical_solution(self, v, t, N0, mean_volume):
-        """Number density n(v, t) for the exponential initial distribution (Golovin; Scott 1968)."""
-        return analytical.sum_number_density(v, t, self.b, N0, mean_volume)
-
-    def analytical_moments(self, t, N0, mean_volume):
-        return analytical.sum_moments(t, self.b, N0, mean_volume)
-
-
-def check_frequency_matrix(c, K: int, name: str) -> np.ndarray:
-    """Validate what a collision-frequency source returned: (K, K), finite, >= 0, symmetric."""
-    c = np.asarray(c, dtype=float)
-    if c.shape != (K, K):
-        raise KernelShapeError(
-            f"collision-frequency source {name} returned shape {c.shape}; expected "
-            f"({K}, {K}) for {K} bins (one c_ij per bin pair)"
-        )
-    if (at := first_index(~np.isfinite(c))) is not None:
-        i, j = at
-        raise KernelShapeError(
-            f"collision-frequency source {name} returned a non-finite value "
-            f"c[{i},{j}] = {c[i, j]}; allowed: finite values >= 0 (1/s per pair)"
-        )
-    if (at := first_index(c < 0)) is not None:
-        i, j = at
-        raise KernelShapeError(
-            f"collision-frequency source {name} returned a negative value "
-            f"c[{i},{j}] = {c[i, j]:.6g}; allowed: values >= 0 (1/s per pair)"
-        )
-    diff = np.abs(c - c.T)
-    tol = SYMMETRY_RTOL * np.maximum(np.abs(c), np.abs(c.T)) + 1e-300
-    if (at := first_index(diff > tol)) is not None:
-        i, j = at
-        raise KernelShapeError(
-            f"collision-frequency source {name} returned a non-symmetric matrix: "
-            f"c[{i},{j}] = {c[i, j]:.6g} but c[{j},{i}] = {c[j, i]:.6g}; c_ij must "
-            f"equal c_ji within relative {SYMMETRY_RTOL:g}"
-        )
-    return 0.5 * (c + c.T)
-
-
-def check_encounter_rates(rates, K: int, name: str):
-    """Validate what ``source.encounters`` returned: an EncounterRates whose frequency passes
-    :func:`check_frequency_matrix` and whose (K, K, V) velocity fractions are finite, >= 0,
-    symmetric in (i, j) and sum to 1 (or to 0 for a pair without encounters) over the bins.
-    Returns (frequency, fractions), both symmetrised."""
-    for attr in ("frequency", "velocity_fractions"):
-        if not hasattr(rates, attr):
-            raise KernelShapeError(
-                f"collision-frequency source {name}.encounters returned {type(rates).__name__} "
-                f"without {attr!r}; expected a pbmdem.impact.EncounterRates"
-            )
-    c = check_frequency_matrix(rates.frequency, K, name + ".encounters")
-    f = np.asarray(rates.velocity_fractions, dtype=float)
-    if f.shape != (K, K, N_VELOCITY_BINS):
-        raise KernelShapeError(
-            f"collision-frequency source {name}.encounters returned velocity fractions of "
-            f"shape {f.shape}; expected ({K}, {K}, {N_VELOCITY_BINS})"
-        )
-    if (at := first_index(~np.isfinite(f) | (f < 0))) is not None:
-        i, j, b = at
-        raise KernelShapeError(
-            f"collision-frequency source {name}.encounters returned velocity fraction "
-            f"[{i},{j},{b}] = {f[i, j, b]!r}; allowed: finite values >= 0"
-        )
-    total = f.sum(axis=2)
-    off = (np.abs(total - 1.0) > 1e-8) & (total != 0.0)
-    if (at := first_index(off)) is not None:
-        i, j = at
-        raise KernelShapeError(
-            f"collision-frequency source {name}.encounters: the velocity fractions of pair "
-            f"({i}, {j}) sum to {total[i, j]:.10g}; allowed: 1 (or 0 for a pair without data)"
-        )
-    if (at := first_index(np.abs(f - f.transpose(1, 0, 2)) > 1e-8)) is not None:
-        i, j, b = at
-        raise KernelShapeError(
-            f"collision-frequency source {name}.encounters: velocity fractions are not "
-            f"symmetric: [{i},{j},{b}] = {f[i, j, b]:.6g} but [{j},{i},{b}] = {f[j, i, b]:.6g}"
-        )
-    return c, 0.5 * (f + f.transpose(1, 0, 2))
 
 
 class CollisionKernel(Kernel):
@@ -422,37 +332,3 @@ class CollisionKernel(Kernel):
             self._beta = self._scaled * np.outer(p, p)  # = beta0 c_ij psi_ij, as before, to the bit
             self._beta_key = key
         return self._beta
-
-
-class ConstantFrequency:
-    """c_ij = value for every pair (1/s per pair).
-
-    ``impact_velocity`` (m/s, optional): one impact speed for every encounter; it enables
-    :meth:`encounters` (all encounters in the velocity bin of that speed), so that the constant
-    baseline can run with a velocity-dependent success probability.
-    """
-
-    def __init__(self, value: float, impact_velocity: float | None = None):
-        self.value = positive("constant collision frequency", value)
-        self.impact_velocity = (
-            None if impact_velocity is None else positive("constant impact velocity (m/s)", impact_velocity)
-        )
-
-    def __repr__(self) -> str:
-        vel = "" if self.impact_velocity is None else f", impact_velocity={self.impact_velocity:g}"
-        return f"ConstantFrequency({self.value:g}{vel})"
-
-    def __call__(self, diameters, numbers, rpm) -> np.ndarray:
-        K = np.atleast_1d(diameters).size
-        return np.full((K, K), self.value)
-
-    def encounters(self, diameters, numbers, rpm):
-        """EncounterRates: c_ij = value, every encounter in the bin of ``impact_velocity``."""
-        if self.impact_velocity is None:
-            raise PBMInputError(
-                "ConstantFrequency.encounters needs an impact velocity (pbm.aggregation.constant_impact_velocity, m/s)"
-            )
-        K = np.atleast_1d(diameters).size
-        f = np.zeros((K, K, N_VELOCITY_BINS))
-        f[:, :, int(velocity_bin(self.impact_velocity))] = 1.0
-        return EncounterRates(self(diameters, numbers, rpm), f)

@@ -438,24 +438,24 @@ class GranulationPBM:
         """
         t_start, t_end = float(t_start), float(t_end)
         s = self._begin(t_start, t_end, state)
-        M, x0, opt, jit = self._M, float(self.grid.x[0]), self.solver, self._jit
+        (M, xc), x0, opt, jit = self._run_classes(), float(self.grid.x[0]), self.solver, self._jit
         outs = set()
         if output_times is not None:
             outs = {float(o) for o in np.atleast_1d(output_times) if t_start < float(o) < t_end}
         edges = self.liquid.edges() if self.liquid is not None else ()
         events = sorted({t_end} | outs | {e for e in edges if t_start < e < t_end})
         rec = Records()
-        rec.add(s)
+        self._record(rec, s)
         u = self._class_state(s)
-        total_solid = float(np.sum(u[:M] * self._xc))  # x_0 units
+        total_solid = float(np.sum(u[:M] * xc))  # x_0 units
         refused = s.refused_volume / x0
         merged_n, merged_v = s.merged_number, s.merged_volume / x0  # fragments merged into x_0 so far
         allowed_refused = opt.max_overflow_fraction * total_solid
         # error scale of entry k: rtol |u_k| + atol x total solid / w_k, where number entries count
         # by their solid volume (w = x_k / x_0) and liquid and gas as volumes (w = 1)
-        floor = opt.atol * max(total_solid, 1e-300) / np.concatenate([self._xc, np.ones(2 * M)])
+        floor = opt.atol * max(total_solid, 1e-300) / np.concatenate([xc, np.ones(2 * M)])
         ctl = StepControl(opt, t_start, t_end, floor, self._stages, self._raise_bad)
-        flush_n = self._flush_n = FLUSH * float(np.sum(s.number))
+        flush_n = self._flush_n = FLUSH * self._number_total(s, u)
         flush_v = self._flush_v = FLUSH * total_solid
         jit.flush(u, M, flush_n, flush_v)
         refresh0 = getattr(self.kernel, "evaluations", None)
@@ -467,7 +467,7 @@ class GranulationPBM:
                 ev += 1
             t_next = events[ev]
             spraying = self.liquid is not None and self.liquid.active(t)
-            self._prepare(self._input(t, u.reshape(3, M)))
+            self._prepare(self._input(t, self._marginal(u)))
             if fast is not None and self._factored is not None and not python_step:
                 # the rest of the run in one compiled call (fast_steps); a step it leaves to Python
                 # (FALLBACK) is taken below and raises its error
@@ -489,6 +489,7 @@ class GranulationPBM:
             capped = dt == t_next - t
             t = t_next if capped else t + dt
             jit.flush(u, M, flush_n, flush_v)
+            self._after_step(u)
             s.steps += 1
             refused_rate, merged_n_rate, merged_v_rate = tally.tolist()  # r[3], overwritten by the next step
             refused += refused_rate * dt
@@ -501,13 +502,31 @@ class GranulationPBM:
             ctl.check_limits(t)
             if capped and (t in outs or t == t_end):
                 self._store(s, t, u, refused, (merged_n, merged_v))
-                rec.add(s)
+                self._record(rec, s)
         self._store(s, t_end, u, refused, (merged_n, merged_v))
         if refresh0 is not None:
             ctl.limits["kernel_refreshes"] = int(self.kernel.evaluations - refresh0)
         res = Result(self.grid, rec, s, self._info(ctl))
         res.info["grid_floor"] = res.grid_floor()  # fragments merged into the first pivot since the batch began
         return res
+
+    # the run's class state (GranulationPBM2D: its size x liquid classes)
+    def _run_classes(self) -> tuple[int, np.ndarray]:
+        """(number of classes M of the run's state, their solid volumes in x_0 units)."""
+        return self._M, self._xc
+
+    def _marginal(self, u: np.ndarray) -> np.ndarray:
+        """(3, M) class totals of the kernel's classes in the scaled state u."""
+        return u.reshape(3, self._M)
+
+    def _number_total(self, s: State, u: np.ndarray) -> float:
+        return float(np.sum(s.number))
+
+    def _after_step(self, u: np.ndarray) -> None:
+        """What follows every step's flush (GranulationPBM2D: the classes move to their liquid band)."""
+
+    def _record(self, rec: Records, s: State) -> None:
+        rec.add(s)
 
     def _advance_compiled(self, fast: FastSteps, s: State, rec: Records, t: float, u: np.ndarray, tallies: list):
         """The compiled steps from u at t (``fast.advance``, u in place): the states at the output

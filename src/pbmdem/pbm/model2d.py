@@ -34,7 +34,7 @@ from .liquid_grid import LiquidGrid
 from .model import GranulationPBM
 from .results import Result
 from .state import FeedGranules, State2D
-from .stepping import FLUSH, TIME_EPS, Records, StepControl
+from .stepping import TIME_EPS, Records, StepControl
 
 __all__ = ["GranulationPBM2D"]
 
@@ -75,8 +75,9 @@ class GranulationPBM2D(GranulationPBM):
         K, cell_average, target, weight, factors, _ = self._op_arrays
         self._dims = np.array([K, Mx, J, int(cell_average)], dtype=np.int64)
         self._pair = (target, weight, factors)
-        self._k2, self._r2, self._stage2 = np.empty((3, 3 * M2)), np.zeros((4, 3)), np.empty(3 * M2)
-        self._k2_rows = [k.reshape(3, M2) for k in self._k2]
+        # the work of the stages on these classes, in place of the 1-D model's
+        self._k, self._r, self._stage = np.empty((3, 3 * M2)), np.zeros((4, 3)), np.empty(3 * M2)
+        self._k_rows = [k.reshape(3, M2) for k in self._k]
         self._work2 = (
             np.empty((Mx, J + 1), dtype=np.int64),
             np.empty((4, Mx, J)),
@@ -103,27 +104,27 @@ class GranulationPBM2D(GranulationPBM):
         """(3, Mx) size-class totals of the scaled class state u (3 M2,)."""
         return np.ascontiguousarray(u.reshape(3, self._M, self._J).sum(axis=2))
 
-    def _rates2(self, t: float, u: np.ndarray, spraying: bool, j: int) -> None:
-        """Rates of the class state u into ``self._k2[j]``, its tallies (refused solid, merged
-        fragments and their solid, x_0 units) into ``self._r2[j]``."""
+    def _rates(self, t: float, u: np.ndarray, spraying: bool, j: int) -> None:
+        """Rates of the class state u into ``self._k[j]``, its tallies (refused solid, merged
+        fragments and their solid, x_0 units) into ``self._r[j]``."""
         lg = self.liquid_grid
         self._jit2.class_rates2d(
             u, self._factored, self._success_code, self._vectors2, self._xcc,
             self._params[1] if spraying else self._params[0], self._dims, lg.step, lg.centres, *self._pair,
-            *self._brk_arrays, *self._work2, self._k2_rows[j], self._r2[j],
+            *self._brk_arrays, *self._work2, self._k_rows[j], self._r[j],
         )  # fmt: skip
 
-    def _stages2(self, t: float, u: np.ndarray, dt: float, order: int, spraying: bool):
+    def _stages(self, t: float, u: np.ndarray, dt: float, order: int, spraying: bool):
         """(new state, embedded lower-order state, tallies (3,) of the step) of one step: one compiled call."""
         n = u.size
         u_new, u_low = np.empty(n), np.empty(n)
         lg = self.liquid_grid
         self._jit2.ssp_step2d(
-            u, self._k2, self._r2, dt, order, u_new, u_low, self._stage2, self._factored, self._success_code,
+            u, self._k, self._r, dt, order, u_new, u_low, self._stage, self._factored, self._success_code,
             self._vectors2, self._xcc, self._params[1] if spraying else self._params[0], self._dims, lg.step,
             lg.centres, *self._pair, *self._brk_arrays, *self._work2,
         )  # fmt: skip
-        return u_new, u_low, self._r2[3]
+        return u_new, u_low, self._r[3]
 
     # ----------------------------------------------------------------- states
     def initial_state(self, volumes, numbers, liquid_content=0.0, porosity=0.0, t=0.0, what="initial distribution"):
@@ -232,69 +233,34 @@ class GranulationPBM2D(GranulationPBM):
         )
 
     # ----------------------------------------------------------------- integration
-    def run(self, t_start: float, t_end: float, state, output_times=None) -> Result:
-        """Integrate from ``t_start`` (= ``state.t``) to ``t_end`` as :meth:`GranulationPBM.run`
-        does (the same step control, flush and records), the classes rebinned after every step."""
-        t_start, t_end = float(t_start), float(t_end)
-        s = self._begin(t_start, t_end, state)
-        M2, x0, opt, jit = self._M2, float(self.grid.x[0]), self.solver, self._jit
-        outs = set()
-        if output_times is not None:
-            outs = {float(o) for o in np.atleast_1d(output_times) if t_start < float(o) < t_end}
-        edges = self.liquid.edges() if self.liquid is not None else ()
-        events = sorted({t_end} | outs | {e for e in edges if t_start < e < t_end})
-        rec, classes = Records(), [s.classes.copy()]
+    fast_steps = False  # the compiled step loop is the 1-D model's
+
+    def _run_classes(self) -> tuple[int, np.ndarray]:
+        return self._M2, self._vectors2[0]
+
+    def _number_total(self, s: State2D, u: np.ndarray) -> float:
+        return float(np.sum(u[: self._M2]))
+
+    def _after_step(self, u: np.ndarray) -> None:
+        lg = self.liquid_grid
+        self._moved += self._jit2.rebin(
+            u, self._M, self._J, self._xcc, lg.step, lg.bounds, lg.centres, self._rebin_work
+        )
+
+    def _record(self, rec: Records, s: State2D) -> None:
         rec.add(s)
-        u = self._class_state(s)
-        xcc = self._vectors2[0]
-        total_solid = float(np.sum(u[:M2] * xcc))
-        refused = s.refused_volume / x0
-        merged_n, merged_v = s.merged_number, s.merged_volume / x0  # fragments merged into x_0 so far
-        allowed_refused = opt.max_overflow_fraction * total_solid
-        floor = opt.atol * max(total_solid, 1e-300) / np.concatenate([xcc, np.ones(2 * M2)])
-        ctl = StepControl(opt, t_start, t_end, floor, self._stages2, self._raise_bad)
-        flush_n = self._flush_n = FLUSH * float(np.sum(u[:M2]))
-        flush_v = self._flush_v = FLUSH * total_solid
-        jit.flush(u, M2, flush_n, flush_v)
-        refresh0 = getattr(self.kernel, "evaluations", None)
-        lg, moved = self.liquid_grid, 0
-        t, ev = t_start, 0
-        while t < t_end:
-            while events[ev] <= t:
-                ev += 1
-            t_next = events[ev]
-            spraying = self.liquid is not None and self.liquid.active(t)
-            self._prepare(self._input(t, self._marginal(u)))
-            self._rates2(t, u, spraying, 0)
-            k1 = self._k2[0]
-            if not jit.all_finite(k1):
-                self._raise_bad(t, np.where(np.isfinite(k1), u, np.nan), "non-finite rate")
-            u, dt, tally = ctl.step(t, t_next, u, k1, spraying)
-            refused_rate, merged_n_rate, merged_v_rate = tally.tolist()  # r[3], overwritten by the next step
-            merged_n += merged_n_rate * dt
-            merged_v += merged_v_rate * dt
-            capped = dt == t_next - t
-            t = t_next if capped else t + dt
-            jit.flush(u, M2, flush_n, flush_v)
-            moved += self._jit2.rebin(u, self._M, self._J, self._xcc, lg.step, lg.bounds, lg.centres, self._rebin_work)
-            s.steps += 1
-            refused += refused_rate * dt
-            if spraying:
-                s.liquid_added += self.liquid.rate * dt
-            if refused > allowed_refused:
-                self._overflow(t, refused, total_solid)
-            ctl.check_limits(t)
-            if capped and (t in outs or t == t_end):
-                self._store(s, t, u, refused, (merged_n, merged_v))
-                rec.add(s)
-                classes.append(s.classes.copy())
-        self._store(s, t_end, u, refused, (merged_n, merged_v))
-        if refresh0 is not None:
-            ctl.limits["kernel_refreshes"] = int(self.kernel.evaluations - refresh0)
-        info = self._info(ctl)
-        info.update({"dimensions": 2, "liquid_grid": repr(lg), "classes_moved": int(moved)})
-        res = Result(self.grid, rec, s, info)
-        res.info["grid_floor"] = res.grid_floor()  # fragments merged into the first pivot since the batch began
-        res.classes = np.stack(classes)
+        self._classes_of_run.append(s.classes.copy())
+
+    def _info(self, ctl: StepControl) -> dict:
+        info = super()._info(ctl)
+        info.update({"dimensions": 2, "liquid_grid": repr(self.liquid_grid), "classes_moved": int(self._moved)})
+        return info
+
+    def run(self, t_start: float, t_end: float, state, output_times=None) -> Result:
+        """Integrate as :meth:`GranulationPBM.run` does (the same step control, flush and records),
+        the classes rebinned after every step; ``result.classes`` (T, 3, Mx, J) at the recorded times."""
+        self._classes_of_run, self._moved = [], 0
+        res = super().run(t_start, t_end, state, output_times)
+        res.classes = np.stack(self._classes_of_run)
         res.class_volumes = self._vc.copy()
         return res

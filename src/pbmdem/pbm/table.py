@@ -45,10 +45,9 @@ class TableFrequency:
       nearest table size (c constant beyond the range: large aggregates of a PBM far outside the
       DEM sizes get the frequency of the largest DEM class); ``"linear"`` extends the power law.
 
-    Over impeller speed: the table speed is selected if it matches, log c is interpolated
-    linearly in rpm between the two neighbouring table speeds, and outside the table's speeds the
-    nearest speed is used (clamped). ``numbers`` is ignored: the table holds the DEM
-    population's own frequencies (the surrogate uses numbers).
+    Over impeller speed: log c linear in rpm between neighbouring table speeds, the nearest speed
+    outside them (:func:`speed_weights`). ``numbers`` is ignored (the table holds the DEM
+    population's own frequencies).
 
     ``velocity_table`` (optional): the impact-velocity table (results/dem/impact_velocity.csv,
     columns ``point_id, class_i, class_j, v_lo, v_hi, encounters``), joined to ``table`` on
@@ -281,35 +280,29 @@ class TableFrequency:
                 raise PBMInputError(f"{path}: no rows for distribution {distribution!r}; present: {names}")
         return table
 
-    def _log_d(self, k: int, d: np.ndarray, clamp: bool) -> tuple[np.ndarray, np.ndarray]:
+    def _log(self, k: int, d: np.ndarray, clamp: bool) -> np.ndarray:
         ld = np.log(d)
         if clamp:
             lo, hi = self.ranges[k]
             ld = np.clip(ld, np.log(lo), np.log(hi))
-        A, B = np.meshgrid(ld, ld, indexing="ij")
-        return A.ravel(), B.ravel()
+        return ld
+
+    def _log_pairs(self, k: int, d: np.ndarray, clamp: bool) -> np.ndarray:
+        A, B = np.meshgrid(*(2 * [self._log(k, d, clamp)]), indexing="ij")
+        return np.column_stack([A.ravel(), B.ravel()])
 
     def _log_matrix(self, k: int, d: np.ndarray) -> np.ndarray:
-        interp = self._interp[k]
+        interp, clamp = self._interp[k], self.extrapolation == "clamp"
         if isinstance(interp, Bilinear):  # on the pairs of the bins' log diameters (the same numbers)
-            ld = np.log(d)
-            if self.extrapolation == "clamp":
-                lo, hi = self.ranges[k]
-                ld = np.clip(ld, np.log(lo), np.log(hi))
-            L = interp.outer(ld)
+            L = interp.outer(self._log(k, d, clamp))
         else:
-            A, B = self._log_d(k, d, self.extrapolation == "clamp")
-            L = interp(np.column_stack([A, B])).reshape(d.size, d.size)
+            L = interp(self._log_pairs(k, d, clamp)).reshape(d.size, d.size)
         return 0.5 * (L + L.T)
 
     def _fractions(self, k: int, d: np.ndarray) -> np.ndarray:
-        A, B = self._log_d(k, d, True)
-        F = self._frac_interp[k](np.column_stack([A, B])).reshape(d.size, d.size, -1)
+        F = self._frac_interp[k](self._log_pairs(k, d, True)).reshape(d.size, d.size, -1)
         F = np.maximum(0.5 * (F + F.transpose(1, 0, 2)), 0.0)
         return F / F.sum(axis=2, keepdims=True)
-
-    def _speed_weights(self, rpm) -> list[tuple[int, float]]:
-        return speed_weights(self.rpms, rpm)
 
     @staticmethod
     def _diameters(diameters) -> np.ndarray:
@@ -320,7 +313,7 @@ class TableFrequency:
 
     def __call__(self, diameters, numbers, rpm) -> np.ndarray:
         d = self._diameters(diameters)
-        return np.exp(sum(w * self._log_matrix(k, d) for k, w in self._speed_weights(rpm)))
+        return np.exp(sum(w * self._log_matrix(k, d) for k, w in speed_weights(self.rpms, rpm)))
 
     def encounters(self, diameters, numbers, rpm):
         """:class:`pbmdem.impact.EncounterRates` at the bins' diameters: the frequency of
@@ -332,7 +325,7 @@ class TableFrequency:
                 "pbmdem pbm --velocity-table)"
             )
         d = self._diameters(diameters)
-        weights = self._speed_weights(rpm)
+        weights = speed_weights(self.rpms, rpm)
         freq = np.exp(sum(w * self._log_matrix(k, d) for k, w in weights))
         fractions = sum(w * self._fractions(k, d) for k, w in weights)
         return EncounterRates(freq, fractions)

@@ -170,3 +170,17 @@ def monodisperse_numbers(kernel: str, t: float, k) -> np.ndarray:
             return (k == 1) * 1.0  # c_k = k^(k-3) t^(k-1) e^(-k t) / (k-1)!
         return np.exp((k - 3) * np.log(k) + (k - 1) * np.log(t) - k * t - gammaln(k))
     raise ValueError(f"kernel {kernel!r}; allowed: 'constant', 'sum', 'product'")
+
+
+def solution(kernel, v, t, N0, m):
+    """Number density n(v, t) (1/m3) of a ConstantKernel or SumKernel for the exponential start."""
+    if hasattr(kernel, "beta0"):
+        return constant_number_density(v, t, kernel.beta0, N0, m)
+    return sum_number_density(v, t, kernel.b, N0, m)
+
+
+def moments(kernel, t, N0, m):
+    """(M0, M1, M2) of a ConstantKernel or SumKernel for the exponential start."""
+    if hasattr(kernel, "beta0"):
+        return constant_moments(t, kernel.beta0, N0, m)
+    return sum_moments(t, kernel.b, N0, m)

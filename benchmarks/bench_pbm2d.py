@@ -88,7 +88,7 @@ def evaluation_time(res) -> None:
     n = 200
     t0 = time.perf_counter()
     for _ in range(n):
-        model._rates2(state.t, u, False, 0)
+        model._rates(state.t, u, False, 0)
     dt = (time.perf_counter() - t0) / n
     print(f"one rate evaluation at the end state: {dt * 1e3:.3f} ms ({occupied} of {model._M2} classes occupied)")
 

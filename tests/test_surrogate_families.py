@@ -405,3 +405,21 @@ def test_the_tail_error_compares_the_fractions_of_fast_impacts():
     np.testing.assert_allclose(err[:2], [expected, 0.0], atol=1e-12)
     assert err[2] > 100
     assert np.isnan(tail_error(predicted[:1], np.eye(1, len(lo))))[0]  # no observed fast impact: no score
+
+
+@pytest.mark.parametrize("degree", (1, 2, 3))
+def test_response_surface_predicts_as_its_pipelines_do(degree):
+    # the response surface evaluates its fitted pipelines by their own arithmetic (no per-step
+    # validation): the mean and the predictive standard deviation equal the pipelines' predict,
+    # on SI-sized features (diameters in m, speeds in m/s) and on points outside the fitted range
+    rng = np.random.default_rng(11)
+    X = np.column_stack([rng.uniform(1e-3, 8e-3, 80), rng.uniform(0.0, 1.0, 80), rng.uniform(0.5, 6.0, 80)])
+    y = np.column_stack([np.log10(X[:, 0]) + X[:, 1] ** 2, np.sin(X[:, 2]) + X[:, 0] * 1e3])
+    model = ResponseSurface(degree=degree).fit(X, y + 0.01 * rng.standard_normal(y.shape))
+    X_new = np.vstack([X[:7] * 1.3, rng.uniform(0.0, 1.0, (5, 3)) * [1e-2, 2.0, 8.0]])
+    mean, std = model.predict_array(X_new, return_std=True)
+    for j, est in enumerate(model.estimators_):
+        m_ref, s_ref = est.predict(X_new, return_std=True)
+        assert np.allclose(mean[:, j], m_ref, rtol=1e-12, atol=1e-12)
+        assert np.allclose(std[:, j], s_ref, rtol=1e-12, atol=0.0)
+    assert np.array_equal(model.predict(X_new), model.predict_array(X_new))

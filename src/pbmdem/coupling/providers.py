@@ -137,7 +137,7 @@ class DemProvider:
             wall = _run_wall(summary)
             info = {
                 "dem_wall_time_s": wall,
-                "dem_cpu_time_s": summary["liggghts_cpu_time_s"] + summary.get("bed_liggghts_cpu_time_s", 0.0),
+                "dem_cpu_time_s": _run_cpu(summary),
                 "dem_borrowed_run": str(run_dir),
                 "dem_borrowed_wall_time_s": wall,
             }
@@ -148,8 +148,7 @@ class DemProvider:
             summary = run_point(plan, run_dir, self.execution, force=True, bed_dir=bed)
             info = {
                 "dem_wall_time_s": _run_wall(summary),
-                # the LIGGGHTS processes' CPU seconds: the run and, if it settled its own bed, the bed's
-                "dem_cpu_time_s": summary["liggghts_cpu_time_s"] + summary.get("bed_liggghts_cpu_time_s", 0.0),
+                "dem_cpu_time_s": _run_cpu(summary),
             }
             if bed is not None:
                 info |= {"dem_settled_bed": str(bed), "dem_borrowed_wall_time_s": summary["bed_liggghts_wall_time_s"]}
@@ -224,6 +223,12 @@ def _run_wall(summary: dict) -> float:
     """A DEM run's wall time as an interval counts it: LIGGGHTS, the settled bed's (if it started
     from one) and the parsing of its contacts."""
     return summary["liggghts_wall_time_s"] + summary.get("bed_liggghts_wall_time_s", 0.0) + summary["parse_time_s"]
+
+
+def _run_cpu(summary: dict) -> float:
+    """A DEM run's CPU time as an interval counts it: the LIGGGHTS processes' CPU seconds of the run
+    and, if it settled its own bed, the bed's."""
+    return summary["liggghts_cpu_time_s"] + summary.get("bed_liggghts_cpu_time_s", 0.0)
 
 
 def _digest(folder: Path | None, names) -> str | None:

@@ -378,9 +378,8 @@ def select_family(metrics: pd.DataFrame, families) -> str:
     """The family with the highest pooled held-out R2 of log10 c (the smallest squared error on
     the same rows); ties (within 1e-9) go to the earlier family in ``families``."""
     pooled = metrics[(metrics["target"] == "encounter_frequency") & (metrics["fold"] == "pooled")]
-    scores = {name: float(pooled.loc[pooled["model"] == name, "r2_log10"].iloc[0]) for name in families}
-    best = max(scores.values())
-    return next(name for name in families if scores[name] >= best - 1e-9)
+    scores = {name: {"r2_log10": float(pooled.loc[pooled["model"] == name, "r2_log10"].iloc[0])} for name in families}
+    return _best(scores, families, "r2_log10", sign=-1.0)
 
 
 def sample_scores(pred: pd.DataFrame, models, point_ids=None) -> dict:

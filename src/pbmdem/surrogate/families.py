@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import warnings
+import weakref
 
 import numpy as np
 from scipy.optimize import minimize
@@ -207,6 +208,22 @@ class KrigingRegressor(_PerOutputRegressor):
             est[-1].optimizer = "fmin_l_bfgs_b"
         return self
 
+    def _predict(self, X: np.ndarray, return_std: bool):
+        """The mean by the pipelines' own arithmetic (scale, ``K(x, X_train) @ alpha``, undo
+        ``normalize_y``: :meth:`GaussianProcessRegressor.predict`'s lines) without scikit-learn's
+        validation at each step, which cost most of a mean prediction; equal to the pipelines'
+        ``predict`` (tests/test_surrogate_families.py). The standard deviation goes through the
+        pipelines."""
+        if return_std:
+            return super()._predict(X, return_std)
+        means = []
+        for est in self.estimators_:
+            (_, scale), (_, gp) = est.steps
+            x = (X - scale.mean_) / scale.scale_
+            means.append(gp._y_train_std * (gp.kernel_(x, gp.X_train_) @ gp.alpha_) + gp._y_train_mean)
+        mean = np.column_stack(means)
+        return mean[:, 0] if self.n_outputs_ == 1 else mean
+
     def _report_warning(self, w) -> None:
         # A length scale at its upper bound means the response hardly varies along that feature:
         # expected for an irrelevant feature, so it is logged, not raised; any other warning is raised.
@@ -311,7 +328,7 @@ class ResponseSurface(_PerOutputRegressor):
         means, stds = [], []
         for est in self.estimators_:
             terms = _polynomial_terms(est, X)
-            ridge = est["ridge"]
+            ridge = est.steps[-1][1]
             means.append(terms @ ridge.coef_ + ridge.intercept_)
             if return_std:
                 stds.append(np.sqrt((terms @ ridge.sigma_ * terms).sum(axis=1) + 1.0 / ridge.alpha_))
@@ -336,14 +353,20 @@ class ResponseSurface(_PerOutputRegressor):
         ]
 
 
+#: Per fitted response-surface polynomial, its ``powers_`` (terms, features): a property that
+#: recomputes every combination at each access, which cost half of a prediction. Weak keys: a
+#: polynomial that is gone leaves no entry.
+_POWERS = weakref.WeakKeyDictionary()
+
+
 def _polynomial_terms(pipeline: Pipeline, X: np.ndarray) -> np.ndarray:
     """The standardised polynomial terms of a fitted :meth:`ResponseSurface._pipeline_of` at X:
-    scale, the products of the powers ``poly.powers_`` (features multiplied in their order),
-    scale the terms."""
-    scale, poly, scale_terms = pipeline["scale"], pipeline["poly"], pipeline["scale_terms"]
+    scale, the products of the powers ``poly.powers_`` (features multiplied in their order: a
+    power 0 contributes an exact 1), scale the terms."""
+    (_, scale), (_, poly), (_, scale_terms), _ = pipeline.steps  # by position: naming a step costs a lookup
+    powers = _POWERS.get(poly)
+    if powers is None:
+        powers = _POWERS[poly] = poly.powers_
     x = (X - scale.mean_) / scale.scale_
-    terms = np.ones((len(x), poly.powers_.shape[0]))
-    for f, powers in enumerate(poly.powers_.T):
-        used = powers > 0
-        terms[:, used] *= x[:, [f]] ** powers[used]
+    terms = np.prod(x[:, None, :] ** powers[None], axis=2)
     return (terms - scale_terms.mean_) / scale_terms.scale_

@@ -25,6 +25,7 @@ import warnings
 import weakref
 
 import numpy as np
+from scipy.linalg import solve_triangular
 from scipy.optimize import minimize
 from scipy.stats import norm
 from sklearn import config_context
@@ -209,20 +210,32 @@ class KrigingRegressor(_PerOutputRegressor):
         return self
 
     def _predict(self, X: np.ndarray, return_std: bool):
-        """The mean by the pipelines' own arithmetic (scale, ``K(x, X_train) @ alpha``, undo
-        ``normalize_y``: :meth:`GaussianProcessRegressor.predict`'s lines) without scikit-learn's
-        validation at each step, which cost most of a mean prediction; equal to the pipelines'
-        ``predict`` (tests/test_surrogate_families.py). The standard deviation goes through the
-        pipelines."""
-        if return_std:
-            return super()._predict(X, return_std)
-        means = []
+        """:meth:`GaussianProcessRegressor.predict`'s lines on the fitted pipelines' attributes
+        (scale; mean ``K(x, X_train) @ alpha``; variance ``k(x, x) - |L^-1 K(x, X_train)^T|^2``,
+        negative variances set to 0 with the same warning; undo ``normalize_y``) without
+        scikit-learn's validation at each step, which cost most of a prediction; equal to the
+        pipelines' ``predict`` (tests/test_surrogate_families.py)."""
+        means, stds = [], []
         for est in self.estimators_:
-            (_, scale), (_, gp) = est.steps
+            (_, scale), (_, gp) = est.steps  # by position: naming a step costs a lookup
             x = (X - scale.mean_) / scale.scale_
-            means.append(gp._y_train_std * (gp.kernel_(x, gp.X_train_) @ gp.alpha_) + gp._y_train_mean)
+            K_trans = gp.kernel_(x, gp.X_train_)
+            means.append(gp._y_train_std * (K_trans @ gp.alpha_) + gp._y_train_mean)
+            if return_std:
+                V = solve_triangular(gp.L_, K_trans.T, lower=True, check_finite=False)
+                var = gp.kernel_.diag(x).copy()
+                var -= np.einsum("ij,ji->i", V.T, V)
+                if np.any(var < 0):
+                    warnings.warn("Predicted variances smaller than 0. Setting those variances to 0.", stacklevel=3)
+                    var[var < 0] = 0.0
+                stds.append(np.sqrt(var * gp._y_train_std**2))
         mean = np.column_stack(means)
-        return mean[:, 0] if self.n_outputs_ == 1 else mean
+        if not return_std:
+            return mean[:, 0] if self.n_outputs_ == 1 else mean
+        std = np.column_stack(stds)
+        if self.n_outputs_ == 1:
+            return mean[:, 0], std[:, 0]
+        return mean, std
 
     def _report_warning(self, w) -> None:
         # A length scale at its upper bound means the response hardly varies along that feature:

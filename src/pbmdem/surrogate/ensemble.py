@@ -369,11 +369,6 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
     def n_members_(self) -> int:
         return len(self.estimators_)
 
-    def predict_members(self, X) -> np.ndarray:
-        """(n_members, n[, n_outputs]): every member's prediction (X as in :meth:`predict_array`)."""
-        require_fitted(self, "estimators_")
-        return _members_forward(self, np.asarray(X, dtype=np.float64))
-
     def fitted_state(self) -> dict:
         """JSON-able description of the fit (for the model's sidecar): the search and its choice."""
         check_is_fitted(self)

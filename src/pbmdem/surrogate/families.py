@@ -8,10 +8,10 @@ gets a model of its own) whose ``predict(X, return_std=True)`` returns the predi
 deviation of the model (Kriging: posterior incl. the fitted noise; RSM: Bayesian ridge
 posterior), and share the interface the surrogate uses with the MLP ensemble:
 
-* :meth:`predict_array` (the PBM's frequent calls; scikit-learn's per-call validation skipped
-  through ``sklearn.config_context``),
-* :meth:`predict_members` (``n_members`` quantiles ``mean + z_k std`` of the predictive normal,
-  ``z_k = Phi^-1((k + 1/2) / n)``), so that PBM-ANN can run once per member as with the ensemble,
+* :meth:`predict_array` (the PBM's frequent calls, without scikit-learn's per-call validation),
+* ``n_members``: the surrogate's members are the quantiles ``mean + z_k std`` of the predictive
+  normal, ``z_k = Phi^-1((k + 1/2) / n)`` (``CollisionSurrogate.member``), so that PBM-ANN can run
+  once per member as with the ensemble,
 * :meth:`fitted_state`, what the model's sidecar (``model.json``) says of the fit.
 
 Fits are single-threaded (:func:`~pbmdem.surrogate._threads.single_threaded`): the matrices are
@@ -28,7 +28,6 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.optimize import minimize
 from scipy.stats import norm
-from sklearn import config_context
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
@@ -136,19 +135,12 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
 
     def predict_array(self, X: np.ndarray, return_std: bool = False):
         """:meth:`predict` on a trusted float64 array in the training feature order, without
-        scikit-learn's per-call validation (``config_context``)."""
+        scikit-learn's per-call validation (both families predict by their fitted attributes)."""
         require_fitted(self, "estimators_")
         X = np.asarray(X, dtype=np.float64)
         if X.ndim != 2 or X.shape[1] != self.n_features_in_:
             raise ValueError(f"predict_array: X must be (n, {self.n_features_in_}), got shape {X.shape}")
-        with config_context(assume_finite=True, skip_parameter_validation=True):
-            return self._predict(X, return_std)
-
-    def predict_members(self, X) -> np.ndarray:
-        """(n_members, n[, n_outputs]): ``mean + z_k std`` for the quantiles of :func:`member_quantiles`."""
-        mean, std = self.predict_array(np.asarray(X, dtype=np.float64), return_std=True)
-        z = member_quantiles(self.n_members).reshape((-1,) + (1,) * mean.ndim)
-        return mean[None] + z * std[None]
+        return self._predict(X, return_std)
 
     def fitted_state(self) -> dict:
         """JSON-able description of the fit (for the model's sidecar)."""
@@ -178,7 +170,7 @@ class KrigingRegressor(_PerOutputRegressor):
     random_state : int
         Seed of the optimiser's restarts.
     n_members : int
-        Members of :meth:`predict_members` (quantiles of the predictive normal).
+        Members of the surrogate (quantiles of the predictive normal, ``CollisionSurrogate.member``).
     """
 
     def __init__(self, n_restarts_optimizer: int = 5, linear_trend: bool = True, random_state: int = 0, n_members=5):
@@ -270,7 +262,7 @@ class ResponseSurface(_PerOutputRegressor):
     cv, n_splits
         Grouped splitter of the degree choice (as for the MLP ensemble).
     n_members : int
-        Members of :meth:`predict_members`.
+        Members of the surrogate (as for Kriging).
 
     Attributes
     ----------

@@ -524,6 +524,3 @@ class CalibratedMember:
 
     def predict(self, X, return_std: bool = False):
         return self.predict_array(X, return_std=return_std)
-
-    def predict_members(self, X) -> np.ndarray:
-        return self.predict_array(X)[None]

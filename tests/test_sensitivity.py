@@ -199,6 +199,8 @@ def test_an_output_without_variance_or_with_a_failed_sample_has_undefined_indice
     def model(x):
         out = ishigami(x).assign(flat=0.004, broken=ishigami(x).y)
         out.loc[5, "broken"] = np.nan
+        out["failed"] = ""
+        out.loc[5, "failed"] = "the PBM holds 49.6 particles"  # the failure's reason reaches the log
         return out
 
     study = sobol_study(
@@ -209,4 +211,4 @@ def test_an_output_without_variance_or_with_a_failed_sample_has_undefined_indice
     for output in ("flat", "broken"):
         assert t.loc[output, ["S1", "ST", "S1_conf", "ST_conf"]].isna().all().all(), output
     assert "flat does not vary over the samples" in caplog.text
-    assert "mean: 1 of 320 samples without a result" in caplog.text
+    assert "mean: 1 of 320 samples without a result; its indices are undefined (first: the PBM holds 49.6" in caplog.text

@@ -127,8 +127,14 @@ def sobol_study(
             raise ValueError(f"model {name!r} returned no column(s) {missing}")
         bad = int((~np.isfinite(y[list(columns)].to_numpy(float))).any(axis=1).sum())
         if bad:
+            reasons = y["failed"].astype(str) if "failed" in y else pd.Series([], dtype=str)
+            first = next((r for r in reasons if r), "no reason recorded")
             log.warning(
-                "sensitivity: %s: %d of %d samples without a result; its indices are undefined", name, bad, len(x)
+                "sensitivity: %s: %d of %d samples without a result; its indices are undefined (first: %s)",
+                name,
+                bad,
+                len(x),
+                first,
             )
         table = indices(problem, y, columns, confidence=confidence, resamples=resamples, seed=seed)
         tables.append(table.assign(member=name))

@@ -373,5 +373,8 @@ def _polynomial_terms(pipeline: Pipeline, X: np.ndarray) -> np.ndarray:
     if powers is None:
         powers = _POWERS[poly] = poly.powers_
     x = (X - scale.mean_) / scale.scale_
-    terms = np.prod(x[:, None, :] ** powers[None], axis=2)
+    # every power of every feature once, (n, features, degree + 1), then each term's factors by index,
+    # contiguous so that the product runs over the features in their order (as the loop it replaced)
+    table = x[:, :, None] ** np.arange(powers.max() + 1)
+    terms = np.prod(np.ascontiguousarray(table[:, np.arange(powers.shape[1]), powers]), axis=2)
     return (terms - scale_terms.mean_) / scale_terms.scale_

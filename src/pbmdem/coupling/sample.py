@@ -86,16 +86,18 @@ def representative_sample(volumes, numbers, rule: SampleRule) -> DemSample:
     def count(g) -> float:
         return float(n[g].sum())
 
+    sums = [count(g) for g in groups]  # each group's number, summed again only when it grows
     while len(groups) > max_classes:
-        neighbours = [count(a) + count(b) for a, b in zip(groups, groups[1:])]
+        neighbours = [a + b for a, b in zip(sums, sums[1:])]
         j = int(np.argmin(neighbours))
         groups[j : j + 2] = [groups[j] + groups[j + 1]]
+        sums[j : j + 2] = [count(groups[j])]
     diam = [
         round(float((6.0 / math.pi * float((n[g] * x[g]).sum() / n[g].sum())) ** (1.0 / 3.0)) / DIAMETER_RESOLUTION)
         * DIAMETER_RESOLUTION
         for g in groups
     ]
-    counts = np.array([count(g) for g in groups])
+    counts = np.array(sums)
     scale = 1.0
     if counts.sum() > rule.max_particles:
         scale = rule.max_particles / counts.sum()

@@ -16,7 +16,6 @@ calibration; it is never left out of the report.
 
 from __future__ import annotations
 
-import json
 import math
 import operator
 from dataclasses import dataclass
@@ -101,11 +100,9 @@ def target_sentences(table: pd.DataFrame) -> list[str]:
     return out
 
 
-def _classes(diameters: str) -> str:
-    try:
-        return ", ".join(f"{MM * d:.2f}" for d in json.loads(diameters))
-    except (TypeError, ValueError):
-        return "n/a"
+def _classes(diameters) -> str:
+    """The sample's class diameters (an array of the contract's reader) in mm; n/a without them."""
+    return "n/a" if diameters is None else ", ".join(f"{MM * d:.2f}" for d in diameters)
 
 
 def _messages(value) -> str:

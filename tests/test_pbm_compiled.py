@@ -81,7 +81,7 @@ def _compiled_rates(op, u, beta, model, threshold, width, vectors, spray_rate, c
 def test_compiled_class_rates_and_stages_equal_the_oracle(scheme, model):
     # every process on: aggregation with a success model, spraying, consolidation; then the stages
     # of one step of every order
-    from pbmdem.pbm import _compiled
+    from pbmdem.pbm import _compiled, _compiled_steps
 
     rng = np.random.default_rng(7)
     g = Grid(30, 2.0 ** (1 / 3), v0=1.0)
@@ -111,11 +111,11 @@ def test_compiled_class_rates_and_stages_equal_the_oracle(scheme, model):
     assert np.all(refused[1:] == 0.0) and np.all(refused_ref[1:] == 0.0)  # no breakage: nothing merged
     params = np.array([0.0, 0.0, 0.02, 0.005, Q, c])
     for order in (1, 2, 3):
-        dt = 0.3 * _compiled.depletion_time(u, d)
+        dt = 0.3 * _compiled_steps.depletion_time(u, d)
         k, r = np.zeros((3, 3 * M)), np.zeros((4, 3))
         k[0], r[0] = d, refused
         u_new, u_low, stage = np.empty(3 * M), np.empty(3 * M), np.empty(3 * M)
-        _compiled.ssp_step(
+        _compiled_steps.ssp_step(
             u, k, r, dt, order, beta, _compiled.SUCCESS_CODES[model], vectors, params, *op.compiled_arrays(),
             *NO_BREAKAGE, np.zeros((2, M)), u_new, u_low, stage,
         )  # fmt: skip

@@ -24,7 +24,8 @@ positivity-preserving explicit integration.
 | `liquid_grid` | the liquid classes of the two-dimensional model |
 | `_compiled2d` | the rates and stages of the two-dimensional model (numba) |
 | `stepping` | the step control of the time integration (step sizes, rejections, limits, records) |
-| `_compiled` | the one implementation of the rates and stages (numba), imported when a model is built |
+| `_compiled` | the one implementation of the rates (numba), imported when a model is built |
+| `_compiled_steps` | the stages and the step loop of the time integration (numba), imported with it |
 | `results` | time series, size statistics, tables, plots |
 | `setup` | a model and a batch from the typed settings (pbmdem.config) |
 | `errors` | the PBM's exceptions |

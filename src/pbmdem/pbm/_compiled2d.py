@@ -12,7 +12,7 @@ G totals. The state is u = [N, L, G] (3 M2,), M2 = Mx J, volumes in units of the
 | :func:`aggregation_totals2d` | aggregation: deaths of every class, births by size cell and liquid class |
 | :func:`breakage_totals2d` | breakage of the pivot classes, fragments in their parent's liquid class |
 | :func:`class_rates2d` | all rates: flush, success per class, aggregation, breakage, spraying, consolidation |
-| :func:`ssp_step2d` | one SSP Runge-Kutta step (the stages of ``_compiled.ssp_stage``) |
+| :func:`ssp_step2d` | one SSP Runge-Kutta step (the stages of ``_compiled_steps.ssp_stage``) |
 | :func:`rebin` | after a step: a class whose mean ratio passed a neighbour's centre moves to the band of its mean |
 
 The size axis is the one-dimensional model's: the same pair map (``aggregation``: target cell and
@@ -26,7 +26,8 @@ from __future__ import annotations
 
 from numba import njit
 
-from ._compiled import ALWAYS, add_processes, flushed, ssp_stage, success_probability, surface_fraction
+from ._compiled import ALWAYS, add_processes, flushed, success_probability, surface_fraction
+from ._compiled_steps import ssp_stage
 
 
 @njit("i8(f8, f8, f8[::1])", cache=True, nogil=True)
@@ -402,7 +403,7 @@ def ssp_step2d(
     u, k, r, dt, order, u_new, u_low, stage, S, model, vectors, xc, params, dims, step, centres, target, weight,
     factors, sel, tab, bf, below, act, cw, xw, rw, pw,
 ):  # fmt: skip
-    """One SSP Runge-Kutta step of size ``dt`` from u (``_compiled.ssp_stage``) with the rates of
+    """One SSP Runge-Kutta step of size ``dt`` from u (``_compiled_steps.ssp_stage``) with the rates of
     :func:`class_rates2d`; ``k[0]``, ``r[0]``: the rates and tallies at u. The step's tallies are
     ``r[3]``."""
     M2 = vectors.shape[1]

@@ -15,7 +15,8 @@ in units of the first pivot (unit independence; docs/pbm.md, "Time integration")
 t_end, state)`` resumes from any :class:`State`, so a coupled loop can swap the
 collision-frequency source between intervals.
 
-Every rate and every stage is computed by the compiled backend (``_compiled``): a factored
+Every rate and every stage is computed by the compiled backend (``_compiled``,
+``_compiled_steps``): a factored
 kernel (``Kernel.factors``) inside it, any other kernel called here and its matrix passed in.
 
 Feed granules (``separate_feed=True``, default): the feed granules not yet aggregated are classes
@@ -103,9 +104,9 @@ class GranulationPBM:
         # building the operator imports the compiled evaluation (numba, ``_compiled``): it is loaded
         # from numba's cache, or compiled, here and not in a run
         self.aggregation = _operator(SCHEMES[scheme], grid, ())
-        from . import _compiled  # lazy: numba + compiled cache ~3 s (measured), loaded when a model is built
+        from . import _compiled, _compiled_steps  # lazy: numba + compiled cache ~3 s (measured), at model build
 
-        self._jit = _compiled
+        self._jit, self._steps = _compiled, _compiled_steps
         self._operators = {(): self.aggregation}
         # internal unit of volume: the first pivot x_0 (pivots 1, r, r^2, ...)
         self._flush_n = self._flush_v = 0.0
@@ -296,11 +297,11 @@ class GranulationPBM:
         ``self._r[0]``): (new state, embedded lower-order state, tallies of the step (3,): refused
         solid, merged fragments and merged solid rates; ``self._r[3]``, valid until the next
         step), by the
-        compiled stages (``_compiled.ssp_stage``): in one compiled call with a factored kernel,
+        compiled stages (``_compiled_steps.ssp_stage``): in one compiled call with a factored kernel,
         else stage by stage with the kernel called between them."""
         n = u.size
         u_new, u_low = np.empty(n), np.empty(n)
-        jit, k, r, stage = self._jit, self._k, self._r, self._stage
+        jit, k, r, stage = self._steps, self._k, self._r, self._stage
         params = self._params[1] if spraying else self._params[0]
         if self._factored is not None:
             jit.ssp_step(
@@ -483,7 +484,7 @@ class GranulationPBM:
             python_step = False
             self._rates(t, u, spraying, 0)
             k1 = self._k[0]
-            if not jit.all_finite(k1):
+            if not self._steps.all_finite(k1):
                 self._raise_bad(t, np.where(np.isfinite(k1), u, np.nan), "non-finite rate")
             u, dt, tally = ctl.step(t, t_next, u, k1, spraying)
             capped = dt == t_next - t

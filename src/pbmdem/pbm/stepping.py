@@ -6,7 +6,7 @@ step, ``max_step``, the next output time or spray-window edge). A step that woul
 negative entry is repeated with half the step; after ``MAX_HALVINGS`` the run stops with
 NegativePopulationError. A step whose embedded error estimate exceeds 1 is repeated with a
 smaller step. What limited each step is counted (``STEP_LIMITS``, ``result.info["step_limits"]``).
-The stages of a step are the model's (``GranulationPBM._stages``, compiled in ``_compiled``).
+The stages of a step are the model's (``GranulationPBM._stages``, compiled in ``_compiled_steps``).
 The rates are those of every process at once (aggregation, breakage, spraying, consolidation),
 so the deaths of breakage limit the step and trigger the halvings as those of aggregation do.
 """
@@ -98,9 +98,9 @@ class StepControl:
     or not finite."""
 
     def __init__(self, opt: Solver, t_start: float, t_end: float, error_floor: np.ndarray, stages, bad):
-        from . import _compiled  # lazy: numba + compiled cache ~3 s (measured), loaded when a model is built
+        from . import _compiled_steps  # lazy: numba + compiled cache ~3 s (measured), loaded when a model is built
 
-        self._jit = _compiled
+        self._jit = _compiled_steps
         self.opt, self.t_start, self.t_end = opt, t_start, t_end
         self.order = ORDERS[opt.method]
         self.expo = 1.0 / self.order

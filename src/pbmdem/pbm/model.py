@@ -30,7 +30,7 @@ import numpy as np
 
 from pbmdem.config import Solver
 
-from .aggregation import SCHEMES
+from .aggregation import SCHEMES, operator
 from .breakage import Breakage, breakage_arrays
 from .errors import GridOverflowError, KernelShapeError, NegativePopulationError, PBMInputError, positive
 from .fast_steps import FastSteps
@@ -38,27 +38,10 @@ from .grid import Grid, diameter_of
 from .kernels import Kernel, KernelInput
 from .processes import Consolidation, LiquidAddition
 from .results import Result
-from .state import FeedGranules, State, check_state, feed_volumes, granule_porosity, surface_fraction
+from .state import FeedGranules, State, check_state, feed_volumes
 from .stepping import FLUSH, STEP_LIMITS, TIME_EPS, Records, StepControl, check_solver
 
 __all__ = ["GranulationPBM", "check_solver"]
-
-
-#: aggregation operators by (scheme, pivots, cell bounds, extra classes): the same for every model
-#: of a grid (a process of the design space builds many; an operator is not modified after its build)
-_OPERATORS: dict = {}
-
-
-def _operator(scheme, grid: Grid, extra: tuple):
-    """The aggregation operator of ``scheme`` on ``grid`` with the ``extra`` class volumes (m3)."""
-    bounds = grid.edges[1:-1]
-    key = (scheme, grid.x.tobytes(), bounds.tobytes(), extra)
-    op = _OPERATORS.get(key)
-    if op is None:
-        if len(_OPERATORS) >= 32:
-            _OPERATORS.clear()
-        op = _OPERATORS[key] = scheme(grid.x, bounds, extra=extra or None)
-    return op
 
 
 class GranulationPBM:
@@ -93,7 +76,7 @@ class GranulationPBM:
         self.liquid = liquid
         self.consolidation = consolidation
         self.solver = check_solver(solver if solver is not None else Solver.defaults())
-        self.rpm = positive("impeller speed (rpm)", rpm, allow_zero=True)
+        self.set_rpm(rpm)
         if scheme not in SCHEMES:
             raise PBMInputError(f"aggregation scheme = {scheme!r}; allowed: {sorted(SCHEMES)}")
         if not isinstance(separate_feed, (bool, np.bool_)):
@@ -103,7 +86,7 @@ class GranulationPBM:
         self._brk_arrays = breakage_arrays(breakage, grid.x, grid.edges)  # None: an empty selection
         # building the operator imports the compiled evaluation (numba, ``_compiled``): it is loaded
         # from numba's cache, or compiled, here and not in a run
-        self.aggregation = _operator(SCHEMES[scheme], grid, ())
+        self.aggregation = operator(SCHEMES[scheme], grid, ())
         from . import _compiled, _compiled_steps  # lazy: numba + compiled cache ~3 s (measured), at model build
 
         self._jit, self._steps = _compiled, _compiled_steps
@@ -135,7 +118,7 @@ class GranulationPBM:
         self._classes_key = key
         op = self._operators.get(key)
         if op is None:
-            op = self._operators[key] = _operator(type(self.aggregation), self.grid, key)
+            op = self._operators[key] = operator(type(self.aggregation), self.grid, key)
         self._op = op
         self._M = op.M
         g = self.grid
@@ -232,32 +215,6 @@ class GranulationPBM:
             state.number, state.liquid, state.gas = f.number @ wn, f.liquid @ ws, f.gas @ ws
         return state
 
-    def kernel_input(self, t: float, N, L, G) -> KernelInput:
-        """Kernel input at (t, N, L, G); L and G in m3 or in any unit (only ratios are used)."""
-        S = N * self.grid.x
-        return KernelInput(
-            t=t,
-            volumes=self.grid.x,
-            diameters=self.grid.d,
-            numbers=N,
-            surface_fraction=surface_fraction(S, L, G),
-            rpm=self.rpm,
-            porosity=granule_porosity(S, G),
-        )
-
-    def rates(self, t: float, N, L, G, spraying: bool):
-        """Rates (dN, dL, dG) in m3 and the refused solid-volume rate (m3/s) at (t, N, L, G)
-        (per-bin totals, no feed classes)."""
-        self._use_classes(np.zeros(0))
-        x0 = self.grid.x[0]
-        u = np.concatenate([N, np.asarray(L, float) / x0, np.asarray(G, float) / x0])
-        inp = self.kernel_input(t, N, L, G)
-        self._prepare(inp)
-        self._rates(t, u, spraying, 0)
-        d = self._k[0].copy()
-        K = self.grid.bins
-        return d[:K], d[K : 2 * K] * x0, d[2 * K :] * x0, float(self._r[0, 0]) * x0
-
     def _rates(self, t: float, u: np.ndarray, spraying: bool, j: int) -> None:
         """Rates of the scaled class state u = [N, L/x_0, G/x_0] (M classes: the K pivots and the
         feed classes of the run, :meth:`_use_classes`) into ``self._k[j]`` (3M,), and its tallies
@@ -274,11 +231,7 @@ class GranulationPBM:
             if self._flush_n > 0:  # the kernel sees the state as the compiled rates do
                 u = self._jit.flushed(u, self._M, self._flush_n, self._flush_v)
             beta = np.ascontiguousarray(self.kernel(self._input(t, u.reshape(3, self._M))), dtype=float)
-            if beta.shape != (self._M, self._M):
-                raise KernelShapeError(
-                    f"kernel {self.kernel!r} returned shape {beta.shape}; expected ({self._M}, {self._M}) "
-                    f"for the {self._M} classes"
-                )
+            self._check_shape("shape", beta)
         self._jit.class_rates(
             u,
             beta,
@@ -343,15 +296,19 @@ class GranulationPBM:
         key = (model, threshold, width, self._flush_n, self._flush_v)
         if S is self._factors_of and key == self._factors_key:
             return  # the kernel's factors of the last step
-        if np.shape(S) != (self._M, self._M):
-            raise KernelShapeError(
-                f"kernel {self.kernel!r} returned factors of shape {np.shape(S)}; expected "
-                f"({self._M}, {self._M}) for the {self._M} classes"
-            )
+        self._check_shape("factors of shape", S)
         self._factors_of, self._factors_key = S, key
         self._factored = np.ascontiguousarray(S, dtype=float)
         self._success_code = self._jit.SUCCESS_CODES[model]
         self._set_params(threshold, width)
+
+    def _check_shape(self, what: str, matrix) -> None:
+        """KernelShapeError unless the kernel's ``matrix`` is (M, M) for the M classes of the run."""
+        if np.shape(matrix) != (self._M, self._M):
+            raise KernelShapeError(
+                f"kernel {self.kernel!r} returned {what} {np.shape(matrix)}; expected ({self._M}, {self._M}) "
+                f"for the {self._M} classes"
+            )
 
     def _input(self, t: float, nlg: np.ndarray) -> KernelInput:
         """KernelInput of the scaled class state (3, M): surface-liquid fraction from class totals."""

@@ -97,9 +97,6 @@ class GranulationPBM2D(GranulationPBM):
                 "velocity_model none, or pbm.dimensions: 1"
             )
 
-    def rates(self, *args, **kwargs):
-        raise PBMInputError("GranulationPBM2D.rates: per-bin rates are the one-dimensional model's (pbm.dimensions: 1)")
-
     def _marginal(self, u: np.ndarray) -> np.ndarray:
         """(3, Mx) size-class totals of the scaled class state u (3 M2,)."""
         return np.ascontiguousarray(u.reshape(3, self._M, self._J).sum(axis=2))

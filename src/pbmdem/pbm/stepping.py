@@ -198,21 +198,29 @@ class TimeIntegration:
         """A copy of the checked start ``state`` at t_start; sets up the run's classes."""
         if not t_end > t_start:
             raise PBMInputError(f"run: t_end = {t_end} must be > t_start = {t_start}")
+        self._check_start(state)
         if abs(state.t - t_start) > TIME_EPS * max(1.0, abs(t_start)):
             raise PBMInputError(f"run: the state is at t = {state.t}, not at t_start = {t_start}")
-        K = self.grid.bins
-        for name, arr in (("number", state.number), ("liquid", state.liquid), ("gas", state.gas)):
-            if np.shape(arr) != (K,):
-                raise PBMInputError(f"state.{name} has shape {np.shape(arr)}; expected ({K},) for this grid")
         s = state.copy()
         s.t = t_start
-        volumes = feed_volumes(self.grid, s)
-        check_state(self.grid, s, " (start of run)")
-        self._use_classes(volumes)
+        self._use_classes(self._start_classes(s))
         self.kernel.reset()
         if self.breakage is not None:
             self.breakage.reset()
         return s
+
+    def _check_start(self, state: State) -> None:
+        """PBMInputError unless ``state`` is a state of this model's grid (the 2-D model: a State2D)."""
+        K = self.grid.bins
+        for name, arr in (("number", state.number), ("liquid", state.liquid), ("gas", state.gas)):
+            if np.shape(arr) != (K,):
+                raise PBMInputError(f"state.{name} has shape {np.shape(arr)}; expected ({K},) for this grid")
+
+    def _start_classes(self, s: State) -> np.ndarray:
+        """The feed-class volumes (m3) of the run from its (copied) start state, checked."""
+        volumes = feed_volumes(self.grid, s)
+        check_state(self.grid, s, " (start of run)")
+        return volumes
 
     def run(self, t_start: float, t_end: float, state: State, output_times=None):
         """Integrate from ``t_start`` (= ``state.t``) to ``t_end``; returns a :class:`Result`.

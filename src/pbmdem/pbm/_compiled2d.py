@@ -95,26 +95,6 @@ def _split_rows(pooled, rows, factors, xr, K, J, cell_average, d):
             d[2, a] += out[2, c, e]
 
 
-@njit("i8(f8, f8, f8[::1])", cache=True, nogil=True)
-def _lower_centre(w, step, centres):
-    """The class e whose centre is the last at or below ``w`` (-1 below the first centre); ``step``
-    > 0: centres (e + 1/2) step."""
-    J = centres.size
-    if step > 0.0:
-        z = w / step - 0.5
-        if z < 0.0:
-            return -1
-        if z >= J - 1:
-            return J - 1
-        e = int(z)
-        if e < J - 1 and w >= centres[e + 1]:
-            e += 1
-        elif w < centres[e]:
-            e -= 1
-        return e
-    return _count_at_or_below(w, centres) - 1
-
-
 @njit("UniTuple(f8, 2)(f8, f8, f8, f8, f8[::1])", cache=True, nogil=True)
 def _locate(l_sum, inv_vol, kz, step, centres):
     """(e, f): the aggregate of liquid ``l_sum`` and solid 1 / ``inv_vol`` (ratio w) goes to liquid
@@ -130,7 +110,7 @@ def _locate(l_sum, inv_vol, kz, step, centres):
         e = int(z)
         return float(e), z - e
     w = l_sum * inv_vol
-    e = _lower_centre(w, step, centres)
+    e = _count_at_or_below(w, centres) - 1  # the last centre at or below w (-1: below the first)
     if e < 0:
         return 0.0, 0.0
     if e >= top:

@@ -103,6 +103,16 @@ def _combine(r, a, b, c, weight):
             r[3, q] = (r[a, q] + r[b, q] + 4.0 * r[c, q]) / 6.0
 
 
+@njit("b1(f8[::1], f8[::1], f8[:, ::1])", cache=True, nogil=True)
+def _stage_ends_step(stage, u_new, r):
+    """The step ends with ``stage`` as its new state (Euler, or an intermediate stage with a
+    negative entry), the tallies those of its first rates; True."""
+    for i in range(stage.size):
+        u_new[i] = stage[i]
+    _combine(r, 0, 0, 0, 0)
+    return True
+
+
 @njit("b1(i8, i8, f8, f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1])", cache=True, nogil=True)
 def ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
     """Stage ``j`` (1, 2, 3) of one explicit SSP Runge-Kutta step of size ``dt`` from u, given
@@ -121,12 +131,7 @@ def ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
     if j == 1:
         for i in range(n):
             stage[i] = u[i] + dt * k1[i]  # u1 (Euler)
-        if order == 1 or any_negative(stage):
-            for i in range(n):
-                u_new[i] = stage[i]
-            _combine(r, 0, 0, 0, 0)
-            return True
-        return False
+        return (order == 1 or any_negative(stage)) and _stage_ends_step(stage, u_new, r)
     k2 = k[1]
     if j == 2:
         h = 0.5 * dt
@@ -141,12 +146,7 @@ def ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
             k12 = k1[i] + k2[i]
             u_low[i] = u[i] + h * k12  # Heun: the embedded estimate
             stage[i] = u[i] + q * k12  # u2 of SSP-RK3
-        if any_negative(stage):
-            for i in range(n):
-                u_new[i] = stage[i]
-            _combine(r, 0, 0, 0, 0)
-            return True
-        return False
+        return any_negative(stage) and _stage_ends_step(stage, u_new, r)
     k3 = k[2]
     c = dt / 6.0
     for i in range(n):

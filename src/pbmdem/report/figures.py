@@ -135,9 +135,6 @@ def cumulative_undersize(diameter: np.ndarray, density_lnd: np.ndarray) -> np.nd
     return PERCENT * mass / mass[-1] if mass[-1] > 0 else np.zeros_like(mass)
 
 
-#: line styles of the snapshot times, so that curves lying on each other stay distinguishable
-
-
 def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str):
     """Cumulative mass undersize (%) against diameter (mm) at `snapshot_times`, one panel per model.
     `bins`: panel title -> that run's bins.csv (`BINS_COLUMNS`). Times whose distribution has not

@@ -3,6 +3,7 @@ speeds give the selection rate the Stokes deformation criterion predicts."""
 
 import dem_tables
 import numpy as np
+import pbm_oracle
 import pytest
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, EncounterRates, ImpactRates, WallRates, fraction_above
@@ -360,7 +361,7 @@ def test_breakage_with_a_porosity_dependent_strength_conserves_solid_liquid_and_
         print(f"n = {n:g}: {name} changed by at most {rel:.1e}")
         assert rel < 1e-13, name
     # the selection saw each bin's porosity: with n = 2 the consolidated bins' impeller impacts break less
-    impeller = model.breakage.selection.contributions(model.kernel_input(0.0, N, 0.2 * S, G))["impeller"][:12]
+    impeller = model.breakage.selection.contributions(pbm_oracle.bin_input(model, 0.0, N, 0.2 * S, G))["impeller"][:12]
     if n == 0.0:
         assert np.all(impeller == impeller[0]) and impeller[0] > 0.0
     else:

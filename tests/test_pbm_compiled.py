@@ -30,7 +30,6 @@ from pbmdem.pbm import (
 )
 from pbmdem.pbm.errors import KernelShapeError
 from pbmdem.pbm.kernels import KernelFactors
-from pbmdem.pbm.state import granule_porosity, surface_fraction
 
 
 def random_totals(rng, M, empty=5):
@@ -243,11 +242,8 @@ def bin_rates(model, t, N, L, G, spraying):
     at the per-bin totals (t, N, L, G) without feed classes: its one rate evaluation, as a step
     calls it (the kernel prepared at that state)."""
     model._use_classes(np.zeros(0))
-    g, x0, S = model.grid, model.grid.x[0], N * model.grid.x
-    phi, eps = surface_fraction(S, L, G), granule_porosity(S, G)
-    model._prepare(
-        KernelInput(t=t, volumes=g.x, diameters=g.d, numbers=N, surface_fraction=phi, rpm=model.rpm, porosity=eps)
-    )
+    g, x0 = model.grid, model.grid.x[0]
+    model._prepare(oracle.bin_input(model, t, N, L, G))
     model._rates(t, np.concatenate([N, np.asarray(L, float) / x0, np.asarray(G, float) / x0]), spraying, 0)
     d, K = model._k[0].copy(), g.bins
     return d[:K], d[K : 2 * K] * x0, d[2 * K :] * x0, float(model._r[0, 0]) * x0

@@ -129,19 +129,10 @@ class ImpactSelection:
             raise PBMInputError(f"breakage walls {list(walls)}: {unknown} unknown; allowed: {list(WALLS)}")
         self.walls = tuple(walls)
         self.pairs = bool(pairs)
-        spread = float(strength_spread)
-        if not (np.isfinite(spread) and spread >= 0):
-            raise PBMInputError(f"spread of ln Y across granules = {strength_spread!r}; allowed: finite, >= 0")
-        self.strength_spread = spread
-        exponent = float(size_exponent)
-        if not (np.isfinite(exponent) and exponent >= 0):
-            raise PBMInputError(f"strength size exponent = {size_exponent!r}; allowed: finite, >= 0")
-        self.size_exponent = exponent
+        self.strength_spread = positive("spread of ln Y across granules", strength_spread, allow_zero=True)
+        self.size_exponent = positive("strength size exponent", size_exponent, allow_zero=True)
         self.reference_diameter = positive("reference diameter of Y (m)", reference_diameter)
-        exponent = float(porosity_exponent)
-        if not (np.isfinite(exponent) and exponent >= 0):
-            raise PBMInputError(f"strength porosity exponent = {porosity_exponent!r}; allowed: finite, >= 0")
-        self.porosity_exponent = exponent
+        self.porosity_exponent = positive("strength porosity exponent", porosity_exponent, allow_zero=True)
         eps_ref = float(reference_porosity)
         if not 0.0 < eps_ref < 1.0:
             raise PBMInputError(f"reference porosity of Y = {reference_porosity!r}; allowed: 0 < porosity < 1")

@@ -127,9 +127,7 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
     """
     M = nlg.shape[1]
     born = work[:4]  # rows: number, liquid, gas born per cell, first moment D_c
-    for r in range(4):
-        for c in range(K):
-            born[r, c] = 0.0
+    born[:] = 0.0
     refused = 0.0
     partners = np.empty(M, dtype=np.int64)  # the j whose q may be nonzero
     n_partners = 0
@@ -202,9 +200,7 @@ def breakage_totals(sel, nlg, K, tab, factors, below, work, d, tally):
     a pivot with no breakage (R, RL, RG 0), add exact zeros (a sum never is -0): skipped, the same
     rates to the bit (binary fragments fill one row of each column)."""
     born = work[:4]  # rows: number, liquid, gas born per cell, first moment D_c
-    for r in range(4):
-        for c in range(K):
-            born[r, c] = 0.0
+    born[:] = 0.0
     merged_n = 0.0
     merged_v = 0.0
     ranged = below.shape[0] >= 4
@@ -316,6 +312,21 @@ def success_probability(model, threshold, width, phi, p):
             p[k] = 1.0 / (1.0 + np.exp(-z))
 
 
+@njit("f8[:, ::1](f8[::1], i8, f8[:, ::1], f8[::1], f8[:, ::1])", cache=True, nogil=True)
+def class_totals(u, model, vectors, params, pw):
+    """The class totals (3, M) of the state u = [N, L, G] (3M,), entries below the flush levels
+    ``params[0]``, ``params[1]`` counting as zero, and for a success ``model`` (not ALWAYS) the
+    surface-liquid fraction and p(phi) of every class in ``pw[0]``, ``pw[1]``."""
+    M = vectors.shape[1]
+    if params[0] > 0:
+        u = flushed(u, M, params[0], params[1])
+    nlg = u.reshape((3, M))
+    if model != ALWAYS:
+        surface_fraction(nlg, vectors[0], pw[0])
+        success_probability(model, params[2], params[3], pw[0], pw[1])
+    return nlg
+
+
 @njit(
     "void(f8[::1], f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], "
     "f8[::1], f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1])",
@@ -336,18 +347,8 @@ def class_rates(
     not spraying), consolidation rate (0: none); ``sel`` (K,), ``tab``, ``bf``, ``below``: the
     breakage's selection rates, fragment tables, split factors and fragments below the first pivot
     (:func:`breakage_totals`; ``sel`` empty: no breakage); ``pw`` (2, M): work (phi, p)."""
-    M = vectors.shape[1]
-    flush_n = params[0]
-    flush_v = params[1]
-    if flush_n > 0:
-        u = flushed(u, M, flush_n, flush_v)  # entries below the flush level count as zero
-    nlg = u.reshape((3, M))
-    phi = pw[0]
-    p = pw[1]
-    if model != ALWAYS:
-        surface_fraction(nlg, vectors[0], phi)
-        success_probability(model, params[2], params[3], phi, p)
-    tally[0] = aggregation_totals(beta, p, model != ALWAYS, nlg, K, cell_average, target, weight, factors, work, d)
+    nlg = class_totals(u, model, vectors, params, pw)
+    tally[0] = aggregation_totals(beta, pw[1], model != ALWAYS, nlg, K, cell_average, target, weight, factors, work, d)
     tally[1] = 0.0
     tally[2] = 0.0
     if sel.size > 0:

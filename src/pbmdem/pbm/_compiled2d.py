@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from numba import njit
 
-from ._compiled import ALWAYS, add_processes, flushed, success_probability, surface_fraction
+from ._compiled import ALWAYS, add_processes, class_totals
 from ._compiled_steps import ssp_stage
 
 
@@ -320,17 +320,9 @@ def class_rates2d(
     aggregation, breakage (``sel`` empty: none), spraying and
     consolidation. ``vectors`` (3, M2): class volumes, spray weights, G_min per granule; ``params``
     as ``_compiled.class_rates``'s; ``pw`` (2, M2): work (phi, p)."""
-    M2 = vectors.shape[1]
-    if params[0] > 0:
-        u = flushed(u, M2, params[0], params[1])
-    nlg = u.reshape((3, M2))
-    phi = pw[0]
-    p = pw[1]
-    if model != ALWAYS:
-        surface_fraction(nlg, vectors[0], phi)
-        success_probability(model, params[2], params[3], phi, p)
+    nlg = class_totals(u, model, vectors, params, pw)
     tally[0] = aggregation_totals2d(
-        S, p, model != ALWAYS, nlg, dims, xc, step, centres, target, weight, factors, act, cw, xw, rw, d
+        S, pw[1], model != ALWAYS, nlg, dims, xc, step, centres, target, weight, factors, act, cw, xw, rw, d
     )
     tally[1] = 0.0
     tally[2] = 0.0

@@ -311,7 +311,7 @@ def main():
         n = 2000 if K < 150 else 300
         per = {}
         oracle = partial(pbm_oracle.aggregation_totals, op, m=pbm_oracle.sparse_map(op))
-        for label, fn in (("compiled", op.totals_stacked), ("numpy", oracle)):
+        for label, fn in (("compiled", partial(pbm_oracle.compiled_totals, op)), ("numpy", oracle)):
             fn(beta, nlg)
             best = []
             for _ in range(3):

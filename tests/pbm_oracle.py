@@ -126,6 +126,28 @@ def aggregation_totals(op, beta, nlg, m=None):
     return d, float(Y[0, 2 * K + M])
 
 
+def bin_input(model, t, N, L, G):
+    """The KernelInput of a one-dimensional model at the per-bin totals (t, N, L, G) (L, G in m3 or
+    any unit: only ratios are used)."""
+    from pbmdem.pbm.kernels import KernelInput
+    from pbmdem.pbm.state import granule_porosity, surface_fraction
+
+    g, S = model.grid, N * model.grid.x
+    phi, eps = surface_fraction(S, L, G), granule_porosity(S, G)
+    return KernelInput(t=t, volumes=g.x, diameters=g.d, numbers=N, surface_fraction=phi, rpm=model.rpm, porosity=eps)
+
+
+def compiled_totals(op, beta, nlg):
+    """The library's compiled aggregation totals of the operator ``op`` (``_compiled.aggregation_totals``
+    on its arrays, no success probability): ``(d, refused)``, ``d`` (3, M) a fresh array, the refused
+    solid rate in units of x_0."""
+    from pbmdem.pbm import _compiled
+
+    d, beta, nlg = np.empty((3, op.M)), np.ascontiguousarray(beta, dtype=float), np.ascontiguousarray(nlg, dtype=float)
+    refused = _compiled.aggregation_totals(beta, np.ones(op.M), False, nlg, *op.compiled_arrays(), d)
+    return d, refused
+
+
 def breakage_totals(xr, sel, tab, nlg):
     """(3, M) breakage rates of the class totals ``nlg`` (3, M) on the pivots ``xr`` (K,, units of
     x_0): the K pivot classes die at the selection rates ``sel`` (K,) with their liquid and gas;

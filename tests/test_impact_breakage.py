@@ -3,6 +3,7 @@ speeds give the selection rate the Stokes deformation criterion predicts."""
 
 import dem_tables
 import numpy as np
+import pbm_oracle
 import pytest
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, EncounterRates, ImpactRates, WallRates, fraction_above
@@ -360,7 +361,7 @@ def test_breakage_with_a_porosity_dependent_strength_conserves_solid_liquid_and_
         print(f"n = {n:g}: {name} changed by at most {rel:.1e}")
         assert rel < 1e-13, name
     # the selection saw each bin's porosity: with n = 2 the consolidated bins' impeller impacts break less
-    impeller = model.breakage.selection.contributions(model.kernel_input(0.0, N, 0.2 * S, G))["impeller"][:12]
+    impeller = model.breakage.selection.contributions(pbm_oracle.bin_input(model, 0.0, N, 0.2 * S, G))["impeller"][:12]
     if n == 0.0:
         assert np.all(impeller == impeller[0]) and impeller[0] > 0.0
     else:
@@ -406,7 +407,7 @@ def test_the_porosity_exponent_setting_reaches_the_selection(default_config):
 
 @pytest.mark.parametrize("spread", [0.0, 0.5, 1.3])
 def test_the_compiled_selection_equals_the_numpy_form_on_random_impacts(spread):
-    # ImpactSelection.__call__ (compiled: _compiled.breaking_probability + impact_selection) against
+    # ImpactSelection.__call__ (compiled: _compiled_selection.breaking_probability + impact_selection) against
     # the numpy definition (selection_rates summed over its kinds) on random impacts, numbers,
     # sizes and porosities (so one v* per class), with pairs and each subset of the walls
     from pbmdem.impact import breaking_probability
@@ -437,11 +438,11 @@ def test_the_compiled_selection_equals_the_numpy_form_on_random_impacts(spread):
         np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-300)
         assert got.shape == (K,) and (got > 0).any()
     # the compiled probability against pbmdem.impact.breaking_probability, one row per v*
-    from pbmdem.pbm import _compiled
+    from pbmdem.pbm import _compiled_selection
 
     v = np.array([1e-4, 5e-4, 0.0316, 0.3, 0.3, 2.0, 2.0, 2.0, 9.9, 12.0])  # repeated: a row copied
     out = np.empty((v.size, N_VELOCITY_BINS))
-    _compiled.breaking_probability(v, spread, VELOCITY_EDGES, out)
+    _compiled_selection.breaking_probability(v, spread, VELOCITY_EDGES, out)
     np.testing.assert_allclose(out, breaking_probability(v, spread), rtol=1e-12, atol=1e-15)
 
 
@@ -480,7 +481,7 @@ def test_bins_that_share_their_nearest_class_fractions_give_the_selection_to_the
     # a coupling interval's bins take the velocity fractions of their nearest class
     # (ClassFrequencySource.encounters): the compiled selection sums each shared column once per
     # row (fraction_columns); against every column summed on its own (the identity map) and the numpy form
-    from pbmdem.pbm import _compiled
+    from pbmdem.pbm import _compiled_selection
     from pbmdem.pbm.impact_breakage import fraction_columns
 
     rng = np.random.default_rng(11)
@@ -497,11 +498,11 @@ def test_bins_that_share_their_nearest_class_fractions_give_the_selection_to_the
     numbers[[1, 7]] = 0.0, 0.5  # an empty bin (its column's first member skipped), one partner short
     v = rng.uniform(0.5, 6.0, K)
     probability = np.empty((K, N_VELOCITY_BINS))
-    _compiled.breaking_probability(v, 0.5, VELOCITY_EDGES, probability)
+    _compiled_selection.breaking_probability(v, 0.5, VELOCITY_EDGES, probability)
     shared, each = np.empty(K), np.empty(K)
     args = (walls.frequency, walls.velocity_fractions, probability, numbers, True)
-    _compiled.impact_selection(c, pair_f, columns, *args, shared)
-    _compiled.impact_selection(c, pair_f, np.arange(K), *args, each)
+    _compiled_selection.impact_selection(c, pair_f, columns, *args, shared)
+    _compiled_selection.impact_selection(c, pair_f, np.arange(K), *args, each)
     assert shared.tobytes() == each.tobytes()
     rates = ImpactRates(EncounterRates(c, pair_f), walls)
     np.testing.assert_allclose(shared, np.sum(list(selection_rates(rates, numbers, v, spread=0.5).values()), axis=0),

@@ -88,5 +88,5 @@ def test_a_damaged_record_is_refused_with_its_file(tmp_path):
         loop_samples(tmp_path / "validation", ["300"], 2)
     frame.loc[1, "class_frequencies"] = "[1.0, oops]"
     frame.to_csv(path, index=False)
-    with pytest.raises(ValueError, match=rf"{path}: column 'class_frequencies'"):
+    with pytest.raises(ValueError, match=rf"{path}: row 2, column 'class_frequencies' = .*: a JSON list of"):
         loop_samples(tmp_path / "validation", ["300"], 2)

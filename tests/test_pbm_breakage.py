@@ -82,7 +82,7 @@ def test_granules_at_the_first_pivot_do_not_break():
 @pytest.mark.parametrize("scheme", sorted(SCHEMES))
 @pytest.mark.parametrize("fragments", FRAGMENTS)
 def test_compiled_breakage_rates_and_stages_equal_the_oracle(scheme, fragments):
-    from pbmdem.pbm import _compiled
+    from pbmdem.pbm import _compiled, _compiled_steps
 
     rng = np.random.default_rng(3)
     g = Grid(30, 2.0 ** (1 / 3), v0=1.0)
@@ -114,11 +114,11 @@ def test_compiled_breakage_rates_and_stages_equal_the_oracle(scheme, fragments):
     # breakage changes neither the solid (x_0 units) nor the liquid and gas totals
     dn = d[0] - oracle.aggregation_totals(op, beta, u.reshape(3, M))[0][0]
     assert abs(dn @ xc) < 1e-13 * np.sum(brk[0] * N[:K] * xc[:K])
-    dt = 0.3 * _compiled.depletion_time(u, d.reshape(-1))
+    dt = 0.3 * _compiled_steps.depletion_time(u, d.reshape(-1))
     k, r = np.zeros((3, 3 * M)), np.zeros((4, 3))
     k[0], r[0] = d.reshape(-1), tally
     u_new, u_low, stage = np.empty(3 * M), np.empty(3 * M), np.empty(3 * M)
-    _compiled.ssp_step(u, k, r, dt, 3, beta, _compiled.ALWAYS, vectors, params, *op.compiled_arrays(), *brk,
+    _compiled_steps.ssp_step(u, k, r, dt, 3, beta, _compiled.ALWAYS, vectors, params, *op.compiled_arrays(), *brk,
                        np.zeros((2, M)), u_new, u_low, stage)  # fmt: skip
     ref_new, ref_low, ref_tally = oracle.ssp_step(oracle_rates, u, dt, 3)
     np.testing.assert_allclose(u_new, ref_new, rtol=1e-12, atol=1e-14 * np.abs(u).max())

@@ -154,17 +154,17 @@ def test_a_step_handed_back_to_python_and_the_compiled_rest_give_the_python_loop
 
 
 def test_a_batch_gives_the_same_result_whatever_ran_before_in_the_process(tiny_config, surrogate, monkeypatch):
-    # the loop keeps the model of its batch settings across batches (coupling.loop._model_of):
+    # the loop keeps the model of its batch settings across batches (coupling.loop._built):
     # a batch run after others (another speed, another setting, a member) equals one run on a fresh model
     from pbmdem.coupling import loop as coupling_loop
 
     on, off = _loop(tiny_config, True, 2.0), _loop(tiny_config, False)
-    monkeypatch.setattr(coupling_loop, "_MODELS", {})
+    coupling_loop._built.cache_clear()
     fresh = pbm_ann(on, surrogate, 900.0, None, log_each=False)
-    model = coupling_loop._MODELS[on.batch][0]
+    model = coupling_loop._built(on.batch)[0]
     for loop, rpm, member in ((on, 600.0, None), (off, 900.0, None), (on, 750.0, 0), (off, 600.0, 1)):
         pbm_ann(loop, surrogate if member is None else surrogate.member(member), rpm, None, log_each=False)
     again = pbm_ann(on, surrogate, 900.0, None, log_each=False)
-    assert coupling_loop._MODELS[on.batch][0] is model and len(coupling_loop._MODELS) == 2
+    assert coupling_loop._built(on.batch)[0] is model and coupling_loop._built.cache_info().currsize == 2
     _assert_same(again, fresh)
     assert again.result.info["rpm"] == 900.0

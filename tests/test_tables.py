@@ -152,7 +152,7 @@ def test_wall_velocity_run_interval_and_comparison_tables_are_checked(tmp_path):
         (COMPARISON, "d50_end_ann_mm"),
     ]
     for contract, column in cases:
-        row = {c.name: ("x" if c.kind == "str" else 1) for c in contract.columns}
+        row = {c.name: {"str": "x", "list": "[1]"}.get(c.kind, 1) for c in contract.columns}
         row[column] = -1
         path = tmp_path / f"{contract.what.replace(' ', '_')}.csv"
         pd.DataFrame([row]).to_csv(path, index=False)

@@ -23,6 +23,7 @@ replicate), so that no replicate is silently dropped from a mean.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -32,8 +33,7 @@ import pandas as pd
 
 from pbmdem.readers import InputFileError, first_index, read_table
 
-KINDS = {"int": "an integer", "float": "a number", "str": "a text"}
-NOUNS = {"int": "integer", "float": "number"}
+KINDS = {"int": "an integer", "float": "a number", "str": "a text", "list": "a JSON list of numbers"}
 SIGNS = {None: "", "nonneg": " >= 0", "positive": " > 0"}
 
 
@@ -42,11 +42,20 @@ SIGNS = {None: "", "nonneg": " >= 0", "positive": " > 0"}
 STATISTICS = ("d10", "d50", "d90")
 
 
+def as_list(cell) -> np.ndarray | None:
+    """A cell of a `list` column as a 1-D float array (an array as it is); None: not a JSON list of numbers."""
+    try:
+        values = cell if isinstance(cell, np.ndarray) else np.asarray(json.loads(cell), float)
+    except (TypeError, ValueError):
+        return None
+    return values if values.ndim == 1 else None
+
+
 @dataclass(frozen=True)
 class Column:
-    """One column: `kind` int, float or str; `sign` None, nonneg or positive (numbers); `empty`
-    (a frame -> boolean row mask) where an empty cell is allowed, None: never; `required`: the
-    column must be present."""
+    """One column: `kind` int, float, str or list (a JSON list of numbers, read as a float array);
+    `sign` None, nonneg or positive (numbers); `empty` (a frame -> boolean row mask) where an empty
+    cell is allowed, None: never; `required`: the column must be present."""
 
     name: str
     kind: str = "float"
@@ -60,12 +69,13 @@ class Column:
         blank = raw.isna().to_numpy() | (raw.astype(str).str.strip() == "").to_numpy()
         allowed = np.zeros(len(frame), bool) if self.empty is None else np.asarray(self.empty(frame), bool)
         if (row := first_index(blank & ~allowed)) is not None:
-            reason = "an empty cell" + (
-                " is allowed only where " + self.empty.__doc__ if self.empty else " is not allowed"
-            )
-            return row, f"{KINDS[self.kind]}{SIGNS[self.sign]} is required ({reason})"
+            reason = " is allowed only where " + self.empty.__doc__ if self.empty else " is not allowed"
+            return row, f"{KINDS[self.kind]}{SIGNS[self.sign]} is required (an empty cell{reason})"
         if self.kind == "str":
             return None
+        if self.kind == "list":
+            bad = np.array([not b and as_list(cell) is None for cell, b in zip(raw, blank)], bool)
+            return None if (row := first_index(bad)) is None else (row, f"{KINDS['list']} is required")
         values = pd.to_numeric(raw.where(~blank), errors="coerce").to_numpy(float)
         checks = [~blank & ~np.isfinite(values)]
         if self.kind == "int":
@@ -75,7 +85,7 @@ class Column:
         elif self.sign == "positive":
             checks.append(~blank & ~(values > 0))
         if (row := first_index(np.logical_or.reduce(checks))) is not None:
-            return row, f"a finite {NOUNS[self.kind]}{SIGNS[self.sign]} is required"
+            return row, f"a finite {KINDS[self.kind].split()[-1]}{SIGNS[self.sign]} is required"
         return None
 
 
@@ -105,7 +115,8 @@ class Table:
                 value = frame[column.name].iloc[row]
                 value = value.item() if hasattr(value, "item") else value  # a numpy scalar as plain Python
                 raise InputFileError(f"{label}: row {row + 1}, column {column.name!r} = {value!r}: {requirement}")
-        return frame
+        lists = [c.name for c in self.columns if c.kind == "list" and c.name in frame.columns]  # decoded once, here
+        return frame.assign(**{name: [as_list(cell) for cell in frame[name]] for name in lists}) if lists else frame
 
     def read(self, path: str | Path, what: str | None = None, need=None) -> pd.DataFrame:
         """The table at `path` (a CSV), checked (`what` replaces the table's name in messages;
@@ -122,15 +133,11 @@ def _numbers(frame: pd.DataFrame, name: str) -> np.ndarray:
     return pd.to_numeric(frame[name], errors="coerce").to_numpy(float)
 
 
-def _pair_count(frame: pd.DataFrame) -> np.ndarray:
-    n_i, n_j = _numbers(frame, "n_i"), _numbers(frame, "n_j")
-    same = _numbers(frame, "class_i") == _numbers(frame, "class_j")
-    return np.where(same, n_i * (n_i - 1) / 2, n_i * n_j)
-
-
 def no_pairs(frame: pd.DataFrame) -> np.ndarray:
     """the class pair has no particle pair (n_i n_j, or n_i (n_i - 1) / 2 on the diagonal, is 0)"""
-    return _pair_count(frame) == 0
+    n_i, n_j = _numbers(frame, "n_i"), _numbers(frame, "n_j")
+    same = _numbers(frame, "class_i") == _numbers(frame, "class_j")
+    return np.where(same, n_i * (n_i - 1) / 2, n_i * n_j) == 0
 
 
 def no_particles(frame: pd.DataFrame) -> np.ndarray:
@@ -251,12 +258,7 @@ GRID_PAIRS = _grid(RUN_PAIRS, "collision table", KEYS["pairs"])
 GRID_WALLS = _grid(RUN_WALLS, "wall-collision table", KEYS["walls"])
 GRID_VELOCITIES = _grid(RUN_VELOCITIES, "impact-velocity table", KEYS["velocities"])
 GRID_WALL_VELOCITIES = _grid(RUN_WALL_VELOCITIES, "wall impact-velocity table", KEYS["wall_velocities"])
-RUN_TABLES = {
-    "pairs": RUN_PAIRS,
-    "walls": RUN_WALLS,
-    "velocities": RUN_VELOCITIES,
-    "wall_velocities": RUN_WALL_VELOCITIES,
-}
+RUN_TABLES = dict(zip(KEYS, (RUN_PAIRS, RUN_WALLS, RUN_VELOCITIES, RUN_WALL_VELOCITIES)))  # by kind, as KEYS
 
 RUNS = Table(
     "DEM run table",
@@ -281,10 +283,10 @@ INTERVALS = Table(
         Column("rpm", sign="positive"),
         _text("method"),
         Column("classes", "int", "positive"),
-        _text("class_diameters"),
-        _text("class_counts"),
+        Column("class_diameters", "list", None),
+        Column("class_counts", "list", None),
         Column("sample_particles", "int", "positive"),
-        _text("class_frequencies"),
+        Column("class_frequencies", "list", None),
         Column("mean_frequency_per_pair"),
         Column("provider_wall_time_s"),
         Column("pbm_wall_time_s"),
@@ -311,12 +313,8 @@ def _no_cpu_time(frame: pd.DataFrame) -> np.ndarray:
 
 
 def _not_recorded(frame: pd.DataFrame) -> np.ndarray:
-    """the run recorded no out-of-domain count (a surrogate-free run, or an older record)"""
-    return np.ones(len(frame), bool)
-
-
-def _no_floor(frame: pd.DataFrame) -> np.ndarray:
-    """the run recorded no grid floor (an older record, before the tally of merged fragments)"""
+    """the run did not record it (a surrogate-free run, or an older record: before the out-of-domain
+    count or the tally of fragments merged at the grid floor)"""
     return np.ones(len(frame), bool)
 
 
@@ -367,9 +365,9 @@ COMPARISON = Table(
         Column("ann_out_of_domain_warnings", "int", empty=_not_recorded),
         Column("constant_calibration_out_of_domain_warnings", "int", empty=_not_recorded),
         # breakage fragments merged at the grid floor, share of the final number (pbm.results.grid_floor)
-        Column("dem_merged_fraction_max", empty=_no_floor),
-        Column("ann_merged_fraction", empty=_no_floor),
-        Column("constant_merged_fraction", empty=_no_floor),
+        Column("dem_merged_fraction_max", empty=_not_recorded),
+        Column("ann_merged_fraction", empty=_not_recorded),
+        Column("constant_merged_fraction", empty=_not_recorded),
     ),
 )
 

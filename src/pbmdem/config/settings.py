@@ -292,8 +292,13 @@ class Config:
         return json.loads(json.dumps(self.mapping, sort_keys=True))
 
     def sha256(self) -> str:
-        """Hash of the completed configuration (key order and formatting do not matter)."""
-        return hashlib.sha256(json.dumps(self.to_dict(), sort_keys=True).encode()).hexdigest()
+        """Hash of the completed configuration (:func:`sha256_of`)."""
+        return sha256_of(self.to_dict())
+
+
+def sha256_of(mapping: dict) -> str:
+    """sha256 of a configuration mapping, key order and formatting ignored."""
+    return hashlib.sha256(json.dumps(mapping, sort_keys=True).encode()).hexdigest()
 
 
 def _or(value, default):

@@ -12,7 +12,7 @@ import hashlib
 import json
 import logging
 import shutil
-from dataclasses import asdict
+from dataclasses import asdict, fields
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -21,24 +21,15 @@ import numpy as np
 from pbmdem.atomic import atomic_path, write_json
 from pbmdem.pbm.results import Result
 from pbmdem.pbm.state import FeedGranules, State, State2D
+from pbmdem.pbm.stepping import Records
 from pbmdem.readers import read_json
 
 from .sample import DemSample
 
 log = logging.getLogger(__name__)
 
-#: the records of a Result; merged_*: breakage fragments merged at the grid floor (State)
-RECORD_NAMES = (
-    "times",
-    "number",
-    "liquid",
-    "gas",
-    "liquid_added",
-    "refused",
-    "steps",
-    "merged_number",
-    "merged_volume",
-)
+#: the records of a Result (``pbm.stepping.Records``); merged_*: breakage fragments merged at the grid floor (State)
+RECORD_NAMES = tuple(f.name for f in fields(Records))
 
 
 def discard_stale(outdir: Path, inputs: dict) -> None:

@@ -10,6 +10,7 @@ after the last finished interval.
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import time
@@ -49,28 +50,23 @@ class LoopOutcome:
     totals: dict
 
 
-#: the PBM models built in this process, by batch settings (:func:`_model_of`); few: the design
-#: space and the sensitivity analysis run many batches of one or a few settings in turn
-_MODELS: dict = {}
-_MAX_MODELS = 4
+@functools.lru_cache(maxsize=4)  # few: the design space and sensitivity run many batches of a few settings in turn
+def _built(batch):
+    """(model, its breakage selection from impacts or None, the initial state) of the batch
+    settings ``batch``, built once in this process; building the model and its operators took about
+    1 ms of a few-ms batch."""
+    selection = impact_selection(batch.pbm)  # breakage from each interval's impacts (None: aggregation only)
+    model = build_model(batch.pbm, ConstantFrequency(1.0), selection=selection)  # sources per interval
+    return model, selection, initial_state(batch, model)
 
 
 def _model_of(batch, rpm: float):
-    """(model, its breakage selection from impacts or None, the initial state) of a loop over the
-    batch settings ``batch`` at ``rpm``: the model built for these settings before in this process,
-    its frequency source and selection's source set anew by every interval and its run state by
-    every run (``GranulationPBM.run``: the classes, the kernel and the breakage reset), so a batch
-    gives the same result to the bit whatever ran before (tests/test_pbm_fast_steps.py); building
-    the model and its operators took about 1 ms of a few-ms batch."""
-    entry = _MODELS.pop(batch, None)
-    if entry is None:
-        selection = impact_selection(batch.pbm)  # breakage from each interval's impacts (None: aggregation only)
-        model = build_model(batch.pbm, ConstantFrequency(1.0), rpm=rpm, selection=selection)  # sources per interval
-        entry = (model, selection, initial_state(batch, model))
-        while len(_MODELS) >= _MAX_MODELS:
-            _MODELS.pop(next(iter(_MODELS)))
-    _MODELS[batch] = entry  # the most recent last
-    model, selection, state = entry
+    """The model of ``batch`` (:func:`_built`) at ``rpm``, its selection and a copy of the initial
+    state: the frequency source and the selection's source are set anew by every interval and the
+    run state by every run (``GranulationPBM.run``: the classes, the kernel and the breakage
+    reset), so a batch gives the same result to the bit whatever ran before
+    (tests/test_pbm_fast_steps.py)."""
+    model, selection, state = _built(batch)
     model.set_rpm(rpm)
     return model, selection, state.copy()
 

@@ -134,10 +134,7 @@ def pair_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, met
         enc_per_pair = np.where(pairs > 0, enc / (pairs * sampling_time), np.nan)
     return pd.DataFrame(
         {
-            "point_id": meta["point_id"],
-            "rpm": meta["rpm"],
-            "distribution": meta["distribution"],
-            "replicate": meta["replicate"],
+            **meta,
             "class_i": i,
             "class_j": j,
             "d_i": d[i],
@@ -163,10 +160,7 @@ def velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
     b = np.arange(N_VELOCITY_BINS)
     return pd.DataFrame(
         {
-            "point_id": meta["point_id"],
-            "rpm": meta["rpm"],
-            "distribution": meta["distribution"],
-            "replicate": meta["replicate"],
+            **meta,
             "class_i": np.repeat(i, N_VELOCITY_BINS),
             "class_j": np.repeat(j, N_VELOCITY_BINS),
             "v_lo": np.tile(VELOCITY_EDGES[:-1], len(i)),
@@ -182,10 +176,7 @@ def wall_velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
     w, c = np.repeat(np.arange(walls), k), np.tile(np.arange(k), walls)
     return pd.DataFrame(
         {
-            "point_id": meta["point_id"],
-            "rpm": meta["rpm"],
-            "distribution": meta["distribution"],
-            "replicate": meta["replicate"],
+            **meta,
             "wall": np.repeat(np.asarray(WALL_NAMES)[w], N_VELOCITY_BINS),
             "class_i": np.repeat(c, N_VELOCITY_BINS),
             "v_lo": np.tile(VELOCITY_EDGES[:-1], len(w)),
@@ -201,10 +192,7 @@ def wall_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, met
         for c in range(len(n)):
             rows.append(
                 {
-                    "point_id": meta["point_id"],
-                    "rpm": meta["rpm"],
-                    "distribution": meta["distribution"],
-                    "replicate": meta["replicate"],
+                    **meta,
                     "class_i": c,
                     "d_i": float(diameters[c]),
                     "n_i": int(n[c]),
@@ -311,12 +299,8 @@ class RunAnalysis:
     def tables(self) -> RunTables:
         K = self.n_classes
         plan = self.plan
-        meta = {
-            "point_id": plan.point_id,
-            "rpm": plan.rpm,
-            "distribution": plan.distribution,
-            "replicate": plan.replicate,
-        }
+        # the run's columns, first in every table, in this order
+        meta = {key: getattr(plan, key) for key in ("point_id", "rpm", "distribution", "replicate")}
         ev, group = self.pair_events()
         pair_tally = _tally(group, ev, (K, K))
         wev, wgroup = self.wall_events()

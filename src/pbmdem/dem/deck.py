@@ -115,6 +115,13 @@ def render(template_name: str, values: dict[str, str], kind: str | None = None) 
         raise DeckValueError(f"template {template_name} needs a value for {exc.args[0]}") from None
 
 
+#: the plan's fields that fill the placeholders of the same name: numbers, integers, and the run's integers
+BED_NUMBERS = ("timestep", "rayleigh_limit", "fill_radius", "fill_zlo", "fill_zhi", "insert_rate")
+BED_INTEGERS = ("n_particles", "insert_every", "thermo_every", "vtk_every", "settle_steps")
+RUN_INTEGERS = ("spinup_steps", "sampling_steps", "spinup_pre_steps", "record_steps", "position_interval",
+                "collision_interval")  # fmt: skip
+
+
 def _matrix(value: float, n: int) -> str:
     return " ".join([number("matrix", value)] * (n * n))
 
@@ -142,25 +149,17 @@ def bed_values(bed: BedPlan, ranks: int) -> dict[str, str]:
         "restitution_matrix": _matrix(mat.restitution, n),
         "friction_matrix": _matrix(mat.friction, n),
         "rolling_matrix": _matrix(mat.rolling_friction, n),
-        "timestep": num("timestep", bed.timestep),
         "bowl_stl": "bowl.stl",
         "impeller_stl": "impeller.stl",
         "post_dir": "post",
         "check_every": num("check_every", bed.thermo_every, integer=True),
-        "rayleigh_limit": num("rayleigh_limit", bed.rayleigh_limit),
         "particle_templates_block": "\n".join(templates),
         "seed_dist": num("seed", bed.distribution_seed, integer=True),
         "distribution_weights": weights,
-        "fill_radius": num("fill_radius", bed.fill_radius),
-        "fill_zlo": num("fill_zlo", bed.fill_zlo),
-        "fill_zhi": num("fill_zhi", bed.fill_zhi),
         "seed_insert": num("seed", bed.insertion_seed, integer=True),
-        "n_particles": num("n_particles", bed.n_particles, integer=True),
-        "insert_rate": num("insert_rate", bed.insert_rate),
-        "insert_every": num("insert_every", bed.insert_every, integer=True),
-        "thermo_every": num("thermo_every", bed.thermo_every, integer=True),
-        "vtk_every": num("vtk_every", bed.vtk_every, integer=True),
-        "settle_steps": num("settle_steps", bed.settle_steps, integer=True),
+        # the plan's fields of the same name
+        **{key: num(key, getattr(bed, key)) for key in BED_NUMBERS},
+        **{key: num(key, getattr(bed, key), integer=True) for key in BED_INTEGERS},
     }
 
 
@@ -170,14 +169,8 @@ def granulator_values(plan: DemPlan, ranks: int) -> dict[str, str]:
     num = number
     return bed_values(plan, ranks) | {
         "point_id": known_name("point_id", plan.point_id.replace(".", "p")),
-        "neighbor_skin": num("neighbor_skin", plan.neighbor_skin),
-        "spinup_steps": num("spinup_steps", plan.spinup_steps, integer=True),
-        "sampling_steps": num("sampling_steps", plan.sampling_steps, integer=True),
-        "spinup_pre_steps": num("spinup_pre_steps", plan.spinup_pre_steps, integer=True),
-        "record_steps": num("record_steps", plan.record_steps, integer=True),
-        "position_interval": num("position_interval", plan.position_interval, integer=True),
-        "rotation_period": num("rotation_period", plan.rotation_period),
-        "collision_interval": num("collision_interval", plan.collision_interval, integer=True),
+        **{key: num(key, getattr(plan, key)) for key in ("neighbor_skin", "rotation_period")},
+        **{key: num(key, getattr(plan, key), integer=True) for key in RUN_INTEGERS},
     }
 
 

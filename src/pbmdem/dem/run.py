@@ -91,16 +91,22 @@ def prepare_run(
     return run_dir / "in.granulator"
 
 
+def _fresh_stage(folder: Path) -> Path:
+    """The staging folder beside `folder` (`.<name>.staging`), what an earlier attempt left there removed."""
+    where = folder.resolve()
+    stage = where.parent / f".{where.name}.staging"
+    if stage.exists():
+        shutil.rmtree(stage)
+    return stage
+
+
 def settle_bed(bed: BedPlan, bed_dir: str | Path, execution: DemExecution) -> dict:
     """Insert and settle the bed `bed` in `bed_dir` and write it to `bed.restart`, then
     `bed.json` (the bed's plan, the deck's hash, the wall time), last, as the finished marker.
     Made in a staging folder and moved into place only when LIGGGHTS reached the planned step."""
     bed_dir = Path(bed_dir)
     key = bed_key(bed)  # raises on any bad value, before any I/O
-    where = bed_dir.resolve()
-    stage = where.parent / f".{where.name}.staging"
-    if stage.exists():
-        shutil.rmtree(stage)
+    stage = _fresh_stage(bed_dir)
     (stage / "post").mkdir(parents=True)
     geometry.write_granulator(bed.granulator, stage)
     write_text(stage / "in.bed", render_bed(bed, execution.mpi_ranks))
@@ -240,10 +246,7 @@ def run_point(
             "refusing to overwrite it (rerunning would give it new time stamps, so Snakemake would redo "
             "everything downstream). Use --force to replace it, or --out to write elsewhere."
         )
-    where = run_dir.resolve()
-    stage = where.parent / f".{where.name}.staging"
-    if stage.exists():
-        shutil.rmtree(stage)
+    stage = _fresh_stage(run_dir)
     stage.mkdir(parents=True)
     try:
         summary = _run_in(plan, stage, run_dir, execution, deck, progress_bar, bed)

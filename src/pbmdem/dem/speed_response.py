@@ -105,27 +105,14 @@ def plot_speed_response(response: pd.DataFrame, path) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     several = response.groupby("distribution").rpm.transform("nunique") > 1
     single = response[~several]
-    for ax, column in zip(axes, ("encounters_per_particle_per_s", "new_contacts_per_particle_per_s")):
+    columns = ("encounters_per_particle_per_s", "new_contacts_per_particle_per_s")
+    for ax, column in zip(axes, columns):
         if len(single):
             ax.plot(single.rpm, single[column], "o", color="0.6", markersize=4, label="single points")
     for dist, g in response[several].groupby("distribution"):
         g = g.sort_values("rpm")
-        axes[0].errorbar(
-            g.rpm,
-            g.encounters_per_particle_per_s,
-            yerr=g.encounters_per_particle_per_s_se,
-            marker="o",
-            capsize=3,
-            label=dist,
-        )
-        axes[1].errorbar(
-            g.rpm,
-            g.new_contacts_per_particle_per_s,
-            yerr=g.new_contacts_per_particle_per_s_se,
-            marker="s",
-            capsize=3,
-            label=dist,
-        )
+        for ax, column, marker in zip(axes, columns, "os"):
+            ax.errorbar(g.rpm, g[column], yerr=g[f"{column}_se"], marker=marker, capsize=3, label=dist)
     axes[0].set(
         xlabel="impeller speed (rpm)",
         ylabel="encounters per particle (1/s)",

@@ -19,12 +19,13 @@ positivity-preserving explicit integration.
 | `success` | the success probability of a pair and the Stokes criterion of velocity-dependent success |
 | `processes` | liquid addition and consolidation |
 | `state` | the resumable state of a run |
-| `model` | the population balance and its time integration |
+| `model` | the population balance: its classes, states, rates and stages |
 | `model2d` | the two-dimensional population balance: size x liquid-to-solid ratio classes (`pbm.dimensions: 2`) |
 | `liquid_grid` | the liquid classes of the two-dimensional model |
 | `_compiled2d` | the rates and stages of the two-dimensional model (numba) |
-| `stepping` | the step control of the time integration (step sizes, rejections, limits, records) |
-| `_compiled` | the one implementation of the rates and stages (numba), imported when a model is built |
+| `stepping` | the time integration: the run loop and its step control (step sizes, rejections, limits, records) |
+| `_compiled` | the one implementation of the rates (numba), imported when a model is built |
+| `_compiled_steps` | the stages and the step loop of the time integration (numba), imported with it |
 | `results` | time series, size statistics, tables, plots |
 | `setup` | a model and a batch from the typed settings (pbmdem.config) |
 | `errors` | the PBM's exceptions |

@@ -1,10 +1,9 @@
-"""The PBM's compiled backend (numba): every loop of the rate processes and of the time
-integration, written once. ``GranulationPBM`` calls these primitives for every kernel: a factored
-kernel (``Kernel.factors``: beta_ij = S_ij p(phi_i) p(phi_j)) is evaluated inside
-:func:`class_rates`, any other kernel is evaluated in Python and its matrix passed to the same
-:func:`class_rates` (success model ALWAYS); the Runge-Kutta stages are :func:`ssp_stage`, run in
-one compiled call by :func:`ssp_step` for a factored kernel and stage by stage (the kernel called
-between the stages) otherwise.
+"""The PBM's compiled rates (numba): every loop of the rate processes, written once.
+``GranulationPBM`` calls these primitives for every kernel: a factored kernel (``Kernel.factors``:
+beta_ij = S_ij p(phi_i) p(phi_j)) is evaluated inside :func:`class_rates`, any other kernel is
+evaluated in Python and its matrix passed to the same :func:`class_rates` (success model ALWAYS).
+The time integration on these rates (the Runge-Kutta stages, the step control's vector
+operations, the step loop) is ``_compiled_steps``.
 
 | primitive | what it computes |
 | --- | --- |
@@ -13,12 +12,11 @@ between the stages) otherwise.
 | :func:`aggregation_totals` | aggregation: deaths and births of the M classes over the M^2 ordered pairs |
 | :func:`breakage_totals` | breakage: deaths of the pivot classes and the cell-average births of their fragments |
 | :func:`add_processes` | binder spraying and consolidation |
-| :func:`selection_of_impacts` | breakage selection from impacts: v*, breaking probability per velocity bin, rate |
 | :func:`class_rates` | all rates of a class state: flush, success, aggregation, breakage, spraying, consolidation |
-| :func:`ssp_stage`, :func:`ssp_step` | the stages of one SSP Runge-Kutta step |
-| the rest | the small vector operations of the step control (flush, depletion time, error norm) |
+| :func:`flush`, :func:`flushed` | entries below their flush level set to zero |
 
-Breakage (a selection rate per pivot and the fragment tables of ``breakage.Breakage``) is one
+The breakage selection from impacts is ``_compiled_selection``. Breakage (a selection rate per
+pivot and the fragment tables of ``breakage.Breakage``) is one
 more loop called from :func:`class_rates`, after :func:`aggregation_totals`; every kernel and
 every stage sees it, and without breakage (an empty selection) the rates are those of
 aggregation alone, to the bit.
@@ -129,9 +127,7 @@ def aggregation_totals(beta, p, use_p, nlg, K, cell_average, target, weight, fac
     """
     M = nlg.shape[1]
     born = work[:4]  # rows: number, liquid, gas born per cell, first moment D_c
-    for r in range(4):
-        for c in range(K):
-            born[r, c] = 0.0
+    born[:] = 0.0
     refused = 0.0
     partners = np.empty(M, dtype=np.int64)  # the j whose q may be nonzero
     n_partners = 0
@@ -204,9 +200,7 @@ def breakage_totals(sel, nlg, K, tab, factors, below, work, d, tally):
     a pivot with no breakage (R, RL, RG 0), add exact zeros (a sum never is -0): skipped, the same
     rates to the bit (binary fragments fill one row of each column)."""
     born = work[:4]  # rows: number, liquid, gas born per cell, first moment D_c
-    for r in range(4):
-        for c in range(K):
-            born[r, c] = 0.0
+    born[:] = 0.0
     merged_n = 0.0
     merged_v = 0.0
     ranged = below.shape[0] >= 4
@@ -254,7 +248,7 @@ def add_processes(d, nlg, spray_rate, spray_weight, consolidation_rate, gas_min)
             d[2, k] -= consolidation_rate * (nlg[2, k] - gas_min[k] * nlg[0, k])
 
 
-# ----------------------------------------------------------------- helpers of the time integration
+# ----------------------------------------------------------------- vector helpers
 # Each replaces 2-6 numpy calls on the (3M,) state by one; elementwise the same operations, so
 # the same result to the bit.
 
@@ -304,51 +298,6 @@ def flushed(u, M, flush_n, flush_v):
     return u
 
 
-@njit("f8(f8[::1], f8[::1])", cache=True, nogil=True)
-def depletion_time(u, rate):
-    """min over the entries with rate < 0 of u / -rate (inf if none)."""
-    t = np.inf
-    for k in range(u.size):
-        if rate[k] < 0:
-            t = min(t, u[k] / -rate[k])
-    return t
-
-
-@njit("f8(f8[::1], f8[::1], f8, f8[::1])", cache=True, nogil=True)
-def error_norm(u_new, u_low, rtol, floor):
-    """max over the entries of |u_new - u_low| / (rtol u_new + floor) (the scaled local error)."""
-    e = 0.0
-    for k in range(u_new.size):
-        e = max(e, abs(u_new[k] - u_low[k]) / (rtol * u_new[k] + floor[k]))
-    return e
-
-
-@njit("b1(f8[::1])", cache=True, nogil=True)
-def any_negative(u):
-    for k in range(u.size):
-        if u[k] < 0:
-            return True
-    return False
-
-
-@njit("b1(f8[::1])", cache=True, nogil=True)
-def all_finite(u):
-    """True if no entry is NaN or infinite."""
-    for k in range(u.size):
-        if not np.isfinite(u[k]):
-            return False
-    return True
-
-
-@njit("b1(f8[::1])", cache=True, nogil=True)
-def all_nonnegative(u):
-    """True if every entry is >= 0 (False for a NaN)."""
-    for k in range(u.size):
-        if not u[k] >= 0:
-            return False
-    return True
-
-
 @njit("void(i8, f8, f8, f8[::1], f8[::1])", cache=True, nogil=True)
 def success_probability(model, threshold, width, phi, p):
     """p(phi) of the success ``model`` into ``p``: ALWAYS 1, STEP 1 if phi >= threshold else 0,
@@ -361,6 +310,21 @@ def success_probability(model, threshold, width, phi, p):
         else:
             z = min(max((phi[k] - threshold) / width, -700.0), 700.0)
             p[k] = 1.0 / (1.0 + np.exp(-z))
+
+
+@njit("f8[:, ::1](f8[::1], i8, f8[:, ::1], f8[::1], f8[:, ::1])", cache=True, nogil=True)
+def class_totals(u, model, vectors, params, pw):
+    """The class totals (3, M) of the state u = [N, L, G] (3M,), entries below the flush levels
+    ``params[0]``, ``params[1]`` counting as zero, and for a success ``model`` (not ALWAYS) the
+    surface-liquid fraction and p(phi) of every class in ``pw[0]``, ``pw[1]``."""
+    M = vectors.shape[1]
+    if params[0] > 0:
+        u = flushed(u, M, params[0], params[1])
+    nlg = u.reshape((3, M))
+    if model != ALWAYS:
+        surface_fraction(nlg, vectors[0], pw[0])
+        success_probability(model, params[2], params[3], pw[0], pw[1])
+    return nlg
 
 
 @njit(
@@ -383,157 +347,10 @@ def class_rates(
     not spraying), consolidation rate (0: none); ``sel`` (K,), ``tab``, ``bf``, ``below``: the
     breakage's selection rates, fragment tables, split factors and fragments below the first pivot
     (:func:`breakage_totals`; ``sel`` empty: no breakage); ``pw`` (2, M): work (phi, p)."""
-    M = vectors.shape[1]
-    flush_n = params[0]
-    flush_v = params[1]
-    if flush_n > 0:
-        u = flushed(u, M, flush_n, flush_v)  # entries below the flush level count as zero
-    nlg = u.reshape((3, M))
-    phi = pw[0]
-    p = pw[1]
-    if model != ALWAYS:
-        surface_fraction(nlg, vectors[0], phi)
-        success_probability(model, params[2], params[3], phi, p)
-    tally[0] = aggregation_totals(beta, p, model != ALWAYS, nlg, K, cell_average, target, weight, factors, work, d)
+    nlg = class_totals(u, model, vectors, params, pw)
+    tally[0] = aggregation_totals(beta, pw[1], model != ALWAYS, nlg, K, cell_average, target, weight, factors, work, d)
     tally[1] = 0.0
     tally[2] = 0.0
     if sel.size > 0:
         breakage_totals(sel, nlg, K, tab, bf, below, work, d, tally)
     add_processes(d, nlg, params[4], vectors[1], params[5], vectors[2])
-
-
-@njit("void(f8[:, ::1], i8, i8, i8, f8)", cache=True, nogil=True)
-def _combine(r, a, b, c, weight):
-    """The tallies of a step, ``r[3]``: r[a] (``weight`` 0), (r[a] + r[b]) / 2 (``weight`` 1:
-    Heun) or (r[a] + r[b] + 4 r[c]) / 6 (``weight`` 4: SSP-RK3)."""
-    for q in range(r.shape[1]):
-        if weight == 0:
-            r[3, q] = r[a, q]
-        elif weight == 1:
-            r[3, q] = 0.5 * (r[a, q] + r[b, q])
-        else:
-            r[3, q] = (r[a, q] + r[b, q] + 4.0 * r[c, q]) / 6.0
-
-
-@njit("b1(i8, i8, f8, f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1])", cache=True, nogil=True)
-def ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
-    """Stage ``j`` (1, 2, 3) of one explicit SSP Runge-Kutta step of size ``dt`` from u, given
-    the rates ``k[0 .. j-1]`` (3, 3M) and tallies ``r[0 .. j-1]`` (r: (4, 3): the refused solid,
-    merged fragment and merged solid rates of :func:`class_rates`) of the stages before.
-
-    Returns True if the step ends at this stage, with the new state in ``u_new`` (for ``order``
-    > 1 also the embedded lower-order state in ``u_low``) and the step's refused rate in
-    ``r[3]``; else False: the caller evaluates the rates ``k[j]``, ``r[j]`` at ``stage`` (at time t + dt for
-    j = 1, t + dt/2 for j = 2) and calls stage j + 1. Euler (``order`` 1), SSP-RK2 (Heun, with an
-    embedded Euler estimate) and SSP-RK3 (Shu & Osher 1988, with an embedded Heun estimate), in
-    increment forms (zero rates leave u unchanged to the bit). An intermediate stage with a
-    negative entry ends the step with that stage as ``u_new`` (the caller then halves the step)."""
-    n = u.size
-    k1 = k[0]
-    if j == 1:
-        for i in range(n):
-            stage[i] = u[i] + dt * k1[i]  # u1 (Euler)
-        if order == 1 or any_negative(stage):
-            for i in range(n):
-                u_new[i] = stage[i]
-            _combine(r, 0, 0, 0, 0)
-            return True
-        return False
-    k2 = k[1]
-    if j == 2:
-        h = 0.5 * dt
-        if order == 2:
-            for i in range(n):
-                u_low[i] = stage[i]
-                u_new[i] = u[i] + h * (k1[i] + k2[i])  # Heun (SSP-RK2)
-            _combine(r, 0, 1, 0, 1)
-            return True
-        q = 0.25 * dt
-        for i in range(n):
-            k12 = k1[i] + k2[i]
-            u_low[i] = u[i] + h * k12  # Heun: the embedded estimate
-            stage[i] = u[i] + q * k12  # u2 of SSP-RK3
-        if any_negative(stage):
-            for i in range(n):
-                u_new[i] = stage[i]
-            _combine(r, 0, 0, 0, 0)
-            return True
-        return False
-    k3 = k[2]
-    c = dt / 6.0
-    for i in range(n):
-        u_new[i] = u[i] + c * ((k1[i] + k2[i]) + 4.0 * k3[i])
-    _combine(r, 0, 1, 2, 4)
-    return True
-
-
-@njit(
-    "void(f8[::1], f8[:, ::1], f8[:, ::1], f8, i8, f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], "
-    "f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], "
-    "f8[::1], f8[::1])",
-    cache=True,
-    nogil=True,
-)
-def ssp_step(
-    u,
-    k,
-    r,
-    dt,
-    order,
-    beta,
-    model,
-    vectors,
-    params,
-    K,
-    cell_average,
-    target,
-    weight,
-    factors,
-    work,
-    sel,
-    tab,
-    bf,
-    below,
-    pw,
-    u_new,
-    u_low,
-    stage,
-):
-    """One step of :func:`ssp_stage` with the rates of a factored kernel (:func:`class_rates`) in
-    one compiled call; ``k[0]``, ``r[0]``: the rates and tallies at u. The step's tallies (refused
-    solid, merged fragments, merged solid rates) are left in ``r[3]``."""
-    M = vectors.shape[1]
-    for j in range(1, 4):
-        if ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
-            return
-        class_rates(
-            stage,
-            beta,
-            model,
-            vectors,
-            params,
-            K,
-            cell_average,
-            target,
-            weight,
-            factors,
-            work,
-            sel,
-            tab,
-            bf,
-            below,
-            pw,
-            k[j].reshape((3, M)),
-            r[j],
-        )
-
-
-# the breakage selection from impacts lives in its own module; these names are part of this backend's
-# interface (impact_breakage, _compiled_steps and the tests call them as _compiled.*)
-from ._compiled_selection import (  # noqa: E402, F401
-    STRENGTH_FIELDS,
-    breaking_probability,
-    critical_speeds,
-    impact_selection,
-    selection_of_impacts,
-)

@@ -6,15 +6,6 @@ Class a = i J + e: size class i (the K pivots, then the feed classes) and liquid
 liquid-to-solid volume ratio, ``liquid_grid.LiquidGrid``), each with its number N, liquid L and gas
 G totals. The state is u = [N, L, G] (3 M2,), M2 = Mx J, volumes in units of the first pivot.
 
-| primitive | what it computes |
-| --- | --- |
-| :func:`ratio_class` | the liquid class of a liquid-to-solid ratio |
-| :func:`aggregation_totals2d` | aggregation: deaths of every class, births by size cell and liquid class |
-| :func:`breakage_totals2d` | breakage of the pivot classes, fragments in their parent's liquid class |
-| :func:`class_rates2d` | all rates: flush, success per class, aggregation, breakage, spraying, consolidation |
-| :func:`ssp_step2d` | one SSP Runge-Kutta step (the stages of ``_compiled.ssp_stage``) |
-| :func:`rebin` | after a step: a class whose mean ratio passed a neighbour's centre moves to the band of its mean |
-
 The size axis is the one-dimensional model's: the same pair map (``aggregation``: target cell and
 weights of every pair of size classes) and, for the cell average, the split of the births of every
 size cell pooled over the liquid classes (``_split_rows``), so that with a kernel and success that
@@ -26,7 +17,21 @@ from __future__ import annotations
 
 from numba import njit
 
-from ._compiled import ALWAYS, add_processes, flushed, ssp_stage, success_probability, surface_fraction
+from ._compiled import ALWAYS, add_processes, class_totals
+from ._compiled_steps import ssp_stage
+
+
+@njit("i8(f8, f8[::1])", cache=True, nogil=True)
+def _count_at_or_below(w, values):
+    """The number of the ascending ``values`` <= w (bisection)."""
+    lo, hi = 0, values.size
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if values[mid] <= w:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
 
 
 @njit("i8(f8, f8, f8[::1])", cache=True, nogil=True)
@@ -44,14 +49,7 @@ def ratio_class(w, step, bounds):
         elif e < n and w >= bounds[e]:
             e += 1
         return e
-    lo, hi = 0, n
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if bounds[mid] <= w:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
+    return _count_at_or_below(w, bounds)
 
 
 @njit("void(f8[:, ::1], f8[:, :, ::1], f8[:, ::1], f8[::1], i8, i8, b1, f8[:, ::1])", cache=True, nogil=True)
@@ -64,10 +62,7 @@ def _split_rows(pooled, rows, factors, xr, K, J, cell_average, d):
     (a granule keeps its liquid class); number = solid / pivot. Fixed pivot: the rows are the
     pivots' already."""
     out = rows[3:]
-    for q in range(3):
-        for c in range(K):
-            for e in range(J):
-                out[q, c, e] = 0.0
+    out[:3] = 0.0
     for c in range(K):
         fu = 0.0
         fd = 0.0
@@ -100,33 +95,6 @@ def _split_rows(pooled, rows, factors, xr, K, J, cell_average, d):
             d[2, a] += out[2, c, e]
 
 
-@njit("i8(f8, f8, f8[::1])", cache=True, nogil=True)
-def _lower_centre(w, step, centres):
-    """The class e whose centre is the last at or below ``w`` (-1 below the first centre); ``step``
-    > 0: centres (e + 1/2) step."""
-    J = centres.size
-    if step > 0.0:
-        z = w / step - 0.5
-        if z < 0.0:
-            return -1
-        if z >= J - 1:
-            return J - 1
-        e = int(z)
-        if e < J - 1 and w >= centres[e + 1]:
-            e += 1
-        elif w < centres[e]:
-            e -= 1
-        return e
-    lo, hi = 0, J
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if centres[mid] <= w:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo - 1
-
-
 @njit("UniTuple(f8, 2)(f8, f8, f8, f8, f8[::1])", cache=True, nogil=True)
 def _locate(l_sum, inv_vol, kz, step, centres):
     """(e, f): the aggregate of liquid ``l_sum`` and solid 1 / ``inv_vol`` (ratio w) goes to liquid
@@ -142,7 +110,7 @@ def _locate(l_sum, inv_vol, kz, step, centres):
         e = int(z)
         return float(e), z - e
     w = l_sum * inv_vol
-    e = _lower_centre(w, step, centres)
+    e = _count_at_or_below(w, centres) - 1  # the last centre at or below w (-1: below the first)
     if e < 0:
         return 0.0, 0.0
     if e >= top:
@@ -230,15 +198,9 @@ def aggregation_totals2d(S, p, use_p, nlg, dims, xc, step, centres, target, weig
             d[0, a] = -nlg[0, a] * q
             d[1, a] = -nlg[1, a] * q
             d[2, a] = -nlg[2, a] * q
-    for q in range(3):
-        for c in range(K):
-            for e in range(J):
-                rw[q, c, e] = 0.0
-        for e in range(J):
-            tmp[q, e] = 0.0
-    for c in range(K):
-        pooled[0, c] = 0.0
-        pooled[1, c] = 0.0
+    rw[:3] = 0.0
+    tmp[:] = 0.0
+    pooled[:, :K] = 0.0
     inv_step = 1.0 / step if step > 0.0 else 0.0
     top = J - 1
     for i in range(Mx):
@@ -262,21 +224,14 @@ def aggregation_totals2d(S, p, use_p, nlg, dims, xc, step, centres, target, weig
                 sAL = s_ij * AL[i, ka]
                 sAG = s_ij * AG[i, ka]
                 la = lpp[i, ka]
-                kb0 = 0
-                if i == j:  # a class with itself: half the events, beta N^2 / 2; then the classes after it
-                    kb0 = ka + 1
-                    Ab = Aj[ka]
-                    R = 0.5 * sA * Ab
-                    total += R
-                    e, f = _locate(la + lj[ka], inv_vol, kz, step, centres)
-                    _deposit(tmp, e, f, R, 0.5 * (sAL * Ab + sA * ALj[ka]), 0.5 * (sAG * Ab + sA * AGj[ka]))
-                    e_lo, e_hi = min(e_lo, e), max(e_hi, min(e + 1, top))
-                for kb in range(kb0, nj):
+                for kb in range(ka if i == j else 0, nj):
+                    # a class with itself: half the events, beta N^2 / 2 (h x exact for h = 1 and 1/2)
+                    h = 0.5 if kb == ka and i == j else 1.0
                     Ab = Aj[kb]
-                    R = sA * Ab
+                    R = h * sA * Ab
                     total += R
                     e, f = _locate(la + lj[kb], inv_vol, kz, step, centres)
-                    _deposit(tmp, e, f, R, sAL * Ab + sA * ALj[kb], sAG * Ab + sA * AGj[kb])
+                    _deposit(tmp, e, f, R, h * (sAL * Ab + sA * ALj[kb]), h * (sAG * Ab + sA * AGj[kb]))
                     e_lo, e_hi = min(e_lo, e), max(e_hi, min(e + 1, top))
             lo, hi = int(e_lo), int(e_hi)
             w0 = weight[0, i * Mx + j]
@@ -294,9 +249,7 @@ def aggregation_totals2d(S, p, use_p, nlg, dims, xc, step, centres, target, weig
                         v = tmp[q, e] * vol if q == 0 else tmp[q, e]
                         rw[q, t, e] += v - v * fu
                         rw[q, t + 1, e] += v * fu
-            for q in range(3):
-                for e in range(lo, hi + 1):
-                    tmp[q, e] = 0.0
+            tmp[:, lo : hi + 1] = 0.0
     _split_rows(pooled, rw, factors, xc, K, J, cell_average, d)
     return refused
 
@@ -318,13 +271,8 @@ def breakage_totals2d(sel, nlg, dims, xc, tab, factors, below, xw, rw, d, tally)
     merged_n = 0.0
     merged_v = 0.0
     pooled = xw[2:4]
-    for q in range(3):
-        for c in range(K):
-            for e in range(J):
-                rw[q, c, e] = 0.0
-    for c in range(K):
-        pooled[0, c] = 0.0
-        pooled[1, c] = 0.0
+    rw[:3] = 0.0
+    pooled[:, :K] = 0.0
     for k in range(K):
         s = sel[k]
         if s == 0.0:
@@ -372,17 +320,9 @@ def class_rates2d(
     aggregation, breakage (``sel`` empty: none), spraying and
     consolidation. ``vectors`` (3, M2): class volumes, spray weights, G_min per granule; ``params``
     as ``_compiled.class_rates``'s; ``pw`` (2, M2): work (phi, p)."""
-    M2 = vectors.shape[1]
-    if params[0] > 0:
-        u = flushed(u, M2, params[0], params[1])
-    nlg = u.reshape((3, M2))
-    phi = pw[0]
-    p = pw[1]
-    if model != ALWAYS:
-        surface_fraction(nlg, vectors[0], phi)
-        success_probability(model, params[2], params[3], phi, p)
+    nlg = class_totals(u, model, vectors, params, pw)
     tally[0] = aggregation_totals2d(
-        S, p, model != ALWAYS, nlg, dims, xc, step, centres, target, weight, factors, act, cw, xw, rw, d
+        S, pw[1], model != ALWAYS, nlg, dims, xc, step, centres, target, weight, factors, act, cw, xw, rw, d
     )
     tally[1] = 0.0
     tally[2] = 0.0
@@ -402,7 +342,7 @@ def ssp_step2d(
     u, k, r, dt, order, u_new, u_low, stage, S, model, vectors, xc, params, dims, step, centres, target, weight,
     factors, sel, tab, bf, below, act, cw, xw, rw, pw,
 ):  # fmt: skip
-    """One SSP Runge-Kutta step of size ``dt`` from u (``_compiled.ssp_stage``) with the rates of
+    """One SSP Runge-Kutta step of size ``dt`` from u (``_compiled_steps.ssp_stage``) with the rates of
     :func:`class_rates2d`; ``k[0]``, ``r[0]``: the rates and tallies at u. The step's tallies are
     ``r[3]``."""
     M2 = vectors.shape[1]
@@ -424,8 +364,7 @@ def rebin(u, Mx, J, xc, step, bounds, centres, work):
     classes moved."""
     M2 = Mx * J
     moved = 0
-    for a in range(3 * M2):
-        work[a] = 0.0
+    work[:] = 0.0
     for i in range(Mx):
         for e in range(J):
             a = i * J + e
@@ -440,8 +379,7 @@ def rebin(u, Mx, J, xc, step, bounds, centres, work):
             work[M2 + t] += u[M2 + a]
             work[2 * M2 + t] += u[2 * M2 + a]
     if moved:
-        for a in range(3 * M2):
-            u[a] = work[a]
+        u[:] = work
     return moved
 
 

@@ -1,6 +1,10 @@
-"""The PBM's step loop, compiled: the steps of ``GranulationPBM.run`` in one call (the states at
-its output times recorded into buffers), for a run whose kernel and breakage selection need no
-Python between steps (``pbm.fast_steps``: a factored kernel whose frequencies
+"""The PBM's time integration, compiled (numba): the stages of one explicit SSP Runge-Kutta step
+(:func:`ssp_stage`; :func:`ssp_step` runs them with the rates of ``_compiled.class_rates`` in one
+call, for a factored kernel; for any other kernel ``GranulationPBM`` calls the stages one by one
+with the kernel called between them), the small vector operations of the step control (depletion
+time, error norm, sign checks), and the step loop: the steps of ``GranulationPBM.run`` in one call
+(:func:`advance`, the states at its output times recorded into buffers), for a run whose kernel
+and breakage selection need no Python between steps (``pbm.fast_steps``: a factored kernel whose frequencies
 stay fixed in the run, and no breakage or an impact selection from fixed impacts).
 
 Per step it does what the Python loop does (``model.run``, ``stepping.StepControl.step``), in the
@@ -19,17 +23,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._compiled import (
-    all_finite,
-    all_nonnegative,
-    class_rates,
-    depletion_time,
-    error_norm,
-    flush,
-    granule_porosity,
-    selection_of_impacts,
-    ssp_step,
-)
+from ._compiled import class_rates, flush, granule_porosity
+from ._compiled_selection import selection_of_impacts
 
 #: why ``advance`` returned: the event reached, a check of the run's limits due, refused solid over
 #: the allowed share, a step for the Python loop (it raises the error of the step)
@@ -42,6 +37,145 @@ TIME, REFUSED, MERGED_N, MERGED_V, LIQUID, ROWS = range(6)
 #: ``counts`` entries: the step limits of ``stepping.STEP_LIMITS``, then the steps taken
 TAKEN = 6
 MAX_HALVINGS = 60
+
+
+# ----------------------------------------------------------------- the small vector operations of the step control
+
+
+@njit("f8(f8[::1], f8[::1])", cache=True, nogil=True)
+def depletion_time(u, rate):
+    """min over the entries with rate < 0 of u / -rate (inf if none)."""
+    t = np.inf
+    for k in range(u.size):
+        if rate[k] < 0:
+            t = min(t, u[k] / -rate[k])
+    return t
+
+
+@njit("f8(f8[::1], f8[::1], f8, f8[::1])", cache=True, nogil=True)
+def error_norm(u_new, u_low, rtol, floor):
+    """max over the entries of |u_new - u_low| / (rtol u_new + floor) (the scaled local error)."""
+    e = 0.0
+    for k in range(u_new.size):
+        e = max(e, abs(u_new[k] - u_low[k]) / (rtol * u_new[k] + floor[k]))
+    return e
+
+
+@njit("b1(f8[::1])", cache=True, nogil=True)
+def any_negative(u):
+    for k in range(u.size):
+        if u[k] < 0:
+            return True
+    return False
+
+
+@njit("b1(f8[::1])", cache=True, nogil=True)
+def all_finite(u):
+    """True if no entry is NaN or infinite."""
+    for k in range(u.size):
+        if not np.isfinite(u[k]):
+            return False
+    return True
+
+
+@njit("b1(f8[::1])", cache=True, nogil=True)
+def all_nonnegative(u):
+    """True if every entry is >= 0 (False for a NaN)."""
+    for k in range(u.size):
+        if not u[k] >= 0:
+            return False
+    return True
+
+
+# ----------------------------------------------------------------- the stages of one step
+
+
+@njit("void(f8[:, ::1], i8, i8, i8, f8)", cache=True, nogil=True)
+def _combine(r, a, b, c, weight):
+    """The tallies of a step, ``r[3]``: r[a] (``weight`` 0), (r[a] + r[b]) / 2 (``weight`` 1:
+    Heun) or (r[a] + r[b] + 4 r[c]) / 6 (``weight`` 4: SSP-RK3)."""
+    for q in range(r.shape[1]):
+        if weight == 0:
+            r[3, q] = r[a, q]
+        elif weight == 1:
+            r[3, q] = 0.5 * (r[a, q] + r[b, q])
+        else:
+            r[3, q] = (r[a, q] + r[b, q] + 4.0 * r[c, q]) / 6.0
+
+
+@njit("b1(f8[::1], f8[::1], f8[:, ::1])", cache=True, nogil=True)
+def _stage_ends_step(stage, u_new, r):
+    """The step ends with ``stage`` as its new state (Euler, or an intermediate stage with a
+    negative entry), the tallies those of its first rates; True."""
+    for i in range(stage.size):
+        u_new[i] = stage[i]
+    _combine(r, 0, 0, 0, 0)
+    return True
+
+
+@njit("b1(i8, i8, f8, f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1])", cache=True, nogil=True)
+def ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
+    """Stage ``j`` (1, 2, 3) of one explicit SSP Runge-Kutta step of size ``dt`` from u, given
+    the rates ``k[0 .. j-1]`` (3, 3M) and tallies ``r[0 .. j-1]`` (r: (4, 3): the refused solid,
+    merged fragment and merged solid rates of :func:`class_rates`) of the stages before.
+
+    Returns True if the step ends at this stage, with the new state in ``u_new`` (for ``order``
+    > 1 also the embedded lower-order state in ``u_low``) and the step's refused rate in
+    ``r[3]``; else False: the caller evaluates the rates ``k[j]``, ``r[j]`` at ``stage`` (at time t + dt for
+    j = 1, t + dt/2 for j = 2) and calls stage j + 1. Euler (``order`` 1), SSP-RK2 (Heun, with an
+    embedded Euler estimate) and SSP-RK3 (Shu & Osher 1988, with an embedded Heun estimate), in
+    increment forms (zero rates leave u unchanged to the bit). An intermediate stage with a
+    negative entry ends the step with that stage as ``u_new`` (the caller then halves the step)."""
+    n = u.size
+    k1 = k[0]
+    if j == 1:
+        for i in range(n):
+            stage[i] = u[i] + dt * k1[i]  # u1 (Euler)
+        return (order == 1 or any_negative(stage)) and _stage_ends_step(stage, u_new, r)
+    k2 = k[1]
+    if j == 2:
+        h = 0.5 * dt
+        if order == 2:
+            for i in range(n):
+                u_low[i] = stage[i]
+                u_new[i] = u[i] + h * (k1[i] + k2[i])  # Heun (SSP-RK2)
+            _combine(r, 0, 1, 0, 1)
+            return True
+        q = 0.25 * dt
+        for i in range(n):
+            k12 = k1[i] + k2[i]
+            u_low[i] = u[i] + h * k12  # Heun: the embedded estimate
+            stage[i] = u[i] + q * k12  # u2 of SSP-RK3
+        return any_negative(stage) and _stage_ends_step(stage, u_new, r)
+    k3 = k[2]
+    c = dt / 6.0
+    for i in range(n):
+        u_new[i] = u[i] + c * ((k1[i] + k2[i]) + 4.0 * k3[i])
+    _combine(r, 0, 1, 2, 4)
+    return True
+
+
+@njit(
+    "void(f8[::1], f8[:, ::1], f8[:, ::1], f8, i8, f8[:, ::1], i8, f8[:, ::1], f8[::1], i8, b1, i8[::1], "
+    "f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], "
+    "f8[::1], f8[::1])",
+    cache=True,
+    nogil=True,
+)
+def ssp_step(u, k, r, dt, order, beta, model, vectors, params, K, cell_average, target, weight, factors, work, sel,
+             tab, bf, below, pw, u_new, u_low, stage):  # fmt: skip
+    """One step of :func:`ssp_stage` with the rates of a factored kernel (:func:`class_rates`) in
+    one compiled call; ``k[0]``, ``r[0]``: the rates and tallies at u. The step's tallies (refused
+    solid, merged fragments, merged solid rates) are left in ``r[3]``."""
+    M = vectors.shape[1]
+    for j in range(1, 4):
+        if ssp_stage(j, order, dt, u, k, r, stage, u_new, u_low):
+            return
+        class_rates(stage, beta, model, vectors, params, K, cell_average, target, weight, factors, work, sel, tab, bf,
+                    below, pw, k[j].reshape((3, M)), r[j])  # fmt: skip
+
+
+# ----------------------------------------------------------------- the step loop
 
 
 @njit(cache=True, nogil=True)

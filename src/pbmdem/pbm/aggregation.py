@@ -86,15 +86,13 @@ class PivotAggregation:
         """The arrays of the compiled evaluation (numba, imported here: building an operator loads
         or compiles it, :mod:`._compiled`): the target cell or lower pivot of every ordered pair
         (-1 beyond the grid), its weights, and the scheme's split factors."""
-        from . import _compiled  # lazy: numba + compiled cache ~3 s (measured), loaded when a model is built
+        from . import _compiled  # noqa: F401  lazy: numba + compiled cache ~3 s (measured), loaded with a model
 
-        self._totals = _compiled.aggregation_totals
         target, weight = self._pair_weights()
         self._target = np.ascontiguousarray(target, dtype=np.int64)
         self._weight = np.ascontiguousarray(weight, dtype=float)
         self._factors = np.ascontiguousarray(self._split_factors(), dtype=float)
         self._work = np.empty((10, self.K))
-        self._no_p = np.ones(self.M)
 
     def _pair_weights(self) -> tuple[np.ndarray, np.ndarray]:
         """(M^2,) target and (2, M^2) weights of the ordered pairs for the compiled evaluation
@@ -106,49 +104,10 @@ class PivotAggregation:
         fixed pivot)."""
         return np.zeros((4, self.K))
 
-    # ----------------------------------------------------------------- evaluation
-    def totals_stacked(self, beta: np.ndarray, nlg: np.ndarray):
-        """Aggregation rates from class totals: ``beta`` (M, M) symmetric and ``nlg`` (3, M) the
-        numbers N, liquid L and gas G per class, in any unit of volume (M = K without extra
-        classes). Returns ``(d, refused)``: ``d`` (3, M) the rates of N, L and G (in the units of
-        L and G) and the refused solid-volume rate in units of the first pivot x_0 (multiply by
-        x_0). One compiled loop over the ordered pairs (``_compiled.aggregation_totals``)."""
-        M = self.M
-        if np.shape(beta) != (M, M) or np.shape(nlg) != (3, M):
-            raise ValueError(
-                f"aggregation totals: beta {np.shape(beta)} and N, L, G {np.shape(nlg)}; expected "
-                f"({M}, {M}) and (3, {M}) for the {M} classes"
-            )
-        d = np.empty((3, M))
-        refused = self._totals(
-            np.ascontiguousarray(beta, dtype=float),
-            self._no_p,
-            False,
-            np.ascontiguousarray(nlg, dtype=float),
-            self.K,
-            self._cell_average,
-            self._target,
-            self._weight,
-            self._factors,
-            self._work,
-            d,
-        )
-        return d, refused
-
     def compiled_arrays(self) -> tuple:
         """(K, cell_average, target, weight, factors, work): the grid's arguments of the compiled
         evaluations (``_compiled.aggregation_totals``, ``_compiled.class_rates``)."""
         return self.K, self._cell_average, self._target, self._weight, self._factors, self._work
-
-    def rates(self, beta: np.ndarray, N: np.ndarray, l: np.ndarray, g: np.ndarray):
-        """Aggregation rates of change from per-particle liquid ``l`` and gas ``g`` (K,).
-
-        Returns ``(dN, dL, dG, refused_rate)``: per-bin rates of number, liquid and gas totals and
-        the solid-volume rate (in the unit of ``x``) of refused aggregates beyond the last bin.
-        """
-        N = np.asarray(N, float)
-        d, refused = self.totals_stacked(np.asarray(beta, float), np.stack((N, N * l, N * g)))
-        return d[0], d[1], d[2], refused * self.x[0]
 
 
 class CellAverageAggregation(PivotAggregation):
@@ -215,3 +174,19 @@ def cell_average_factors(xr: np.ndarray) -> np.ndarray:
 
 #: the aggregation schemes by config name
 SCHEMES: dict[str, type[PivotAggregation]] = {c.name: c for c in (CellAverageAggregation, FixedPivotAggregation)}
+
+#: operators by (scheme, pivots, cell bounds, extra classes): the same for every model of a grid (a
+#: process of the design space builds many; an operator is not modified after its build)
+_OPERATORS: dict = {}
+
+
+def operator(scheme: type[PivotAggregation], grid, extra: tuple) -> PivotAggregation:
+    """The operator of ``scheme`` on the pivots and cells of ``grid`` with the ``extra`` class volumes (m3)."""
+    bounds = grid.edges[1:-1]
+    key = (scheme, grid.x.tobytes(), bounds.tobytes(), extra)
+    op = _OPERATORS.get(key)
+    if op is None:
+        if len(_OPERATORS) >= 32:
+            _OPERATORS.clear()
+        op = _OPERATORS[key] = scheme(grid.x, bounds, extra=extra or None)
+    return op

@@ -19,28 +19,28 @@ class Bilinear:
         self.grid = np.asarray(grid, float)
         self.values = np.asarray(values, float)
 
-    def __call__(self, points: np.ndarray) -> np.ndarray:
-        g, v = self.grid, self.values
-        a, b = points[:, 0], points[:, 1]
+    def _cell(self, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The cell of every value of ``a`` (the lower node, the last cell beyond the grid) and the
+        normalised distance from its lower node."""
+        g = self.grid
         i = np.clip(np.searchsorted(g, a, side="right") - 1, 0, g.size - 2)
-        j = np.clip(np.searchsorted(g, b, side="right") - 1, 0, g.size - 2)
-        y0 = (a - g[i]) / (g[i + 1] - g[i])
-        y1 = (b - g[j]) / (g[j + 1] - g[j])
+        return i, (a - g[i]) / (g[i + 1] - g[i])
+
+    def _corners(self, i, j, y0, y1) -> np.ndarray:
+        """The four corner terms of the cells (i, j), summed in the interpolator's order."""
+        v = self.values
         out = 0.0 + v[i, j] * (1 - y0) * (1 - y1)
         out = out + v[i, j + 1] * (1 - y0) * y1
         out = out + v[i + 1, j] * y0 * (1 - y1)
         return out + v[i + 1, j + 1] * y0 * y1
 
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        (i, y0), (j, y1) = self._cell(points[:, 0]), self._cell(points[:, 1])
+        return self._corners(i, j, y0, y1)
+
     def outer(self, a: np.ndarray) -> np.ndarray:
         """(n, n): ``self(points)`` at every pair (a[p], a[q]) of ``a`` (n,), reshaped: the cells
         and distances of the n values once, broadcast over the pairs; elementwise the same
         operations, so the same numbers to the bit (tests/test_pbm_compiled.py)."""
-        g, v = self.grid, self.values
-        i = np.clip(np.searchsorted(g, a, side="right") - 1, 0, g.size - 2)
-        y = (a - g[i]) / (g[i + 1] - g[i])
-        i0, j0 = i[:, None], i[None, :]
-        y0, y1 = y[:, None], y[None, :]
-        out = 0.0 + v[i0, j0] * (1 - y0) * (1 - y1)
-        out = out + v[i0, j0 + 1] * (1 - y0) * y1
-        out = out + v[i0 + 1, j0] * y0 * (1 - y1)
-        return out + v[i0 + 1, j0 + 1] * y0 * y1
+        i, y = self._cell(a)
+        return self._corners(i[:, None], i[None, :], y[:, None], y[None, :])

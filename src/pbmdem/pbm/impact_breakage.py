@@ -38,7 +38,7 @@ import numpy as np
 from pbmdem.config import Pbm
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, WALLS, ImpactRates, breaking_probability
 
-from . import _compiled
+from . import _compiled_selection
 from .errors import PBMInputError, positive
 from .kernels import KernelInput
 
@@ -54,7 +54,7 @@ def critical_speed(density: float, yield_strength: float, critical_stokes: float
 def fraction_columns(fractions: np.ndarray) -> np.ndarray:
     """(K,) for each partner j of the pair velocity ``fractions`` (K, K, V): the first partner of
     the run of neighbours j' <= j whose columns ``fractions[:, j', :]`` equal column j
-    (``_compiled.impact_selection`` sums such a column once per row; the bins sharing their
+    (``_compiled_selection.impact_selection`` sums such a column once per row; the bins sharing their
     nearest class of a coupling interval are such runs)."""
     K = fractions.shape[1]
     same = (fractions[:, 1:, :] == fractions[:, :-1, :]).all(axis=(0, 2))  # column j + 1 equals column j
@@ -104,7 +104,7 @@ class ImpactSelection:
     numbers (the pair term)."""
 
     #: its impacts are fixed for the pivots and the speed and its rates are those of
-    #: ``_compiled.selection_of_impacts``: the compiled step loop evaluates it (``pbm.fast_steps``)
+    #: ``_compiled_selection.selection_of_impacts``: the compiled step loop evaluates it (``pbm.fast_steps``)
     compiled_steps = True
 
     def __init__(
@@ -129,27 +129,18 @@ class ImpactSelection:
             raise PBMInputError(f"breakage walls {list(walls)}: {unknown} unknown; allowed: {list(WALLS)}")
         self.walls = tuple(walls)
         self.pairs = bool(pairs)
-        spread = float(strength_spread)
-        if not (np.isfinite(spread) and spread >= 0):
-            raise PBMInputError(f"spread of ln Y across granules = {strength_spread!r}; allowed: finite, >= 0")
-        self.strength_spread = spread
-        exponent = float(size_exponent)
-        if not (np.isfinite(exponent) and exponent >= 0):
-            raise PBMInputError(f"strength size exponent = {size_exponent!r}; allowed: finite, >= 0")
-        self.size_exponent = exponent
+        self.strength_spread = positive("spread of ln Y across granules", strength_spread, allow_zero=True)
+        self.size_exponent = positive("strength size exponent", size_exponent, allow_zero=True)
         self.reference_diameter = positive("reference diameter of Y (m)", reference_diameter)
-        exponent = float(porosity_exponent)
-        if not (np.isfinite(exponent) and exponent >= 0):
-            raise PBMInputError(f"strength porosity exponent = {porosity_exponent!r}; allowed: finite, >= 0")
-        self.porosity_exponent = exponent
+        self.porosity_exponent = positive("strength porosity exponent", porosity_exponent, allow_zero=True)
         eps_ref = float(reference_porosity)
         if not 0.0 < eps_ref < 1.0:
             raise PBMInputError(f"reference porosity of Y = {reference_porosity!r}; allowed: 0 < porosity < 1")
         self.reference_porosity = eps_ref
         self.speed = critical_speed(self.density, self.yield_strength, self.critical_stokes)
-        # the compiled selection's strength parameters (_compiled.STRENGTH_FIELDS) and "no porosity"
+        # the compiled selection's strength parameters (_compiled_selection.STRENGTH_FIELDS) and "no porosity"
         strength = dict(vars(self), limit=POROSITY_LIMIT)
-        self._strength = np.array([float(strength[k]) for k in _compiled.STRENGTH_FIELDS])
+        self._strength = np.array([float(strength[k]) for k in _compiled_selection.STRENGTH_FIELDS])
         self._no_porosity = np.zeros(0)
         self.set_source(source)
 
@@ -248,7 +239,7 @@ class ImpactSelection:
 
     def __call__(self, inp: KernelInput) -> np.ndarray:
         """S_i of every pivot: the sum of :meth:`contributions`, in one compiled call
-        (``_compiled.selection_of_impacts``: v*, the breaking probability per velocity bin, the sum
+        (``_compiled_selection.selection_of_impacts``: v*, the breaking probability per velocity bin, the sum
         over the impacts)."""
         if self._rates is None:
             self.prepare(inp)
@@ -256,7 +247,7 @@ class ImpactSelection:
         eps = self._porosity(inp)
         eps = self._no_porosity if eps is None else np.ascontiguousarray(eps, dtype=float)
         out = np.empty(d.size)
-        _compiled.selection_of_impacts(
+        _compiled_selection.selection_of_impacts(
             np.ascontiguousarray(d, dtype=float),
             eps,
             self._strength,

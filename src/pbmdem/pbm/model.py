@@ -1,4 +1,4 @@
-"""The batch granulator population balance and its adaptive explicit time integration.
+"""The batch granulator population balance (its time integration: ``stepping``).
 
 State: numbers N_k, liquid L_k and gas (pore) G_k volume totals per bin of a :class:`Grid`
 (solid S_k = N_k x_k). Balances (aggregation A: a scheme of ``aggregation.SCHEMES``, by default
@@ -15,8 +15,8 @@ in units of the first pivot (unit independence; docs/pbm.md, "Time integration")
 t_end, state)`` resumes from any :class:`State`, so a coupled loop can swap the
 collision-frequency source between intervals.
 
-Every rate and every stage is computed by the compiled backend (``_compiled``): a factored
-kernel (``Kernel.factors``) inside it, any other kernel called here and its matrix passed in.
+Every rate and every stage is computed by the compiled backend (``_compiled``, ``_compiled_steps``):
+a factored kernel (``Kernel.factors``) inside it, any other kernel called here and its matrix passed in.
 
 Feed granules (``separate_feed=True``, default): the feed granules not yet aggregated are classes
 of their own (:class:`FeedGranules`, docs/pbm.md, "Feed granules"), in the State's per-bin totals
@@ -29,38 +29,19 @@ import numpy as np
 
 from pbmdem.config import Solver
 
-from .aggregation import SCHEMES
+from .aggregation import SCHEMES, operator
 from .breakage import Breakage, breakage_arrays
-from .errors import GridOverflowError, KernelShapeError, NegativePopulationError, PBMInputError, positive
-from .fast_steps import FastSteps
+from .errors import KernelShapeError, PBMInputError, positive
 from .grid import Grid, diameter_of
 from .kernels import Kernel, KernelInput
 from .processes import Consolidation, LiquidAddition
-from .results import Result
-from .state import FeedGranules, State, check_state, feed_volumes, granule_porosity, surface_fraction
-from .stepping import FLUSH, STEP_LIMITS, TIME_EPS, Records, StepControl, check_solver
+from .state import FeedGranules, State
+from .stepping import TimeIntegration, check_solver
 
 __all__ = ["GranulationPBM", "check_solver"]
 
 
-#: aggregation operators by (scheme, pivots, cell bounds, extra classes): the same for every model
-#: of a grid (a process of the design space builds many; an operator is not modified after its build)
-_OPERATORS: dict = {}
-
-
-def _operator(scheme, grid: Grid, extra: tuple):
-    """The aggregation operator of ``scheme`` on ``grid`` with the ``extra`` class volumes (m3)."""
-    bounds = grid.edges[1:-1]
-    key = (scheme, grid.x.tobytes(), bounds.tobytes(), extra)
-    op = _OPERATORS.get(key)
-    if op is None:
-        if len(_OPERATORS) >= 32:
-            _OPERATORS.clear()
-        op = _OPERATORS[key] = scheme(grid.x, bounds, extra=extra or None)
-    return op
-
-
-class GranulationPBM:
+class GranulationPBM(TimeIntegration):
     """Batch granulator PBM: aggregation (+ optional liquid addition, consolidation, breakage).
 
     ``kernel``: any :class:`Kernel`; ``liquid``/``consolidation``: the processes or None (off);
@@ -70,10 +51,6 @@ class GranulationPBM:
     of their bins (:class:`FeedGranules`; default True), False: they share the bin's liquid and gas;
     ``breakage``: a :class:`Breakage` or None (aggregation only).
     """
-
-    #: run the steps between events in one compiled call where the kernel and selection allow it
-    #: (``fast_steps``; False: the Python loop, step by step, as the tests' reference)
-    fast_steps = True
 
     def __init__(
         self,
@@ -92,7 +69,7 @@ class GranulationPBM:
         self.liquid = liquid
         self.consolidation = consolidation
         self.solver = check_solver(solver if solver is not None else Solver.defaults())
-        self.rpm = positive("impeller speed (rpm)", rpm, allow_zero=True)
+        self.set_rpm(rpm)
         if scheme not in SCHEMES:
             raise PBMInputError(f"aggregation scheme = {scheme!r}; allowed: {sorted(SCHEMES)}")
         if not isinstance(separate_feed, (bool, np.bool_)):
@@ -102,10 +79,10 @@ class GranulationPBM:
         self._brk_arrays = breakage_arrays(breakage, grid.x, grid.edges)  # None: an empty selection
         # building the operator imports the compiled evaluation (numba, ``_compiled``): it is loaded
         # from numba's cache, or compiled, here and not in a run
-        self.aggregation = _operator(SCHEMES[scheme], grid, ())
-        from . import _compiled  # lazy: numba + compiled cache ~3 s (measured), loaded when a model is built
+        self.aggregation = operator(SCHEMES[scheme], grid, ())
+        from . import _compiled, _compiled_steps  # lazy: numba + compiled cache ~3 s (measured), at model build
 
-        self._jit = _compiled
+        self._jit, self._steps = _compiled, _compiled_steps
         self._operators = {(): self.aggregation}
         # internal unit of volume: the first pivot x_0 (pivots 1, r, r^2, ...)
         self._flush_n = self._flush_v = 0.0
@@ -134,7 +111,7 @@ class GranulationPBM:
         self._classes_key = key
         op = self._operators.get(key)
         if op is None:
-            op = self._operators[key] = _operator(type(self.aggregation), self.grid, key)
+            op = self._operators[key] = operator(type(self.aggregation), self.grid, key)
         self._op = op
         self._M = op.M
         g = self.grid
@@ -231,32 +208,6 @@ class GranulationPBM:
             state.number, state.liquid, state.gas = f.number @ wn, f.liquid @ ws, f.gas @ ws
         return state
 
-    def kernel_input(self, t: float, N, L, G) -> KernelInput:
-        """Kernel input at (t, N, L, G); L and G in m3 or in any unit (only ratios are used)."""
-        S = N * self.grid.x
-        return KernelInput(
-            t=t,
-            volumes=self.grid.x,
-            diameters=self.grid.d,
-            numbers=N,
-            surface_fraction=surface_fraction(S, L, G),
-            rpm=self.rpm,
-            porosity=granule_porosity(S, G),
-        )
-
-    def rates(self, t: float, N, L, G, spraying: bool):
-        """Rates (dN, dL, dG) in m3 and the refused solid-volume rate (m3/s) at (t, N, L, G)
-        (per-bin totals, no feed classes)."""
-        self._use_classes(np.zeros(0))
-        x0 = self.grid.x[0]
-        u = np.concatenate([N, np.asarray(L, float) / x0, np.asarray(G, float) / x0])
-        inp = self.kernel_input(t, N, L, G)
-        self._prepare(inp)
-        self._rates(t, u, spraying, 0)
-        d = self._k[0].copy()
-        K = self.grid.bins
-        return d[:K], d[K : 2 * K] * x0, d[2 * K :] * x0, float(self._r[0, 0]) * x0
-
     def _rates(self, t: float, u: np.ndarray, spraying: bool, j: int) -> None:
         """Rates of the scaled class state u = [N, L/x_0, G/x_0] (M classes: the K pivots and the
         feed classes of the run, :meth:`_use_classes`) into ``self._k[j]`` (3M,), and its tallies
@@ -273,11 +224,7 @@ class GranulationPBM:
             if self._flush_n > 0:  # the kernel sees the state as the compiled rates do
                 u = self._jit.flushed(u, self._M, self._flush_n, self._flush_v)
             beta = np.ascontiguousarray(self.kernel(self._input(t, u.reshape(3, self._M))), dtype=float)
-            if beta.shape != (self._M, self._M):
-                raise KernelShapeError(
-                    f"kernel {self.kernel!r} returned shape {beta.shape}; expected ({self._M}, {self._M}) "
-                    f"for the {self._M} classes"
-                )
+            self._check_shape("shape", beta)
         self._jit.class_rates(
             u,
             beta,
@@ -296,11 +243,11 @@ class GranulationPBM:
         ``self._r[0]``): (new state, embedded lower-order state, tallies of the step (3,): refused
         solid, merged fragments and merged solid rates; ``self._r[3]``, valid until the next
         step), by the
-        compiled stages (``_compiled.ssp_stage``): in one compiled call with a factored kernel,
+        compiled stages (``_compiled_steps.ssp_stage``): in one compiled call with a factored kernel,
         else stage by stage with the kernel called between them."""
         n = u.size
         u_new, u_low = np.empty(n), np.empty(n)
-        jit, k, r, stage = self._jit, self._k, self._r, self._stage
+        jit, k, r, stage = self._steps, self._k, self._r, self._stage
         params = self._params[1] if spraying else self._params[0]
         if self._factored is not None:
             jit.ssp_step(
@@ -342,15 +289,19 @@ class GranulationPBM:
         key = (model, threshold, width, self._flush_n, self._flush_v)
         if S is self._factors_of and key == self._factors_key:
             return  # the kernel's factors of the last step
-        if np.shape(S) != (self._M, self._M):
-            raise KernelShapeError(
-                f"kernel {self.kernel!r} returned factors of shape {np.shape(S)}; expected "
-                f"({self._M}, {self._M}) for the {self._M} classes"
-            )
+        self._check_shape("factors of shape", S)
         self._factors_of, self._factors_key = S, key
         self._factored = np.ascontiguousarray(S, dtype=float)
         self._success_code = self._jit.SUCCESS_CODES[model]
         self._set_params(threshold, width)
+
+    def _check_shape(self, what: str, matrix) -> None:
+        """KernelShapeError unless the kernel's ``matrix`` is (M, M) for the M classes of the run."""
+        if np.shape(matrix) != (self._M, self._M):
+            raise KernelShapeError(
+                f"kernel {self.kernel!r} returned {what} {np.shape(matrix)}; expected ({self._M}, {self._M}) "
+                f"for the {self._M} classes"
+            )
 
     def _input(self, t: float, nlg: np.ndarray) -> KernelInput:
         """KernelInput of the scaled class state (3, M): surface-liquid fraction from class totals."""
@@ -368,46 +319,6 @@ class GranulationPBM:
             porosity=eps,
         )
 
-    # ----------------------------------------------------------------- integration
-    #: what can limit a step (``result.info["step_limits"]`` counts them; ``rejected_*`` count retries)
-    STEP_LIMITS = STEP_LIMITS
-
-    def _raise_bad(self, t: float, arr: np.ndarray, why: str):
-        """NegativePopulationError naming the first entry of the class state ``arr`` that is
-        negative or not finite."""
-        K, M = self.grid.bins, self._M
-        bad = ~np.isfinite(arr) | (arr < 0)
-        idx = int(np.argmax(bad))
-        name = ("number", "liquid", "gas")[idx // M]
-        c = idx % M
-        what = (
-            f"bin {c} (diameter {self.grid.d[c]:.4g} m)" if c < K else f"the feed class of diameter {self._dc[c]:.4g} m"
-        )
-        value = float(arr[idx]) * (self.grid.x[0] if idx >= M else 1.0)
-        raise NegativePopulationError(
-            f"{name} of {what} became {value!r} at t = {t:.6g} s ({why}); populations must stay finite and >= 0"
-        )
-
-    def _begin(self, t_start: float, t_end: float, state: State) -> State:
-        """A copy of the checked start ``state`` at t_start; sets up the run's classes."""
-        if not t_end > t_start:
-            raise PBMInputError(f"run: t_end = {t_end} must be > t_start = {t_start}")
-        if abs(state.t - t_start) > TIME_EPS * max(1.0, abs(t_start)):
-            raise PBMInputError(f"run: the state is at t = {state.t}, not at t_start = {t_start}")
-        K = self.grid.bins
-        for name, arr in (("number", state.number), ("liquid", state.liquid), ("gas", state.gas)):
-            if np.shape(arr) != (K,):
-                raise PBMInputError(f"state.{name} has shape {np.shape(arr)}; expected ({K},) for this grid")
-        s = state.copy()
-        s.t = t_start
-        volumes = feed_volumes(self.grid, s)
-        check_state(self.grid, s, " (start of run)")
-        self._use_classes(volumes)
-        self.kernel.reset()
-        if self.breakage is not None:
-            self.breakage.reset()
-        return s
-
     def _class_state(self, s: State) -> np.ndarray:
         """The scaled class state u = [N, L/x_0, G/x_0] (3M,) of ``s``: with feed classes, the
         aggregates of every bin (bin totals - feed) followed by the feed classes."""
@@ -423,160 +334,6 @@ class GranulationPBM:
             feed = np.asarray(part, float) / scale
             parts += [np.maximum(total / scale - feed @ w, 0.0), feed]
         return np.concatenate(parts)
-
-    def run(self, t_start: float, t_end: float, state: State, output_times=None):
-        """Integrate from ``t_start`` (= ``state.t``) to ``t_end``; returns a :class:`Result`.
-
-        ``output_times``: times in [t_start, t_end] to record (t_start and t_end always are).
-        The input state is not modified; ``result.state`` is the state at ``t_end``.
-
-        Internally volumes are in units of the first pivot x_0 (the state is [N, L/x_0, G/x_0]),
-        so the steps and the result do not depend on the unit of volume. Entries below
-        ``FLUSH`` (1e-100) of the total number (numbers) or of the total solid (liquid, gas) are
-        set to zero after every step: they cannot matter, and keeping them would let event rates
-        of far-tail bins underflow to subnormal floats.
-        """
-        t_start, t_end = float(t_start), float(t_end)
-        s = self._begin(t_start, t_end, state)
-        (M, xc), x0, opt, jit = self._run_classes(), float(self.grid.x[0]), self.solver, self._jit
-        outs = set()
-        if output_times is not None:
-            outs = {float(o) for o in np.atleast_1d(output_times) if t_start < float(o) < t_end}
-        edges = self.liquid.edges() if self.liquid is not None else ()
-        events = sorted({t_end} | outs | {e for e in edges if t_start < e < t_end})
-        rec = Records()
-        self._record(rec, s)
-        u = self._class_state(s)
-        total_solid = float(np.sum(u[:M] * xc))  # x_0 units
-        refused = s.refused_volume / x0
-        merged_n, merged_v = s.merged_number, s.merged_volume / x0  # fragments merged into x_0 so far
-        allowed_refused = opt.max_overflow_fraction * total_solid
-        # error scale of entry k: rtol |u_k| + atol x total solid / w_k, where number entries count
-        # by their solid volume (w = x_k / x_0) and liquid and gas as volumes (w = 1)
-        floor = opt.atol * max(total_solid, 1e-300) / np.concatenate([xc, np.ones(2 * M)])
-        ctl = StepControl(opt, t_start, t_end, floor, self._stages, self._raise_bad)
-        flush_n = self._flush_n = FLUSH * self._number_total(s, u)
-        flush_v = self._flush_v = FLUSH * total_solid
-        jit.flush(u, M, flush_n, flush_v)
-        refresh0 = getattr(self.kernel, "evaluations", None)
-        t, ev = t_start, 0
-        fast = FastSteps.of(self, ctl, events, outs, allowed_refused) if self.fast_steps else None
-        python_step = False  # the next step is the Python loop's (the compiled one left it to it)
-        while t < t_end:
-            while events[ev] <= t:
-                ev += 1
-            t_next = events[ev]
-            spraying = self.liquid is not None and self.liquid.active(t)
-            self._prepare(self._input(t, self._marginal(u)))
-            if fast is not None and self._factored is not None and not python_step:
-                # the rest of the run in one compiled call (fast_steps); a step it leaves to Python
-                # (FALLBACK) is taken below and raises its error
-                tallies = [refused, merged_n, merged_v, s.liquid_added]
-                code = self._advance_compiled(fast, s, rec, t, u, tallies)
-                t, (refused, merged_n, merged_v, s.liquid_added) = fast.t, tallies
-                if code == fast.OVERFLOW:
-                    self._overflow(t, refused, total_solid)
-                if code == fast.CHECK:
-                    ctl.check_limits(t)
-                python_step = code == fast.FALLBACK
-                continue
-            python_step = False
-            self._rates(t, u, spraying, 0)
-            k1 = self._k[0]
-            if not jit.all_finite(k1):
-                self._raise_bad(t, np.where(np.isfinite(k1), u, np.nan), "non-finite rate")
-            u, dt, tally = ctl.step(t, t_next, u, k1, spraying)
-            capped = dt == t_next - t
-            t = t_next if capped else t + dt
-            jit.flush(u, M, flush_n, flush_v)
-            self._after_step(u)
-            s.steps += 1
-            refused_rate, merged_n_rate, merged_v_rate = tally.tolist()  # r[3], overwritten by the next step
-            refused += refused_rate * dt
-            merged_n += merged_n_rate * dt
-            merged_v += merged_v_rate * dt
-            if spraying:
-                s.liquid_added += self.liquid.rate * dt
-            if refused > allowed_refused:
-                self._overflow(t, refused, total_solid)
-            ctl.check_limits(t)
-            if capped and (t in outs or t == t_end):
-                self._store(s, t, u, refused, (merged_n, merged_v))
-                self._record(rec, s)
-        self._store(s, t_end, u, refused, (merged_n, merged_v))
-        if refresh0 is not None:
-            ctl.limits["kernel_refreshes"] = int(self.kernel.evaluations - refresh0)
-        res = Result(self.grid, rec, s, self._info(ctl))
-        res.info["grid_floor"] = res.grid_floor()  # fragments merged into the first pivot since the batch began
-        return res
-
-    # the run's class state (GranulationPBM2D: its size x liquid classes)
-    def _run_classes(self) -> tuple[int, np.ndarray]:
-        """(number of classes M of the run's state, their solid volumes in x_0 units)."""
-        return self._M, self._xc
-
-    def _marginal(self, u: np.ndarray) -> np.ndarray:
-        """(3, M) class totals of the kernel's classes in the scaled state u."""
-        return u.reshape(3, self._M)
-
-    def _number_total(self, s: State, u: np.ndarray) -> float:
-        return float(np.sum(s.number))
-
-    def _after_step(self, u: np.ndarray) -> None:
-        """What follows every step's flush (GranulationPBM2D: the classes move to their liquid band)."""
-
-    def _record(self, rec: Records, s: State) -> None:
-        rec.add(s)
-
-    def _advance_compiled(self, fast: FastSteps, s: State, rec: Records, t: float, u: np.ndarray, tallies: list):
-        """The compiled steps from u at t (``fast.advance``, u in place): the states at the output
-        times it reached stored into ``s`` and added to ``rec`` as the Python loop does. Returns its code."""
-        base = s.steps - fast.ctl.taken  # the start state's steps (a resumed run)
-        code = fast.advance(u, t, tallies)
-        x0 = float(self.grid.x[0])
-        last = len(fast.records) - 1
-        for j, (v, (t_out, refused, merged_n, merged_v, liquid, taken)) in enumerate(fast.records):
-            if j < last:  # what _store and rec.add would record, without the state in between
-                tot = self._pivot_totals(v)
-                rec.append(t_out, tot[0], tot[1] * x0, tot[2] * x0, liquid, refused * x0, base + int(taken),
-                           float(merged_n), float(merged_v) * x0)  # fmt: skip
-                continue
-            s.liquid_added, s.steps = liquid, base + int(taken)
-            self._store(s, t_out, v, refused, (merged_n, merged_v))
-            rec.add(s)
-        s.steps = base + fast.ctl.taken
-        return code
-
-    def _overflow(self, t: float, refused: float, total_solid: float) -> None:
-        """GridOverflowError: the refused solid (x_0 units) exceeds the allowed fraction."""
-        allowed = self.solver.max_overflow_fraction
-        x0 = self.grid.x[0]
-        raise GridOverflowError(
-            f"aggregation beyond the last bin (pivot {self.grid.x[-1]:.4g} m3, diameter "
-            f"{self.grid.d[-1]:.4g} m): by t = {t:.6g} s aggregates carrying {refused * x0:.4g} m3 of solid "
-            f"were refused, {refused / total_solid:.3g} of the total solid volume {total_solid * x0:.4g} m3; "
-            f"allowed: at most max_overflow_fraction = {allowed:g} of the total solid. "
-            "Raise the top of the grid (pbm.grid.max_diameter, or bins / ratio)"
-        )
-
-    def _info(self, ctl: StepControl) -> dict:
-        """``result.info`` of a run."""
-        return {
-            "kernel": repr(self.kernel),
-            "liquid_addition": repr(self.liquid),
-            "consolidation": repr(self.consolidation),
-            "breakage": repr(self.breakage),
-            "rpm": self.rpm,
-            "steps": ctl.taken,
-            "wall_time_s": ctl.wall_time(),
-            "method": self.solver.method,
-            "aggregation_scheme": self.aggregation.name,
-            "safety": self.solver.safety,
-            "step_limits": ctl.limits,
-            # the kernel evaluated inside the compiled rates (Kernel.factors), or called per evaluation
-            "kernel_evaluation": "compiled" if self._factored is not None else "called",
-            "feed_volumes": self._op.extra.tolist() if self._M > self.grid.bins else [],
-        }
 
     def _store(self, s: State, t: float, u: np.ndarray, refused: float, merged: tuple) -> None:
         """Write time t, the class state u, the refused solid and the fragments merged into the

@@ -34,7 +34,7 @@ from .liquid_grid import LiquidGrid
 from .model import GranulationPBM
 from .results import Result
 from .state import FeedGranules, State2D
-from .stepping import TIME_EPS, Records, StepControl
+from .stepping import Records, StepControl
 
 __all__ = ["GranulationPBM2D"]
 
@@ -96,9 +96,6 @@ class GranulationPBM2D(GranulationPBM):
                 "(the Stokes criterion: pbm.aggregation.success.velocity_model = stokes); allowed: "
                 "velocity_model none, or pbm.dimensions: 1"
             )
-
-    def rates(self, *args, **kwargs):
-        raise PBMInputError("GranulationPBM2D.rates: per-bin rates are the one-dimensional model's (pbm.dimensions: 1)")
 
     def _marginal(self, u: np.ndarray) -> np.ndarray:
         """(3, Mx) size-class totals of the scaled class state u (3 M2,)."""
@@ -164,16 +161,14 @@ class GranulationPBM2D(GranulationPBM):
         self._store(s, float(t), u, 0.0, (0.0, 0.0))
         return s
 
-    def _begin(self, t_start: float, t_end: float, state) -> State2D:
-        if not t_end > t_start:
-            raise PBMInputError(f"run: t_end = {t_end} must be > t_start = {t_start}")
+    def _check_start(self, state) -> None:
         if not isinstance(state, State2D) or state.classes is None or state.class_volumes is None:
             raise PBMInputError(
                 f"run: the two-dimensional PBM starts from a State2D (GranulationPBM2D.initial_state or "
                 f"make_state), not {type(state).__name__}"
             )
-        if abs(state.t - t_start) > TIME_EPS * max(1.0, abs(t_start)):
-            raise PBMInputError(f"run: the state is at t = {state.t}, not at t_start = {t_start}")
+
+    def _start_classes(self, state: State2D) -> np.ndarray:
         K, J = self.grid.bins, self.liquid_grid.classes
         vols = np.asarray(state.class_volumes, float)
         if vols.size < K or not np.allclose(vols[:K], self.grid.x, rtol=1e-12, atol=0):
@@ -187,13 +182,7 @@ class GranulationPBM2D(GranulationPBM):
                 f"liquid class {e} is {state.classes[q, i, e]!r} at t = {state.t:.6g} s (start of run); "
                 "allowed: finite values >= 0"
             )
-        s = state.copy()
-        s.t = t_start
-        self._use_classes(vols[K:])
-        self.kernel.reset()
-        if self.breakage is not None:
-            self.breakage.reset()
-        return s
+        return vols[K:]
 
     @staticmethod
     def _diameter(v: float) -> float:

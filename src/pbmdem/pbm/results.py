@@ -10,14 +10,13 @@ volume per solid volume); mean porosity sum G / (sum S + sum G).
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 
-from pbmdem.atomic import atomic_path
+from pbmdem.atomic import write_csv, write_json
 from pbmdem.plotting import pyplot, save_figure, size_distribution
 
 from .grid import Grid
@@ -306,17 +305,8 @@ class Result:
     def save(self, outdir) -> dict[str, Path]:
         """Write summary.csv, bins.csv, run.json, psd.png and d50.png into ``outdir`` (atomically)."""
         outdir = Path(outdir)
-        outdir.mkdir(parents=True, exist_ok=True)
-        paths = {}
-        for name, frame in self.to_frames().items():
-            p = outdir / f"{name}.csv"
-            with atomic_path(p) as tmp:
-                frame.to_csv(tmp, index=False)
-            paths[name] = p
-        p = outdir / "run.json"
-        with atomic_path(p) as tmp:
-            tmp.write_text(json.dumps(_jsonable(self.info), indent=2, sort_keys=True) + "\n")
-        paths["info"] = p
+        paths = {name: write_csv(outdir / f"{name}.csv", frame) for name, frame in self.to_frames().items()}
+        paths["info"] = write_json(outdir / "run.json", _jsonable(self.info))
         paths["psd"] = outdir / "psd.png"
         self.plot_psd(paths["psd"])
         paths["d50"] = outdir / "d50.png"

@@ -3,7 +3,7 @@ and the checks of a state against its grid."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -27,12 +27,7 @@ class FeedGranules:
     gas: np.ndarray
 
     def copy(self) -> FeedGranules:
-        return FeedGranules(
-            np.array(self.volumes, float),
-            np.array(self.number, float),
-            np.array(self.liquid, float),
-            np.array(self.gas, float),
-        )
+        return FeedGranules(*(np.array(getattr(self, f.name), float) for f in fields(self)))
 
 
 @dataclass
@@ -60,18 +55,9 @@ class State:
     merged_volume: float = 0.0
 
     def copy(self) -> State:
-        return State(
-            self.t,
-            self.number.copy(),
-            self.liquid.copy(),
-            self.gas.copy(),
-            self.refused_volume,
-            self.liquid_added,
-            self.steps,
-            None if self.feed is None else self.feed.copy(),
-            self.merged_number,
-            self.merged_volume,
-        )
+        """A copy of the same class whose arrays (and feed granules) are copies."""
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        return replace(self, **{k: v.copy() if hasattr(v, "copy") else v for k, v in values.items()})
 
 
 def surface_fraction(S: np.ndarray, L: np.ndarray, G: np.ndarray) -> np.ndarray:
@@ -152,11 +138,3 @@ class State2D(State):
 
     classes: np.ndarray | None = None
     class_volumes: np.ndarray | None = None
-
-    def copy(self) -> State2D:
-        base = State.copy(self)
-        return State2D(
-            **{f: getattr(base, f) for f in State.__dataclass_fields__},
-            classes=None if self.classes is None else self.classes.copy(),
-            class_volumes=None if self.class_volumes is None else self.class_volumes.copy(),
-        )

@@ -325,10 +325,8 @@ class TableFrequency:
                 "pbmdem pbm --velocity-table)"
             )
         d = self._diameters(diameters)
-        weights = speed_weights(self.rpms, rpm)
-        freq = np.exp(sum(w * self._log_matrix(k, d) for k, w in weights))
-        fractions = sum(w * self._fractions(k, d) for k, w in weights)
-        return EncounterRates(freq, fractions)
+        fractions = sum(w * self._fractions(k, d) for k, w in speed_weights(self.rpms, rpm))
+        return EncounterRates(self(d, numbers, rpm), fractions)
 
     def impacts(self, diameters, numbers, rpm):
         """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall impacts of the

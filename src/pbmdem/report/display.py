@@ -25,7 +25,8 @@ PERCENT = 100.0
 MAX_COLUMNS = 8
 
 
-def _missing(value) -> bool:
+def missing(value) -> bool:
+    """None, NaN or a text that reads as NaN: shown as "n/a"."""
     try:
         return value is None or math.isnan(float(value))
     except (TypeError, ValueError):
@@ -34,28 +35,28 @@ def _missing(value) -> bool:
 
 def number(value, spec: str = ".4g") -> str:
     """`value` formatted with `spec`; "n/a" for a missing value."""
-    return "n/a" if _missing(value) else format(float(value), spec)
+    return "n/a" if missing(value) else format(float(value), spec)
 
 
 def mm(value_m, decimals: int = 3) -> str:
     """A size in m shown in mm with `decimals` decimals."""
-    return "n/a" if _missing(value_m) else f"{MM * float(value_m):.{decimals}f}"
+    return "n/a" if missing(value_m) else f"{MM * float(value_m):.{decimals}f}"
 
 
 def percent(fraction, decimals: int = 2) -> str:
     """A fraction shown in % with `decimals` decimals."""
-    return "n/a" if _missing(fraction) else f"{PERCENT * float(fraction):.{decimals}f}"
+    return "n/a" if missing(fraction) else f"{PERCENT * float(fraction):.{decimals}f}"
 
 
 def value_range(lo, hi, decimals: int = 3) -> str:
     """ "lo - hi" of two numbers already in display units."""
-    if _missing(lo) or _missing(hi):
+    if missing(lo) or missing(hi):
         return "n/a"
     return f"{float(lo):.{decimals}f} - {float(hi):.{decimals}f}"
 
 
 def yes_no(flag) -> str:
-    return "n/a" if _missing(flag) else ("yes" if bool(flag) else "no")
+    return "n/a" if missing(flag) else ("yes" if bool(flag) else "no")
 
 
 def shown(frame: pd.DataFrame, names: dict[str, str], spec: str = ".4g") -> pd.DataFrame:

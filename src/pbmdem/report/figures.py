@@ -135,9 +135,6 @@ def cumulative_undersize(diameter: np.ndarray, density_lnd: np.ndarray) -> np.nd
     return PERCENT * mass / mass[-1] if mass[-1] > 0 else np.zeros_like(mass)
 
 
-#: line styles of the snapshot times, so that curves lying on each other stay distinguishable
-
-
 def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str):
     """Cumulative mass undersize (%) against diameter (mm) at `snapshot_times`, one panel per model.
     `bins`: panel title -> that run's bins.csv (`BINS_COLUMNS`). Times whose distribution has not
@@ -215,8 +212,8 @@ def liquid_porosity(speed, process, rpm: str):
         t_ann = _column(ann, "time")
         if members is not None and len(members) and column in members.columns:
             per = [g.sort_values("time") for _, g in members.groupby("member")]
-            lo = np.min([np.interp(t_ann, g.time, g[column]) for g in per], axis=0) * scale
-            hi = np.max([np.interp(t_ann, g.time, g[column]) for g in per], axis=0) * scale
+            curves = [np.interp(t_ann, g.time, g[column]) for g in per]
+            lo, hi = np.min(curves, axis=0) * scale, np.max(curves, axis=0) * scale
             ax.fill_between(t_ann, lo, hi, **BAND["PBM-ANN"], label="PBM-ANN band (min-max of the surrogate's members)")
         ax.plot(
             t_ann,

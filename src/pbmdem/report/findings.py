@@ -41,7 +41,8 @@ from .training import training_set, training_words
 from .words import write_titled_table
 
 
-def _domain_marks(ax, x, frame: pd.DataFrame) -> bool:
+def _domain_marks(ax, x, frame: pd.DataFrame) -> None:
+    """Circles on the sizes of the batches with intervals outside the training domain, and their legend entry."""
     outside = frame.out_of_domain_intervals.to_numpy(int) > 0
     for stat, _, _ in SIZE_STYLES:
         ax.scatter(
@@ -53,7 +54,10 @@ def _domain_marks(ax, x, frame: pd.DataFrame) -> bool:
             lw=1.6,
             zorder=5,
         )
-    return bool(outside.any())
+    if outside.any():
+        ax.scatter(
+            [], [], s=140, facecolors="none", edgecolors="tab:purple", label="surrogate outside its training domain"
+        )
 
 
 def speed_figure(study: pd.DataFrame, feed: str, batch_s: float):
@@ -68,10 +72,7 @@ def speed_figure(study: pd.DataFrame, feed: str, batch_s: float):
     outside_range = s[~s.in_grid_range.astype(bool)]
     for rpm in outside_range.rpm:
         ax.axvspan(rpm - 0.5 * _step(s.rpm), rpm + 0.5 * _step(s.rpm), color="tab:purple", alpha=0.08, lw=0)
-    if _domain_marks(ax, s.rpm, s):
-        ax.scatter(
-            [], [], s=140, facecolors="none", edgecolors="tab:purple", label="surrogate outside its training domain"
-        )
+    _domain_marks(ax, s.rpm, s)
     ax.set_ylim(bottom=0.0)
     if len(s) <= 12:
         ax.set_xticks(s.rpm, [f"{v:g}" for v in s.rpm])
@@ -120,10 +121,7 @@ def feed_figure(study: pd.DataFrame, rpm: float, batch_s: float):
             label=f"final {stat} (bars: surrogate members' range)",
         )
     ax.plot(x, MM * s.feed_d50, "s", color="0.55", ms=7, label="feed d50 (before granulation)")
-    if _domain_marks(ax, x, s):
-        ax.scatter(
-            [], [], s=140, facecolors="none", edgecolors="tab:purple", label="surrogate outside its training domain"
-        )
+    _domain_marks(ax, x, s)
     labels = [f"{f}\n(not in DEM grid)" if not g else f for f, g in zip(s.feed, s.in_grid.astype(bool))]
     ax.set_xticks(x, labels, fontsize=8)
     ax.set_ylim(bottom=0.0)

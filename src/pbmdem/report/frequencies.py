@@ -11,9 +11,6 @@
 
 from __future__ import annotations
 
-import json
-
-import numpy as np
 import pandas as pd
 
 from pbmdem.frequency import upper_pairs
@@ -85,9 +82,7 @@ def surrogate_on_dem_samples(speed, surrogate) -> pd.DataFrame:
     rows = []
     for k, rep in enumerate(speed.dem):
         for r in _intervals(rep, f"PBM-DEM replicate {k} result").itertuples():
-            d = np.asarray(json.loads(r.class_diameters), float)
-            n = np.asarray(json.loads(r.class_counts), float)
-            dem = np.asarray(json.loads(r.class_frequencies), float)
+            d, n, dem = r.class_diameters, r.class_counts, r.class_frequencies
             with out_of_domain_recorded(
                 f"report, {speed.rpm} rpm, PBM-DEM replicate {k} interval {r.interval}", log_each=False
             ) as found:

@@ -17,7 +17,6 @@ of LIGGGHTS, Python and the libraries.
 
 from __future__ import annotations
 
-import hashlib
 import importlib.metadata
 import json
 import platform
@@ -30,6 +29,7 @@ import pandas as pd
 
 import pbmdem
 from pbmdem.config.dem import EXECUTION_KEYS
+from pbmdem.config.settings import sha256_of
 from pbmdem.readers import read_json
 from pbmdem.tables import RUNS
 
@@ -45,11 +45,6 @@ def settings_mapping(mapping: dict) -> dict:
     for key in EXECUTION_KEYS:
         out.get("dem", {}).pop(key, None)
     return out
-
-
-def sha256_of(mapping: dict) -> str:
-    """sha256 of a mapping, key order and formatting ignored (the formula of `Config.sha256`)."""
-    return hashlib.sha256(json.dumps(mapping, sort_keys=True).encode()).hexdigest()
 
 
 def liggghts_versions(runs_table: str | Path) -> str:

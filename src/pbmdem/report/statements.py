@@ -16,15 +16,13 @@ calibration; it is never left out of the report.
 
 from __future__ import annotations
 
-import json
-import math
 import operator
 from dataclasses import dataclass
 
 import pandas as pd
 
 from . import words
-from .display import MM, number, percent
+from .display import MM, missing, number, percent
 
 
 @dataclass(frozen=True)
@@ -36,7 +34,7 @@ class Target:
     unit: str = ""
 
     def met(self, value) -> bool:
-        if value is None or (isinstance(value, float) and math.isnan(value)):
+        if missing(value):
             return False
         return {"<=": operator.le, ">=": operator.ge, "==": operator.eq}[self.relation](float(value), self.threshold)
 
@@ -101,15 +99,13 @@ def target_sentences(table: pd.DataFrame) -> list[str]:
     return out
 
 
-def _classes(diameters: str) -> str:
-    try:
-        return ", ".join(f"{MM * d:.2f}" for d in json.loads(diameters))
-    except (TypeError, ValueError):
-        return "n/a"
+def _classes(diameters) -> str:
+    """The sample's class diameters (an array of the contract's reader) in mm; n/a without them."""
+    return "n/a" if diameters is None else ", ".join(f"{MM * d:.2f}" for d in diameters)
 
 
 def _messages(value) -> str:
-    return "" if value is None or (isinstance(value, float) and math.isnan(value)) else str(value)
+    return "" if missing(value) else str(value)
 
 
 def out_of_domain(speed) -> pd.DataFrame:
@@ -121,7 +117,7 @@ def out_of_domain(speed) -> pd.DataFrame:
     recorded = ann is not None and "out_of_domain_count" in ann.columns
     for r in ann.to_dict("records") if ann is not None else []:
         count = r.get("out_of_domain_count", float("nan"))
-        known = recorded and not (isinstance(count, float) and math.isnan(count))
+        known = recorded and not missing(count)
         rows.append(
             {
                 "model": "PBM-ANN (ensemble mean)",
@@ -155,7 +151,7 @@ def out_of_domain(speed) -> pd.DataFrame:
             )
     timing = speed.constant.timing
     count = timing.get("out_of_domain_count", float("nan"))
-    known = not (isinstance(count, float) and math.isnan(count))
+    known = not missing(count)
     first = ann.iloc[0] if ann is not None and len(ann) else {}
     rows.append(
         {

@@ -19,12 +19,11 @@ as a number in mm), ``codes`` (names as ````a``, ``b````), ``fold``.
 
 from __future__ import annotations
 
-import math
 import re
 
 import jinja2
 
-from .display import MM, PERCENT, write_table
+from .display import MM, PERCENT, missing, write_table
 
 #: a space that `fold` keeps (a private-use character, not whitespace, stands in for it while folding)
 _KEPT = "\ue000"
@@ -53,9 +52,7 @@ def _codes(items) -> str:
 
 def mm(value, decimals: int = 2) -> str:
     """A size in m as "1.23 mm"; "n/a" when missing."""
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "n/a"
-    return f"{MM * float(value):.{decimals}f} mm"
+    return "n/a" if missing(value) else f"{MM * float(value):.{decimals}f} mm"
 
 
 ENV = jinja2.Environment(

@@ -13,7 +13,6 @@ counts once), beside the targets :data:`MEAN_ERROR_TARGET` and :data:`MAE_TARGET
 
 from __future__ import annotations
 
-import json
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,13 +42,6 @@ class LoopSample:
     frequencies: np.ndarray
 
 
-def _json_array(text: str, source: str, column: str) -> np.ndarray:
-    try:
-        return np.asarray(json.loads(text), float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{source}: column {column!r} = {text!r:.60}: a JSON list of numbers is required") from exc
-
-
 def loop_samples(validation_dir: str | Path, rpms, replicates: int) -> list[LoopSample]:
     """The distinct samples of the PBM-DEM loops (``replicates`` per speed of ``rpms``, the speeds as
     in the paths) under ``validation_dir``, from their ``intervals.csv`` (contract
@@ -60,13 +52,11 @@ def loop_samples(validation_dir: str | Path, rpms, replicates: int) -> list[Loop
             path = run_folder(validation_dir, str(rpm), "pbm_dem", rep) / "intervals.csv"
             table = INTERVALS.read(path, "PBM-DEM coupling-interval record")
             for row in table.itertuples():
-                key = (float(rpm), row.class_diameters, row.class_counts)
+                d, n, c = row.class_diameters, row.class_counts, row.class_frequencies
+                key = (float(rpm), tuple(d), tuple(n))
                 if key in seen:
                     continue
                 seen.add(key)
-                d = _json_array(row.class_diameters, str(path), "class_diameters")
-                n = _json_array(row.class_counts, str(path), "class_counts")
-                c = _json_array(row.class_frequencies, str(path), "class_frequencies")
                 if len(d) != len(n) or len(c) != len(d) * (len(d) + 1) // 2:
                     raise ValueError(
                         f"{path}: interval {row.interval}: {len(d)} diameters, {len(n)} counts and {len(c)} pair "

@@ -70,8 +70,7 @@ def assess(surrogate, rpm: float, intervals: pd.DataFrame) -> list[Assessment]:
     ranges = surrogate.feature_ranges()
     out = []
     for row in intervals.itertuples():
-        d = np.asarray(json.loads(row.class_diameters), float)
-        n = np.asarray(json.loads(row.class_counts), float)
+        d, n = row.class_diameters, row.class_counts
         frame, _, _ = pair_table(d, n, rpm)
         features = make_features(frame, surrogate.impeller_radius)
         mask = surrogate.out_of_domain(frame)

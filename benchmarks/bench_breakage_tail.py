@@ -21,7 +21,7 @@ estimate above it is contradicted by the DEM's zero.
 Run: .venv/bin/python benchmarks/bench_breakage_tail.py --tables results/dem
      [--config config/config.yaml] [--laws lognormal gengamma] [--family mlp] [--speeds 1 2 4]
      [--spread 0 0.5] [--model results/surrogate/model.skops] [--no-held-out] [--csv rows.csv]
-     [--rpm 600 1200]
+     [--rpm 600 1200] [--law-from 1.0]
 (--spread: pbm.breakage.strength_spread values to score, 0 the sharp criterion; --rpm: score only
 the grid points of speeds in [lo, hi] rpm, the fits still on every run of the folds.) About 1 min per
 law (fits and held-out MLP or Kriging) on the default grid (12 runs, 5 folds) on one core; measured
@@ -60,7 +60,7 @@ def point_classes(pairs: pd.DataFrame, point: str) -> tuple[np.ndarray, np.ndarr
     return classes["d"].to_numpy(float), classes["n"].to_numpy(float), float(rows["rpm"].iloc[0])
 
 
-def dem_point(tables: dict, point: str, law: str | None = None) -> dict:
+def dem_point(tables: dict, point: str, law: str | None = None, law_from: float | None = None) -> dict:
     """The DEM's impacts of one point as ``pbmdem.impact.ImpactRates`` plus the impacts sampled.
 
     Returns {"d", "n", "rpm", "rates", "sampled": {kind: (K,) impacts sampled per class, all replicates},
@@ -75,7 +75,7 @@ def dem_point(tables: dict, point: str, law: str | None = None) -> dict:
         if ok.any():
             out[ok] = counts[ok] / counts[ok].sum(axis=1, keepdims=True)
             if law is not None:
-                mu, sigma, *shape = fit_speed_law(counts[ok], law)
+                mu, sigma, *shape = fit_speed_law(counts[ok], law, law_from)
                 out[ok] = speed_fractions(mu, sigma, law, shape[0] if shape else None)
         return out
 
@@ -141,9 +141,10 @@ def ingredients(rates, numbers, speed: float, spread: float = 0.0) -> dict:
 
 
 # ----------------------------------------------------------------------------- held-out surrogate
-def held_out_points(tables: dict, settings: dict, radius: float, family: str, law: str) -> dict:
+def held_out_points(tables: dict, settings: dict, radius: float, family: str, law: str, law_from=None) -> dict:
     """point -> ImpactRates of the point's classes predicted by ``family`` fitted on the runs of the
-    other folds (surrogate.cv's grouped folds over whole runs; walls on the same folds)."""
+    other folds (surrogate.cv's grouped folds over whole runs; walls on the same folds); the law
+    fitted to the bins from ``law_from`` m/s up (None: every bin)."""
     from sklearn.base import clone
 
     from pbmdem.impact import WALLS
@@ -156,9 +157,13 @@ def held_out_points(tables: dict, settings: dict, radius: float, family: str, la
     s = {**settings, "speed_law": law}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        data = training_data(tables["pairs"], radius, s["zero_collisions"], tables["velocities"], speed_law=law)
+        data = training_data(
+            tables["pairs"], radius, s["zero_collisions"], tables["velocities"], speed_law=law, speed_law_from=law_from
+        )
         walls = {
-            w: wall_training_data(tables["walls"], tables["wall_velocities"], w, radius, s["zero_collisions"], law)
+            w: wall_training_data(
+                tables["walls"], tables["wall_velocities"], w, radius, s["zero_collisions"], law, law_from
+            )
             for w in WALLS
         }
     template = build_surrogate(s, radius, n_jobs=1, family=family)
@@ -281,6 +286,12 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--rpm", nargs=2, type=float, default=None, metavar=("LO", "HI"), help="score the points of lo-hi rpm only"
     )
+    parser.add_argument(
+        "--law-from",
+        type=float,
+        default=None,
+        help="fit the laws to the bins from this speed (m/s, a bin edge) up, as surrogate.speed_law_from",
+    )
     parser.add_argument("--quick", action="store_true", help="synthetic tables, tiny config (smoke test)")
     args = parser.parse_args(argv)
     from pbmdem.surrogate._threads import single_threaded
@@ -324,13 +335,13 @@ def report(args) -> int:
     rows = []
     for law in args.laws:
         t0 = time.perf_counter()
-        fitted = {p: dem_point(tables, p, law)["rates"] for p in points}
+        fitted = {p: dem_point(tables, p, law, getattr(args, "law_from", None))["rates"] for p in points}
         rows += scored(points, dem, fitted, args.speeds, f"{law} fit", args.spread)
         print(f"{law}: fits to the DEM's own bins {time.perf_counter() - t0:.1f} s", flush=True)
         if not args.no_held_out:
             t0 = time.perf_counter()
             TV.clear()
-            held = held_out_points(tables, settings, radius, args.family, law)
+            held = held_out_points(tables, settings, radius, args.family, law, getattr(args, "law_from", None))
             print(
                 f"{law}: held-out bin fractions, mean total-variation distance "
                 + ", ".join(f"{k} {np.mean(v):.3f} ({len(v)} rows)" for k, v in TV.items())

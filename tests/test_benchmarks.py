@@ -30,6 +30,10 @@ HELPERS = {"quick.py"}
 QUICK = {
     "render_decks.py --quick": (r"test\.yaml: [1-9]\d* decks in ",),
     "bench_breakage_tail.py --quick": (r"gengamma held out s=0\.5 +pairs", r"number-weighted selection rate S"),
+    "bench_breakage_samples.py --quick": (
+        r"rpm 1200: median log10\(estimate / DEM\) of the pair breaking-impact rate",
+        r"0\.50 +feed +\S+ +[+-]\d\.\d\d +[+-]\d\.\d\d +[+-]\d\.\d\d",
+    ),
     "bench_calibration.py --quick": (r"PBM-constant \+ noise, 2 noise seeds", r"pbm\.aggregation\.beta0 +2 "),
     "bench_dem.py --quick": (
         r"vectorised parse\+count +\d",

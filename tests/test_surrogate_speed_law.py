@@ -17,6 +17,7 @@ from pbmdem.surrogate.baselines import PhysicalScaling
 from pbmdem.surrogate.families import ResponseSurface
 from pbmdem.surrogate.velocity import (
     attach_velocity_bins,
+    bin_counts,
     fit_speed_law,
     lognormal_fractions,
     speed_fractions,
@@ -135,6 +136,47 @@ def test_gengamma_fit_of_sampled_speeds_recovers_the_tail_above_2_and_4_m_s(q):
     # the test can tell: the log-normal fit of the same bins misses the tail at 4 m/s (by 3x or more)
     p4, lognormal4 = true.sf(4.0), norm.sf((math.log10(4.0) - mu_ln) / sigma_ln)
     assert max(p4 / lognormal4, lognormal4 / p4) > 3.0
+
+
+def test_fit_from_1_m_s_recovers_the_tail_above_2_m_s_of_a_law_whose_bulk_differs():
+    # the DEM's pairs: many slow bed contacts (log-normal, median 3 cm/s) and a fast mode of a known
+    # generalised gamma (q = 0.5, median 0.5 m/s), 400 000 impacts binned as the DEM bins them. The law
+    # fitted from 1 m/s up (slower impacts one cell) gives the rate above 2 and 3.16 m/s (breakage's
+    # critical speeds) within 3 binomial standard errors of the fraction counted there; fitted to every
+    # bin, the bulk decides and the same law misses it by more than 10x.
+    rng = np.random.default_rng(11)
+    n, share = 400_000, 0.4
+    fast = gengamma_law(math.log10(0.5), 0.3, 0.5)
+    n_fast = rng.binomial(n, share)
+    v = np.concatenate([fast.rvs(n_fast, random_state=rng), 10 ** rng.normal(math.log10(0.03), 0.25, n - n_fast)])
+    counts = np.bincount(velocity_bin(v), minlength=N_VELOCITY_BINS)
+    tail = fit_speed_law(counts, "gengamma", fit_from=1.0)
+    bulk = fit_speed_law(counts, "gengamma")
+    # the true law's bins, as the PBM's breakage reads them (fractions of the bins x the fraction above v)
+    true = share * speed_fractions(math.log10(0.5), 0.3, "gengamma", 0.5)[0]
+    true += (1.0 - share) * lognormal_fractions(math.log10(0.03), 0.25)[0]
+    for speed in (2.0, VELOCITY_EDGES[15]):
+        above = fraction_above(speed)
+        p = true @ above
+        tolerance = 3.0 * math.sqrt(p * (1.0 - p) / n)
+        fitted = speed_fractions(tail[0], tail[1], "gengamma", tail[2])[0] @ above
+        assert abs(fitted - p) <= tolerance, speed
+        missed = speed_fractions(bulk[0], bulk[1], "gengamma", bulk[2])[0] @ above
+        assert max(missed / p, p / missed) > 10.0, speed
+    # below the speed it is fitted from the law keeps the share of slower impacts
+    slower = counts[:13].sum() / n
+    assert speed_fractions(tail[0], tail[1], "gengamma", tail[2])[0][:13].sum() == pytest.approx(slower, abs=1e-6)
+
+
+def test_fit_from_must_be_a_bin_edge_and_reaches_the_training_data():
+    with pytest.raises(ValueError, match=r"fitted from 0\.9 m/s; allowed: null or an inner edge"):
+        fit_speed_law(np.ones(N_VELOCITY_BINS), "gengamma", fit_from=0.9)
+    pairs, velocities = make_synthetic_tables(R, rpms=(600.0, 1200.0), sample_velocities=True, seed=3)
+    data = training_data(pairs, R, velocity_table=velocities, speed_law="gengamma", speed_law_from=1.0)
+    rows = np.isfinite(data.velocity).all(axis=1)
+    counts = bin_counts(data.table)[rows]
+    assert data.speed_law_from == 1.0
+    assert np.allclose(np.column_stack(fit_speed_law(counts, "gengamma", 1.0)), data.velocity[rows])
 
 
 def test_weibull_fit_of_sampled_speeds_and_its_median():

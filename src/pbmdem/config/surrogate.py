@@ -79,6 +79,11 @@ class Surrogate(Settings):
     speed_law: Literal["lognormal", "weibull", "gengamma"] = setting(
         "gengamma", "the law of the impact speeds the surrogate learns (docs/surrogate.md)"
     )
+    speed_law_from: float | None = setting(
+        None,
+        "m/s, an inner edge of the velocity bins: the speed law is fitted to the bins from this speed up, "
+        "the slower impacts one cell (the fast tail breakage counts); null: to every bin",
+    )
     model: Literal["auto", "mlp", "kriging", "rsm"] = setting(
         "auto",
         "the family PBM-ANN uses: auto, per target the least held-out error (docs/surrogate.md); or mlp, kriging, rsm",

@@ -409,6 +409,8 @@ class TrainingData:
     """Rows whose zero count was floored (``zero_policy="floor"``)."""
     speed_law: str = "lognormal"
     """The impact-speed law ``velocity`` was fitted with (:data:`~pbmdem.surrogate.velocity.SPEED_LAWS`)."""
+    speed_law_from: float | None = None
+    """The speed (m/s) from which the law was fitted to the bins (slower impacts one cell); None: every bin."""
 
 
 def training_data(
@@ -418,6 +420,7 @@ def training_data(
     velocity_table: pd.DataFrame | None = None,
     velocity_source: str = "impact-velocity table",
     speed_law: str = "lognormal",
+    speed_law_from: float | None = None,
 ) -> TrainingData:
     """Features, target, groups, replicate noise and impact-speed targets of a collision table.
 
@@ -427,7 +430,8 @@ def training_data(
     a table whose bins are already attached needs none. Without bins only the encounter frequency
     can be learned (a warning says so). ``impeller_radius`` (m) is
     ``granulator.impeller.blade_length``, for the tip-speed feature. ``speed_law`` is the
-    impact-speed law fitted to every row's bins (:data:`~pbmdem.surrogate.velocity.SPEED_LAWS`).
+    impact-speed law fitted to every row's bins (:data:`~pbmdem.surrogate.velocity.SPEED_LAWS`),
+    from the speed ``speed_law_from`` up (:func:`~pbmdem.surrogate.velocity.fit_speed_law`'s ``fit_from``).
     """
     n_par = n_law_parameters(speed_law)
 
@@ -438,7 +442,7 @@ def training_data(
     velocity = np.full((len(data), n_par), np.nan)
     vmask = velocity_rows(data)
     if vmask.any():
-        velocity[vmask] = np.column_stack(fit_speed_law(bin_counts(data.loc[vmask]), speed_law))
+        velocity[vmask] = np.column_stack(fit_speed_law(bin_counts(data.loc[vmask]), speed_law, speed_law_from))
     else:
         warnings.warn(
             "the collision table carries no impact-velocity bins (results/dem/impact_velocity.csv "
@@ -456,4 +460,5 @@ def training_data(
         n_dropped=int(len(table) - len(data)),
         n_floored=int(data["floored"].sum()),
         speed_law=speed_law,
+        speed_law_from=speed_law_from,
     )

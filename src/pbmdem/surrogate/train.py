@@ -218,6 +218,7 @@ def _training_data(table, velocity_table, impeller_radius: float, settings: dict
         velocity_table=vframe,
         velocity_source=f"impact-velocity table {velocity_source}",
         speed_law=settings.get("speed_law", "lognormal"),
+        speed_law_from=settings.get("speed_law_from"),
     )
     return data, source, velocity_source
 

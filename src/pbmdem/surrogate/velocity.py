@@ -211,12 +211,36 @@ def lognormal_fractions(mu, sigma) -> np.ndarray:
     return speed_fractions(mu, sigma, "lognormal")
 
 
-def _neg_loglik(theta, counts, law: str = "lognormal"):
+def _neg_loglik(theta, counts, law: str = "lognormal", first: int = 0):
+    """Negative log-likelihood of the bin ``counts``; with ``first`` > 0 the bins below bin ``first``
+    are one cell, P(v < edge ``first``) (:func:`fit_speed_law`'s ``fit_from``)."""
     mu, log_sigma = theta[:2]
     shape = theta[2] if len(theta) > 2 else None
     logp = _log_bin_probabilities(_LOG_EDGES, mu, np.exp(log_sigma), law, shape)
     logp = np.where(counts > 0, np.nan_to_num(logp, nan=-745.0, neginf=-745.0), 0.0)
-    return -float(np.sum(counts * np.maximum(logp, -745.0)))
+    if first == 0:
+        return -float(np.sum(counts * np.maximum(logp, -745.0)))
+    below = float(np.sum(counts[:first]))
+    log_below = 0.0
+    if below > 0:
+        log_cdf = _log_cdf_sf(_LOG_EDGES[first], mu, np.exp(log_sigma), law, shape)[0]
+        log_below = max(float(np.nan_to_num(log_cdf, nan=-745.0)), -745.0)
+    return -(below * log_below + float(np.sum(counts[first:] * np.maximum(logp[first:], -745.0))))
+
+
+def fit_from_bin(fit_from: float | None) -> int:
+    """The bin from which :func:`fit_speed_law` resolves the bins (0: every bin) for ``fit_from``
+    (m/s, an inner edge of :data:`~pbmdem.impact.VELOCITY_EDGES`, or None); ValueError otherwise."""
+    if fit_from is None:
+        return 0
+    inner = VELOCITY_EDGES[1:-1]
+    match = np.flatnonzero(np.isclose(inner, float(fit_from), rtol=1e-6, atol=0.0))
+    if match.size != 1:
+        raise ValueError(
+            f"speed law fitted from {fit_from!r} m/s; allowed: null or an inner edge of the velocity bins, "
+            f"{[float(f'{e:.4g}') for e in inner]}"
+        )
+    return int(match[0]) + 1
 
 
 def fit_lognormal(counts) -> tuple[np.ndarray, np.ndarray]:
@@ -224,8 +248,13 @@ def fit_lognormal(counts) -> tuple[np.ndarray, np.ndarray]:
     return fit_speed_law(counts, "lognormal")
 
 
-def fit_speed_law(counts, law: str = "lognormal") -> tuple[np.ndarray, ...]:
+def fit_speed_law(counts, law: str = "lognormal", fit_from: float | None = None) -> tuple[np.ndarray, ...]:
     """Maximum-likelihood fit of the speed law ``law`` (:data:`SPEED_LAWS`) to binned counts, one per row.
+
+    ``fit_from`` (m/s, an inner bin edge; None: every bin): the bins below it count as one cell,
+    the impacts slower than ``fit_from``, so that the law describes P(V > v) from ``fit_from`` up,
+    the fast tail that breakage counts, rather than the slow bulk (docs/surrogate.md, "Impact-speed
+    laws"); mu and sigma are then the fitted law's, not the bulk's median and spread.
 
     Returns ``(mu, sigma)`` (``(mu, sigma, q)`` for ``gengamma``): log10 median speed (m/s),
     standard deviation of log10 v (decades) within :data:`SIGMA_BOUNDS`, and the shape q within
@@ -233,6 +262,7 @@ def fit_speed_law(counts, law: str = "lognormal") -> tuple[np.ndarray, ...]:
     the multinomial likelihood.
     """
     n_par = n_law_parameters(law)
+    first = fit_from_bin(fit_from)
     counts = np.atleast_2d(np.asarray(counts, float))
     if counts.shape[1] != N_VELOCITY_BINS:
         raise ValueError(f"expected {N_VELOCITY_BINS} bins per row, got {counts.shape[1]}")
@@ -245,13 +275,23 @@ def fit_speed_law(counts, law: str = "lognormal") -> tuple[np.ndarray, ...]:
         w = c / c.sum()
         m0 = float(np.dot(w, _LOG_CENTRES))
         s0 = float(np.clip(np.sqrt(np.dot(w, (_LOG_CENTRES - m0) ** 2) + 0.25**2 / 12), *SIGMA_BOUNDS))
-        x0 = [m0, np.log(s0)]
+        starts = [[m0, np.log(s0)]]
         if n_par == 3:  # the generalised gamma from the likeliest of a log-normal, a Weibull and a heavy tail
-            x0 = min(([m0, np.log(s0), q0] for q0 in (0.01, 1.0, -0.5)), key=lambda x: _neg_loglik(x, w, law))
+            starts = [min(([m0, np.log(s0), q0] for q0 in (0.01, 1.0, -0.5)), key=lambda x: _neg_loglik(x, w, law))]
+        if first:  # the tail's fit from the law fitted to every bin, and from it with each start shape
+            bulk = [float(v[0]) for v in fit_speed_law(w, law)]
+            bulk[1] = np.log(bulk[1])
+            starts = [bulk] + ([bulk[:2] + [q0] for q0 in (0.01, 1.0, -0.5)] if n_par == 3 else [])
         # beyond the log-normal, converged tightly: the looser default stops where another BLAS
         # kernel's rounding moves a flat likelihood's optimum by 1e-4 (tests/test_surrogate_families.py)
-        options = {} if law == "lognormal" else {"ftol": 1e-15, "gtol": 1e-10, "maxiter": 2000}
-        best = minimize(_neg_loglik, x0=x0, args=(w, law), method="L-BFGS-B", bounds=bounds[:n_par], options=options)
+        options = {} if law == "lognormal" and not first else {"ftol": 1e-15, "gtol": 1e-10, "maxiter": 2000}
+        fits = [
+            minimize(
+                _neg_loglik, x0=x0, args=(w, law, first), method="L-BFGS-B", bounds=bounds[:n_par], options=options
+            )
+            for x0 in starts
+        ]
+        best = min(fits, key=lambda f: f.fun if np.isfinite(f.fun) else np.inf)
         if not best.success and not np.isfinite(best.fun):
             warnings.warn(f"{law} fit of velocity row {r} did not converge: {best.message}", stacklevel=2)
         out[:, r] = best.x

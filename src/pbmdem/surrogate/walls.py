@@ -53,9 +53,16 @@ def wall_velocity_table(velocities: pd.DataFrame, wall: str) -> pd.DataFrame:
 
 
 def wall_training_data(
-    walls, velocities, wall: str, impeller_radius: float, zero_policy: str, speed_law: str = "lognormal"
+    walls,
+    velocities,
+    wall: str,
+    impeller_radius: float,
+    zero_policy: str,
+    speed_law: str = "lognormal",
+    speed_law_from: float | None = None,
 ):
-    """:class:`~pbmdem.surrogate.features.TrainingData` of one wall (impact-speed law ``speed_law``)."""
+    """:class:`~pbmdem.surrogate.features.TrainingData` of one wall (impact-speed law ``speed_law``,
+    fitted from ``speed_law_from`` m/s up)."""
     return training_data(
         wall_collision_table(walls, wall),
         impeller_radius,
@@ -63,6 +70,7 @@ def wall_training_data(
         velocity_table=wall_velocity_table(velocities, wall),
         velocity_source=f"wall impact-velocity table ({wall})",
         speed_law=speed_law,
+        speed_law_from=speed_law_from,
     )
 
 
@@ -124,6 +132,7 @@ def train_wall_models(walls, velocities, template, candidates: dict, settings: d
             impeller_radius,
             settings["zero_collisions"],
             settings.get("speed_law", "lognormal"),
+            settings.get("speed_law_from"),
         )
         metrics, _ = cross_validate_models(
             data,

@@ -17,7 +17,7 @@ import weakref
 
 import numpy as np
 from scipy.special import expit
-from sklearn.base import BaseEstimator, RegressorMixin, clone
+from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.model_selection import GridSearchCV, GroupKFold, LeaveOneGroupOut
 from sklearn.neural_network import MLPRegressor
@@ -184,44 +184,47 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
                 raise ValueError(
                     f"groups must be 1-d with one entry per sample ({X.shape[0]}), got shape {groups.shape}"
                 )
-        with single_threaded():
-            self._fit(X, y, groups, sizes, alphas, seeds)
-        return self
-
-    def _fit(self, X, y, groups, sizes, alphas, seeds) -> None:
-        n_candidates = len(sizes) * len(alphas)
+        search = len(sizes) * len(alphas) > 1
         n_groups = 0 if groups is None else len(np.unique(groups))
-        if n_candidates > 1 and n_groups < 2:
+        if search and n_groups < 2:
             why = "no groups given" if groups is None else "only one group (DEM run)"
             warnings.warn(
                 f"{why}: no grouped hyperparameter search possible, using the first candidate of "
                 f"hidden_layer_sizes and alpha",
                 UserWarning,
-                stacklevel=3,
+                stacklevel=2,
             )
-        grid = {"mlp__hidden_layer_sizes": sizes, "mlp__alpha": alphas}
-        n_conv = 0
+        with single_threaded(), warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ConvergenceWarning)
+            self._fit(X, y, groups if search and n_groups >= 2 else None, sizes, alphas, seeds)
+        n_conv = sum(issubclass(w.category, ConvergenceWarning) for w in caught)
+        if n_conv:
+            warnings.warn(
+                f"{n_conv} MLP fit(s) stopped at max_iter={self.max_iter} before converging",
+                ConvergenceWarning,
+                stacklevel=2,
+            )
+        return self
+
+    def _fit(self, X, y, groups, sizes, alphas, seeds) -> None:
+        """The search (when ``groups`` is given) and the members, without warnings handling."""
         self.cv_results_ = None
         self.cv_folds_ = []
         self.best_score_ = float("nan")
         best = {"mlp__hidden_layer_sizes": sizes[0], "mlp__alpha": alphas[0]}
         members = []
-        if n_candidates > 1 and n_groups >= 2:
+        if groups is not None:
             splits = grouped_splits(groups, self.cv, self.n_splits)
             # the refit is the first member: the chosen candidate fitted on all rows with seeds[0]
             search = GridSearchCV(
                 self._pipeline().set_params(mlp__random_state=seeds[0]),
-                grid,
+                {"mlp__hidden_layer_sizes": sizes, "mlp__alpha": alphas},
                 cv=splits,
                 scoring="neg_mean_squared_error",
                 refit=OneStandardErrorRule(X.shape[1]),
                 n_jobs=self.n_jobs,
                 error_score="raise",
-            )
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always", ConvergenceWarning)
-                search.fit(X, y)
-            n_conv += sum(issubclass(w.category, ConvergenceWarning) for w in caught)
+            ).fit(X, y)
             self.cv_results_ = self._results(search.cv_results_, len(splits))
             best = search.best_params_
             members.append(search.best_estimator_)
@@ -242,21 +245,15 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
             "hidden_layer_sizes": tuple(best["mlp__hidden_layer_sizes"]),
             "alpha": float(best["mlp__alpha"]),
         }
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", ConvergenceWarning)
-            for seed in seeds[len(members) :]:
-                est = clone(self._pipeline()).set_params(
+        for seed in seeds[len(members) :]:
+            members.append(
+                self._pipeline()
+                .set_params(
                     mlp__hidden_layer_sizes=self.best_params_["hidden_layer_sizes"],
                     mlp__alpha=self.best_params_["alpha"],
                     mlp__random_state=seed,
                 )
-                members.append(est.fit(X, y))
-        n_conv += sum(issubclass(w.category, ConvergenceWarning) for w in caught)
-        if n_conv:
-            warnings.warn(
-                f"{n_conv} MLP fit(s) stopped at max_iter={self.max_iter} before converging",
-                ConvergenceWarning,
-                stacklevel=3,
+                .fit(X, y)
             )
         self.estimators_ = members
         self.n_outputs_ = 1 if y.ndim == 1 else int(y.shape[1])

@@ -26,6 +26,7 @@ from pbmdem.surrogate import (
     grouped_splits,
     training_data,
 )
+from pbmdem.surrogate import ensemble as ensemble_module
 from pbmdem.surrogate._threads import single_threaded
 from pbmdem.surrogate.evaluation import default_baselines
 from pbmdem.surrogate.features import make_features, pair_table
@@ -250,18 +251,18 @@ def test_frequency_matrix_shape_symmetry_positivity(fitted):
 
 def test_frequency_matrix_is_one_vectorised_predict(fitted, monkeypatch):
     calls = []
-    for est in fitted.frequency_model_.estimators_:
-        original = est.predict
+    original = ensemble_module._members_forward
 
-        def spy(X, _orig=original):
-            calls.append(len(X))
-            return _orig(X)
+    def spy(ensemble, X):
+        calls.append((ensemble.n_members_, len(X)))
+        return original(ensemble, X)
 
-        monkeypatch.setattr(est, "predict", spy)
+    monkeypatch.setattr(ensemble_module, "_members_forward", spy)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OutOfDomainWarning)
         fitted.frequency_matrix(np.linspace(0.002, 0.004, 5), np.full(5, 400.0), 600)
-    assert calls == [15] * len(fitted.frequency_model_.estimators_)  # K (K + 1) / 2 pairs, one call per member
+    # K (K + 1) / 2 pairs, one pass over all members
+    assert calls == [(len(fitted.frequency_model_.estimators_), 15)]
 
 
 def test_invalid_fit_inputs_are_refused_before_fitting(data):

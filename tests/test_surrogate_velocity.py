@@ -128,23 +128,6 @@ def test_encounters_one_call_consistent(fitted):
     assert np.abs(mu - mu_law).max() < 0.06
 
 
-def test_encounters_is_one_vectorised_predict_per_member(fitted, monkeypatch):
-    calls = []
-    members = list(fitted.frequency_model_.estimators_) + list(fitted.velocity_model_.estimators_)
-    for est in members:
-        original = est.predict
-
-        def spy(X, _orig=original):
-            calls.append(len(X))
-            return _orig(X)
-
-        monkeypatch.setattr(est, "predict", spy)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", OutOfDomainWarning)
-        fitted.encounters(np.linspace(0.002, 0.004, 5), np.full(5, 400.0), 600)
-    assert calls == [15] * len(members)
-
-
 def test_encounters_warns_out_of_domain_once_per_feature(fitted):
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")

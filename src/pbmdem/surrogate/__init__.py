@@ -2,7 +2,7 @@
 tables (docs/surrogate.md)."""
 
 from .baselines import HGBBaseline, PhysicalScaling
-from .ensemble import EnsembleMLPRegressorCV, grouped_splits, make_group_cv
+from .ensemble import EnsembleMLPRegressorCV, grouped_splits
 from .evaluation import cross_validate_models, noise_floor_r2, select_family, summarise
 from .families import KrigingRegressor, ResponseSurface
 from .features import FEATURE_NAMES, TARGET_NAME, TrainingData, make_features, training_data
@@ -32,7 +32,6 @@ __all__ = [
     "make_features",
     "training_data",
     "grouped_splits",
-    "make_group_cv",
     "cross_validate_models",
     "summarise",
     "save_surrogate",

@@ -116,7 +116,6 @@ class PhysicalScaling(RegressorMixin, BaseEstimator):
         p = n_law_parameters(self.speed_law)
         X, y = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
         self.log10_K_ = float(np.mean(y - self._log10_shape(X)))
-        self.K_ = 10.0**self.log10_K_
         self.log10_speed_ratio_ = self.log10_sigma_ = self.shape_ = None
         if velocity is not None:
             V = np.asarray(velocity, dtype=float)

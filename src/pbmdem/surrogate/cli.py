@@ -19,12 +19,6 @@ from .model import OutOfDomainWarning
 from .persistence import load_surrogate
 from .train import train_and_report
 
-EXAMPLES = """examples:
-  pbmdem surrogate train --config config/config.yaml --table results/dem/collisions.csv \\
-      --velocity-table results/dem/impact_velocity.csv --out out/surrogate
-  pbmdem surrogate predict --model results/surrogate/model.skops --table results/dem/collisions.csv
-"""
-
 TRAIN_EXAMPLES = """examples:
   pbmdem surrogate train --config config/config.yaml --table results/dem/collisions.csv \\
       --velocity-table results/dem/impact_velocity.csv --out out/surrogate --jobs 2
@@ -35,6 +29,10 @@ PREDICT_EXAMPLES = """examples:
   pbmdem surrogate predict --model results/surrogate/model.skops --diameters 0.002 0.004 \\
       --numbers 500 100 --rpm 900
 """
+
+
+#: ``pbmdem surrogate --help``: the examples of both subcommands
+EXAMPLES = TRAIN_EXAMPLES + PREDICT_EXAMPLES.removeprefix("examples:\n")
 
 
 def add_options(parser: argparse.ArgumentParser) -> None:
@@ -126,7 +124,6 @@ def _fmt(x) -> str:
 
 
 def _predict(args) -> int:
-
     model = load_surrogate(args.model, args.metadata)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", OutOfDomainWarning)
@@ -137,14 +134,10 @@ def _predict(args) -> int:
             if model.has_velocity_model():
                 mu, sigma = model.predict_velocity(table, check_domain=False)
                 out = out.assign(predicted_impact_velocity_median=10.0**mu, predicted_impact_velocity_sigma_log10=sigma)
-            if args.output:
-                out.to_csv(args.output, index=False)
-            else:
-                out.to_csv(sys.stdout, index=False)
+            out.to_csv(args.output or sys.stdout, index=False)
         else:
             if args.numbers is None or args.rpm is None:
                 raise SystemExit("--diameters needs --numbers and --rpm")
-
             args.rpm = check_rpm(args.rpm, "--rpm")
             for flag, values in (("--diameters", args.diameters), ("--numbers", args.numbers)):
                 bad = [v for v in values if not np.isfinite(v) or v <= 0]

@@ -12,9 +12,9 @@ import numpy as np
 import pandas as pd
 from sklearn.base import clone
 
+from pbmdem.atomic import write_csv
 from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES, GRID_WALL_VELOCITIES, GRID_WALLS
 
-from ._io import atomic_write
 from .evaluation import METRIC_COLUMNS, cross_validate_models, sample_scores, select_per_target, summarise
 from .features import training_data
 from .persistence import save_surrogate, sha256_file
@@ -26,7 +26,7 @@ log = logging.getLogger(__name__)
 
 
 def _write_csv(frame: pd.DataFrame, path: Path) -> None:
-    atomic_write(path, lambda tmp: frame.to_csv(tmp, index=False, float_format="%.6g"))
+    write_csv(path, frame, float_format="%.6g")
 
 
 def _read_table(table, contract, need=()) -> tuple[pd.DataFrame, str]:

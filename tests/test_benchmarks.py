@@ -50,6 +50,11 @@ QUICK = {
         r"the median batch \([\d.]+ ms\): surrogate [\d.]+ ms, PBM [\d.]+ ms",
         r"12 PBM-ANN batches \(mean and \d+ members\) on 2 process\(es\): .* batches per minute; 0 failed",
     ),
+    "bench_pair_features.py --quick": (
+        r"pair frequency \(Kriging\) per variant: held-out MAE",
+        r"rel +[+-]\d\.\d{3}",
+        r"rel frequency \+ law from 0\.1 m/s +\d+\.\d\d / \d+\.\d\d / \d+\.\d\d",
+    ),
     "bench_pbm.py --quick": (
         r"surrogate for PBM-ANN: trained in [\d.]+ s",
         r"batch  min +[\d.]+ ms, median +[\d.]+ ms \| \d+ steps, \d+ bins",

@@ -1,21 +1,8 @@
-"""The encounter surrogate used by the PBM: two self-tuning MLP ensembles plus the physics around them.
-
-:class:`CollisionSurrogate` is a scikit-learn regressor on the surrogate's feature matrix
-(:data:`~pbmdem.surrogate.features.FEATURE_NAMES`, built by
-:func:`~pbmdem.surrogate.features.training_data` / :func:`~pbmdem.surrogate.features.make_features`):
-``fit(X, y, groups=..., velocity=...)`` with ``y`` = log10 of the encounter frequency per pair and
-``velocity`` = the impact-speed law (mu, sigma[, q]) of every row. It is composed of
-
-* the frequency model (``frequency_model``, an :class:`~pbmdem.surrogate.ensemble.EnsembleMLPRegressorCV`)
-  fitted to ``y`` minus the physics offset,
-* the impact-velocity model (``velocity_model``, the same estimator class) fitted to
-  ``[mu - log10 tip speed, log10 sigma]`` (offset only with ``physics_offset="cross_section"``),
-* the impeller radius for building features from particle sizes and impeller speeds,
-* the per-feature training ranges behind :class:`OutOfDomainWarning`,
-
-and offers the PBM-facing methods: :meth:`~CollisionSurrogate.frequency_matrix`,
-:meth:`~CollisionSurrogate.encounters` (and ``__call__``), plus :meth:`~CollisionSurrogate.predict_log10`
-and :meth:`~CollisionSurrogate.predict_velocity` on collision tables or feature frames.
+"""The encounter surrogate used by the PBM: :class:`CollisionSurrogate`, a scikit-learn regressor
+on the feature matrix of :mod:`pbmdem.surrogate.features` that holds the frequency model, the
+impact-speed model, the physics offsets and the training domain, and offers the PBM-facing
+:meth:`~CollisionSurrogate.frequency_matrix`, :meth:`~CollisionSurrogate.encounters` and
+:meth:`~CollisionSurrogate.impacts`.
 """
 
 from __future__ import annotations
@@ -175,22 +162,21 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
             return F
         return np.log10(F)
 
-    def _offset(self, F: pd.DataFrame) -> np.ndarray:
+    def _column(self, F, name: str) -> np.ndarray:
+        """Feature ``name`` of a feature frame, or of a feature array in :data:`FEATURE_NAMES` order."""
+        return F[:, FEATURE_NAMES.index(name)] if isinstance(F, np.ndarray) else F[name].to_numpy(float)
+
+    def _offset(self, F) -> np.ndarray:
         """log10 of the physical part of c_ij that the frequency model does not have to learn."""
         if self.physics_offset == "none":
             return np.zeros(len(F))
-        return self._offset_of(F["d_small"].to_numpy(float), F["d_large"].to_numpy(float))
+        return 2.0 * np.log10(1e3 * (self._column(F, "d_small") + self._column(F, "d_large")))
 
-    def _offset_of(self, d_small: np.ndarray, d_large: np.ndarray) -> np.ndarray:
-        if self.physics_offset == "none":
-            return np.zeros(len(d_small))
-        return 2.0 * np.log10(1e3 * (d_small + d_large))
-
-    def _velocity_offset(self, F: pd.DataFrame) -> np.ndarray:
+    def _velocity_offset(self, F) -> np.ndarray:
         """log10 of the speed scale the velocity model does not have to learn (the tip speed)."""
         if self.physics_offset == "none":
             return np.zeros(len(F))
-        return np.log10(F["tip_speed"].to_numpy(float))
+        return np.log10(self._column(F, "tip_speed"))
 
     def _features(self, X):
         """A collision table becomes its feature frame; a feature frame or an array is passed on."""
@@ -367,7 +353,11 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
     def _velocity_law(self, F):
         """(mu, sigma, shape or None, (n, outputs) std) of the velocity model on the feature frame."""
         mean, std = self.velocity_model_.predict(self._inner(F), return_std=True)
-        mean, std = mean.reshape(len(F), -1), self.velocity_uncertainty_scale * std.reshape(len(F), -1)
+        return self._law(F, mean, self.velocity_uncertainty_scale * std.reshape(len(F), -1))
+
+    def _law(self, F, mean, std=None):
+        """(mu, sigma, shape or None, std) from the velocity model's outputs ``mean`` on the features ``F``."""
+        mean = mean.reshape(len(F), -1)
         shape = mean[:, 2] if mean.shape[1] > 2 else None
         return mean[:, 0] + self._velocity_offset(F), 10.0 ** mean[:, 1], shape, std
 
@@ -406,17 +396,15 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
             return self.predict(F, return_std=return_std, check_domain=False)
         out = self.frequency_model_.predict_array(self._transform(F), return_std=return_std)
         mean, std = out if return_std else (out, None)
-        mean = mean + self._offset_of(F[:, 0], F[:, 1])
+        mean = mean + self._offset(F)
         return (mean, self.uncertainty_scale * std) if return_std else mean
 
     def _pair_velocity(self, F) -> np.ndarray:
         """:meth:`velocity_fractions` of the pairs' features from :meth:`_pairs` (unchecked domain)."""
         if not isinstance(F, np.ndarray):
             return self.velocity_fractions(F, check_domain=False)
-        mean = self.velocity_model_.predict_array(self._transform(F)).reshape(len(F), -1)
-        velocity_offset = np.zeros(len(F)) if self.physics_offset == "none" else np.log10(F[:, 5])
-        shape = mean[:, 2] if mean.shape[1] > 2 else None
-        return speed_fractions(mean[:, 0] + velocity_offset, 10.0 ** mean[:, 1], self.speed_law, shape)
+        mu, sigma, shape, _ = self._law(F, self.velocity_model_.predict_array(self._transform(F)))
+        return speed_fractions(mu, sigma, self.speed_law, shape)
 
     def frequency_matrix(self, diameters, numbers, rpm: float, return_std: bool = False, check_domain: bool = True):
         """(K,) diameters (m) and (K,) particle numbers -> (K, K) symmetric encounter frequency c_ij (1/s per pair).
@@ -432,15 +420,8 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         F, iu, ju, k = self._pairs(diameters, numbers, rpm, check_domain)
         out = self._pair_log10(F, return_std=return_std)
         mean, std = out if return_std else (out, None)
-        c = np.empty((k, k))
-        c[iu, ju] = 10.0**mean
-        c[ju, iu] = 10.0**mean
-        if not return_std:
-            return c
-        s = np.empty((k, k))
-        s[iu, ju] = std
-        s[ju, iu] = std
-        return c, s
+        c = _symmetric(10.0**mean, iu, ju, k)
+        return (c, _symmetric(std, iu, ju, k)) if return_std else c
 
     def encounters(self, diameters, numbers, rpm: float, check_domain: bool = True) -> EncounterRates:
         """(K,) diameters (m), (K,) particle numbers, impeller speed (1/min) -> EncounterRates.
@@ -451,15 +432,8 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         """
         self._require_velocity_model()
         F, iu, ju, k = self._pairs(diameters, numbers, rpm, check_domain)
-        log_c = self._pair_log10(F)
-        fractions = self._pair_velocity(F)
-        c = np.empty((k, k))
-        c[iu, ju] = 10.0**log_c
-        c[ju, iu] = 10.0**log_c
-        v = np.empty((k, k, fractions.shape[1]))
-        v[iu, ju] = fractions
-        v[ju, iu] = fractions
-        return EncounterRates(frequency=c, velocity_fractions=v)
+        frequency = _symmetric(10.0 ** self._pair_log10(F), iu, ju, k)
+        return EncounterRates(frequency=frequency, velocity_fractions=_symmetric(self._pair_velocity(F), iu, ju, k))
 
     def impacts(self, diameters, numbers, rpm: float, check_domain: bool = True):
         """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall impacts per granule
@@ -503,6 +477,14 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         walls = getattr(self, "wall_models_", None) or {}
         out.wall_models_ = {wall: model._at(z) for wall, model in walls.items()}
         return out
+
+
+def _symmetric(values: np.ndarray, iu, ju, k: int) -> np.ndarray:
+    """(K, K, ...) symmetric array with ``values`` of the pairs (iu, ju) on both sides of the diagonal."""
+    out = np.empty((k, k, *values.shape[1:]))
+    out[iu, ju] = values
+    out[ju, iu] = values
+    return out
 
 
 class CalibratedMember:

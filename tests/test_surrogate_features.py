@@ -6,12 +6,11 @@ import warnings
 import numpy as np
 import pandas as pd
 import pytest
-from synthetic_tables import make_synthetic_table, make_synthetic_tables, velocity_law
+from synthetic_tables import TABLE_COLUMNS, make_synthetic_table, make_synthetic_tables, velocity_law
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES
 from pbmdem.surrogate.features import (
     FEATURE_NAMES,
-    TABLE_COLUMNS,
     TARGET_NAME,
     TARGET_NOISE_VAR,
     CollisionTableError,
@@ -19,7 +18,7 @@ from pbmdem.surrogate.features import (
     make_features,
     pair_table,
     prepare_training_table,
-    run_descriptors,
+    run_classes,
     tip_speed,
     training_data,
 )
@@ -30,6 +29,7 @@ from pbmdem.surrogate.velocity import (
     lognormal_fractions,
     total_variation,
 )
+from pbmdem.tables import GRID_PAIRS
 
 R = 0.0265  # impeller radius (m) of the synthetic tables and of their features
 
@@ -102,8 +102,9 @@ def test_no_feature_duplicates_another():
     # rpm and d_mean would be: tip speed is proportional to rpm, and with a fixed bed volume
     # log n_total follows log d_mean
     t = make_synthetic_table(R, seed=3, noise_log10=0.0)
-    desc = run_descriptors(t)
-    extra = f.assign(rpm=t["rpm"].to_numpy(float), d_mean=desc["d_mean"].reindex(t["point_id"]).to_numpy())
+    classes = run_classes(t).assign(nd=lambda c: c["n"] * c["d"]).groupby("point_id")[["nd", "n"]].sum()
+    d_mean = classes["nd"] / classes["n"]  # number mean diameter of every run
+    extra = f.assign(rpm=t["rpm"].to_numpy(float), d_mean=d_mean.reindex(t["point_id"]).to_numpy())
     found = {(a, b) for a, b, _ in duplicated_features(extra)}
     assert ("tip_speed", "rpm") in found and ("n_total", "d_mean") in found
 
@@ -124,8 +125,7 @@ def test_any_number_of_classes():
     assert len(t) == 15
     f = make_features(t, R)
     assert f.notna().all().all()
-    desc = run_descriptors(t)
-    assert desc.loc["rpm600_x", "n_classes"] == 5
+    assert run_classes(t).groupby("point_id").size()["rpm600_x"] == 5
     single = one_run(diameters=(0.003,), numbers=(500,))
     assert len(make_features(single, R)) == 1
 
@@ -185,6 +185,7 @@ def test_pair_table_matches_training_features():
 def test_synthetic_tables_follow_contract():
     t, v = make_synthetic_tables(R, rpms=(300, 900), seed=2, noise_log10=0.02, n_replicates=4)
     assert list(t.columns) == list(TABLE_COLUMNS)
+    assert set(TABLE_COLUMNS) == {c.name for c in GRID_PAIRS.columns} - {"frequency_per_pair_se"}
     assert t["point_id"].nunique() == 8 and len(t) == 48
     assert (t.groupby("point_id")["n_total"].nunique() == 1).all()
     assert np.isfinite(np.log10(t["encounter_frequency_per_pair"])).all()

@@ -37,32 +37,6 @@ from .velocity import attach_velocity_bins, bin_counts, fit_speed_law, n_law_par
 #: Columns that name a row of the collision table: its run, its class pair and their diameters.
 PAIR_ID_COLUMNS = ("point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j")
 
-#: Columns of the collision-table contract (docs/architecture.md).
-TABLE_COLUMNS = (
-    *PAIR_ID_COLUMNS,
-    "n_i",
-    "n_j",
-    "n_total",
-    "collisions",
-    "sampling_time",
-    "frequency",
-    "frequency_per_pair",
-    "n_replicates",
-    "encounters",
-    "encounter_frequency_per_pair",
-    "encounter_frequency_per_pair_se",
-    "impact_velocity_median",
-)
-
-#: Columns of the collision table the target is built from.
-TARGET_SOURCE_COLUMNS = (
-    "n_replicates",
-    "encounters",
-    "sampling_time",
-    "encounter_frequency_per_pair",
-    "encounter_frequency_per_pair_se",
-)
-
 #: Columns needed to build features (the others are needed only for the target).
 FEATURE_SOURCE_COLUMNS = ("point_id", "rpm", "class_i", "class_j", "d_i", "d_j", "n_i", "n_j", "n_total")
 
@@ -161,52 +135,45 @@ def run_classes(table: pd.DataFrame) -> pd.DataFrame:
     return both.drop_duplicates(["point_id", "cls"]).sort_values(["point_id", "cls"]).reset_index(drop=True)
 
 
-def run_descriptors(table: pd.DataFrame) -> pd.DataFrame:
-    """Per run (index point_id): n_total, n_classes, d_mean (number mean), solid_volume (m3)."""
-    classes = run_classes(table)
-    classes["nd"] = classes["n"] * classes["d"]
-    classes["nv"] = classes["n"] * math.pi / 6.0 * classes["d"] ** 3
-    agg = classes.groupby("point_id").agg(
-        n_sum=("n", "sum"), nd=("nd", "sum"), solid_volume=("nv", "sum"), n_classes=("cls", "size")
-    )
-    n_total = table.groupby("point_id")["n_total"].first().astype(float)
-    agg["n_total"] = n_total
-    if (agg["n_sum"] <= 0).any():
+def _check_runs(table: pd.DataFrame) -> None:
+    """Check that every run's classes are consistent (:func:`run_classes`) and warn where their
+    numbers do not add up to the run's ``n_total``."""
+    n_sum = run_classes(table).groupby("point_id")["n"].sum()
+    if (n_sum <= 0).any():
         raise CollisionTableError("a run has no particles in its classes")
-    mismatch = agg.index[~np.isclose(agg["n_sum"], agg["n_total"], rtol=1e-9)].tolist()
+    n_total = table.groupby("point_id")["n_total"].first().astype(float)
+    mismatch = n_sum.index[~np.isclose(n_sum, n_total, rtol=1e-9)].tolist()
     if mismatch:
         warnings.warn(
             f"run(s) {mismatch[:5]}: class numbers do not add up to n_total; "
             "fractions use n_total, the mean diameter uses the listed classes",
             stacklevel=3,
         )
-    agg["d_mean"] = agg["nd"] / agg["n_sum"]
-    return agg[["n_total", "n_classes", "d_mean", "solid_volume"]]
 
 
 def make_features(table: pd.DataFrame, impeller_radius: float) -> pd.DataFrame:
     """Feature frame (columns :data:`FEATURE_NAMES`, same index as ``table``) of a collision table."""
     check_table(table)
-    run_descriptors(table)  # checks the classes of every run are consistent
-    d_i = table["d_i"].to_numpy(float)
-    d_j = table["d_j"].to_numpy(float)
-    n_total = table["n_total"].to_numpy(float)
-    f_i = table["n_i"].to_numpy(float) / n_total
-    f_j = table["n_j"].to_numpy(float) / n_total
-    i_small = d_i <= d_j
-    rpm = table["rpm"].to_numpy(float)
-    return pd.DataFrame(
-        {
-            "d_small": np.where(i_small, d_i, d_j),
-            "d_large": np.where(i_small, d_j, d_i),
-            "frac_small": np.where(i_small, f_i, f_j),
-            "frac_large": np.where(i_small, f_j, f_i),
-            "n_total": n_total,
-            "tip_speed": tip_speed(rpm, impeller_radius),
-        },
-        index=table.index,
-        columns=list(FEATURE_NAMES),
+    _check_runs(table)
+    X = _feature_array(
+        *(table[c].to_numpy(float) for c in ("d_i", "d_j", "n_i", "n_j", "n_total", "rpm")), impeller_radius
     )
+    return pd.DataFrame(X, index=table.index, columns=list(FEATURE_NAMES))
+
+
+def _feature_array(d_i, d_j, n_i, n_j, n_total, rpm, impeller_radius: float) -> np.ndarray:
+    """(n, len(FEATURE_NAMES)) features of pairs of classes (sizes d, numbers n) in beds of
+    ``n_total`` particles at ``rpm``: the one definition of :data:`FEATURE_NAMES`."""
+    f_i, f_j = n_i / n_total, n_j / n_total
+    i_small = d_i <= d_j
+    X = np.empty((np.size(d_i), len(FEATURE_NAMES)))
+    X[:, 0] = np.where(i_small, d_i, d_j)
+    X[:, 1] = np.where(i_small, d_j, d_i)
+    X[:, 2] = np.where(i_small, f_i, f_j)
+    X[:, 3] = np.where(i_small, f_j, f_i)
+    X[:, 4] = n_total
+    X[:, 5] = tip_speed(rpm, impeller_radius)
+    return X
 
 
 def duplicated_features(
@@ -235,14 +202,6 @@ def duplicated_features(
     return out
 
 
-def pairs_in_row(table: pd.DataFrame) -> np.ndarray:
-    """Number of distinct particle pairs of each row: n_i n_j, or n_i (n_i - 1) / 2 on the diagonal."""
-    n_i = table["n_i"].to_numpy(float)
-    n_j = table["n_j"].to_numpy(float)
-    diag = table["class_i"].to_numpy() == table["class_j"].to_numpy()
-    return np.where(diag, n_i * (n_i - 1.0) / 2.0, n_i * n_j)
-
-
 def prepare_training_table(table: pd.DataFrame, zero_policy: str = "drop") -> pd.DataFrame:
     """Rows usable for fitting, with columns :data:`TARGET_NAME` and :data:`TARGET_NOISE_VAR` added.
 
@@ -264,7 +223,8 @@ def prepare_training_table(table: pd.DataFrame, zero_policy: str = "drop") -> pd
     if TARGET_COLUMN not in table.columns:
         raise CollisionTableError(f"collision table lacks column(s) {[TARGET_COLUMN]}")
     out = table.copy()
-    pairs = pairs_in_row(out)
+    n_i, n_j = out["n_i"].to_numpy(float), out["n_j"].to_numpy(float)
+    pairs = np.where(out["class_i"].to_numpy() == out["class_j"].to_numpy(), n_i * (n_i - 1.0) / 2.0, n_i * n_j)
     fpp = pd.to_numeric(out[TARGET_COLUMN], errors="coerce").to_numpy(float)
     counts = out["encounters"].to_numpy(float)
     if "n_replicates" in out:
@@ -366,17 +326,7 @@ def pair_features(diameters, numbers, rpm: float, impeller_radius: float) -> tup
     :data:`FEATURE_NAMES`) and the row/column indices ``iu``, ``ju`` of each row."""
     d, n = _distribution(diameters, numbers, rpm)
     iu, ju = upper_pairs(d.size)
-    d_i, d_j = d[iu], d[ju]
-    n_total = n.sum()
-    f_i, f_j = n[iu] / n_total, n[ju] / n_total
-    i_small = d_i <= d_j
-    X = np.empty((iu.size, len(FEATURE_NAMES)))
-    X[:, 0] = np.where(i_small, d_i, d_j)
-    X[:, 1] = np.where(i_small, d_j, d_i)
-    X[:, 2] = np.where(i_small, f_i, f_j)
-    X[:, 3] = np.where(i_small, f_j, f_i)
-    X[:, 4] = n_total
-    X[:, 5] = tip_speed(np.full(iu.size, float(rpm)), impeller_radius)
+    X = _feature_array(d[iu], d[ju], n[iu], n[ju], n.sum(), np.full(iu.size, float(rpm)), impeller_radius)
     return X, iu, ju
 
 

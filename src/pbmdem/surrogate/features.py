@@ -12,11 +12,9 @@ table) into what every model is fitted on: ``X``, ``y``, ``groups`` (DEM runs), 
 noise variance and the impact-speed targets. The impeller radius for the tip-speed feature is
 always passed in (``granulator.impeller.blade_length``); nothing here reads the config.
 
-The same code path builds features for the PBM (:func:`pair_table`): a size distribution given as
-class diameters and particle numbers is turned into a collision-table-like frame of all unordered
-class pairs, so training and prediction can never disagree about a feature's definition.
-:func:`pair_features` is its array twin for the PBM's frequent calls (the same values, without a
-DataFrame; a test holds them equal).
+The PBM's class pairs get their features from the same definition (:func:`pair_table` with
+:func:`make_features`, or :func:`pair_features` without DataFrames), so training and prediction
+cannot disagree about a feature.
 """
 
 from __future__ import annotations
@@ -101,14 +99,10 @@ def check_table(table: pd.DataFrame, columns=FEATURE_SOURCE_COLUMNS) -> None:
     bad = values.columns[values.isna().any()].tolist()
     if bad:
         raise CollisionTableError(f"non-numeric or missing values in column(s) {bad}")
-    for col in ("d_i", "d_j", "n_total", "rpm"):
-        if col in values and (values[col] <= 0).any():
-            raise CollisionTableError(f"column {col!r} must be > 0")
-    for col in ("n_i", "n_j"):
-        if col in values and (values[col] < 0).any():
-            raise CollisionTableError(f"column {col!r} must be >= 0")
-    if "sampling_time" in values and (values["sampling_time"] <= 0).any():
-        raise CollisionTableError("column 'sampling_time' must be > 0")
+    bounds = {"d_i": ">", "d_j": ">", "n_total": ">", "rpm": ">", "n_i": ">=", "n_j": ">=", "sampling_time": ">"}
+    for col, low in bounds.items():
+        if col in values and ((values[col] <= 0) if low == ">" else (values[col] < 0)).any():
+            raise CollisionTableError(f"column {col!r} must be {low} 0")
     if (values["class_i"] > values["class_j"]).any():
         raise CollisionTableError("rows must have class_i <= class_j")
     per_run = table.groupby("point_id")[["rpm", "n_total"]].nunique()
@@ -185,20 +179,13 @@ def duplicated_features(
     the two apart, and predictions where they disagree are extrapolations.
     """
     out = []
-    cols = list(features.columns)
-    vals = features.to_numpy(float)
-    for transform in (lambda x: x, lambda x: np.log(np.abs(x))):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            v = transform(vals)
-        for a in range(len(cols)):
-            for b in range(a + 1, len(cols)):
-                x, y = v[:, a], v[:, b]
-                ok = np.isfinite(x) & np.isfinite(y)
-                if ok.sum() < 3 or np.std(x[ok]) == 0 or np.std(y[ok]) == 0:
-                    continue
-                r = float(np.corrcoef(x[ok], y[ok])[0, 1])
-                if abs(r) > threshold and not any(p[:2] == (cols[a], cols[b]) for p in out):
-                    out.append((cols[a], cols[b], r))
+    with np.errstate(divide="ignore"):
+        for values in (features.astype(float), np.log(features.abs().astype(float))):
+            r = values.replace([np.inf, -np.inf], np.nan).corr(min_periods=3)  # pairwise-complete rows
+            for a, b in zip(*np.triu_indices(len(r), 1)):
+                pair = (r.index[a], r.columns[b])
+                if abs(r.iat[a, b]) > threshold and not any(p[:2] == pair for p in out):
+                    out.append((*pair, float(r.iat[a, b])))
     return out
 
 
@@ -282,26 +269,12 @@ def prepare_training_table(table: pd.DataFrame, zero_policy: str = "drop") -> pd
 
 
 def pair_table(diameters, numbers, rpm: float) -> tuple[pd.DataFrame, np.ndarray, np.ndarray]:
-    """Collision-table-like frame of all unordered class pairs (i <= j) of one size distribution.
-
-    Returns the frame and the row/column indices (``iu``, ``ju``) of each row in the (K, K) matrix.
-    """
+    """Collision-table-like frame of all unordered class pairs (i <= j) of one size distribution
+    and the row/column indices (``iu``, ``ju``) of each row in the (K, K) matrix."""
     d, n = _distribution(diameters, numbers, rpm)
     iu, ju = upper_pairs(d.size)
-    frame = pd.DataFrame(
-        {
-            "point_id": "query",
-            "rpm": float(rpm),
-            "class_i": iu,
-            "class_j": ju,
-            "d_i": d[iu],
-            "d_j": d[ju],
-            "n_i": n[iu],
-            "n_j": n[ju],
-            "n_total": n.sum(),
-        }
-    )
-    return frame, iu, ju
+    columns = {"point_id": "query", "rpm": float(rpm), "class_i": iu, "class_j": ju, "d_i": d[iu], "d_j": d[ju]}
+    return pd.DataFrame({**columns, "n_i": n[iu], "n_j": n[ju], "n_total": n.sum()}), iu, ju
 
 
 def _distribution(diameters, numbers, rpm) -> tuple[np.ndarray, np.ndarray]:

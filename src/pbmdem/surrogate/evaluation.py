@@ -1,18 +1,6 @@
-"""Grouped cross-validation of the surrogate against its baselines (same folds for all models).
-
-The outer folds hold out whole DEM runs. For the MLP the hyperparameter search runs *inside*
-each outer training set (nested, again grouped), so the held-out runs never influence the model
-that predicts them.
-
-Two targets are scored on the same folds (column ``target`` of the metrics):
-
-* ``encounter_frequency``: R2 and MAE of log10(encounter_frequency_per_pair), next to the
-  *replicate noise floor* ``noise_floor_r2_log10`` (:func:`noise_floor_r2`): the R2 that a model
-  predicting the true replicate-free value would reach, limited only by the spread between
-  DEM replicates;
-* ``impact_velocity``: R2 and MAE of log10 of the median impact speed (log-normal fit of the DEM
-  bins vs prediction) and ``tv_distance``, the mean total-variation distance between the
-  predicted and the DEM fractions per velocity bin (0 identical, 1 disjoint).
+"""Grouped cross-validation of the surrogate families against the baselines (:func:`cross_validate_models`:
+the same folds for all models, whole DEM runs held out, the MLP's own search nested inside every
+training set), its interval coverage and calibration, and the choice of the family per target.
 """
 
 from __future__ import annotations
@@ -38,7 +26,6 @@ log = logging.getLogger(__name__)
 
 #: The nominal level of the predictive intervals whose coverage is checked on held-out runs.
 COVERAGE_LEVEL = 0.90
-TARGETS = ("encounter_frequency", "impact_velocity")
 METRIC_COLUMNS = [
     "target",
     "model",
@@ -153,21 +140,8 @@ def _metrics(y: np.ndarray, p: np.ndarray) -> tuple[float, float]:
 
 
 def _row(target, model, fold, ids, n_train, n_test, r2, mae, floor=np.nan, tv=np.nan, cov=(np.nan,) * 3) -> dict:
-    return {
-        "target": target,
-        "model": model,
-        "fold": fold,
-        "test_point_ids": ids,
-        "n_train_runs": n_train,
-        "n_test": n_test,
-        "r2_log10": r2,
-        "mae_log10": mae,
-        "noise_floor_r2_log10": floor,
-        "tv_distance": tv,
-        "coverage_90": cov[0],
-        "coverage_90_calibrated": cov[1],
-        "uncertainty_scale": cov[2],
-    }
+    """One row of the metrics (:data:`METRIC_COLUMNS`); ``cov``: coverage, calibrated coverage, scale."""
+    return dict(zip(METRIC_COLUMNS, (target, model, fold, ids, n_train, n_test, r2, mae, floor, tv, *cov)))
 
 
 def default_baselines(random_state: int | None = 0, speed_law: str = "lognormal") -> dict:
@@ -320,20 +294,8 @@ def _summary_rows(metrics: pd.DataFrame, pred: pd.DataFrame, models: list, famil
                     calibration_scale(obs, p, std),
                 )
             summary.append(_row(target, name, "pooled", "all", np.nan, n_test, r2, mae, fl, tv, cov))
-            summary.append(
-                _row(
-                    target,
-                    name,
-                    "mean",
-                    "all",
-                    float(per["n_train_runs"].mean()),
-                    float(per["n_test"].mean()),
-                    float(per["r2_log10"].mean()),
-                    float(per["mae_log10"].mean()),
-                    float(per["noise_floor_r2_log10"].mean()),
-                    float(per["tv_distance"].mean()),
-                )
-            )
+            means = ("n_train_runs", "n_test", "r2_log10", "mae_log10", "noise_floor_r2_log10", "tv_distance")
+            summary.append(_row(target, name, "mean", "all", *(float(per[c].mean()) for c in means)))
     return summary
 
 
@@ -362,16 +324,10 @@ def _log_fold(k: int, n_folds: int, ids: str, rows: list, t_fold: float, t_start
     """One line of progress: fold k's held-out runs, the models' R2, the time left."""
     elapsed = time.perf_counter() - t_start
     done = [r for r in rows if r["fold"] == str(k) and r["target"] == "encounter_frequency"]
-    log.info(
-        "CV fold %d of %d done (held out %s) in %.1f s: %s; elapsed %.0f s, remaining ~%.0f s",
-        k + 1,
-        n_folds,
-        ids,
-        time.perf_counter() - t_fold,
-        ", ".join(f"{r['model']} R2 {r['r2_log10']:.3f}" for r in done),
-        elapsed,
-        elapsed / (k + 1) * (n_folds - k - 1),
-    )
+    scores = ", ".join(f"{r['model']} R2 {r['r2_log10']:.3f}" for r in done)
+    remaining = elapsed / (k + 1) * (n_folds - k - 1)
+    log.info("CV fold %d of %d done (held out %s) in %.1f s: %s; elapsed %.0f s, remaining ~%.0f s",
+             k + 1, n_folds, ids, time.perf_counter() - t_fold, scores, elapsed, remaining)  # fmt: skip
 
 
 def select_family(metrics: pd.DataFrame, families) -> str:

@@ -37,10 +37,10 @@ from pbmdem.surrogate.evaluation import (
     interval_z,
     sample_scores,
     select_per_target,
-    tail_error,
 )
 from pbmdem.surrogate.families import member_quantiles
 from pbmdem.surrogate.settings import FAMILIES, build_families
+from pbmdem.surrogate.velocity import tail_error
 
 R = 0.0265
 #: Small but complete settings: every family, fast MLP candidates, 3 outer folds.

@@ -15,12 +15,10 @@ from scipy.stats import norm
 from sklearn.base import clone
 from sklearn.metrics import mean_absolute_error, r2_score
 
-from pbmdem.impact import VELOCITY_EDGES
-
 from .baselines import HGBBaseline, PhysicalScaling
 from .ensemble import grouped_splits
 from .features import PAIR_ID_COLUMNS, TARGET_COLUMN, TARGET_NAME, TARGET_NOISE_VAR, TrainingData
-from .velocity import bin_counts, empirical_fractions, total_variation
+from .velocity import TAIL_SPEEDS, bin_counts, empirical_fractions, tail_error, total_variation
 
 log = logging.getLogger(__name__)
 
@@ -41,31 +39,6 @@ METRIC_COLUMNS = [
     "coverage_90_calibrated",
     "uncertainty_scale",
 ]
-
-
-#: Impact speeds (m/s) whose exceedance fractions score an impact-speed law for breakage: the bin
-#: edges from 1 m/s up. The critical speed of breakage sqrt(2 Y St*/rho) is 2 m/s at the default
-#: strength and rises 4x as a granule consolidates (docs/pbm.md); the fast tail is what breakage reads.
-TAIL_SPEEDS = tuple(float(e) for e in VELOCITY_EDGES[1:-1] if e >= 1.0)
-
-
-def tail_error(predicted, observed, speeds=TAIL_SPEEDS) -> np.ndarray:
-    """Per row of bin fractions (:data:`pbmdem.impact.VELOCITY_EDGES`): the mean over ``speeds`` of
-    |log10(predicted / observed fraction of impacts faster than the speed)|, over the speeds where
-    the observed fraction is above zero (NaN for a row without any)."""
-    predicted, observed = np.atleast_2d(predicted), np.atleast_2d(observed)
-    lo = np.asarray(VELOCITY_EDGES[:-1], float)
-    errors = []
-    for v in speeds:
-        above = lo >= v - 1e-12
-        p, o = predicted[:, above].sum(axis=1), observed[:, above].sum(axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            errors.append(np.where(o > 0, np.abs(np.log10(np.maximum(p, 1e-300) / o)), np.nan))
-    errors = np.column_stack(errors)
-    out = np.full(len(errors), np.nan)
-    ok = np.isfinite(errors).any(axis=1)
-    out[ok] = np.nanmean(errors[ok], axis=1)
-    return out
 
 
 def interval_z(level: float = COVERAGE_LEVEL) -> float:
@@ -123,8 +96,7 @@ def noise_floor_r2(y, noise_var) -> float:
     value. Rows with unknown noise (NaN, e.g. one replicate) are left out; NaN if none is left
     or ``y`` has no spread.
     """
-    y = np.asarray(y, float)
-    noise_var = np.asarray(noise_var, float)
+    y, noise_var = np.asarray(y, float), np.asarray(noise_var, float)
     ok = np.isfinite(y) & np.isfinite(noise_var)
     if ok.sum() < 2:
         return float("nan")
@@ -151,10 +123,8 @@ def default_baselines(random_state: int | None = 0, speed_law: str = "lognormal"
 
 def _fit(model, data: TrainingData, rows: np.ndarray):
     """Clone of ``model`` fitted on ``rows`` of ``data`` (with velocity targets if it learns them)."""
-    kwargs = {"groups": data.groups[rows]}
-    if hasattr(model, "predict_velocity"):
-        kwargs["velocity"] = data.velocity[rows]
-    return clone(model).fit(data.X.iloc[rows], data.y[rows], **kwargs)
+    kwargs = {"velocity": data.velocity[rows]} if hasattr(model, "predict_velocity") else {}
+    return clone(model).fit(data.X.iloc[rows], data.y[rows], groups=data.groups[rows], **kwargs)
 
 
 def _uncertain(model) -> bool:
@@ -177,13 +147,8 @@ def _prediction_frame(table: pd.DataFrame, models: dict, families: list) -> pd.D
     """The pairs' ids and DEM targets with empty columns for the fold and every model's held-out
     prediction (and the families' standard deviations)."""
     keep = [c for c in (*PAIR_ID_COLUMNS, TARGET_COLUMN, TARGET_NAME, TARGET_NOISE_VAR) if c in table]
-    pred = table[keep].copy()
-    pred["fold"] = -1
-    for name in models:
-        pred[f"{name}_log10"] = np.nan
-    for name in families:
-        pred[f"{name}_std_log10"] = np.nan
-    return pred
+    empty = {**{f"{name}_log10": np.nan for name in models}, **{f"{name}_std_log10": np.nan for name in families}}
+    return table[keep].assign(fold=-1, **empty)
 
 
 def _velocity_columns(pred: pd.DataFrame, data: TrainingData, models: dict):
@@ -196,13 +161,12 @@ def _velocity_columns(pred: pd.DataFrame, data: TrainingData, models: dict):
         return vmask, [], None
     vel_models = [m for m, model in models.items() if hasattr(model, "predict_velocity")]
     obs_frac = empirical_fractions(bin_counts(data.table.loc[vmask]))
-    pred["velocity_mu_log10"] = np.nan
-    pred["velocity_sigma"] = np.nan
-    pred.loc[vmask, "velocity_mu_log10"] = data.velocity[vmask, 0]
-    pred.loc[vmask, "velocity_sigma"] = data.velocity[vmask, 1]
-    for name in vel_models:
-        for col in ("mu_log10", "sigma", "tv", "tail", "mu_std_log10"):
-            pred[f"{name}_velocity_{col}"] = np.nan
+    pred["velocity_mu_log10"] = np.where(vmask, data.velocity[:, 0], np.nan)
+    pred["velocity_sigma"] = np.where(vmask, data.velocity[:, 1], np.nan)
+    for col in (
+        f"{name}_velocity_{c}" for name in vel_models for c in ("mu_log10", "sigma", "tv", "tail", "mu_std_log10")
+    ):
+        pred[col] = np.nan
     obs_frac_full = np.full((len(data.table), obs_frac.shape[1]), np.nan)
     obs_frac_full[vmask] = obs_frac
     return vmask, vel_models, obs_frac_full
@@ -211,16 +175,12 @@ def _velocity_columns(pred: pd.DataFrame, data: TrainingData, models: dict):
 def cross_validate_models(data: TrainingData, models: dict, cv: str = "group_kfold", n_splits: int = 5):
     """Evaluate every model on the same grouped outer folds (whole DEM runs held out).
 
-    ``models``: name -> unfitted estimator, the surrogate families (``CollisionSurrogate``s:
-    frequency, impact-speed law and uncertainty) and the baselines. ``data`` comes from
-    :func:`~pbmdem.surrogate.features.training_data`; ``cv`` and ``n_splits`` choose the outer
-    folds (the MLP's own grouped search then runs inside every outer training set: nested).
-    Returns ``(metrics, predictions)``: ``metrics`` has one row per (target, model, fold) plus, per
-    model, a ``pooled`` row (all held-out predictions together) and a ``mean`` row (average over
-    folds). For the families the pooled row also gives the coverage of the nominal 90 % interval
-    (raw, and calibrated on the other folds) and the calibration factor from all held-out rows.
-    ``predictions`` holds every held-out row with the DEM value, each model's prediction (log10),
-    the families' predictive standard deviations and the fold number.
+    ``models``: name -> unfitted estimator, the surrogate families (``CollisionSurrogate``s) and the
+    baselines; ``data`` from :func:`~pbmdem.surrogate.features.training_data`; ``cv`` and ``n_splits``
+    choose the outer folds (the MLP's own grouped search runs inside every training set: nested).
+    Returns ``(metrics, predictions)``: one metrics row per (target, model, fold) plus the
+    :func:`_summary_rows`; ``predictions`` every held-out row with the DEM value, each model's
+    prediction (log10), the families' predictive standard deviations and the fold number.
     """
     groups = data.groups
     _check_speed_laws(models, data.speed_law)
@@ -244,11 +204,9 @@ def cross_validate_models(data: TrainingData, models: dict, cv: str = "group_kfo
             with warnings.catch_warnings():
                 # held-out runs may lie at the edges of the training ranges: expected here
                 warnings.simplefilter("ignore", UserWarning)
-                if name in families:
-                    p, s = fitted.predict(X_test, return_std=True)
-                    pred.loc[pred.index[test], f"{name}_std_log10"] = s
-                else:
-                    p = fitted.predict(X_test)
+                p, s = fitted.predict(X_test, return_std=True) if name in families else (fitted.predict(X_test), None)
+            if s is not None:
+                pred.loc[pred.index[test], f"{name}_std_log10"] = s
             pred.loc[pred.index[test], f"{name}_log10"] = p
             r2, mae = _metrics(y, p)
             rows.append(_row("encounter_frequency", name, str(k), ids, n_train, len(test), r2, mae, floor))
@@ -258,7 +216,11 @@ def cross_validate_models(data: TrainingData, models: dict, cv: str = "group_kfo
                     name, fitted, data.X.iloc[vt], name in families, obs_frac_full[vt], pred, vt
                 )
                 rows.append(_row("impact_velocity", name, str(k), ids, n_train, len(vt), r2v, maev, tv=tv))
-        _log_fold(k, len(splits), ids, rows, t_fold, t_start)
+        done = [r for r in rows if r["fold"] == str(k) and r["target"] == "encounter_frequency"]
+        scores = ", ".join(f"{r['model']} R2 {r['r2_log10']:.3f}" for r in done)
+        elapsed, n = time.perf_counter() - t_start, len(splits)
+        log.info("CV fold %d of %d done (held out %s) in %.1f s: %s; elapsed %.0f s, remaining ~%.0f s", k + 1, n, ids,
+                 time.perf_counter() - t_fold, scores, elapsed, elapsed / (k + 1) * (n - k - 1))  # fmt: skip
 
     metrics = pd.DataFrame(rows, columns=METRIC_COLUMNS)
     summary = _summary_rows(metrics, pred, list(models), families, vel_models, vmask)
@@ -287,12 +249,9 @@ def _summary_rows(metrics: pd.DataFrame, pred: pd.DataFrame, models: list, famil
                 n_test, tv, fl = int(sel.sum()), float(pred.loc[sel, f"{name}_velocity_tv"].mean()), np.nan
             r2, mae = _metrics(obs, p)
             cov = (np.nan,) * 3
-            if std is not None:
-                cov = (
-                    coverage(obs, p, std),
-                    cross_fitted_coverage(obs, p, std, folds[sel]),
-                    calibration_scale(obs, p, std),
-                )
+            if std is not None:  # the families': raw and cross-fitted calibrated coverage, calibration factor
+                held = (obs, p, std)
+                cov = (coverage(*held), cross_fitted_coverage(*held, folds[sel]), calibration_scale(*held))
             summary.append(_row(target, name, "pooled", "all", np.nan, n_test, r2, mae, fl, tv, cov))
             means = ("n_train_runs", "n_test", "r2_log10", "mae_log10", "noise_floor_r2_log10", "tv_distance")
             summary.append(_row(target, name, "mean", "all", *(float(per[c].mean()) for c in means)))
@@ -320,16 +279,6 @@ def _velocity_fold(name: str, fitted, X, uncertain: bool, observed, pred: pd.Dat
     return r2, mae, float(tv.mean())
 
 
-def _log_fold(k: int, n_folds: int, ids: str, rows: list, t_fold: float, t_start: float) -> None:
-    """One line of progress: fold k's held-out runs, the models' R2, the time left."""
-    elapsed = time.perf_counter() - t_start
-    done = [r for r in rows if r["fold"] == str(k) and r["target"] == "encounter_frequency"]
-    scores = ", ".join(f"{r['model']} R2 {r['r2_log10']:.3f}" for r in done)
-    remaining = elapsed / (k + 1) * (n_folds - k - 1)
-    log.info("CV fold %d of %d done (held out %s) in %.1f s: %s; elapsed %.0f s, remaining ~%.0f s",
-             k + 1, n_folds, ids, time.perf_counter() - t_fold, scores, elapsed, remaining)  # fmt: skip
-
-
 def select_family(metrics: pd.DataFrame, families) -> str:
     """The family with the highest pooled held-out R2 of log10 c (the smallest squared error on
     the same rows); ties (within 1e-9) go to the earlier family in ``families``."""
@@ -340,12 +289,10 @@ def select_family(metrics: pd.DataFrame, families) -> str:
 
 def sample_scores(pred: pd.DataFrame, models, point_ids=None) -> dict:
     """Held-out errors of every model in ``models`` on the rows of the runs ``point_ids`` (all rows
-    when None) of the held-out predictions ``pred`` (:func:`cross_validate_models`):
-    {model: {n_runs, n_rows, mae_log10, mean_error_log10 (prediction - DEM, decades),
-    uncertainty_scale (families only: the calibration factor on those rows; NaN for the rest),
-    velocity_mae_log10, velocity_tv_distance, velocity_tail_log10 (median over rows of
-    :func:`tail_error`), velocity_uncertainty_scale (impact-speed law: log10 median speed, bin
-    fractions and their fast tail, where the rows have bins)}}; empty when no row is of
+    when None) of the held-out predictions ``pred`` (:func:`cross_validate_models`), per model:
+    the frequency's MAE and mean error (prediction - DEM, decades) and calibration factor (families;
+    else NaN), and where the rows have bins the impact-speed law's (``velocity_*``: log10 median
+    speed, bin fractions, median :func:`tail_error` of the fast tail); {} when no row is of
     ``point_ids``. The active-learning runs (``grid.extra_points``) are samples of the PBM's own
     states, which the pooled score of every run does not weigh as the PBM does (docs/surrogate.md)."""
     rows = pred if point_ids is None else pred[pred["point_id"].astype(str).isin({str(p) for p in point_ids})]

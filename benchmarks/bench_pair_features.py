@@ -12,23 +12,22 @@ builds the training data: ``surrogate:`` settings of ``--config``) in a few vari
   the sample, number fraction of the smaller class, its size relative to the sample's Sauter mean).
 
 Variants (only the frequency model changes; offset, transform and kernel are the settings'):
-``today`` the six features of :data:`pbmdem.surrogate.features.FEATURE_NAMES`; ``ratio`` + the size
-ratio d_small / d_large; ``rel`` + each class's size relative to its run's (sample's) Sauter mean
-diameter d32 = sum n d^3 / sum n d^2 (``rel_small``, ``rel_large``); ``nooffset`` without the
-cross-section offset (``physics_offset: none``).
+``today`` the features of :data:`pbmdem.surrogate.features.FEATURE_NAMES`; ``norel`` without
+``rel_small`` and ``rel_large`` (each class's size relative to its run's Sauter mean diameter: the
+six features before 2026-12-06); ``ratio`` + the size ratio d_small / d_large; ``nooffset`` without
+the cross-section offset (``physics_offset: none``).
 
 ``--replay``: PBM-ANN replayed in memory on each speed's stored loop settings (rep0's
 loop_inputs.json; mean prediction, as ``bench_replay.py``'s "all surrogate") with the stored
-surrogate, and with its pair frequency replaced by the ``rel`` variant, each with the stored speed
-law and with the speed law refitted from ``--law-from`` m/s up (the response surface on every grid
-row, ``surrogate.speed_law_from``); final d10 / d50 / d90 beside the PBM-DEM loops' range.
+surrogate, and with its pair speed law refitted from ``--law-from`` m/s up (the response surface on
+every grid row, ``surrogate.speed_law_from``); final d10 / d50 / d90 beside the PBM-DEM loops' range.
 
 Run: .venv/bin/python benchmarks/bench_pair_features.py --results <copy of results> [--rpm 300 750 900 1200]
      [--variants today ratio rel nooffset] [--replay] [--law-from 1.0]
 Measured numbers: docs/validation.md, "Features for the pair frequency on the loops' samples".
 
 ``--quick`` (the suite's smoke test, no LIGGGHTS): the synthetic stored loops of ``bench_replay.py
---quick`` (1200 rpm, tiny config; its synthetic grid tables), variants ``today`` and ``rel``, and the
+--quick`` (1200 rpm, tiny config; its synthetic grid tables), variants ``today`` and ``norel``, and the
 replay with the law from 0.1 m/s.
 """
 
@@ -50,27 +49,16 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from bench_replay import QUANTILES, final_sizes, quick_results, stored_loop  # noqa: E402
 
 #: variant -> (extra features, physics offset; None: the settings')
-VARIANTS = {"today": ("none", None), "ratio": ("ratio", None), "rel": ("rel", None), "nooffset": ("none", "none")}
-
-
-def sauter(table: pd.DataFrame) -> pd.Series:
-    """d32 (m) of every run (point_id) of a collision-table-like frame."""
-    from pbmdem.surrogate.features import run_classes
-
-    c = run_classes(table)
-    n3, n2 = c["n"] * c["d"] ** 3, c["n"] * c["d"] ** 2
-    return n3.groupby(c["point_id"]).sum() / n2.groupby(c["point_id"]).sum()
+VARIANTS = {"today": ("none", None), "norel": ("norel", None), "ratio": ("ratio", None), "nooffset": ("none", "none")}
 
 
 def with_extra(F: pd.DataFrame, table: pd.DataFrame, kind: str) -> pd.DataFrame:
-    """The feature frame ``F`` of ``table`` with the variant's extra columns."""
+    """The feature frame ``F`` of ``table`` with the variant's columns."""
     F = F.copy()
     if kind == "ratio":
         F["ratio"] = F["d_small"] / F["d_large"]
-    elif kind == "rel":
-        d32 = table["point_id"].map(sauter(table)).to_numpy(float)
-        F["rel_small"] = F["d_small"].to_numpy(float) / d32
-        F["rel_large"] = F["d_large"].to_numpy(float) / d32
+    elif kind == "norel":
+        F = F.drop(columns=["rel_small", "rel_large"])
     return F
 
 
@@ -91,7 +79,7 @@ def loop_frames(results: Path, rpms) -> list:
 
 def sample_rows(model, kind: str, frames, radius: float) -> pd.DataFrame:
     """log10(model / DEM) of every pair with DEM encounters of every loop sample, with the pair's structure."""
-    from pbmdem.surrogate.features import make_features
+    from pbmdem.surrogate.features import make_features, sauter_diameter
 
     rows = []
     for k, (s, frame) in enumerate(frames):
@@ -99,7 +87,7 @@ def sample_rows(model, kind: str, frames, radius: float) -> pd.DataFrame:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             c = 10.0 ** model.predict(F, check_domain=False)
-        d32 = float(sauter(frame).iloc[0])
+        d32 = sauter_diameter(s.diameters, s.counts)
         ok = s.frequencies > 0
         rows.append(
             pd.DataFrame(
@@ -168,25 +156,6 @@ def structure(rows: pd.DataFrame) -> pd.DataFrame:
     return table[[v for v in VARIANTS if v in table.columns]]
 
 
-def rel_frequency(stored, fitted):
-    """A copy of the surrogate ``stored`` whose pair frequency is the ``rel`` variant ``fitted`` (mean only)."""
-    from pbmdem.surrogate.features import FEATURE_NAMES
-
-    model = copy.deepcopy(stored)
-
-    def pair_log10(F, return_std: bool = False):
-        if return_std or not isinstance(F, np.ndarray):
-            raise NotImplementedError("the rel variant's replay predicts the mean from the feature array")
-        frame = pd.DataFrame(F, columns=list(FEATURE_NAMES))
-        diag = frame[np.isclose(frame["d_small"], frame["d_large"])]  # every class once: its own pair
-        d32 = (diag["frac_small"] * diag["d_small"] ** 3).sum() / (diag["frac_small"] * diag["d_small"] ** 2).sum()
-        frame["rel_small"], frame["rel_large"] = frame["d_small"] / d32, frame["d_large"] / d32
-        return fitted.predict(frame, check_domain=False)
-
-    model._pair_log10 = pair_log10
-    return model
-
-
 def replay(results: Path, rpms, models: dict) -> None:
     """PBM-ANN of every model on each speed's stored loop settings, beside the PBM-DEM loops' range."""
     from pbmdem.coupling.loop import run_loop
@@ -230,7 +199,7 @@ def main(argv=None) -> None:
     parser.add_argument("--config", type=Path, default=ROOT / "config" / "config.yaml", help="its configuration")
     parser.add_argument("--rpm", nargs="+", default=["300", "750", "900", "1200"], help="validation speeds")
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
-    parser.add_argument("--replay", action="store_true", help="also replay PBM-ANN with the rel variant")
+    parser.add_argument("--replay", action="store_true", help="also replay PBM-ANN with the speed law from --law-from")
     parser.add_argument("--law-from", type=float, default=1.0, help="the replay's refitted speed law from (m/s)")
     parser.add_argument("--quick", action="store_true", help="synthetic stored loops, seconds (the suite's smoke test)")
     args = parser.parse_args(argv)
@@ -242,7 +211,7 @@ def main(argv=None) -> None:
         if args.quick:
             import quick
 
-            args.results, args.rpm, args.variants = quick_results(Path(tmp)), ["1200"], ["today", "rel"]
+            args.results, args.rpm, args.variants = quick_results(Path(tmp)), ["1200"], ["today", "norel"]
             args.replay, args.law_from, cfg, tables = True, 0.1, quick.config(), Path(tmp) / "results/surrogate/dem"
         else:
             if args.results is None:
@@ -268,15 +237,10 @@ def main(argv=None) -> None:
         print(pd.DataFrame(scores).to_string(index=False, float_format=lambda x: f"{x:+.3f}"))
         print("\nloop-sample error by the pair's structure (mean / MAE, decades)")
         print(structure(pd.concat(rows, ignore_index=True)).to_string())
-        if args.replay and "rel" in fitted:
+        if args.replay:
             stored = load_surrogate(args.results / "surrogate" / "model.skops")
             from_law = law_from(stored, (table, velocities), settings, radius, args.law_from)
-            replay(args.results, args.rpm, {
-                "stored": stored,
-                "rel frequency": rel_frequency(stored, fitted["rel"]),
-                f"law from {args.law_from:g} m/s": from_law,
-                f"rel frequency + law from {args.law_from:g} m/s": rel_frequency(from_law, fitted["rel"]),
-            })  # fmt: skip
+            replay(args.results, args.rpm, {"stored": stored, f"law from {args.law_from:g} m/s": from_law})
 
 
 if __name__ == "__main__":

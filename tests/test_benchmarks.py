@@ -52,8 +52,8 @@ QUICK = {
     ),
     "bench_pair_features.py --quick": (
         r"pair frequency \(Kriging\) per variant: held-out MAE",
-        r"rel +[+-]\d\.\d{3}",
-        r"rel frequency \+ law from 0\.1 m/s +\d+\.\d\d / \d+\.\d\d / \d+\.\d\d",
+        r"norel +[+-]\d\.\d{3}",
+        r"law from 0\.1 m/s +\d+\.\d\d / \d+\.\d\d / \d+\.\d\d",
     ),
     "bench_pbm.py --quick": (
         r"surrogate for PBM-ANN: trained in [\d.]+ s",

@@ -117,7 +117,7 @@ def test_predict_array_equals_predict(fitted):
         np.testing.assert_allclose(mean, ref_mean, rtol=1e-12, atol=0.0)
         np.testing.assert_allclose(std, ref_std, rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(est.predict_array(X), ref_mean, rtol=1e-12, atol=0.0)
-    with pytest.raises(ValueError, match=r"X must be \(n, 6\)"):
+    with pytest.raises(ValueError, match=rf"X must be \(n, {len(FEATURE_NAMES)}\)"):
         fitted.frequency_model_.predict_array(X[:, :5])
 
 

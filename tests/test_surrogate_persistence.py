@@ -15,6 +15,7 @@ from synthetic_tables import make_synthetic_table, make_synthetic_tables, make_s
 
 from pbmdem.impact import WALLS
 from pbmdem.surrogate import (
+    FEATURE_NAMES,
     CollisionSurrogate,
     EnsembleMLPRegressorCV,
     IncompatibleVersionError,
@@ -152,7 +153,7 @@ def test_round_trip_keeps_the_fitted_state(fitted, saved, table):
     for x, y in zip(predictions(fitted, table), predictions(loaded, table), strict=True):
         np.testing.assert_array_equal(x, y)
     assert loaded.velocity_model is None and loaded.has_velocity_model()
-    assert loaded.feature_ranges() == fitted.feature_ranges() and loaded.n_features_in_ == 6
+    assert loaded.feature_ranges() == fitted.feature_ranges() and loaded.n_features_in_ == len(FEATURE_NAMES) == 8
     for attr in ("training_point_ids_", "n_training_rows_", "n_velocity_rows_", "duplicated_features_"):
         assert getattr(loaded, attr) == getattr(fitted, attr), attr
     for attr in ("best_params_", "best_score_", "cv_folds_", "n_outputs_"):
@@ -166,7 +167,7 @@ def test_round_trip_keeps_the_fitted_state(fitted, saved, table):
     assert {"sklearn", "numpy", "skops"} <= set(meta["versions"])
     assert meta["cv_scores"]["mlp"]["pooled_r2_log10"] == 0.9
     assert meta["cv_scores"]["mlp"]["nan_value"] is None  # strict JSON, no NaN
-    assert meta["format_version"] == FORMAT_VERSION == 6
+    assert meta["format_version"] == FORMAT_VERSION == 7
     assert meta["family"] == meta["velocity_family"] == "mlp"
     # the impeller radius the model was trained with, and every estimator parameter
     assert meta["params"]["impeller_radius"] == R
@@ -269,7 +270,7 @@ def test_another_format_version_is_refused_with_retrain(saved, found):
     meta["format_version"] = found
     meta_path.write_text(json.dumps(meta))
     with pytest.raises(
-        IncompatibleVersionError, match=rf"{meta_path}: format version {found} .*reads version 6.*retrain"
+        IncompatibleVersionError, match=rf"{meta_path}: format version {found} .*reads version 7.*retrain"
     ):
         load_surrogate(model)
 

@@ -46,6 +46,8 @@ FEATURE_NAMES = (
     "frac_large",  # number fraction of the larger particle's class in the run
     "n_total",  # particles in the run
     "tip_speed",  # impeller tip speed 2 pi R rpm / 60 (m/s)
+    "rel_small",  # d_small / d32, d32 = sum n d^3 / sum n d^2 the run's Sauter mean diameter
+    "rel_large",  # d_large / d32: where the pair sits in its run's distribution
 )
 # Not features, because they duplicate one above (docs/surrogate.md, "Features"):
 # * rpm: tip_speed = 2 pi R rpm / 60 with one impeller radius R;
@@ -149,15 +151,25 @@ def make_features(table: pd.DataFrame, impeller_radius: float) -> pd.DataFrame:
     """Feature frame (columns :data:`FEATURE_NAMES`, same index as ``table``) of a collision table."""
     check_table(table)
     _check_runs(table)
+    runs = run_classes(table).groupby("point_id")
+    d32 = table["point_id"].map({p: sauter_diameter(c["d"].to_numpy(), c["n"].to_numpy()) for p, c in runs})
     X = _feature_array(
-        *(table[c].to_numpy(float) for c in ("d_i", "d_j", "n_i", "n_j", "n_total", "rpm")), impeller_radius
+        *(table[c].to_numpy(float) for c in ("d_i", "d_j", "n_i", "n_j", "n_total", "rpm")),
+        d32.to_numpy(float),
+        impeller_radius,
     )
     return pd.DataFrame(X, index=table.index, columns=list(FEATURE_NAMES))
 
 
-def _feature_array(d_i, d_j, n_i, n_j, n_total, rpm, impeller_radius: float) -> np.ndarray:
+def sauter_diameter(d: np.ndarray, n: np.ndarray) -> float:
+    """Sauter mean diameter sum n d^3 / sum n d^2 of classes of sizes ``d`` and numbers ``n``."""
+    return float((n * d**3).sum() / (n * d**2).sum())
+
+
+def _feature_array(d_i, d_j, n_i, n_j, n_total, rpm, d32, impeller_radius: float) -> np.ndarray:
     """(n, len(FEATURE_NAMES)) features of pairs of classes (sizes d, numbers n) in beds of
-    ``n_total`` particles at ``rpm``: the one definition of :data:`FEATURE_NAMES`."""
+    ``n_total`` particles at ``rpm`` whose Sauter mean diameter is ``d32``: the one definition of
+    :data:`FEATURE_NAMES`."""
     f_i, f_j = n_i / n_total, n_j / n_total
     i_small = d_i <= d_j
     X = np.empty((np.size(d_i), len(FEATURE_NAMES)))
@@ -167,6 +179,8 @@ def _feature_array(d_i, d_j, n_i, n_j, n_total, rpm, impeller_radius: float) -> 
     X[:, 3] = np.where(i_small, f_j, f_i)
     X[:, 4] = n_total
     X[:, 5] = tip_speed(rpm, impeller_radius)
+    X[:, 6] = X[:, 0] / d32
+    X[:, 7] = X[:, 1] / d32
     return X
 
 
@@ -299,7 +313,8 @@ def pair_features(diameters, numbers, rpm: float, impeller_radius: float) -> tup
     :data:`FEATURE_NAMES`) and the row/column indices ``iu``, ``ju`` of each row."""
     d, n = _distribution(diameters, numbers, rpm)
     iu, ju = upper_pairs(d.size)
-    X = _feature_array(d[iu], d[ju], n[iu], n[ju], n.sum(), np.full(iu.size, float(rpm)), impeller_radius)
+    rpm = np.full(iu.size, float(rpm))
+    X = _feature_array(d[iu], d[ju], n[iu], n[ju], n.sum(), rpm, sauter_diameter(d, n), impeller_radius)
     return X, iu, ju
 
 

@@ -54,7 +54,7 @@ FORMAT = "pbmdem-surrogate"
 #: 5: one family for both); 5: the fitted CollisionSurrogate itself in the skops file, the sidecar
 #: for users (4: fitted pipelines, the rest rebuilt from the metadata; 3: MLP only; 2: one class;
 #: 1: raw target).
-FORMAT_VERSION = 6
+FORMAT_VERSION = 7
 
 #: Every type that may appear in a surrogate model file (module.qualname).
 ALLOWED_TYPES = frozenset(

@@ -3,15 +3,15 @@ and their impact-speed law, learned like the pair model (what breakage from impa
 
 A wall row of the DEM's tables (point, class i, wall) is put into the collision table's form as the
 diagonal pair (i, i): the same features (d_small = d_large = d_i, frac_small = frac_large = the
-class's number fraction, n_total, tip speed), the target ``encounter_frequency_per_pair`` taken from
-the wall table's ``encounter_frequency_per_particle`` (and its replicate standard error), and the
-velocity bins of results/dem/wall_impact_velocity.csv. :func:`~pbmdem.surrogate.features.training_data`,
-the held-out evaluation (:func:`~pbmdem.surrogate.evaluation.cross_validate_models`, the same
-grouped folds) and :class:`~pbmdem.surrogate.model.CollisionSurrogate` then apply unchanged: one
-fitted ``CollisionSurrogate`` per wall, of the family chosen for the pairs, held in the pair
-model's ``wall_models_``. With ``physics_offset = cross_section`` the wall model learns the
-residual after log10 (2 d)^2 (a granule's target area; the wall's is fixed) and the speed law
-after the tip speed.
+class's number fraction, rel_small = rel_large = d_i / d32, n_total, tip speed), the target
+``encounter_frequency_per_pair`` taken from the wall table's ``encounter_frequency_per_particle``
+(and its replicate standard error), and the velocity bins of results/dem/wall_impact_velocity.csv.
+:func:`~pbmdem.surrogate.features.training_data`, the held-out evaluation
+(:func:`~pbmdem.surrogate.evaluation.cross_validate_models`, the same grouped folds) and
+:class:`~pbmdem.surrogate.model.CollisionSurrogate` then apply unchanged: one fitted
+``CollisionSurrogate`` per wall, of the family chosen for the pairs, held in the pair model's
+``wall_models_``. With ``physics_offset = cross_section`` the wall model learns the residual after
+log10 (2 d)^2 (a granule's target area; the wall's is fixed) and the speed law after the tip speed.
 """
 
 from __future__ import annotations
@@ -29,6 +29,9 @@ from .features import pair_features, training_data
 
 #: wall-table columns -> collision-table columns of the diagonal pair
 _RENAME = {"encounter_frequency_per_particle": "encounter_frequency_per_pair"}
+
+#: Feature pairs equal on the diagonal by construction (their duplicate warning is expected).
+DIAGONAL_TWINS = ("d_small and d_large", "frac_small and frac_large", "rel_small and rel_large")
 
 
 def wall_collision_table(walls: pd.DataFrame, wall: str) -> pd.DataFrame:
@@ -148,8 +151,7 @@ def train_wall_models(walls, velocities, template, candidates: dict, settings: d
             scales[key] = float(scale) if np.isfinite(scale) and scale > 0 else 1.0
         model = clone(template).set_params(**scales)
         with warnings.catch_warnings():
-            # on the diagonal d_small = d_large and frac_small = frac_large by construction
-            warnings.filterwarnings("ignore", message="features (d_small and d_large|frac_small and frac_large) are")
+            warnings.filterwarnings("ignore", message=f"features ({'|'.join(DIAGONAL_TWINS)}) are")
             models[wall] = model.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
         frames.append(metrics.assign(target=wall + "_" + metrics["target"]))
     return models, pd.concat(frames, ignore_index=True), summaries

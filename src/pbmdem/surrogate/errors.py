@@ -1,4 +1,5 @@
-"""Errors of the surrogate's input tables, and the fitted check of its hot paths."""
+"""Errors of the surrogate's input tables and of a missing velocity model, and the fitted check
+of its hot paths."""
 
 from __future__ import annotations
 
@@ -7,6 +8,10 @@ from sklearn.exceptions import NotFittedError
 
 class CollisionTableError(ValueError):
     """The collision table violates the contract of docs/architecture.md."""
+
+
+class VelocityModelMissingError(RuntimeError):
+    """The surrogate was trained without impact-velocity bins, so it cannot predict them."""
 
 
 def require_fitted(estimator, attribute: str) -> None:

@@ -346,9 +346,16 @@ def tabulate_run(post_dir: str | Path, plan) -> RunTables:
     return RunAnalysis(post_dir, plan, plan.granulator.bowl, plan.granulator.impeller).tables()
 
 
+#: the tables of a run (file: field of RunTables) in the order they are written: collisions.csv
+#: last, its presence marks a finished run (pbmdem.dem.run.FINISHED_MARKERS)
+RUN_TABLES = {
+    "wall_collisions.csv": "walls",
+    "impact_velocity.csv": "velocities",
+    "wall_impact_velocity.csv": "wall_velocities",
+    "collisions.csv": "pairs",
+}
+
+
 def write_tables(tables: RunTables, run_dir: str | Path) -> None:
-    run_dir = Path(run_dir)
-    write_csv(run_dir / "wall_collisions.csv", tables.walls)
-    write_csv(run_dir / "impact_velocity.csv", tables.velocities)
-    write_csv(run_dir / "wall_impact_velocity.csv", tables.wall_velocities)
-    write_csv(run_dir / "collisions.csv", tables.pairs)  # last: its presence marks a finished run
+    for name, attribute in RUN_TABLES.items():
+        write_csv(Path(run_dir) / name, getattr(tables, attribute))

@@ -46,10 +46,6 @@ def template_dir() -> Path:
     return Path(str(resources.files("pbmdem") / "data" / "liggghts_templates"))
 
 
-def template_path(name: str = GRANULATOR_TEMPLATE) -> Path:
-    return template_dir() / name
-
-
 def number(name: str, value, *, integer: bool = False, minimum: float | None = None) -> str:
     """`value` as text for a deck: a finite number (an integer if `integer`; at least `minimum`
     if given), or DeckValueError naming it."""

@@ -157,6 +157,8 @@ def is_finished(run_dir: str | Path) -> bool:
     return any((Path(run_dir) / name).exists() for name in FINISHED_MARKERS)
 
 
+#: moved into a run folder last, in this order: the tables, then the finished markers
+LAST_PRODUCTS = tuple(dict.fromkeys((*collisions.RUN_TABLES, *FINISHED_MARKERS)))
 # what a run writes into its folder (besides whatever LIGGGHTS itself adds)
 RUN_PRODUCTS = (
     "bowl.stl",
@@ -168,10 +170,7 @@ RUN_PRODUCTS = (
     "crash.json",
     BED_FILE,
     "post",
-    "wall_collisions.csv",
-    "impact_velocity.csv",
-    "wall_impact_velocity.csv",
-    *FINISHED_MARKERS,
+    *LAST_PRODUCTS,
 )
 
 
@@ -193,11 +192,7 @@ def _move_into(stage: Path, run_dir: Path) -> None:
     for name in RUN_PRODUCTS:
         if not (stage / name).exists() and (run_dir / name).exists():
             _remove(run_dir / name)
-    last = [
-        stage / n
-        for n in ("wall_collisions.csv", "impact_velocity.csv", "wall_impact_velocity.csv", *FINISHED_MARKERS)
-        if (stage / n).exists()
-    ]
+    last = [stage / n for n in LAST_PRODUCTS if (stage / n).exists()]
     for item in [p for p in sorted(stage.iterdir()) if p not in last] + last:
         target = run_dir / item.name
         if target.is_dir() and not target.is_symlink():

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from xml.etree import ElementTree
 
 from pbmdem.atomic import write_text
 
@@ -48,9 +47,3 @@ def write_series(post_dir: str | Path, timestep: float) -> dict[str, Path]:
         )
         out[kind] = write_text(post_dir / f"{kind}.pvd", text)
     return out
-
-
-def read_series(pvd_path: str | Path) -> list[tuple[float, Path]]:
-    pvd_path = Path(pvd_path)
-    root = ElementTree.parse(pvd_path).getroot()
-    return [(float(d.get("timestep")), pvd_path.parent / d.get("file")) for d in root.iter("DataSet")]

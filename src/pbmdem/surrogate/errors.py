@@ -1,8 +1,9 @@
-"""Errors of the surrogate's input tables and of a missing velocity model, and the fitted check
-of its hot paths."""
+"""Errors of the surrogate's input tables and of a missing velocity model, the check of the
+``groups`` of a fit, and the fitted check of its hot paths."""
 
 from __future__ import annotations
 
+import numpy as np
 from sklearn.exceptions import NotFittedError
 
 
@@ -23,3 +24,14 @@ def require_fitted(estimator, attribute: str) -> None:
             f"This {type(estimator).__name__} instance is not fitted yet. Call 'fit' with appropriate "
             "arguments before using this estimator."
         )
+
+
+def checked_groups(groups, n_samples: int):
+    """``groups`` (the DEM run of every row) as an array, None if None; ValueError unless it has
+    one entry per sample."""
+    if groups is None:
+        return None
+    groups = np.asarray(groups)
+    if groups.shape != (n_samples,):
+        raise ValueError(f"groups must be 1-d with one entry per sample ({n_samples}), got shape {groups.shape}")
+    return groups

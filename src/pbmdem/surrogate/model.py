@@ -20,7 +20,7 @@ from pbmdem.impact import EncounterRates, ImpactRates
 
 from .domain import TrainingDomain
 from .ensemble import EnsembleMLPRegressorCV
-from .errors import VelocityModelMissingError, require_fitted
+from .errors import VelocityModelMissingError, checked_groups, require_fitted
 from .families import CalibratedMember, member_quantiles
 from .features import (
     FEATURE_NAMES,
@@ -177,10 +177,7 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
                     f"{list(OFFSET_FEATURES)} (a feature frame from make_features/training_data); "
                     f"missing {missing}"
                 )
-        if groups is not None:
-            groups = np.asarray(groups)
-            if groups.shape != (len(y),):
-                raise ValueError(f"groups must be 1-d with one entry per sample ({len(y)}), got shape {groups.shape}")
+        groups = checked_groups(groups, len(y))
         if velocity is not None:
             V = np.asarray(velocity, dtype=float)
             p = n_law_parameters(self.speed_law)

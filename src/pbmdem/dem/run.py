@@ -23,7 +23,7 @@ from pbmdem.atomic import write_json, write_text
 from pbmdem.config import ConfigError, DemExecution
 from pbmdem.readers import InputFileError, read_json
 
-from . import collisions, engine, geometry, vtk_series
+from . import collisions, engine, geometry, viewer
 from .deck import render_bed, render_granulator
 from .plan import BedPlan, DemPlan
 from .progress import ThermoProgress
@@ -284,7 +284,7 @@ def _run_in(
     tables = collisions.tabulate_run(run_dir / "post", plan)
     parse_time = time.perf_counter() - t0
     collisions.write_tables(tables, run_dir)
-    series = vtk_series.write_series(run_dir / "post", plan.timestep)
+    series = viewer.write_series(run_dir / "post", plan.timestep)
     if not plan.keep_contact_dumps:
         for dump in plan.dumps:
             (run_dir / dump).unlink(missing_ok=True)

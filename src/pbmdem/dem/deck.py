@@ -46,6 +46,11 @@ def template_dir() -> Path:
     return Path(str(resources.files("pbmdem") / "data" / "liggghts_templates"))
 
 
+def template_path(name: str = GRANULATOR_TEMPLATE) -> Path:
+    """The shipped template `name` (the workflow hashes the granulator deck's to rerun the DEM jobs when it changes)."""
+    return template_dir() / name
+
+
 def number(name: str, value, *, integer: bool = False) -> str:
     """`value` as text for a deck: a finite number (an integer if `integer`), or DeckValueError naming it."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):

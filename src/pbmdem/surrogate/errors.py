@@ -1,5 +1,5 @@
 """Errors of the surrogate's input tables and of a missing velocity model, the check of the
-``groups`` of a fit, and the fitted check of its hot paths."""
+``groups`` of a fit, and the checks of its hot paths (fitted, the array's shape)."""
 
 from __future__ import annotations
 
@@ -35,3 +35,13 @@ def checked_groups(groups, n_samples: int):
     if groups.shape != (n_samples,):
         raise ValueError(f"groups must be 1-d with one entry per sample ({n_samples}), got shape {groups.shape}")
     return groups
+
+
+def array_input(estimator, X) -> np.ndarray:
+    """``X`` as the float64 (n, ``n_features_in_``) array of a fitted model's ``predict_array``
+    (fitted with ``estimators_``), or ValueError; nothing else of scikit-learn's validation."""
+    require_fitted(estimator, "estimators_")
+    X = np.asarray(X, dtype=np.float64)
+    if X.ndim != 2 or X.shape[1] != estimator.n_features_in_:
+        raise ValueError(f"predict_array: X must be (n, {estimator.n_features_in_}), got shape {X.shape}")
+    return X

@@ -40,7 +40,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._threads import single_threaded
 from .ensemble import grouped_splits
-from .errors import require_fitted
+from .errors import array_input
 
 log = logging.getLogger(__name__)
 
@@ -162,10 +162,7 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
     def predict_array(self, X: np.ndarray, return_std: bool = False):
         """:meth:`predict` on a trusted float64 array in the training feature order, without
         scikit-learn's per-call validation (both families predict by their fitted attributes)."""
-        require_fitted(self, "estimators_")
-        X = np.asarray(X, dtype=np.float64)
-        if X.ndim != 2 or X.shape[1] != self.n_features_in_:
-            raise ValueError(f"predict_array: X must be (n, {self.n_features_in_}), got shape {X.shape}")
+        X = array_input(self, X)
         return self._predict(X, return_std)
 
     def fitted_state(self) -> dict:

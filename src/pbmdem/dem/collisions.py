@@ -348,7 +348,7 @@ def tabulate_run(post_dir: str | Path, plan) -> RunTables:
 
 #: the tables of a run (file: field of RunTables) in the order they are written: collisions.csv
 #: last, its presence marks a finished run (pbmdem.dem.run.FINISHED_MARKERS)
-RUN_TABLES = {
+RUN_FILES = {
     "wall_collisions.csv": "walls",
     "impact_velocity.csv": "velocities",
     "wall_impact_velocity.csv": "wall_velocities",
@@ -357,5 +357,5 @@ RUN_TABLES = {
 
 
 def write_tables(tables: RunTables, run_dir: str | Path) -> None:
-    for name, attribute in RUN_TABLES.items():
+    for name, attribute in RUN_FILES.items():
         write_csv(Path(run_dir) / name, getattr(tables, attribute))

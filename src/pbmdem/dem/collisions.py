@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.atomic import write_csv
-from pbmdem.frequency import pair_counts
+from pbmdem.frequency import pair_counts, upper_pairs
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, velocity_bin
 
 from . import encounters
@@ -125,7 +125,7 @@ def _tally(group: np.ndarray, events, shape: tuple[int, ...]) -> Tally:
 def pair_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, meta: dict) -> pd.DataFrame:
     """Tidy table with one row per unordered class pair (see docs/architecture.md)."""
     k = len(n)
-    i, j = np.triu_indices(k)
+    i, j = upper_pairs(k)
     pairs = pair_counts(n)[i, j]
     d = np.asarray(diameters, float)
     coll, enc = tally.raw[i, j], tally.encounters[i, j]
@@ -156,7 +156,7 @@ def pair_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, met
 def velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
     """Encounters per class pair and impact-velocity bin (long format, docs/architecture.md)."""
     k = tally.raw.shape[0]
-    i, j = np.triu_indices(k)
+    i, j = upper_pairs(k)
     b = np.arange(N_VELOCITY_BINS)
     return pd.DataFrame(
         {

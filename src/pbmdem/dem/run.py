@@ -158,7 +158,7 @@ def is_finished(run_dir: str | Path) -> bool:
 
 
 #: moved into a run folder last, in this order: the tables, then the finished markers
-LAST_PRODUCTS = tuple(dict.fromkeys((*collisions.RUN_FILES, *FINISHED_MARKERS)))
+LAST_PRODUCTS = tuple(dict.fromkeys((*collisions.TABLE_FILES, *FINISHED_MARKERS)))
 # what a run writes into its folder (besides whatever LIGGGHTS itself adds)
 RUN_PRODUCTS = (
     "bowl.stl",

@@ -52,6 +52,12 @@ def test_particles_must_fit_the_bowl(default_config):
     assert "size_distributions.fine.diameters" in msg and "does not fit the bowl" in msg
 
 
+def test_blade_must_stay_inside_the_bowl(default_config):
+    radius = default_config.granulator.bowl.radius
+    msg = bad(default_config, lambda c: c["granulator"]["impeller"].__setitem__("blade_length", radius))
+    assert "granulator.impeller.blade_length" in msg and "must be smaller than the bowl radius" in msg
+
+
 def test_unknown_distribution_in_grid(default_config):
     msg = bad(default_config, lambda c: c["grid"]["size_distributions"].append("huge"))
     assert "'huge' is not defined" in msg and "fine" in msg

@@ -15,6 +15,7 @@ import pandas as pd
 import pytest
 
 from pbmdem.readers import InputFileError
+from pbmdem.surrogate.domain import OutOfDomainWarning
 
 RPM = "600"
 TIMES = np.linspace(0.0, 20.0, 21)
@@ -144,8 +145,6 @@ class FakeSurrogate:
         self.outside_at = set(outside_at)
 
     def frequency_matrix(self, diameters, numbers, rpm):
-        from pbmdem.surrogate.model import OutOfDomainWarning
-
         if rpm in self.outside_at:
             warnings.warn(f"tip_speed {rpm:g} rpm outside the training range", OutOfDomainWarning, stacklevel=2)
         k = len(diameters)

@@ -1,17 +1,26 @@
 """VTK series and viewer on a real (tiny) LIGGGHTS run: pyvista reads the series, and
 `pbmdem view --screenshot` renders a picture of particles coloured by size."""
 
+from pathlib import Path
+from xml.etree import ElementTree
+
 import pytest
 
 from pbmdem.cli import main
-from pbmdem.dem import viewer, vtk_series
+from pbmdem.dem import viewer
 
 pytestmark = pytest.mark.liggghts
 
 
+def read_series(pvd_path: Path) -> list[tuple[float, Path]]:
+    """(time, snapshot path) of every DataSet of a ParaView series file."""
+    root = ElementTree.parse(pvd_path).getroot()
+    return [(float(d.get("timestep")), pvd_path.parent / d.get("file")) for d in root.iter("DataSet")]
+
+
 def test_series_index_is_in_numeric_step_order(tiny_run):
     post = tiny_run["dir"] / "post"
-    series = vtk_series.read_series(post / "particles.pvd")
+    series = read_series(post / "particles.pvd")
     times = [t for t, _ in series]
     assert times == sorted(times) and len(times) >= 3
     steps = [int(p.stem.split("_")[1]) for _, p in series]
@@ -27,9 +36,9 @@ def test_series_opens_on_a_frame_with_particles(tiny_run):
     import pyvista
 
     post = tiny_run["dir"] / "post"
-    assert vtk_series.point_count(post / "particles_0.vtk") == 0
-    series = vtk_series.read_series(post / "particles.pvd")
-    assert series[0][0] > 0 and all(vtk_series.point_count(p) > 0 for _, p in series)
+    assert viewer.point_count(post / "particles_0.vtk") == 0
+    series = read_series(post / "particles.pvd")
+    assert series[0][0] > 0 and all(viewer.point_count(p) > 0 for _, p in series)
     reader = pyvista.get_reader(str(post / "particles.pvd"))
     mesh = reader.read()
     mesh = mesh[0] if isinstance(mesh, pyvista.MultiBlock) else mesh
@@ -41,7 +50,7 @@ def test_view_picks_a_time_in_seconds_and_names_it(tiny_run):
     title names the point, speed, feed and time."""
     run = tiny_run["dir"]
     first = viewer.pick(run)
-    assert first.step > 0 and vtk_series.point_count(first.path) > 0
+    assert first.step > 0 and viewer.point_count(first.path) > 0
     assert first.time == pytest.approx(first.step * tiny_run["plan"].timestep)
     last = viewer.pick(run, "last")
     assert viewer.pick(run, last.time * 0.999) == last and last.time > first.time
@@ -92,4 +101,4 @@ def test_not_a_run_folder(tmp_path):
         viewer.render_run(tmp_path, screenshot=tmp_path / "x.png")
     with pytest.raises(FileNotFoundError, match="no particles"):
         (tmp_path / "post").mkdir()
-        vtk_series.write_series(tmp_path / "post", 1e-5)
+        viewer.write_series(tmp_path / "post", 1e-5)

@@ -29,6 +29,8 @@ from pbmdem.atomic import atomic_path
 DPI = 110
 #: m -> mm
 MM = 1e3
+#: m3/s -> mL/min
+ML_PER_MIN = 6e7
 #: (statistic, marker, colour) of d10, d50 and d90 in every figure of granule sizes
 SIZE_STYLES = (("d90", "^", "tab:red"), ("d50", "o", "black"), ("d10", "v", "tab:blue"))
 #: line styles of successive times in a size-distribution figure

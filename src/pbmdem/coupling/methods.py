@@ -28,7 +28,7 @@ from pbmdem.pbm.kernels import ConstantFrequency
 from pbmdem.pbm.results import floor_words
 from pbmdem.pbm.setup import build_model, initial_state, run_batch
 from pbmdem.surrogate import load_surrogate
-from pbmdem.surrogate.model import out_of_domain_recorded
+from pbmdem.surrogate.domain import out_of_domain_recorded
 
 from .loop import CouplingError, LoopOutcome, interval_bounds, run_loop, write_outputs
 from .providers import DemProvider, SurrogateProvider, surrogate_needs

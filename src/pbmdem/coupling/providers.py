@@ -31,7 +31,7 @@ from pbmdem.frequency import matrix_from_table, velocity_fractions_from_table, w
 from pbmdem.impact import EncounterRates, ImpactRates
 from pbmdem.readers import InputFileError, read_json
 from pbmdem.surrogate import load_surrogate
-from pbmdem.surrogate.model import out_of_domain_recorded
+from pbmdem.surrogate.domain import out_of_domain_recorded
 from pbmdem.tables import RUN_PAIRS, RUN_VELOCITIES, RUN_WALL_VELOCITIES, RUN_WALLS
 
 from .sample import DIAMETER_RESOLUTION, DemSample

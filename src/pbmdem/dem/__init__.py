@@ -14,8 +14,7 @@
 | `collisions` | the collision and encounter tables of one run |
 | `grid_tables` | the grid's tables: replicate means and standard errors, the run table |
 | `speed_response` | encounter rate against impeller speed, flow development |
-| `vtk_series` | `.pvd` index of the VTK snapshots |
-| `viewer` | pyvista view / screenshot of a run |
+| `viewer` | pyvista view / screenshot of a run, and the `.pvd` index of its VTK snapshots |
 """
 
 from .plan import DemPlan, plan_point

@@ -19,14 +19,12 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.atomic import write_csv
-from pbmdem.frequency import pair_counts
-from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, velocity_bin
+from pbmdem.frequency import pair_counts, upper_pairs
+from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, WALLS, velocity_bin
 
 from . import encounters
 from .dumps import DumpFormatError, Snapshots, read_classes, read_dump, read_trajectories
 from .dumps import class_lookup as _class_lookup
-
-WALL_NAMES = ("bowl", "impeller")  # mesh ids 0 and 1, in the order of the deck's fix wall/gran
 
 
 def contact_starts(frame: np.ndarray, key: np.ndarray, stride: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -125,7 +123,7 @@ def _tally(group: np.ndarray, events, shape: tuple[int, ...]) -> Tally:
 def pair_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, meta: dict) -> pd.DataFrame:
     """Tidy table with one row per unordered class pair (see docs/architecture.md)."""
     k = len(n)
-    i, j = np.triu_indices(k)
+    i, j = upper_pairs(k)
     pairs = pair_counts(n)[i, j]
     d = np.asarray(diameters, float)
     coll, enc = tally.raw[i, j], tally.encounters[i, j]
@@ -156,7 +154,7 @@ def pair_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, met
 def velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
     """Encounters per class pair and impact-velocity bin (long format, docs/architecture.md)."""
     k = tally.raw.shape[0]
-    i, j = np.triu_indices(k)
+    i, j = upper_pairs(k)
     b = np.arange(N_VELOCITY_BINS)
     return pd.DataFrame(
         {
@@ -177,7 +175,7 @@ def wall_velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
     return pd.DataFrame(
         {
             **meta,
-            "wall": np.repeat(np.asarray(WALL_NAMES)[w], N_VELOCITY_BINS),
+            "wall": np.repeat(np.asarray(WALLS)[w], N_VELOCITY_BINS),
             "class_i": np.repeat(c, N_VELOCITY_BINS),
             "v_lo": np.tile(VELOCITY_EDGES[:-1], len(w)),
             "v_hi": np.tile(VELOCITY_EDGES[1:], len(w)),
@@ -188,7 +186,7 @@ def wall_velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
 
 def wall_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, meta: dict) -> pd.DataFrame:
     rows = []
-    for w, wall in enumerate(WALL_NAMES):
+    for w, wall in enumerate(WALLS):
         for c in range(len(n)):
             rows.append(
                 {
@@ -304,7 +302,7 @@ class RunAnalysis:
         ev, group = self.pair_events()
         pair_tally = _tally(group, ev, (K, K))
         wev, wgroup = self.wall_events()
-        wall_tally = _tally(wgroup, wev, (len(WALL_NAMES), K))
+        wall_tally = _tally(wgroup, wev, (len(WALLS), K))
         ev2, group2 = self.pair_events(stride=2)
         raw, raw2 = int(pair_tally.raw.sum()), int(np.bincount(group2, minlength=K * K).sum())
         enc, enc2 = int(ev.encounter.sum()), int(ev2.encounter.sum())
@@ -346,9 +344,16 @@ def tabulate_run(post_dir: str | Path, plan) -> RunTables:
     return RunAnalysis(post_dir, plan, plan.granulator.bowl, plan.granulator.impeller).tables()
 
 
+#: the tables of a run (file: field of RunTables) in the order they are written: collisions.csv
+#: last, its presence marks a finished run (pbmdem.dem.run.FINISHED_MARKERS)
+TABLE_FILES = {
+    "wall_collisions.csv": "walls",
+    "impact_velocity.csv": "velocities",
+    "wall_impact_velocity.csv": "wall_velocities",
+    "collisions.csv": "pairs",
+}
+
+
 def write_tables(tables: RunTables, run_dir: str | Path) -> None:
-    run_dir = Path(run_dir)
-    write_csv(run_dir / "wall_collisions.csv", tables.walls)
-    write_csv(run_dir / "impact_velocity.csv", tables.velocities)
-    write_csv(run_dir / "wall_impact_velocity.csv", tables.wall_velocities)
-    write_csv(run_dir / "collisions.csv", tables.pairs)  # last: its presence marks a finished run
+    for name, attribute in TABLE_FILES.items():
+        write_csv(Path(run_dir) / name, getattr(tables, attribute))

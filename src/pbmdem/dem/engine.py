@@ -66,8 +66,7 @@ def executable() -> str:
 
 
 def command(deck: str, ranks: int = 1) -> list[str]:
-    if not isinstance(ranks, int) or ranks < 1:
-        raise ValueError(f"mpi_ranks = {ranks!r}: a positive integer is required")
+    """The command line of LIGGGHTS on `deck` with `ranks` MPI ranks (dem.mpi_ranks, checked by the config)."""
     base = [executable(), "-in", deck, "-log", "log.liggghts", "-echo", "none"]
     if ranks == 1:
         return base

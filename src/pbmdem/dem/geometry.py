@@ -33,8 +33,6 @@ def bowl_mesh(bowl: Bowl) -> tuple[np.ndarray, np.ndarray]:
     lets the mesh be checked for being a closed surface.
     """
     n = int(bowl.segments)
-    if n < 8:
-        raise ValueError(f"granulator.bowl.segments = {n}: at least 8 facets are needed around the bowl")
     theta = 2.0 * np.pi * np.arange(n) / n
     x, y = bowl.radius * np.cos(theta), bowl.radius * np.sin(theta)
     bottom = np.column_stack([x, y, np.zeros(n)])
@@ -91,20 +89,13 @@ def _rotation(axis: str, angle: float) -> np.ndarray:
     raise ValueError(axis)
 
 
-def impeller_mesh(imp: Impeller, bowl: Bowl | None = None) -> tuple[np.ndarray, np.ndarray]:
+def impeller_mesh(imp: Impeller) -> tuple[np.ndarray, np.ndarray]:
     """Hub (a closed prism) plus `blades` rectangular blades, each a closed box.
 
     Blade k is a plate spanning radially from half the hub radius to `blade_length`, of height
     `blade_height` and thickness `blade_thickness`, its underside `clearance` above the bottom,
     rotated by 2 pi k / blades about z and tilted by `pitch_deg` about its own radial axis.
     """
-    if imp.blades < 1:
-        raise ValueError(f"granulator.impeller.blades = {imp.blades}: at least one blade is needed")
-    if bowl is not None and imp.blade_length >= bowl.radius:
-        raise ValueError(
-            f"granulator.impeller.blade_length = {imp.blade_length} m reaches the bowl wall "
-            f"(radius {bowl.radius} m); it must be smaller than the bowl radius"
-        )
     parts_pts, parts_tris, offset = [], [], 0
     zc = imp.clearance + 0.5 * imp.blade_height
     for k in range(imp.blades):
@@ -172,5 +163,5 @@ def write_granulator(granulator: Granulator, outdir: str | Path) -> dict[str, Pa
     bowl, imp = granulator.bowl, granulator.impeller
     return {
         "bowl": write_stl(outdir / "bowl.stl", *bowl_mesh(bowl)),
-        "impeller": write_stl(outdir / "impeller.stl", *impeller_mesh(imp, bowl)),
+        "impeller": write_stl(outdir / "impeller.stl", *impeller_mesh(imp)),
     }

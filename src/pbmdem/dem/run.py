@@ -23,7 +23,7 @@ from pbmdem.atomic import write_json, write_text
 from pbmdem.config import ConfigError, DemExecution
 from pbmdem.readers import InputFileError, read_json
 
-from . import collisions, engine, geometry, vtk_series
+from . import collisions, engine, geometry, viewer
 from .deck import render_bed, render_granulator
 from .plan import BedPlan, DemPlan
 from .progress import ThermoProgress
@@ -157,6 +157,8 @@ def is_finished(run_dir: str | Path) -> bool:
     return any((Path(run_dir) / name).exists() for name in FINISHED_MARKERS)
 
 
+#: moved into a run folder last, in this order: the tables, then the finished markers
+LAST_PRODUCTS = tuple(dict.fromkeys((*collisions.TABLE_FILES, *FINISHED_MARKERS)))
 # what a run writes into its folder (besides whatever LIGGGHTS itself adds)
 RUN_PRODUCTS = (
     "bowl.stl",
@@ -168,10 +170,7 @@ RUN_PRODUCTS = (
     "crash.json",
     BED_FILE,
     "post",
-    "wall_collisions.csv",
-    "impact_velocity.csv",
-    "wall_impact_velocity.csv",
-    *FINISHED_MARKERS,
+    *LAST_PRODUCTS,
 )
 
 
@@ -193,11 +192,7 @@ def _move_into(stage: Path, run_dir: Path) -> None:
     for name in RUN_PRODUCTS:
         if not (stage / name).exists() and (run_dir / name).exists():
             _remove(run_dir / name)
-    last = [
-        stage / n
-        for n in ("wall_collisions.csv", "impact_velocity.csv", "wall_impact_velocity.csv", *FINISHED_MARKERS)
-        if (stage / n).exists()
-    ]
+    last = [stage / n for n in LAST_PRODUCTS if (stage / n).exists()]
     for item in [p for p in sorted(stage.iterdir()) if p not in last] + last:
         target = run_dir / item.name
         if target.is_dir() and not target.is_symlink():
@@ -289,7 +284,7 @@ def _run_in(
     tables = collisions.tabulate_run(run_dir / "post", plan)
     parse_time = time.perf_counter() - t0
     collisions.write_tables(tables, run_dir)
-    series = vtk_series.write_series(run_dir / "post", plan.timestep)
+    series = viewer.write_series(run_dir / "post", plan.timestep)
     if not plan.keep_contact_dumps:
         for dump in plan.dumps:
             (run_dir / dump).unlink(missing_ok=True)

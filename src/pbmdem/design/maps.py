@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.config import Specification
-from pbmdem.plotting import pyplot, save_figure
+from pbmdem.plotting import ML_PER_MIN, pyplot, save_figure
 
 #: marker and colour of each specification status
 STYLE = {
@@ -26,7 +26,7 @@ def _grid(panel: pd.DataFrame, column: str):
     x = np.sort(panel.rpm.unique())
     y = np.sort(panel.liquid_rate.unique())
     z = panel.pivot_table(index="liquid_rate", columns="rpm", values=column, dropna=False).reindex(index=y, columns=x)
-    return x, 1e6 * 60 * y, z.to_numpy(float)  # binder rate in mL/min
+    return x, ML_PER_MIN * y, z.to_numpy(float)  # binder rate in mL/min
 
 
 def _levels(values: pd.Series) -> np.ndarray:
@@ -70,7 +70,7 @@ def plot_design_space(table: pd.DataFrame, third_key: str, spec: Specification, 
             fig.colorbar(filled, ax=top, label="d50 (mm), ensemble mean")
         for status, (marker, color, text) in STYLE.items():
             sel = panel[panel.spec_status == status]
-            top.scatter(sel.rpm, 1e6 * 60 * sel.liquid_rate, marker=marker, color=color, s=28, label=text)
+            top.scatter(sel.rpm, ML_PER_MIN * sel.liquid_rate, marker=marker, color=color, s=28, label=text)
         top.set_title(f"{label} = {third:g}")
         if contours and np.isfinite(d90).any():
             filled = bottom.contourf(x, y, 1e3 * d90, levels=levels["d90"], cmap="magma", extend="both")

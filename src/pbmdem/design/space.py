@@ -24,13 +24,13 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.config import CoupledLoop, DesignSpace, Specification
+from pbmdem.coupling.lumping import LIQUID_KEY
 from pbmdem.surrogate import load_surrogate
 
 from .batches import STATISTICS, Case, outcomes_table, run_cases
 
 log = logging.getLogger(__name__)
 
-LIQUID_KEY = "pbm.liquid_addition.rate"
 STATUSES = ("meets", "uncertain", "fails", "out_of_domain", "failed")
 
 

@@ -16,9 +16,8 @@ from pathlib import Path
 import pandas as pd
 
 from pbmdem.atomic import write_csv, write_text
+from pbmdem.plotting import MM
 
-#: m -> mm
-MM = 1e3
 #: fraction -> %
 PERCENT = 100.0
 #: columns a page holds side by side (at the report's font size, on an A4/letter page or a laptop screen)

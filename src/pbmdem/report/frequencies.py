@@ -15,7 +15,7 @@ import pandas as pd
 
 from pbmdem.frequency import upper_pairs
 from pbmdem.readers import InputFileError
-from pbmdem.surrogate.model import out_of_domain_recorded
+from pbmdem.surrogate.domain import out_of_domain_recorded
 from pbmdem.tables import INTERVALS
 
 #: the interval columns these tables read

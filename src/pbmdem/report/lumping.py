@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from pbmdem.plotting import log_ticks, pyplot
+from pbmdem.plotting import ML_PER_MIN, log_ticks, pyplot
 
 from . import words
 from .breakage import peak_speed
@@ -19,8 +19,6 @@ from .display import MM, PERCENT, mm, number
 #: d50 (a sieve or laser diffraction of the same sample, calibration.relative_error_floor): the lumped
 #: model is called adequate where d10, d50 and d90 of every case of a study differ by less
 ADEQUATE = 0.01
-#: m3/s -> mL/min
-ML_PER_MIN = 6e7
 #: size classes shown in the liquid panel: those holding at least this share of the solid
 SHOWN_SOLID = 1e-6
 #: a share of the batch's solid below this is "none" (round-off of the classes' totals)

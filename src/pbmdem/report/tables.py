@@ -19,6 +19,7 @@ import pandas as pd
 
 from pbmdem.config import Granulator, Pbm, SizeDistribution
 from pbmdem.pbm.results import FLOOR_LIMIT
+from pbmdem.plotting import ML_PER_MIN
 
 from .display import MM, PERCENT, number, percent, value_range, yes_no
 
@@ -103,7 +104,7 @@ def process_settings(
         ("batch length", number(p.end, ".4g"), "s", "pbm.process"),
         (
             "binder addition rate",
-            number(ML * 60.0 * pbm.liquid_addition.rate, ".4g"),
+            number(ML_PER_MIN * pbm.liquid_addition.rate, ".4g"),
             "mL/min",
             "pbm.liquid_addition.rate",
         ),
@@ -291,7 +292,7 @@ def design_space_table(table: pd.DataFrame, third_key: str) -> pd.DataFrame:
     return pd.DataFrame(
         {
             "rpm": [f"{r:g}" for r in table.rpm],
-            "binder (mL/min)": [f"{ML * 60 * q:.2f}" for q in table.liquid_rate],
+            "binder (mL/min)": [f"{ML_PER_MIN * q:.2f}" for q in table.liquid_rate],
             third: [f"{v:g}" for v in table[third_key]],
             "d50 (mm)": [f"{MM * v:.2f}" if v == v else "n/a" for v in table.d50],
             "d50 members (mm)": [

@@ -2,11 +2,13 @@
 tables (docs/surrogate.md)."""
 
 from .baselines import HGBBaseline, PhysicalScaling
+from .domain import OutOfDomainWarning
 from .ensemble import EnsembleMLPRegressorCV, grouped_splits
+from .errors import VelocityModelMissingError
 from .evaluation import cross_validate_models, noise_floor_r2, select_family, summarise
 from .families import KrigingRegressor, ResponseSurface
 from .features import FEATURE_NAMES, TARGET_NAME, TrainingData, make_features, training_data
-from .model import CollisionSurrogate, OutOfDomainWarning, VelocityModelMissingError
+from .model import CollisionSurrogate
 from .persistence import (
     IncompatibleVersionError,
     SurrogateLoadError,

@@ -15,7 +15,7 @@ from pbmdem.config import check_rpm, load_config, point_id
 from pbmdem.impact import VELOCITY_EDGES
 from pbmdem.tables import GRID_PAIRS
 
-from .model import OutOfDomainWarning
+from .domain import OutOfDomainWarning
 from .persistence import load_surrogate
 from .train import train_and_report
 

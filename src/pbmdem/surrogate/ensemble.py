@@ -26,7 +26,7 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._threads import single_threaded
-from .errors import require_fitted
+from .errors import array_input, checked_groups
 
 log = logging.getLogger(__name__)
 
@@ -178,12 +178,7 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         sizes, alphas = self._candidates()
         seeds = self._seed_list()
         X, y = validate_data(self, X, y, multi_output=True, y_numeric=True, dtype=[np.float64, np.float32])
-        if groups is not None:
-            groups = np.asarray(groups)
-            if groups.shape != (X.shape[0],):
-                raise ValueError(
-                    f"groups must be 1-d with one entry per sample ({X.shape[0]}), got shape {groups.shape}"
-                )
+        groups = checked_groups(groups, X.shape[0])
         search = len(sizes) * len(alphas) > 1
         n_groups = 0 if groups is None else len(np.unique(groups))
         if search and n_groups < 2:
@@ -282,10 +277,7 @@ class EnsembleMLPRegressorCV(RegressorMixin, BaseEstimator):
         scikit-learn's per-call validation (the caller's array is trusted: finite, 2-d, the
         fitted number of features): the same members' predictions, mean and spread, for the
         PBM's frequent calls with a few rows (``CollisionSurrogate.frequency_matrix``)."""
-        require_fitted(self, "estimators_")
-        X = np.asarray(X, dtype=np.float64)
-        if X.ndim != 2 or X.shape[1] != self.n_features_in_:
-            raise ValueError(f"predict_array: X must be (n, {self.n_features_in_}), got shape {X.shape}")
+        X = array_input(self, X)
         return _mean_std(_members_forward(self, X), return_std)
 
     def predict(self, X, return_std: bool = False):

@@ -40,7 +40,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from ._threads import single_threaded
 from .ensemble import grouped_splits
-from .errors import require_fitted
+from .errors import array_input
 
 log = logging.getLogger(__name__)
 
@@ -73,6 +73,27 @@ def converged_lbfgs(obj_func, initial_theta, bounds):
 def member_quantiles(n: int) -> np.ndarray:
     """``n`` standard-normal quantiles at ``(k + 1/2) / n``: symmetric, mean 0 (0 for n = 1)."""
     return norm.ppf((np.arange(int(n)) + 0.5) / int(n))
+
+
+class CalibratedMember:
+    """One member of a fitted model's uncertainty: the quantile ``z`` of its predictive normal with
+    the standard deviation widened or narrowed by a calibration factor.
+
+    ``model.predict_array(X, return_std=True)`` gives the mean and the standard deviation of every
+    output; the member predicts ``mean + z scale std`` and has no spread of its own.
+    """
+
+    def __init__(self, model, z: float, scale: float):
+        self.model, self.z, self.scale = model, float(z), float(scale)
+        self.n_members_ = 1
+
+    def predict_array(self, X, return_std: bool = False):
+        mean, std = self.model.predict_array(np.asarray(X, dtype=np.float64), return_std=True)
+        out = mean + self.z * self.scale * std
+        return (out, np.zeros_like(out)) if return_std else out
+
+    def predict(self, X, return_std: bool = False):
+        return self.predict_array(X, return_std=return_std)
 
 
 class _PerOutputRegressor(RegressorMixin, BaseEstimator):
@@ -112,20 +133,25 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
     def n_members_(self) -> int:
         return int(self.n_members)
 
+    def _output(self, est: Pipeline, X: np.ndarray, return_std: bool):  # pragma: no cover - abstract
+        """(mean, std or None) of one output's fitted pipeline at X."""
+        raise NotImplementedError
+
     def _predict(self, X: np.ndarray, return_std: bool):
         """Mean (and with ``return_std`` the standard deviation) of every output; the standard
         deviation costs the most, so it is computed only when asked for."""
         # no thread limit here: a prediction is a few small products that OpenBLAS runs on one
         # thread anyway, and setting up the limit cost tens of ms on the PBM's first call
+        means, stds = [], []
+        for est in self.estimators_:  # a loop, not a comprehension: the Kriging warning's stacklevel
+            mean, std = self._output(est, X, return_std)
+            means.append(mean)
+            stds.append(std)
+        mean = np.column_stack(means)
         if not return_std:
-            mean = np.column_stack([est.predict(X) for est in self.estimators_])
             return mean[:, 0] if self.n_outputs_ == 1 else mean
-        out = [est.predict(X, return_std=True) for est in self.estimators_]
-        mean = np.column_stack([m for m, _ in out])
-        std = np.column_stack([s for _, s in out])
-        if self.n_outputs_ == 1:
-            return mean[:, 0], std[:, 0]
-        return mean, std
+        std = np.column_stack(stds)
+        return (mean[:, 0], std[:, 0]) if self.n_outputs_ == 1 else (mean, std)
 
     def predict(self, X, return_std: bool = False):
         """Predictive mean (units of ``y``); with ``return_std`` also the predictive standard deviation."""
@@ -136,10 +162,7 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
     def predict_array(self, X: np.ndarray, return_std: bool = False):
         """:meth:`predict` on a trusted float64 array in the training feature order, without
         scikit-learn's per-call validation (both families predict by their fitted attributes)."""
-        require_fitted(self, "estimators_")
-        X = np.asarray(X, dtype=np.float64)
-        if X.ndim != 2 or X.shape[1] != self.n_features_in_:
-            raise ValueError(f"predict_array: X must be (n, {self.n_features_in_}), got shape {X.shape}")
+        X = array_input(self, X)
         return self._predict(X, return_std)
 
     def fitted_state(self) -> dict:
@@ -201,33 +224,25 @@ class KrigingRegressor(_PerOutputRegressor):
             est[-1].optimizer = "fmin_l_bfgs_b"
         return self
 
-    def _predict(self, X: np.ndarray, return_std: bool):
-        """:meth:`GaussianProcessRegressor.predict`'s lines on the fitted pipelines' attributes
+    def _output(self, est: Pipeline, X: np.ndarray, return_std: bool):
+        """:meth:`GaussianProcessRegressor.predict`'s lines on the fitted pipeline's attributes
         (scale; mean ``K(x, X_train) @ alpha``; variance ``k(x, x) - |L^-1 K(x, X_train)^T|^2``,
         negative variances set to 0 with the same warning; undo ``normalize_y``) without
         scikit-learn's validation at each step, which cost most of a prediction; equal to the
         pipelines' ``predict`` (tests/test_surrogate_families.py)."""
-        means, stds = [], []
-        for est in self.estimators_:
-            (_, scale), (_, gp) = est.steps  # by position: naming a step costs a lookup
-            x = (X - scale.mean_) / scale.scale_
-            K_trans = gp.kernel_(x, gp.X_train_)
-            means.append(gp._y_train_std * (K_trans @ gp.alpha_) + gp._y_train_mean)
-            if return_std:
-                V = solve_triangular(gp.L_, K_trans.T, lower=True, check_finite=False)
-                var = gp.kernel_.diag(x).copy()
-                var -= np.einsum("ij,ji->i", V.T, V)
-                if np.any(var < 0):
-                    warnings.warn("Predicted variances smaller than 0. Setting those variances to 0.", stacklevel=3)
-                    var[var < 0] = 0.0
-                stds.append(np.sqrt(var * gp._y_train_std**2))
-        mean = np.column_stack(means)
+        (_, scale), (_, gp) = est.steps  # by position: naming a step costs a lookup
+        x = (X - scale.mean_) / scale.scale_
+        K_trans = gp.kernel_(x, gp.X_train_)
+        mean = gp._y_train_std * (K_trans @ gp.alpha_) + gp._y_train_mean
         if not return_std:
-            return mean[:, 0] if self.n_outputs_ == 1 else mean
-        std = np.column_stack(stds)
-        if self.n_outputs_ == 1:
-            return mean[:, 0], std[:, 0]
-        return mean, std
+            return mean, None
+        V = solve_triangular(gp.L_, K_trans.T, lower=True, check_finite=False)
+        var = gp.kernel_.diag(x).copy()
+        var -= np.einsum("ij,ji->i", V.T, V)
+        if np.any(var < 0):
+            warnings.warn("Predicted variances smaller than 0. Setting those variances to 0.", stacklevel=4)
+            var[var < 0] = 0.0
+        return mean, np.sqrt(var * gp._y_train_std**2)
 
     def _report_warning(self, w) -> None:
         # A length scale at its upper bound means the response hardly varies along that feature:
@@ -325,25 +340,17 @@ class ResponseSurface(_PerOutputRegressor):
         self.n_outputs_ = 1 if y.ndim == 1 else int(Y.shape[1])
         return self
 
-    def _predict(self, X: np.ndarray, return_std: bool):
-        """:meth:`_PerOutputRegressor._predict` by the pipelines' own arithmetic on their fitted
-        attributes (scalers, polynomial powers, the ridge's coefficients and posterior covariance),
-        without scikit-learn's validation at each of the four steps, which cost most of a
-        prediction; equal to the pipelines' ``predict`` (tests/test_surrogate_families.py)."""
-        means, stds = [], []
-        for est in self.estimators_:
-            terms = _polynomial_terms(est, X)
-            ridge = est.steps[-1][1]
-            means.append(terms @ ridge.coef_ + ridge.intercept_)
-            if return_std:
-                stds.append(np.sqrt((terms @ ridge.sigma_ * terms).sum(axis=1) + 1.0 / ridge.alpha_))
-        mean = np.column_stack(means)
+    def _output(self, est: Pipeline, X: np.ndarray, return_std: bool):
+        """One output by the pipeline's own arithmetic on its fitted attributes (scalers,
+        polynomial powers, the ridge's coefficients and posterior covariance), without
+        scikit-learn's validation at each of the four steps, which cost most of a prediction;
+        equal to the pipelines' ``predict`` (tests/test_surrogate_families.py)."""
+        terms = _polynomial_terms(est, X)
+        ridge = est.steps[-1][1]
+        mean = terms @ ridge.coef_ + ridge.intercept_
         if not return_std:
-            return mean[:, 0] if self.n_outputs_ == 1 else mean
-        std = np.column_stack(stds)
-        if self.n_outputs_ == 1:
-            return mean[:, 0], std[:, 0]
-        return mean, std
+            return mean, None
+        return mean, np.sqrt((terms @ ridge.sigma_ * terms).sum(axis=1) + 1.0 / ridge.alpha_)
 
     def fitted_state(self) -> dict:
         return {**super().fitted_state(), "cv_mse": [{str(k): v for k, v in m.items()} for m in self.cv_mse_]}

@@ -7,9 +7,7 @@ impact-speed model, the physics offsets and the training domain, and offers the 
 
 from __future__ import annotations
 
-import contextlib
 import copy
-import logging
 import warnings
 
 import numpy as np
@@ -17,11 +15,13 @@ import pandas as pd
 from sklearn.base import BaseEstimator, RegressorMixin, clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from pbmdem.frequency import matrix_from_pairs
 from pbmdem.impact import EncounterRates, ImpactRates
 
+from .domain import TrainingDomain
 from .ensemble import EnsembleMLPRegressorCV
-from .errors import require_fitted
-from .families import member_quantiles
+from .errors import VelocityModelMissingError, checked_groups, require_fitted
+from .families import CalibratedMember, member_quantiles
 from .features import (
     FEATURE_NAMES,
     check_impeller_radius,
@@ -33,8 +33,6 @@ from .features import (
 from .velocity import check_speed_law, n_law_parameters, speed_fractions
 from .walls import wall_rates
 
-log = logging.getLogger(__name__)
-
 PHYSICS_OFFSETS = ("cross_section", "none")
 FEATURE_TRANSFORMS = ("log", "none")
 
@@ -42,34 +40,7 @@ FEATURE_TRANSFORMS = ("log", "none")
 OFFSET_FEATURES = ("d_small", "d_large", "tip_speed")
 
 
-class OutOfDomainWarning(UserWarning):
-    """A prediction was requested outside the training domain of the surrogate."""
-
-
-@contextlib.contextmanager
-def out_of_domain_recorded(where: str, log_each: bool = True):
-    """Collect the surrogate's OutOfDomainWarning messages (its own mechanism for inputs outside
-    the training range) into the yielded list and log each one; every other warning is passed on
-    unchanged. Nothing is silenced: the caller counts and reports what was collected."""
-    found: list[str] = []
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", OutOfDomainWarning)
-        yield found
-    for w in caught:
-        if issubclass(w.category, OutOfDomainWarning):
-            found.append(str(w.message))
-        else:
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    if log_each:
-        for message in found:
-            log.warning("%s: surrogate out of its training domain: %s", where, message)
-
-
-class VelocityModelMissingError(RuntimeError):
-    """The surrogate was trained without impact-velocity bins, so it cannot predict them."""
-
-
-class CollisionSurrogate(RegressorMixin, BaseEstimator):
+class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
     """Encounter frequency and impact-speed law per particle pair: the surrogate the PBM uses.
 
     Parameters
@@ -87,10 +58,8 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
     physics_offset : {"none", "cross_section"}
         ``"cross_section"``: the frequency model learns the residual of log10 c_ij after the
         collision cross-section 2 log10(d_small + d_large) (d in mm), which is added back at
-        prediction; kinetic theory gives c_ij proportional to (d_i + d_j)^2 at a fixed bed volume,
-        so the learned part varies less and predictions for granules larger than the training
-        sizes follow the cross-section instead of a saturated tanh network. The velocity model
-        likewise learns log10(median impact speed / tip speed). Needs X with the named features
+        prediction (why: docs/surrogate.md, "Physics offset"). The velocity model likewise
+        learns log10(median impact speed / tip speed). Needs X with the named features
         ``d_small``, ``d_large``, ``tip_speed``. ``"none"``: plain targets, any numeric X.
     speed_law : {"lognormal", "weibull", "gengamma"}
         The impact-speed law whose (mu, sigma[, q]) the velocity model learns and whose bin fractions
@@ -141,13 +110,6 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         self.speed_law = speed_law
 
     # ------------------------------------------------------------------ helpers
-    def _feature_names(self) -> list[str]:
-        names = getattr(self, "feature_names_in_", None)
-        return [str(n) for n in names] if names is not None else [f"x{j}" for j in range(self.n_features_in_)]
-
-    def _frame(self, X: np.ndarray) -> pd.DataFrame:
-        return pd.DataFrame(X, columns=self._feature_names())
-
     def _inner(self, F: pd.DataFrame):
         """What the inner models see: the (log) features, as a frame when fitted with feature
         names, else as an array."""
@@ -215,10 +177,7 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
                     f"{list(OFFSET_FEATURES)} (a feature frame from make_features/training_data); "
                     f"missing {missing}"
                 )
-        if groups is not None:
-            groups = np.asarray(groups)
-            if groups.shape != (len(y),):
-                raise ValueError(f"groups must be 1-d with one entry per sample ({len(y)}), got shape {groups.shape}")
+        groups = checked_groups(groups, len(y))
         if velocity is not None:
             V = np.asarray(velocity, dtype=float)
             p = n_law_parameters(self.speed_law)
@@ -259,56 +218,6 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         self.n_training_rows_ = int(len(y))
         return self
 
-    # ------------------------------------------------------------------ domain
-    def feature_ranges(self) -> dict[str, tuple[float, float]]:
-        """Training range (min, max) of every feature."""
-        check_is_fitted(self)
-        return {
-            n: (float(lo), float(hi)) for n, lo, hi in zip(self._feature_names(), self.feature_min_, self.feature_max_)
-        }
-
-    def _domain_mask(self, vals: np.ndarray) -> np.ndarray:
-        span = self.feature_max_ - self.feature_min_
-        slack = self.domain_margin * span + 1e-9 * np.maximum(np.abs(self.feature_max_), np.abs(self.feature_min_))
-        return (vals < self.feature_min_ - slack) | (vals > self.feature_max_ + slack)
-
-    def out_of_domain(self, X) -> pd.DataFrame:
-        """Boolean frame: True where a feature lies outside its (slackened) training range.
-        ``X``: a collision table, a feature frame or an array."""
-        check_is_fitted(self)
-        F = self._features(X)
-        vals = validate_data(self, F, reset=False, dtype=np.float64)
-        index = F.index if isinstance(F, pd.DataFrame) else None
-        return pd.DataFrame(self._domain_mask(vals), columns=self._feature_names(), index=index)
-
-    def _validated_frame(self, X, check_domain: bool):
-        """The feature frame of the feature matrix ``X`` (validated against the fitted features),
-        with an OutOfDomainWarning per feature outside the training range if ``check_domain``
-        (pointing at the caller of the public method that called this)."""
-        X = validate_data(self, X, reset=False, dtype=np.float64)
-        if check_domain:
-            self._warn_domain(X, stacklevel=4)
-        return self._frame(X)
-
-    def _warn_domain(self, vals: np.ndarray, stacklevel: int = 3) -> None:
-        """One OutOfDomainWarning per feature with values outside the training range (``vals``:
-        validated feature array)."""
-        mask = self._domain_mask(vals)
-        if not mask.any():
-            return
-        for j, name in enumerate(self._feature_names()):
-            col = mask[:, j]
-            if col.any():
-                v = vals[col, j]
-                worst = v[np.argmax(np.maximum(self.feature_min_[j] - v, v - self.feature_max_[j]))]
-                warnings.warn(
-                    f"{name} = {worst:.6g} outside the training range "
-                    f"[{self.feature_min_[j]:.6g}, {self.feature_max_[j]:.6g}] "
-                    f"({int(col.sum())} of {len(col)} prediction(s) out of domain for {name})",
-                    OutOfDomainWarning,
-                    stacklevel=stacklevel,
-                )
-
     # ------------------------------------------------------------------ predict
     def predict(self, X, return_std: bool = False, check_domain: bool = True):
         """Ensemble mean of log10(encounter frequency per pair) on the feature matrix ``X`` (the
@@ -317,7 +226,12 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         ``check_domain`` is False."""
         check_is_fitted(self)
         F = self._validated_frame(X, check_domain)
-        mean, std = self.frequency_model_.predict(self._inner(F), return_std=True)
+        return self._log10(F, self.frequency_model_.predict(self._inner(F), return_std=return_std), return_std)
+
+    def _log10(self, F, out, return_std: bool):
+        """:meth:`predict` from the frequency model's prediction ``out`` (mean, or mean and std
+        with ``return_std``) on the features ``F``: the offset added, the std calibrated."""
+        mean, std = out if return_std else (out, None)
         mean = mean + self._offset(F)
         return (mean, self.uncertainty_scale * std) if return_std else mean
 
@@ -376,28 +290,26 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         return names is not None and [str(n) for n in names] == list(FEATURE_NAMES)
 
     def _pairs(self, diameters, numbers, rpm: float, check_domain: bool):
-        """Features of the K (K + 1) / 2 class pairs (an array with :meth:`_array_path`, else the
-        feature frame), the pairs' indices, K."""
+        """Features of the K (K + 1) / 2 class pairs (:func:`pbmdem.frequency.upper_pairs`; an
+        array with :meth:`_array_path`, else the feature frame) and K."""
         if self._array_path():
             # the values of make_features(pair_table(...)), without DataFrames (pair_features)
-            X, iu, ju = pair_features(diameters, numbers, rpm, self.impeller_radius)
+            X = pair_features(diameters, numbers, rpm, self.impeller_radius)[0]
             if check_domain:
                 self._warn_domain(X, stacklevel=4)
-            return X, iu, ju, len(np.atleast_1d(diameters))
-        frame, iu, ju = pair_table(diameters, numbers, rpm)
-        F = make_features(frame, self.impeller_radius)
+            return X, len(np.atleast_1d(diameters))
+        F = make_features(pair_table(diameters, numbers, rpm)[0], self.impeller_radius)
         if check_domain:
             self._warn_domain(validate_data(self, F, reset=False, dtype=np.float64), stacklevel=4)
-        return F, iu, ju, len(np.atleast_1d(diameters))
+        return F, len(np.atleast_1d(diameters))
 
     def _pair_log10(self, F, return_std: bool = False):
         """:meth:`predict` of the pairs' features from :meth:`_pairs` (unchecked domain)."""
         if not isinstance(F, np.ndarray):
             return self.predict(F, return_std=return_std, check_domain=False)
-        out = self.frequency_model_.predict_array(self._transform(F), return_std=return_std)
-        mean, std = out if return_std else (out, None)
-        mean = mean + self._offset(F)
-        return (mean, self.uncertainty_scale * std) if return_std else mean
+        return self._log10(
+            F, self.frequency_model_.predict_array(self._transform(F), return_std=return_std), return_std
+        )
 
     def _pair_velocity(self, F) -> np.ndarray:
         """:meth:`velocity_fractions` of the pairs' features from :meth:`_pairs` (unchecked domain)."""
@@ -417,11 +329,11 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         on the pairs' collision table, without its DataFrames.
         """
         require_fitted(self, "frequency_model_")
-        F, iu, ju, k = self._pairs(diameters, numbers, rpm, check_domain)
+        F, k = self._pairs(diameters, numbers, rpm, check_domain)
         out = self._pair_log10(F, return_std=return_std)
         mean, std = out if return_std else (out, None)
-        c = _symmetric(10.0**mean, iu, ju, k)
-        return (c, _symmetric(std, iu, ju, k)) if return_std else c
+        c = matrix_from_pairs(10.0**mean, k)
+        return (c, matrix_from_pairs(std, k)) if return_std else c
 
     def encounters(self, diameters, numbers, rpm: float, check_domain: bool = True) -> EncounterRates:
         """(K,) diameters (m), (K,) particle numbers, impeller speed (1/min) -> EncounterRates.
@@ -431,9 +343,9 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         encounters per bin of :data:`pbmdem.impact.VELOCITY_EDGES` (summing to 1 over bins).
         """
         self._require_velocity_model()
-        F, iu, ju, k = self._pairs(diameters, numbers, rpm, check_domain)
-        frequency = _symmetric(10.0 ** self._pair_log10(F), iu, ju, k)
-        return EncounterRates(frequency=frequency, velocity_fractions=_symmetric(self._pair_velocity(F), iu, ju, k))
+        F, k = self._pairs(diameters, numbers, rpm, check_domain)
+        frequency = matrix_from_pairs(10.0 ** self._pair_log10(F), k)
+        return EncounterRates(frequency=frequency, velocity_fractions=matrix_from_pairs(self._pair_velocity(F), k))
 
     def impacts(self, diameters, numbers, rpm: float, check_domain: bool = True):
         """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall impacts per granule
@@ -453,11 +365,10 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
 
     def member(self, k: int) -> CollisionSurrogate:
         """A copy of the fitted surrogate that predicts with member ``k`` of its calibrated
-        uncertainty alone: the k-th of ``n_members`` quantiles of the calibrated predictive
-        normal, ``mean + z_k scale std`` with ``z_k = Phi^-1((k + 1/2) / n)``
-        (:func:`~pbmdem.surrogate.families.member_quantiles`), ``std`` the spread of the ensemble's
-        networks (MLP) or the predictive standard deviation (Kriging, RSM) and ``scale`` the
-        calibrated ``uncertainty_scale`` (``velocity_uncertainty_scale`` for the impact-speed law).
+        uncertainty alone: :class:`~pbmdem.surrogate.families.CalibratedMember` at the k-th of
+        :func:`~pbmdem.surrogate.families.member_quantiles` ``z_k``, with ``std`` the spread of the
+        ensemble's networks (MLP) or the predictive standard deviation (Kriging, RSM) and ``scale``
+        ``uncertainty_scale`` (``velocity_uncertainty_scale`` for the impact-speed law).
         The frequency, the impact-speed law and the wall models take the same ``z_k``, whatever
         their families: member 0 has the fewest and slowest impacts, the last the most and the
         fastest, and with an odd ``n_members`` the middle member is the mean prediction itself, so
@@ -477,32 +388,3 @@ class CollisionSurrogate(RegressorMixin, BaseEstimator):
         walls = getattr(self, "wall_models_", None) or {}
         out.wall_models_ = {wall: model._at(z) for wall, model in walls.items()}
         return out
-
-
-def _symmetric(values: np.ndarray, iu, ju, k: int) -> np.ndarray:
-    """(K, K, ...) symmetric array with ``values`` of the pairs (iu, ju) on both sides of the diagonal."""
-    out = np.empty((k, k, *values.shape[1:]))
-    out[iu, ju] = values
-    out[ju, iu] = values
-    return out
-
-
-class CalibratedMember:
-    """One member of a fitted model's uncertainty: the quantile ``z`` of its predictive normal with
-    the standard deviation widened or narrowed by a calibration factor.
-
-    ``model.predict_array(X, return_std=True)`` gives the mean and the standard deviation of every
-    output; the member predicts ``mean + z scale std`` and has no spread of its own.
-    """
-
-    def __init__(self, model, z: float, scale: float):
-        self.model, self.z, self.scale = model, float(z), float(scale)
-        self.n_members_ = 1
-
-    def predict_array(self, X, return_std: bool = False):
-        mean, std = self.model.predict_array(np.asarray(X, dtype=np.float64), return_std=True)
-        out = mean + self.z * self.scale * std
-        return (out, np.zeros_like(out)) if return_std else out
-
-    def predict(self, X, return_std: bool = False):
-        return self.predict_array(X, return_std=return_std)

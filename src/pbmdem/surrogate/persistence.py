@@ -192,9 +192,9 @@ def save_surrogate(
         "estimator": "pbmdem.surrogate.CollisionSurrogate",
         "target": f"{TARGET_NAME} (fitted in log10 space; frequency_matrix returns 1/s per particle pair)",
         "velocity_target": (
-            "log-normal impact-speed law per pair: [log10 median speed (m/s) minus the "
-            "physics offset, log10 sigma (decades)], fitted by ML to the bins of "
-            "pbmdem.impact.VELOCITY_EDGES"
+            f"{surrogate.speed_law} impact-speed law per pair (pbmdem.surrogate.velocity): [log10 median speed (m/s) "
+            f"minus the physics offset, log10 sigma (decades){', q' if surrogate.speed_law == 'gengamma' else ''}], "
+            "fitted by ML to the bins of pbmdem.impact.VELOCITY_EDGES"
             if surrogate.velocity_model_ is not None
             else None
         ),

@@ -37,7 +37,7 @@ import yaml
 
 from pbmdem.atomic import write_text
 from pbmdem.config import Granulator, OperatingGrid, rpm_text
-from pbmdem.frequency import pair_counts, pairs_of
+from pbmdem.frequency import pair_counts, pair_weighted_mean
 from pbmdem.surrogate.features import make_features, pair_table
 
 #: rounding of proposed class diameters (m) and number fractions
@@ -81,8 +81,7 @@ def assess(surrogate, rpm: float, intervals: pd.DataFrame) -> list[Assessment]:
             span = hi - lo if hi > lo else max(abs(hi), 1e-300)
             excess[name] = float(np.max(np.maximum(lo - v, v - hi)) / span)
         _, std = surrogate.frequency_matrix(d, n, rpm, return_std=True, check_domain=False)
-        pairs = pairs_of(pair_counts(n))
-        spread = float((pairs_of(std) * pairs).sum() / pairs.sum()) if pairs.sum() > 0 else float("nan")
+        spread = pair_weighted_mean(std, n) if pair_counts(n).sum() > 0 else float("nan")
         out.append(Assessment(float(rpm), int(row.interval), d.tolist(), n.astype(int).tolist(), excess, spread))
     return out
 

@@ -81,8 +81,17 @@ class Records:
     def append(self, *values):
         """Record a state given by its parts, in the order of the fields (arrays kept as given: the
         caller's to not modify)."""
-        for f, value in zip(fields(self), values, strict=True):
-            getattr(self, f.name).append(value)
+        for f, value in zip(_RECORD_FIELDS, values, strict=True):
+            getattr(self, f).append(value)
+
+    def extend(self, *values):
+        """Record several states given by their parts, each a list over the states, in the order
+        of the fields (arrays kept as given)."""
+        for f, value in zip(_RECORD_FIELDS, values, strict=True):
+            getattr(self, f).extend(value)
+
+
+_RECORD_FIELDS = tuple(f.name for f in fields(Records))
 
 
 class StepControl:
@@ -333,14 +342,19 @@ class TimeIntegration:
         code = fast.advance(u, t, tallies)
         x0 = float(self.grid.x[0])
         last = len(fast.records) - 1
-        for j, (v, (t_out, refused, merged_n, merged_v, liquid, taken)) in enumerate(fast.records):
-            if j < last:  # what _store and rec.add would record, without the state in between
-                tot = self._pivot_totals(v)
-                rec.append(t_out, tot[0], tot[1] * x0, tot[2] * x0, liquid, refused * x0, base + int(taken),
-                           float(merged_n), float(merged_v) * x0)  # fmt: skip
-                continue
+        if last > 0:  # what _store and rec.add would record, without the state in between
+            tot = self._pivot_totals_of(fast.states[:last])
+            values = fast.records[:last]
+            # (T, 6): time, refused solid, merged fragments, their solid (x_0 units), liquid added, steps
+            rec.extend(
+                values[:, 0].tolist(), list(tot[:, 0]), list(tot[:, 1] * x0), list(tot[:, 2] * x0),
+                values[:, 4].tolist(), (values[:, 1] * x0).tolist(), (base + values[:, 5].astype(np.int64)).tolist(),
+                values[:, 2].tolist(), (values[:, 3] * x0).tolist(),
+            )  # fmt: skip
+        if last >= 0:
+            t_out, refused, merged_n, merged_v, liquid, taken = fast.records[last].tolist()
             s.liquid_added, s.steps = liquid, base + int(taken)
-            self._store(s, t_out, v, refused, (merged_n, merged_v))
+            self._store(s, t_out, fast.states[last], refused, (merged_n, merged_v))
             rec.add(s)
         s.steps = base + fast.ctl.taken
         return code

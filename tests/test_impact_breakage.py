@@ -491,6 +491,7 @@ def test_bins_that_share_their_nearest_class_fractions_give_the_selection_to_the
     pair_f = np.ascontiguousarray(class_f[np.ix_(nearest, nearest)])
     columns = fraction_columns(pair_f)
     assert columns.tolist() == [0, 0, 0, 3, 3, 3, 6, 6, 6, 9, 9, 9]
+    assert _compiled_selection.fraction_columns(pair_f).tolist() == columns.tolist()
     c = rng.uniform(0.0, 0.3, (K, K))
     c = 0.5 * (c + c.T)
     walls = WallRates(rng.uniform(0.0, 5.0, (2, K)), rng.dirichlet(np.ones(N_VELOCITY_BINS), (2, K)))
@@ -507,3 +508,24 @@ def test_bins_that_share_their_nearest_class_fractions_give_the_selection_to_the
     rates = ImpactRates(EncounterRates(c, pair_f), walls)
     np.testing.assert_allclose(shared, np.sum(list(selection_rates(rates, numbers, v, spread=0.5).values()), axis=0),
                                rtol=1e-12)  # fmt: skip
+
+
+def test_the_compiled_fraction_columns_equal_the_numpy_form_on_random_runs():
+    # runs of equal columns, a column equal to its neighbour but in one entry, NaN (never equal)
+    from pbmdem.pbm import _compiled_selection
+    from pbmdem.pbm.impact_breakage import fraction_columns
+
+    rng = np.random.default_rng(5)
+    for trial in range(50):
+        K, classes = int(rng.integers(1, 30)), int(rng.integers(1, 6))
+        nearest = np.sort(rng.integers(0, classes, K))
+        class_f = rng.dirichlet(np.ones(N_VELOCITY_BINS), (classes, classes))
+        f = np.ascontiguousarray(class_f[np.ix_(nearest, nearest)])
+        if K > 2 and trial % 3 == 0:
+            j = int(rng.integers(1, K))
+            f[:, j] = f[:, j - 1]
+            f[int(rng.integers(0, K)), j, int(rng.integers(0, N_VELOCITY_BINS))] += 1e-16 if trial % 2 else 0.0
+        if K > 2 and trial % 7 == 0:
+            f[:, 1:3, 0] = np.nan
+        expected = fraction_columns(f)
+        assert _compiled_selection.fraction_columns(f).tolist() == expected.tolist()

@@ -72,7 +72,8 @@ class ClassFrequencySource:
         if self.fractions is None:
             raise ValueError(f"{self.label}: no impact-velocity distribution for a velocity-dependent success model")
         nearest = self._nearest(diameters)
-        return EncounterRates(self(diameters, numbers, rpm), self.fractions[np.ix_(nearest, nearest)])
+        # fractions[np.ix_(nearest, nearest)], taken one axis at a time (the same entries, faster)
+        return EncounterRates(self(diameters, numbers, rpm), self.fractions[nearest][:, nearest])
 
     def impacts(self, diameters, numbers, rpm) -> ImpactRates:
         """Pair encounters (:meth:`encounters`) and wall impacts of the bins (needs ImpactRates)."""

@@ -120,6 +120,7 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
     bounds = interval_bounds(loop)
     results, rows = [], []
     previous = None  # (rates, class diameters, source) of the last interval run here
+    checked = True  # the state is the model's (initial, or a run's): not checked again; False: read from disk
     for k in range(n_intervals):
         folder = None if outdir is None else outdir / f"interval_{k:02d}"
         if folder is not None and intervals.is_finished(folder):
@@ -127,7 +128,7 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
             log.info("interval %d of %s: resumed from %s", k, provider.name, folder)
             results.append(result)
             rows.append({key: v for key, v in info.items() if key != "sample"})
-            state = result.state
+            state, checked = result.state, False
             continue
         t0, t1 = bounds[k], bounds[k + 1]
         sample = representative_sample(*model.particle_classes(state), loop.sample)
@@ -159,7 +160,7 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
         pairs = rates.pairs if isinstance(rates, ImpactRates) else rates
         matrix = pairs.frequency if isinstance(pairs, EncounterRates) else np.asarray(pairs, float)
         t_pbm, cpu_pbm = time.perf_counter(), cpu()
-        result = model.run(t0, t1, state, output_times=output_times(pbm, t0, t1))
+        result = model.run(t0, t1, state, output_times=output_times(pbm, t0, t1), checked=checked)
         pbm_wall, pbm_cpu = time.perf_counter() - t_pbm, cpu() - cpu_pbm
         info = {
             "interval": k,
@@ -191,7 +192,7 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
         )
         results.append(result)
         rows.append(info)
-        state = result.state
+        state, checked = result.state, True
     full = Result.concat(results)
     totals = _totals(provider.name, rpm, loop, rows, in_memory=outdir is None)
     totals["grid_floor"] = floor = full.info["grid_floor"]

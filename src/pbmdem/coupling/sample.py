@@ -71,9 +71,10 @@ def representative_sample(volumes, numbers, rule: SampleRule) -> DemSample:
     groups: list[list[int]] = []
     current: list[int] = []
     acc = 0.0
-    for k in np.flatnonzero(n > 0):
-        current.append(int(k))
-        acc += n[k]
+    values = n.tolist()  # Python floats: the same sums, without a numpy scalar per class
+    for k in np.flatnonzero(n > 0).tolist():
+        current.append(k)
+        acc += values[k]
         if acc >= min_per_class:
             groups.append(current)
             current, acc = [], 0.0
@@ -93,9 +94,9 @@ def representative_sample(volumes, numbers, rule: SampleRule) -> DemSample:
         groups[j : j + 2] = [groups[j] + groups[j + 1]]
         sums[j : j + 2] = [count(groups[j])]
     diam = [
-        round(float((6.0 / math.pi * float((n[g] * x[g]).sum() / n[g].sum())) ** (1.0 / 3.0)) / DIAMETER_RESOLUTION)
+        round(float((6.0 / math.pi * float((ng * xg).sum() / ng.sum())) ** (1.0 / 3.0)) / DIAMETER_RESOLUTION)
         * DIAMETER_RESOLUTION
-        for g in groups
+        for ng, xg in ((n[g], x[g]) for g in map(np.asarray, groups))
     ]
     counts = np.array(sums)
     scale = 1.0

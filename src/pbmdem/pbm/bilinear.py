@@ -2,7 +2,8 @@
 it: what ``scipy.interpolate.RegularGridInterpolator((g, g), values, method="linear",
 bounds_error=False, fill_value=None)`` gives, with the arithmetic of its 2-D path (the cell by
 ``searchsorted``, the normalised distances y, the four corner terms summed in its order), without
-its construction and per-call checks (about 1 ms per coupling interval of the PBM-ANN batch).
+its construction and per-call checks (about 1 ms per coupling interval of the PBM-ANN batch); at
+every pair of a set of points (``outer``, the bins' frequency matrix) compiled.
 ``TableFrequency`` uses it for its log frequencies; tests/test_pbm_compiled.py holds it equal to
 the interpolator to the bit on random tables and points, inside and outside the grid.
 """
@@ -39,8 +40,13 @@ class Bilinear:
         return self._corners(i, j, y0, y1)
 
     def outer(self, a: np.ndarray) -> np.ndarray:
-        """(n, n): ``self(points)`` at every pair (a[p], a[q]) of ``a`` (n,), reshaped: the cells
-        and distances of the n values once, broadcast over the pairs; elementwise the same
-        operations, so the same numbers to the bit (tests/test_pbm_compiled.py)."""
-        i, y = self._cell(a)
-        return self._corners(i[:, None], i[None, :], y[:, None], y[None, :])
+        """(n, n): ``self(points)`` at every pair (a[p], a[q]) of ``a`` (n,), reshaped, compiled
+        (``_compiled.bilinear_outer``: the cells and distances of the n values once, the corner
+        terms over the pairs); elementwise the same operations, so the same numbers to the bit
+        (tests/test_pbm_compiled.py)."""
+        from ._compiled import bilinear_outer  # numba: loaded with the model's compiled rates
+
+        a = np.ascontiguousarray(a, dtype=float)
+        out = np.empty((a.size, a.size))
+        bilinear_outer(np.ascontiguousarray(self.grid), np.ascontiguousarray(self.values), a, out)
+        return out

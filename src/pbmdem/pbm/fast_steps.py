@@ -66,8 +66,9 @@ class FastSteps:
     def advance(self, u: np.ndarray, t: float, tallies: list) -> int:
         """Steps of the model from u at t (prepared in Python for this step) to the end of the run,
         u in place; ``tallies`` [refused, merged number, merged solid (x_0 units), liquid added (m3)]
-        updated. Returns the code of ``_compiled_steps`` (``self.t``: the time reached,
-        ``self.records``: (class state, tallies + [steps taken]) at each output time reached)."""
+        updated. Returns the code of ``_compiled_steps`` (``self.t``: the time reached; at each
+        output time reached a row of ``self.records``, the tallies and the steps taken (6,), and
+        of ``self.states``, the class state (3M,): views of the buffers, valid until the next call)."""
         m, ctl, cs = self.model, self.ctl, self._cs
         brk, sel = m.breakage, None
         state, acc, counts = self.state, self.acc, self.counts
@@ -103,6 +104,6 @@ class FastSteps:
             brk._t_eval = float(state[cs.T_EVAL])
         self.t = float(acc[cs.TIME])
         rows = int(acc[cs.ROWS])
-        self.records = [(self.rec_u[j], self.rec_s[j].tolist()) for j in range(rows)]
+        self.records, self.states = self.rec_s[:rows], self.rec_u[:rows]
         tallies[:] = acc[1:5].tolist()
         return int(code)

@@ -154,6 +154,18 @@ class GranulationPBM(TimeIntegration):
             tot[1:] += v[1:, K:] @ self._feed_solid_w
         return tot
 
+    def _pivot_totals_of(self, states: np.ndarray) -> np.ndarray:
+        """(T, 3, K) per-bin totals of T class states (T, 3M): :meth:`_pivot_totals` of each,
+        the same products of each (numpy's matmul makes the same call for every matrix of a
+        stack) in one call."""
+        K, M = self.grid.bins, self._M
+        v = states.reshape(-1, 3, M)
+        tot = v[:, :, :K].copy()
+        if M > K:
+            tot[:, :1] += v[:, :1, K:] @ self._feed_number_w
+            tot[:, 1:] += v[:, 1:, K:] @ self._feed_solid_w
+        return tot
+
     # ----------------------------------------------------------------- state helpers
     def particle_classes(self, state: State) -> tuple[np.ndarray, np.ndarray]:
         """(solid volumes (m3), numbers) of the particle classes of `state`, in ascending volume:

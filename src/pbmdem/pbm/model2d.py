@@ -168,6 +168,9 @@ class GranulationPBM2D(GranulationPBM):
                 f"make_state), not {type(state).__name__}"
             )
 
+    def _known_classes(self, state: State2D) -> np.ndarray:
+        return self._start_classes(state)  # the size classes of the state: read (and checked) as they enter
+
     def _start_classes(self, state: State2D) -> np.ndarray:
         K, J = self.grid.bins, self.liquid_grid.classes
         vols = np.asarray(state.class_volumes, float)
@@ -245,11 +248,11 @@ class GranulationPBM2D(GranulationPBM):
         info.update({"dimensions": 2, "liquid_grid": repr(self.liquid_grid), "classes_moved": int(self._moved)})
         return info
 
-    def run(self, t_start: float, t_end: float, state, output_times=None) -> Result:
+    def run(self, t_start: float, t_end: float, state, output_times=None, *, checked: bool = False) -> Result:
         """Integrate as :meth:`GranulationPBM.run` does (the same step control, flush and records),
         the classes rebinned after every step; ``result.classes`` (T, 3, Mx, J) at the recorded times."""
         self._classes_of_run, self._moved = [], 0
-        res = super().run(t_start, t_end, state, output_times)
+        res = super().run(t_start, t_end, state, output_times, checked=checked)
         res.classes = np.stack(self._classes_of_run)
         res.class_volumes = self._vc.copy()
         return res

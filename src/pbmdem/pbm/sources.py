@@ -17,6 +17,9 @@ SYMMETRY_RTOL = 1e-8
 def check_frequency_matrix(c, K: int, name: str) -> np.ndarray:
     """Validate what a collision-frequency source returned: (K, K), finite, >= 0, symmetric."""
     c = np.asarray(c, dtype=float)
+    if c.shape == (K, K) and c.size and c.min() >= 0.0 and c.max() < 1e307 and np.array_equal(c, c.T):
+        # the usual case (finite, >= 0 and symmetric to the bit): 0.5 (c + c^T) is c itself
+        return c.copy()
     if c.shape != (K, K):
         raise KernelShapeError(
             f"collision-frequency source {name} returned shape {c.shape}; expected "

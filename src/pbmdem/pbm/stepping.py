@@ -81,8 +81,17 @@ class Records:
     def append(self, *values):
         """Record a state given by its parts, in the order of the fields (arrays kept as given: the
         caller's to not modify)."""
-        for f, value in zip(fields(self), values, strict=True):
-            getattr(self, f.name).append(value)
+        for f, value in zip(_RECORD_FIELDS, values, strict=True):
+            getattr(self, f).append(value)
+
+    def extend(self, *values):
+        """Record several states given by their parts, each a list over the states, in the order
+        of the fields (arrays kept as given)."""
+        for f, value in zip(_RECORD_FIELDS, values, strict=True):
+            getattr(self, f).extend(value)
+
+
+_RECORD_FIELDS = tuple(f.name for f in fields(Records))
 
 
 class StepControl:
@@ -194,16 +203,18 @@ class TimeIntegration:
             f"{name} of {what} became {value!r} at t = {t:.6g} s ({why}); populations must stay finite and >= 0"
         )
 
-    def _begin(self, t_start: float, t_end: float, state: State) -> State:
-        """A copy of the checked start ``state`` at t_start; sets up the run's classes."""
+    def _begin(self, t_start: float, t_end: float, state: State, checked: bool = False) -> State:
+        """A copy of the checked start ``state`` at t_start (``checked``: a state this model made,
+        its entries not checked again); sets up the run's classes."""
         if not t_end > t_start:
             raise PBMInputError(f"run: t_end = {t_end} must be > t_start = {t_start}")
-        self._check_start(state)
+        if not checked:
+            self._check_start(state)
         if abs(state.t - t_start) > TIME_EPS * max(1.0, abs(t_start)):
             raise PBMInputError(f"run: the state is at t = {state.t}, not at t_start = {t_start}")
         s = state.copy()
         s.t = t_start
-        self._use_classes(self._start_classes(s))
+        self._use_classes(self._known_classes(s) if checked else self._start_classes(s))
         self.kernel.reset()
         if self.breakage is not None:
             self.breakage.reset()
@@ -216,17 +227,24 @@ class TimeIntegration:
             if np.shape(arr) != (K,):
                 raise PBMInputError(f"state.{name} has shape {np.shape(arr)}; expected ({K},) for this grid")
 
+    def _known_classes(self, s: State) -> np.ndarray:
+        """The feed-class volumes (m3) of the run from a start state this model made (not checked)."""
+        return np.asarray(s.feed.volumes, float) if s.feed is not None else np.zeros(0)
+
     def _start_classes(self, s: State) -> np.ndarray:
         """The feed-class volumes (m3) of the run from its (copied) start state, checked."""
         volumes = feed_volumes(self.grid, s)
         check_state(self.grid, s, " (start of run)")
         return volumes
 
-    def run(self, t_start: float, t_end: float, state: State, output_times=None):
+    def run(self, t_start: float, t_end: float, state: State, output_times=None, *, checked: bool = False):
         """Integrate from ``t_start`` (= ``state.t``) to ``t_end``; returns a :class:`Result`.
 
         ``output_times``: times in [t_start, t_end] to record (t_start and t_end always are).
-        The input state is not modified; ``result.state`` is the state at ``t_end``.
+        The input state is not modified; ``result.state`` is the state at ``t_end``. ``checked``:
+        the state is one this model made (its initial state, the state of a run), whose entries
+        and feed classes were checked where they entered: not checked again (a coupled loop's
+        intervals; a state read from disk is checked).
 
         Internally volumes are in units of the first pivot x_0 (the state is [N, L/x_0, G/x_0]),
         so the steps and the result do not depend on the unit of volume. Entries below
@@ -235,11 +253,11 @@ class TimeIntegration:
         of far-tail bins underflow to subnormal floats.
         """
         t_start, t_end = float(t_start), float(t_end)
-        s = self._begin(t_start, t_end, state)
+        s = self._begin(t_start, t_end, state, checked)
         (M, xc), x0, opt, jit = self._run_classes(), float(self.grid.x[0]), self.solver, self._jit
         outs = set()
         if output_times is not None:
-            outs = {float(o) for o in np.atleast_1d(output_times) if t_start < float(o) < t_end}
+            outs = {o for o in np.atleast_1d(np.asarray(output_times, float)).tolist() if t_start < o < t_end}
         edges = self.liquid.edges() if self.liquid is not None else ()
         events = sorted({t_end} | outs | {e for e in edges if t_start < e < t_end})
         rec = Records()
@@ -333,14 +351,19 @@ class TimeIntegration:
         code = fast.advance(u, t, tallies)
         x0 = float(self.grid.x[0])
         last = len(fast.records) - 1
-        for j, (v, (t_out, refused, merged_n, merged_v, liquid, taken)) in enumerate(fast.records):
-            if j < last:  # what _store and rec.add would record, without the state in between
-                tot = self._pivot_totals(v)
-                rec.append(t_out, tot[0], tot[1] * x0, tot[2] * x0, liquid, refused * x0, base + int(taken),
-                           float(merged_n), float(merged_v) * x0)  # fmt: skip
-                continue
+        if last > 0:  # what _store and rec.add would record, without the state in between
+            tot = self._pivot_totals_of(fast.states[:last])
+            values = fast.records[:last]
+            # (T, 6): time, refused solid, merged fragments, their solid (x_0 units), liquid added, steps
+            rec.extend(
+                values[:, 0].tolist(), list(tot[:, 0]), list(tot[:, 1] * x0), list(tot[:, 2] * x0),
+                values[:, 4].tolist(), (values[:, 1] * x0).tolist(), (base + values[:, 5].astype(np.int64)).tolist(),
+                values[:, 2].tolist(), (values[:, 3] * x0).tolist(),
+            )  # fmt: skip
+        if last >= 0:
+            t_out, refused, merged_n, merged_v, liquid, taken = fast.records[last].tolist()
             s.liquid_added, s.steps = liquid, base + int(taken)
-            self._store(s, t_out, v, refused, (merged_n, merged_v))
+            self._store(s, t_out, fast.states[last], refused, (merged_n, merged_v))
             rec.add(s)
         s.steps = base + fast.ctl.taken
         return code

@@ -136,7 +136,8 @@ class TableFrequency:
         interval's classes). Diameters that are not strictly ascending go through the table."""
         d = np.asarray(diameters, float)
         m = np.asarray(matrix, float)
-        if d.ndim != 1 or d.size < 2 or m.shape != (d.size, d.size) or not np.all(np.diff(d) >= 0):
+        step = np.diff(d) if d.ndim == 1 else None
+        if d.ndim != 1 or d.size < 2 or m.shape != (d.size, d.size) or not np.all(step >= 0):
             iu, ju = np.triu_indices(d.size) if d.ndim == 1 else (np.zeros(0, int),) * 2
             m2 = np.atleast_2d(m)
             table = pd.DataFrame({"d_i": d[iu], "d_j": d[ju], column: m2[iu, ju]})
@@ -145,10 +146,10 @@ class TableFrequency:
         self._set_options(extrapolation, zero_floor, column)
         self.walls = None
         _check_diameters(d, "d_i")
-        iu, ju = np.triu_indices(d.size)
+        iu, ju = _upper_indices(d.size)
         f = _checked_frequencies(m[iu, ju], column)
         floor = self.zero_floor * f[f > 0].min()
-        if np.all(np.diff(d) > 0):
+        if np.all(step > 0):
             # the table's symmetric mean: each off-diagonal pair once per order, the diagonal twice
             F = np.empty((d.size, d.size))
             F[iu, ju] = f
@@ -375,6 +376,18 @@ def _merged_pairs(d: np.ndarray, iu: np.ndarray, ju: np.ndarray, f: np.ndarray) 
             total[p][q] = t
             count[p][q] += 1
     return u, np.array([[total[p][q] / count[p][q] for q in range(n)] for p in range(n)])
+
+
+_UPPER: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _upper_indices(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(n)``, kept per n (a coupling interval's few classes; read-only arrays)."""
+    if n not in _UPPER:
+        iu, ju = np.triu_indices(n)
+        iu.flags.writeable = ju.flags.writeable = False
+        _UPPER[n] = iu, ju
+    return _UPPER[n]
 
 
 def _check_diameters(d: np.ndarray, column: str) -> None:

@@ -151,13 +151,9 @@ def make_features(table: pd.DataFrame, impeller_radius: float) -> pd.DataFrame:
     """Feature frame (columns :data:`FEATURE_NAMES`, same index as ``table``) of a collision table."""
     check_table(table)
     _check_runs(table)
-    runs = run_classes(table).groupby("point_id")
-    d32 = table["point_id"].map({p: sauter_diameter(c["d"].to_numpy(), c["n"].to_numpy()) for p, c in runs})
-    X = _feature_array(
-        *(table[c].to_numpy(float) for c in ("d_i", "d_j", "n_i", "n_j", "n_total", "rpm")),
-        d32.to_numpy(float),
-        impeller_radius,
-    )
+    d32 = {p: sauter_diameter(c["d"].to_numpy(), c["n"].to_numpy()) for p, c in run_classes(table).groupby("point_id")}
+    columns = (table[c].to_numpy(float) for c in ("d_i", "d_j", "n_i", "n_j", "n_total", "rpm"))
+    X = _feature_array(*columns, table["point_id"].map(d32).to_numpy(float), impeller_radius)
     return pd.DataFrame(X, index=table.index, columns=list(FEATURE_NAMES))
 
 
@@ -314,8 +310,7 @@ def pair_features(diameters, numbers, rpm: float, impeller_radius: float) -> tup
     d, n = _distribution(diameters, numbers, rpm)
     iu, ju = upper_pairs(d.size)
     rpm = np.full(iu.size, float(rpm))
-    X = _feature_array(d[iu], d[ju], n[iu], n[ju], n.sum(), rpm, sauter_diameter(d, n), impeller_radius)
-    return X, iu, ju
+    return _feature_array(d[iu], d[ju], n[iu], n[ju], n.sum(), rpm, sauter_diameter(d, n), impeller_radius), iu, ju
 
 
 @dataclass(frozen=True)

@@ -248,7 +248,11 @@ def test_three_parameter_law_through_the_surrogate(data):
         with pytest.raises(ValueError, match=r"\(n_samples, 3\)"):
             model.fit(gg.X, gg.y, groups=gg.groups, velocity=gg.velocity[:, :2])
     rates = model.encounters(np.array([1e-3, 2e-3]), np.array([3000.0, 500.0]), 600.0, check_domain=False)
-    X = pd.DataFrame([[1e-3, 2e-3, 3000 / 3500, 500 / 3500, 3500.0, 2 * np.pi * R * 10.0]], columns=list(gg.X.columns))
+    d32 = (3000 * 1e-9 + 500 * 8e-9) / (3000 * 1e-6 + 500 * 4e-6)  # Sauter diameter of the two classes
+    X = pd.DataFrame(
+        [[1e-3, 2e-3, 3000 / 3500, 500 / 3500, 3500.0, 2 * np.pi * R * 10.0, 1e-3 / d32, 2e-3 / d32]],
+        columns=list(gg.X.columns),
+    )
     assert np.allclose(rates.velocity_fractions[0, 1], model.velocity_fractions(X, check_domain=False)[0])
     assert np.allclose(rates.velocity_fractions.sum(axis=-1), 1.0)
     base = PhysicalScaling(speed_law="gengamma").fit(gg.X, gg.y, velocity=gg.velocity)

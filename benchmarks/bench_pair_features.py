@@ -23,7 +23,7 @@ surrogate, and with its pair speed law refitted from ``--law-from`` m/s up (the 
 every grid row, ``surrogate.speed_law_from``); final d10 / d50 / d90 beside the PBM-DEM loops' range.
 
 Run: .venv/bin/python benchmarks/bench_pair_features.py --results <copy of results> [--rpm 300 750 900 1200]
-     [--variants today ratio rel nooffset] [--replay] [--law-from 1.0]
+     [--variants today norel ratio nooffset] [--replay] [--law-from 1.0]
 Measured numbers: docs/validation.md, "Features for the pair frequency on the loops' samples".
 
 ``--quick`` (the suite's smoke test, no LIGGGHTS): the synthetic stored loops of ``bench_replay.py
@@ -52,8 +52,8 @@ from bench_replay import QUANTILES, final_sizes, quick_results, stored_loop  # n
 VARIANTS = {"today": ("none", None), "norel": ("norel", None), "ratio": ("ratio", None), "nooffset": ("none", "none")}
 
 
-def with_extra(F: pd.DataFrame, table: pd.DataFrame, kind: str) -> pd.DataFrame:
-    """The feature frame ``F`` of ``table`` with the variant's columns."""
+def with_extra(F: pd.DataFrame, kind: str) -> pd.DataFrame:
+    """The feature frame ``F`` with the variant's columns."""
     F = F.copy()
     if kind == "ratio":
         F["ratio"] = F["d_small"] / F["d_large"]
@@ -83,7 +83,7 @@ def sample_rows(model, kind: str, frames, radius: float) -> pd.DataFrame:
 
     rows = []
     for k, (s, frame) in enumerate(frames):
-        F = with_extra(make_features(frame, radius), frame, kind)
+        F = with_extra(make_features(frame, radius), kind)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             c = 10.0 ** model.predict(F, check_domain=False)
@@ -114,7 +114,7 @@ def variant(name: str, data, frames, settings: dict, radius: float, pbm_samples)
     model = build_surrogate(settings, radius, family="kriging").set_params(velocity_model=None)
     if offset is not None:
         model.set_params(physics_offset=offset)
-    X, y, g = with_extra(data.X, data.table, kind), data.y, data.groups
+    X, y, g = with_extra(data.X, kind), data.y, data.groups
     pred = np.full(len(y), np.nan)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -15,6 +15,7 @@ import warnings
 from functools import partial
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from pbmdem.config import Config, load_config
@@ -150,7 +151,6 @@ def tiny_run(tmp_path_factory, tiny_config):
 def tiny_surrogate(tmp_path_factory, tiny_config):
     """A small MLP surrogate trained on synthetic tables at 600-900 rpm for the tiny granulator, with
     frequencies near the tiny config's constant kernel (~3 1/s per pair for its ~300 granules)."""
-    import numpy as np
     from synthetic_tables import make_synthetic_tables, power_law
 
     from pbmdem.surrogate import CollisionSurrogate, EnsembleMLPRegressorCV, save_surrogate, training_data
@@ -165,8 +165,8 @@ def tiny_surrogate(tmp_path_factory, tiny_config):
             n_total_range=(20, 2000),
             seed=2,
             law=partial(power_law, c0=0.6),
-            # four random beds and two wide ones (a few granules of one end among the other), so
-            # that the sizes over the bed's Sauter diameter (rel_small, rel_large) span the batch's
+            # four random beds and two lopsided ones (mostly large, mostly fine), so that the sizes
+            # over the bed's Sauter diameter (rel_small, rel_large) span the tiny batches' beds
             distributions={
                 **{f"dist{k}": f for k, f in enumerate(np.random.default_rng(2).dirichlet(np.full(3, 2.0), 4))},
                 "fines_among_large": [0.3, 0.2, 0.5],

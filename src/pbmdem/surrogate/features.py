@@ -131,10 +131,11 @@ def run_classes(table: pd.DataFrame) -> pd.DataFrame:
     return both.drop_duplicates(["point_id", "cls"]).sort_values(["point_id", "cls"]).reset_index(drop=True)
 
 
-def _check_runs(table: pd.DataFrame) -> None:
-    """Check that every run's classes are consistent (:func:`run_classes`) and warn where their
-    numbers do not add up to the run's ``n_total``."""
-    n_sum = run_classes(table).groupby("point_id")["n"].sum()
+def _checked_runs(table: pd.DataFrame):
+    """The runs' classes (:func:`run_classes`, grouped by ``point_id``), after checking that they
+    are consistent; warns where their numbers do not add up to the run's ``n_total``."""
+    runs = run_classes(table).groupby("point_id")
+    n_sum = runs["n"].sum()
     if (n_sum <= 0).any():
         raise CollisionTableError("a run has no particles in its classes")
     n_total = table.groupby("point_id")["n_total"].first().astype(float)
@@ -145,13 +146,14 @@ def _check_runs(table: pd.DataFrame) -> None:
             "fractions use n_total, the mean diameter uses the listed classes",
             stacklevel=3,
         )
+    return runs
 
 
 def make_features(table: pd.DataFrame, impeller_radius: float) -> pd.DataFrame:
     """Feature frame (columns :data:`FEATURE_NAMES`, same index as ``table``) of a collision table."""
     check_table(table)
-    _check_runs(table)
-    d32 = {p: sauter_diameter(c["d"].to_numpy(), c["n"].to_numpy()) for p, c in run_classes(table).groupby("point_id")}
+    runs = _checked_runs(table)  # a statement, not inside the comprehension: its warning's stacklevel
+    d32 = {p: sauter_diameter(c["d"].to_numpy(), c["n"].to_numpy()) for p, c in runs}
     columns = (table[c].to_numpy(float) for c in ("d_i", "d_j", "n_i", "n_j", "n_total", "rpm"))
     X = _feature_array(*columns, table["point_id"].map(d32).to_numpy(float), impeller_radius)
     return pd.DataFrame(X, index=table.index, columns=list(FEATURE_NAMES))

@@ -124,6 +124,8 @@ def default_baselines(random_state: int | None = 0, speed_law: str = "lognormal"
 def _fit(model, data: TrainingData, rows: np.ndarray):
     """Clone of ``model`` fitted on ``rows`` of ``data`` (with velocity targets if it learns them)."""
     kwargs = {"velocity": data.velocity[rows]} if hasattr(model, "predict_velocity") else {}
+    if hasattr(model, "speed_tail_from") and data.velocity_counts is not None:  # the pooled tail's bins
+        kwargs["velocity_counts"] = data.velocity_counts[rows]
     return clone(model).fit(data.X.iloc[rows], data.y[rows], groups=data.groups[rows], **kwargs)
 
 

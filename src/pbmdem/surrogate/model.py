@@ -30,7 +30,7 @@ from .features import (
     pair_features,
     pair_table,
 )
-from .velocity import check_speed_law, n_law_parameters, speed_fractions
+from .velocity import check_speed_law, fit_speed_tail, n_law_parameters, speed_fractions, with_speed_tail
 from .walls import wall_rates
 
 PHYSICS_OFFSETS = ("cross_section", "none")
@@ -65,6 +65,8 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         The impact-speed law whose (mu, sigma[, q]) the velocity model learns and whose bin fractions
         it predicts (:mod:`pbmdem.surrogate.velocity`); the ``velocity`` targets of ``fit`` must
         be fitted with the same law (:func:`~pbmdem.surrogate.features.training_data`).
+    speed_tail_from : float or None
+        m/s: above this bin edge fractions follow :func:`~pbmdem.surrogate.velocity.fit_speed_tail`; None: the law's
     domain_margin : float
         Relative slack of the per-feature training ranges before :class:`OutOfDomainWarning`
         (fraction of each feature's training range).
@@ -75,6 +77,8 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         The fitted frequency model (``best_params_``, ``cv_results_``, ``estimators_``, ...).
     velocity_model_ : EnsembleMLPRegressorCV or None
         The fitted impact-velocity model, None without velocity targets.
+    speed_tail_ : (int, float, float) or None
+        The pooled fast tail (bin, a, beta) of :func:`~pbmdem.surrogate.velocity.fit_speed_tail`, or None.
     feature_min_, feature_max_ : ndarray
         Training range of every feature.
     duplicated_features_ : list of (str, str, float)
@@ -98,6 +102,7 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         uncertainty_scale=1.0,
         velocity_uncertainty_scale=1.0,
         speed_law="lognormal",
+        speed_tail_from=None,
     ):
         self.frequency_model = frequency_model
         self.velocity_model = velocity_model
@@ -108,6 +113,7 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         self.uncertainty_scale = uncertainty_scale
         self.velocity_uncertainty_scale = velocity_uncertainty_scale
         self.speed_law = speed_law
+        self.speed_tail_from = speed_tail_from
 
     # ------------------------------------------------------------------ helpers
     def _inner(self, F: pd.DataFrame):
@@ -120,9 +126,7 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         """The features as the inner models see them: ``log10`` of every feature with
         ``feature_transform="log"`` (all features are positive sizes, fractions, counts and
         speeds that enter power laws), else unchanged. Domain checks use the untransformed values."""
-        if self.feature_transform == "none":
-            return F
-        return np.log10(F)
+        return F if self.feature_transform == "none" else np.log10(F)
 
     def _column(self, F, name: str) -> np.ndarray:
         """Feature ``name`` of a feature frame, or of a feature array in :data:`FEATURE_NAMES` order."""
@@ -136,9 +140,7 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
 
     def _velocity_offset(self, F) -> np.ndarray:
         """log10 of the speed scale the velocity model does not have to learn (the tip speed)."""
-        if self.physics_offset == "none":
-            return np.zeros(len(F))
-        return np.log10(self._column(F, "tip_speed"))
+        return np.zeros(len(F)) if self.physics_offset == "none" else np.log10(self._column(F, "tip_speed"))
 
     def _features(self, X):
         """A collision table becomes its feature frame; a feature frame or an array is passed on."""
@@ -150,11 +152,11 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         return X
 
     # ------------------------------------------------------------------ fit
-    def fit(self, X, y, groups=None, velocity=None):
-        """Fit on the feature matrix ``X`` (n, n_features), ``y`` = log10 encounter frequency per
-        pair (n,), ``groups`` = DEM run of every row (for the grouped hyperparameter search), and
-        optionally ``velocity`` = (n, 2) or (n, 3) impact-speed law per row (``speed_law``; mu = log10 median
-        speed in m/s, sigma in decades; rows with NaN are not used). Returns ``self``."""
+    def fit(self, X, y, groups=None, velocity=None, velocity_counts=None):
+        """Fit on the features ``X`` (n, n_features), ``y`` = log10 encounter frequency per pair (n,),
+        ``groups`` = DEM run of every row (for the grouped search), optionally ``velocity`` = (n, 2 or 3)
+        impact-speed law per row (``speed_law``: log10 median speed in m/s, sigma in decades[, q]; NaN rows
+        unused) and ``velocity_counts`` = (n, bins) impacts per bin (``speed_tail_from``). Returns ``self``."""
         check_impeller_radius(self.impeller_radius)
         check_speed_law(self.speed_law)
         if self.physics_offset not in PHYSICS_OFFSETS:
@@ -197,12 +199,10 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
                 UserWarning,
                 stacklevel=2,
             )
-
         template = EnsembleMLPRegressorCV() if self.frequency_model is None else self.frequency_model
         self.frequency_model_ = clone(template).fit(self._inner(F), y - self._offset(F), groups=groups)
 
-        self.velocity_model_ = None
-        self.n_velocity_rows_ = 0
+        self.velocity_model_, self.n_velocity_rows_ = None, 0
         if velocity is not None and vmask.any():
             Fv = F.loc[vmask].reset_index(drop=True)
             Yv = np.column_stack([V[vmask, 0] - self._velocity_offset(Fv), np.log10(V[vmask, 1]), V[vmask, 2:]])
@@ -211,6 +211,10 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
                 self._inner(Fv), Yv, groups=None if groups is None else groups[vmask]
             )
             self.n_velocity_rows_ = int(vmask.sum())
+        self.speed_tail_ = None
+        if self.velocity_model_ is not None and self.speed_tail_from is not None and velocity_counts is not None:
+            tip = self._column(F, "tip_speed")[vmask]
+            self.speed_tail_ = fit_speed_tail(np.asarray(velocity_counts, float)[vmask], tip, self.speed_tail_from)
 
         self.feature_min_ = X.min(axis=0)
         self.feature_max_ = X.max(axis=0)
@@ -275,12 +279,17 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         shape = mean[:, 2] if mean.shape[1] > 2 else None
         return mean[:, 0] + self._velocity_offset(F), 10.0 ** mean[:, 1], shape, std
 
+    def _fractions(self, F, mu, sigma, shape) -> np.ndarray:
+        """Bin fractions of the law (mu, sigma, shape) of the features ``F``, with the pooled tail."""
+        tip = self._column(F, "tip_speed")
+        return with_speed_tail(speed_fractions(mu, sigma, self.speed_law, shape), tip, self.speed_tail_)
+
     def velocity_fractions(self, X, check_domain: bool = True) -> np.ndarray:
         """(n, N_VELOCITY_BINS) predicted fraction of each row's encounters per velocity bin (rows sum to 1)."""
         self._require_velocity_model()
         F = self._validated_frame(self._features(X), check_domain)
         mu, sigma, shape, _ = self._velocity_law(F)
-        return speed_fractions(mu, sigma, self.speed_law, shape)
+        return self._fractions(F, mu, sigma, shape)
 
     # ------------------------------------------------------------------ PBM kernel
     def _array_path(self) -> bool:
@@ -316,7 +325,7 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         if not isinstance(F, np.ndarray):
             return self.velocity_fractions(F, check_domain=False)
         mu, sigma, shape, _ = self._law(F, self.velocity_model_.predict_array(self._transform(F)))
-        return speed_fractions(mu, sigma, self.speed_law, shape)
+        return self._fractions(F, mu, sigma, shape)
 
     def frequency_matrix(self, diameters, numbers, rpm: float, return_std: bool = False, check_domain: bool = True):
         """(K,) diameters (m) and (K,) particle numbers -> (K, K) symmetric encounter frequency c_ij (1/s per pair).

@@ -132,7 +132,9 @@ def train_and_report(
     selected, speed_family = choice["frequency"], choice["speed_law"]
     surrogate, calibration = _calibrated(families, choice, summary, velocity_summary, pbm_scores)
     t0 = time.perf_counter()
-    _logged(surrogate.fit, data.X, data.y, groups=data.groups, velocity=data.velocity)
+    _logged(
+        surrogate.fit, data.X, data.y, groups=data.groups, velocity=data.velocity, velocity_counts=data.velocity_counts
+    )
     metrics, wall_summary = _train_walls(surrogate, speed_family, metrics, (wall_table, wall_velocity_table), settings,
                                          impeller_radius, n_jobs)  # fmt: skip
     t_fit = time.perf_counter() - t0

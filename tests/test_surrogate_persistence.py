@@ -270,7 +270,8 @@ def test_another_format_version_is_refused_with_retrain(saved, found):
     meta["format_version"] = found
     meta_path.write_text(json.dumps(meta))
     with pytest.raises(
-        IncompatibleVersionError, match=rf"{meta_path}: format version {found} .*reads version {FORMAT_VERSION}.*retrain"
+        IncompatibleVersionError,
+        match=rf"{meta_path}: format version {found} .*reads version {FORMAT_VERSION}.*retrain",
     ):
         load_surrogate(model)
 

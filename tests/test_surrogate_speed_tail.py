@@ -1,4 +1,4 @@
-"""The pooled fast tail of the impact speeds (pbmdem.surrogate.velocity.fit_speed_tail): a known
+"""The pooled fast tail of the impact speeds (pbmdem.surrogate.tail.fit_speed_tail): a known
 stretched exponential in tip-speed units recovered from sampled speeds in m/s, its use on a speed
 law's bin fractions, and the surrogate that fits and applies it."""
 
@@ -10,8 +10,9 @@ from synthetic_tables import make_synthetic_tables
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, velocity_bin
 from pbmdem.surrogate import CollisionSurrogate, training_data
-from pbmdem.surrogate.families import ResponseSurface
-from pbmdem.surrogate.velocity import fit_speed_tail, speed_fractions, with_speed_tail
+from pbmdem.surrogate.families import ResponseSurface, member_quantiles
+from pbmdem.surrogate.tail import fit_speed_tail, member_tail, with_speed_tail
+from pbmdem.surrogate.velocity import speed_fractions
 
 R = 0.0265
 A, BETA = 8.0, 0.7  # the known tail: P(V > v | V > v_s) = exp(-A ((v/v_tip)^BETA - (v_s/v_tip)^BETA))
@@ -19,12 +20,12 @@ V_S = float(VELOCITY_EDGES[14])  # 1.78 m/s
 TIPS = (1.67, 2.5, 3.33)  # m/s: 600, 900, 1200 rpm at R
 
 
-def sampled_counts(rng, tip: float, n_tail: int, n_bulk: int) -> np.ndarray:
+def sampled_counts(rng, tip: float, n_tail: int, n_bulk: int, a: float = A) -> np.ndarray:
     """Bin counts of ``n_bulk`` slow impacts (log-normal below v_s) and ``n_tail`` impacts above v_s
     drawn from the known tail by its inverse distribution function."""
     bulk = 10.0 ** rng.normal(-0.7, 0.4, 4 * n_bulk)
     bulk = bulk[bulk < V_S][:n_bulk]
-    u = (V_S / tip) ** BETA - np.log(rng.random(n_tail)) / A
+    u = (V_S / tip) ** BETA - np.log(rng.random(n_tail)) / a
     tail = tip * u ** (1.0 / BETA)
     return np.bincount(velocity_bin(np.concatenate([bulk, tail])), minlength=N_VELOCITY_BINS).astype(float)
 
@@ -32,7 +33,8 @@ def sampled_counts(rng, tip: float, n_tail: int, n_bulk: int) -> np.ndarray:
 def test_known_tail_recovered_from_sampled_speeds_including_above_2_m_s():
     rng = np.random.default_rng(5)
     counts = np.array([sampled_counts(rng, tip, 20_000, 50_000) for tip in TIPS])
-    first, a, beta = fit_speed_tail(counts, TIPS, 1.78)
+    first, a, beta, spread = fit_speed_tail(counts, TIPS, 1.78)
+    assert spread == 0.0  # one run (no groups)
     assert VELOCITY_EDGES[first] == pytest.approx(V_S)
     assert a == pytest.approx(A, rel=0.05)
     assert beta == pytest.approx(BETA, rel=0.05)
@@ -61,6 +63,7 @@ def test_no_impact_above_the_speed_gives_no_tail_and_a_bad_edge_names_the_key():
     counts = np.zeros((2, N_VELOCITY_BINS))
     counts[:, 5:10] = 3.0
     assert fit_speed_tail(counts, [1.0, 2.0], 1.78) is None
+    assert member_tail(None, 1.0) is None
     with pytest.raises(ValueError, match=r"surrogate\.speed_tail_from = 1\.5 m/s; allowed: null or an inner edge"):
         fit_speed_tail(counts, [1.0, 2.0], 1.5)
 
@@ -87,8 +90,15 @@ def test_surrogate_fits_the_pooled_tail_and_its_fractions_follow_it():
 
     plain, tailed = fitted(None), fitted(1.0)
     assert plain.speed_tail_ is None
-    first, a, beta = tailed.speed_tail_
-    assert tailed.speed_tail_ == fit_speed_tail(counts[rows], data.X["tip_speed"].to_numpy()[rows], 1.0)
+    first, a, beta, spread = tailed.speed_tail_
+    tips = data.X["tip_speed"].to_numpy()[rows]
+    assert tailed.speed_tail_ == fit_speed_tail(counts[rows], tips, 1.0, data.groups[rows])
+    # members: the tail's a scaled by exp(-z spread), from the fewest fast impacts to the most (the
+    # synthetic runs hold too few fast impacts for a spread of their own: one is set)
+    tailed.speed_tail_ = (first, a, beta, 0.2)
+    scales = np.array([tailed.member(k).speed_tail_[1] for k in range(tailed.n_members)])
+    assert np.allclose(scales, a * np.exp(-0.2 * member_quantiles(tailed.n_members)), rtol=1e-14, atol=0)
+    assert np.all(np.diff(scales) < 0) and scales[tailed.n_members // 2] == pytest.approx(a, rel=1e-14)
     X = data.X.iloc[:20]
     law, tail = plain.velocity_fractions(X), tailed.velocity_fractions(X)
     assert np.array_equal(law[:, :first], tail[:, :first])  # the law below the tail's speed
@@ -96,3 +106,18 @@ def test_surrogate_fits_the_pooled_tail_and_its_fractions_follow_it():
     exact = np.exp(-a * ((VELOCITY_EDGES[first + 1] / tip) ** beta - (VELOCITY_EDGES[first] / tip) ** beta))
     share = tail[:, first + 1 :].sum(axis=1, keepdims=True) / tail[:, first:].sum(axis=1, keepdims=True)
     assert np.allclose(share, exact, rtol=1e-9, atol=0)
+
+
+def test_spread_between_runs_is_the_scatter_of_each_runs_own_scale():
+    # six runs whose tails differ in a by a known factor: the spread is the sd of ln a_r (the pooled
+    # a and beta describe their mixture, a heavier tail than any one run's: not compared)
+    rng = np.random.default_rng(11)
+    log_a = np.log(A) + np.array([-0.3, -0.1, 0.0, 0.1, 0.2, 0.3])
+    counts = np.array([sampled_counts(rng, 3.33, 30_000, 1000, a=np.exp(la)) for la in log_a])
+    runs = np.array(["r0", "r1", "r2", "r3", "r4", "r5"])
+    spread = fit_speed_tail(counts, np.full(6, 3.33), 1.78, runs)[3]
+    # each run's own a_r is fitted at the pooled beta, which is not the true one: allow 25 %
+    assert spread == pytest.approx(np.std(log_a, ddof=1), rel=0.25)
+    # a run with fewer than TAIL_RUN_MIN_COUNTS fast impacts does not count
+    few = np.vstack([counts, sampled_counts(rng, 3.33, 50, 1000, a=A * 5)])
+    assert fit_speed_tail(few, np.full(7, 3.33), 1.78, np.append(runs, "r6"))[3] == pytest.approx(spread, rel=0.05)

@@ -30,7 +30,8 @@ from .features import (
     pair_features,
     pair_table,
 )
-from .velocity import check_speed_law, fit_speed_tail, n_law_parameters, speed_fractions, with_speed_tail
+from .tail import fit_speed_tail, member_tail, with_speed_tail
+from .velocity import check_speed_law, n_law_parameters, speed_fractions
 from .walls import wall_rates
 
 PHYSICS_OFFSETS = ("cross_section", "none")
@@ -66,7 +67,7 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         it predicts (:mod:`pbmdem.surrogate.velocity`); the ``velocity`` targets of ``fit`` must
         be fitted with the same law (:func:`~pbmdem.surrogate.features.training_data`).
     speed_tail_from : float or None
-        m/s: above this bin edge fractions follow :func:`~pbmdem.surrogate.velocity.fit_speed_tail`; None: the law's
+        m/s: above this bin edge fractions follow :func:`~pbmdem.surrogate.tail.fit_speed_tail`; None: the law's
     domain_margin : float
         Relative slack of the per-feature training ranges before :class:`OutOfDomainWarning`
         (fraction of each feature's training range).
@@ -77,8 +78,8 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         The fitted frequency model (``best_params_``, ``cv_results_``, ``estimators_``, ...).
     velocity_model_ : EnsembleMLPRegressorCV or None
         The fitted impact-velocity model, None without velocity targets.
-    speed_tail_ : (int, float, float) or None
-        The pooled fast tail (bin, a, beta) of :func:`~pbmdem.surrogate.velocity.fit_speed_tail`, or None.
+    speed_tail_ : (int, float, float, float) or None
+        The pooled tail (bin, a, beta, spread) of :func:`~pbmdem.surrogate.tail.fit_speed_tail`, or None.
     feature_min_, feature_max_ : ndarray
         Training range of every feature.
     duplicated_features_ : list of (str, str, float)
@@ -214,7 +215,8 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         self.speed_tail_ = None
         if self.velocity_model_ is not None and self.speed_tail_from is not None and velocity_counts is not None:
             tip = self._column(F, "tip_speed")[vmask]
-            self.speed_tail_ = fit_speed_tail(np.asarray(velocity_counts, float)[vmask], tip, self.speed_tail_from)
+            counts, runs = np.asarray(velocity_counts, float)[vmask], None if groups is None else groups[vmask]
+            self.speed_tail_ = fit_speed_tail(counts, tip, self.speed_tail_from, runs)
 
         self.feature_min_ = X.min(axis=0)
         self.feature_max_ = X.max(axis=0)
@@ -373,16 +375,13 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         return self.frequency_model_.n_members_
 
     def member(self, k: int) -> CollisionSurrogate:
-        """A copy of the fitted surrogate that predicts with member ``k`` of its calibrated
-        uncertainty alone: :class:`~pbmdem.surrogate.families.CalibratedMember` at the k-th of
-        :func:`~pbmdem.surrogate.families.member_quantiles` ``z_k``, with ``std`` the spread of the
-        ensemble's networks (MLP) or the predictive standard deviation (Kriging, RSM) and ``scale``
-        ``uncertainty_scale`` (``velocity_uncertainty_scale`` for the impact-speed law).
-        The frequency, the impact-speed law and the wall models take the same ``z_k``, whatever
-        their families: member 0 has the fewest and slowest impacts, the last the most and the
-        fastest, and with an odd ``n_members`` the middle member is the mean prediction itself, so
-        that PBM-ANN's mean lies inside its members' range. Running the PBM once per member gives
-        the spread of PBM-ANN that the uncertainty implies."""
+        """A copy of the fitted surrogate that predicts with member ``k`` of its calibrated uncertainty
+        alone: :class:`~pbmdem.surrogate.families.CalibratedMember` at the k-th of
+        :func:`~pbmdem.surrogate.families.member_quantiles` ``z_k`` (``std``: the networks' spread or
+        the predictive standard deviation, times ``uncertainty_scale`` or ``velocity_uncertainty_scale``),
+        the pooled tail's a times exp(-z_k spread). Frequency, speed law, tail and wall models take the
+        same ``z_k``: member 0 has the fewest and slowest impacts, the last the most and the fastest;
+        with an odd ``n_members`` the middle member is the mean prediction itself."""
         n = self.n_members
         if not 0 <= int(k) < n:
             raise ValueError(f"surrogate member {k!r}: allowed 0 .. {n - 1}")
@@ -396,4 +395,5 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
             out.velocity_model_ = CalibratedMember(self.velocity_model_, z, self.velocity_uncertainty_scale)
         walls = getattr(self, "wall_models_", None) or {}
         out.wall_models_ = {wall: model._at(z) for wall, model in walls.items()}
+        out.speed_tail_ = member_tail(self.speed_tail_, z)
         return out

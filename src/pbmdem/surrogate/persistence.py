@@ -140,14 +140,15 @@ def family_name(model) -> str:
 
 
 def _tail_metadata(tail) -> dict | None:
-    """The pooled fast tail (:func:`~.velocity.fit_speed_tail`) as a user reads it, or None."""
+    """The pooled fast tail (:func:`~.tail.fit_speed_tail`) as a user reads it, or None."""
     if tail is None:
         return None
-    first, a, beta = tail
+    first, a, beta, spread = tail
     return {
         "from_m_s": float(VELOCITY_EDGES[first]),
         "a": a,
         "beta": beta,
+        "sd_ln_a_between_runs": spread,  # the members' a: a exp(-z sd)
         "law": "P(V>v|V>v_s) = exp(-a((v/v_tip)^beta - (v_s/v_tip)^beta))",
     }
 

@@ -299,69 +299,6 @@ def fit_speed_law(counts, law: str = "lognormal", fit_from: float | None = None)
     return tuple(out)
 
 
-# ----------------------------------------------------------------------------- the pooled fast tail
-def _tail_survival(v, tip_speed, first: int, a: float, beta: float):
-    """P(V > v | V > the lower edge of bin ``first``) of :func:`fit_speed_tail`'s law (broadcast)."""
-    u = lambda x: (np.asarray(x, float) / tip_speed) ** beta  # noqa: E731
-    with np.errstate(over="ignore", invalid="ignore"):
-        return np.where(np.isinf(v), 0.0, np.exp(-a * (u(np.where(np.isinf(v), 1.0, v)) - u(VELOCITY_EDGES[first]))))
-
-
-def _tail_bins(tip_speed, first: int, a: float, beta: float) -> np.ndarray:
-    """(n, bins from ``first`` up) conditional fractions of the tail law at each row's tip speed."""
-    t = np.asarray(tip_speed, float).reshape(-1, 1)
-    upper = np.append(VELOCITY_EDGES[first + 1 : -1], np.inf)
-    return _tail_survival(VELOCITY_EDGES[first:-1], t, first, a, beta) - _tail_survival(upper, t, first, a, beta)
-
-
-def fit_speed_tail(counts, tip_speed, tail_from: float) -> tuple[int, float, float] | None:
-    """The fast tail of the impact speeds, pooled over every row (class pair and run): maximum
-    likelihood of the bin ``counts`` (n, bins) from the speed ``tail_from`` up (m/s, an inner bin
-    edge, :func:`fit_from_bin`) under
-
-        P(V > v | V > v_s) = exp(-a [(v / v_tip)^beta - (v_s / v_tip)^beta]),   v >= v_s,
-
-    with v_tip each row's impeller ``tip_speed`` (m/s): one stretched exponential in tip-speed units
-    for every pair and run (docs/surrogate.md, "The pooled fast tail"). A single pair's tail holds a
-    handful of impacts (at 1200 rpm about 1 in 3000 pair impacts is faster than 3.16 m/s); pooled, the
-    grid's holds thousands. Returns (bin of ``tail_from``, a, beta), or None without any count from
-    ``tail_from`` up (the tail then stays the speed law's)."""
-    first = fit_from_bin(tail_from, "surrogate.speed_tail_from")
-    counts = np.atleast_2d(np.asarray(counts, float))[:, first:]
-    tip = np.asarray(tip_speed, float).ravel()
-    keep = counts.sum(axis=1) > 0
-    if not keep.any():
-        return None
-    counts, tip = counts[keep], tip[keep]
-
-    def nll(theta):
-        p = _tail_bins(tip, first, np.exp(theta[0]), np.exp(theta[1]))
-        return -float(np.sum(counts * np.log(np.maximum(p, 1e-300))))
-
-    best = min(
-        (
-            minimize(nll, x0=[np.log(a0), 0.0], method="Nelder-Mead", options={"xatol": 1e-8, "fatol": 1e-10})
-            for a0 in (1.0, 10.0)
-        ),
-        key=lambda f: f.fun,
-    )
-    return first, float(np.exp(best.x[0])), float(np.exp(best.x[1]))
-
-
-def with_speed_tail(fractions, tip_speed, tail) -> np.ndarray:
-    """Bin ``fractions`` (n, bins) of a speed law with the bins from the tail's speed up replaced by
-    the pooled tail ``tail`` = (bin, a, beta) of :func:`fit_speed_tail` (None: unchanged), scaled to
-    the law's own fraction above that speed: P(V > v_s) is the law's (per pair), its shape above is
-    the tail's."""
-    if tail is None:
-        return fractions
-    first, a, beta = tail
-    out = np.array(fractions, float)
-    above = out[:, first:].sum(axis=1, keepdims=True)
-    out[:, first:] = above * _tail_bins(tip_speed, first, a, beta)
-    return out
-
-
 def total_variation(p, q) -> np.ndarray:
     """Total-variation distance 0.5 sum |p - q| of fraction rows (0: identical, 1: disjoint)."""
     return 0.5 * np.abs(np.asarray(p, float) - np.asarray(q, float)).sum(axis=-1)

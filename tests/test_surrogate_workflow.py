@@ -198,7 +198,7 @@ def test_cli_train_and_predict(tmp_path, capsys):
     velocity.to_csv(vcsv, index=False)
     cfg = yaml.safe_load((REPO / "config" / "test.yaml").read_text())
     cfg["granulator"]["impeller"]["blade_length"] = 0.012
-    cfg["surrogate"] = TINY
+    cfg["surrogate"] = {**TINY, "speed_tail_from": 0.316}  # the tiny tips are 0.4-1.1 m/s
     cfg_path = tmp_path / "config.yaml"
     cfg_path.write_text(yaml.safe_dump(cfg))
     out = tmp_path / "out"
@@ -223,7 +223,11 @@ def test_cli_train_and_predict(tmp_path, capsys):
         )
     printed = capsys.readouterr().out
     assert "replicate noise floor" in printed and "median impact speed" in printed
-    assert json.loads((out / "model.json").read_text())["params"]["impeller_radius"] == 0.012
+    meta = json.loads((out / "model.json").read_text())
+    assert meta["params"]["impeller_radius"] == 0.012
+    tail = meta["speed_tail"]
+    assert tail["from_m_s"] == pytest.approx(0.316, rel=1e-3) and tail["a"] > 0 and tail["beta"] > 0
+    assert f"pooled fast tail from 0.316 m/s: a {tail['a']:.3g}, beta {tail['beta']:.3g}" in printed
     assert (
         main(
             [

@@ -419,6 +419,13 @@ def test_response_surface_predicts_as_its_pipelines_do(degree):
         assert np.allclose(mean[:, j], m_ref, rtol=1e-12, atol=1e-12)
         assert np.allclose(std[:, j], s_ref, rtol=1e-12, atol=0.0)
     assert np.array_equal(model.predict(X_new), model.predict_array(X_new))
+    # the two outputs (one degree, the same rows) share the terms of one prediction: those of each alone
+    from pbmdem.surrogate.families import _polynomial_terms
+
+    shared = {}
+    first = _polynomial_terms(model.estimators_[0], X_new, shared)
+    second = _polynomial_terms(model.estimators_[1], X_new, shared)
+    assert second is first and np.array_equal(second, _polynomial_terms(model.estimators_[1], X_new))
 
 
 def test_kriging_mean_predicts_as_its_pipelines_do():

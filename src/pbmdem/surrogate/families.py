@@ -133,8 +133,9 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
     def n_members_(self) -> int:
         return int(self.n_members)
 
-    def _output(self, est: Pipeline, X: np.ndarray, return_std: bool):  # pragma: no cover - abstract
-        """(mean, std or None) of one output's fitted pipeline at X."""
+    def _output(self, est: Pipeline, X: np.ndarray, return_std: bool, shared: dict):  # pragma: no cover - abstract
+        """(mean, std or None) of one output's fitted pipeline at X; ``shared``: one prediction's
+        work that its outputs may share (empty at its first output)."""
         raise NotImplementedError
 
     def _predict(self, X: np.ndarray, return_std: bool):
@@ -142,9 +143,9 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
         deviation costs the most, so it is computed only when asked for."""
         # no thread limit here: a prediction is a few small products that OpenBLAS runs on one
         # thread anyway, and setting up the limit cost tens of ms on the PBM's first call
-        means, stds = [], []
+        means, stds, shared = [], [], {}
         for est in self.estimators_:  # a loop, not a comprehension: the Kriging warning's stacklevel
-            mean, std = self._output(est, X, return_std)
+            mean, std = self._output(est, X, return_std, shared)
             means.append(mean)
             stds.append(std)
         mean = np.column_stack(means)
@@ -224,7 +225,7 @@ class KrigingRegressor(_PerOutputRegressor):
             est[-1].optimizer = "fmin_l_bfgs_b"
         return self
 
-    def _output(self, est: Pipeline, X: np.ndarray, return_std: bool):
+    def _output(self, est: Pipeline, X: np.ndarray, return_std: bool, shared: dict):
         """:meth:`GaussianProcessRegressor.predict`'s lines on the fitted pipeline's attributes
         (scale; mean ``K(x, X_train) @ alpha``; variance ``k(x, x) - |L^-1 K(x, X_train)^T|^2``,
         negative variances set to 0 with the same warning; undo ``normalize_y``) without
@@ -340,12 +341,14 @@ class ResponseSurface(_PerOutputRegressor):
         self.n_outputs_ = 1 if y.ndim == 1 else int(Y.shape[1])
         return self
 
-    def _output(self, est: Pipeline, X: np.ndarray, return_std: bool):
+    def _output(self, est: Pipeline, X: np.ndarray, return_std: bool, shared: dict):
         """One output by the pipeline's own arithmetic on its fitted attributes (scalers,
         polynomial powers, the ridge's coefficients and posterior covariance), without
         scikit-learn's validation at each of the four steps, which cost most of a prediction;
-        equal to the pipelines' ``predict`` (tests/test_surrogate_families.py)."""
-        terms = _polynomial_terms(est, X)
+        equal to the pipelines' ``predict`` (tests/test_surrogate_families.py). Outputs whose
+        scalers and powers are equal (the same degree, fitted on the same rows) share the terms
+        (``shared``): the same operations on the same numbers."""
+        terms = _polynomial_terms(est, X, shared)
         ridge = est.steps[-1][1]
         mean = terms @ ridge.coef_ + ridge.intercept_
         if not return_std:
@@ -365,23 +368,35 @@ class ResponseSurface(_PerOutputRegressor):
         ]
 
 
-#: Per fitted response-surface polynomial, its ``powers_`` (terms, features): a property that
-#: recomputes every combination at each access, which cost half of a prediction. Weak keys: a
-#: polynomial that is gone leaves no entry.
+#: Per fitted response-surface pipeline, its polynomial's ``powers_`` (terms, features): a property
+#: that recomputes every combination at each access, which cost half of a prediction; and the
+#: bytes of everything its terms depend on besides X (scalers, powers). Weak keys: a pipeline that
+#: is gone leaves no entry.
 _POWERS = weakref.WeakKeyDictionary()
 
 
-def _polynomial_terms(pipeline: Pipeline, X: np.ndarray) -> np.ndarray:
+def _polynomial_terms(pipeline: Pipeline, X: np.ndarray, shared: dict | None = None) -> np.ndarray:
     """The standardised polynomial terms of a fitted :meth:`ResponseSurface._pipeline_of` at X:
     scale, the products of the powers ``poly.powers_`` (features multiplied in their order: a
-    power 0 contributes an exact 1), scale the terms."""
+    power 0 contributes an exact 1), scale the terms. ``shared`` (one prediction's, at one X):
+    terms already computed by a pipeline of equal scalers and powers are taken from it (the same
+    numbers; the PBM's impact-speed law has three outputs, mostly of one degree)."""
     (_, scale), (_, poly), (_, scale_terms), _ = pipeline.steps  # by position: naming a step costs a lookup
-    powers = _POWERS.get(poly)
-    if powers is None:
-        powers = _POWERS[poly] = poly.powers_
+    known = _POWERS.get(pipeline)
+    if known is None:
+        powers = poly.powers_
+        parts = (scale.mean_, scale.scale_, powers, scale_terms.mean_, scale_terms.scale_)
+        key = b"|".join(f"{a.dtype.str}{a.shape}".encode() + a.tobytes() for a in map(np.ascontiguousarray, parts))
+        known = _POWERS[pipeline] = (powers, key)
+    powers, key = known
+    if shared is not None and key in shared:
+        return shared[key]
     x = (X - scale.mean_) / scale.scale_
     # every power of every feature once, (n, features, degree + 1), then each term's factors by index,
     # contiguous so that the product runs over the features in their order (as the loop it replaced)
     table = x[:, :, None] ** np.arange(powers.max() + 1)
     terms = np.prod(np.ascontiguousarray(table[:, np.arange(powers.shape[1]), powers]), axis=2)
-    return (terms - scale_terms.mean_) / scale_terms.scale_
+    terms = (terms - scale_terms.mean_) / scale_terms.scale_
+    if shared is not None:
+        shared[key] = terms
+    return terms

@@ -23,6 +23,8 @@ from __future__ import annotations
 import logging
 import warnings
 import weakref
+from contextlib import contextmanager
+from contextvars import ContextVar
 
 import numpy as np
 from scipy.linalg import solve_triangular
@@ -134,8 +136,8 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
         return int(self.n_members)
 
     def _output(self, est: Pipeline, X: np.ndarray, return_std: bool, shared: dict):  # pragma: no cover - abstract
-        """(mean, std or None) of one output's fitted pipeline at X; ``shared``: one prediction's
-        work that its outputs may share (empty at its first output)."""
+        """(mean, std or None) of one output's fitted pipeline at X; ``shared``: work that the
+        outputs of one prediction (or of the predictions inside :func:`shared_terms`) may share."""
         raise NotImplementedError
 
     def _predict(self, X: np.ndarray, return_std: bool):
@@ -143,7 +145,9 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
         deviation costs the most, so it is computed only when asked for."""
         # no thread limit here: a prediction is a few small products that OpenBLAS runs on one
         # thread anyway, and setting up the limit cost tens of ms on the PBM's first call
-        means, stds, shared = [], [], {}
+        means, stds = [], []
+        shared = _SHARED.get()
+        shared = {} if shared is None else shared
         for est in self.estimators_:  # a loop, not a comprehension: the Kriging warning's stacklevel
             mean, std = self._output(est, X, return_std, shared)
             means.append(mean)
@@ -368,6 +372,23 @@ class ResponseSurface(_PerOutputRegressor):
         ]
 
 
+#: The polynomial terms shared by the predictions inside :func:`shared_terms` (None: outside)
+_SHARED: ContextVar[dict | None] = ContextVar("pbmdem_shared_terms", default=None)
+
+
+@contextmanager
+def shared_terms():
+    """Inside: the response surfaces' predictions share their polynomial terms at equal X (the
+    bytes of X, the scalers and the powers; the same numbers), e.g. the wall models' frequency and
+    impact-speed law on the same classes (``CollisionSurrogate.impacts``). The terms are dropped
+    on leaving."""
+    token = _SHARED.set({})
+    try:
+        yield
+    finally:
+        _SHARED.reset(token)
+
+
 #: Per fitted response-surface pipeline, its polynomial's ``powers_`` (terms, features): a property
 #: that recomputes every combination at each access, which cost half of a prediction; and the
 #: bytes of everything its terms depend on besides X (scalers, powers). Weak keys: a pipeline that
@@ -380,7 +401,8 @@ def _polynomial_terms(pipeline: Pipeline, X: np.ndarray, shared: dict | None = N
     scale, the products of the powers ``poly.powers_`` (features multiplied in their order: a
     power 0 contributes an exact 1), scale the terms. ``shared`` (one prediction's, at one X):
     terms already computed by a pipeline of equal scalers and powers are taken from it (the same
-    numbers; the PBM's impact-speed law has three outputs, mostly of one degree)."""
+    numbers; the PBM's impact-speed law has three outputs, mostly of one degree; inside
+    :func:`shared_terms` also other models' at an equal X)."""
     (_, scale), (_, poly), (_, scale_terms), _ = pipeline.steps  # by position: naming a step costs a lookup
     known = _POWERS.get(pipeline)
     if known is None:
@@ -389,8 +411,10 @@ def _polynomial_terms(pipeline: Pipeline, X: np.ndarray, shared: dict | None = N
         key = b"|".join(f"{a.dtype.str}{a.shape}".encode() + a.tobytes() for a in map(np.ascontiguousarray, parts))
         known = _POWERS[pipeline] = (powers, key)
     powers, key = known
-    if shared is not None and key in shared:
-        return shared[key]
+    if shared is not None:
+        key = (key, X.shape, X.dtype.str, X.tobytes())
+        if key in shared:
+            return shared[key]
     x = (X - scale.mean_) / scale.scale_
     # every power of every feature once, (n, features, degree + 1), then each term's factors by index,
     # contiguous so that the product runs over the features in their order (as the loop it replaced)

@@ -21,7 +21,7 @@ from pbmdem.impact import EncounterRates, ImpactRates
 from .domain import TrainingDomain
 from .ensemble import EnsembleMLPRegressorCV
 from .errors import VelocityModelMissingError, checked_groups, require_fitted
-from .families import CalibratedMember, member_quantiles
+from .families import CalibratedMember, member_quantiles, shared_terms
 from .features import (
     FEATURE_NAMES,
     check_impeller_radius,
@@ -349,9 +349,12 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
 
     def impacts(self, diameters, numbers, rpm: float, check_domain: bool = True):
         """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall impacts per granule
-        of the wall models (``wall_models_``, :mod:`pbmdem.surrogate.walls`), for breakage."""
-        pairs = self.encounters(diameters, numbers, rpm, check_domain=check_domain)
-        return ImpactRates(pairs, wall_rates(self, diameters, numbers, rpm, check_domain=check_domain))
+        of the wall models (``wall_models_``, :mod:`pbmdem.surrogate.walls`), for breakage. The
+        response surfaces among them share their polynomial terms at equal features
+        (:func:`~.families.shared_terms`: the walls' models see the same classes)."""
+        with shared_terms():
+            pairs = self.encounters(diameters, numbers, rpm, check_domain=check_domain)
+            return ImpactRates(pairs, wall_rates(self, diameters, numbers, rpm, check_domain=check_domain))
 
     def __call__(self, diameters, numbers, rpm: float):
         """Collision-frequency source interface of ``pbmdem.pbm`` (docs/architecture.md)."""

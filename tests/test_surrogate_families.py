@@ -447,3 +447,37 @@ def test_kriging_mean_predicts_as_its_pipelines_do():
     single = KrigingRegressor(n_restarts_optimizer=0).fit(X, y[:, 0])
     assert single.predict_array(X_new).shape == (len(X_new),)
     assert np.array_equal(single.predict_array(X_new), single.estimators_[0].predict(X_new))
+
+
+def test_terms_of_two_factors_equal_the_product_over_every_feature(monkeypatch):
+    # a response-surface term of at most two features of nonzero power is computed as their one
+    # product (families._two_factors): the product over all features (the exact 1s of power 0
+    # included, in any order) to the bit, on random features of every sign and scale; degree 3
+    # has terms of three factors and keeps the product over all features
+    from sklearn.preprocessing import PolynomialFeatures
+
+    from pbmdem.surrogate.families import _term_products, _two_factors
+
+    rng = np.random.default_rng(3)
+    for degree, n_features in ((1, 8), (2, 8), (2, 3), (3, 4)):
+        powers = PolynomialFeatures(degree, include_bias=False).fit(np.zeros((1, n_features))).powers_
+        factors = _two_factors(powers)
+        assert (factors is None) == (degree == 3)
+        if factors is None:
+            continue
+        x = rng.standard_normal((50, n_features)) * 10.0 ** rng.uniform(-150, 150, (50, n_features))
+        x[:3] = [0.0, -0.0, 1.0][0]
+        table = x[:, :, None] ** np.arange(powers.max() + 1)
+        fast = _term_products(table, powers, factors)
+        assert np.array_equal(fast, _term_products(table, powers, None)) and fast.flags.c_contiguous
+    # a fitted response surface predicts the same numbers with every term as the product over all features
+    from pbmdem.surrogate import families
+
+    X = rng.uniform(0.5, 2.0, (60, 4))
+    model = ResponseSurface(degree=2).fit(X, np.column_stack([X @ [1.0, -2.0, 0.5, 3.0], np.log(X).sum(axis=1)]))
+    X_new = rng.uniform(0.2, 3.0, (9, 4))
+    fast = model.predict_array(X_new, return_std=True)
+    monkeypatch.setattr(families, "_POWERS", families.weakref.WeakKeyDictionary())
+    monkeypatch.setattr(families, "_two_factors", lambda powers: None)
+    for a, b in zip(fast, model.predict_array(X_new, return_std=True), strict=True):
+        assert np.array_equal(a, b)

@@ -390,10 +390,36 @@ def shared_terms():
 
 
 #: Per fitted response-surface pipeline, its polynomial's ``powers_`` (terms, features): a property
-#: that recomputes every combination at each access, which cost half of a prediction; and the
-#: bytes of everything its terms depend on besides X (scalers, powers). Weak keys: a pipeline that
-#: is gone leaves no entry.
+#: that recomputes every combination at each access, which cost half of a prediction; its
+#: :func:`_two_factors`; and the bytes of everything its terms depend on besides X (scalers,
+#: powers). Weak keys: a pipeline that is gone leaves no entry.
 _POWERS = weakref.WeakKeyDictionary()
+
+
+def _two_factors(powers: np.ndarray):
+    """(feature, power) of the first and the second feature of nonzero power of every term
+    (feature 0 at power 0, an exact 1, for a term of one feature), or None if a term has three or
+    more (degree 3 and up): a term of at most two factors is their one product whatever the order
+    of the exact 1s around them, so it equals the product over all features (:func:`_term_products`)."""
+    rows = [np.flatnonzero(row) for row in powers]
+    if any(r.size > 2 for r in rows):
+        return None
+    f1 = np.array([r[0] for r in rows])
+    f2 = np.array([r[1] if r.size > 1 else 0 for r in rows])
+    return f1, powers[np.arange(len(rows)), f1], f2, np.where(f2 > 0, powers[np.arange(len(rows)), f2], 0)
+
+
+def _term_products(table: np.ndarray, powers: np.ndarray, factors) -> np.ndarray:
+    """(n, terms): the product over the features of ``table[:, f, powers[t, f]]`` (``table``: every
+    power of every feature, (n, features, degree + 1)) for every term t: with ``factors``
+    (:func:`_two_factors`) the product of its two factors, else over all features in their order."""
+    if factors is not None:
+        f1, p1, f2, p2 = factors
+        # C order, as the product below (the index gives (n, terms) in Fortran order; the terms'
+        # matrix products would then sum in another order)
+        return np.ascontiguousarray(table[:, f1, p1] * table[:, f2, p2])
+    # contiguous so that the product runs over the features in their order (as the loop it replaced)
+    return np.prod(np.ascontiguousarray(table[:, np.arange(powers.shape[1]), powers]), axis=2)
 
 
 def _polynomial_terms(pipeline: Pipeline, X: np.ndarray, shared: dict | None = None) -> np.ndarray:
@@ -409,18 +435,16 @@ def _polynomial_terms(pipeline: Pipeline, X: np.ndarray, shared: dict | None = N
         powers = poly.powers_
         parts = (scale.mean_, scale.scale_, powers, scale_terms.mean_, scale_terms.scale_)
         key = b"|".join(f"{a.dtype.str}{a.shape}".encode() + a.tobytes() for a in map(np.ascontiguousarray, parts))
-        known = _POWERS[pipeline] = (powers, key)
-    powers, key = known
+        known = _POWERS[pipeline] = (powers, _two_factors(powers), key)
+    powers, factors, key = known
     if shared is not None:
         key = (key, X.shape, X.dtype.str, X.tobytes())
         if key in shared:
             return shared[key]
     x = (X - scale.mean_) / scale.scale_
-    # every power of every feature once, (n, features, degree + 1), then each term's factors by index,
-    # contiguous so that the product runs over the features in their order (as the loop it replaced)
+    # every power of every feature once, (n, features, degree + 1), then each term's factors by index
     table = x[:, :, None] ** np.arange(powers.max() + 1)
-    terms = np.prod(np.ascontiguousarray(table[:, np.arange(powers.shape[1]), powers]), axis=2)
-    terms = (terms - scale_terms.mean_) / scale_terms.scale_
+    terms = (_term_products(table, powers, factors) - scale_terms.mean_) / scale_terms.scale_
     if shared is not None:
         shared[key] = terms
     return terms

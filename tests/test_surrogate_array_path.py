@@ -215,10 +215,10 @@ def test_wall_rates_equal_the_frame_path_for_every_family(with_walls):
 
 
 def test_impacts_share_the_response_surfaces_terms_and_give_the_same_numbers(with_walls):
-    # impacts() predicts the pairs and both walls inside families.shared_terms: response surfaces
+    # impacts() predicts the pairs and both walls inside _terms.shared_terms: response surfaces
     # of equal scalers and powers at equal features compute their terms once; the rates equal
     # those of encounters() and wall_rates() called on their own, to the bit (mean and a member)
-    from pbmdem.surrogate import families
+    from pbmdem.surrogate import _terms, families
     from pbmdem.surrogate.walls import wall_rates
 
     for model in (with_walls, with_walls.member(0)):
@@ -233,9 +233,9 @@ def test_impacts_share_the_response_surfaces_terms_and_give_the_same_numbers(wit
                 assert np.array_equal(a, b)
     if isinstance(with_walls.frequency_model_, families.ResponseSurface):
         d, n, rpm = next(distributions())
-        with warnings.catch_warnings(), families.shared_terms():
+        with warnings.catch_warnings(), _terms.shared_terms():
             warnings.simplefilter("ignore")
             wall_rates(with_walls, d, n, rpm)
-            computed = len(families._SHARED.get())
+            computed = len(_terms.SHARED.get())
         models = [m for w in with_walls.wall_models_.values() for m in (w.frequency_model_, w.velocity_model_)]
         assert computed < sum(len(m.estimators_) for m in models)  # both walls' models fitted on the same rows

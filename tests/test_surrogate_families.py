@@ -420,12 +420,12 @@ def test_response_surface_predicts_as_its_pipelines_do(degree):
         assert np.allclose(std[:, j], s_ref, rtol=1e-12, atol=0.0)
     assert np.array_equal(model.predict(X_new), model.predict_array(X_new))
     # the two outputs (one degree, the same rows) share the terms of one prediction: those of each alone
-    from pbmdem.surrogate.families import _polynomial_terms
+    from pbmdem.surrogate._terms import polynomial_terms
 
     shared = {}
-    first = _polynomial_terms(model.estimators_[0], X_new, shared)
-    second = _polynomial_terms(model.estimators_[1], X_new, shared)
-    assert second is first and np.array_equal(second, _polynomial_terms(model.estimators_[1], X_new))
+    first = polynomial_terms(model.estimators_[0], X_new, shared)
+    second = polynomial_terms(model.estimators_[1], X_new, shared)
+    assert second is first and np.array_equal(second, polynomial_terms(model.estimators_[1], X_new))
 
 
 def test_kriging_mean_predicts_as_its_pipelines_do():
@@ -451,33 +451,33 @@ def test_kriging_mean_predicts_as_its_pipelines_do():
 
 def test_terms_of_two_factors_equal_the_product_over_every_feature(monkeypatch):
     # a response-surface term of at most two features of nonzero power is computed as their one
-    # product (families._two_factors): the product over all features (the exact 1s of power 0
+    # product (_terms.two_factors): the product over all features (the exact 1s of power 0
     # included, in any order) to the bit, on random features of every sign and scale; degree 3
     # has terms of three factors and keeps the product over all features
     from sklearn.preprocessing import PolynomialFeatures
 
-    from pbmdem.surrogate.families import _term_products, _two_factors
+    from pbmdem.surrogate._terms import term_products, two_factors
 
     rng = np.random.default_rng(3)
     for degree, n_features in ((1, 8), (2, 8), (2, 3), (3, 4)):
         powers = PolynomialFeatures(degree, include_bias=False).fit(np.zeros((1, n_features))).powers_
-        factors = _two_factors(powers)
+        factors = two_factors(powers)
         assert (factors is None) == (degree == 3)
         if factors is None:
             continue
         x = rng.standard_normal((50, n_features)) * 10.0 ** rng.uniform(-150, 150, (50, n_features))
         x[:3] = [0.0, -0.0, 1.0][0]
         table = x[:, :, None] ** np.arange(powers.max() + 1)
-        fast = _term_products(table, powers, factors)
-        assert np.array_equal(fast, _term_products(table, powers, None)) and fast.flags.c_contiguous
+        fast = term_products(table, powers, factors)
+        assert np.array_equal(fast, term_products(table, powers, None)) and fast.flags.c_contiguous
     # a fitted response surface predicts the same numbers with every term as the product over all features
-    from pbmdem.surrogate import families
+    from pbmdem.surrogate import _terms
 
     X = rng.uniform(0.5, 2.0, (60, 4))
     model = ResponseSurface(degree=2).fit(X, np.column_stack([X @ [1.0, -2.0, 0.5, 3.0], np.log(X).sum(axis=1)]))
     X_new = rng.uniform(0.2, 3.0, (9, 4))
     fast = model.predict_array(X_new, return_std=True)
-    monkeypatch.setattr(families, "_POWERS", families.weakref.WeakKeyDictionary())
-    monkeypatch.setattr(families, "_two_factors", lambda powers: None)
+    monkeypatch.setattr(_terms, "POWERS", _terms.weakref.WeakKeyDictionary())
+    monkeypatch.setattr(_terms, "two_factors", lambda powers: None)
     for a, b in zip(fast, model.predict_array(X_new, return_std=True), strict=True):
         assert np.array_equal(a, b)

@@ -22,9 +22,6 @@ from __future__ import annotations
 
 import logging
 import warnings
-import weakref
-from contextlib import contextmanager
-from contextvars import ContextVar
 
 import numpy as np
 from scipy.linalg import solve_triangular
@@ -40,6 +37,7 @@ from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import PolynomialFeatures, StandardScaler
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from ._terms import SHARED, polynomial_terms
 from ._threads import single_threaded
 from .ensemble import grouped_splits
 from .errors import array_input
@@ -137,7 +135,7 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
 
     def _output(self, est: Pipeline, X: np.ndarray, return_std: bool, shared: dict):  # pragma: no cover - abstract
         """(mean, std or None) of one output's fitted pipeline at X; ``shared``: work that the
-        outputs of one prediction (or of the predictions inside :func:`shared_terms`) may share."""
+        outputs of one prediction (or of the predictions inside :func:`~._terms.shared_terms`) may share."""
         raise NotImplementedError
 
     def _predict(self, X: np.ndarray, return_std: bool):
@@ -146,7 +144,7 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
         # no thread limit here: a prediction is a few small products that OpenBLAS runs on one
         # thread anyway, and setting up the limit cost tens of ms on the PBM's first call
         means, stds = [], []
-        shared = _SHARED.get()
+        shared = SHARED.get()
         shared = {} if shared is None else shared
         for est in self.estimators_:  # a loop, not a comprehension: the Kriging warning's stacklevel
             mean, std = self._output(est, X, return_std, shared)
@@ -352,7 +350,7 @@ class ResponseSurface(_PerOutputRegressor):
         equal to the pipelines' ``predict`` (tests/test_surrogate_families.py). Outputs whose
         scalers and powers are equal (the same degree, fitted on the same rows) share the terms
         (``shared``): the same operations on the same numbers."""
-        terms = _polynomial_terms(est, X, shared)
+        terms = polynomial_terms(est, X, shared)
         ridge = est.steps[-1][1]
         mean = terms @ ridge.coef_ + ridge.intercept_
         if not return_std:
@@ -370,81 +368,3 @@ class ResponseSurface(_PerOutputRegressor):
             f"{est[-1].alpha_:.4g}, weight precision {est[-1].lambda_:.4g}"
             for est in self.estimators_
         ]
-
-
-#: The polynomial terms shared by the predictions inside :func:`shared_terms` (None: outside)
-_SHARED: ContextVar[dict | None] = ContextVar("pbmdem_shared_terms", default=None)
-
-
-@contextmanager
-def shared_terms():
-    """Inside: the response surfaces' predictions share their polynomial terms at equal X (the
-    bytes of X, the scalers and the powers; the same numbers), e.g. the wall models' frequency and
-    impact-speed law on the same classes (``CollisionSurrogate.impacts``). The terms are dropped
-    on leaving."""
-    token = _SHARED.set({})
-    try:
-        yield
-    finally:
-        _SHARED.reset(token)
-
-
-#: Per fitted response-surface pipeline, its polynomial's ``powers_`` (terms, features): a property
-#: that recomputes every combination at each access, which cost half of a prediction; its
-#: :func:`_two_factors`; and the bytes of everything its terms depend on besides X (scalers,
-#: powers). Weak keys: a pipeline that is gone leaves no entry.
-_POWERS = weakref.WeakKeyDictionary()
-
-
-def _two_factors(powers: np.ndarray):
-    """(feature, power) of the first and the second feature of nonzero power of every term
-    (feature 0 at power 0, an exact 1, for a term of one feature), or None if a term has three or
-    more (degree 3 and up): a term of at most two factors is their one product whatever the order
-    of the exact 1s around them, so it equals the product over all features (:func:`_term_products`)."""
-    rows = [np.flatnonzero(row) for row in powers]
-    if any(r.size > 2 for r in rows):
-        return None
-    f1 = np.array([r[0] for r in rows])
-    f2 = np.array([r[1] if r.size > 1 else 0 for r in rows])
-    return f1, powers[np.arange(len(rows)), f1], f2, np.where(f2 > 0, powers[np.arange(len(rows)), f2], 0)
-
-
-def _term_products(table: np.ndarray, powers: np.ndarray, factors) -> np.ndarray:
-    """(n, terms): the product over the features of ``table[:, f, powers[t, f]]`` (``table``: every
-    power of every feature, (n, features, degree + 1)) for every term t: with ``factors``
-    (:func:`_two_factors`) the product of its two factors, else over all features in their order."""
-    if factors is not None:
-        f1, p1, f2, p2 = factors
-        # C order, as the product below (the index gives (n, terms) in Fortran order; the terms'
-        # matrix products would then sum in another order)
-        return np.ascontiguousarray(table[:, f1, p1] * table[:, f2, p2])
-    # contiguous so that the product runs over the features in their order (as the loop it replaced)
-    return np.prod(np.ascontiguousarray(table[:, np.arange(powers.shape[1]), powers]), axis=2)
-
-
-def _polynomial_terms(pipeline: Pipeline, X: np.ndarray, shared: dict | None = None) -> np.ndarray:
-    """The standardised polynomial terms of a fitted :meth:`ResponseSurface._pipeline_of` at X:
-    scale, the products of the powers ``poly.powers_`` (features multiplied in their order: a
-    power 0 contributes an exact 1), scale the terms. ``shared`` (one prediction's, at one X):
-    terms already computed by a pipeline of equal scalers and powers are taken from it (the same
-    numbers; the PBM's impact-speed law has three outputs, mostly of one degree; inside
-    :func:`shared_terms` also other models' at an equal X)."""
-    (_, scale), (_, poly), (_, scale_terms), _ = pipeline.steps  # by position: naming a step costs a lookup
-    known = _POWERS.get(pipeline)
-    if known is None:
-        powers = poly.powers_
-        parts = (scale.mean_, scale.scale_, powers, scale_terms.mean_, scale_terms.scale_)
-        key = b"|".join(f"{a.dtype.str}{a.shape}".encode() + a.tobytes() for a in map(np.ascontiguousarray, parts))
-        known = _POWERS[pipeline] = (powers, _two_factors(powers), key)
-    powers, factors, key = known
-    if shared is not None:
-        key = (key, X.shape, X.dtype.str, X.tobytes())
-        if key in shared:
-            return shared[key]
-    x = (X - scale.mean_) / scale.scale_
-    # every power of every feature once, (n, features, degree + 1), then each term's factors by index
-    table = x[:, :, None] ** np.arange(powers.max() + 1)
-    terms = (_term_products(table, powers, factors) - scale_terms.mean_) / scale_terms.scale_
-    if shared is not None:
-        shared[key] = terms
-    return terms

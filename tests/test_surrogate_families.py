@@ -481,3 +481,20 @@ def test_terms_of_two_factors_equal_the_product_over_every_feature(monkeypatch):
     monkeypatch.setattr(_terms, "two_factors", lambda powers: None)
     for a, b in zip(fast, model.predict_array(X_new, return_std=True), strict=True):
         assert np.array_equal(a, b)
+
+
+def test_the_terms_of_a_pipeline_fitted_again_in_place_are_those_of_its_new_fit():
+    # _terms.POWERS keeps a pipeline's powers and sharing key while its scalers are the ones it saw:
+    # two outputs fitted on the same rows share their terms until one is fitted again on others
+    from pbmdem.surrogate._terms import polynomial_terms
+
+    rng = np.random.default_rng(5)
+    X = rng.uniform(0.5, 2.0, (40, 3))
+    a, b = ResponseSurface(degree=2).fit(X, np.column_stack([X.sum(axis=1), X[:, 0]])).estimators_
+    X_new = rng.uniform(0.5, 2.0, (6, 3))
+    shared = {}
+    assert polynomial_terms(a, X_new, shared) is polynomial_terms(b, X_new, shared)
+    a.fit(3.0 * X + 1.0, X.sum(axis=1))
+    shared = {}
+    polynomial_terms(b, X_new, shared)
+    np.testing.assert_allclose(polynomial_terms(a, X_new, shared), a[:-1].transform(X_new), rtol=1e-12, atol=1e-12)

@@ -31,9 +31,10 @@ def shared_terms():
         SHARED.reset(token)
 
 
-#: Per fitted response-surface pipeline, its polynomial's ``powers_`` (terms, features): a property
-#: that recomputes every combination at each access, which cost half of a prediction; its
-#: :func:`two_factors`; and the bytes of everything its terms depend on besides X (scalers,
+#: Per fitted response-surface pipeline: its scalers' fitted arrays (a pipeline fitted again has
+#: new ones: computed again), its polynomial's ``powers_`` (terms, features; a property that
+#: recomputes every combination at each access, which cost half of a prediction), their
+#: :func:`two_factors` and the bytes of everything its terms depend on besides X (scalers,
 #: powers). Weak keys: a pipeline that is gone leaves no entry.
 POWERS = weakref.WeakKeyDictionary()
 
@@ -72,13 +73,14 @@ def polynomial_terms(pipeline: Pipeline, X: np.ndarray, shared: dict | None = No
     numbers; the PBM's impact-speed law has three outputs, mostly of one degree; inside
     :func:`shared_terms` also other models' at an equal X)."""
     (_, scale), (_, poly), (_, scale_terms), _ = pipeline.steps  # by position: naming a step costs a lookup
+    fitted = (scale.mean_, scale.scale_, scale_terms.mean_, scale_terms.scale_)
     known = POWERS.get(pipeline)
-    if known is None:
+    if known is None or any(a is not b for a, b in zip(known[0], fitted, strict=True)):  # new, or refitted
         powers = poly.powers_
-        parts = (scale.mean_, scale.scale_, powers, scale_terms.mean_, scale_terms.scale_)
+        parts = (*fitted[:2], powers, *fitted[2:])
         key = b"|".join(f"{a.dtype.str}{a.shape}".encode() + a.tobytes() for a in map(np.ascontiguousarray, parts))
-        known = POWERS[pipeline] = (powers, two_factors(powers), key)
-    powers, factors, key = known
+        known = POWERS[pipeline] = (fitted, powers, two_factors(powers), key)
+    _, powers, factors, key = known
     if shared is not None:
         key = (key, X.shape, X.dtype.str, X.tobytes())
         if key in shared:

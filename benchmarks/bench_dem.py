@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import tempfile
 import time
 from pathlib import Path
@@ -36,11 +37,30 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.config import load_config
-from pbmdem.dem import collisions, engine
+from pbmdem.dem import collisions
 from pbmdem.dem.plan import plan_point
 from pbmdem.dem.run import run_point
 
 ROOT = Path(__file__).resolve().parents[1]
+
+_LOOP = re.compile(r"^Loop time of (?P<wall>[\d.eE+-]+) on (?P<procs>\d+) procs for (?P<steps>\d+) steps")
+_PART = re.compile(r"^(?P<name>Pair|Neigh|Comm|Outpt|Modfy|Other)\s+time \(%\) = (?P<seconds>[\d.eE+-]+)")
+
+
+def loop_times(log: str | Path) -> list[dict[str, float]]:
+    """The timing block LIGGGHTS writes after each `run` command of a log, in order: `wall` (s),
+    `steps`, `procs`, and the seconds of its parts (`Pair`, `Neigh`, `Comm`, `Outpt` (dumps),
+    `Other`: fixes such as the mesh walls, integration, thermo), as far as the log has them."""
+    blocks: list[dict[str, float]] = []
+    for line in Path(log).read_text(errors="replace").splitlines():
+        loop = _LOOP.match(line)
+        if loop:
+            blocks.append({k: float(v) for k, v in loop.groupdict().items()})
+            continue
+        part = _PART.match(line)
+        if part and blocks:
+            blocks[-1][part.group("name")] = float(part.group("seconds"))
+    return blocks
 
 
 def naive_parse(path: Path) -> int:
@@ -116,11 +136,11 @@ def run_profile(run_dir: Path) -> dict:
     """Per-phase LIGGGHTS wall time of one finished run (and its settled bed, if it had one)."""
     plan = json.loads((run_dir / "plan.json").read_text())
     summary = json.loads((run_dir / "summary.json").read_text())
-    blocks = engine.loop_times(run_dir / "log.liggghts")
+    blocks = loop_times(run_dir / "log.liggghts")
     bed = plan.get("settled_bed")
     if bed:  # plan.json names the settled bed's restart file; its log lies beside it
         bed_log = Path(bed).parent / "log.liggghts"
-        (settle,) = engine.loop_times(bed_log) if bed_log.exists() else [{}]
+        (settle,) = loop_times(bed_log) if bed_log.exists() else [{}]
         spin, record = blocks
     else:
         settle, spin, record = blocks
@@ -336,7 +356,7 @@ def bench_cost(args) -> None:
         prof = run_profile(Path(args.out) / side / "run")
         bed_cpu = bed["liggghts_cpu_time_s"] / args.speeds if bed else 0.0
         if bed:
-            (settle,) = engine.loop_times(Path(args.out) / side / "bed" / "log.liggghts")
+            (settle,) = loop_times(Path(args.out) / side / "bed" / "log.liggghts")
             prof["settling_s"] = settle["wall"] / args.speeds
         rows.append(
             prof
@@ -403,7 +423,7 @@ def bench_skin(args) -> None:
                         check=True,
                         stdout=subprocess.DEVNULL,
                     )
-                    blocks = engine.loop_times(work / "log.liggghts")
+                    blocks = loop_times(work / "log.liggghts")
                     rows.append(
                         {
                             "run": f"{plan['point_id']}/rep{plan['replicate']}",

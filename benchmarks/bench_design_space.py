@@ -14,14 +14,15 @@ analysis and the calibration). Prints figures, no assertions.
    loop (sample, class-frequency source).
 2. **Throughput**: `--batches` batches (speeds over the grid's range; the ensemble mean and each
    member in turn, as the design space runs them) with `pbmdem.design.batches.run_cases` on 1 and
-   on `--jobs` processes: wall and CPU time (this process and its children), batches per minute.
+   on `--jobs` processes, `--rounds` times each: wall and CPU time (this process and its children)
+   and batches per minute of every round, then their min / median / max.
 
 The targets of issue 35: one batch <= 10 ms with breakage, <= 5 ms without (median, warm); >= 10,000
 batches per minute on 2 cores. The machine may be shared: the load average is printed before and
 after; compare figures of one run.
 
 Run: .venv/bin/python benchmarks/bench_design_space.py [--model results/surrogate/model.skops]
-     [--repeat 30] [--batches 2000] [--jobs 2] [--quick]
+     [--repeat 30] [--batches 2000] [--rounds 3] [--jobs 2] [--quick]
 `--quick` (for the test suite): trains a small surrogate on synthetic tables (benchmarks/quick.py)
 unless `--model` is given, and runs a few batches of each kind.
 """
@@ -119,21 +120,29 @@ def one_batch(loop, model, speeds, repeat: int, label: str) -> None:
         print(f"  final d10 / d50 / d90 at {rpm:g} rpm: " + " / ".join(f"{1e3 * q:.9f}" for q in final) + " mm")
 
 
-def throughput(loop, model_path, n: int, jobs: int, n_members: int, speeds) -> None:
+def throughput(loop, model_path, n: int, jobs: int, n_members: int, speeds, rounds: int) -> None:
     from pbmdem.design.batches import Case, run_cases
 
     members = (None, *range(n_members))
     lo, hi = min(speeds), max(speeds)
     cases = [Case(lo + (hi - lo) * k / max(n - 1, 1), member=members[k % len(members)]) for k in range(n)]
     for j in sorted({1, jobs}):
-        t0, c0 = time.perf_counter(), cpu_seconds()
-        outcomes = run_cases(loop, model_path, cases, j)
-        wall, cpu = time.perf_counter() - t0, cpu_seconds() - c0
-        failed = sum(bool(o.failed) for o in outcomes)
+        per_minute = []
+        for r in range(rounds):
+            t0, c0 = time.perf_counter(), cpu_seconds()
+            outcomes = run_cases(loop, model_path, cases, j)
+            wall, cpu = time.perf_counter() - t0, cpu_seconds() - c0
+            failed = sum(bool(o.failed) for o in outcomes)
+            per_minute.append(60 * len(outcomes) / wall)
+            print(
+                f"{len(outcomes)} PBM-ANN batches (mean and {n_members} members) on {j} process(es): round {r + 1}, "
+                f"wall {wall:.2f} s, CPU {cpu:.2f} s ({1e3 * cpu / len(outcomes):.2f} ms per batch): "
+                f"{per_minute[-1]:.0f} batches per minute; {failed} failed"
+            )
+        v = np.asarray(per_minute)
         print(
-            f"{len(outcomes)} PBM-ANN batches (mean and {n_members} members) on {j} process(es): wall {wall:.2f} s, "
-            f"CPU {cpu:.2f} s ({1e3 * cpu / len(outcomes):.2f} ms per batch): {60 * len(outcomes) / wall:.0f} "
-            f"batches per minute; {failed} failed"
+            f"  batches per minute on {j} process(es), {rounds} round(s): "
+            f"min {v.min():.0f} / median {np.median(v):.0f} / max {v.max():.0f}"
         )
 
 
@@ -143,6 +152,7 @@ def main() -> None:
     parser.add_argument("--config", default=None, help="default: config/config.yaml (--quick: config/test.yaml)")
     parser.add_argument("--repeat", type=int, default=30, help="warm single batches per kind (>= 20 for a statement)")
     parser.add_argument("--batches", type=int, default=2000, help="batches of the throughput measurement")
+    parser.add_argument("--rounds", type=int, default=3, help="throughput measurements per process count")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--quick", action="store_true", help="a small surrogate and a few batches (smoke test)")
     args = parser.parse_args()
@@ -164,7 +174,7 @@ def main() -> None:
         print(f"surrogate: a small one trained on synthetic tables ({model_path})")
     elif model_path is None:
         model_path = str(ROOT / "results/surrogate/model.skops")
-    repeat, batches = (3, 12) if args.quick else (args.repeat, args.batches)
+    repeat, batches, rounds = (3, 12, 2) if args.quick else (args.repeat, args.batches, args.rounds)
     print(f"load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs")
     model = load_surrogate(model_path)
     speeds = [float(r) for r in cfg.validation.rpm]
@@ -173,7 +183,7 @@ def main() -> None:
         if loop.batch.pbm.breakage.enabled:
             one_batch(without_breakage(loop), model, speeds, repeat, "breakage off")
     grid = [float(r) for r in cfg.grid.impeller_rpm]
-    throughput(loop, model_path, batches, args.jobs, model.n_members, grid)
+    throughput(loop, model_path, batches, args.jobs, model.n_members, grid, rounds)
     print(f"load average after: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     tmp.cleanup()
 

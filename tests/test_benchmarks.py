@@ -49,6 +49,7 @@ QUICK = {
         r"wall min [\d.]+ / median [\d.]+ / max [\d.]+ ms; CPU min [\d.]+ / median [\d.]+ / max [\d.]+ ms",
         r"the median batch \([\d.]+ ms\): surrogate [\d.]+ ms, PBM [\d.]+ ms",
         r"12 PBM-ANN batches \(mean and \d+ members\) on 2 process\(es\): .* batches per minute; 0 failed",
+        r"batches per minute on 2 process\(es\), 2 round\(s\): min \d+ / median \d+ / max \d+",
     ),
     "bench_pair_features.py --quick": (
         r"pair frequency \(Kriging\) per variant: held-out MAE",

@@ -1,6 +1,8 @@
 """One settled bed for every speed, with the real LIGGGHTS engine on the tiny granulator."""
 
 import json
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,6 +12,13 @@ from pbmdem.dem import engine
 from pbmdem.dem.dumps import read_classes
 from pbmdem.dem.plan import plan_bed, plan_point
 from pbmdem.dem.run import BED_FILE, BED_RECORD, check_bed, run_point, settle_bed
+
+BENCHMARKS = str(Path(__file__).resolve().parents[1] / "benchmarks")
+sys.path.insert(0, BENCHMARKS)  # loop_times lives with the DEM benchmark
+try:
+    from bench_dem import loop_times
+finally:
+    sys.path.remove(BENCHMARKS)
 
 pytestmark = pytest.mark.liggghts
 
@@ -105,20 +114,20 @@ def test_a_run_refuses_a_bed_that_is_not_its_own(bed_runs, tiny_config):
 
 
 def test_the_logs_time_each_phase(bed_runs):
-    """engine.loop_times reads LIGGGHTS' timing block of every `run`: the bed's settling, and the
+    """loop_times (benchmarks/bench_dem.py) reads LIGGGHTS' timing block of every `run`: the bed's settling, and the
     spin-up and the recording (history and sampling window) of a run from the bed."""
     root, bed, plans = bed_runs["root"], bed_runs["bed"], bed_runs["plans"]
-    (settling,) = engine.loop_times(root / "bed" / "log.liggghts")
+    (settling,) = loop_times(root / "bed" / "log.liggghts")
     assert settling["steps"] == bed.settle_steps
     for rpm in SPEEDS:
         plan = plans[rpm]
-        spinup, record = engine.loop_times(root / f"rpm{rpm}" / "log.liggghts")
+        spinup, record = loop_times(root / f"rpm{rpm}" / "log.liggghts")
         assert spinup["steps"] == plan.spinup_steps - plan.history_steps
         assert record["steps"] == plan.history_steps + plan.sampling_steps
         for block in (spinup, record):
             assert block["wall"] > 0 and block["Pair"] > 0
             assert sum(block.get(k, 0.0) for k in ("Pair", "Neigh", "Comm", "Outpt", "Other")) <= 1.01 * block["wall"]
-    fresh = engine.loop_times(root / "fresh" / "log.liggghts")
+    fresh = loop_times(root / "fresh" / "log.liggghts")
     assert [b["steps"] for b in fresh][0] == bed.settle_steps and len(fresh) == 3
 
 

@@ -529,3 +529,45 @@ def test_the_compiled_fraction_columns_equal_the_numpy_form_on_random_runs():
             f[:, 1:3, 0] = np.nan
         expected = fraction_columns(f)
         assert _compiled_selection.fraction_columns(f).tolist() == expected.tolist()
+
+
+def test_the_compiled_impact_selection_sums_as_the_plain_loops_do_to_the_bit():
+    # _compiled_selection.impact_selection runs the sums of four columns side by side: against the
+    # plain loops (one sum over the bins after the other, in the bins' order) on random impacts with
+    # empty classes, partners short of one, zero frequencies, shared columns and 0-2 walls
+    from pbmdem.pbm import _compiled_selection
+    from pbmdem.pbm.impact_breakage import fraction_columns
+
+    def plain(c, f, walls_c, walls_f, p, n, pairs):
+        out = []
+        for i in range(len(n)):
+            total = 0.0
+            for j in range(len(n)) if pairs else ():
+                partners = n[j] - 1.0 if i == j else n[j]
+                if n[j] <= 0.0 or partners <= 0.0 or c[i, j] == 0.0:
+                    continue
+                dot = 0.0
+                for b in range(p.shape[1]):
+                    dot += f[i, j, b] * p[i, b]
+                total += c[i, j] * dot * partners
+            for w in range(walls_c.shape[0]):
+                dot = 0.0
+                for b in range(p.shape[1]):
+                    dot += walls_f[w, i, b] * p[i, b]
+                total += walls_c[w, i] * dot
+            out.append(total)
+        return np.array(out)
+
+    rng = np.random.default_rng(17)
+    for K, W, pairs in ((1, 2, True), (5, 2, True), (7, 1, True), (13, 0, True), (6, 2, False)):
+        nearest = np.sort(rng.integers(0, max(K // 2, 1), K))
+        f = np.ascontiguousarray(rng.dirichlet(np.ones(N_VELOCITY_BINS), (K, K))[:, nearest])
+        c = rng.uniform(0.0, 0.3, (K, K)) * (rng.random((K, K)) > 0.2)
+        walls_c, walls_f = rng.uniform(0.0, 5.0, (W, K)), rng.dirichlet(np.ones(N_VELOCITY_BINS), (W, K))
+        n = rng.uniform(0.0, 40.0, K) * (rng.random(K) > 0.2)
+        n[K // 2] = 0.5
+        p = np.empty((K, N_VELOCITY_BINS))
+        _compiled_selection.breaking_probability(rng.uniform(0.5, 6.0, K), 0.5, VELOCITY_EDGES, p)
+        out = np.empty(K)
+        _compiled_selection.impact_selection(c, f, fraction_columns(f), walls_c, walls_f, p, n, pairs, out)
+        assert out.tobytes() == plain(c, f, walls_c, walls_f, p, n, pairs).tobytes()

@@ -212,3 +212,30 @@ def test_wall_rates_equal_the_frame_path_for_every_family(with_walls):
         ref, _ = recorded(partial(slow.impacts, d, n, rpm))
         np.testing.assert_allclose(fast.pairs.frequency, ref.pairs.frequency, rtol=1e-12, atol=0.0)
         np.testing.assert_allclose(fast.pairs.velocity_fractions, ref.pairs.velocity_fractions, rtol=1e-12, atol=1e-300)
+
+
+def test_impacts_share_the_response_surfaces_terms_and_give_the_same_numbers(with_walls):
+    # impacts() predicts the pairs and both walls inside _terms.shared_terms: response surfaces
+    # of equal scalers and powers at equal features compute their terms once; the rates equal
+    # those of encounters() and wall_rates() called on their own, to the bit (mean and a member)
+    from pbmdem.surrogate import _terms, families
+    from pbmdem.surrogate.walls import wall_rates
+
+    for model in (with_walls, with_walls.member(0)):
+        for d, n, rpm in distributions():
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                shared = model.impacts(d, n, rpm)
+                pairs, walls = model.encounters(d, n, rpm), wall_rates(model, d, n, rpm)
+            for a, b in ((shared.pairs.frequency, pairs.frequency), (shared.walls.frequency, walls.frequency),
+                         (shared.pairs.velocity_fractions, pairs.velocity_fractions),
+                         (shared.walls.velocity_fractions, walls.velocity_fractions)):  # fmt: skip
+                assert np.array_equal(a, b)
+    if isinstance(with_walls.frequency_model_, families.ResponseSurface):
+        d, n, rpm = next(distributions())
+        with warnings.catch_warnings(), _terms.shared_terms():
+            warnings.simplefilter("ignore")
+            wall_rates(with_walls, d, n, rpm)
+            computed = len(_terms.SHARED.get())
+        models = [m for w in with_walls.wall_models_.values() for m in (w.frequency_model_, w.velocity_model_)]
+        assert computed < sum(len(m.estimators_) for m in models)  # both walls' models fitted on the same rows

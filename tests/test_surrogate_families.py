@@ -418,6 +418,13 @@ def test_response_surface_predicts_as_its_pipelines_do(degree):
         assert np.allclose(mean[:, j], m_ref, rtol=1e-12, atol=1e-12)
         assert np.allclose(std[:, j], s_ref, rtol=1e-12, atol=0.0)
     assert np.array_equal(model.predict(X_new), model.predict_array(X_new))
+    # the two outputs (one degree, the same rows) share the terms of one prediction: those of each alone
+    from pbmdem.surrogate._terms import polynomial_terms
+
+    shared = {}
+    first = polynomial_terms(model.estimators_[0], X_new, shared)
+    second = polynomial_terms(model.estimators_[1], X_new, shared)
+    assert second is first and np.array_equal(second, polynomial_terms(model.estimators_[1], X_new))
 
 
 def test_kriging_mean_predicts_as_its_pipelines_do():
@@ -452,3 +459,54 @@ def test_run_calibration_scale_is_the_row_scale_of_the_runs_means():
     assert run_calibration_scale(runs, y, mean, std) == pytest.approx(per_run, rel=1e-12)
     assert per_run == pytest.approx(0.04 / 0.05 / interval_z(), rel=1e-12)  # the 90 % quantile of 5: the largest
     assert calibration_scale(y, mean, std) > 2 * per_run
+
+
+def test_terms_of_two_factors_equal_the_product_over_every_feature(monkeypatch):
+    # a response-surface term of at most two features of nonzero power is computed as their one
+    # product (_terms.two_factors): the product over all features (the exact 1s of power 0
+    # included, in any order) to the bit, on random features of every sign and scale; degree 3
+    # has terms of three factors and keeps the product over all features
+    from sklearn.preprocessing import PolynomialFeatures
+
+    from pbmdem.surrogate._terms import term_products, two_factors
+
+    rng = np.random.default_rng(3)
+    for degree, n_features in ((1, 8), (2, 8), (2, 3), (3, 4)):
+        powers = PolynomialFeatures(degree, include_bias=False).fit(np.zeros((1, n_features))).powers_
+        factors = two_factors(powers)
+        assert (factors is None) == (degree == 3)
+        if factors is None:
+            continue
+        x = rng.standard_normal((50, n_features)) * 10.0 ** rng.uniform(-150, 150, (50, n_features))
+        x[:3] = [0.0, -0.0, 1.0][0]
+        table = x[:, :, None] ** np.arange(powers.max() + 1)
+        fast = term_products(table, powers, factors)
+        assert np.array_equal(fast, term_products(table, powers, None)) and fast.flags.c_contiguous
+    # a fitted response surface predicts the same numbers with every term as the product over all features
+    from pbmdem.surrogate import _terms
+
+    X = rng.uniform(0.5, 2.0, (60, 4))
+    model = ResponseSurface(degree=2).fit(X, np.column_stack([X @ [1.0, -2.0, 0.5, 3.0], np.log(X).sum(axis=1)]))
+    X_new = rng.uniform(0.2, 3.0, (9, 4))
+    fast = model.predict_array(X_new, return_std=True)
+    monkeypatch.setattr(_terms, "POWERS", _terms.weakref.WeakKeyDictionary())
+    monkeypatch.setattr(_terms, "two_factors", lambda powers: None)
+    for a, b in zip(fast, model.predict_array(X_new, return_std=True), strict=True):
+        assert np.array_equal(a, b)
+
+
+def test_the_terms_of_a_pipeline_fitted_again_in_place_are_those_of_its_new_fit():
+    # _terms.POWERS keeps a pipeline's powers and sharing key while its scalers are the ones it saw:
+    # two outputs fitted on the same rows share their terms until one is fitted again on others
+    from pbmdem.surrogate._terms import polynomial_terms
+
+    rng = np.random.default_rng(5)
+    X = rng.uniform(0.5, 2.0, (40, 3))
+    a, b = ResponseSurface(degree=2).fit(X, np.column_stack([X.sum(axis=1), X[:, 0]])).estimators_
+    X_new = rng.uniform(0.5, 2.0, (6, 3))
+    shared = {}
+    assert polynomial_terms(a, X_new, shared) is polynomial_terms(b, X_new, shared)
+    a.fit(3.0 * X + 1.0, X.sum(axis=1))
+    shared = {}
+    polynomial_terms(b, X_new, shared)
+    np.testing.assert_allclose(polynomial_terms(a, X_new, shared), a[:-1].transform(X_new), rtol=1e-12, atol=1e-12)

@@ -54,7 +54,6 @@ class BinaryFrame:
     step: int
     rows: int
     size_one: int
-    at: int  # byte offset of the frame header
     chunks: list[tuple[int, int]]  # (byte offset of the first value, number of values)
 
 
@@ -96,7 +95,7 @@ def binary_frames(raw: bytes, path: str | Path, width: int | None = None) -> tup
         if values != rows * size_one:
             announced = f"its header announces {rows} rows of {size_one}"
             return frames, damage(f"the frame at step {step} holds {values} values, {announced}")
-        frames.append(BinaryFrame(step, rows, size_one, at, chunks))
+        frames.append(BinaryFrame(step, rows, size_one, chunks))
         at = cursor
     return frames, None
 
@@ -245,20 +244,18 @@ def read_dump(path: str | Path, columns: int, ids: tuple[int, ...] = ()) -> Snap
     return Snapshots(steps=steps, offsets=offsets, data=data)
 
 
-def find_damage(path: str | Path, expected_steps=None) -> str | None:
+def find_damage(path: str | Path) -> str | None:
     """Where the dump `path` stops being a well-formed LIGGGHTS dump, or None if it is one.
 
     Every line is checked against the structure LIGGGHTS writes (TIMESTEP, step, NUMBER OF
     ENTRIES/ATOMS, count, BOX BOUNDS and its three lines, the ENTRIES/ATOMS header with its column
-    names, then exactly `count` rows of as many finite numbers); steps must increase. With
-    `expected_steps` (the planned frame steps) a frame at an unplanned step, or a missing frame,
-    is damage too. The answer names the line, the byte offset and the frame. Slow (one Python
+    names, then exactly `count` rows of as many finite numbers); steps must increase. The answer
+    names the line, the byte offset and the frame. Slow (one Python
     pass over the lines): for explaining a dump already found inconsistent, not for reading one."""
     path = Path(path)
     raw = path.read_bytes()
-    planned = None if expected_steps is None else [int(x) for x in expected_steps]
     if path.suffix == BINARY_SUFFIX:
-        return _find_binary_damage(raw, path, planned)
+        return _find_binary_damage(raw, path)
     offset, line_no, frame, step, previous = 0, 0, 0, None, None
     lines = raw.split(b"\n")
     if lines and lines[-1] == b"":
@@ -283,11 +280,6 @@ def find_damage(path: str | Path, expected_steps=None) -> str | None:
             step = int(line)
             if previous is not None and step <= previous:
                 return where(f"time step {step} does not follow {previous}", line)
-            if planned is not None:
-                if frame > len(planned):
-                    return where(f"more frames than the {len(planned)} planned", line)
-                if step != planned[frame - 1]:
-                    return where(f"frame {frame} should be at step {planned[frame - 1]} (a frame is missing)", line)
             state = "count_item"
         elif state == "count_item":
             if line not in (b"ITEM: NUMBER OF ENTRIES", b"ITEM: NUMBER OF ATOMS"):
@@ -319,23 +311,15 @@ def find_damage(path: str | Path, expected_steps=None) -> str | None:
         offset += len(line) + 1
     if state != "item":
         return where(f"truncated: the file ends inside a frame ({state.replace('_', ' ')} expected)", b"<end of file>")
-    if planned is not None and frame < len(planned):
-        return where(f"the file ends after {frame} of {len(planned)} planned frames", b"<end of file>")
     return None
 
 
-def _find_binary_damage(raw: bytes, path: Path, planned: list[int] | None) -> str | None:
-    """find_damage for a binary dump: its structure, finite values and the planned frame steps."""
+def _find_binary_damage(raw: bytes, path: Path) -> str | None:
+    """find_damage for a binary dump: its structure and finite values."""
     frames, damage = binary_frames(raw, path)
     if damage is not None:
         return damage
     for k, frame in enumerate(frames):
-        if planned is not None and (k >= len(planned) or frame.step != planned[k]):
-            if k >= len(planned):
-                expected = f"more frames than the {len(planned)} planned"
-            else:
-                expected = f"frame {k + 1} should be at step {planned[k]} (a frame is missing)"
-            return f"{path}: byte {frame.at}, frame {k + 1} (step {frame.step}): {expected}"
         for start, n in frame.chunks:
             values = np.frombuffer(raw, "<f8", n, start)
             if (bad := first_index(~np.isfinite(values))) is not None:
@@ -343,8 +327,6 @@ def _find_binary_damage(raw: bytes, path: Path, planned: list[int] | None) -> st
                     f"{path}: byte {start + 8 * bad}, frame {k + 1} (step {frame.step}): non-finite value "
                     f"{float(values[bad])!r}"
                 )
-    if planned is not None and len(frames) < len(planned):
-        return f"{path}: byte {len(raw)}, the file ends after {len(frames)} of {len(planned)} planned frames"
     return None
 
 

@@ -285,23 +285,3 @@ def thermo_table(log: str | Path) -> dict[str, list[float]]:
         for name, value in zip(header, values):
             columns.setdefault(name, []).append(value)
     return columns
-
-
-_LOOP = re.compile(r"^Loop time of (?P<wall>[\d.eE+-]+) on (?P<procs>\d+) procs for (?P<steps>\d+) steps")
-_PART = re.compile(r"^(?P<name>Pair|Neigh|Comm|Outpt|Modfy|Other)\s+time \(%\) = (?P<seconds>[\d.eE+-]+)")
-
-
-def loop_times(log: str | Path) -> list[dict[str, float]]:
-    """The timing block LIGGGHTS writes after each `run` command of a log, in order: `wall` (s),
-    `steps`, `procs`, and the seconds of its parts (`Pair`, `Neigh`, `Comm`, `Outpt` (dumps),
-    `Other`: fixes such as the mesh walls, integration, thermo), as far as the log has them."""
-    blocks: list[dict[str, float]] = []
-    for line in Path(log).read_text(errors="replace").splitlines():
-        loop = _LOOP.match(line)
-        if loop:
-            blocks.append({k: float(v) for k, v in loop.groupdict().items()})
-            continue
-        part = _PART.match(line)
-        if part and blocks:
-            blocks[-1][part.group("name")] = float(part.group("seconds"))
-    return blocks

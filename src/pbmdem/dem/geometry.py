@@ -3,7 +3,7 @@
 The bowl's axis is the z axis, its bottom at z = 0 (dimensions: `pbmdem.config.Granulator`). The
 impeller turns about the same axis. Both meshes are written with meshio; every closed part is
 watertight with outward normals (triangles ordered counter-clockwise seen from outside), which
-`check_closed_surface` verifies.
+tests/test_geometry.py verifies.
 """
 
 from __future__ import annotations
@@ -131,20 +131,6 @@ def impeller_mesh(imp: Impeller) -> tuple[np.ndarray, np.ndarray]:
     parts_pts.append(hub_pts)
     parts_tris.append(hub_tris + offset)
     return np.vstack(parts_pts), np.vstack(parts_tris).astype(np.int64)
-
-
-def check_closed_surface(points: np.ndarray, triangles: np.ndarray) -> float:
-    """Return the enclosed volume; raise if some edge is not shared by exactly two triangles
-    traversed in opposite directions (i.e. the surface is not closed and consistently oriented)."""
-    edges = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    fwd = {tuple(e) for e in edges.tolist()}
-    if len(fwd) != len(edges):
-        raise ValueError("a directed edge is used twice: inconsistent triangle orientation")
-    missing = [e for e in fwd if (e[1], e[0]) not in fwd]
-    if missing:
-        raise ValueError(f"surface is not closed: {len(missing)} edges have no opposite twin, e.g. {missing[0]}")
-    a, b, c = (points[triangles[:, k]] for k in range(3))
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
 
 
 def write_stl(path: str | Path, points: np.ndarray, triangles: np.ndarray) -> Path:

@@ -52,17 +52,17 @@ def breaking_probability(v_star, spread, edges, out):
     criterion); :func:`pbmdem.impact.breaking_probability`. Impacts spread evenly in log v inside
     a log bin (the bin mean of Phi(a ln(v / v*)) is then exact: the difference of the antiderivative
     at the bin's edges over their distance in z), evenly in v in bin 0 (64-point midpoint rule);
-    the last bin ends at its upper edge. The logarithms of the edges are taken once per call and
-    the antiderivative once per edge. Bin 0 of a granule whose Phi is saturated (0) at its fastest
-    midpoint is 0 without its 64 points (they rise with m, and so does z: all saturated, their sum 0)."""
+    the last bin ends at its upper edge. The logarithms of the edges are taken once per call (of
+    bin 0's 64 points only if a granule needs them) and the antiderivative once per edge. Bin 0
+    of a granule whose Phi is saturated (0) at its fastest midpoint is 0 without its 64 points
+    (they rise with m, and so does z: all saturated, their sum 0)."""
     V = edges.size - 1
     log_edges = np.empty(V + 1)
     for e in range(1, V + 1):
         log_edges[e] = math.log(edges[e])
-    log_v0 = np.empty(64)
-    for m in range(64):
-        log_v0[m] = math.log((m + 0.5) / 64 * edges[1])
-    top = log_v0[63]
+    log_v0 = np.empty(64)  # taken when a granule first needs them (bin 0 not saturated: rare)
+    have_v0 = False
+    top = math.log((63 + 0.5) / 64 * edges[1])  # log_v0[63]
     integral = np.empty(V + 1)
     z = np.empty(V + 1)
     for i in range(v_star.size):
@@ -86,6 +86,10 @@ def breaking_probability(v_star, spread, edges, out):
         log_s = math.log(s)
         first = 0.0
         if a * (top - log_s) > -_Z_SATURATED:
+            if not have_v0:
+                for m in range(64):
+                    log_v0[m] = math.log((m + 0.5) / 64 * edges[1])
+                have_v0 = True
             for m in range(64):
                 first += _phi(a * (log_v0[m] - log_s))
         out[i, 0] = min(max(first / 64, 0.0), 1.0)
@@ -114,18 +118,61 @@ def impact_selection(frequency, fractions, columns, wall_frequency, wall_fractio
     for each partner j the first partner whose fractions ``fractions[:, j, :]`` are the same to the
     bit (``impact_breakage.fraction_columns``; a coupling interval's bins take the fractions of
     their nearest class, so a few classes serve all bins): the sum over the velocity bins is taken once per
-    such column and row, the same operations on the same numbers, so the same result to the bit."""
+    such column and row, the same operations on the same numbers, so the same result to the bit.
+    The sums of four such columns run side by side over the bins (each in the bins' order, from
+    0; every distinct column of the partners present, used or not): the same sums, about 25 %
+    faster than one after the other (a refresh of the default batch's 46 bins)."""
     K = numbers.size
     V = probability.shape[1]
-    dots = np.empty(K)
-    done = np.full(K, -1)  # the row i whose sum dots[c] holds
-    present = np.empty(K, dtype=np.int64)  # the partners j not skipped below for numbers[j] <= 0
+    W = wall_frequency.shape[0]
+    present = np.empty(K, dtype=np.int64)
     n_present = 0
     for j in range(K):
         if not numbers[j] <= 0.0:
             present[n_present] = j
             n_present += 1
+    used = np.empty(K, dtype=np.int64)  # the distinct columns of the partners present
+    n_used = 0
+    if pairs:
+        seen = np.zeros(K, dtype=np.bool_)
+        for jj in range(n_present):
+            c = columns[present[jj]]
+            if not seen[c]:
+                seen[c] = True
+                used[n_used] = c
+                n_used += 1
+    dots = np.empty(K)
+    walls = np.empty(max(W, 1))
     for i in range(K):
+        # four sums over the bins side by side (each in the bins' order, from 0.0)
+        for u0 in range(0, n_used, 4):
+            n4 = min(4, n_used - u0)
+            c0 = used[u0]
+            c1 = used[u0 + 1] if n4 > 1 else c0
+            c2 = used[u0 + 2] if n4 > 2 else c0
+            c3 = used[u0 + 3] if n4 > 3 else c0
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            s3 = 0.0
+            for b in range(V):
+                p = probability[i, b]
+                s0 += fractions[i, c0, b] * p
+                s1 += fractions[i, c1, b] * p
+                s2 += fractions[i, c2, b] * p
+                s3 += fractions[i, c3, b] * p
+            dots[c0] = s0
+            if n4 > 1:
+                dots[c1] = s1
+            if n4 > 2:
+                dots[c2] = s2
+            if n4 > 3:
+                dots[c3] = s3
+        for w in range(W):
+            breaking = 0.0
+            for b in range(V):
+                breaking += wall_fractions[w, i, b] * probability[i, b]
+            walls[w] = breaking
         total = 0.0
         if pairs:
             for jj in range(n_present):
@@ -133,19 +180,9 @@ def impact_selection(frequency, fractions, columns, wall_frequency, wall_fractio
                 partners = numbers[j] - 1.0 if i == j else numbers[j]
                 if partners <= 0.0 or frequency[i, j] == 0.0:
                     continue
-                c = columns[j]
-                if done[c] != i:
-                    breaking = 0.0
-                    for b in range(V):
-                        breaking += fractions[i, c, b] * probability[i, b]
-                    dots[c] = breaking
-                    done[c] = i
-                total += frequency[i, j] * dots[c] * partners
-        for w in range(wall_frequency.shape[0]):
-            breaking = 0.0
-            for b in range(V):
-                breaking += wall_fractions[w, i, b] * probability[i, b]
-            total += wall_frequency[w, i] * breaking
+                total += frequency[i, j] * dots[columns[j]] * partners
+        for w in range(W):
+            total += wall_frequency[w, i] * walls[w]
         out[i] = total
 
 

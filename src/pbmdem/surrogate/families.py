@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import logging
 import warnings
-import weakref
 
 import numpy as np
 from scipy.linalg import solve_triangular
@@ -38,6 +37,7 @@ from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import PolynomialFeatures, StandardScaler
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from ._terms import SHARED, polynomial_terms
 from ._threads import single_threaded
 from .ensemble import grouped_splits
 from .errors import array_input
@@ -133,8 +133,9 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
     def n_members_(self) -> int:
         return int(self.n_members)
 
-    def _output(self, est: Pipeline, X: np.ndarray, return_std: bool):  # pragma: no cover - abstract
-        """(mean, std or None) of one output's fitted pipeline at X."""
+    def _output(self, est: Pipeline, X: np.ndarray, return_std: bool, shared: dict):  # pragma: no cover - abstract
+        """(mean, std or None) of one output's fitted pipeline at X; ``shared``: work that the
+        outputs of one prediction (or of the predictions inside :func:`~._terms.shared_terms`) may share."""
         raise NotImplementedError
 
     def _predict(self, X: np.ndarray, return_std: bool):
@@ -143,8 +144,10 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
         # no thread limit here: a prediction is a few small products that OpenBLAS runs on one
         # thread anyway, and setting up the limit cost tens of ms on the PBM's first call
         means, stds = [], []
+        shared = SHARED.get()
+        shared = {} if shared is None else shared
         for est in self.estimators_:  # a loop, not a comprehension: the Kriging warning's stacklevel
-            mean, std = self._output(est, X, return_std)
+            mean, std = self._output(est, X, return_std, shared)
             means.append(mean)
             stds.append(std)
         mean = np.column_stack(means)
@@ -224,7 +227,7 @@ class KrigingRegressor(_PerOutputRegressor):
             est[-1].optimizer = "fmin_l_bfgs_b"
         return self
 
-    def _output(self, est: Pipeline, X: np.ndarray, return_std: bool):
+    def _output(self, est: Pipeline, X: np.ndarray, return_std: bool, shared: dict):
         """:meth:`GaussianProcessRegressor.predict`'s lines on the fitted pipeline's attributes
         (scale; mean ``K(x, X_train) @ alpha``; variance ``k(x, x) - |L^-1 K(x, X_train)^T|^2``,
         negative variances set to 0 with the same warning; undo ``normalize_y``) without
@@ -340,12 +343,14 @@ class ResponseSurface(_PerOutputRegressor):
         self.n_outputs_ = 1 if y.ndim == 1 else int(Y.shape[1])
         return self
 
-    def _output(self, est: Pipeline, X: np.ndarray, return_std: bool):
+    def _output(self, est: Pipeline, X: np.ndarray, return_std: bool, shared: dict):
         """One output by the pipeline's own arithmetic on its fitted attributes (scalers,
         polynomial powers, the ridge's coefficients and posterior covariance), without
         scikit-learn's validation at each of the four steps, which cost most of a prediction;
-        equal to the pipelines' ``predict`` (tests/test_surrogate_families.py)."""
-        terms = _polynomial_terms(est, X)
+        equal to the pipelines' ``predict`` (tests/test_surrogate_families.py). Outputs whose
+        scalers and powers are equal (the same degree, fitted on the same rows) share the terms
+        (``shared``): the same operations on the same numbers."""
+        terms = polynomial_terms(est, X, shared)
         ridge = est.steps[-1][1]
         mean = terms @ ridge.coef_ + ridge.intercept_
         if not return_std:
@@ -363,25 +368,3 @@ class ResponseSurface(_PerOutputRegressor):
             f"{est[-1].alpha_:.4g}, weight precision {est[-1].lambda_:.4g}"
             for est in self.estimators_
         ]
-
-
-#: Per fitted response-surface polynomial, its ``powers_`` (terms, features): a property that
-#: recomputes every combination at each access, which cost half of a prediction. Weak keys: a
-#: polynomial that is gone leaves no entry.
-_POWERS = weakref.WeakKeyDictionary()
-
-
-def _polynomial_terms(pipeline: Pipeline, X: np.ndarray) -> np.ndarray:
-    """The standardised polynomial terms of a fitted :meth:`ResponseSurface._pipeline_of` at X:
-    scale, the products of the powers ``poly.powers_`` (features multiplied in their order: a
-    power 0 contributes an exact 1), scale the terms."""
-    (_, scale), (_, poly), (_, scale_terms), _ = pipeline.steps  # by position: naming a step costs a lookup
-    powers = _POWERS.get(poly)
-    if powers is None:
-        powers = _POWERS[poly] = poly.powers_
-    x = (X - scale.mean_) / scale.scale_
-    # every power of every feature once, (n, features, degree + 1), then each term's factors by index,
-    # contiguous so that the product runs over the features in their order (as the loop it replaced)
-    table = x[:, :, None] ** np.arange(powers.max() + 1)
-    terms = np.prod(np.ascontiguousarray(table[:, np.arange(powers.shape[1]), powers]), axis=2)
-    return (terms - scale_terms.mean_) / scale_terms.scale_

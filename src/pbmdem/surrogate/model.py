@@ -1,8 +1,6 @@
-"""The encounter surrogate used by the PBM: :class:`CollisionSurrogate`, a scikit-learn regressor
-on the feature matrix of :mod:`pbmdem.surrogate.features` that holds the frequency model, the
-impact-speed model, the physics offsets and the training domain, and offers the PBM-facing
-:meth:`~CollisionSurrogate.frequency_matrix`, :meth:`~CollisionSurrogate.encounters` and
-:meth:`~CollisionSurrogate.impacts`.
+"""The encounter surrogate used by the PBM: :class:`CollisionSurrogate`, a scikit-learn regressor on the
+features of :mod:`pbmdem.surrogate.features` holding the frequency and impact-speed models, the physics
+offsets, the pooled tail and the training domain; the PBM calls ``frequency_matrix``, ``encounters``, ``impacts``.
 """
 
 from __future__ import annotations
@@ -18,6 +16,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 from pbmdem.frequency import matrix_from_pairs
 from pbmdem.impact import EncounterRates, ImpactRates
 
+from ._terms import shared_terms
 from .domain import TrainingDomain
 from .ensemble import EnsembleMLPRegressorCV
 from .errors import VelocityModelMissingError, checked_groups, require_fitted
@@ -359,10 +358,11 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         return EncounterRates(frequency=frequency, velocity_fractions=matrix_from_pairs(self._pair_velocity(F), k))
 
     def impacts(self, diameters, numbers, rpm: float, check_domain: bool = True):
-        """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall impacts per granule
-        of the wall models (``wall_models_``, :mod:`pbmdem.surrogate.walls`), for breakage."""
-        pairs = self.encounters(diameters, numbers, rpm, check_domain=check_domain)
-        return ImpactRates(pairs, wall_rates(self, diameters, numbers, rpm, check_domain=check_domain))
+        """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall models' impacts per granule
+        (:mod:`~pbmdem.surrogate.walls`); response surfaces share terms at equal features (:mod:`._terms`)."""
+        with shared_terms():
+            pairs = self.encounters(diameters, numbers, rpm, check_domain=check_domain)
+            return ImpactRates(pairs, wall_rates(self, diameters, numbers, rpm, check_domain=check_domain))
 
     def __call__(self, diameters, numbers, rpm: float):
         """Collision-frequency source interface of ``pbmdem.pbm`` (docs/architecture.md)."""

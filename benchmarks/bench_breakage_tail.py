@@ -173,12 +173,17 @@ def held_out_points(tables: dict, settings: dict, radius: float, family: str, la
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             model = clone(template).fit(data.X.iloc[train], data.y[train], groups=data.groups[train],
-                                        velocity=data.velocity[train])  # fmt: skip
+                                        velocity=data.velocity[train],
+                                        velocity_counts=data.velocity_counts[train])  # fmt: skip
             model.wall_models_ = {}
             for w, wd in walls.items():
                 rows = np.flatnonzero(np.isin(wd.groups, list(train_runs)))
                 model.wall_models_[w] = clone(template).fit(
-                    wd.X.iloc[rows], wd.y[rows], groups=wd.groups[rows], velocity=wd.velocity[rows]
+                    wd.X.iloc[rows],
+                    wd.y[rows],
+                    groups=wd.groups[rows],
+                    velocity=wd.velocity[rows],
+                    velocity_counts=wd.velocity_counts[rows],
                 )
             for point in test_runs:
                 d, n, rpm = point_classes(tables["pairs"], point)

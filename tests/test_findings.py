@@ -247,6 +247,12 @@ def test_kernel_source_in_words():
     assert kernel_source({}) == "Kernel source: not recorded (not recorded); fitted not recorded"
     mixed = {**kriging, "velocity_family": "mlp", "cv_scores": {"selection": "auto", "speed_law_selection": "tv"}}
     assert kernel_source(mixed) == "Kernel source: kriging (auto); fitted 1**2 * RBF; impact-speed law: mlp (tv)"
+    tail = {"from_m_s": 1.7782794100389228, "a": 11.385, "beta": 0.6077, "sd_ln_a_between_runs": 0.1425}
+    assert kernel_source({**kriging, "speed_tail": tail}) == (
+        "Kernel source: kriging (auto); fitted 1**2 * RBF; pair impacts faster than 1.78 m/s: one tail for every "
+        "pair and run, P(V > v) falling as exp(-11.4 (v / v_tip)^0.61), the members' scale spread by 0.14 in ln a "
+        "(the scatter between DEM beds)"
+    )
 
 
 def test_hyperparameters_in_words():

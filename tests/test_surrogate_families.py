@@ -29,15 +29,14 @@ from pbmdem.surrogate import (
     summarise,
     training_data,
 )
-from pbmdem.surrogate.evaluation import (
+from pbmdem.surrogate.calibration import (
     calibration_scale,
     coverage,
     cross_fitted_coverage,
-    default_baselines,
     interval_z,
-    sample_scores,
-    select_per_target,
+    run_calibration_scale,
 )
+from pbmdem.surrogate.evaluation import default_baselines, sample_scores, select_per_target
 from pbmdem.surrogate.families import member_quantiles
 from pbmdem.surrogate.settings import FAMILIES, build_families
 from pbmdem.surrogate.velocity import tail_error
@@ -447,6 +446,19 @@ def test_kriging_mean_predicts_as_its_pipelines_do():
     single = KrigingRegressor(n_restarts_optimizer=0).fit(X, y[:, 0])
     assert single.predict_array(X_new).shape == (len(X_new),)
     assert np.array_equal(single.predict_array(X_new), single.estimators_[0].predict(X_new))
+
+
+def test_run_calibration_scale_is_the_row_scale_of_the_runs_means():
+    # three pairs per run; within a run the errors cancel, between runs they do not: the run-level
+    # factor is that of the runs' mean errors over their mean std, smaller than the rows'
+    runs = np.repeat(["a", "b", "c", "d", "e"], 3)
+    shared = np.repeat([0.02, -0.04, 0.01, 0.03, -0.02], 3)
+    pair = np.tile([0.1, -0.1, 0.0], 5)
+    y, mean, std = np.zeros(15), shared + pair, np.full(15, 0.05)
+    per_run = calibration_scale(np.zeros(5), shared[::3], np.full(5, 0.05))
+    assert run_calibration_scale(runs, y, mean, std) == pytest.approx(per_run, rel=1e-12)
+    assert per_run == pytest.approx(0.04 / 0.05 / interval_z(), rel=1e-12)  # the 90 % quantile of 5: the largest
+    assert calibration_scale(y, mean, std) > 2 * per_run
 
 
 def test_terms_of_two_factors_equal_the_product_over_every_feature(monkeypatch):

@@ -167,7 +167,7 @@ def test_round_trip_keeps_the_fitted_state(fitted, saved, table):
     assert {"sklearn", "numpy", "skops"} <= set(meta["versions"])
     assert meta["cv_scores"]["mlp"]["pooled_r2_log10"] == 0.9
     assert meta["cv_scores"]["mlp"]["nan_value"] is None  # strict JSON, no NaN
-    assert meta["format_version"] == FORMAT_VERSION == 7
+    assert meta["format_version"] == FORMAT_VERSION == 8
     assert meta["family"] == meta["velocity_family"] == "mlp"
     # the impeller radius the model was trained with, and every estimator parameter
     assert meta["params"]["impeller_radius"] == R
@@ -270,7 +270,8 @@ def test_another_format_version_is_refused_with_retrain(saved, found):
     meta["format_version"] = found
     meta_path.write_text(json.dumps(meta))
     with pytest.raises(
-        IncompatibleVersionError, match=rf"{meta_path}: format version {found} .*reads version 7.*retrain"
+        IncompatibleVersionError,
+        match=rf"{meta_path}: format version {found} .*reads version {FORMAT_VERSION}.*retrain",
     ):
         load_surrogate(model)
 

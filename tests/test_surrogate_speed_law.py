@@ -169,7 +169,7 @@ def test_fit_from_1_m_s_recovers_the_tail_above_2_m_s_of_a_law_whose_bulk_differ
 
 
 def test_fit_from_must_be_a_bin_edge_and_reaches_the_training_data():
-    with pytest.raises(ValueError, match=r"fitted from 0\.9 m/s; allowed: null or an inner edge"):
+    with pytest.raises(ValueError, match=r"speed_law_from = 0\.9 m/s; allowed: null or an inner edge"):
         fit_speed_law(np.ones(N_VELOCITY_BINS), "gengamma", fit_from=0.9)
     pairs, velocities = make_synthetic_tables(R, rpms=(600.0, 1200.0), sample_velocities=True, seed=3)
     data = training_data(pairs, R, velocity_table=velocities, speed_law="gengamma", speed_law_from=1.0)

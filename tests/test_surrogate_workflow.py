@@ -85,6 +85,7 @@ def test_build_surrogate_from_settings():
         "impeller_radius",
         "physics_offset",
         "speed_law",
+        "speed_tail_from",
         "uncertainty_scale",
         "velocity_model",
         "velocity_uncertainty_scale",
@@ -198,7 +199,7 @@ def test_cli_train_and_predict(tmp_path, capsys):
     velocity.to_csv(vcsv, index=False)
     cfg = yaml.safe_load((REPO / "config" / "test.yaml").read_text())
     cfg["granulator"]["impeller"]["blade_length"] = 0.012
-    cfg["surrogate"] = TINY
+    cfg["surrogate"] = {**TINY, "speed_tail_from": 0.316}  # the tiny tips are 0.4-1.1 m/s
     cfg_path = tmp_path / "config.yaml"
     cfg_path.write_text(yaml.safe_dump(cfg))
     out = tmp_path / "out"
@@ -223,7 +224,11 @@ def test_cli_train_and_predict(tmp_path, capsys):
         )
     printed = capsys.readouterr().out
     assert "replicate noise floor" in printed and "median impact speed" in printed
-    assert json.loads((out / "model.json").read_text())["params"]["impeller_radius"] == 0.012
+    meta = json.loads((out / "model.json").read_text())
+    assert meta["params"]["impeller_radius"] == 0.012
+    tail = meta["speed_tail"]
+    assert tail["from_m_s"] == pytest.approx(0.316, rel=1e-3) and tail["a"] > 0 and tail["beta"] > 0
+    assert f"pooled fast tail from 0.316 m/s: a {tail['a']:.3g}, beta {tail['beta']:.3g}" in printed
     assert (
         main(
             [
@@ -384,10 +389,13 @@ def test_auto_chooses_the_frequency_on_the_pbm_samples_and_the_speed_law_apart(t
     model = load_surrogate(out / "model.skops")
     assert type(model.frequency_model_) is FAMILY_CLASSES[meta["family"]]
     assert type(model.velocity_model_) is FAMILY_CLASSES[meta["velocity_family"]]
-    # each uncertainty calibrated on the named runs
+    # the frequency's uncertainty calibrated on the means of every held-out run (what a member shifts),
+    # the speed law's on the named runs' rows
     calibration = meta["cv_scores"]["calibration"]
-    assert calibration["frequency"]["rows"] == "active-learning runs"
-    assert model.uncertainty_scale == pytest.approx(per[meta["family"]]["uncertainty_scale"])
+    assert calibration["frequency"]["rows"] == "means of every held-out run"
+    pooled = meta["cv_scores"]["pooled_scores"][meta["family"]]
+    assert model.uncertainty_scale == pytest.approx(pooled["run_uncertainty_scale"])
+    assert pooled["run_uncertainty_scale"] != pytest.approx(pooled["uncertainty_scale"])
     assert model.velocity_uncertainty_scale == pytest.approx(per[meta["velocity_family"]]["velocity_uncertainty_scale"])
     d, n = np.array([0.002, 0.003, 0.004]), np.array([900.0, 600.0, 300.0])
     for k in range(model.n_members):

@@ -84,6 +84,11 @@ class Surrogate(Settings):
         "m/s, an inner edge of the velocity bins: the speed law is fitted to the bins from this speed up, "
         "the slower impacts one cell (the fast tail breakage counts); null: to every bin",
     )
+    speed_tail_from: float | None = setting(
+        None,
+        "m/s, an inner edge of the velocity bins: above it the pair impact speeds follow one stretched exponential "
+        "in tip-speed units fitted to every run's pairs at once (the fast tail breakage counts); null: the speed law's",
+    )
     model: Literal["auto", "mlp", "kriging", "rsm"] = setting(
         "auto",
         "the family PBM-ANN uses: auto, per target the least held-out error (docs/surrogate.md); or mlp, kriging, rsm",

@@ -118,6 +118,13 @@ def kernel_source(meta: dict) -> str:
     speed = meta.get("velocity_family")
     if speed and speed != meta.get("family"):  # the impact-speed law of another family (model format 6)
         out += f"; impact-speed law: {speed} ({scores.get('speed_law_selection') or 'not recorded'})"
+    tail = meta.get("speed_tail")
+    if tail:  # model format 8: the pooled fast tail (docs/surrogate.md)
+        out += (
+            f"; pair impacts faster than {tail['from_m_s']:.3g} m/s: one tail for every pair and run, "
+            f"P(V > v) falling as exp(-{tail['a']:.3g} (v / v_tip)^{tail['beta']:.2f}), the members' scale "
+            f"spread by {tail['sd_ln_a_between_runs']:.2f} in ln a (the scatter between DEM beds)"
+        )
     return out
 
 

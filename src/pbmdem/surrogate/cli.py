@@ -115,6 +115,10 @@ def _train(args) -> int:
         )
     print(f"pair encounter frequency: {meta['family']} ({meta['cv_scores']['selection']})")
     print(f"impact-speed law: {meta['velocity_family']} ({meta['cv_scores']['speed_law_selection']})")
+    if meta.get("speed_tail"):
+        t = meta["speed_tail"]
+        tail = f"a {t['a']:.3g}, beta {t['beta']:.3g}, members' sd of ln a {t['sd_ln_a_between_runs']:.3g}"
+        print(f"pooled fast tail from {t['from_m_s']:.3g} m/s: {tail}")
     print(f"wrote {args.out}/model.skops, model.json, metrics.csv, parity.png")
     return 0
 

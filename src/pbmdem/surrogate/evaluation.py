@@ -11,19 +11,17 @@ import warnings
 
 import numpy as np
 import pandas as pd
-from scipy.stats import norm
 from sklearn.base import clone
 from sklearn.metrics import mean_absolute_error, r2_score
 
 from .baselines import HGBBaseline, PhysicalScaling
+from .calibration import calibration_scale, coverage, cross_fitted_coverage, run_calibration_scale
 from .ensemble import grouped_splits
 from .features import PAIR_ID_COLUMNS, TARGET_COLUMN, TARGET_NAME, TARGET_NOISE_VAR, TrainingData
 from .velocity import TAIL_SPEEDS, bin_counts, empirical_fractions, tail_error, total_variation
 
 log = logging.getLogger(__name__)
 
-#: The nominal level of the predictive intervals whose coverage is checked on held-out runs.
-COVERAGE_LEVEL = 0.90
 METRIC_COLUMNS = [
     "target",
     "model",
@@ -39,51 +37,6 @@ METRIC_COLUMNS = [
     "coverage_90_calibrated",
     "uncertainty_scale",
 ]
-
-
-def interval_z(level: float = COVERAGE_LEVEL) -> float:
-    """Half-width of the central ``level`` interval of a standard normal (1.645 for 90 %)."""
-    return float(norm.ppf(0.5 + level / 2))
-
-
-def _usable(y, mean, std):
-    """The three as float arrays and the mask of rows with finite values and a positive std."""
-    y, mean, std = (np.asarray(a, float) for a in (y, mean, std))
-    return y, mean, std, np.isfinite(y) & np.isfinite(mean) & np.isfinite(std) & (std > 0)
-
-
-def coverage(y, mean, std, scale: float | np.ndarray = 1.0, level: float = COVERAGE_LEVEL) -> float:
-    """Share of rows with ``|y - mean| <= z scale std``: the observed coverage of the nominal
-    ``level`` normal interval (rows with a non-finite or zero std are left out; NaN if none)."""
-    y, mean, std, ok = _usable(y, mean, std)
-    scale = np.broadcast_to(np.asarray(scale, float), y.shape)
-    if not ok.any():
-        return float("nan")
-    return float(np.mean(np.abs(y[ok] - mean[ok]) <= interval_z(level) * scale[ok] * std[ok]))
-
-
-def calibration_scale(y, mean, std, level: float = COVERAGE_LEVEL) -> float:
-    """Factor on ``std`` that makes the nominal ``level`` interval cover that share of the rows:
-    the ``level`` quantile of ``|y - mean| / std`` over ``z``. NaN without usable rows."""
-    y, mean, std, ok = _usable(y, mean, std)
-    if ok.sum() < 2:
-        return float("nan")
-    ratio = np.abs(y[ok] - mean[ok]) / std[ok]
-    return float(np.quantile(ratio, level, method="higher") / interval_z(level))
-
-
-def cross_fitted_coverage(y, mean, std, folds, level: float = COVERAGE_LEVEL) -> float:
-    """Coverage of the calibrated interval without calibrating on the rows it is judged on:
-    every fold's rows are judged with the scale calibrated on the other folds' held-out rows."""
-    y, mean, std, folds = (np.asarray(a) for a in (y, mean, std, folds))
-    scale = np.full(len(y), np.nan)
-    for k in np.unique(folds):
-        rows = folds == k
-        scale[rows] = calibration_scale(y[~rows], mean[~rows], std[~rows], level)
-    ok = np.isfinite(scale)
-    if not ok.any():
-        return float("nan")
-    return coverage(y[ok], mean[ok], std[ok], scale[ok], level)
 
 
 def noise_floor_r2(y, noise_var) -> float:
@@ -124,6 +77,8 @@ def default_baselines(random_state: int | None = 0, speed_law: str = "lognormal"
 def _fit(model, data: TrainingData, rows: np.ndarray):
     """Clone of ``model`` fitted on ``rows`` of ``data`` (with velocity targets if it learns them)."""
     kwargs = {"velocity": data.velocity[rows]} if hasattr(model, "predict_velocity") else {}
+    if hasattr(model, "speed_tail_from") and data.velocity_counts is not None:  # the pooled tail's bins
+        kwargs["velocity_counts"] = data.velocity_counts[rows]
     return clone(model).fit(data.X.iloc[rows], data.y[rows], groups=data.groups[rows], **kwargs)
 
 
@@ -310,6 +265,9 @@ def sample_scores(pred: pd.DataFrame, models, point_ids=None) -> dict:
             "mae_log10": float(np.mean(np.abs(p - obs))),
             "mean_error_log10": float(np.mean(p - obs)),
             "uncertainty_scale": calibration_scale(obs, p, rows[std]) if std in rows else float("nan"),
+            "run_uncertainty_scale": run_calibration_scale(rows["point_id"], obs, p, rows[std])
+            if std in rows
+            else np.nan,
         }
         mu = f"{name}_velocity_mu_log10"
         if mu in vrows and len(vrows):

@@ -30,7 +30,14 @@ from pbmdem.config.granulator import tip_speed as granulator_tip_speed
 from pbmdem.frequency import upper_pairs
 
 from .errors import CollisionTableError
-from .velocity import attach_velocity_bins, bin_counts, fit_speed_law, n_law_parameters, velocity_rows
+from .velocity import (
+    VELOCITY_COUNT_COLUMNS,
+    attach_velocity_bins,
+    bin_counts,
+    fit_speed_law,
+    n_law_parameters,
+    velocity_rows,
+)
 
 #: Columns that name a row of the collision table: its run, its class pair and their diameters.
 PAIR_ID_COLUMNS = ("point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j")
@@ -320,8 +327,8 @@ class TrainingData:
     """Model inputs and targets of a collision table, one row per usable class pair and run.
 
     Every surrogate model (the MLP surrogate and its baselines) is fitted as
-    ``model.fit(X, y, groups=groups)`` (plus ``velocity=velocity`` for the models that learn the
-    impact speeds); the rows are those of ``table``, in the same order (index 0..n-1).
+    ``model.fit(X, y, groups=groups)`` (plus ``velocity=velocity`` and ``velocity_counts`` for the models
+    that learn the impact speeds); the rows are those of ``table``, in the same order (index 0..n-1).
     """
 
     X: pd.DataFrame
@@ -333,9 +340,8 @@ class TrainingData:
     noise_var: np.ndarray
     """:data:`TARGET_NOISE_VAR`: replicate noise variance of ``y`` (decades^2, NaN if unknown)."""
     velocity: np.ndarray
-    """(n, 2) impact-speed law (``speed_law``) of every row: ``mu`` (log10 median speed, m/s) and
-    ``sigma`` (std of log10 v, decades), and for ``gengamma`` a third column, the shape q; fitted to
-    the row's velocity bins; NaN rows without bins."""
+    """(n, 2) impact-speed law (``speed_law``) of every row: ``mu`` (log10 median speed, m/s), ``sigma``
+    (std of log10 v, decades), for ``gengamma`` the shape q; fitted to its bins; NaN without bins."""
     table: pd.DataFrame
     """The rows used (:func:`prepare_training_table`), with the target columns and ``floored``."""
     n_dropped: int
@@ -346,6 +352,8 @@ class TrainingData:
     """The impact-speed law ``velocity`` was fitted with (:data:`~pbmdem.surrogate.velocity.SPEED_LAWS`)."""
     speed_law_from: float | None = None
     """The speed (m/s) from which the law was fitted to the bins (slower impacts one cell); None: every bin."""
+    velocity_counts: np.ndarray | None = None
+    """(n, bins) impacts per velocity bin of every row (NaN: no bins): the pooled fast tail's data."""
 
 
 def training_data(
@@ -368,16 +376,15 @@ def training_data(
     impact-speed law fitted to every row's bins (:data:`~pbmdem.surrogate.velocity.SPEED_LAWS`),
     from the speed ``speed_law_from`` up (:func:`~pbmdem.surrogate.velocity.fit_speed_law`'s ``fit_from``).
     """
-    n_par = n_law_parameters(speed_law)
-
     if velocity_table is not None:
         table = attach_velocity_bins(table, velocity_table, source=velocity_source)
     data = prepare_training_table(table, zero_policy).reset_index(drop=True)
     X = make_features(data, impeller_radius)
-    velocity = np.full((len(data), n_par), np.nan)
-    vmask = velocity_rows(data)
+    velocity, vmask = np.full((len(data), n_law_parameters(speed_law)), np.nan), velocity_rows(data)
+    counts = np.full((len(data), len(VELOCITY_COUNT_COLUMNS)), np.nan)
     if vmask.any():
-        velocity[vmask] = np.column_stack(fit_speed_law(bin_counts(data.loc[vmask]), speed_law, speed_law_from))
+        counts[vmask] = bin_counts(data.loc[vmask])
+        velocity[vmask] = np.column_stack(fit_speed_law(counts[vmask], speed_law, speed_law_from))
     else:
         warnings.warn(
             "the collision table carries no impact-velocity bins (results/dem/impact_velocity.csv "
@@ -396,4 +403,5 @@ def training_data(
         n_floored=int(data["floored"].sum()),
         speed_law=speed_law,
         speed_law_from=speed_law_from,
+        velocity_counts=counts,
     )

@@ -1,8 +1,6 @@
-"""The encounter surrogate used by the PBM: :class:`CollisionSurrogate`, a scikit-learn regressor
-on the feature matrix of :mod:`pbmdem.surrogate.features` that holds the frequency model, the
-impact-speed model, the physics offsets and the training domain, and offers the PBM-facing
-:meth:`~CollisionSurrogate.frequency_matrix`, :meth:`~CollisionSurrogate.encounters` and
-:meth:`~CollisionSurrogate.impacts`.
+"""The encounter surrogate used by the PBM: :class:`CollisionSurrogate`, a scikit-learn regressor on the
+features of :mod:`pbmdem.surrogate.features` holding the frequency and impact-speed models, the physics
+offsets, the pooled tail and the training domain; the PBM calls ``frequency_matrix``, ``encounters``, ``impacts``.
 """
 
 from __future__ import annotations
@@ -31,6 +29,7 @@ from .features import (
     pair_features,
     pair_table,
 )
+from .tail import fit_speed_tail, member_tail, with_speed_tail
 from .velocity import check_speed_law, n_law_parameters, speed_fractions
 from .walls import wall_rates
 
@@ -66,6 +65,8 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         The impact-speed law whose (mu, sigma[, q]) the velocity model learns and whose bin fractions
         it predicts (:mod:`pbmdem.surrogate.velocity`); the ``velocity`` targets of ``fit`` must
         be fitted with the same law (:func:`~pbmdem.surrogate.features.training_data`).
+    speed_tail_from : float or None
+        m/s: above this bin edge fractions follow :func:`~pbmdem.surrogate.tail.fit_speed_tail`; None: the law's
     domain_margin : float
         Relative slack of the per-feature training ranges before :class:`OutOfDomainWarning`
         (fraction of each feature's training range).
@@ -76,6 +77,8 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         The fitted frequency model (``best_params_``, ``cv_results_``, ``estimators_``, ...).
     velocity_model_ : EnsembleMLPRegressorCV or None
         The fitted impact-velocity model, None without velocity targets.
+    speed_tail_ : (int, float, float, float) or None
+        The pooled tail (bin, a, beta, spread) of :func:`~pbmdem.surrogate.tail.fit_speed_tail`, or None.
     feature_min_, feature_max_ : ndarray
         Training range of every feature.
     duplicated_features_ : list of (str, str, float)
@@ -99,6 +102,7 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         uncertainty_scale=1.0,
         velocity_uncertainty_scale=1.0,
         speed_law="lognormal",
+        speed_tail_from=None,
     ):
         self.frequency_model = frequency_model
         self.velocity_model = velocity_model
@@ -109,6 +113,7 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         self.uncertainty_scale = uncertainty_scale
         self.velocity_uncertainty_scale = velocity_uncertainty_scale
         self.speed_law = speed_law
+        self.speed_tail_from = speed_tail_from
 
     # ------------------------------------------------------------------ helpers
     def _inner(self, F: pd.DataFrame):
@@ -121,9 +126,7 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         """The features as the inner models see them: ``log10`` of every feature with
         ``feature_transform="log"`` (all features are positive sizes, fractions, counts and
         speeds that enter power laws), else unchanged. Domain checks use the untransformed values."""
-        if self.feature_transform == "none":
-            return F
-        return np.log10(F)
+        return F if self.feature_transform == "none" else np.log10(F)
 
     def _column(self, F, name: str) -> np.ndarray:
         """Feature ``name`` of a feature frame, or of a feature array in :data:`FEATURE_NAMES` order."""
@@ -137,9 +140,7 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
 
     def _velocity_offset(self, F) -> np.ndarray:
         """log10 of the speed scale the velocity model does not have to learn (the tip speed)."""
-        if self.physics_offset == "none":
-            return np.zeros(len(F))
-        return np.log10(self._column(F, "tip_speed"))
+        return np.zeros(len(F)) if self.physics_offset == "none" else np.log10(self._column(F, "tip_speed"))
 
     def _features(self, X):
         """A collision table becomes its feature frame; a feature frame or an array is passed on."""
@@ -151,11 +152,11 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         return X
 
     # ------------------------------------------------------------------ fit
-    def fit(self, X, y, groups=None, velocity=None):
-        """Fit on the feature matrix ``X`` (n, n_features), ``y`` = log10 encounter frequency per
-        pair (n,), ``groups`` = DEM run of every row (for the grouped hyperparameter search), and
-        optionally ``velocity`` = (n, 2) or (n, 3) impact-speed law per row (``speed_law``; mu = log10 median
-        speed in m/s, sigma in decades; rows with NaN are not used). Returns ``self``."""
+    def fit(self, X, y, groups=None, velocity=None, velocity_counts=None):
+        """Fit on the features ``X`` (n, n_features), ``y`` = log10 encounter frequency per pair (n,),
+        ``groups`` = DEM run of every row (for the grouped search), optionally ``velocity`` = (n, 2 or 3)
+        impact-speed law per row (``speed_law``: log10 median speed in m/s, sigma in decades[, q]; NaN rows
+        unused) and ``velocity_counts`` = (n, bins) impacts per bin (``speed_tail_from``). Returns ``self``."""
         check_impeller_radius(self.impeller_radius)
         check_speed_law(self.speed_law)
         if self.physics_offset not in PHYSICS_OFFSETS:
@@ -198,12 +199,10 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
                 UserWarning,
                 stacklevel=2,
             )
-
         template = EnsembleMLPRegressorCV() if self.frequency_model is None else self.frequency_model
         self.frequency_model_ = clone(template).fit(self._inner(F), y - self._offset(F), groups=groups)
 
-        self.velocity_model_ = None
-        self.n_velocity_rows_ = 0
+        self.velocity_model_, self.n_velocity_rows_ = None, 0
         if velocity is not None and vmask.any():
             Fv = F.loc[vmask].reset_index(drop=True)
             Yv = np.column_stack([V[vmask, 0] - self._velocity_offset(Fv), np.log10(V[vmask, 1]), V[vmask, 2:]])
@@ -212,6 +211,11 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
                 self._inner(Fv), Yv, groups=None if groups is None else groups[vmask]
             )
             self.n_velocity_rows_ = int(vmask.sum())
+        self.speed_tail_ = None
+        if self.velocity_model_ is not None and self.speed_tail_from is not None and velocity_counts is not None:
+            tip = self._column(F, "tip_speed")[vmask]
+            counts, runs = np.asarray(velocity_counts, float)[vmask], None if groups is None else groups[vmask]
+            self.speed_tail_ = fit_speed_tail(counts, tip, self.speed_tail_from, runs)
 
         self.feature_min_ = X.min(axis=0)
         self.feature_max_ = X.max(axis=0)
@@ -276,12 +280,17 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         shape = mean[:, 2] if mean.shape[1] > 2 else None
         return mean[:, 0] + self._velocity_offset(F), 10.0 ** mean[:, 1], shape, std
 
+    def _fractions(self, F, mu, sigma, shape) -> np.ndarray:
+        """Bin fractions of the law (mu, sigma, shape) of the features ``F``, with the pooled tail."""
+        tip = self._column(F, "tip_speed")
+        return with_speed_tail(speed_fractions(mu, sigma, self.speed_law, shape), tip, self.speed_tail_)
+
     def velocity_fractions(self, X, check_domain: bool = True) -> np.ndarray:
         """(n, N_VELOCITY_BINS) predicted fraction of each row's encounters per velocity bin (rows sum to 1)."""
         self._require_velocity_model()
         F = self._validated_frame(self._features(X), check_domain)
         mu, sigma, shape, _ = self._velocity_law(F)
-        return speed_fractions(mu, sigma, self.speed_law, shape)
+        return self._fractions(F, mu, sigma, shape)
 
     # ------------------------------------------------------------------ PBM kernel
     def _array_path(self) -> bool:
@@ -317,7 +326,7 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         if not isinstance(F, np.ndarray):
             return self.velocity_fractions(F, check_domain=False)
         mu, sigma, shape, _ = self._law(F, self.velocity_model_.predict_array(self._transform(F)))
-        return speed_fractions(mu, sigma, self.speed_law, shape)
+        return self._fractions(F, mu, sigma, shape)
 
     def frequency_matrix(self, diameters, numbers, rpm: float, return_std: bool = False, check_domain: bool = True):
         """(K,) diameters (m) and (K,) particle numbers -> (K, K) symmetric encounter frequency c_ij (1/s per pair).
@@ -349,10 +358,8 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         return EncounterRates(frequency=frequency, velocity_fractions=matrix_from_pairs(self._pair_velocity(F), k))
 
     def impacts(self, diameters, numbers, rpm: float, check_domain: bool = True):
-        """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall impacts per granule
-        of the wall models (``wall_models_``, :mod:`pbmdem.surrogate.walls`), for breakage. The
-        response surfaces among them share their polynomial terms at equal features
-        (:func:`~._terms.shared_terms`: the walls' models see the same classes)."""
+        """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall models' impacts per granule
+        (:mod:`~pbmdem.surrogate.walls`); response surfaces share terms at equal features (:mod:`._terms`)."""
         with shared_terms():
             pairs = self.encounters(diameters, numbers, rpm, check_domain=check_domain)
             return ImpactRates(pairs, wall_rates(self, diameters, numbers, rpm, check_domain=check_domain))
@@ -368,16 +375,13 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         return self.frequency_model_.n_members_
 
     def member(self, k: int) -> CollisionSurrogate:
-        """A copy of the fitted surrogate that predicts with member ``k`` of its calibrated
-        uncertainty alone: :class:`~pbmdem.surrogate.families.CalibratedMember` at the k-th of
-        :func:`~pbmdem.surrogate.families.member_quantiles` ``z_k``, with ``std`` the spread of the
-        ensemble's networks (MLP) or the predictive standard deviation (Kriging, RSM) and ``scale``
-        ``uncertainty_scale`` (``velocity_uncertainty_scale`` for the impact-speed law).
-        The frequency, the impact-speed law and the wall models take the same ``z_k``, whatever
-        their families: member 0 has the fewest and slowest impacts, the last the most and the
-        fastest, and with an odd ``n_members`` the middle member is the mean prediction itself, so
-        that PBM-ANN's mean lies inside its members' range. Running the PBM once per member gives
-        the spread of PBM-ANN that the uncertainty implies."""
+        """A copy of the fitted surrogate that predicts with member ``k`` of its calibrated uncertainty
+        alone: :class:`~pbmdem.surrogate.families.CalibratedMember` at the k-th of
+        :func:`~pbmdem.surrogate.families.member_quantiles` ``z_k`` (``std``: the networks' spread or
+        the predictive standard deviation, times ``uncertainty_scale`` or ``velocity_uncertainty_scale``),
+        the pooled tail's a times exp(-z_k spread). Frequency, speed law, tail and wall models take the
+        same ``z_k``: member 0 has the fewest and slowest impacts, the last the most and the fastest;
+        with an odd ``n_members`` the middle member is the mean prediction itself."""
         n = self.n_members
         if not 0 <= int(k) < n:
             raise ValueError(f"surrogate member {k!r}: allowed 0 .. {n - 1}")
@@ -391,4 +395,5 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
             out.velocity_model_ = CalibratedMember(self.velocity_model_, z, self.velocity_uncertainty_scale)
         walls = getattr(self, "wall_models_", None) or {}
         out.wall_models_ = {wall: model._at(z) for wall, model in walls.items()}
+        out.speed_tail_ = member_tail(self.speed_tail_, z)
         return out

@@ -50,11 +50,12 @@ from .model import CollisionSurrogate
 FAMILY_CLASSES = {"mlp": EnsembleMLPRegressorCV, "kriging": KrigingRegressor, "rsm": ResponseSurface}
 
 FORMAT = "pbmdem-surrogate"
+#: 8: the pooled fast tail of the impact speeds (``speed_tail``); 7: the features rel_small, rel_large;
 #: 6: the impact-speed law may be of another family than the frequency (``velocity_family``;
 #: 5: one family for both); 5: the fitted CollisionSurrogate itself in the skops file, the sidecar
 #: for users (4: fitted pipelines, the rest rebuilt from the metadata; 3: MLP only; 2: one class;
 #: 1: raw target).
-FORMAT_VERSION = 7
+FORMAT_VERSION = 8
 
 #: Every type that may appear in a surrogate model file (module.qualname).
 ALLOWED_TYPES = frozenset(
@@ -138,6 +139,20 @@ def family_name(model) -> str:
     raise ValueError(f"{type(model).__name__} is not a surrogate model family {sorted(FAMILY_CLASSES)}")
 
 
+def _tail_metadata(tail) -> dict | None:
+    """The pooled fast tail (:func:`~.tail.fit_speed_tail`) as a user reads it, or None."""
+    if tail is None:
+        return None
+    first, a, beta, spread = tail
+    return {
+        "from_m_s": float(VELOCITY_EDGES[first]),
+        "a": a,
+        "beta": beta,
+        "sd_ln_a_between_runs": spread,  # the members' a: a exp(-z sd)
+        "law": "P(V>v|V>v_s) = exp(-a((v/v_tip)^beta - (v_s/v_tip)^beta))",
+    }
+
+
 def _model_metadata(surrogate: CollisionSurrogate) -> dict:
     """What a user reads of one fitted surrogate (the pair model, or a wall model under ``walls``)."""
     freq, vel = surrogate.frequency_model_, surrogate.velocity_model_
@@ -152,6 +167,7 @@ def _model_metadata(surrogate: CollisionSurrogate) -> dict:
         "frequency_state": freq.fitted_state(),
         "velocity_state": None if vel is None else vel.fitted_state(),
         "n_velocity_rows": surrogate.n_velocity_rows_,
+        "speed_tail": _tail_metadata(surrogate.speed_tail_),
         "duplicated_features": [list(p) for p in surrogate.duplicated_features_],
         "feature_names": [str(n) for n in surrogate.feature_names_in_],
         "feature_ranges": {k: list(v) for k, v in surrogate.feature_ranges().items()},

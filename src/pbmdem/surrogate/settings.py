@@ -66,6 +66,7 @@ def build_surrogate(
         domain_margin=typed.domain_margin,
         feature_transform=typed.feature_transform,
         speed_law=typed.speed_law,
+        speed_tail_from=typed.speed_tail_from,
     )
 
 

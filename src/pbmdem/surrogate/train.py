@@ -130,9 +130,11 @@ def train_and_report(
     pooled_scores = {} if predictions is None else sample_scores(predictions, list(families))
     choice = _kernel_source(settings["model"], metrics, summary, pbm_scores, pooled_scores)
     selected, speed_family = choice["frequency"], choice["speed_law"]
-    surrogate, calibration = _calibrated(families, choice, summary, velocity_summary, pbm_scores)
+    surrogate, calibration = _calibrated(families, choice, summary, velocity_summary, pbm_scores, pooled_scores)
     t0 = time.perf_counter()
-    _logged(surrogate.fit, data.X, data.y, groups=data.groups, velocity=data.velocity)
+    _logged(
+        surrogate.fit, data.X, data.y, groups=data.groups, velocity=data.velocity, velocity_counts=data.velocity_counts
+    )
     metrics, wall_summary = _train_walls(surrogate, speed_family, metrics, (wall_table, wall_velocity_table), settings,
                                          impeller_radius, n_jobs)  # fmt: skip
     t_fit = time.perf_counter() - t0
@@ -299,11 +301,13 @@ def _kernel_source(choice: str, metrics: pd.DataFrame, summary: dict, pbm_scores
     return out
 
 
-def _calibrated(families: dict, choice: dict, summary: dict, velocity_summary: dict, pbm_scores: dict):
+def _calibrated(families: dict, choice: dict, summary: dict, velocity_summary: dict, pbm_scores: dict, runs: dict):
     """The surrogate of the chosen families (frequency model of one, impact-speed law of the other),
-    with the held-out calibration factor of each as its uncertainty scale: on the active-learning
-    runs' rows (``pbm_scores``) when there are any, else on every held-out row. Returns
-    (surrogate, {target: {family, scale, rows}})."""
+    with the held-out calibration factor of each as its uncertainty scale. The frequency's on the
+    means of every held-out run (``runs``: :func:`~.evaluation.sample_scores` of every row): a member shifts every pair
+    of a bed alike, and the PBM's growth follows a bed's mean error, not one pair's; the speed law's
+    on the active-learning runs' rows (``pbm_scores``) when there are any, else on every held-out row.
+    Returns (surrogate, {target: {family, scale, rows}})."""
     freq, speed = choice["frequency"], choice["speed_law"]
     surrogate = clone(families[freq]).set_params(velocity_model=clone(families[speed].velocity_model))
     scales, calibration = {}, {}
@@ -312,6 +316,8 @@ def _calibrated(families: dict, choice: dict, summary: dict, velocity_summary: d
         ("velocity_uncertainty_scale", "speed_law", speed, velocity_summary, "velocity_uncertainty_scale"),
     ):
         scale, rows = pbm_scores.get(family, {}).get(on_samples, float("nan")), "active-learning runs"
+        if target == "frequency":
+            scale, rows = runs.get(family, {}).get("run_uncertainty_scale", np.nan), "means of every held-out run"
         if not (np.isfinite(scale) and scale > 0):
             scale, rows = pooled.get(family, {}).get("uncertainty_scale", float("nan")), "every held-out run"
         if not (np.isfinite(scale) and scale > 0):

@@ -228,16 +228,16 @@ def _neg_loglik(theta, counts, law: str = "lognormal", first: int = 0):
     return -(below * log_below + float(np.sum(counts[first:] * np.maximum(logp[first:], -745.0))))
 
 
-def fit_from_bin(fit_from: float | None) -> int:
+def fit_from_bin(fit_from: float | None, key: str = "surrogate.speed_law_from") -> int:
     """The bin from which :func:`fit_speed_law` resolves the bins (0: every bin) for ``fit_from``
     (m/s, an inner edge of :data:`~pbmdem.impact.VELOCITY_EDGES`, or None); ValueError otherwise."""
     if fit_from is None:
         return 0
     inner = VELOCITY_EDGES[1:-1]
-    match = np.flatnonzero(np.isclose(inner, float(fit_from), rtol=1e-6, atol=0.0))
+    match = np.flatnonzero(np.isclose(inner, float(fit_from), rtol=5e-3, atol=0.0))  # an edge to 3 digits
     if match.size != 1:
         raise ValueError(
-            f"speed law fitted from {fit_from!r} m/s; allowed: null or an inner edge of the velocity bins, "
+            f"{key} = {fit_from!r} m/s; allowed: null or an inner edge of the velocity bins (3 digits suffice), "
             f"{[float(f'{e:.4g}') for e in inner]}"
         )
     return int(match[0]) + 1

@@ -152,6 +152,8 @@ def train_wall_models(walls, velocities, template, candidates: dict, settings: d
         model = clone(template).set_params(**scales)
         with warnings.catch_warnings():
             warnings.filterwarnings("ignore", message=f"features ({'|'.join(DIAGONAL_TWINS)}) are")
-            models[wall] = model.fit(data.X, data.y, groups=data.groups, velocity=data.velocity)
+            models[wall] = model.fit(
+                data.X, data.y, groups=data.groups, velocity=data.velocity, velocity_counts=data.velocity_counts
+            )
         frames.append(metrics.assign(target=wall + "_" + metrics["target"]))
     return models, pd.concat(frames, ignore_index=True), summaries

@@ -4,8 +4,7 @@ Input is the aggregated collision table of ``docs/architecture.md`` (one row per
 pair and DEM run, ``point_id`` identifies the run). Every row becomes one sample with the
 features in :data:`FEATURE_NAMES`; the target is ``log10(encounter_frequency_per_pair)``, the
 frequency per pair of *encounters* (impacts of granules that were apart), averaged over the DEM
-replicates (insertion seeds) of the run. The raw new-contact columns ``collisions`` and
-``frequency_per_pair`` are diagnostics and are not learned.
+replicates (insertion seeds) of the run. The raw ``collisions``, ``frequency_per_pair`` are not learned.
 
 :func:`training_data` is the one place that turns a collision table (and its impact-velocity
 table) into what every model is fitted on: ``X``, ``y``, ``groups`` (DEM runs), the replicate
@@ -28,16 +27,10 @@ import pandas as pd
 
 from pbmdem.config.granulator import tip_speed as granulator_tip_speed
 from pbmdem.frequency import upper_pairs
+from pbmdem.impact import N_VELOCITY_BINS
 
 from .errors import CollisionTableError
-from .velocity import (
-    VELOCITY_COUNT_COLUMNS,
-    attach_velocity_bins,
-    bin_counts,
-    fit_speed_law,
-    n_law_parameters,
-    velocity_rows,
-)
+from .velocity import attach_velocity_bins, bin_counts, fit_speed_law, n_law_parameters, velocity_rows
 
 #: Columns that name a row of the collision table: its run, its class pair and their diameters.
 PAIR_ID_COLUMNS = ("point_id", "rpm", "distribution", "class_i", "class_j", "d_i", "d_j")
@@ -381,7 +374,7 @@ def training_data(
     data = prepare_training_table(table, zero_policy).reset_index(drop=True)
     X = make_features(data, impeller_radius)
     velocity, vmask = np.full((len(data), n_law_parameters(speed_law)), np.nan), velocity_rows(data)
-    counts = np.full((len(data), len(VELOCITY_COUNT_COLUMNS)), np.nan)
+    counts = np.full((len(data), N_VELOCITY_BINS), np.nan)
     if vmask.any():
         counts[vmask] = bin_counts(data.loc[vmask])
         velocity[vmask] = np.column_stack(fit_speed_law(counts[vmask], speed_law, speed_law_from))

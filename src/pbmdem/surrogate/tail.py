@@ -57,7 +57,7 @@ def fit_speed_tail(counts, tip_speed, tail_from: float, groups=None) -> tuple[in
 
     with v_tip each row's impeller ``tip_speed`` (m/s): one stretched exponential in tip-speed units
     for every pair and run (docs/surrogate.md, "The pooled fast tail"). A single pair's tail holds a
-    handful of impacts (at 1200 rpm about 1 in 3000 pair impacts is faster than 3.16 m/s); pooled, the
+    handful of impacts (at 1200 rpm about 1 in 750 pair impacts is faster than 3.16 m/s); pooled, the
     grid's holds thousands. The spread is the standard deviation of ln a_r over the runs (``groups``)
     with at least :data:`TAIL_RUN_MIN_COUNTS` impacts from ``tail_from`` up, a_r each run's own scale
     at the pooled beta: how far one bed's tail departs from the pooled one (0 with fewer than two

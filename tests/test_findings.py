@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from pbmdem.config import SizeDistribution
-from pbmdem.coupling.studies import blend, feed_cases, mass_median
+from pbmdem.coupling.studies import blend, feed_cases
 from pbmdem.report import findings
 from pbmdem.report.provenance import hyperparameters, kernel_source
 from pbmdem.report.training import training_set, training_words
@@ -24,7 +24,7 @@ def test_a_blend_holds_each_feed_by_mass_and_lies_between_them():
     mass = np.asarray(mix.number_fractions) * np.asarray(mix.diameters) ** 3
     from_fine = sum(m for d, m in zip(mix.diameters, mass) if d in FINE.diameters)
     assert from_fine / mass.sum() == pytest.approx(0.5)
-    assert mass_median(FINE) < mass_median(mix) < mass_median(COARSE)
+    assert FINE.mass_median < mix.mass_median < COARSE.mass_median
     with pytest.raises(ValueError, match="allowed 0 < share < 1"):
         blend(FINE, COARSE, 1.0)
 

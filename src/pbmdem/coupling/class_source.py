@@ -13,18 +13,9 @@ rate, which log f could not hold), their speeds those of the nearest class.
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 
-from pbmdem.frequency import upper_pairs
 from pbmdem.impact import EncounterRates, ImpactRates, WallRates
 from pbmdem.pbm.kernels import TableFrequency
-
-
-def class_table(diameters, matrix) -> pd.DataFrame:
-    """Upper-triangular class-pair frame with d_i, d_j, frequency_per_pair (TableFrequency input)."""
-    d = np.asarray(diameters, float)
-    i, j = upper_pairs(len(d))
-    return pd.DataFrame({"d_i": d[i], "d_j": d[j], "frequency_per_pair": np.asarray(matrix, float)[i, j]})
 
 
 class ClassFrequencySource:
@@ -56,7 +47,7 @@ class ClassFrequencySource:
             self._value = float(self.matrix[0, 0])
             self._table = None
         else:
-            # the TableFrequency of class_table(diameters, matrix), built without its DataFrames
+            # the TableFrequency of the upper-triangular class pairs, built without DataFrames
             self._table = TableFrequency.from_matrix(
                 self.diameters, self.matrix, extrapolation="clamp", column="frequency_per_pair"
             )

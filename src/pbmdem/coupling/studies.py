@@ -31,11 +31,6 @@ from .methods import pbm_ann
 log = logging.getLogger(__name__)
 
 
-def mass_median(sizes: SizeDistribution) -> float:
-    """The mass-median diameter (m) of a discrete distribution (`SizeDistribution.mass_median`)."""
-    return sizes.mass_median
-
-
 def blend(a: SizeDistribution, b: SizeDistribution, mass_share_a: float = 0.5) -> SizeDistribution:
     """A mix of two feeds by mass (`mass_share_a` of the mass from `a`): the union of their classes."""
     if not 0.0 < mass_share_a < 1.0:
@@ -92,7 +87,7 @@ def run_case(loop: CoupledLoop, model_path: str | Path, rpm: float, feed: str, s
     the wall time."""
     case = with_feed(loop, feed, sizes)
     n_members = load_surrogate(model_path).n_members
-    row: dict = {"rpm": float(rpm), "feed": feed, "feed_d50": mass_median(sizes)}
+    row: dict = {"rpm": float(rpm), "feed": feed, "feed_d50": sizes.mass_median}
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         try:

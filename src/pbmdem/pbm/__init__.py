@@ -6,29 +6,7 @@ beta0 * c_ij * psi_ij (c_ij from a pluggable collision-frequency source), binder
 spray window, consolidation toward a minimum porosity, optional breakage, adaptive
 positivity-preserving explicit integration.
 
-| module | concept |
-| --- | --- |
-| `grid` | the geometric solid-volume grid and the lever rule |
-| `aggregation` | the cell-average and fixed-pivot aggregation schemes (their pair maps for the compiled rates) |
-| `kernels` | aggregation kernels (the collision-frequency sources re-exported) |
-| `sources` | the constant collision-frequency source and the checks of what any source returns |
-| `breakage` | breakage: selection rates, fragment distributions and their cell-average tables |
-| `table` | the DEM collision table as a collision-frequency source (`TableFrequency`, re-exported by `kernels`) |
-| `wall_table` | the DEM's wall impacts per granule and their speeds, interpolated in size and speed (`WallTable`) |
-| `impact_breakage` | breakage selection from impacts: the Stokes deformation criterion (`ImpactSelection`) |
-| `success` | the success probability of a pair and the Stokes criterion of velocity-dependent success |
-| `processes` | liquid addition and consolidation |
-| `state` | the resumable state of a run |
-| `model` | the population balance: its classes, states, rates and stages |
-| `model2d` | the two-dimensional population balance: size x liquid-to-solid ratio classes (`pbm.dimensions: 2`) |
-| `liquid_grid` | the liquid classes of the two-dimensional model |
-| `_compiled2d` | the rates and stages of the two-dimensional model (numba) |
-| `stepping` | the time integration: the run loop and its step control (step sizes, rejections, limits, records) |
-| `_compiled` | the one implementation of the rates (numba), imported when a model is built |
-| `_compiled_steps` | the stages and the step loop of the time integration (numba), imported with it |
-| `results` | time series, size statistics, tables, plots |
-| `setup` | a model and a batch from the typed settings (pbmdem.config) |
-| `errors` | the PBM's exceptions |
+Its modules, one concept each: docs/architecture.md ("Packages and modules").
 
 `setup` (and with it the settings layer) is imported on first use, so `import pbmdem.pbm` stays light.
 """

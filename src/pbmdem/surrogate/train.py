@@ -311,13 +311,14 @@ def _calibrated(families: dict, choice: dict, summary: dict, velocity_summary: d
     freq, speed = choice["frequency"], choice["speed_law"]
     surrogate = clone(families[freq]).set_params(velocity_model=clone(families[speed].velocity_model))
     scales, calibration = {}, {}
-    for key, target, family, pooled, on_samples in (
-        ("uncertainty_scale", "frequency", freq, summary, "uncertainty_scale"),
-        ("velocity_uncertainty_scale", "speed_law", speed, velocity_summary, "velocity_uncertainty_scale"),
+    # per target: the scores it is calibrated on first, their key and what they hold; the pooled rows next
+    frequency_first = (runs, "run_uncertainty_scale", "means of every held-out run")
+    speed_first = (pbm_scores, "velocity_uncertainty_scale", "active-learning runs")
+    for key, target, family, pooled, (first, first_key, first_rows) in (
+        ("uncertainty_scale", "frequency", freq, summary, frequency_first),
+        ("velocity_uncertainty_scale", "speed_law", speed, velocity_summary, speed_first),
     ):
-        scale, rows = pbm_scores.get(family, {}).get(on_samples, float("nan")), "active-learning runs"
-        if target == "frequency":
-            scale, rows = runs.get(family, {}).get("run_uncertainty_scale", np.nan), "means of every held-out run"
+        scale, rows = first.get(family, {}).get(first_key, float("nan")), first_rows
         if not (np.isfinite(scale) and scale > 0):
             scale, rows = pooled.get(family, {}).get("uncertainty_scale", float("nan")), "every held-out run"
         if not (np.isfinite(scale) and scale > 0):

@@ -16,25 +16,12 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.impact import VELOCITY_EDGES
-from pbmdem.surrogate.features import PAIR_ID_COLUMNS, tip_speed
+from pbmdem.surrogate.features import tip_speed
 from pbmdem.surrogate.velocity import lognormal_fractions
+from pbmdem.tables import GRID_PAIRS
 
 #: Columns of the synthetic collision tables: the contract's (pbmdem.tables.GRID_PAIRS) but frequency_per_pair_se.
-TABLE_COLUMNS = (
-    *PAIR_ID_COLUMNS,
-    "n_i",
-    "n_j",
-    "n_total",
-    "collisions",
-    "sampling_time",
-    "frequency",
-    "frequency_per_pair",
-    "n_replicates",
-    "encounters",
-    "encounter_frequency_per_pair",
-    "encounter_frequency_per_pair_se",
-    "impact_velocity_median",
-)
+TABLE_COLUMNS = tuple(c.name for c in GRID_PAIRS.columns if c.name != "frequency_per_pair_se")
 
 #: Raw new contacts per encounter in the synthetic tables (re-contacts of a pair that bounces).
 CONTACTS_PER_ENCOUNTER = 1.6

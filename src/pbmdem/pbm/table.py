@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 from scipy.interpolate import RegularGridInterpolator
 
+from pbmdem.frequency import fractions_with_fallback, upper_pairs
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_KEYS, EncounterRates, ImpactRates, binned_counts
 from pbmdem.readers import InputFileError, first_index
 from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES, GRID_WALL_VELOCITIES, GRID_WALLS
@@ -146,7 +147,7 @@ class TableFrequency:
         self._set_options(extrapolation, zero_floor, column)
         self.walls = None
         _check_diameters(d, "d_i")
-        iu, ju = _upper_indices(d.size)
+        iu, ju = upper_pairs(d.size)
         f = _checked_frequencies(m[iu, ju], column)
         floor = self.zero_floor * f[f > 0].min()
         if np.all(step > 0):
@@ -229,9 +230,7 @@ class TableFrequency:
         b = np.array([pos[float(d)] for d in g["d_j"]])
         np.add.at(grid, (a, b), counts)
         np.add.at(grid, (b[a != b], a[a != b]), counts[a != b])
-        total = grid.sum(axis=2, keepdims=True)
-        grid = np.where(total > 0, grid / np.where(total > 0, total, 1.0), pooled / pooled.sum())
-        return grid
+        return fractions_with_fallback(grid, pooled)
 
     def __repr__(self) -> str:
         speeds = "any" if np.isnan(self.rpms).all() else ",".join(f"{r:g}" for r in self.rpms)
@@ -376,18 +375,6 @@ def _merged_pairs(d: np.ndarray, iu: np.ndarray, ju: np.ndarray, f: np.ndarray) 
             total[p][q] = t
             count[p][q] += 1
     return u, np.array([[total[p][q] / count[p][q] for q in range(n)] for p in range(n)])
-
-
-_UPPER: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-
-
-def _upper_indices(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``np.triu_indices(n)``, kept per n (a coupling interval's few classes; read-only arrays)."""
-    if n not in _UPPER:
-        iu, ju = np.triu_indices(n)
-        iu.flags.writeable = ju.flags.writeable = False
-        _UPPER[n] = iu, ju
-    return _UPPER[n]
 
 
 def _check_diameters(d: np.ndarray, column: str) -> None:

@@ -67,16 +67,24 @@ def floor_words(floor: dict, what: str) -> str:
     )
 
 
+def cumulative_mass(mass, scale: float = 1.0) -> np.ndarray:
+    """The mass finer than each bin's upper edge as ``scale`` x its share of the total (1: fractions,
+    100: %), along the last axis of ``mass`` (..., K), the solid per bin; 0 where there is no mass.
+    The one cumulative distribution of :func:`mass_quantiles`, psd.png and the report's figure."""
+    m = np.asarray(mass, float)
+    total = m.sum(axis=-1, keepdims=True)
+    return np.divide(scale * np.cumsum(m, axis=-1), total, out=np.zeros(m.shape), where=total > 0)
+
+
 def mass_quantiles(mass: np.ndarray, d_edges: np.ndarray, q=(0.1, 0.5, 0.9)) -> np.ndarray:
     """Diameters below which fractions ``q`` of the solid lie; ``mass`` (T, K) or (K,)."""
     m = np.atleast_2d(np.asarray(mass, float))
     out = np.full((m.shape[0], len(q)), np.nan)
     le = np.log(d_edges)
     for r, row in enumerate(m):
-        total = row.sum()
-        if total <= 0:
+        if row.sum() <= 0:
             continue
-        C = np.concatenate([[0.0], np.cumsum(row) / total])
+        C = np.concatenate([[0.0], cumulative_mass(row)])
         C[-1] = 1.0
         for c, qq in enumerate(q):
             k = int(np.searchsorted(C, qq, side="left"))
@@ -247,8 +255,7 @@ class Result:
         if own:
             fig, ax = plt.subplots(figsize=(6.4, 4.4), layout="constrained")
         g = self.grid
-        mass = self.mass_fractions()
-        cum = 100.0 * np.cumsum(mass, axis=1) / np.maximum(mass.sum(axis=1, keepdims=True), 1e-300)
+        cum = cumulative_mass(self.mass_fractions(), 100.0)
         idx = np.unique(np.linspace(0, self.times.size - 1, min(n_curves, self.times.size)).round().astype(int))
         occupied = np.nonzero(self.number.max(axis=0) > 1e-6 * self.number.max())[0]
         lo, hi = occupied.min(), occupied.max()

@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 from pbmdem.config.pbm import ProcessSettings
+from pbmdem.pbm.results import cumulative_mass
 from pbmdem.plotting import log_ticks, pyplot, save_figure, size_distribution
 from pbmdem.readers import InputFileError, read_table, require_columns
 from pbmdem.surrogate import load_surrogate
@@ -126,13 +127,12 @@ def snapshot_times(recorded, process) -> list[float]:
 
 def cumulative_undersize(diameter: np.ndarray, density_lnd: np.ndarray) -> np.ndarray:
     """Mass % finer than each bin's upper edge, from the mass density per ln d on a geometric grid
-    (the PBM's bins): the sum of density x d(ln d), normalised to 100 %. A cumulative curve is smooth
-    where the density of a sectional grid zig-zags between neighbouring bins."""
+    (the PBM's bins): density x d(ln d) per bin, cumulated by `pbmdem.pbm.results.cumulative_mass`.
+    A cumulative curve is smooth where the density of a sectional grid zig-zags between neighbouring bins."""
     order = np.argsort(diameter)
     d, q = diameter[order], np.clip(density_lnd[order], 0.0, None)
     width = np.gradient(np.log(d)) if len(d) > 1 else np.ones_like(d)
-    mass = np.cumsum(q * width)
-    return PERCENT * mass / mass[-1] if mass[-1] > 0 else np.zeros_like(mass)
+    return cumulative_mass(q * width, PERCENT)
 
 
 def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str):

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from pbmdem.frequency import fractions_with_fallback
 from pbmdem.impact import N_VELOCITY_BINS, WALLS, WallRates, velocity_bins_of
 from pbmdem.readers import InputFileError, first_index
 
@@ -89,9 +90,7 @@ class WallTable:
                 raise PBMInputError(f"wall-collision table at rpm {g['rpm'].iloc[0]:g}: no rows for the {wall}")
             pooled = rows.groupby("d_i", sort=True)
             counts = pooled[list(range(N_VELOCITY_BINS))].sum().to_numpy(float)
-            total = counts.sum(axis=1, keepdims=True)
-            everything = counts.sum(axis=0) / max(counts.sum(), 1e-300)
-            fractions = np.where(total > 0, counts / np.where(total > 0, total, 1.0), everything)
+            fractions = fractions_with_fallback(counts, counts.sum(axis=0))
             out[wall] = (np.log(pooled.size().index.to_numpy(float)), pooled["log_f"].mean().to_numpy(), fractions)
         return out
 

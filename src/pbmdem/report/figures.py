@@ -67,9 +67,13 @@ def _column(frame: pd.DataFrame, name: str) -> np.ndarray:
     return frame[name].to_numpy(float)
 
 
-def _figure_legend(fig, ax, ncol: int = 4) -> None:
+def legend_below(fig, ax, ncol: int, bottom: float, relabel=None) -> None:
+    """The report's figure legend: `ax`'s entries (labels through `relabel`) below the panels, 8 pt,
+    no frame; the panels fill the figure above the share `bottom` of its height."""
     handles, labels = ax.get_legend_handles_labels()
+    labels = labels if relabel is None else [relabel(label) for label in labels]
     fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, bottom, 1, 1))
 
 
 def size_bands(bands: pd.DataFrame, process, rpm: str, what: str = "bands table"):
@@ -103,17 +107,14 @@ def size_bands(bands: pd.DataFrame, process, rpm: str, what: str = "bands table"
             ax.plot(b.time, MM * b.constant, **STYLES["PBM-constant"], label="PBM-constant")
         ax.set(xlabel="time (s)", ylabel=f"{stat} (mm)", title=f"{stat}, {rpm} rpm")
         ax.grid(alpha=0.3)
-    # the band's width in the legend is that of the d50 panel
     d50 = bands[bands["statistic"] == "d50"]
-    handles, labels = axes[0].get_legend_handles_labels()
-    labels = [
-        lab[:-1] + f"; {_width_text(MM * d50.dem_min, MM * d50.dem_max)} in d50)"
-        if lab.startswith("PBM-DEM band")
-        else lab
-        for lab in labels
-    ]
-    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
-    fig.tight_layout(rect=(0, 0.12, 1, 1))
+
+    def relabel(label: str) -> str:  # the band's width in the legend is that of the d50 panel
+        if not label.startswith("PBM-DEM band"):
+            return label
+        return label[:-1] + f"; {_width_text(MM * d50.dem_min, MM * d50.dem_max)} in d50)"
+
+    legend_below(fig, axes[0], 3, 0.12, relabel)
     return fig
 
 
@@ -230,8 +231,7 @@ def liquid_porosity(speed, process, rpm: str):
         )
         ax.set(xlabel="time (s)", ylabel=ylabel, title=f"{ylabel.split(' (')[0]}, {rpm} rpm")
         ax.grid(alpha=0.3)
-    _figure_legend(fig, axes[0], ncol=3)
-    fig.tight_layout(rect=(0, 0.12, 1, 1))
+    legend_below(fig, axes[0], 3, 0.12)
     return fig
 
 

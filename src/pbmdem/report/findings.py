@@ -35,6 +35,7 @@ from pbmdem.validation.feed_check import CHECK_COLUMNS
 from . import words
 from .breakage import breakage_figure, breakage_words, clipping_words, peak_speed
 from .display import MM
+from .figures import legend_below
 from .lumping import lumping_figure, lumping_table, lumping_words, turn_speeds
 from .sensitivity import sensitivity_words
 from .training import training_set, training_words
@@ -86,9 +87,7 @@ def speed_figure(study: pd.DataFrame, feed: str, batch_s: float):
 
 def _legend_below(fig, ax) -> None:
     ax.title.set_fontsize(10.5)
-    handles, labels = ax.get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
-    fig.tight_layout(rect=(0, 0.13, 1, 1))
+    legend_below(fig, ax, 2, 0.13)
 
 
 def batch_text(seconds: float) -> str:

@@ -32,7 +32,7 @@ from pbmdem.tables import STATISTICS
 
 from .loop import CouplingError
 from .methods import pbm_ann
-from .studies import feed_cases, with_feed
+from .studies import feed_cases, final_statistics, with_feed
 
 log = logging.getLogger(__name__)
 
@@ -91,10 +91,7 @@ def _run(loop: CoupledLoop, model, rpm: float):
 
 
 def _final(outcome) -> dict:
-    if outcome is None:
-        return dict.fromkeys(STATISTICS, float("nan"))
-    last = outcome.result.summary().iloc[-1]
-    return {s: float(last[s]) for s in STATISTICS}
+    return dict.fromkeys(STATISTICS, float("nan")) if outcome is None else final_statistics(outcome.result.summary())
 
 
 def solid_change(result) -> float:

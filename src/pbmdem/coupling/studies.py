@@ -76,7 +76,8 @@ def with_feed(loop: CoupledLoop, name: str, sizes: SizeDistribution) -> CoupledL
     return loop.replace(batch=loop.batch.replace(distribution=name, sizes=sizes))
 
 
-def _final(summary: pd.DataFrame) -> dict:
+def final_statistics(summary: pd.DataFrame) -> dict:
+    """The final d10/d50/d90 (m) of a PBM run's summary (its last row)."""
     last = summary.iloc[-1]
     return {s: float(last[s]) for s in STATISTICS}
 
@@ -97,7 +98,7 @@ def run_case(loop: CoupledLoop, model_path: str | Path, rpm: float, feed: str, s
             row.update({s: float("nan") for s in STATISTICS} | {"mean_failed": True})
             row.update({"out_of_domain_intervals": 0, "intervals": 0})
         else:
-            row.update(_final(outcome.result.summary()) | {"mean_failed": False})
+            row.update(final_statistics(outcome.result.summary()) | {"mean_failed": False})
             row["out_of_domain_intervals"] = int(outcome.totals.get("out_of_domain_intervals", 0))
             row["intervals"] = int(outcome.totals.get("intervals", loop.coupling_intervals))
             row["merged_fraction"] = float(outcome.totals["grid_floor"]["merged_fraction"])
@@ -109,7 +110,9 @@ def run_case(loop: CoupledLoop, model_path: str | Path, rpm: float, feed: str, s
                 log.warning("PBM-ANN at %g rpm, feed %s, ensemble member %d failed: %s", rpm, feed, k, exc)
                 failed += 1
                 continue
-            finals.append(_final(member.result.summary()) | {"merged": member.totals["grid_floor"]["merged_fraction"]})
+            finals.append(
+                final_statistics(member.result.summary()) | {"merged": member.totals["grid_floor"]["merged_fraction"]}
+            )
     for s in STATISTICS:
         values = [f[s] for f in finals]
         row[f"{s}_member_min"] = min(values) if values else float("nan")

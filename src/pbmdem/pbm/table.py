@@ -90,7 +90,7 @@ class TableFrequency:
         if "rpm" not in t.columns:
             t["rpm"] = np.nan
         for col in ("d_i", "d_j"):
-            _check_diameters(t[col].to_numpy(float), col)
+            _check_diameters(t[col].to_numpy(float), f"collision table column {col}")
         f = _checked_frequencies(t[column].to_numpy(float), column)
         counts = None if velocity_table is None else self._velocity_counts(t, velocity_table)
         floor = self.zero_floor * f[f > 0].min()
@@ -146,7 +146,7 @@ class TableFrequency:
         self = cls.__new__(cls)
         self._set_options(extrapolation, zero_floor, column)
         self.walls = None
-        _check_diameters(d, "d_i")
+        _check_diameters(d, "collision table column d_i")
         iu, ju = upper_pairs(d.size)
         f = _checked_frequencies(m[iu, ju], column)
         floor = self.zero_floor * f[f > 0].min()
@@ -304,15 +304,8 @@ class TableFrequency:
         F = np.maximum(0.5 * (F + F.transpose(1, 0, 2)), 0.0)
         return F / F.sum(axis=2, keepdims=True)
 
-    @staticmethod
-    def _diameters(diameters) -> np.ndarray:
-        d = np.atleast_1d(np.asarray(diameters, float))
-        if not np.all(np.isfinite(d) & (d > 0)):
-            raise PBMInputError(f"TableFrequency: diameters must be finite and > 0, got {d}")
-        return d
-
     def __call__(self, diameters, numbers, rpm) -> np.ndarray:
-        d = self._diameters(diameters)
+        d = _check_diameters(np.atleast_1d(np.asarray(diameters, float)), "TableFrequency: diameters")
         return np.exp(sum(w * self._log_matrix(k, d) for k, w in speed_weights(self.rpms, rpm)))
 
     def encounters(self, diameters, numbers, rpm):
@@ -324,7 +317,7 @@ class TableFrequency:
                 "(results/dem/impact_velocity.csv: velocity_table= / from_csv(velocity_path=...), "
                 "pbmdem pbm --velocity-table)"
             )
-        d = self._diameters(diameters)
+        d = _check_diameters(np.atleast_1d(np.asarray(diameters, float)), "TableFrequency: diameters")
         fractions = sum(w * self._fractions(k, d) for k, w in speed_weights(self.rpms, rpm))
         return EncounterRates(self(d, numbers, rpm), fractions)
 
@@ -377,13 +370,13 @@ def _merged_pairs(d: np.ndarray, iu: np.ndarray, ju: np.ndarray, f: np.ndarray) 
     return u, np.array([[total[p][q] / count[p][q] for q in range(n)] for p in range(n)])
 
 
-def _check_diameters(d: np.ndarray, column: str) -> None:
-    """Refuse class diameters that are not finite and positive, naming the column."""
+def _check_diameters(d: np.ndarray, what: str) -> np.ndarray:
+    """``d`` if its class diameters are finite and positive, else an error naming ``what`` (a table's
+    column or the diameters a caller asks for)."""
     bad = ~(np.isfinite(d) & (d > 0))
     if bad.any():
-        raise PBMInputError(
-            f"collision table column {column} has values {d[bad][:5]}; allowed: finite diameters > 0 (m)"
-        )
+        raise PBMInputError(f"{what} has values {d[bad][:5]}; allowed: finite diameters > 0 (m)")
+    return d
 
 
 def _checked_frequencies(f: np.ndarray, column: str) -> np.ndarray:

@@ -45,12 +45,7 @@ def rpm_sweep(
             rows.append(
                 {
                     "rpm": float(rpm),
-                    "d10": last.d10,
-                    "d50": last.d50,
-                    "d90": last.d90,
-                    "number_mean_diameter": last.number_mean_diameter,
-                    "mass_mean_diameter": last.mass_mean_diameter,
-                    "total_number": last.total_number,
+                    **{column: last[column] for column in SUMMARY_COLUMNS[1:]},  # the final values
                     "wall_time_s": wall,
                     "out_of_domain_intervals": int((ood.fillna(0) > 0).sum()),
                     "out_of_domain_count": int(ood.fillna(0).sum()),

@@ -17,7 +17,7 @@ from scipy.interpolate import RegularGridInterpolator
 from pbmdem.frequency import fractions_with_fallback, upper_pairs
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_KEYS, EncounterRates, ImpactRates, binned_counts
 from pbmdem.readers import InputFileError, first_index
-from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES, GRID_WALL_VELOCITIES, GRID_WALLS
+from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES, Table
 
 from .bilinear import Bilinear
 from .errors import PBMInputError, positive
@@ -245,10 +245,10 @@ class TableFrequency:
         ``velocity_path``: the impact-velocity table CSV (results/dem/impact_velocity.csv) that
         enables :meth:`encounters`; ``walls``: the wall impacts
         (:meth:`pbmdem.pbm.wall_table.WallTable.from_csv`) that enable :meth:`impacts`."""
-        table = cls._read(path, distribution, "collision table")
+        table = read_grid_table(path, GRID_PAIRS, distribution)
         velocity_table = None
         if velocity_path is not None:
-            velocity_table = cls._read(velocity_path, distribution, "impact-velocity table")
+            velocity_table = read_grid_table(velocity_path, GRID_VELOCITIES, distribution)
         try:
             source = cls(table, velocity_table=velocity_table, **kwargs)
         except PBMInputError as err:
@@ -256,29 +256,6 @@ class TableFrequency:
             raise PBMInputError(f"{names}: {err}") from None
         source.walls = walls
         return source
-
-    @staticmethod
-    def _read(path, distribution: str | None, what: str) -> pd.DataFrame:
-        path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"{what} {path} does not exist")
-        contract = {
-            "impact-velocity table": GRID_VELOCITIES,
-            "wall-collision table": GRID_WALLS,
-            "wall impact-velocity table": GRID_WALL_VELOCITIES,
-        }.get(what, GRID_PAIRS)
-        try:
-            table = contract.read(path, what, need=())  # the kernel checks the columns it uses
-        except InputFileError as exc:
-            raise PBMInputError(str(exc)) from None
-        if distribution is not None:
-            if "distribution" not in table.columns:
-                raise PBMInputError(f"{path}: no 'distribution' column to select {distribution!r}")
-            names = sorted(table["distribution"].astype(str).unique())
-            table = table[table["distribution"].astype(str) == distribution]
-            if table.empty:
-                raise PBMInputError(f"{path}: no rows for distribution {distribution!r}; present: {names}")
-        return table
 
     def _log(self, k: int, d: np.ndarray, clamp: bool) -> np.ndarray:
         ld = np.log(d)
@@ -331,6 +308,26 @@ class TableFrequency:
                 "wall_impact_velocity.csv: from_csv(walls=WallTable.from_csv(...)))"
             )
         return ImpactRates(self.encounters(diameters, numbers, rpm), self.walls.rates(diameters, rpm))
+
+
+def read_grid_table(path, contract: Table, distribution: str | None = None) -> pd.DataFrame:
+    """The DEM grid table at ``path`` read through its ``contract`` (pbmdem.tables; a source checks
+    the columns it uses); ``distribution`` keeps only that distribution's rows."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{contract.what} {path} does not exist")
+    try:
+        table = contract.read(path, need=())
+    except InputFileError as exc:
+        raise PBMInputError(str(exc)) from None
+    if distribution is not None:
+        if "distribution" not in table.columns:
+            raise PBMInputError(f"{path}: no 'distribution' column to select {distribution!r}")
+        names = sorted(table["distribution"].astype(str).unique())
+        table = table[table["distribution"].astype(str) == distribution]
+        if table.empty:
+            raise PBMInputError(f"{path}: no rows for distribution {distribution!r}; present: {names}")
+    return table
 
 
 def speed_weights(rpms: np.ndarray, rpm) -> list[tuple[int, float]]:

@@ -19,9 +19,10 @@ import pandas as pd
 from pbmdem.frequency import fractions_with_fallback
 from pbmdem.impact import N_VELOCITY_BINS, WALLS, WallRates, velocity_bins_of
 from pbmdem.readers import InputFileError, first_index
+from pbmdem.tables import GRID_WALL_VELOCITIES, GRID_WALLS
 
 from .errors import PBMInputError, positive
-from .table import TableFrequency, speed_weights
+from .table import read_grid_table, speed_weights
 
 #: Column of the wall table the breakage selection is built on (impacts of granules that were apart).
 WALL_FREQUENCY_COLUMN = "encounter_frequency_per_particle"
@@ -98,8 +99,8 @@ class WallTable:
     def from_csv(cls, path, velocity_path, distribution: str | None = None) -> WallTable:
         """The grid's wall tables (results/dem/wall_collisions.csv, wall_impact_velocity.csv), read
         through their contracts; ``distribution`` keeps only that distribution's rows."""
-        walls = TableFrequency._read(path, distribution, "wall-collision table")
-        velocities = TableFrequency._read(velocity_path, distribution, "wall impact-velocity table")
+        walls = read_grid_table(path, GRID_WALLS, distribution)
+        velocities = read_grid_table(velocity_path, GRID_WALL_VELOCITIES, distribution)
         try:
             return cls(walls, velocities)
         except PBMInputError as err:

@@ -151,37 +151,32 @@ def pair_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, met
     )
 
 
-def velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
-    """Encounters per class pair and impact-velocity bin (long format, docs/architecture.md)."""
-    k = tally.raw.shape[0]
-    i, j = upper_pairs(k)
-    b = np.arange(N_VELOCITY_BINS)
+def _per_bin(meta: dict, keys: dict, counts: np.ndarray) -> pd.DataFrame:
+    """A velocity table in long format (docs/architecture.md): one row per entry of the `keys`
+    columns and impact-velocity bin [v_lo, v_hi), with its encounters `counts` (entries, bins)."""
+    rows = len(counts)
     return pd.DataFrame(
         {
             **meta,
-            "class_i": np.repeat(i, N_VELOCITY_BINS),
-            "class_j": np.repeat(j, N_VELOCITY_BINS),
-            "v_lo": np.tile(VELOCITY_EDGES[:-1], len(i)),
-            "v_hi": np.tile(VELOCITY_EDGES[1:], len(i)),
-            "encounters": tally.histogram[i, j][:, b].ravel(),
+            **{name: np.repeat(values, N_VELOCITY_BINS) for name, values in keys.items()},
+            "v_lo": np.tile(VELOCITY_EDGES[:-1], rows),
+            "v_hi": np.tile(VELOCITY_EDGES[1:], rows),
+            "encounters": counts.ravel(),
         }
     )
+
+
+def velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
+    """Encounters per class pair and impact-velocity bin."""
+    i, j = upper_pairs(tally.raw.shape[0])
+    return _per_bin(meta, {"class_i": i, "class_j": j}, tally.histogram[i, j])
 
 
 def wall_velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
-    """Wall encounters per wall, class and impact-velocity bin (long format, docs/architecture.md)."""
+    """Wall encounters per wall, class and impact-velocity bin."""
     walls, k = tally.raw.shape
     w, c = np.repeat(np.arange(walls), k), np.tile(np.arange(k), walls)
-    return pd.DataFrame(
-        {
-            **meta,
-            "wall": np.repeat(np.asarray(WALLS)[w], N_VELOCITY_BINS),
-            "class_i": np.repeat(c, N_VELOCITY_BINS),
-            "v_lo": np.tile(VELOCITY_EDGES[:-1], len(w)),
-            "v_hi": np.tile(VELOCITY_EDGES[1:], len(w)),
-            "encounters": tally.histogram[w, c].ravel(),
-        }
-    )
+    return _per_bin(meta, {"wall": np.asarray(WALLS)[w], "class_i": c}, tally.histogram[w, c])
 
 
 def wall_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, meta: dict) -> pd.DataFrame:

@@ -120,16 +120,29 @@ def _tally(group: np.ndarray, events, shape: tuple[int, ...]) -> Tally:
     )
 
 
+def _counted(tally: Tally, at, count: np.ndarray, sampling_time: float, per: tuple[str, str]) -> dict:
+    """The columns of a run table (docs/architecture.md) from the contact starts and encounters of
+    the entries `at` of `tally` over the sampling window: their frequencies in total and per pair
+    or particle (`per`: the two columns' names; NaN where `count`, the pairs or particles, is 0)."""
+    coll, enc = tally.raw[at], tally.encounters[at]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per_count = [np.where(count > 0, x / (count * sampling_time), np.nan) for x in (coll, enc)]
+    return {
+        "collisions": coll,
+        "sampling_time": sampling_time,
+        "frequency": coll / sampling_time,
+        per[0]: per_count[0],
+        "encounters": enc,
+        per[1]: per_count[1],
+        "impact_velocity_median": tally.median_velocity[at],
+    }
+
+
 def pair_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, meta: dict) -> pd.DataFrame:
     """Tidy table with one row per unordered class pair (see docs/architecture.md)."""
-    k = len(n)
-    i, j = upper_pairs(k)
-    pairs = pair_counts(n)[i, j]
+    i, j = upper_pairs(len(n))
     d = np.asarray(diameters, float)
-    coll, enc = tally.raw[i, j], tally.encounters[i, j]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        per_pair = np.where(pairs > 0, coll / (pairs * sampling_time), np.nan)
-        enc_per_pair = np.where(pairs > 0, enc / (pairs * sampling_time), np.nan)
+    per = ("frequency_per_pair", "encounter_frequency_per_pair")
     return pd.DataFrame(
         {
             **meta,
@@ -140,13 +153,24 @@ def pair_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, met
             "n_i": n[i],
             "n_j": n[j],
             "n_total": int(n.sum()),
-            "collisions": coll,
-            "sampling_time": sampling_time,
-            "frequency": coll / sampling_time,
-            "frequency_per_pair": per_pair,
-            "encounters": enc,
-            "encounter_frequency_per_pair": enc_per_pair,
-            "impact_velocity_median": tally.median_velocity[i, j],
+            **_counted(tally, (i, j), pair_counts(n)[i, j], sampling_time, per),
+        }
+    )
+
+
+def wall_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, meta: dict) -> pd.DataFrame:
+    """Tidy table with one row per wall and class (see docs/architecture.md)."""
+    w, c = np.repeat(np.arange(len(WALLS)), len(n)), np.tile(np.arange(len(n)), len(WALLS))
+    per = ("frequency_per_particle", "encounter_frequency_per_particle")
+    return pd.DataFrame(
+        {
+            **meta,
+            "class_i": c,
+            "d_i": np.asarray(diameters, float)[c],
+            "n_i": n[c],
+            "n_total": int(n.sum()),
+            "wall": np.asarray(WALLS)[w],
+            **_counted(tally, (w, c), n[c], sampling_time, per),
         }
     )
 
@@ -177,32 +201,6 @@ def wall_velocity_table(tally: Tally, meta: dict) -> pd.DataFrame:
     walls, k = tally.raw.shape
     w, c = np.repeat(np.arange(walls), k), np.tile(np.arange(k), walls)
     return _per_bin(meta, {"wall": np.asarray(WALLS)[w], "class_i": c}, tally.histogram[w, c])
-
-
-def wall_table(tally: Tally, n: np.ndarray, diameters, sampling_time: float, meta: dict) -> pd.DataFrame:
-    rows = []
-    for w, wall in enumerate(WALLS):
-        for c in range(len(n)):
-            rows.append(
-                {
-                    **meta,
-                    "class_i": c,
-                    "d_i": float(diameters[c]),
-                    "n_i": int(n[c]),
-                    "n_total": int(n.sum()),
-                    "wall": wall,
-                    "collisions": int(tally.raw[w, c]),
-                    "sampling_time": sampling_time,
-                    "frequency": tally.raw[w, c] / sampling_time,
-                    "frequency_per_particle": tally.raw[w, c] / (n[c] * sampling_time) if n[c] else np.nan,
-                    "encounters": int(tally.encounters[w, c]),
-                    "encounter_frequency_per_particle": tally.encounters[w, c] / (n[c] * sampling_time)
-                    if n[c]
-                    else np.nan,
-                    "impact_velocity_median": tally.median_velocity[w, c],
-                }
-            )
-    return pd.DataFrame(rows)
 
 
 @dataclass

@@ -22,7 +22,8 @@ of its final d10/d50/d90 from the stored summary.csv and in how many intervals t
 was the stored one (the same code as the run that wrote them gives 0 and all of them).
 
 Run: .venv/bin/python benchmarks/bench_replay.py --results results --rpm 750 900 1200 [--model m.skops]
-     [--csv replays.csv] [--finished-only] (--finished-only: a run still running, its finished
+     [--csv replays.csv] [--members] [--finished-only] (--members: the member band per model, `member_band`;
+     --finished-only: a run still running, its finished
      loops only, said in the output; otherwise an unfinished loop is an error naming it.)
 About 1 s per replayed batch on the default configuration (10 combinations x 3 replicates per
 speed). Measured numbers in docs/validation.md ("Why PBM-ANN misses above 900 rpm") and
@@ -213,6 +214,60 @@ def replay_speed(results: Path, rpm: str, model_path: Path, finished_only: bool 
     return {"table": table, "worst": worst, "same": same, "total": total}
 
 
+#: what a surrogate member moves (``CollisionSurrogate.member``) -> the fitted attribute that carries it
+MEMBER_PARTS = {
+    "frequency": "frequency_model_",
+    "speed law": "velocity_model_",
+    "tail": "speed_tail_",
+    "walls": "wall_models_",
+}
+
+
+def member_band(results: Path, rpm: str, model_path: Path) -> dict:
+    """Where PBM-ANN's member band comes from: the final d50 of each member's batch (PBM-ANN on the
+    first stored loop's settings) with every model moved to the member's quantile, and with one model
+    of ``MEMBER_PARTS`` moved alone (the others the mean). Prints one row per variant, the PBM-DEM
+    replicates' final d50 range and the band's target (3 x that range or 10 % of their mean)."""
+    import copy
+
+    from pbmdem.coupling.methods import pbm_ann
+    from pbmdem.surrogate import load_surrogate
+
+    speed_dir = results / "validation" / f"rpm{rpm}"
+    reps = sorted(rep for rep in (speed_dir / "pbm_dem").glob("rep*") if (rep / "summary.csv").exists())
+    if not reps:
+        raise SystemExit(f"{speed_dir}/pbm_dem: no finished replicate loop (rep*/summary.csv)")
+    model = load_surrogate(model_path)
+    loop = stored_loop(reps[0])
+    members = [model.member(k) for k in range(model.n_members)]
+
+    def d50(surrogate) -> float:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return 1e3 * float(
+                pbm_ann(loop, surrogate, float(rpm), None, log_each=False).result.summary().iloc[-1]["d50"]
+            )
+
+    def moved(member, attribute):
+        out = copy.copy(model)
+        setattr(out, attribute, getattr(member, attribute))
+        return out
+
+    variants = {"all models": [d50(m) for m in members]}
+    for part, attribute in MEMBER_PARTS.items():
+        variants[part] = [d50(moved(m, attribute)) for m in members]
+    dem = np.array([final_sizes(rep / "summary.csv")["d50"] for rep in reps])
+    target = max(3 * (dem.max() - dem.min()), 0.1 * dem.mean())
+    print(f"\nrpm {rpm}: members' final d50 (mm), member 0 .. {model.n_members - 1}; PBM-DEM {_band('d50', dem)}, "
+          f"band target {target:.2f} mm")  # fmt: skip
+    for name, values in variants.items():
+        width = max(values) - min(values)
+        inside = "yes" if min(values) <= dem.mean() <= max(values) else "no"
+        tail = f", contains the PBM-DEM mean: {inside}" if name == "all models" else ""
+        print(f"  {name:<11}" + " ".join(f"{v:6.2f}" for v in values) + f"   width {width:.2f}{tail}")
+    return variants
+
+
 def _band(name: str, values) -> str:
     v = np.asarray(values, float)
     prefix = f"{name} " if name else ""
@@ -303,12 +358,15 @@ def main(argv=None) -> None:
     parser.add_argument(
         "--finished-only", action="store_true", help="replay the finished loops of a run still running (said)"
     )
+    parser.add_argument(
+        "--members", action="store_true", help="also: the members' band, all models and each model alone"
+    )
     parser.add_argument("--quick", action="store_true", help="synthetic stored loops, seconds (the suite's smoke test)")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         if args.quick:
             t0 = time.perf_counter()
-            args.results, args.rpm = quick_results(Path(tmp)), ["1200"]
+            args.results, args.rpm, args.members = quick_results(Path(tmp)), ["1200"], True
             print(f"quick: stored loops made in {time.perf_counter() - t0:.1f} s")
         if args.results is None or not args.rpm:
             parser.error("give --results and --rpm (or --quick)")
@@ -323,6 +381,8 @@ def main(argv=None) -> None:
             ) as exc:  # a missing or broken file of the run: named, no traceback
                 raise SystemExit(f"bench_replay.py: {exc}") from None
             tables.append(out["table"].assign(rpm=rpm))
+            if args.members:
+                member_band(args.results, rpm, model)
         if args.csv:
             pd.concat(tables).to_csv(args.csv, index=False)
 

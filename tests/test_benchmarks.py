@@ -78,6 +78,8 @@ QUICK = {
         r"DEM pair_speed only +[\d.]+",
         r"all DEM reproduces the stored PBM-DEM loops: max \|difference\| of final d10/d50/d90 [\d.e+-]+",
         r"all surrogate reproduces the stored PBM-ANN batch: max \|difference\|",
+        r"members' final d50 \(mm\)",
+        r"  tail +[\d. ]+ width [\d.]+",
     ),
     "bench_sensitivity.py --quick": (
         r"ranking by ST of d50 \(first to last\)",

@@ -201,3 +201,20 @@ def test_the_feed_check_jobs_follow_the_config(tmp_path, tiny_mapping):
     code, counts, out = jobs(lambda c: c.update(feed="large+small"))
     assert code != 0 and "validation.feed_check.feed = 'large+small'" in out and "allowed: ['small+large']" in out
     assert not (tmp_path / "results").exists()
+
+
+@pytest.mark.parametrize("key", ["speed_law_from", "speed_tail_from"])
+def test_speeds_the_surrogate_fits_from_are_velocity_bin_edges_checked_where_they_enter(tmp_path, root, key):
+    """A fitting speed between two velocity-bin edges is refused when the file is loaded (not when
+    the surrogate is trained, minutes into a run), naming the key, the value and the edges."""
+    cfg = yaml.safe_load((root / "config" / "config.yaml").read_text())
+    cfg["surrogate"][key] = 1.5
+    path = tmp_path / "config.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    message = str(info.value)
+    assert f"surrogate.{key} = 1.5 m/s; allowed: null or an inner edge" in message and "1.778" in message, message
+    cfg["surrogate"][key] = 1.778  # an edge to 3 digits
+    path.write_text(yaml.safe_dump(cfg))
+    assert getattr(load_config(path).surrogate, key) == 1.778

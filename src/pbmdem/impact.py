@@ -33,6 +33,21 @@ VELOCITY_EDGES = np.concatenate(
 N_VELOCITY_BINS = len(VELOCITY_EDGES) - 1
 
 
+def velocity_edge_bin(speed: float | None, key: str) -> int:
+    """The bin whose lower edge is ``speed`` (m/s, an inner edge of :data:`VELOCITY_EDGES` to 3
+    digits; None: 0, every bin); ValueError naming ``key``, the value and the allowed edges otherwise."""
+    if speed is None:
+        return 0
+    inner = VELOCITY_EDGES[1:-1]
+    match = np.flatnonzero(np.isclose(inner, float(speed), rtol=5e-3, atol=0.0))
+    if match.size != 1:
+        raise ValueError(
+            f"{key} = {speed!r} m/s; allowed: null or an inner edge of the velocity bins (3 digits suffice), "
+            f"{[float(f'{e:.4g}') for e in inner]}"
+        )
+    return int(match[0]) + 1
+
+
 def velocity_bin(v) -> np.ndarray:
     """Bin index (0 .. N_VELOCITY_BINS-1) of each impact speed `v` (m/s, >= 0; larger than
     V_MAX goes to the last bin). Raises ValueError on negative or non-finite speeds."""

@@ -6,6 +6,8 @@ from typing import Annotated, Literal
 
 from pydantic import Field
 
+from pbmdem.impact import velocity_edge_bin
+
 from .errors import ConfigError
 from .typed import Settings, setting
 
@@ -108,13 +110,20 @@ class Surrogate(Settings):
         return settings
 
     def problems(self) -> list[str]:
-        """What a field cannot check alone: one seed per ensemble member."""
+        """What a field cannot check alone: one seed per ensemble member; the speeds from which the
+        law and the tail are fitted are edges of the velocity bins."""
+        found = []
         if self.seeds is not None and len(self.seeds) != self.ensemble_size:
-            return [
+            found.append(
                 f"surrogate.seeds = {list(self.seeds)}: {len(self.seeds)} seeds but ensemble_size = "
                 f"{self.ensemble_size}; one seed per ensemble member (or seeds: null)"
-            ]
-        return []
+            )
+        for key in ("speed_law_from", "speed_tail_from"):
+            try:
+                velocity_edge_bin(getattr(self, key), f"surrogate.{key}")
+            except ValueError as error:
+                found.append(str(error))
+        return found
 
     @property
     def member_seeds(self) -> tuple[int, ...]:

@@ -38,7 +38,14 @@ import pandas as pd
 from scipy.optimize import minimize
 from scipy.special import gammainc, gammaincc, gammaincinv, log_ndtr, ndtr, polygamma
 
-from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, VELOCITY_KEYS, binned_counts, representative_velocities
+from pbmdem.impact import (
+    N_VELOCITY_BINS,
+    VELOCITY_EDGES,
+    VELOCITY_KEYS,
+    binned_counts,
+    representative_velocities,
+    velocity_edge_bin,
+)
 from pbmdem.readers import InputFileError
 
 from .errors import CollisionTableError
@@ -230,17 +237,8 @@ def _neg_loglik(theta, counts, law: str = "lognormal", first: int = 0):
 
 def fit_from_bin(fit_from: float | None, key: str = "surrogate.speed_law_from") -> int:
     """The bin from which :func:`fit_speed_law` resolves the bins (0: every bin) for ``fit_from``
-    (m/s, an inner edge of :data:`~pbmdem.impact.VELOCITY_EDGES`, or None); ValueError otherwise."""
-    if fit_from is None:
-        return 0
-    inner = VELOCITY_EDGES[1:-1]
-    match = np.flatnonzero(np.isclose(inner, float(fit_from), rtol=5e-3, atol=0.0))  # an edge to 3 digits
-    if match.size != 1:
-        raise ValueError(
-            f"{key} = {fit_from!r} m/s; allowed: null or an inner edge of the velocity bins (3 digits suffice), "
-            f"{[float(f'{e:.4g}') for e in inner]}"
-        )
-    return int(match[0]) + 1
+    (m/s, an inner edge of :data:`~pbmdem.impact.VELOCITY_EDGES`, or None; :func:`pbmdem.impact.velocity_edge_bin`)."""
+    return velocity_edge_bin(fit_from, key)
 
 
 def fit_lognormal(counts) -> tuple[np.ndarray, np.ndarray]:

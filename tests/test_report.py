@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from pbmdem.pbm.results import mass_quantiles
 from pbmdem.readers import InputFileError
 from pbmdem.surrogate.domain import OutOfDomainWarning
 
@@ -317,6 +318,15 @@ def test_figures_have_units_legends_and_sizes_in_mm(tmp_path):
     for line in fig.axes[0].get_lines()[:3]:  # cumulative: smooth, from ~0 to 100 %, never falling
         y = line.get_ydata()
         assert np.all(np.diff(y) >= -1e-9) and y[-1] == pytest.approx(100.0) and y[0] < 10.0
+    # each bin's mass is finer than its upper edge: the curve crosses 50 % at the d50 of summary.csv
+    # (pbm.results.mass_quantiles on the bins' edges), not half a bin to its left
+    final = bins["PBM-ANN"][bins["PBM-ANN"].time == max(TIMES)]
+    d = final.diameter.to_numpy()
+    edges = np.append(d[0] / 2 ** (1 / 6), d * 2 ** (1 / 6))  # the synthetic grid's ratio is 2^(1/3)
+    d50 = mass_quantiles(final.mass_fraction.to_numpy(), edges, (0.5,))[0]
+    last = next(ln for ln in fig.axes[1].get_lines() if ln.get_label() == f"t = {max(TIMES):g} s")
+    x, y = last.get_xdata(), last.get_ydata()
+    assert np.exp(np.interp(50.0, y, np.log(x))) == pytest.approx(1e3 * d50, rel=1e-9)
     assert fig.axes[0].get_title().startswith("PBM-DEM replicate 0")
     figures.pyplot().close(fig)
 

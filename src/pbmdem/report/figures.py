@@ -126,14 +126,17 @@ def snapshot_times(recorded, process) -> list[float]:
     return sorted({float(recorded[np.argmin(np.abs(recorded - t))]) for t in wanted})
 
 
-def cumulative_undersize(diameter: np.ndarray, density_lnd: np.ndarray) -> np.ndarray:
-    """Mass % finer than each bin's upper edge, from the mass density per ln d on a geometric grid
-    (the PBM's bins): density x d(ln d) per bin, cumulated by `pbmdem.pbm.results.cumulative_mass`.
-    A cumulative curve is smooth where the density of a sectional grid zig-zags between neighbouring bins."""
-    order = np.argsort(diameter)
-    d, q = diameter[order], np.clip(density_lnd[order], 0.0, None)
+def cumulative_undersize(diameter: np.ndarray, density_lnd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(upper edges, mass % finer than them) of the bins at ``diameter`` (ascending), from the mass
+    density per ln d: density x d(ln d) per bin, cumulated by `pbmdem.pbm.results.cumulative_mass`.
+    A bin's edges lie halfway between its diameter and its neighbours' in ln d (the last one's a
+    half-width above it), so the curve passes through d50 where summary.csv has it, not half a
+    bin to its left. A cumulative curve is smooth where the density of a sectional grid zig-zags."""
+    d, q = diameter, np.clip(density_lnd, 0.0, None)
     width = np.gradient(np.log(d)) if len(d) > 1 else np.ones_like(d)
-    return cumulative_mass(q * width, PERCENT)
+    ln = np.log(d)
+    upper = np.exp(np.append(0.5 * (ln[1:] + ln[:-1]), ln[-1] + 0.5 * width[-1]))
+    return upper, cumulative_mass(q * width, PERCENT)
 
 
 def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str):
@@ -154,7 +157,7 @@ def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str):
             if not at.any():
                 continue  # a run that ended early shows what it has
             order = np.argsort(d[at])
-            dd, cum = d[at][order], cumulative_undersize(d[at][order], q[at][order])
+            dd, cum = cumulative_undersize(d[at][order], q[at][order])
             if curves and len(curves[-1][1]) == len(dd) and np.allclose(curves[-1][2], cum, atol=0.2):
                 curves[-1][0].append(time)  # unchanged: one curve for both times
                 continue

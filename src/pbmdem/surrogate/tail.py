@@ -34,8 +34,11 @@ def _tail_survival(v, tip_speed, first: int, a: float, beta: float):
 def _tail_bins(tip_speed, first: int, a: float, beta: float) -> np.ndarray:
     """(n, bins from ``first`` up) conditional fractions of the tail law at each row's tip speed."""
     t = np.asarray(tip_speed, float).reshape(-1, 1)
-    upper = np.append(VELOCITY_EDGES[first + 1 : -1], np.inf)
-    return _tail_survival(VELOCITY_EDGES[first:-1], t, first, a, beta) - _tail_survival(upper, t, first, a, beta)
+    # the survival at each lower edge; a bin's upper edge is the next one's lower edge, the last's is inf (0)
+    lower = _tail_survival(VELOCITY_EDGES[first:-1], t, first, a, beta)
+    upper = np.zeros_like(lower)
+    upper[:, :-1] = lower[:, 1:]
+    return lower - upper
 
 
 #: Impacts from the tail's speed up that a run needs for its own scale a_r (:func:`fit_speed_tail`'s

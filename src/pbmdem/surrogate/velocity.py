@@ -36,7 +36,7 @@ import warnings
 import numpy as np
 import pandas as pd
 from scipy.optimize import minimize
-from scipy.special import gammainc, gammaincc, gammaincinv, log_ndtr, ndtr, polygamma
+from scipy.special import gammainc, gammaincc, gammaincinv, log_ndtr, ndtr, zeta
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, VELOCITY_KEYS, binned_counts, representative_velocities
 from pbmdem.readers import InputFileError
@@ -137,10 +137,12 @@ def n_law_parameters(law: str) -> int:
 
 
 def _gengamma_standard(q):
-    """(a, median, standard deviation) of W = ln(q^2 G) / q, G ~ Gamma(a = 1 / q^2)."""
+    """(a, median, standard deviation) of W = ln(q^2 G) / q, G ~ Gamma(a = 1 / q^2). The trigamma
+    function is zeta(2, a), what ``scipy.special.polygamma(1, a)`` computes (times (-1)^2 Gamma(2) = 1),
+    without its Python set-up."""
     a = 1.0 / (q * q)
     med = np.log(q * q * gammaincinv(a, 0.5)) / q
-    sd = np.sqrt(polygamma(1, a)) / np.abs(q)
+    sd = np.sqrt(zeta(2.0, a)) / np.abs(q)
     return a, med, sd
 
 
@@ -162,8 +164,9 @@ def _log_cdf_sf(x, mu, sigma, law: str, shape=None):
         a, med, sd = _gengamma_standard(qq)
         g = np.exp(qq * (med + z * sd)) / (qq * qq)
         lower, upper = np.log(gammainc(a, g)), np.log(gammaincc(a, g))
-        log_cdf = np.where(normal, log_ndtr(z), np.where(qq > 0, lower, upper))
-        log_sf = np.where(normal, log_ndtr(-z), np.where(qq > 0, upper, lower))
+        log_cdf, log_sf = np.where(qq > 0, lower, upper), np.where(qq > 0, upper, lower)
+        if normal.any():  # the log-normal's rows (element by element: the same numbers where they are taken)
+            log_cdf, log_sf = np.where(normal, log_ndtr(z), log_cdf), np.where(normal, log_ndtr(-z), log_sf)
         return np.broadcast_to(log_cdf, full), np.broadcast_to(log_sf, full)
 
 

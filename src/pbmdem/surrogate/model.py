@@ -337,20 +337,34 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
     def _fractions_of(laws) -> list[np.ndarray]:
         """:meth:`_fractions` of several models' speed laws, ``[(model, F, mu, sigma, shape), ...]``
         (the pairs' and the walls' of :meth:`impacts`): the laws of one ``speed_law`` in one
-        :func:`~.velocity.speed_fractions` call, which evaluates them row by row (the same numbers
-        as a call per model, its fixed cost paid once), each model's pooled tail on its own rows."""
+        :func:`~.velocity.speed_fractions` call and the pooled tails that start at one bin in one
+        :func:`~.tail.with_speed_tail` call, each row with its model's a and beta. Both evaluate
+        row by row, element by element: the same numbers as a call per model, their fixed cost paid once."""
         out = [None] * len(laws)
         for law in dict.fromkeys(entry[0].speed_law for entry in laws):
             idx = [i for i, entry in enumerate(laws) if entry[0].speed_law == law]
             mu, sigma, shape = ([laws[i][2 + p] for i in idx] for p in range(3))
             shape = None if any(q is None for q in shape) else np.concatenate(shape)
             frac = speed_fractions(np.concatenate(mu), np.concatenate(sigma), law, shape)
-            start = 0
+            tails, start = {}, 0  # first bin of a tail -> the rows, tip speeds, a and beta of its models
             for i in idx:
                 model, F, rows = laws[i][0], laws[i][1], len(laws[i][2])
-                part = frac[start : start + rows]
-                out[i] = with_speed_tail(part, model._column(F, "tip_speed"), model.speed_tail_)
+                if model.speed_tail_ is not None:
+                    first, a, beta = model.speed_tail_[:3]
+                    part = tails.setdefault(first, ([], [], [], []))
+                    part[0].append(np.arange(start, start + rows))
+                    part[1].append(model._column(F, "tip_speed"))
+                    part[2].append(np.full(rows, a))
+                    part[3].append(np.full(rows, beta))
                 start += rows
+            for first, (rows, tip, a, beta) in tails.items():
+                rows = np.concatenate(rows)
+                tail = (first, np.concatenate(a)[:, None], np.concatenate(beta)[:, None])
+                frac[rows] = with_speed_tail(frac[rows], np.concatenate(tip), tail)
+            start = 0
+            for i in idx:
+                out[i] = frac[start : start + len(laws[i][2])]
+                start += len(out[i])
         return out
 
     def frequency_matrix(self, diameters, numbers, rpm: float, return_std: bool = False, check_domain: bool = True):

@@ -105,7 +105,7 @@ def with_speed_tail(fractions, tip_speed, tail) -> np.ndarray:
     """Bin ``fractions`` (n, bins) of a speed law with the bins from the tail's speed up replaced by
     the pooled tail ``tail`` = (bin, a, beta[, spread]) of :func:`fit_speed_tail` (None: unchanged), scaled to
     the law's own fraction above that speed: P(V > v_s) is the law's (per pair), its shape above is
-    the tail's."""
+    the tail's. a and beta may also be (n, 1) columns, one tail per row (element by element the same numbers)."""
     if tail is None:
         return fractions
     first, a, beta = tail[:3]

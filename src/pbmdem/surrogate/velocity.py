@@ -205,7 +205,9 @@ def speed_fractions(mu, sigma, law: str = "lognormal", shape=None) -> np.ndarray
         # a predicted shape beyond the fitted range (an extrapolating or widened member) is held at its bound
         q = None if shape is None else np.clip(np.atleast_1d(np.asarray(shape, float)), *SHAPE_BOUNDS)[:, None]
         frac = np.exp(_log_bin_probabilities(_LOG_EDGES[None, :], mu, sigma, law, q))
-    frac = np.clip(np.nan_to_num(frac, nan=0.0), 0.0, None)
+    # NaN -> 0 and negatives -> 0 (np.nan_to_num and np.clip without their Python set-up; the laws' bin
+    # probabilities are at most 1, never infinite)
+    frac = np.maximum(np.where(np.isnan(frac), 0.0, frac), 0.0)
     return frac / frac.sum(axis=1, keepdims=True)
 
 

@@ -239,3 +239,60 @@ def test_impacts_share_the_response_surfaces_terms_and_give_the_same_numbers(wit
             computed = len(_terms.SHARED.get())
         models = [m for w in with_walls.wall_models_.values() for m in (w.frequency_model_, w.velocity_model_)]
         assert computed < sum(len(m.estimators_) for m in models)  # both walls' models fitted on the same rows
+
+
+@pytest.fixture(scope="module")
+def mixed_laws():
+    """A generalised-gamma pair model with its pooled tail; a bowl model of the same law with another
+    tail; an impeller model of the log-normal law without one (response surfaces)."""
+    from synthetic_tables import make_synthetic_tables as tables
+
+    from pbmdem.surrogate.families import ResponseSurface
+
+    pairs, velocities = tables(R, rpms=(600.0, 900.0, 1200.0), sample_velocities=True, seed=4)
+
+    def fit(law, tail_from, shift):
+        data = training_data(pairs, R, velocity_table=velocities, speed_law=law)
+        model = CollisionSurrogate(
+            frequency_model=ResponseSurface(),
+            impeller_radius=R,
+            physics_offset="cross_section",
+            feature_transform="log",
+            speed_law=law,
+            speed_tail_from=tail_from,
+        )
+        return model.fit(
+            data.X, data.y + shift, data.groups, velocity=data.velocity, velocity_counts=data.velocity_counts
+        )
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = fit("gengamma", 1.0, 0.0)
+        bowl = fit("gengamma", 1.0, 1.0)
+        bowl.speed_tail_ = (bowl.speed_tail_[0], 2.0 * bowl.speed_tail_[1], 1.3 * bowl.speed_tail_[2], 0.1)
+        model.wall_models_ = {"bowl": bowl, "impeller": fit("lognormal", None, 1.5)}
+    assert model.speed_tail_ is not None and model.wall_models_["impeller"].speed_tail_ is None
+    return model
+
+
+def test_impacts_batched_speed_laws_equal_each_models_own_fractions(mixed_laws):
+    # impacts() turns the pairs' and walls' speed laws into fractions in one speed_fractions call
+    # per law (each model's tail on its own rows) and the walls predict from the diagonal of the
+    # pairs' features: the same numbers as each model's own _pair_velocity on its own features
+    from pbmdem.surrogate.walls import diagonal_features
+
+    for model in (mixed_laws, mixed_laws.member(0), mixed_laws.member(mixed_laws.n_members - 1)):
+        for d, n, rpm in distributions():
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                rates = model.impacts(d, n, rpm)
+                X, iu, ju = pair_features(d, n, rpm, R)
+                own = model._pair_velocity(X)
+                diagonal = diagonal_features(d, n, rpm, R)
+                walls = [model.wall_models_[w]._pair_velocity(diagonal) for w in ("bowl", "impeller")]
+                frequency = [10.0 ** model.wall_models_[w]._pair_log10(diagonal) for w in ("bowl", "impeller")]
+            np.testing.assert_allclose(rates.pairs.velocity_fractions[iu, ju], own, rtol=1e-12, atol=0.0)
+            np.testing.assert_allclose(rates.walls.velocity_fractions, np.stack(walls), rtol=1e-12, atol=0.0)
+            np.testing.assert_allclose(rates.walls.frequency, np.stack(frequency), rtol=1e-12, atol=0.0)
+            # the tails differ: the walls' fast bins are not the pairs' law with another scale
+            assert not np.allclose(rates.walls.velocity_fractions[0], rates.walls.velocity_fractions[1])

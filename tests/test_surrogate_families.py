@@ -447,6 +447,35 @@ def test_kriging_mean_predicts_as_its_pipelines_do():
     assert single.predict_array(X_new).shape == (len(X_new),)
     assert np.array_equal(single.predict_array(X_new), single.estimators_[0].predict(X_new))
 
+    # and without the linear trend
+    plain = KrigingRegressor(n_restarts_optimizer=0, linear_trend=False).fit(X, y[:, 0])
+    assert np.array_equal(plain.predict_array(X_new), plain.estimators_[0].predict(X_new))
+
+
+def test_cross_kernel_is_the_kernels_call_to_the_bit():
+    # Kriging's cross-covariance by scikit-learn's lines of each term (families.cross_kernel): the
+    # kernel's own call bit for bit, for sums and products of its terms, and a kernel of other terms
+    # (a Matern) or of a constant or white noise alone is called
+    from sklearn.gaussian_process.kernels import RBF, ConstantKernel, DotProduct, Matern, WhiteKernel
+
+    from pbmdem.surrogate.families import cross_kernel
+
+    rng = np.random.default_rng(3)
+    Y = rng.normal(size=(30, 3)) * [1e-3, 1.0, 5.0]
+    kernels = [
+        ConstantKernel(2.0) * RBF([1e-3, 2.0, 3.0]) + ConstantKernel(0.3) * DotProduct(1.0) + WhiteKernel(0.1),
+        RBF(1.5),
+        ConstantKernel(0.3) * DotProduct(0.7) + ConstantKernel(1.1),
+        RBF(1.0) * DotProduct(1.0) + WhiteKernel(0.1) * RBF(2.0),
+        ConstantKernel(2.0) * Matern(1.0) + WhiteKernel(0.1),
+        WhiteKernel(0.2),
+        ConstantKernel(2.0),
+    ]
+    for kernel in kernels:
+        for n in (1, 7):
+            X = rng.normal(size=(n, 3)) * [1e-3, 1.0, 5.0]
+            assert np.array_equal(cross_kernel(kernel, X, Y), kernel(X, Y)), kernel
+
 
 def test_run_calibration_scale_is_the_row_scale_of_the_runs_means():
     # three pairs per run; within a run the errors cancel, between runs they do not: the run-level

@@ -26,11 +26,12 @@ import warnings
 import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.optimize import minimize
+from scipy.spatial.distance import cdist
 from scipy.stats import norm
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
-from sklearn.gaussian_process.kernels import RBF, DotProduct, WhiteKernel
+from sklearn.gaussian_process.kernels import RBF, DotProduct, Product, Sum, WhiteKernel
 from sklearn.gaussian_process.kernels import ConstantKernel as Constant
 from sklearn.linear_model import BayesianRidge
 from sklearn.pipeline import Pipeline
@@ -173,6 +174,39 @@ class _PerOutputRegressor(RegressorMixin, BaseEstimator):
         return {"n_outputs": self.n_outputs_, "fitted": self.describe()}
 
 
+def cross_kernel(kernel, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """``kernel(X, Y)`` of a fitted kernel built of sums and products of ``Constant``, ``RBF``,
+    ``DotProduct`` and ``WhiteKernel`` (:class:`KrigingRegressor`'s) by scikit-learn's own lines for
+    X != Y (a constant times the term, ``exp(-0.5 cdist(X / l, Y / l, "sqeuclidean"))``,
+    ``inner(X, Y) + sigma_0^2``, the white noise 0 off the training points), without the kernel
+    objects' calls and checks: the same operations on the same numbers (a constant's product with a
+    scalar instead of a filled matrix, the white noise's zeros not added: x + 0 is x). Any other
+    kernel is called."""
+    K = _kernel_terms(kernel, X, Y)
+    return K if isinstance(K, np.ndarray) and K.shape == (len(X), len(Y)) else kernel(X, Y)
+
+
+def _kernel_terms(kernel, X: np.ndarray, Y: np.ndarray):
+    """:func:`cross_kernel` of one term: a matrix, a constant's scalar or None (white noise: zeros)."""
+    kind = type(kernel)
+    if kind is Sum or kind is Product:
+        a, b = _kernel_terms(kernel.k1, X, Y), _kernel_terms(kernel.k2, X, Y)
+        if kind is Sum:
+            return a if b is None else b if a is None else a + b
+        if a is not None and b is not None:
+            return a * b
+    elif kind is Constant:
+        return np.float64(kernel.constant_value)
+    elif kind is RBF:
+        length_scale = np.squeeze(kernel.length_scale).astype(float)
+        return np.exp(-0.5 * cdist(X / length_scale, Y / length_scale, metric="sqeuclidean"))
+    elif kind is DotProduct:
+        return np.inner(X, Y) + kernel.sigma_0**2
+    elif kind is WhiteKernel:
+        return None
+    return kernel(X, Y)
+
+
 class KrigingRegressor(_PerOutputRegressor):
     """Kriging: Gaussian-process regression with an anisotropic kernel and a noise term.
 
@@ -235,7 +269,7 @@ class KrigingRegressor(_PerOutputRegressor):
         pipelines' ``predict`` (tests/test_surrogate_families.py)."""
         (_, scale), (_, gp) = est.steps  # by position: naming a step costs a lookup
         x = (X - scale.mean_) / scale.scale_
-        K_trans = gp.kernel_(x, gp.X_train_)
+        K_trans = cross_kernel(gp.kernel_, x, gp.X_train_)
         mean = gp._y_train_std * (K_trans @ gp.alpha_) + gp._y_train_mean
         if not return_std:
             return mean, None

@@ -34,8 +34,11 @@ def _tail_survival(v, tip_speed, first: int, a: float, beta: float):
 def _tail_bins(tip_speed, first: int, a: float, beta: float) -> np.ndarray:
     """(n, bins from ``first`` up) conditional fractions of the tail law at each row's tip speed."""
     t = np.asarray(tip_speed, float).reshape(-1, 1)
-    upper = np.append(VELOCITY_EDGES[first + 1 : -1], np.inf)
-    return _tail_survival(VELOCITY_EDGES[first:-1], t, first, a, beta) - _tail_survival(upper, t, first, a, beta)
+    # the survival at each lower edge; a bin's upper edge is the next one's lower edge, the last's is inf (0)
+    lower = _tail_survival(VELOCITY_EDGES[first:-1], t, first, a, beta)
+    upper = np.zeros_like(lower)
+    upper[:, :-1] = lower[:, 1:]
+    return lower - upper
 
 
 #: Impacts from the tail's speed up that a run needs for its own scale a_r (:func:`fit_speed_tail`'s
@@ -102,7 +105,7 @@ def with_speed_tail(fractions, tip_speed, tail) -> np.ndarray:
     """Bin ``fractions`` (n, bins) of a speed law with the bins from the tail's speed up replaced by
     the pooled tail ``tail`` = (bin, a, beta[, spread]) of :func:`fit_speed_tail` (None: unchanged), scaled to
     the law's own fraction above that speed: P(V > v_s) is the law's (per pair), its shape above is
-    the tail's."""
+    the tail's. a and beta may also be (n, 1) columns, one tail per row (element by element the same numbers)."""
     if tail is None:
         return fractions
     first, a, beta = tail[:3]

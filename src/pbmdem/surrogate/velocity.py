@@ -36,7 +36,7 @@ import warnings
 import numpy as np
 import pandas as pd
 from scipy.optimize import minimize
-from scipy.special import gammainc, gammaincc, gammaincinv, log_ndtr, ndtr, polygamma
+from scipy.special import gammainc, gammaincc, gammaincinv, log_ndtr, ndtr, zeta
 
 from pbmdem.impact import (
     N_VELOCITY_BINS,
@@ -144,10 +144,12 @@ def n_law_parameters(law: str) -> int:
 
 
 def _gengamma_standard(q):
-    """(a, median, standard deviation) of W = ln(q^2 G) / q, G ~ Gamma(a = 1 / q^2)."""
+    """(a, median, standard deviation) of W = ln(q^2 G) / q, G ~ Gamma(a = 1 / q^2). The trigamma
+    function is zeta(2, a), what ``scipy.special.polygamma(1, a)`` computes (times (-1)^2 Gamma(2) = 1),
+    without its Python set-up."""
     a = 1.0 / (q * q)
     med = np.log(q * q * gammaincinv(a, 0.5)) / q
-    sd = np.sqrt(polygamma(1, a)) / np.abs(q)
+    sd = np.sqrt(zeta(2.0, a)) / np.abs(q)
     return a, med, sd
 
 
@@ -169,8 +171,9 @@ def _log_cdf_sf(x, mu, sigma, law: str, shape=None):
         a, med, sd = _gengamma_standard(qq)
         g = np.exp(qq * (med + z * sd)) / (qq * qq)
         lower, upper = np.log(gammainc(a, g)), np.log(gammaincc(a, g))
-        log_cdf = np.where(normal, log_ndtr(z), np.where(qq > 0, lower, upper))
-        log_sf = np.where(normal, log_ndtr(-z), np.where(qq > 0, upper, lower))
+        log_cdf, log_sf = np.where(qq > 0, lower, upper), np.where(qq > 0, upper, lower)
+        if normal.any():  # the log-normal's rows (element by element: the same numbers where they are taken)
+            log_cdf, log_sf = np.where(normal, log_ndtr(z), log_cdf), np.where(normal, log_ndtr(-z), log_sf)
         return np.broadcast_to(log_cdf, full), np.broadcast_to(log_sf, full)
 
 
@@ -209,7 +212,9 @@ def speed_fractions(mu, sigma, law: str = "lognormal", shape=None) -> np.ndarray
         # a predicted shape beyond the fitted range (an extrapolating or widened member) is held at its bound
         q = None if shape is None else np.clip(np.atleast_1d(np.asarray(shape, float)), *SHAPE_BOUNDS)[:, None]
         frac = np.exp(_log_bin_probabilities(_LOG_EDGES[None, :], mu, sigma, law, q))
-    frac = np.clip(np.nan_to_num(frac, nan=0.0), 0.0, None)
+    # NaN -> 0 and negatives -> 0 (np.nan_to_num and np.clip without their Python set-up; the laws' bin
+    # probabilities are at most 1, never infinite)
+    frac = np.maximum(np.where(np.isnan(frac), 0.0, frac), 0.0)
     return frac / frac.sum(axis=1, keepdims=True)
 
 

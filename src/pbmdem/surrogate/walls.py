@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 from sklearn.base import clone
 
-from pbmdem.impact import N_VELOCITY_BINS, WALLS, WallRates
+from pbmdem.impact import WALLS, WallRates
 
 from .evaluation import cross_validate_models, summarise
 from .features import pair_features, training_data
@@ -83,12 +83,14 @@ def diagonal_features(diameters, numbers, rpm: float, impeller_radius: float) ->
     return X[iu == ju]
 
 
-def wall_rates(surrogate, diameters, numbers, rpm: float, check_domain: bool = True) -> WallRates:
-    """:class:`pbmdem.impact.WallRates` of the classes from the surrogate's wall models (every
-    wall of :data:`pbmdem.impact.WALLS`; ValueError naming the missing ones). The wall models
-    predict from the diagonal pairs' feature array (the pair model's array path: the same numbers
-    as their ``predict`` on the feature frame, without its DataFrames and without the members'
-    spread, which the PBM does not use); each warns of features outside its own training range."""
+def wall_laws(surrogate, X: np.ndarray, check_domain: bool = True):
+    """Per wall of :data:`pbmdem.impact.WALLS` (ValueError naming the missing wall models), from
+    the diagonal pairs' feature array ``X`` (:func:`diagonal_features`): the (walls, K) impacts per
+    granule and the speed laws ``[(model, F, mu, sigma, shape), ...]`` that
+    ``CollisionSurrogate._fractions_of`` turns into bin fractions. A wall model fitted on the
+    feature frame predicts from ``X`` (the pair model's array path: the same numbers as its
+    ``predict`` on the frame, without its DataFrames and without the members' spread, which the
+    PBM does not use), another from the frame; each warns of features outside its own training range."""
     models = getattr(surrogate, "wall_models_", None) or {}
     missing = [w for w in WALLS if w not in models]
     if missing:
@@ -96,23 +98,31 @@ def wall_rates(surrogate, diameters, numbers, rpm: float, check_domain: bool = T
             f"this surrogate has no wall model for {missing}: retrain it with the wall tables "
             "(results/dem/wall_collisions.csv, wall_impact_velocity.csv) to predict wall impacts"
         )
-    X = diagonal_features(diameters, numbers, rpm, surrogate.impeller_radius)
     frequency = np.empty((len(WALLS), len(X)))
-    fractions = np.empty((len(WALLS), len(X), N_VELOCITY_BINS))
-    frame = None
+    laws, frame = [], None
     for w, wall in enumerate(WALLS):
         model = models[wall]
         if model._array_path():
             if check_domain:
-                model._warn_domain(X, stacklevel=3)
+                model._warn_domain(X, stacklevel=4)
             frequency[w] = 10.0 ** model._pair_log10(X)
-            fractions[w] = model._pair_velocity(X)
+            laws.append((model, *model._pair_law(X)))
             continue
         if frame is None:
             frame = pd.DataFrame(X, columns=surrogate._feature_names())
         frequency[w] = 10.0 ** model.predict(frame, check_domain=check_domain)
-        fractions[w] = model.velocity_fractions(frame, check_domain=False)
-    return WallRates(frequency, fractions)
+        laws.append((model, *model._pair_law(frame)))
+    return frequency, laws
+
+
+def wall_rates(surrogate, diameters, numbers, rpm: float, check_domain: bool = True) -> WallRates:
+    """:class:`pbmdem.impact.WallRates` of the classes from the surrogate's wall models
+    (:func:`wall_laws` of the diagonal pairs' features, the walls' speed laws turned into bin
+    fractions in one ``CollisionSurrogate._fractions_of``)."""
+    frequency, laws = wall_laws(
+        surrogate, diagonal_features(diameters, numbers, rpm, surrogate.impeller_radius), check_domain
+    )
+    return WallRates(frequency, np.stack(surrogate._fractions_of(laws)))
 
 
 def train_wall_models(walls, velocities, template, candidates: dict, settings: dict, impeller_radius: float):

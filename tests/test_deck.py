@@ -166,6 +166,7 @@ def _insertions(text: str) -> dict[int, dict[str, str]]:
             "seed",
             "distributiontemplate",
             "nparticles",
+            "maxattempt",
             "particlerate",
             "insert_every",
             "start",
@@ -194,6 +195,10 @@ def test_every_class_is_inserted_by_its_own_fix_with_exactly_its_planned_count(d
         assert kv["region"] == "fill" and kv["overlapcheck"] == "yes" and kv["insert_every"] == str(plan.insert_every)
         assert 1 <= int(kv["start"]) <= plan.insert_every
     assert len({kv["start"] for kv in fixes.values()}) == len(fixes)  # different steps
+    # the largest class first in every insertion period, then by decreasing diameter
+    by_start = sorted(fixes, key=lambda c: int(fixes[c]["start"]))
+    assert [plan.diameters[c - 1] for c in by_start] == sorted(plan.diameters, reverse=True)
+    assert {kv["maxattempt"] for kv in fixes.values()} == {str(plan.insert_attempts)}
     seeds = [int(kv[s]) for kv in fixes.values() for s in ("seed", "distribution_seed")] + list(plan.template_seeds)
     assert len(set(seeds)) == len(seeds) and all(s > 10000 and next_prime(s) == s for s in seeds)
     settle_run = text.index("\nrun ")

@@ -147,7 +147,8 @@ def bed_values(bed: BedPlan, ranks: int) -> dict[str, str]:
             f"distributiontemplate psd{c} nparticles {num(f'counts[{k}]', count, integer=True)} &\n"
             f"                particlerate {num(f'insert_rates[{k}]', bed.insert_rates[k])} "
             f"insert_every {num('insert_every', bed.insert_every, integer=True)} "
-            f"start {num(f'insert_starts[{k}]', bed.insert_starts[k], integer=True)} overlapcheck yes all_in yes &\n"
+            f"start {num(f'insert_starts[{k}]', bed.insert_starts[k], integer=True)} overlapcheck yes "
+            f"maxattempt {num('insert_attempts', bed.insert_attempts, integer=True)} all_in yes &\n"
             "                vel constant 0.0 0.0 -0.5 region fill",
         ]
         unfix.append(f"unfix           ins{c}")

@@ -7,7 +7,7 @@ import pytest
 
 from pbmdem.dem import deck
 from pbmdem.dem.deck import DeckValueError
-from pbmdem.dem.plan import SKIN_STEPS_AT_TIP_SPEED, SNAPSHOTS_PER_CONTACT, neighbor_skin, plan_point
+from pbmdem.dem.plan import SKIN_STEPS_AT_TIP_SPEED, SNAPSHOTS_PER_CONTACT, neighbor_skin, next_prime, plan_point
 
 
 @pytest.mark.parametrize("value", ["1\nshell rm -rf /", "0.1", None, True, math.nan, math.inf, [1]])
@@ -134,18 +134,78 @@ def test_the_deck_formats_the_plan_and_decides_nothing(tiny_config):
     """Every value of a deck is the plan's: change a decision in the plan and the deck follows."""
     plan = plan_point(tiny_config.dem_point("small"), 600)
     other = dataclasses.replace(
-        plan, neighbor_skin=0.00123, thermo_every=17, insertion_seed=10037, rotation_period=0.25, rayleigh_limit=0.3
-    )
+        plan, neighbor_skin=0.00123, thermo_every=17, insertion_seeds=(10037, 10039, 10061), rotation_period=0.25,
+        rayleigh_limit=0.3, insert_starts=(1, 5, 9),
+    )  # fmt: skip
     words = {
-        line.split()[0] + (" " + line.split()[3] if line.startswith("fix") else ""): line.split()
-        for line in deck.render_granulator(other, 1).splitlines()
+        line.split()[0] + (" " + line.split()[1 if "insert/" in line else 3] if line.startswith("fix") else ""): line
+        for line in deck.render_granulator(other, 1).replace("&\n", "").splitlines()
         if line.strip() and not line.startswith("#")
     }
+    words = {key: line.split() for key, line in words.items()}
     assert words["neighbor"][1] == "0.00123"
     assert words["thermo"][1] == "17"
-    assert words["fix insert/rate/region"][5] == "10037"
+    assert [words[f"fix ins{c}"][5] for c in (1, 2, 3)] == ["10037", "10039", "10061"]
+    assert [words[f"fix ins{c}"][words[f"fix ins{c}"].index("start") + 1] for c in (1, 2, 3)] == ["1", "5", "9"]
     assert words["fix move/mesh"][-1] == "0.25"
     assert words["fix check/timestep/gran"][4:6] == ["17", "0.3"]
     # the plan's record (plan.json, bed.json) holds the fields a run is named by, not the deck's
-    assert not {"neighbor_skin", "thermo_every", "insertion_seed", "material"} & set(plan.to_dict())
+    assert not {"neighbor_skin", "thermo_every", "insertion_seeds", "material"} & set(plan.to_dict())
     assert {"rpm", "seed", "timestep", "collision_interval", "sampling_time"} <= set(plan.to_dict())
+
+
+def _insertions(text: str) -> dict[int, dict[str, str]]:
+    """The insertion fixes of a deck by atom type: their keyword values (and the distribution's
+    template), from the lines between the settling's region and its run."""
+    text = text.replace("&\n", "")
+    lines = [ln.split() for ln in text.splitlines() if ln.startswith("fix") and "/region" in ln]
+    dists = {ln.split()[1]: ln.split() for ln in text.splitlines() if "particledistribution" in ln}
+    found = {}
+    for words in lines:
+        keys = (
+            "seed",
+            "distributiontemplate",
+            "nparticles",
+            "maxattempt",
+            "particlerate",
+            "insert_every",
+            "start",
+            "overlapcheck",
+            "region",
+        )
+        kv = {key: words[words.index(key) + 1] for key in keys}
+        dist = dists[kv["distributiontemplate"]]
+        assert dist[5:] == ["1", dist[6], "1.0"]  # one template, weight 1
+        found[int(dist[6].removeprefix("pts"))] = kv | {"distribution_seed": dist[4]}
+    return found
+
+
+def test_every_class_is_inserted_by_its_own_fix_with_exactly_its_planned_count(default_config):
+    """One fix over all classes drew each particle's class at random (the planned counts were
+    missed by up to 25 %); each class now has its own fix with its count, its own prime seeds,
+    the same region and insertion interval, on its own steps, and is unfixed after settling."""
+    plan = plan_point(default_config.dem_point("dem_rpm900_i2"), 900)
+    text = deck.render_bed(plan.bed, 1)
+    fixes = _insertions(text)
+    assert sorted(fixes) == [k + 1 for k, c in enumerate(plan.counts) if c > 0] == list(range(1, 6))
+    assert [int(fixes[c]["nparticles"]) for c in sorted(fixes)] == plan.counts
+    insert_time = 0.6 * plan.settle_steps * plan.timestep
+    for c, kv in fixes.items():
+        assert float(kv["particlerate"]) == pytest.approx(plan.counts[c - 1] / insert_time, rel=1e-12)
+        assert kv["region"] == "fill" and kv["overlapcheck"] == "yes" and kv["insert_every"] == str(plan.insert_every)
+        assert 1 <= int(kv["start"]) <= plan.insert_every
+    assert len({kv["start"] for kv in fixes.values()}) == len(fixes)  # different steps
+    # the largest class first in every insertion period, then by decreasing diameter
+    by_start = sorted(fixes, key=lambda c: int(fixes[c]["start"]))
+    assert [plan.diameters[c - 1] for c in by_start] == sorted(plan.diameters, reverse=True)
+    assert {kv["maxattempt"] for kv in fixes.values()} == {str(plan.insert_attempts)}
+    seeds = [int(kv[s]) for kv in fixes.values() for s in ("seed", "distribution_seed")] + list(plan.template_seeds)
+    assert len(set(seeds)) == len(seeds) and all(s > 10000 and next_prime(s) == s for s in seeds)
+    settle_run = text.index("\nrun ")
+    for c in fixes:
+        assert text.index(f"fix             ins{c} ") < settle_run < text.index(f"unfix           ins{c}\n")
+    # a class the plan holds no particle of gets no fix (LIGGGHTS refuses nparticles 0)
+    counts = [0, *plan.counts[1:]]
+    empty = plan_point(default_config.dem_point("dem_rpm900_i2"), 900, counts=counts)
+    assert sorted(_insertions(deck.render_bed(empty.bed, 1))) == [2, 3, 4, 5]
+    assert "unfix           ins1\n" not in deck.render_bed(empty.bed, 1)

@@ -11,7 +11,6 @@ import pandas as pd
 import pytest
 
 from pbmdem.dem import collisions, deck, engine
-from pbmdem.dem.dumps import DumpFormatError
 from pbmdem.dem.grid_tables import aggregate
 from pbmdem.dem.plan import plan_point
 from pbmdem.dem.run import run_point
@@ -26,10 +25,10 @@ def test_tiny_run_counts_collisions_for_every_class_pair(tiny_run):
     assert len(table) == k * (k + 1) // 2
     assert (table["collisions"] > 0).all(), table
     assert (table["frequency_per_pair"] > 0).all()
-    # class counts are the particles actually in the bowl, and they add up to the plan
+    # class counts are the particles actually in the bowl: exactly the planned bed
     per_class = table.loc[table.class_i == table.class_j, "n_i"].to_numpy()
+    np.testing.assert_array_equal(per_class, plan.counts)
     assert per_class.sum() == plan.n_particles
-    np.testing.assert_allclose(per_class / per_class.sum(), plan.number_fractions, atol=0.08)
     # per-pair normalisation as documented
     row = table.iloc[1]
     assert row.frequency_per_pair == pytest.approx(row.collisions / (row.n_i * row.n_j * row.sampling_time))
@@ -91,14 +90,10 @@ def test_replicates_differ_only_by_seed_and_aggregate_to_mean_and_se(tiny_run, t
     for plan in plans[1:]:
         other = dataclasses.asdict(plan)
         # the replicate and its seeds (dem.seed's and the LIGGGHTS primes the plan derives from it)
-        seeds = {"seed", "template_seeds", "distribution_seed", "insertion_seed"}
+        seeds = {"seed", "template_seeds", "distribution_seeds", "insertion_seeds"}
         assert {k for k in base if base[k] != other[k]} == {"replicate", *seeds}
     decks = [deck.granulator_values(p, ranks=1) for p in plans]
-    assert {k for k in decks[0] if decks[0][k] != decks[1][k]} <= {
-        "seed_dist",
-        "seed_insert",
-        "particle_templates_block",
-    }
+    assert {k for k in decks[0] if decks[0][k] != decks[1][k]} <= {"insertion_block", "particle_templates_block"}
     tables = [tiny_run["dir"] / "collisions.csv"]
     for plan in plans[1:]:
         run_dir = tmp_path / f"rep{plan.replicate}"
@@ -181,8 +176,12 @@ def test_insertion_shortfall_is_an_error(tiny_config, tmp_path):
     point = tiny_config.dem_point("small")
     point = point.replace(dem=point.dem.replace(settle_time=0.004))  # far too short to drop ~400 particles
     plan = plan_point(point, 600)
-    with pytest.raises(DumpFormatError, match="insertion did not place them all"):
+    with pytest.raises(engine.LiggghtsError, match="insertion did not place them all") as err:
         run_point(plan, tmp_path, tiny_config.dem_execution)
+    inserted = json.loads((tmp_path / "crash.json").read_text())["inserted_counts"]
+    assert sum(inserted) < plan.n_particles
+    for k, (planned, got) in enumerate(zip(plan.counts, inserted)):
+        assert (f"class {k}: {planned} particles planned, {got} inserted" in str(err.value)) == (planned != got)
     assert not (tmp_path / "collisions.csv").exists()
 
 
@@ -234,3 +233,42 @@ def test_two_mpi_ranks(tiny_config, tmp_path):
     table = pd.read_csv(tmp_path / "collisions.csv")
     assert summary["n_particles"] == plan.n_particles and summary["mpi_ranks"] == 2
     assert (table.collisions > 0).all()
+
+
+def _retype(classes_dump, moves: dict[int, int]) -> None:
+    """Rewrite the class map: the first `n` particles of atom type `t` become type 1 (`moves`: t -> n)."""
+    lines = classes_dump.read_text().splitlines(keepends=True)
+    start = next(k for k, line in enumerate(lines) if line.startswith("ITEM: ATOMS")) + 1
+    for k in range(start, len(lines)):
+        words = lines[k].split()
+        if len(words) == 3 and moves.get(int(words[1]), 0) > 0:
+            moves[int(words[1])] -= 1
+            lines[k] = f"{words[0]} 1 {words[2]}\n"
+    assert not any(moves.values())
+    classes_dump.write_text("".join(lines))
+
+
+def test_a_bed_other_than_the_planned_one_fails_the_run(tiny_run, tmp_path):
+    """The real tiny run holds exactly its planned counts and passes; its class map rewritten to
+    the counts the former deck (one insertion fix over all classes) inserted for this bed, measured
+    with LIGGGHTS: [232, 137, 91] for the plan's [230, 138, 92] (the same total), fails the run
+    naming the folder and each class that differs."""
+    import shutil
+
+    from pbmdem.dem.run import check_finished
+
+    plan = tiny_run["plan"]
+    assert plan.counts == [230, 138, 92]
+    run = tmp_path / "other_bed"
+    shutil.copytree(tiny_run["dir"], run)
+    check_finished(plan, run)
+    _retype(run / "post" / "classes.dump", {2: 1, 3: 1})
+    with pytest.raises(engine.LiggghtsError) as err:
+        check_finished(plan, run)
+    text = str(err.value)
+    assert str(run) in text
+    assert "class 0: 230 particles planned, 232 inserted" in text
+    assert "class 1: 138 particles planned, 137 inserted" in text
+    assert "class 2: 92 particles planned, 91 inserted" in text
+    crash = json.loads((run / "crash.json").read_text())
+    assert crash["planned_counts"] == [230, 138, 92] and crash["inserted_counts"] == [232, 137, 91]

@@ -114,8 +114,8 @@ def render(template_name: str, values: dict[str, str], kind: str | None = None) 
 
 
 #: the plan's fields that fill the placeholders of the same name: numbers, integers, and the run's integers
-BED_NUMBERS = ("timestep", "rayleigh_limit", "fill_radius", "fill_zlo", "fill_zhi", "insert_rate")
-BED_INTEGERS = ("n_particles", "insert_every", "thermo_every", "vtk_every", "settle_steps")
+BED_NUMBERS = ("timestep", "rayleigh_limit", "fill_radius", "fill_zlo", "fill_zhi")
+BED_INTEGERS = ("thermo_every", "vtk_every", "settle_steps")
 RUN_INTEGERS = ("spinup_steps", "sampling_steps", "spinup_pre_steps", "record_steps", "position_interval",
                 "collision_interval")  # fmt: skip
 
@@ -134,7 +134,24 @@ def bed_values(bed: BedPlan, ranks: int) -> dict[str, str]:
         f"radius constant {num(f'diameters[{k}]', 0.5 * d)}"
         for k, (seed, d) in enumerate(zip(bed.template_seeds, bed.diameters))
     ]
-    weights = " ".join(f"pts{k + 1} {num(f'number_fractions[{k}]', w)}" for k, w in enumerate(bed.number_fractions))
+    # one distribution of one template and one insertion fix per class: exactly its planned count
+    insert, unfix = [], []
+    for k, count in enumerate(bed.counts):
+        if count == 0:
+            continue  # LIGGGHTS refuses an insertion of no particles
+        c = k + 1
+        insert += [
+            f"fix             psd{c} all particledistribution/discrete/numberbased "
+            f"{num('seed', bed.distribution_seeds[k], integer=True)} 1 pts{c} 1.0",
+            f"fix             ins{c} all insert/rate/region seed {num('seed', bed.insertion_seeds[k], integer=True)} "
+            f"distributiontemplate psd{c} nparticles {num(f'counts[{k}]', count, integer=True)} &\n"
+            f"                particlerate {num(f'insert_rates[{k}]', bed.insert_rates[k])} "
+            f"insert_every {num('insert_every', bed.insert_every, integer=True)} "
+            f"start {num(f'insert_starts[{k}]', bed.insert_starts[k], integer=True)} overlapcheck yes "
+            f"maxattempt {num('insert_attempts', bed.insert_attempts, integer=True)} all_in yes &\n"
+            "                vel constant 0.0 0.0 -0.5 region fill",
+        ]
+        unfix.append(f"unfix           ins{c}")
     box = dict(zip(("box_xlo", "box_xhi", "box_ylo", "box_yhi", "box_zlo", "box_zhi"), bed.box))
     return {
         "point_id": known_name("point_id", bed.bed_id.replace(".", "p")),
@@ -152,9 +169,8 @@ def bed_values(bed: BedPlan, ranks: int) -> dict[str, str]:
         "post_dir": "post",
         "check_every": num("check_every", bed.thermo_every, integer=True),
         "particle_templates_block": "\n".join(templates),
-        "seed_dist": num("seed", bed.distribution_seed, integer=True),
-        "distribution_weights": weights,
-        "seed_insert": num("seed", bed.insertion_seed, integer=True),
+        "insertion_block": "\n".join(insert),
+        "unfix_insertion_block": "\n".join(unfix),
         # the plan's fields of the same name
         **{key: num(key, getattr(bed, key)) for key in BED_NUMBERS},
         **{key: num(key, getattr(bed, key), integer=True) for key in BED_INTEGERS},

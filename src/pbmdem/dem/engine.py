@@ -11,8 +11,9 @@ system's time limit) LIGGGHTS writes `restart_forced_liggghts_<step>.data`, logs
 `Forced restart written` and exits 0. `run` treats that log line as a failure; SIGINT/SIGTERM
 reaching this Python process while LIGGGHTS runs are recorded (and passed on to LIGGGHTS if it
 did not get them too), so that the run is recorded as interrupted rather than Python dying
-first. `check_finished` judges a run against its plan (last thermo step and number of dump
-frames), whatever the exit code said; the restart file is removed and recorded in crash.json.
+first. `check_finished` judges a run against its plan (last thermo step, number of dump frames and
+the particles per size class in the class map), whatever the exit code said; the restart file is
+removed and recorded in crash.json.
 """
 
 from __future__ import annotations
@@ -26,10 +27,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from pbmdem.atomic import write_json
 from pbmdem.readers import InputFileError
 
-from .dumps import BINARY_SUFFIX, DumpFormatError, binary_frames, find_damage
+from .dumps import BINARY_SUFFIX, DumpFormatError, binary_frames, find_damage, read_classes
 from .signals import PassSignals, children_cpu, wait
 
 _ERROR_LINE = re.compile(r"^(ERROR|ERROR on proc \d+).*$", re.MULTILINE)
@@ -200,14 +203,23 @@ def dump_steps(path: str | Path) -> list[int]:
     return [int(m.group(1)) for m in _DUMP_FRAME.finditer(data)]
 
 
-def check_finished(workdir: str | Path, total_steps: int, dumps: dict[str, tuple[int, int]]) -> None:
+#: the class-map dump of a run (liggghts_templates/granulator.in): id, atom type (class + 1), radius
+CLASS_MAP = "post/classes.dump"
+
+
+def check_finished(
+    workdir: str | Path, total_steps: int, dumps: dict[str, tuple[int, int]], counts: list[int] | None = None
+) -> None:
     """Judge a run against its plan, not its exit code: the last thermo step of the log must be
     `total_steps` and each dump `name -> (frames, last step)` must hold exactly that many frames
     ending at that step. Otherwise crash.json is written and an error raised, telling two cases
     apart: a log that stops short of the plan is an **unfinished** engine run (LiggghtsError); a
     log that reaches the planned step with a dump that does not match the plan is a **corrupt**
     file (DumpFormatError naming the file, the line, the byte and the frame): the engine finished,
-    the file was damaged afterwards (disk, copy, edit), and rerunning the engine is not the cure."""
+    the file was damaged afterwards (disk, copy, edit), and rerunning the engine is not the cure.
+    With `counts` (the plan's particles per size class), the class map (CLASS_MAP) of a finished
+    run must hold exactly these: a bed that is not the planned one fails (LiggghtsError naming
+    each class, its planned and its inserted count)."""
     workdir = Path(workdir)
     log = workdir / "log.liggghts"
     steps = thermo_table(log).get("Step", []) if log.exists() else []
@@ -233,6 +245,35 @@ def check_finished(workdir: str | Path, total_steps: int, dumps: dict[str, tuple
             f"but {'; '.join(problems)}. The file was damaged after the engine wrote it (check the disk "
             f"and what else writes there); no tables were written; details in {workdir / 'crash.json'}."
         )
+    if counts is not None:
+        check_class_counts(workdir, counts)
+
+
+def check_class_counts(workdir: str | Path, counts: list[int]) -> None:
+    """The particles per size class of the run's class map (CLASS_MAP) must be the planned
+    `counts`; otherwise crash.json is written and LiggghtsError raised naming the folder and each
+    class that differs (planned and inserted)."""
+    workdir = Path(workdir)
+    _, classes = read_classes(workdir / CLASS_MAP)
+    if classes.size and (classes.min() < 0 or classes.max() >= len(counts)):
+        found = sorted({int(c) + 1 for c in classes if not 0 <= c < len(counts)})
+        inserted = None
+        problems = [f"atom types {found} in {CLASS_MAP}: the plan has types 1..{len(counts)}"]
+    else:
+        inserted = [int(n) for n in np.bincount(classes, minlength=len(counts))]
+        problems = [
+            f"class {k}: {planned} particles planned, {got} inserted"
+            for k, (planned, got) in enumerate(zip(counts, inserted))
+            if planned != got
+        ]
+    if problems:
+        problems[0] = f"the bed in {CLASS_MAP} is not the planned one: {problems[0]}"
+        if inserted is not None and sum(inserted) < sum(counts):
+            problems.append(
+                f"insertion did not place them all ({sum(inserted)} of {sum(counts)}): lower dem.bed_height, "
+                "or give the bowl more height / the settling phase more time"
+            )
+        record_crash(workdir, problems, planned_counts=[int(c) for c in counts], inserted_counts=inserted)
 
 
 def _corruption(workdir: Path, name: str, found: list[int], frames: int, last_step: int) -> str:

@@ -34,6 +34,8 @@ from .progress import thermo_interval
 SNAPSHOTS_PER_CONTACT = 1
 #: replicate r runs with insertion seeds derived from dem.seed + r x this prime
 REPLICATE_SEED_STRIDE = 7919
+#: random positions an insertion fix tries for a particle (LIGGGHTS' maxattempt; its default is 50)
+INSERT_ATTEMPTS = 1000
 #: impact speed (m/s) below which the contact time is not evaluated (an impeller at rest)
 MIN_CONTACT_SPEED = 0.1
 #: steps between neighbour-list rebuilds that the skin allows a granule moving at the blade tip
@@ -107,18 +109,23 @@ class BedPlan:
     # what the deck is made of (DECK: derived, not recorded)
     material: Material = field(metadata=DECK)
     granulator: Granulator = field(metadata=DECK)
-    #: LIGGGHTS' prime seeds: one per particle template, the distribution's, the insertion's
+    #: LIGGGHTS' prime seeds, one per class each: its particle template, its particle distribution
+    #: (of that one template) and its insertion fix
     template_seeds: tuple[int, ...] = field(metadata=DECK)
-    distribution_seed: int = field(metadata=DECK)
-    insertion_seed: int = field(metadata=DECK)
+    distribution_seeds: tuple[int, ...] = field(metadata=DECK)
+    insertion_seeds: tuple[int, ...] = field(metadata=DECK)
     #: simulation box (xlo, xhi, ylo, yhi, zlo, zhi) and the insertion cylinder (radius, zlo, zhi), m
     box: tuple[float, ...] = field(metadata=DECK)
     fill_radius: float = field(metadata=DECK)
     fill_zlo: float = field(metadata=DECK)
     fill_zhi: float = field(metadata=DECK)
-    #: particles per second inserted, every `insert_every` steps
-    insert_rate: float = field(metadata=DECK)
+    #: one insertion fix per class that inserts exactly its `counts` (a class with none has no
+    #: fix): its particles per second, every `insert_every` steps from its first step `insert_starts`
+    insert_rates: tuple[float, ...] = field(metadata=DECK)
     insert_every: int = field(metadata=DECK)
+    insert_starts: tuple[int, ...] = field(metadata=DECK)
+    #: random positions a fix tries for a particle before it gives up until its next step
+    insert_attempts: int = field(metadata=DECK)
     #: steps between thermo lines (and the time-step check, which thermo reads)
     thermo_every: int = field(metadata=DECK)
     #: neighbour skin (m) of the settling, the impeller at rest
@@ -245,15 +252,25 @@ def plan_bed(point: DemPoint, *, replicate: int = 0, counts: list[int] | None = 
     dt = dem.timestep_fraction * t_r
     settle_steps, vtk_every = _steps(dem.settle_time, dt), _steps(dem.vtk_interval, dt)
     seed = dem.seed + REPLICATE_SEED_STRIDE * int(replicate)
-    template_seeds, prime = [], next_prime(seed)
-    for _ in sizes.diameters:
+    primes, prime = [], next_prime(seed)
+    for _ in range(3 * len(sizes.diameters)):  # template, distribution and insertion seeds
         prime = next_prime(prime + 1)
-        template_seeds.append(prime)
+        primes.append(prime)
+    n_classes = len(sizes.diameters)
     bowl, d_max = granulator.bowl, max(sizes.diameters)
     margin, half = 0.05 * bowl.diameter, bowl.radius + 0.05 * bowl.diameter
     # insert in small batches over the first 60 % of the settling phase, so that the fill region
-    # never saturates (a saturated region inserts the large templates first and skews the PSD)
+    # never saturates; one fix per class with exactly its count (one fix over all classes drew the
+    # class of each particle at random and missed the planned counts by up to 25 %, docs/dem.md).
+    # The classes insert on different steps (offsets within `insert_every`, the largest class first),
+    # so that each fix's overlap check sees the particles the others inserted also across MPI
+    # ranks. 1000 attempts per particle (LIGGGHTS: 50): with 50, the large class of `corner` missed
+    # 10 of its 50 particles in the settling time (docs/dem.md)
     insert_time = 0.6 * settle_steps * dt
+    insert_every = max(1, int(0.002 / dt))
+    largest_first = np.argsort(-np.asarray(sizes.diameters, float), kind="stable")
+    offsets = np.empty(n_classes, int)
+    offsets[largest_first] = 1 + np.arange(n_classes) * (insert_every // n_classes)
     return BedPlan(
         distribution=point.distribution,
         diameters=list(sizes.diameters),
@@ -268,15 +285,17 @@ def plan_bed(point: DemPoint, *, replicate: int = 0, counts: list[int] | None = 
         seed=seed,
         material=mat,
         granulator=granulator,
-        template_seeds=tuple(template_seeds),
-        distribution_seed=next_prime(prime + 1),
-        insertion_seed=next_prime(prime + 100),
+        template_seeds=tuple(primes[:n_classes]),
+        distribution_seeds=tuple(primes[n_classes : 2 * n_classes]),
+        insertion_seeds=tuple(primes[2 * n_classes :]),
         box=(-half, half, -half, half, -margin, bowl.height + margin),
         fill_radius=bowl.radius - d_max,
         fill_zlo=granulator.impeller.top + d_max,
         fill_zhi=bowl.height - d_max,
-        insert_rate=n_particles / insert_time,
-        insert_every=max(1, int(0.002 / dt)),
+        insert_rates=tuple(c / insert_time for c in counts),
+        insert_every=insert_every,
+        insert_starts=tuple(int(k) for k in offsets),
+        insert_attempts=INSERT_ATTEMPTS,
         # thermo reads fix check/timestep/gran, so both run at the same interval (LIGGGHTS requires it)
         thermo_every=thermo_interval(n_particles, vtk_every),
         settle_skin=neighbor_skin(sizes.diameters, dt),

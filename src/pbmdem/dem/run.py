@@ -203,9 +203,10 @@ def _move_into(stage: Path, run_dir: Path) -> None:
 
 def check_finished(plan: DemPlan, run_dir: str | Path) -> None:
     """Raise LiggghtsError (and write crash.json) unless the run reached every planned step and
-    contact snapshot. LIGGGHTS exits 0 when interrupted, so the exit code proves nothing. (A run
-    from a settled bed goes on from the bed's last step, so its plan's steps are the same.)"""
-    engine.check_finished(run_dir, plan.total_steps, plan.dumps)
+    contact snapshot, and unless its class map holds exactly the planned particles per class.
+    LIGGGHTS exits 0 when interrupted, so the exit code proves nothing. (A run from a settled bed
+    goes on from the bed's last step, so its plan's steps are the same.)"""
+    engine.check_finished(run_dir, plan.total_steps, plan.dumps, plan.counts)
 
 
 def run_point(

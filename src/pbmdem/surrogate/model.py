@@ -29,7 +29,7 @@ from .features import (
     pair_features,
     pair_table,
 )
-from .tail import fit_speed_tail, member_tail, with_speed_tail
+from .tail import fit_speed_tail, law_fractions, member_tail, with_speed_tail
 from .velocity import check_speed_law, n_law_parameters, speed_fractions
 from .walls import diagonal_features, wall_laws
 
@@ -322,50 +322,19 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         )
 
     def _pair_law(self, F):
-        """``(F, mu, sigma, shape)``: the speed law of the pairs' features from :meth:`_pairs`
-        (unchecked domain; ``F`` as :meth:`_fractions` reads it), the entry of :meth:`_fractions_of`."""
+        """The speed law of the pairs' features from :meth:`_pairs` (unchecked domain) as an entry
+        of :func:`~.tail.law_fractions`: (speed law, tip speeds, mu, sigma, shape, pooled tail)."""
         if not isinstance(F, np.ndarray):
             F = self._validated_frame(self._features(F), False)
-            return (F, *self._velocity_law(F)[:3])
-        return (F, *self._law(F, self.velocity_model_.predict_array(self._transform(F)))[:3])
+            mu, sigma, shape = self._velocity_law(F)[:3]
+        else:
+            mu, sigma, shape = self._law(F, self.velocity_model_.predict_array(self._transform(F)))[:3]
+        return self.speed_law, self._column(F, "tip_speed"), mu, sigma, shape, self.speed_tail_
 
     def _pair_velocity(self, F) -> np.ndarray:
         """:meth:`velocity_fractions` of the pairs' features from :meth:`_pairs` (unchecked domain)."""
-        return self._fractions(*self._pair_law(F))
-
-    @staticmethod
-    def _fractions_of(laws) -> list[np.ndarray]:
-        """:meth:`_fractions` of several models' speed laws, ``[(model, F, mu, sigma, shape), ...]``
-        (the pairs' and the walls' of :meth:`impacts`): the laws of one ``speed_law`` in one
-        :func:`~.velocity.speed_fractions` call and the pooled tails that start at one bin in one
-        :func:`~.tail.with_speed_tail` call, each row with its model's a and beta. Both evaluate
-        row by row, element by element: the same numbers as a call per model, their fixed cost paid once."""
-        out = [None] * len(laws)
-        for law in dict.fromkeys(entry[0].speed_law for entry in laws):
-            idx = [i for i, entry in enumerate(laws) if entry[0].speed_law == law]
-            mu, sigma, shape = ([laws[i][2 + p] for i in idx] for p in range(3))
-            shape = None if any(q is None for q in shape) else np.concatenate(shape)
-            frac = speed_fractions(np.concatenate(mu), np.concatenate(sigma), law, shape)
-            tails, start = {}, 0  # first bin of a tail -> the rows, tip speeds, a and beta of its models
-            for i in idx:
-                model, F, rows = laws[i][0], laws[i][1], len(laws[i][2])
-                if model.speed_tail_ is not None:
-                    first, a, beta = model.speed_tail_[:3]
-                    part = tails.setdefault(first, ([], [], [], []))
-                    part[0].append(np.arange(start, start + rows))
-                    part[1].append(model._column(F, "tip_speed"))
-                    part[2].append(np.full(rows, a))
-                    part[3].append(np.full(rows, beta))
-                start += rows
-            for first, (rows, tip, a, beta) in tails.items():
-                rows = np.concatenate(rows)
-                tail = (first, np.concatenate(a)[:, None], np.concatenate(beta)[:, None])
-                frac[rows] = with_speed_tail(frac[rows], np.concatenate(tip), tail)
-            start = 0
-            for i in idx:
-                out[i] = frac[start : start + len(laws[i][2])]
-                start += len(out[i])
-        return out
+        law, tip, mu, sigma, shape, tail = self._pair_law(F)
+        return with_speed_tail(speed_fractions(mu, sigma, law, shape), tip, tail)
 
     def frequency_matrix(self, diameters, numbers, rpm: float, return_std: bool = False, check_domain: bool = True):
         """(K,) diameters (m) and (K,) particle numbers -> (K, K) symmetric encounter frequency c_ij (1/s per pair).
@@ -400,7 +369,7 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall models' impacts per granule
         (:func:`~pbmdem.surrogate.walls.wall_rates`), the same numbers as those calls: the walls
         predict from the diagonal rows of the pairs' feature array, the pairs' and walls' speed laws
-        become fractions in one :meth:`_fractions_of`, and response surfaces share terms at equal
+        become fractions in one :func:`~.tail.law_fractions`, and response surfaces share terms at equal
         features (:mod:`._terms`)."""
         self._require_velocity_model()
         with shared_terms():
@@ -412,7 +381,7 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
             else:
                 diagonal = diagonal_features(diameters, numbers, rpm, self.impeller_radius)
             walls, laws = wall_laws(self, diagonal, check_domain)
-            fractions = self._fractions_of([(self, *self._pair_law(F)), *laws])
+            fractions = law_fractions([self._pair_law(F), *laws])
             pairs = EncounterRates(frequency=frequency, velocity_fractions=matrix_from_pairs(fractions[0], k))
             return ImpactRates(pairs, WallRates(walls, np.stack(fractions[1:])))
 

@@ -21,7 +21,7 @@ from scipy.optimize import minimize, minimize_scalar
 
 from pbmdem.impact import VELOCITY_EDGES
 
-from .velocity import fit_from_bin
+from .velocity import fit_from_bin, speed_fractions
 
 
 def _tail_survival(v, tip_speed, first: int, a: float, beta: float):
@@ -123,3 +123,38 @@ def member_tail(tail, z: float):
         return None
     first, a, beta, spread = tail
     return first, a * float(np.exp(-z * spread)), beta, spread
+
+
+def law_fractions(laws) -> list[np.ndarray]:
+    """Bin fractions of several models' speed laws with their pooled tails, each entry ``(speed
+    law, tip speeds, mu, sigma, shape or None, tail or None)`` (the pairs' and the walls' of
+    ``CollisionSurrogate.impacts``): the laws of one name in one
+    :func:`~.velocity.speed_fractions` call and the tails that start at one bin in one
+    :func:`with_speed_tail` call, each row with its model's a and beta. Both evaluate row by row,
+    element by element: the same numbers as a call per model, their fixed cost paid once."""
+    out = [None] * len(laws)
+    for law in dict.fromkeys(entry[0] for entry in laws):
+        idx = [i for i, entry in enumerate(laws) if entry[0] == law]
+        mu, sigma, shape = ([laws[i][2 + p] for i in idx] for p in range(3))
+        shape = None if any(q is None for q in shape) else np.concatenate(shape)
+        frac = speed_fractions(np.concatenate(mu), np.concatenate(sigma), law, shape)
+        tails, start = {}, 0  # first bin of a tail -> the rows, tip speeds, a and beta of its models
+        for i in idx:
+            tip, rows, tail = laws[i][1], len(laws[i][2]), laws[i][5]
+            if tail is not None:
+                first, a, beta = tail[:3]
+                part = tails.setdefault(first, ([], [], [], []))
+                part[0].append(np.arange(start, start + rows))
+                part[1].append(tip)
+                part[2].append(np.full(rows, a))
+                part[3].append(np.full(rows, beta))
+            start += rows
+        for first, (rows, tip, a, beta) in tails.items():
+            rows = np.concatenate(rows)
+            tail = (first, np.concatenate(a)[:, None], np.concatenate(beta)[:, None])
+            frac[rows] = with_speed_tail(frac[rows], np.concatenate(tip), tail)
+        start = 0
+        for i in idx:
+            out[i] = frac[start : start + len(laws[i][2])]
+            start += len(out[i])
+    return out

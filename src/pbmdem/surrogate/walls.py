@@ -26,6 +26,7 @@ from pbmdem.impact import WALLS, WallRates
 
 from .evaluation import cross_validate_models, summarise
 from .features import pair_features, training_data
+from .tail import law_fractions
 
 #: wall-table columns -> collision-table columns of the diagonal pair
 _RENAME = {"encounter_frequency_per_particle": "encounter_frequency_per_pair"}
@@ -86,8 +87,8 @@ def diagonal_features(diameters, numbers, rpm: float, impeller_radius: float) ->
 def wall_laws(surrogate, X: np.ndarray, check_domain: bool = True):
     """Per wall of :data:`pbmdem.impact.WALLS` (ValueError naming the missing wall models), from
     the diagonal pairs' feature array ``X`` (:func:`diagonal_features`): the (walls, K) impacts per
-    granule and the speed laws ``[(model, F, mu, sigma, shape), ...]`` that
-    ``CollisionSurrogate._fractions_of`` turns into bin fractions. A wall model fitted on the
+    granule and the speed laws (entries of :func:`~.tail.law_fractions`) that
+    :func:`~.tail.law_fractions` turns into bin fractions. A wall model fitted on the
     feature frame predicts from ``X`` (the pair model's array path: the same numbers as its
     ``predict`` on the frame, without its DataFrames and without the members' spread, which the
     PBM does not use), another from the frame; each warns of features outside its own training range."""
@@ -106,23 +107,23 @@ def wall_laws(surrogate, X: np.ndarray, check_domain: bool = True):
             if check_domain:
                 model._warn_domain(X, stacklevel=4)
             frequency[w] = 10.0 ** model._pair_log10(X)
-            laws.append((model, *model._pair_law(X)))
+            laws.append(model._pair_law(X))
             continue
         if frame is None:
             frame = pd.DataFrame(X, columns=surrogate._feature_names())
         frequency[w] = 10.0 ** model.predict(frame, check_domain=check_domain)
-        laws.append((model, *model._pair_law(frame)))
+        laws.append(model._pair_law(frame))
     return frequency, laws
 
 
 def wall_rates(surrogate, diameters, numbers, rpm: float, check_domain: bool = True) -> WallRates:
     """:class:`pbmdem.impact.WallRates` of the classes from the surrogate's wall models
     (:func:`wall_laws` of the diagonal pairs' features, the walls' speed laws turned into bin
-    fractions in one ``CollisionSurrogate._fractions_of``)."""
+    fractions in one :func:`~.tail.law_fractions`)."""
     frequency, laws = wall_laws(
         surrogate, diagonal_features(diameters, numbers, rpm, surrogate.impeller_radius), check_domain
     )
-    return WallRates(frequency, np.stack(surrogate._fractions_of(laws)))
+    return WallRates(frequency, np.stack(law_fractions(laws)))
 
 
 def train_wall_models(walls, velocities, template, candidates: dict, settings: dict, impeller_radius: float):

@@ -49,6 +49,22 @@ def test_known_tail_recovered_from_sampled_speeds_including_above_2_m_s():
             assert abs(got - exact) <= 3.0 * math.sqrt(exact * (1 - exact) / n_tail) + 0.05 * exact, (tip, v)
 
 
+def test_rows_whose_tail_lies_beyond_twice_their_tip_speed_do_not_enter_the_fit():
+    # a slow run (tip 0.69 m/s, 250 rpm) with a few pinched impacts at 2-5 m/s, 3-8 times its tip
+    # speed: in tip-speed units they would dominate the pooled shape (final10, rpm250_sf07)
+    rng = np.random.default_rng(5)
+    counts = np.array([sampled_counts(rng, tip, 20_000, 50_000) for tip in TIPS])
+    slow = np.zeros(N_VELOCITY_BINS)
+    slow[:14] = 50_000.0 / 14
+    slow[velocity_bin(np.array([1.9, 2.4, 3.5, 4.2, 5.0]))] += 1.0
+    first, a, beta, _ = fit_speed_tail(np.vstack([counts, slow]), (*TIPS, 0.69), 1.78)
+    assert (first, a, beta) == fit_speed_tail(counts, TIPS, 1.78)[:3]
+    assert a == pytest.approx(A, rel=0.05)
+    assert beta == pytest.approx(BETA, rel=0.05)
+    # alone, such a row gives no tail: the speed law's own tail stays
+    assert fit_speed_tail(slow[None, :], [0.69], 1.78) is None
+
+
 def test_tail_keeps_each_rows_share_above_its_speed_and_sums_to_one():
     fractions = speed_fractions(np.array([-0.5, 0.1]), np.array([0.4, 0.3]), "gengamma", np.array([0.2, -0.3]))
     tail = (14, A, BETA)

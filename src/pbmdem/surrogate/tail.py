@@ -45,6 +45,14 @@ def _tail_bins(tip_speed, first: int, a: float, beta: float) -> np.ndarray:
 #: spread): with 100, Poisson noise alone spreads ln a_r by about 0.1 or less.
 TAIL_RUN_MIN_COUNTS = 100
 
+#: A row (class pair and run) enters the pooled fit only if v_s is at most this many times its tip
+#: speed. The law is written in tip-speed units because the impeller drives the fast impacts; a run
+#: whose v_s lies far above its own tip speed holds, at most, a few impacts from rare events that
+#: the impeller's scale does not describe (pinching in the blade-bowl gap), and 1/v_tip-scaled they
+#: dominate the shape (docs/surrogate.md, "The pooled fast tail"). Twice v_tip is a scale argument,
+#: not a bound: a blade-struck granule leaves at up to about (1 + e) v_tip, e <= 1.
+TAIL_MAX_TIP_MULTIPLE = 2.0
+
 
 def _neg_loglik(log_a: float, counts, tip, first: int, beta: float) -> float:
     """Negative log-likelihood of the tail ``counts`` (n, bins from ``first`` up) at a = exp(log_a)."""
@@ -65,12 +73,13 @@ def fit_speed_tail(counts, tip_speed, tail_from: float, groups=None) -> tuple[in
     with at least :data:`TAIL_RUN_MIN_COUNTS` impacts from ``tail_from`` up, a_r each run's own scale
     at the pooled beta: how far one bed's tail departs from the pooled one (0 with fewer than two
     such runs); the surrogate's members scale a by exp(-z spread). Returns (bin of ``tail_from``, a,
-    beta, spread), or None without any count from ``tail_from`` up (the tail stays the speed law's)."""
+    beta, spread), or None without any count from ``tail_from`` up (the tail stays the speed law's).
+    Rows whose ``tail_from`` exceeds :data:`TAIL_MAX_TIP_MULTIPLE` times their tip speed are left out."""
     first = fit_from_bin(tail_from, "surrogate.speed_tail_from")
     counts = np.atleast_2d(np.asarray(counts, float))[:, first:]
     tip = np.asarray(tip_speed, float).ravel()
     groups = np.zeros(len(tip)) if groups is None else np.asarray(groups).ravel()
-    keep = counts.sum(axis=1) > 0
+    keep = (counts.sum(axis=1) > 0) & (tip * TAIL_MAX_TIP_MULTIPLE >= VELOCITY_EDGES[first])
     if not keep.any():
         return None
     counts, tip, groups = counts[keep], tip[keep], groups[keep]

@@ -24,6 +24,8 @@ from pbmdem.surrogate.features import (
     pair_features,
     pair_table,
 )
+from pbmdem.surrogate.tail import with_speed_tail
+from pbmdem.surrogate.velocity import speed_fractions
 
 R = 0.0265
 
@@ -275,10 +277,16 @@ def mixed_laws():
     return model
 
 
+def own_fractions(model, X):
+    """A model's bin fractions on its own: its speed law's fractions, then its own pooled tail."""
+    law, tip, mu, sigma, shape, tail = model._pair_law(X)
+    return with_speed_tail(speed_fractions(mu, sigma, law, shape), tip, tail)
+
+
 def test_impacts_batched_speed_laws_equal_each_models_own_fractions(mixed_laws):
     # impacts() turns the pairs' and walls' speed laws into fractions in one speed_fractions call
     # per law (each model's tail on its own rows) and the walls predict from the diagonal of the
-    # pairs' features: the same numbers as each model's own _pair_velocity on its own features
+    # pairs' features: the same numbers as each model's own law and tail on its own features
     from pbmdem.surrogate.walls import diagonal_features
 
     for model in (mixed_laws, mixed_laws.member(0), mixed_laws.member(mixed_laws.n_members - 1)):
@@ -287,9 +295,9 @@ def test_impacts_batched_speed_laws_equal_each_models_own_fractions(mixed_laws):
                 warnings.simplefilter("ignore")
                 rates = model.impacts(d, n, rpm)
                 X, iu, ju = pair_features(d, n, rpm, R)
-                own = model._pair_velocity(X)
+                own = own_fractions(model, X)
                 diagonal = diagonal_features(d, n, rpm, R)
-                walls = [model.wall_models_[w]._pair_velocity(diagonal) for w in ("bowl", "impeller")]
+                walls = [own_fractions(model.wall_models_[w], diagonal) for w in ("bowl", "impeller")]
                 frequency = [10.0 ** model.wall_models_[w]._pair_log10(diagonal) for w in ("bowl", "impeller")]
             np.testing.assert_allclose(rates.pairs.velocity_fractions[iu, ju], own, rtol=1e-12, atol=0.0)
             np.testing.assert_allclose(rates.walls.velocity_fractions, np.stack(walls), rtol=1e-12, atol=0.0)

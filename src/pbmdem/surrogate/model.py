@@ -29,8 +29,8 @@ from .features import (
     pair_features,
     pair_table,
 )
-from .tail import fit_speed_tail, law_fractions, member_tail, with_speed_tail
-from .velocity import check_speed_law, n_law_parameters, speed_fractions
+from .tail import fit_speed_tail, law_fractions, member_tail
+from .velocity import check_speed_law, n_law_parameters
 from .walls import diagonal_features, wall_laws
 
 PHYSICS_OFFSETS = ("cross_section", "none")
@@ -280,17 +280,12 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         shape = mean[:, 2] if mean.shape[1] > 2 else None
         return mean[:, 0] + self._velocity_offset(F), 10.0 ** mean[:, 1], shape, std
 
-    def _fractions(self, F, mu, sigma, shape) -> np.ndarray:
-        """Bin fractions of the law (mu, sigma, shape) of the features ``F``, with the pooled tail."""
-        tip = self._column(F, "tip_speed")
-        return with_speed_tail(speed_fractions(mu, sigma, self.speed_law, shape), tip, self.speed_tail_)
-
     def velocity_fractions(self, X, check_domain: bool = True) -> np.ndarray:
         """(n, N_VELOCITY_BINS) predicted fraction of each row's encounters per velocity bin (rows sum to 1)."""
         self._require_velocity_model()
         F = self._validated_frame(self._features(X), check_domain)
         mu, sigma, shape, _ = self._velocity_law(F)
-        return self._fractions(F, mu, sigma, shape)
+        return law_fractions([(self.speed_law, self._column(F, "tip_speed"), mu, sigma, shape, self.speed_tail_)])[0]
 
     # ------------------------------------------------------------------ PBM kernel
     def _array_path(self) -> bool:
@@ -331,11 +326,6 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
             mu, sigma, shape = self._law(F, self.velocity_model_.predict_array(self._transform(F)))[:3]
         return self.speed_law, self._column(F, "tip_speed"), mu, sigma, shape, self.speed_tail_
 
-    def _pair_velocity(self, F) -> np.ndarray:
-        """:meth:`velocity_fractions` of the pairs' features from :meth:`_pairs` (unchecked domain)."""
-        law, tip, mu, sigma, shape, tail = self._pair_law(F)
-        return with_speed_tail(speed_fractions(mu, sigma, law, shape), tip, tail)
-
     def frequency_matrix(self, diameters, numbers, rpm: float, return_std: bool = False, check_domain: bool = True):
         """(K,) diameters (m) and (K,) particle numbers -> (K, K) symmetric encounter frequency c_ij (1/s per pair).
 
@@ -363,7 +353,8 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         self._require_velocity_model()
         F, k = self._pairs(diameters, numbers, rpm, check_domain)
         frequency = matrix_from_pairs(10.0 ** self._pair_log10(F), k)
-        return EncounterRates(frequency=frequency, velocity_fractions=matrix_from_pairs(self._pair_velocity(F), k))
+        fractions = law_fractions([self._pair_law(F)])[0]
+        return EncounterRates(frequency=frequency, velocity_fractions=matrix_from_pairs(fractions, k))
 
     def impacts(self, diameters, numbers, rpm: float, check_domain: bool = True):
         """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall models' impacts per granule

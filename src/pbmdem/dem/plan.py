@@ -41,7 +41,9 @@ MIN_CONTACT_SPEED = 0.1
 #: steps between neighbour-list rebuilds that the skin allows a granule moving at the blade tip
 #: speed (LIGGGHTS rebuilds the lists when a granule has moved half the skin)
 SKIN_STEPS_AT_TIP_SPEED = 22
-#: LIGGGHTS' warning limit of dt over the Rayleigh time when the plan's fraction is below it
+#: LIGGGHTS' warning limit of dt over the Rayleigh time (fix check/timestep/gran); a plan whose own
+#: fraction dt / t_R is above it (a documented choice, docs/dem.md "Cost of a run") warns 2 % above
+#: that fraction instead, so that a particle smaller than planned still makes it warn
 RAYLEIGH_WARNING_FRACTION = 0.2
 #: a field of the deck only (derived from the recorded fields and the settings), not in `to_dict`
 DECK = {"deck": True}
@@ -73,13 +75,6 @@ def neighbor_skin(diameters, timestep: float, tip_speed: float = 0.0) -> float:
     18-29 %; half the smallest cost the fine bed 24 % at 1200 rpm."""
     travel = 2 * SKIN_STEPS_AT_TIP_SPEED * tip_speed * timestep
     return min(max(0.5 * min(diameters), travel), 0.5 * max(diameters))
-
-
-def rayleigh_limit(timestep: float, rayleigh_time: float) -> float:
-    """The fraction of the Rayleigh time above which fix check/timestep/gran warns: 20 %, or 2 %
-    above the planned fraction dt / t_R where that is larger (the fraction is a documented choice,
-    docs/dem.md "Cost of a run"; a particle smaller than planned still makes it warn)."""
-    return max(RAYLEIGH_WARNING_FRACTION, 1.02 * timestep / rayleigh_time)
 
 
 def next_prime(n: int) -> int:
@@ -238,16 +233,13 @@ def plan_bed(point: DemPoint, *, replicate: int = 0, counts: list[int] | None = 
     PBM-DEM loop hands its own sample this way."""
     sizes, mat, dem, granulator = point.sizes, point.material, point.dem, point.granulator
     where = f"distribution {point.distribution}"
-    if counts is None:
-        n_particles = bed_particle_count(granulator.bed_solid_volume, sizes)
-    else:
-        n_particles = int(sum(counts))
+    counts = None if counts is None else [int(c) for c in counts]
+    n_particles = bed_particle_count(granulator.bed_solid_volume, sizes) if counts is None else sum(counts)
     if n_particles > dem.max_particles:
         raise ConfigError(f"{where} needs {n_particles} particles, more than dem.max_particles = {dem.max_particles}")
     if n_particles < 2:
         raise ConfigError(f"{where}: the bed holds {n_particles} particles; raise dem.bed_height")
-    counts = class_counts(n_particles, sizes.number_fractions) if counts is None else [int(c) for c in counts]
-    n_particles = int(sum(counts))
+    counts = class_counts(n_particles, sizes.number_fractions) if counts is None else counts
     t_r = rayleigh_time(0.5 * min(sizes.diameters), mat.density, mat.youngs_modulus, mat.poisson_ratio)
     dt = dem.timestep_fraction * t_r
     settle_steps, vtk_every = _steps(dem.settle_time, dt), _steps(dem.vtk_interval, dt)
@@ -299,7 +291,7 @@ def plan_bed(point: DemPoint, *, replicate: int = 0, counts: list[int] | None = 
         # thermo reads fix check/timestep/gran, so both run at the same interval (LIGGGHTS requires it)
         thermo_every=thermo_interval(n_particles, vtk_every),
         settle_skin=neighbor_skin(sizes.diameters, dt),
-        rayleigh_limit=rayleigh_limit(dt, t_r),
+        rayleigh_limit=max(RAYLEIGH_WARNING_FRACTION, 1.02 * dt / t_r),
     )
 
 
@@ -321,8 +313,7 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
         bed = plan_bed(point, replicate=replicate, counts=counts)
     except ConfigError as exc:
         raise ConfigError(str(exc).replace(f"distribution {point.distribution}", f"operating point {pid}", 1)) from None
-    mat, dem = point.material, point.dem
-    dt = bed.timestep
+    mat, dem, dt = point.material, point.dem, bed.timestep
     t_c = hertz_contact_time(
         0.5 * min(bed.diameters), mat.density, mat.youngs_modulus, mat.poisson_ratio, max(tip_speed, MIN_CONTACT_SPEED)
     )
@@ -384,8 +375,7 @@ def limit_problems(plan: DemPlan, limits: DemLimits) -> list[str]:
 
 def check_limits(plan: DemPlan, limits: DemLimits) -> DemPlan:
     """`plan` if it stays within `limits` (dem.limits), else ConfigError naming each bound exceeded."""
-    problems = limit_problems(plan, limits)
-    if problems:
+    if problems := limit_problems(plan, limits):
         raise ConfigError("\n".join(problems))
     return plan
 

@@ -37,6 +37,10 @@ rule pbm_ann_coupled:
         layout.log("validation/pbm_ann_rpm{rpm}.log"),
     conda:
         "../envs/validation.yaml"
+    # its warm batches time PBM-ANN for the comparison's speed ratio: two cores, so that on the
+    # default 2-core run no other job shares the machine while they run (one did on 2026-12-06 and
+    # made the same batches up to 1.8 times dearer in CPU time; docs/validation.md)
+    threads: 2
     params:
         loop=loop_params,
         method="ann",

@@ -404,3 +404,24 @@ def test_a_loop_reports_the_fragments_merged_at_the_grid_floor(tiny_config, tmp_
         shutil.rmtree(tmp_path / "fast" / name)
     resumed = coupling.run_loop(on, _ImpactProvider(2.0, 4.0), 600.0, tmp_path / "fast")
     assert resumed.totals["grid_floor"] == pytest.approx(floor, rel=1e-12)
+
+
+def test_warm_batches_are_timed_on_one_blas_thread(monkeypatch):
+    # rule pbm_ann_coupled has two threads (nothing runs beside its timing); its warm batches must
+    # still run on one BLAS/OpenMP thread, as the design space and the benchmarks run them, or an
+    # idle second thread's CPU would count in the speed ratio (docs/validation.md)
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from pbmdem.coupling import methods
+
+    def most_threads():
+        return max((pool["num_threads"] for pool in threadpool_info()), default=1)
+
+    seen = []
+    monkeypatch.setattr(methods, "pbm_ann", lambda *args, **kwargs: seen.append(most_threads()))
+    with threadpool_limits(limits=2):
+        before = most_threads()
+        timing = coupling.warm_batch_times(object(), object(), 300.0, repeats=3)
+    assert before == 2  # the check below is not vacuous: the pools had two threads
+    assert seen == [1, 1, 1, 1]  # the warm-up and the three timed batches
+    assert timing["warm_batches"] == 3 and timing["warm_cpu_time_s_min"] >= 0.0

@@ -195,6 +195,23 @@ def test_execution_settings_rerun_nothing(tiny_workflow, root, tmp_path):
     assert "dem_point" in out and "pbm_dem_coupled" in out, out
 
 
+def rule_jobs(dry_run: str, rule: str) -> list[str]:
+    """The job blocks of `rule` in a dry run's output (from its `rule <name>:` line to the next blank one)."""
+    return re.findall(rf"^rule {rule}:\n(?:.+\n)+", dry_run + "\n", flags=re.M)
+
+
+def test_the_pbm_ann_timing_has_both_cores_of_the_default_run(tiny_workflow, root):
+    """Rule pbm_ann_coupled times PBM-ANN for the speed ratio: it asks for two threads, so that on
+    the default `--cores 2` run no other job runs beside its warm batches (docs/validation.md)."""
+    workdir, configfile = tiny_workflow
+    proc = snakemake(root, workdir, configfile, "-n", "--cores", "2", "--forcerun", "pbm_ann_coupled")
+    jobs = rule_jobs(proc.stdout + proc.stderr, "pbm_ann_coupled")
+    assert len(jobs) == 2, proc.stdout + proc.stderr  # the tiny config's two validation speeds
+    assert all(re.search(r"^\s+threads: 2$", job, flags=re.M) for job in jobs), jobs
+    # a rule without the setting shows no such line (the check above is not vacuous)
+    assert not any("threads:" in job for job in rule_jobs(proc.stdout + proc.stderr, "comparison"))
+
+
 PROJECT_FILES = ("Snakefile", "rules", "workflow", "liggghts_templates", "src", "profiles", "envs")
 
 

@@ -28,6 +28,7 @@ from pbmdem.pbm.kernels import ConstantFrequency
 from pbmdem.pbm.results import floor_words
 from pbmdem.pbm.setup import build_model, initial_state, run_batch
 from pbmdem.surrogate import load_surrogate
+from pbmdem.surrogate._threads import single_threaded
 from pbmdem.surrogate.domain import out_of_domain_recorded
 
 from .loop import CouplingError, LoopOutcome, interval_bounds, run_loop, write_outputs
@@ -75,17 +76,20 @@ WARM_BATCHES = 9
 def warm_batch_times(loop: CoupledLoop, model, rpm: float, repeats: int = WARM_BATCHES) -> dict:
     """PBM-ANN's cost of one batch at `rpm` as a benchmark measures it: the surrogate (`model`: a
     path or a loaded one) loaded once, one batch to warm up (lazy imports, caches, thread pools),
-    then `repeats` batches in memory. Returns the median, min and max of their wall and CPU
-    seconds (CPU: this process's), keys ``warm_{wall,cpu}_time_s_{median,min,max}`` and
-    ``warm_batches``: what the comparison's speed ratio uses (docs/validation.md)."""
+    then `repeats` batches in memory, on one BLAS/OpenMP thread as the design space and the
+    benchmarks run them (a job with two threads would otherwise count an idle thread pool's CPU).
+    Returns the median, min and max of their wall and CPU seconds (CPU: this process's), keys
+    ``warm_{wall,cpu}_time_s_{median,min,max}`` and ``warm_batches``: what the comparison's speed
+    ratio uses (docs/validation.md)."""
     loaded = load_surrogate(model) if isinstance(model, (str, Path)) else model
-    pbm_ann(loop, loaded, rpm, None, log_each=False)
     walls, cpus = [], []
-    for _ in range(int(repeats)):
-        t0, c0 = time.perf_counter(), time.process_time()
+    with single_threaded():
         pbm_ann(loop, loaded, rpm, None, log_each=False)
-        walls.append(time.perf_counter() - t0)
-        cpus.append(time.process_time() - c0)
+        for _ in range(int(repeats)):
+            t0, c0 = time.perf_counter(), time.process_time()
+            pbm_ann(loop, loaded, rpm, None, log_each=False)
+            walls.append(time.perf_counter() - t0)
+            cpus.append(time.process_time() - c0)
     out = {"warm_batches": int(repeats)}
     for name, values in (("wall", walls), ("cpu", cpus)):
         out |= {

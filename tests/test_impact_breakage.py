@@ -22,6 +22,18 @@ def one_bin(shape, speed):
     return f
 
 
+def fraction_columns(fractions: np.ndarray) -> np.ndarray:
+    """(K,) for each partner j of the pair velocity ``fractions`` (K, K, V): the first partner of
+    the run of neighbours j' <= j whose columns ``fractions[:, j', :]`` equal column j
+    (``_compiled_selection.impact_selection`` sums such a column once per row; the bins sharing their
+    nearest class of a coupling interval are such runs). The readable form of
+    ``_compiled_selection.fraction_columns``, which ``ImpactSelection`` uses: its test oracle."""
+    K = fractions.shape[1]
+    same = (fractions[:, 1:, :] == fractions[:, :-1, :]).all(axis=(0, 2))  # column j + 1 equals column j
+    starts = np.flatnonzero(np.concatenate([[True], ~same]))
+    return starts[np.searchsorted(starts, np.arange(K), side="right") - 1].astype(np.int64)
+
+
 class HandMadeSource:
     """Impacts with known speeds: pairs at `pair_speed`, the impeller at `impeller_speed`, the
     bowl at `bowl_speed`; frequencies given per pair and per granule."""
@@ -482,7 +494,6 @@ def test_bins_that_share_their_nearest_class_fractions_give_the_selection_to_the
     # (ClassFrequencySource.encounters): the compiled selection sums each shared column once per
     # row (fraction_columns); against every column summed on its own (the identity map) and the numpy form
     from pbmdem.pbm import _compiled_selection
-    from pbmdem.pbm.impact_breakage import fraction_columns
 
     rng = np.random.default_rng(11)
     K, classes = 12, 4
@@ -513,7 +524,6 @@ def test_bins_that_share_their_nearest_class_fractions_give_the_selection_to_the
 def test_the_compiled_fraction_columns_equal_the_numpy_form_on_random_runs():
     # runs of equal columns, a column equal to its neighbour but in one entry, NaN (never equal)
     from pbmdem.pbm import _compiled_selection
-    from pbmdem.pbm.impact_breakage import fraction_columns
 
     rng = np.random.default_rng(5)
     for trial in range(50):
@@ -536,7 +546,6 @@ def test_the_compiled_impact_selection_sums_as_the_plain_loops_do_to_the_bit():
     # plain loops (one sum over the bins after the other, in the bins' order) on random impacts with
     # empty classes, partners short of one, zero frequencies, shared columns and 0-2 walls
     from pbmdem.pbm import _compiled_selection
-    from pbmdem.pbm.impact_breakage import fraction_columns
 
     def plain(c, f, walls_c, walls_f, p, n, pairs):
         out = []

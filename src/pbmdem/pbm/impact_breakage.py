@@ -51,18 +51,6 @@ def critical_speed(density: float, yield_strength: float, critical_stokes: float
     return float(np.sqrt(2.0 * yield_strength * critical_stokes / density))
 
 
-def fraction_columns(fractions: np.ndarray) -> np.ndarray:
-    """(K,) for each partner j of the pair velocity ``fractions`` (K, K, V): the first partner of
-    the run of neighbours j' <= j whose columns ``fractions[:, j', :]`` equal column j
-    (``_compiled_selection.impact_selection`` sums such a column once per row; the bins sharing their
-    nearest class of a coupling interval are such runs). The readable form and the test oracle of
-    ``_compiled_selection.fraction_columns``, which :class:`ImpactSelection` uses."""
-    K = fractions.shape[1]
-    same = (fractions[:, 1:, :] == fractions[:, :-1, :]).all(axis=(0, 2))  # column j + 1 equals column j
-    starts = np.flatnonzero(np.concatenate([[True], ~same]))
-    return starts[np.searchsorted(starts, np.arange(K), side="right") - 1].astype(np.int64)
-
-
 def selection_rates(
     rates: ImpactRates, numbers, speed: float, walls=WALLS, pairs: bool = True, spread: float = 0.0
 ) -> dict[str, np.ndarray]:
@@ -190,7 +178,7 @@ class ImpactSelection:
             np.ascontiguousarray(walls.frequency[rows], dtype=float).reshape(shape),
             np.ascontiguousarray(walls.velocity_fractions[rows], dtype=float).reshape(*shape, N_VELOCITY_BINS),
         )
-        self._columns = _compiled_selection.fraction_columns(self._arrays[1])  # fraction_columns, compiled
+        self._columns = _compiled_selection.fraction_columns(self._arrays[1])
         self._work = (np.empty(d.size), np.empty((d.size, N_VELOCITY_BINS)))
 
     def contributions(self, inp: KernelInput) -> dict[str, np.ndarray]:

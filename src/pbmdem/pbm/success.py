@@ -82,9 +82,6 @@ class StokesCriterion:
             f"asperity_height={self.asperity_height:g} m, density={self.density:g} kg/m3)"
         )
 
-    def stokes_number(self, d_i, d_j, w) -> np.ndarray:
-        return viscous_stokes_number(d_i, d_j, w, self.viscosity, self.density)
-
     def critical_stokes(self, d, phi) -> np.ndarray:
         """(K, K) St* of every pair of bins with diameters d (m) and surface-liquid fractions phi."""
         h = layer_thickness(d, phi)
@@ -96,7 +93,8 @@ class StokesCriterion:
         d = np.asarray(d, float)
         key = d.tobytes()
         if getattr(self, "_st1_key", None) != key:  # the PBM's bins do not move: cache per diameters
-            self._st1 = self.stokes_number(d[:, None], d[None, :], 1.0)  # St_v at 1 m/s, linear in w
+            # St_v at 1 m/s, linear in w
+            self._st1 = viscous_stokes_number(d[:, None], d[None, :], 1.0, self.viscosity, self.density)
             self._st1_key = key
         return np.maximum(self.critical_stokes(d, phi), 0.0) / self._st1
 

@@ -145,6 +145,17 @@ def test_bad_stokes_parameters_are_refused():
         Pbm.from_section({"aggregation": {"success": {"velocity_model": "fast"}}})
 
 
+def test_a_velocity_criterion_needs_only_critical_velocity():
+    # the kernel calls velocity.critical_velocity(d, phi) and nothing else of the criterion
+    class OnlyCritical:
+        def critical_velocity(self, d, phi):
+            return np.ones((np.size(d), np.size(d)))
+
+    assert SuccessProbability("step", 0.02, velocity=OnlyCritical()).velocity_dependent
+    with pytest.raises(PBMInputError, match=r"lacks critical_velocity\(d, phi\); allowed: None or a pbmdem"):
+        SuccessProbability("step", 0.02, velocity=object())
+
+
 # ----------------------------------------------------------------------------- combination with the liquid
 def test_success_combines_liquid_condition_and_stokes_criterion():
     crit = StokesCriterion(0.1, 0.4, 5e-6, 1000.0)

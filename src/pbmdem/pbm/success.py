@@ -116,10 +116,10 @@ class SuccessProbability:
     MODELS = ("step", "logistic", "always")
 
     def __init__(self, model: str = "step", threshold: float = 0.02, width: float = 0.005, velocity=None):
-        if velocity is not None and not (hasattr(velocity, "success") and hasattr(velocity, "critical_velocity")):
+        if velocity is not None and not callable(getattr(velocity, "critical_velocity", None)):
             raise PBMInputError(
-                f"success velocity criterion {velocity!r} lacks success(d, phi, velocities) or "
-                "critical_velocity(d, phi); allowed: None or a pbmdem.pbm.success.StokesCriterion"
+                f"success velocity criterion {velocity!r} lacks critical_velocity(d, phi); "
+                "allowed: None or a pbmdem.pbm.success.StokesCriterion"
             )
         self.velocity = velocity
         if model not in self.MODELS:

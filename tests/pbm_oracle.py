@@ -126,11 +126,19 @@ def aggregation_totals(op, beta, nlg, m=None):
     return d, float(Y[0, 2 * K + M])
 
 
+def granule_porosity(S: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """Intra-granular porosity eps = G / (S + G) of the granules of each bin (G the pore volume,
+    wet or dry: docs/pbm.md); NaN where a bin holds no solid (no granules). The numpy form of
+    ``_compiled.granule_porosity``, which the model uses."""
+    S, G = np.broadcast_arrays(np.asarray(S, float), np.asarray(G, float))
+    return np.divide(G, S + G, out=np.full(S.shape, np.nan), where=S > 0)
+
+
 def bin_input(model, t, N, L, G):
     """The KernelInput of a one-dimensional model at the per-bin totals (t, N, L, G) (L, G in m3 or
     any unit: only ratios are used)."""
     from pbmdem.pbm.kernels import KernelInput
-    from pbmdem.pbm.state import granule_porosity, surface_fraction
+    from pbmdem.pbm.state import surface_fraction
 
     g, S = model.grid, N * model.grid.x
     phi, eps = surface_fraction(S, L, G), granule_porosity(S, G)

@@ -17,7 +17,7 @@ import pandas as pd
 
 from pbmdem.impact import VELOCITY_EDGES
 from pbmdem.surrogate.features import tip_speed
-from pbmdem.surrogate.velocity import lognormal_fractions
+from pbmdem.surrogate.velocity import speed_fractions
 from pbmdem.tables import GRID_PAIRS
 
 #: Columns of the synthetic collision tables: the contract's (pbmdem.tables.GRID_PAIRS) but frequency_per_pair_se.
@@ -110,7 +110,7 @@ def make_synthetic_tables(
                     se = float(reps.std(ddof=1) / math.sqrt(R)) if (R > 1 and pairs > 0) else np.nan
                     encounters = efpp * pairs * sampling_time if pairs > 0 else 0.0
                     mu, sigma = vlaw(d[i], d[j], rpm, impeller_radius)
-                    frac = lognormal_fractions(mu, sigma)[0]
+                    frac = speed_fractions(mu, sigma, "lognormal")[0]
                     if sample_velocities and pairs > 0:
                         counts = np.mean(
                             [rng.multinomial(int(round(r * pairs * sampling_time)), frac) for r in reps], axis=0
@@ -211,7 +211,7 @@ def make_synthetic_wall_tables(collisions: pd.DataFrame, impeller_radius: float,
                     "encounter_frequency_per_particle_se": 0.03 * rate,
                 }
             )
-            counts = encounters * lognormal_fractions(mu, sigma)[0]
+            counts = encounters * speed_fractions(mu, sigma, "lognormal")[0]
             for b, n in enumerate(counts):
                 vrows.append(
                     key | {"wall": wall, "v_lo": VELOCITY_EDGES[b], "v_hi": VELOCITY_EDGES[b + 1], "encounters": n}

@@ -8,7 +8,7 @@ import pytest
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, EncounterRates, ImpactRates, WallRates, fraction_above
 from pbmdem.pbm.errors import PBMInputError
-from pbmdem.pbm.impact_breakage import ImpactSelection, critical_speed, selection_rates
+from pbmdem.pbm.impact_breakage import POROSITY_LIMIT, ImpactSelection, critical_speed, selection_rates
 from pbmdem.pbm.kernels import KernelInput
 from pbmdem.readers import InputFileError
 
@@ -20,6 +20,53 @@ def one_bin(shape, speed):
     f = np.zeros((*shape, N_VELOCITY_BINS))
     f[..., int(np.searchsorted(VELOCITY_EDGES, speed, side="right") - 1)] = 1.0
     return f
+
+
+def fraction_columns(fractions: np.ndarray) -> np.ndarray:
+    """(K,) for each partner j of the pair velocity ``fractions`` (K, K, V): the first partner of
+    the run of neighbours j' <= j whose columns ``fractions[:, j', :]`` equal column j
+    (``_compiled_selection.impact_selection`` sums such a column once per row; the bins sharing their
+    nearest class of a coupling interval are such runs). The readable form of
+    ``_compiled_selection.fraction_columns``, which ``ImpactSelection`` uses: its test oracle."""
+    K = fractions.shape[1]
+    same = (fractions[:, 1:, :] == fractions[:, :-1, :]).all(axis=(0, 2))  # column j + 1 equals column j
+    starts = np.flatnonzero(np.concatenate([[True], ~same]))
+    return starts[np.searchsorted(starts, np.arange(K), side="right") - 1].astype(np.int64)
+
+
+def critical_speeds(selection: ImpactSelection, diameters, porosity=None) -> float | np.ndarray:
+    """v* of granules of each diameter (m) and porosity: Y (d / d_ref)^(-e) with e =
+    ``size_exponent`` times [r(eps) / r(eps_ref)]^n with r = (1 - eps) / eps and n =
+    ``porosity_exponent``, so v* scales with the square root of both factors; ``porosity``
+    None or NaN (an empty pivot): eps_ref. The one v* with e = n = 0. The readable form (and
+    oracle) of ``_compiled_selection.critical_speeds``, which the selection uses."""
+    s = selection
+    if s.size_exponent == 0.0 and s.porosity_exponent == 0.0:
+        return s.speed
+    d = np.asarray(diameters, float)
+    speeds = np.full(d.shape, s.speed)
+    if s.size_exponent != 0.0:
+        speeds = s.speed * (d / s.reference_diameter) ** (-0.5 * s.size_exponent)
+    if s.porosity_exponent != 0.0 and porosity is not None:
+        eps = np.broadcast_to(np.asarray(porosity, float), d.shape)
+        eps = np.where(np.isfinite(eps), eps, s.reference_porosity)
+        # kept inside (0, 1) so that v* stays finite and > 0 (at eps -> 0 a granule without
+        # pores is unbreakable, at eps -> 1 one without solid breaks at any impact)
+        eps = np.clip(eps, POROSITY_LIMIT, 1.0 - POROSITY_LIMIT)
+        ref = (1.0 - s.reference_porosity) / s.reference_porosity
+        speeds = speeds * (((1.0 - eps) / eps) / ref) ** (0.5 * s.porosity_exponent)
+    return speeds
+
+
+def contributions(selection: ImpactSelection, inp: KernelInput) -> dict[str, np.ndarray]:
+    """Per kind of impact (pairs, each wall): (K,) breaking impacts per granule and second of the
+    pivots of ``inp``, in numpy (:func:`selection_rates` at the selection's v*): the oracle of the
+    compiled ``ImpactSelection.__call__``."""
+    if selection._rates is None:
+        selection.prepare(inp)
+    d, n = inp.per_bin()
+    speeds = critical_speeds(selection, d, selection._porosity(inp))
+    return selection_rates(selection._rates, n, speeds, selection.walls, selection.pairs, selection.strength_spread)
 
 
 class HandMadeSource:
@@ -69,7 +116,7 @@ def test_only_impacts_faster_than_the_critical_speed_break():
     inp = kernel_input([100, 50])
     sel.prepare(inp)
     np.testing.assert_allclose(sel(inp), [3.0, 5.0])
-    parts = sel.contributions(inp)
+    parts = contributions(sel, inp)
     np.testing.assert_allclose(parts["pairs"], 0.0)
     np.testing.assert_allclose(parts["bowl"], 0.0)
 
@@ -235,9 +282,9 @@ def test_larger_granules_weaker_with_a_strength_size_exponent():
     inp = kernel_input([10.0, 5.0], d=d)
     flat = ImpactSelection(source, RHO, Y, ST)
     sized = ImpactSelection(source, RHO, Y, ST, size_exponent=1.0, reference_diameter=0.002)
-    assert sized.critical_speeds(np.array(d)) == pytest.approx([2.0, 1.0])
+    assert critical_speeds(sized, np.array(d)) == pytest.approx([2.0, 1.0])
     assert np.all(flat(inp) == 0.0)
-    parts = sized.contributions(inp)
+    parts = contributions(sized, inp)
     assert parts["pairs"] == pytest.approx([0.0, 0.01 * (10.0 + 4.0)])
     assert parts["impeller"] == pytest.approx([0.0, 2.0]) and parts["bowl"] == pytest.approx([0.0, 1.0])
     with pytest.raises(PBMInputError, match="exponent"):
@@ -272,7 +319,7 @@ def test_a_porosity_exponent_of_zero_leaves_the_selection_bit_identical():
             rates = source.impacts(d, inp.numbers, inp.rpm)
             expected = selection_rates(rates, inp.numbers, v, before.walls, before.pairs, spread)
             for sel in (before, after):
-                parts = sel.contributions(inp)
+                parts = contributions(sel, inp)
                 assert parts.keys() == expected.keys()
                 for k in parts:
                     np.testing.assert_array_equal(parts[k], expected[k])
@@ -291,7 +338,7 @@ def test_consolidated_granules_are_stronger_with_a_porosity_exponent(n):
     inp.porosity = np.array([0.5, 0.2, np.nan])
     sharp = ImpactSelection(source, RHO, Y, ST, porosity_exponent=n)
     v_fresh, v_dense = 2.0, 2.0 * 4.0 ** (n / 2)
-    assert sharp.critical_speeds(np.array(d), inp.porosity) == pytest.approx([v_fresh, v_dense, v_fresh])
+    assert critical_speeds(sharp, np.array(d), inp.porosity) == pytest.approx([v_fresh, v_dense, v_fresh])
     s = sharp(inp)
     lo, hi = VELOCITY_EDGES[15], VELOCITY_EDGES[16]
     dense_above = np.clip(np.log(hi / v_dense) / np.log(hi / lo), 0.0, 1.0)
@@ -306,7 +353,7 @@ def test_consolidated_granules_are_stronger_with_a_porosity_exponent(n):
     assert 0.0 < spread(inp)[1] < spread(inp)[0]
     # the reference porosity is the one whose strength is Y
     shifted = ImpactSelection(source, RHO, Y, ST, porosity_exponent=n, reference_porosity=0.2)
-    assert shifted.critical_speeds(np.array(d), inp.porosity) == pytest.approx([2.0 / 4.0 ** (n / 2), 2.0, 2.0])
+    assert critical_speeds(shifted, np.array(d), inp.porosity) == pytest.approx([2.0 / 4.0 ** (n / 2), 2.0, 2.0])
     with pytest.raises(PBMInputError, match="porosity exponent"):
         ImpactSelection(source, RHO, Y, ST, porosity_exponent=-1.0)
     with pytest.raises(PBMInputError, match="reference porosity"):
@@ -361,7 +408,7 @@ def test_breakage_with_a_porosity_dependent_strength_conserves_solid_liquid_and_
         print(f"n = {n:g}: {name} changed by at most {rel:.1e}")
         assert rel < 1e-13, name
     # the selection saw each bin's porosity: with n = 2 the consolidated bins' impeller impacts break less
-    impeller = model.breakage.selection.contributions(pbm_oracle.bin_input(model, 0.0, N, 0.2 * S, G))["impeller"][:12]
+    impeller = contributions(model.breakage.selection, pbm_oracle.bin_input(model, 0.0, N, 0.2 * S, G))["impeller"][:12]
     if n == 0.0:
         assert np.all(impeller == impeller[0]) and impeller[0] > 0.0
     else:
@@ -432,7 +479,7 @@ def test_the_compiled_selection_equals_the_numpy_form_on_random_impacts(spread):
     inp.porosity = rng.uniform(0.2, 0.5, K)
     for walls, pairs in ((("impeller", "bowl"), True), (("bowl",), True), ((), True), (("impeller",), False)):
         sel = ImpactSelection(Source(), RHO, Y, ST, walls, pairs, spread, size_exponent=0.5, porosity_exponent=2.0)
-        parts = sel.contributions(inp)
+        parts = contributions(sel, inp)
         expected = np.sum(list(parts.values()), axis=0) if parts else np.zeros(K)
         got = sel(inp)
         np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-300)
@@ -482,7 +529,6 @@ def test_bins_that_share_their_nearest_class_fractions_give_the_selection_to_the
     # (ClassFrequencySource.encounters): the compiled selection sums each shared column once per
     # row (fraction_columns); against every column summed on its own (the identity map) and the numpy form
     from pbmdem.pbm import _compiled_selection
-    from pbmdem.pbm.impact_breakage import fraction_columns
 
     rng = np.random.default_rng(11)
     K, classes = 12, 4
@@ -513,7 +559,6 @@ def test_bins_that_share_their_nearest_class_fractions_give_the_selection_to_the
 def test_the_compiled_fraction_columns_equal_the_numpy_form_on_random_runs():
     # runs of equal columns, a column equal to its neighbour but in one entry, NaN (never equal)
     from pbmdem.pbm import _compiled_selection
-    from pbmdem.pbm.impact_breakage import fraction_columns
 
     rng = np.random.default_rng(5)
     for trial in range(50):
@@ -536,7 +581,6 @@ def test_the_compiled_impact_selection_sums_as_the_plain_loops_do_to_the_bit():
     # plain loops (one sum over the bins after the other, in the bins' order) on random impacts with
     # empty classes, partners short of one, zero frequencies, shared columns and 0-2 walls
     from pbmdem.pbm import _compiled_selection
-    from pbmdem.pbm.impact_breakage import fraction_columns
 
     def plain(c, f, walls_c, walls_f, p, n, pairs):
         out = []

@@ -26,6 +26,23 @@ V = representative_velocities()
 STOKES = {"aggregation": {"success": {"velocity_model": "stokes"}}}
 
 
+def held_below(crit: StokesCriterion, d, phi, velocities) -> np.ndarray:
+    """(K, K, V) 1 where an impact at velocities[b] (m/s) of the pair (i, j) is held by the
+    criterion ``crit`` (slower than its critical speed w*_ij), else 0."""
+    w = np.asarray(velocities, float)
+    return (w[None, None, :] < crit.critical_velocity(d, phi)[:, :, None]).astype(float)
+
+
+def resolved(psi: SuccessProbability, diameters, phi, velocities) -> np.ndarray:
+    """(K, K, V) psi_ij(v_b): the surface-liquid condition of ``psi`` times its velocity criterion
+    (:func:`held_below`) at the speeds ``velocities`` (m/s); what CollisionKernel sums with the
+    velocity fractions, in one readable product."""
+    liquid = psi(phi)
+    if psi.velocity is None:
+        return np.repeat(liquid[:, :, None], np.size(velocities), axis=2)
+    return liquid[:, :, None] * held_below(psi.velocity, diameters, phi, velocities)
+
+
 def batch_with(config, section: dict, distribution: str = "fine"):
     """The default batch with its pbm settings replaced by a (partial) pbm section (schema defaults)."""
     pbm = Pbm.from_section(section)
@@ -96,10 +113,10 @@ def test_critical_velocity_and_success_on_each_side_by_hand():
     # St = 2 rho d w / (9 mu) = (40/9) w  =>  w* = St* 9 / 40 = 0.5458 m/s
     w_star = st_star * 9.0 / 40.0
     np.testing.assert_allclose(crit.critical_velocity(d, phi), w_star, rtol=1e-12)
-    held = crit.success(d, phi, [0.5 * w_star, 0.99 * w_star, 1.01 * w_star, 2 * w_star])
+    held = held_below(crit, d, phi, [0.5 * w_star, 0.99 * w_star, 1.01 * w_star, 2 * w_star])
     np.testing.assert_array_equal(held[0, 1], [1.0, 1.0, 0.0, 0.0])
     # on the project's bins: held in every bin whose representative speed is below w*, not above
-    held = crit.success(d, phi, V)[0, 0]
+    held = held_below(crit, d, phi, V)[0, 0]
     np.testing.assert_array_equal(held, (V < w_star).astype(float))
     assert held[velocity_bin(0.3)] == 1.0 and held[velocity_bin(1.0)] == 0.0
 
@@ -128,6 +145,17 @@ def test_bad_stokes_parameters_are_refused():
         Pbm.from_section({"aggregation": {"success": {"velocity_model": "fast"}}})
 
 
+def test_a_velocity_criterion_needs_only_critical_velocity():
+    # the kernel calls velocity.critical_velocity(d, phi) and nothing else of the criterion
+    class OnlyCritical:
+        def critical_velocity(self, d, phi):
+            return np.ones((np.size(d), np.size(d)))
+
+    assert SuccessProbability("step", 0.02, velocity=OnlyCritical()).velocity_dependent
+    with pytest.raises(PBMInputError, match=r"lacks critical_velocity\(d, phi\); allowed: None or a pbmdem"):
+        SuccessProbability("step", 0.02, velocity=object())
+
+
 # ----------------------------------------------------------------------------- combination with the liquid
 def test_success_combines_liquid_condition_and_stokes_criterion():
     crit = StokesCriterion(0.1, 0.4, 5e-6, 1000.0)
@@ -135,7 +163,7 @@ def test_success_combines_liquid_condition_and_stokes_criterion():
     assert psi.velocity_dependent and not SuccessProbability().velocity_dependent
     d = np.array([3e-3, 3e-3, 3e-3])
     phi = np.array([0.01, 0.02, 0.05])  # below, at and above the liquid threshold
-    res = psi.resolved(d, phi, V)
+    res = resolved(psi, d, phi, V)
     w_star = crit.critical_velocity(d, phi)
     for i in range(3):
         for j in range(3):
@@ -146,7 +174,7 @@ def test_success_combines_liquid_condition_and_stokes_criterion():
     assert w_star[2, 2] > w_star[1, 1]
     # without the velocity criterion: the liquid condition in every bin
     np.testing.assert_array_equal(
-        SuccessProbability("step", 0.02).resolved(d, phi, V),
+        resolved(SuccessProbability("step", 0.02), d, phi, V),
         np.repeat(SuccessProbability("step", 0.02)(phi)[:, :, None], V.size, axis=2),
     )
 
@@ -237,7 +265,7 @@ def test_collision_kernel_sums_over_velocity_bins_by_hand():
 
 
 def test_collision_kernel_equals_the_sum_over_bins_of_the_definition():
-    # beta_ij = beta0 c_ij sum_b f_ij,b psi_ij(v_b), psi from SuccessProbability.resolved
+    # beta_ij = beta0 c_ij sum_b f_ij,b psi_ij(v_b), psi_ij(v_b) from resolved
     crit = StokesCriterion(0.05, 0.6, 3e-6, 1200.0)
     psi = SuccessProbability("logistic", 0.02, 0.005, velocity=crit)
     src = FakeEncounters(value=0.7, spread=1.5)
@@ -246,7 +274,7 @@ def test_collision_kernel_equals_the_sum_over_bins_of_the_definition():
     inp = kernel_input(d, phi)
     beta = CollisionKernel(src, 2e-3, psi)(inp)
     rates = src.encounters(d, np.ones(d.size), inp.rpm)
-    expected = 2e-3 * rates.frequency * np.sum(rates.velocity_fractions * psi.resolved(d, phi, V), axis=2)
+    expected = 2e-3 * rates.frequency * np.sum(rates.velocity_fractions * resolved(psi, d, phi, V), axis=2)
     np.testing.assert_allclose(beta, expected, rtol=1e-12, atol=0.0)
     assert 0 < np.count_nonzero(beta) < beta.size  # some pairs held, some not
 

@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 from synthetic_tables import make_synthetic_tables
 
+from pbmdem.impact import WallRates
 from pbmdem.surrogate import (
     CollisionSurrogate,
     EnsembleMLPRegressorCV,
@@ -24,8 +25,9 @@ from pbmdem.surrogate.features import (
     pair_features,
     pair_table,
 )
-from pbmdem.surrogate.tail import with_speed_tail
+from pbmdem.surrogate.tail import law_fractions, with_speed_tail
 from pbmdem.surrogate.velocity import speed_fractions
+from pbmdem.surrogate.walls import diagonal_features, wall_laws
 
 R = 0.0265
 
@@ -197,9 +199,17 @@ def with_walls(request, data):
     return pairs
 
 
-def test_wall_rates_equal_the_frame_path_for_every_family(with_walls):
-    from pbmdem.surrogate.walls import wall_rates
+def wall_rates(surrogate, diameters, numbers, rpm: float, check_domain: bool = True) -> WallRates:
+    """:class:`pbmdem.impact.WallRates` of the classes from the surrogate's wall models on their own
+    (``walls.wall_laws`` of the diagonal pairs' features, the walls' speed laws turned into bin
+    fractions in one ``tail.law_fractions``): what ``CollisionSurrogate.impacts`` must give for the walls."""
+    frequency, laws = wall_laws(
+        surrogate, diagonal_features(diameters, numbers, rpm, surrogate.impeller_radius), check_domain
+    )
+    return WallRates(frequency, np.stack(law_fractions(laws)))
 
+
+def test_wall_rates_equal_the_frame_path_for_every_family(with_walls):
     slow = frame_path(with_walls)
     slow.wall_models_ = {wall: frame_path(model) for wall, model in with_walls.wall_models_.items()}
     for d, n, rpm in distributions():
@@ -221,7 +231,6 @@ def test_impacts_share_the_response_surfaces_terms_and_give_the_same_numbers(wit
     # of equal scalers and powers at equal features compute their terms once; the rates equal
     # those of encounters() and wall_rates() called on their own, to the bit (mean and a member)
     from pbmdem.surrogate import _terms, families
-    from pbmdem.surrogate.walls import wall_rates
 
     for model in (with_walls, with_walls.member(0)):
         for d, n, rpm in distributions():

@@ -25,8 +25,8 @@ from pbmdem.surrogate.features import (
 from pbmdem.surrogate.velocity import (
     VELOCITY_COUNT_COLUMNS,
     attach_velocity_bins,
-    fit_lognormal,
-    lognormal_fractions,
+    fit_speed_law,
+    speed_fractions,
     total_variation,
 )
 from pbmdem.tables import GRID_PAIRS
@@ -231,13 +231,13 @@ def test_attach_velocity_bins():
 def test_lognormal_fit_recovers_known_law():
     mu = np.log10([0.004, 0.05, 0.3, 2.0])
     sigma = np.array([0.15, 0.3, 0.5, 0.25])
-    frac = lognormal_fractions(mu, sigma)
+    frac = speed_fractions(mu, sigma, "lognormal")
     assert frac.shape == (4, N_VELOCITY_BINS) and np.allclose(frac.sum(axis=1), 1.0) and (frac >= 0).all()
-    mu_fit, sigma_fit = fit_lognormal(1000.0 * frac)
+    mu_fit, sigma_fit = fit_speed_law(1000.0 * frac, "lognormal")
     assert np.allclose(mu_fit, mu, atol=1e-3) and np.allclose(sigma_fit, sigma, rtol=1e-2)
-    assert np.allclose(total_variation(lognormal_fractions(mu_fit, sigma_fit), frac), 0.0, atol=1e-3)
+    assert np.allclose(total_variation(speed_fractions(mu_fit, sigma_fit, "lognormal"), frac), 0.0, atol=1e-3)
     # the open last bin takes the fast tail: a median at 20 m/s puts most encounters there
-    assert lognormal_fractions(np.log10(20.0), 0.2)[0, -1] > 0.9
+    assert speed_fractions(np.log10(20.0), 0.2, "lognormal")[0, -1] > 0.9
     m, s = velocity_law(0.002, 0.004, 600, R)
     assert 10**m == pytest.approx(0.12 * 2 * math.pi * R * 600 / 60 * 0.5**0.5)
     assert s == pytest.approx(0.30)
@@ -276,7 +276,7 @@ def test_training_data_is_the_one_table_to_model_inputs_path():
     )
     # impact-speed targets: the log-normal fit of every row's bins
     bins = attach_velocity_bins(t, v).drop(index=3)[list(VELOCITY_COUNT_COLUMNS)].to_numpy()
-    mu, sigma = fit_lognormal(bins)
+    mu, sigma = fit_speed_law(bins, "lognormal")
     assert np.array_equal(data.velocity, np.column_stack([mu, sigma]))
     # bins attached beforehand give the same; floored rows are counted
     with warnings.catch_warnings():

@@ -19,7 +19,6 @@ from pbmdem.surrogate.velocity import (
     attach_velocity_bins,
     bin_counts,
     fit_speed_law,
-    lognormal_fractions,
     speed_fractions,
 )
 
@@ -73,7 +72,7 @@ def test_gengamma_is_the_lognormal_and_the_weibull_at_its_limits():
 
     mu, sigma = np.array([-0.5, 0.1]), np.array([0.3, 0.1])
     assert np.allclose(speed_fractions(mu, sigma, "gengamma", [1.0, 1.0]), speed_fractions(mu, sigma, "weibull"))
-    assert np.allclose(speed_fractions(mu, sigma, "gengamma", [1e-4, -1e-4]), lognormal_fractions(mu, sigma))
+    assert np.allclose(speed_fractions(mu, sigma, "gengamma", [1e-4, -1e-4]), speed_fractions(mu, sigma, "lognormal"))
     # q = 0.5 by hand: v = s G^(q / ln 10 ...) -- scipy's Stacy form: v = scale G^(1/c), G ~ Gamma(a),
     # a = 1 / q^2, c = q / (sigma_W ln 10 ... ) matched through the median and the std of log10 v
     q, a = 0.5, 4.0
@@ -154,7 +153,7 @@ def test_fit_from_1_m_s_recovers_the_tail_above_2_m_s_of_a_law_whose_bulk_differ
     bulk = fit_speed_law(counts, "gengamma")
     # the true law's bins, as the PBM's breakage reads them (fractions of the bins x the fraction above v)
     true = share * speed_fractions(math.log10(0.5), 0.3, "gengamma", 0.5)[0]
-    true += (1.0 - share) * lognormal_fractions(math.log10(0.03), 0.25)[0]
+    true += (1.0 - share) * speed_fractions(math.log10(0.03), 0.25, "lognormal")[0]
     for speed in (2.0, VELOCITY_EDGES[15]):
         above = fraction_above(speed)
         p = true @ above
@@ -186,11 +185,6 @@ def test_weibull_fit_of_sampled_speeds_and_its_median():
     mu, sigma = fit_speed_law(counts, "weibull")
     assert mu[0] == pytest.approx(np.log10(np.median(v)), abs=0.01)
     assert sigma[0] == pytest.approx(np.std(np.log10(v)), rel=0.03)
-
-
-def test_lognormal_fractions_unchanged_by_the_law_option():
-    mu, sigma = np.array([-1.0, 0.2]), np.array([0.3, 0.05])
-    assert np.array_equal(speed_fractions(mu, sigma, "lognormal"), lognormal_fractions(mu, sigma))
 
 
 def test_unknown_law_is_refused():
@@ -228,7 +222,7 @@ def test_surrogate_predicts_fractions_of_its_law_and_persists_it(data, tmp_path)
     model = _fitted_surrogate(data, "weibull")
     frac = model.velocity_fractions(data.X.iloc[:5])
     assert np.allclose(frac, speed_fractions(*model.predict_velocity(data.X.iloc[:5]), "weibull"))
-    assert not np.allclose(frac, lognormal_fractions(*model.predict_velocity(data.X.iloc[:5])))
+    assert not np.allclose(frac, speed_fractions(*model.predict_velocity(data.X.iloc[:5]), "lognormal"))
     d, n = np.array([1e-3, 2e-3]), np.array([3000.0, 500.0])
     rates = model.encounters(d, n, 600.0, check_domain=False)
     assert np.allclose(rates.velocity_fractions.sum(axis=-1), 1.0) and (rates.velocity_fractions >= 0).all()

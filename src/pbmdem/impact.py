@@ -86,10 +86,6 @@ class EncounterRates:
                 f"velocity fractions must be ({K}, {K}, {N_VELOCITY_BINS}), got {self.velocity_fractions.shape}"
             )
 
-    def resolved(self) -> np.ndarray:
-        """(K, K, N_VELOCITY_BINS) encounter frequency per pair in each velocity bin (1/s)."""
-        return self.frequency[:, :, None] * self.velocity_fractions
-
 
 #: The walls a granule can hit, in the order of the DEM deck's meshes (pbmdem.dem.collisions).
 WALLS = ("bowl", "impeller")

@@ -266,13 +266,6 @@ class Config:
     def surrogate_training(self) -> SurrogateTraining:
         return SurrogateTraining(surrogate=self.surrogate, granulator=self.granulator)
 
-    def sample_rule(self) -> SampleRule:
-        return SampleRule(
-            max_classes=self.validation.max_classes,
-            min_particles_per_class=self.validation.min_particles_per_class,
-            max_particles=self.dem.max_particles,
-        )
-
     def coupled_loop(self) -> CoupledLoop:
         v = self.validation
         return CoupledLoop(
@@ -282,7 +275,11 @@ class Config:
             dem=self.dem,
             coupling_intervals=v.coupling_intervals,
             dem_sampling_time=v.dem_sampling_time,
-            sample=self.sample_rule(),
+            sample=SampleRule(
+                max_classes=v.max_classes,
+                min_particles_per_class=v.min_particles_per_class,
+                max_particles=self.dem.max_particles,
+            ),
         )
 
     # ------------------------------------------------------------------ provenance

@@ -299,8 +299,8 @@ def surface_fraction(nlg, xc, out):
 
 @njit("void(f8[:, ::1], f8[::1], f8[::1])", cache=True, nogil=True)
 def granule_porosity(nlg, xc, out):
-    """Intra-granular porosity G / (N x + G) of every class (NaN where a class holds no solid):
-    ``state.granule_porosity`` of the class totals, elementwise the same operations."""
+    """Intra-granular porosity G / (N x + G) of every class (NaN where a class holds no solid; G the
+    pore volume, wet or dry: docs/pbm.md); numpy form in tests/pbm_oracle.py."""
     for k in range(nlg.shape[1]):
         S = nlg[0, k] * xc[k]
         out[k] = nlg[2, k] / (S + nlg[2, k]) if S > 0 else np.nan

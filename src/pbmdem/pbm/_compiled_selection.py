@@ -116,7 +116,7 @@ def impact_selection(frequency, fractions, columns, wall_frequency, wall_fractio
     ``wall_fractions`` (W, K, V), and the breaking ``probability`` (K, V) of
     :func:`breaking_probability`; ``numbers`` (K,) the granules of each class. ``columns`` (K,):
     for each partner j the first partner whose fractions ``fractions[:, j, :]`` are the same to the
-    bit (``impact_breakage.fraction_columns``; a coupling interval's bins take the fractions of
+    bit (:func:`fraction_columns`; a coupling interval's bins take the fractions of
     their nearest class, so a few classes serve all bins): the sum over the velocity bins is taken once per
     such column and row, the same operations on the same numbers, so the same result to the bit.
     The sums of four such columns run side by side over the bins (each in the bins' order, from
@@ -188,10 +188,10 @@ def impact_selection(frequency, fractions, columns, wall_frequency, wall_fractio
 
 @njit("i8[::1](f8[:, :, ::1])", cache=True, nogil=True)
 def fraction_columns(fractions):
-    """``impact_breakage.fraction_columns``, compiled: for each partner j of the pair velocity
-    ``fractions`` (K, K, V) the first partner of the run of neighbours j' <= j whose columns
-    ``fractions[:, j', :]`` equal column j to the bit, each pair of neighbours compared until
-    they differ (the numpy form compares every entry: about 0.1 ms per coupling interval)."""
+    """For each partner j of the pair velocity ``fractions`` (K, K, V) the first partner of the run
+    of neighbours j' <= j whose columns ``fractions[:, j', :]`` equal column j to the bit, each pair
+    of neighbours compared until they differ (the numpy form, the test oracle in
+    tests/test_impact_breakage.py, compares every entry: about 0.1 ms per coupling interval)."""
     K = fractions.shape[1]
     out = np.empty(K, dtype=np.int64)
     start = 0
@@ -220,7 +220,7 @@ def critical_speeds(diameters, porosity, strength, out):
     empty: every granule at the reference porosity; NaN: a pivot without granules, the reference
     porosity), with ``strength`` of :data:`STRENGTH_FIELDS`: v*_ref (Y at d_ref, eps_ref) scaled by
     (d / d_ref)^(-e/2) and [((1 - eps) / eps) / ((1 - eps_ref) / eps_ref)]^(n/2), eps clipped to
-    [limit, 1 - limit]; ``ImpactSelection.critical_speeds``."""
+    [limit, 1 - limit] (the numpy form: ``critical_speeds`` in tests/test_impact_breakage.py)."""
     speed, e, d_ref, n, eps_ref, limit = strength[0], strength[1], strength[2], strength[3], strength[4], strength[5]
     ref = (1.0 - eps_ref) / eps_ref
     for i in range(diameters.size):

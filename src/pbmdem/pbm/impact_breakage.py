@@ -51,18 +51,6 @@ def critical_speed(density: float, yield_strength: float, critical_stokes: float
     return float(np.sqrt(2.0 * yield_strength * critical_stokes / density))
 
 
-def fraction_columns(fractions: np.ndarray) -> np.ndarray:
-    """(K,) for each partner j of the pair velocity ``fractions`` (K, K, V): the first partner of
-    the run of neighbours j' <= j whose columns ``fractions[:, j', :]`` equal column j
-    (``_compiled_selection.impact_selection`` sums such a column once per row; the bins sharing their
-    nearest class of a coupling interval are such runs). The readable form and the test oracle of
-    ``_compiled_selection.fraction_columns``, which :class:`ImpactSelection` uses."""
-    K = fractions.shape[1]
-    same = (fractions[:, 1:, :] == fractions[:, :-1, :]).all(axis=(0, 2))  # column j + 1 equals column j
-    starts = np.flatnonzero(np.concatenate([[True], ~same]))
-    return starts[np.searchsorted(starts, np.arange(K), side="right") - 1].astype(np.int64)
-
-
 def selection_rates(
     rates: ImpactRates, numbers, speed: float, walls=WALLS, pairs: bool = True, spread: float = 0.0
 ) -> dict[str, np.ndarray]:
@@ -190,16 +178,8 @@ class ImpactSelection:
             np.ascontiguousarray(walls.frequency[rows], dtype=float).reshape(shape),
             np.ascontiguousarray(walls.velocity_fractions[rows], dtype=float).reshape(*shape, N_VELOCITY_BINS),
         )
-        self._columns = _compiled_selection.fraction_columns(self._arrays[1])  # fraction_columns, compiled
+        self._columns = _compiled_selection.fraction_columns(self._arrays[1])
         self._work = (np.empty(d.size), np.empty((d.size, N_VELOCITY_BINS)))
-
-    def contributions(self, inp: KernelInput) -> dict[str, np.ndarray]:
-        """Per kind of impact (pairs, each wall): (K,) breaking impacts per granule and second
-        (numpy: for reports and as the oracle of the compiled :meth:`__call__`)."""
-        if self._rates is None:
-            self.prepare(inp)
-        d, n = inp.per_bin()
-        return selection_rates(self._rates, n, self._speeds(inp), self.walls, self.pairs, self.strength_spread)
 
     def _porosity(self, inp: KernelInput) -> np.ndarray | None:
         """The porosity of each pivot's aggregates (feed granules do not break), or None when the
@@ -213,33 +193,8 @@ class ImpactSelection:
             )
         return inp.porosity[: inp.pivots]
 
-    def _speeds(self, inp: KernelInput):
-        """v* of the pivots of ``inp`` (one v* when the strength depends on neither size nor porosity)."""
-        return self.critical_speeds(inp.per_bin()[0], self._porosity(inp))
-
-    def critical_speeds(self, diameters, porosity=None) -> float | np.ndarray:
-        """v* of granules of each diameter (m) and porosity: Y (d / d_ref)^(-e) with e =
-        ``size_exponent`` times [r(eps) / r(eps_ref)]^n with r = (1 - eps) / eps and n =
-        ``porosity_exponent``, so v* scales with the square root of both factors; ``porosity``
-        None or NaN (an empty pivot): eps_ref. The one v* with e = n = 0."""
-        if self.size_exponent == 0.0 and self.porosity_exponent == 0.0:
-            return self.speed
-        d = np.asarray(diameters, float)
-        speeds = np.full(d.shape, self.speed)
-        if self.size_exponent != 0.0:
-            speeds = self.speed * (d / self.reference_diameter) ** (-0.5 * self.size_exponent)
-        if self.porosity_exponent != 0.0 and porosity is not None:
-            eps = np.broadcast_to(np.asarray(porosity, float), d.shape)
-            eps = np.where(np.isfinite(eps), eps, self.reference_porosity)
-            # kept inside (0, 1) so that v* stays finite and > 0 (at eps -> 0 a granule without
-            # pores is unbreakable, at eps -> 1 one without solid breaks at any impact)
-            eps = np.clip(eps, POROSITY_LIMIT, 1.0 - POROSITY_LIMIT)
-            ref = (1.0 - self.reference_porosity) / self.reference_porosity
-            speeds = speeds * (((1.0 - eps) / eps) / ref) ** (0.5 * self.porosity_exponent)
-        return speeds
-
     def __call__(self, inp: KernelInput) -> np.ndarray:
-        """S_i of every pivot: the sum of :meth:`contributions`, in one compiled call
+        """S_i of every pivot: the sum over the kinds of impact of :func:`selection_rates`, in one compiled call
         (``_compiled_selection.selection_of_impacts``: v*, the breaking probability per velocity bin, the sum
         over the impacts)."""
         if self._rates is None:

@@ -316,7 +316,7 @@ class CollisionKernel(Kernel):
         if self.success.velocity_dependent:
             # the criterion holds an impact iff its speed is below the pair's critical speed w*, and
             # the representative speeds rise with the bin: sum_b f_b [v_b < w*] is the cumulative
-            # fraction up to the last bin below w* (same as summing success.resolved(...) * f)
+            # fraction up to the last bin below w* (the same as summing [v_b < w*] f_b over the bins)
             w_star = self.success.velocity.critical_velocity(inp.diameters, inp.surface_fraction)
             n = np.searchsorted(self._speeds, w_star, side="left")
             held = np.take_along_axis(self._class_cumulative, n[:, :, None], axis=2)[:, :, 0]

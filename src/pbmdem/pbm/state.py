@@ -74,13 +74,6 @@ def surface_fraction(S: np.ndarray, L: np.ndarray, G: np.ndarray) -> np.ndarray:
     return np.divide(np.maximum(L - G, 0.0), V, out=np.zeros(V.shape), where=V > 0)
 
 
-def granule_porosity(S: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """Intra-granular porosity eps = G / (S + G) of the granules of each bin (G the pore volume,
-    wet or dry: docs/pbm.md); NaN where a bin holds no solid (no granules)."""
-    S, G = np.broadcast_arrays(np.asarray(S, float), np.asarray(G, float))
-    return np.divide(G, S + G, out=np.full(S.shape, np.nan), where=S > 0)
-
-
 def check_state(grid: Grid, s: State, where: str = "") -> None:
     """NegativePopulationError naming the first entry of `s` that is negative or not finite."""
     parts = [s.number, s.liquid, s.gas]

@@ -82,9 +82,6 @@ class StokesCriterion:
             f"asperity_height={self.asperity_height:g} m, density={self.density:g} kg/m3)"
         )
 
-    def stokes_number(self, d_i, d_j, w) -> np.ndarray:
-        return viscous_stokes_number(d_i, d_j, w, self.viscosity, self.density)
-
     def critical_stokes(self, d, phi) -> np.ndarray:
         """(K, K) St* of every pair of bins with diameters d (m) and surface-liquid fractions phi."""
         h = layer_thickness(d, phi)
@@ -96,14 +93,10 @@ class StokesCriterion:
         d = np.asarray(d, float)
         key = d.tobytes()
         if getattr(self, "_st1_key", None) != key:  # the PBM's bins do not move: cache per diameters
-            self._st1 = self.stokes_number(d[:, None], d[None, :], 1.0)  # St_v at 1 m/s, linear in w
+            # St_v at 1 m/s, linear in w
+            self._st1 = viscous_stokes_number(d[:, None], d[None, :], 1.0, self.viscosity, self.density)
             self._st1_key = key
         return np.maximum(self.critical_stokes(d, phi), 0.0) / self._st1
-
-    def success(self, d, phi, velocities) -> np.ndarray:
-        """(K, K, V) 1 where an impact at velocities[b] (m/s) of the pair (i, j) is held, else 0."""
-        w = np.asarray(velocities, float)
-        return (w[None, None, :] < self.critical_velocity(d, phi)[:, :, None]).astype(float)
 
 
 class SuccessProbability:
@@ -114,9 +107,8 @@ class SuccessProbability:
     tests). phi = surface liquid / granule volume (see ``state.surface_fraction``).
 
     ``velocity``: optional impact-velocity criterion (``pbmdem.pbm.success.StokesCriterion``: it
-    holds an impact iff its speed is below ``critical_velocity(d, phi)``, and ``success(d, phi,
-    velocities)`` gives that step per speed); with it the success of an impact at speed v is
-    psi_ij(v) = p(phi_i) p(phi_j) x [criterion holds at v] (:meth:`resolved`), and
+    holds an impact iff its speed is below ``critical_velocity(d, phi)``); with it the success of
+    an impact at speed v is psi_ij(v) = p(phi_i) p(phi_j) x [criterion holds at v], and
     :class:`CollisionKernel` needs velocity-resolved encounter rates from its source. Without it
     (default) the success is velocity-independent, as in the seed study.
     """
@@ -124,10 +116,10 @@ class SuccessProbability:
     MODELS = ("step", "logistic", "always")
 
     def __init__(self, model: str = "step", threshold: float = 0.02, width: float = 0.005, velocity=None):
-        if velocity is not None and not (hasattr(velocity, "success") and hasattr(velocity, "critical_velocity")):
+        if velocity is not None and not callable(getattr(velocity, "critical_velocity", None)):
             raise PBMInputError(
-                f"success velocity criterion {velocity!r} lacks success(d, phi, velocities) or "
-                "critical_velocity(d, phi); allowed: None or a pbmdem.pbm.success.StokesCriterion"
+                f"success velocity criterion {velocity!r} lacks critical_velocity(d, phi); "
+                "allowed: None or a pbmdem.pbm.success.StokesCriterion"
             )
         self.velocity = velocity
         if model not in self.MODELS:
@@ -148,14 +140,6 @@ class SuccessProbability:
     def velocity_dependent(self) -> bool:
         """True if the success also depends on the impact velocity (``velocity`` criterion set)."""
         return self.velocity is not None
-
-    def resolved(self, diameters, phi, velocities) -> np.ndarray:
-        """(K, K, V) psi_ij(v_b): the surface-liquid condition times the velocity criterion
-        (``velocity.success(diameters, phi, velocities)``) at the speeds ``velocities`` (m/s)."""
-        liquid = self(phi)
-        if self.velocity is None:
-            return np.repeat(liquid[:, :, None], np.size(velocities), axis=2)
-        return liquid[:, :, None] * self.velocity.success(diameters, phi, velocities)
 
     def per_particle(self, phi: np.ndarray) -> np.ndarray:
         """p(phi) of every granule: the compiled success model (``_compiled.success_probability``,

@@ -58,13 +58,6 @@ def yes_no(flag) -> str:
     return "n/a" if missing(flag) else ("yes" if bool(flag) else "no")
 
 
-def shown(frame: pd.DataFrame, names: dict[str, str], spec: str = ".4g") -> pd.DataFrame:
-    """The columns of `frame` named in `names` (those present, in the order of `names`), renamed to
-    their display names (with units) and their float values formatted with `spec`."""
-    out = frame[[c for c in names if c in frame.columns]].rename(columns=names)
-    return out.map(lambda v: number(v, spec) if isinstance(v, float) else v)
-
-
 def split_columns(frame: pd.DataFrame, keys: int = 1, max_columns: int = MAX_COLUMNS) -> list[pd.DataFrame]:
     """`frame` as one or more tables of at most `max_columns` columns each, every part repeating
     the first `keys` columns (what identifies a row), so that each part fits a page."""

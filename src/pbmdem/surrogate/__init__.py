@@ -17,7 +17,7 @@ from .persistence import (
     load_surrogate,
     save_surrogate,
 )
-from .velocity import attach_velocity_bins, fit_lognormal, lognormal_fractions
+from .velocity import attach_velocity_bins
 
 __all__ = [
     "CollisionSurrogate",
@@ -45,6 +45,4 @@ __all__ = [
     "VelocityModelMissingError",
     "noise_floor_r2",
     "attach_velocity_bins",
-    "fit_lognormal",
-    "lognormal_fractions",
 ]

@@ -358,7 +358,7 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
 
     def impacts(self, diameters, numbers, rpm: float, check_domain: bool = True):
         """:class:`pbmdem.impact.ImpactRates`: :meth:`encounters` and the wall models' impacts per granule
-        (:func:`~pbmdem.surrogate.walls.wall_rates`), the same numbers as those calls: the walls
+        (:func:`~pbmdem.surrogate.walls.wall_laws`), the same numbers as those calls: the walls
         predict from the diagonal rows of the pairs' feature array, the pairs' and walls' speed laws
         become fractions in one :func:`~.tail.law_fractions`, and response surfaces share terms at equal
         features (:mod:`._terms`)."""

@@ -218,11 +218,6 @@ def speed_fractions(mu, sigma, law: str = "lognormal", shape=None) -> np.ndarray
     return frac / frac.sum(axis=1, keepdims=True)
 
 
-def lognormal_fractions(mu, sigma) -> np.ndarray:
-    """:func:`speed_fractions` of the log-normal law."""
-    return speed_fractions(mu, sigma, "lognormal")
-
-
 def _neg_loglik(theta, counts, law: str = "lognormal", first: int = 0):
     """Negative log-likelihood of the bin ``counts``; with ``first`` > 0 the bins below bin ``first``
     are one cell, P(v < edge ``first``) (:func:`fit_speed_law`'s ``fit_from``)."""
@@ -244,11 +239,6 @@ def fit_from_bin(fit_from: float | None, key: str = "surrogate.speed_law_from") 
     """The bin from which :func:`fit_speed_law` resolves the bins (0: every bin) for ``fit_from``
     (m/s, an inner edge of :data:`~pbmdem.impact.VELOCITY_EDGES`, or None; :func:`pbmdem.impact.velocity_edge_bin`)."""
     return velocity_edge_bin(fit_from, key)
-
-
-def fit_lognormal(counts) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`fit_speed_law` of the log-normal law."""
-    return fit_speed_law(counts, "lognormal")
 
 
 def fit_speed_law(counts, law: str = "lognormal", fit_from: float | None = None) -> tuple[np.ndarray, ...]:

@@ -22,11 +22,10 @@ import numpy as np
 import pandas as pd
 from sklearn.base import clone
 
-from pbmdem.impact import WALLS, WallRates
+from pbmdem.impact import WALLS
 
 from .evaluation import cross_validate_models, summarise
 from .features import pair_features, training_data
-from .tail import law_fractions
 
 #: wall-table columns -> collision-table columns of the diagonal pair
 _RENAME = {"encounter_frequency_per_particle": "encounter_frequency_per_pair"}
@@ -114,16 +113,6 @@ def wall_laws(surrogate, X: np.ndarray, check_domain: bool = True):
         frequency[w] = 10.0 ** model.predict(frame, check_domain=check_domain)
         laws.append(model._pair_law(frame))
     return frequency, laws
-
-
-def wall_rates(surrogate, diameters, numbers, rpm: float, check_domain: bool = True) -> WallRates:
-    """:class:`pbmdem.impact.WallRates` of the classes from the surrogate's wall models
-    (:func:`wall_laws` of the diagonal pairs' features, the walls' speed laws turned into bin
-    fractions in one :func:`~.tail.law_fractions`)."""
-    frequency, laws = wall_laws(
-        surrogate, diagonal_features(diameters, numbers, rpm, surrogate.impeller_radius), check_domain
-    )
-    return WallRates(frequency, np.stack(law_fractions(laws)))
 
 
 def train_wall_models(walls, velocities, template, candidates: dict, settings: dict, impeller_radius: float):

@@ -17,8 +17,6 @@ from pbmdem import layout
 from pbmdem.readers import read_json, read_table
 from pbmdem.tables import INTERVALS
 
-LABELS = {"pbm_dem": "PBM-DEM", "pbm_ann": "PBM-ANN", "pbm_constant": "PBM-constant"}
-
 
 def run_folder(validation_dir: str | Path, rpm: str, method: str, replicate: int | None = None) -> Path:
     """One run's folder (`pbmdem.layout.validation_run`) under the validation folder `validation_dir`."""

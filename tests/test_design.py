@@ -250,6 +250,18 @@ def test_batches_do_not_depend_on_the_number_of_processes(tiny_config):
     assert finals[0] < finals[-1]  # more binder, larger granules
 
 
+def test_a_case_records_the_summarys_sizes(tiny_config, tiny_surrogate):
+    # run_case reads d10/d50/d90 without the batch's summary table: the same numbers, to the bit
+    from pbmdem.coupling import pbm_ann
+
+    loop = tiny_config.coupled_loop()
+    (outcome,) = run_cases(loop, tiny_surrogate, [Case(750.0)])
+    summary = pbm_ann(loop, tiny_surrogate, 750.0, None, log_each=False).result.summary()
+    np.testing.assert_array_equal(outcome.times, summary.time.to_numpy(float))
+    np.testing.assert_array_equal(outcome.sizes, summary[["d10", "d50", "d90"]].to_numpy(float))
+    assert np.isfinite(outcome.sizes).all() and len(outcome.times) > 2
+
+
 # --------------------------------------------------------------------------- design space with a surrogate
 def test_design_space_marks_points_outside_the_training_domain(tiny_config, tiny_surrogate, caplog):
     design = tiny_config.design_space  # 600-1200 rpm: the surrogate saw 600-900 only

@@ -206,6 +206,21 @@ def test_mass_quantiles_interpolate_in_log_d():
     np.testing.assert_allclose(d, [2**0.4, 2**1.5, 2**2.6])
 
 
+def test_mass_quantiles_of_many_rows_are_those_of_each_row_to_the_bit():
+    # the (T, K) form is the (K,) form row by row: the same numbers, NaN for a row without solid
+    from pbmdem.pbm import mass_quantiles
+
+    rng = np.random.default_rng(7)
+    edges = np.cumprod(np.r_[1e-4, rng.uniform(1.05, 1.4, 30)])
+    mass = rng.random((40, 30)) ** 8 * 1e-9
+    mass[rng.random(mass.shape) < 0.5] = 0.0
+    mass[3] = 0.0
+    many = mass_quantiles(mass, edges)
+    rows = np.array([mass_quantiles(row, edges) for row in mass])
+    assert np.isnan(many[3]).all() and np.isfinite(np.delete(many, 3, axis=0)).all()
+    np.testing.assert_array_equal(many, rows)
+
+
 def test_constant_frequency_equals_constant_kernel():
     g = Grid(25, 2.0, v0=1e-3)
     import pbm_verification as ver

@@ -103,6 +103,18 @@ def _prepared(outdir, loop: CoupledLoop, rpm: float, provider) -> Path | None:
     return outdir
 
 
+def _sample_record(sample, matrix: np.ndarray) -> dict:
+    """An interval's sample and its class frequencies as intervals.csv records them (a loop in
+    memory, one of the design space's many short batches, skips these strings: nothing reads them)."""
+    return {
+        "class_diameters": json.dumps(sample.diameters),
+        "class_counts": json.dumps(sample.counts),
+        "sample_particles": sample.n_particles,
+        "class_frequencies": json.dumps(pairs_of(matrix).tolist()),
+        "mean_frequency_per_pair": pair_weighted_mean(matrix, sample.counts),
+    }
+
+
 def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None) -> LoopOutcome:
     """Run the PBM of `loop` at `rpm` over its coupling intervals, asking
     `provider(sample, interval_dir, index) -> (rates, info)` for the frequencies of each.
@@ -169,11 +181,7 @@ def run_loop(loop: CoupledLoop, provider, rpm: float, outdir: str | Path | None)
             "rpm": rpm,
             "method": provider.name,
             "classes": len(sample.counts),
-            "class_diameters": json.dumps(sample.diameters),
-            "class_counts": json.dumps(sample.counts),
-            "sample_particles": sample.n_particles,
-            "class_frequencies": json.dumps(pairs_of(matrix).tolist()),
-            "mean_frequency_per_pair": pair_weighted_mean(matrix, sample.counts),
+            **(_sample_record(sample, matrix) if folder is not None else {}),
             "provider_wall_time_s": provider_wall,
             "pbm_wall_time_s": pbm_wall,
             # CPU seconds of this process (a DEM provider adds its LIGGGHTS processes' in dem_cpu_time_s)

@@ -114,11 +114,10 @@ def run_case(loop: CoupledLoop, model_path: str | Path | None, case: Case) -> Ou
         # ValueError: a bed the granules outgrew so far that no representative DEM sample is left
         # (pbmdem.coupling.sample); the settings were checked before (case.loop)
         return Outcome(case, failed=str(exc))
-    summary = result.summary()
     return Outcome(
         case,
-        summary.time.to_numpy(float),
-        summary[list(STATISTICS)].to_numpy(float),
+        np.asarray(result.times, float),
+        result.size_quantiles(),  # d10, d50, d90: STATISTICS
         int(totals.get("out_of_domain_intervals", 0)),
         int(totals.get("out_of_domain_count", 0)),
     )

@@ -34,10 +34,10 @@ from pbmdem.surrogate.calibration import (
     coverage,
     cross_fitted_coverage,
     interval_z,
+    member_quantiles,
     run_calibration_scale,
 )
 from pbmdem.surrogate.evaluation import default_baselines, sample_scores, select_per_target
-from pbmdem.surrogate.families import member_quantiles
 from pbmdem.surrogate.settings import FAMILIES, build_families
 from pbmdem.surrogate.velocity import tail_error
 

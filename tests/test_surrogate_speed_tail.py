@@ -10,7 +10,8 @@ from synthetic_tables import make_synthetic_tables
 
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, velocity_bin
 from pbmdem.surrogate import CollisionSurrogate, training_data
-from pbmdem.surrogate.families import ResponseSurface, member_quantiles
+from pbmdem.surrogate.calibration import member_quantiles
+from pbmdem.surrogate.families import ResponseSurface
 from pbmdem.surrogate.tail import fit_speed_tail, member_tail, with_speed_tail
 from pbmdem.surrogate.velocity import speed_fractions
 

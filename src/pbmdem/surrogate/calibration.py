@@ -1,14 +1,20 @@
 """Calibrated uncertainty of the surrogate's predictions: the coverage of held-out runs by the
 nominal predictive interval, the factor on the predicted standard deviation that makes it nominal
 (per row, or per run for an error that every pair of a bed shares, as the members' band assumes)
-and the cross-fitted check of that factor (docs/surrogate.md, "Calibrated uncertainty").
+and the cross-fitted check of that factor (docs/surrogate.md, "Calibrated uncertainty"); the
+members of that calibrated distribution that PBM-ANN runs (:class:`CalibratedMember` at
+:func:`member_quantiles`).
 """
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pandas as pd
 from scipy.stats import norm
+
+from .tail import member_tail
 
 #: The nominal level of the predictive intervals whose coverage is checked on held-out runs.
 COVERAGE_LEVEL = 0.90
@@ -65,3 +71,44 @@ def cross_fitted_coverage(y, mean, std, folds, level: float = COVERAGE_LEVEL) ->
     if not ok.any():
         return float("nan")
     return coverage(y[ok], mean[ok], std[ok], scale[ok], level)
+
+
+def member_quantiles(n: int) -> np.ndarray:
+    """``n`` standard-normal quantiles at ``(k + 1/2) / n``: symmetric, mean 0 (0 for n = 1)."""
+    return norm.ppf((np.arange(int(n)) + 0.5) / int(n))
+
+
+class CalibratedMember:
+    """One member of a fitted model's uncertainty: the quantile ``z`` of its predictive normal with
+    the standard deviation widened or narrowed by a calibration factor.
+
+    ``model.predict_array(X, return_std=True)`` gives the mean and the standard deviation of every
+    output; the member predicts ``mean + z scale std`` and has no spread of its own.
+    """
+
+    def __init__(self, model, z: float, scale: float):
+        self.model, self.z, self.scale = model, float(z), float(scale)
+        self.n_members_ = 1
+
+    def predict_array(self, X, return_std: bool = False):
+        mean, std = self.model.predict_array(np.asarray(X, dtype=np.float64), return_std=True)
+        out = mean + self.z * self.scale * std
+        return (out, np.zeros_like(out)) if return_std else out
+
+    def predict(self, X, return_std: bool = False):
+        return self.predict_array(X, return_std=return_std)
+
+
+def member_at(surrogate, z: float):
+    """A copy of the fitted ``CollisionSurrogate`` that predicts at the standard-normal quantile ``z``
+    alone (``CollisionSurrogate.member``): its frequency and speed-law models as
+    :class:`CalibratedMember` at ``z`` (each with its own calibration factor), its wall models
+    likewise, its pooled tail's a times exp(-z spread) (:func:`~.tail.member_tail`)."""
+    out = copy.copy(surrogate)
+    out.frequency_model_ = CalibratedMember(surrogate.frequency_model_, z, surrogate.uncertainty_scale)
+    if surrogate.velocity_model_ is not None:
+        out.velocity_model_ = CalibratedMember(surrogate.velocity_model_, z, surrogate.velocity_uncertainty_scale)
+    walls = getattr(surrogate, "wall_models_", None) or {}
+    out.wall_models_ = {wall: member_at(model, z) for wall, model in walls.items()}
+    out.speed_tail_ = member_tail(surrogate.speed_tail_, z)
+    return out

@@ -27,7 +27,6 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.optimize import minimize
 from scipy.spatial.distance import cdist
-from scipy.stats import norm
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
@@ -69,32 +68,6 @@ def converged_lbfgs(obj_func, initial_theta, bounds):
         options={"gtol": 1e-9, "ftol": 1e-15, "maxiter": 15000},
     )
     return result.x, result.fun
-
-
-def member_quantiles(n: int) -> np.ndarray:
-    """``n`` standard-normal quantiles at ``(k + 1/2) / n``: symmetric, mean 0 (0 for n = 1)."""
-    return norm.ppf((np.arange(int(n)) + 0.5) / int(n))
-
-
-class CalibratedMember:
-    """One member of a fitted model's uncertainty: the quantile ``z`` of its predictive normal with
-    the standard deviation widened or narrowed by a calibration factor.
-
-    ``model.predict_array(X, return_std=True)`` gives the mean and the standard deviation of every
-    output; the member predicts ``mean + z scale std`` and has no spread of its own.
-    """
-
-    def __init__(self, model, z: float, scale: float):
-        self.model, self.z, self.scale = model, float(z), float(scale)
-        self.n_members_ = 1
-
-    def predict_array(self, X, return_std: bool = False):
-        mean, std = self.model.predict_array(np.asarray(X, dtype=np.float64), return_std=True)
-        out = mean + self.z * self.scale * std
-        return (out, np.zeros_like(out)) if return_std else out
-
-    def predict(self, X, return_std: bool = False):
-        return self.predict_array(X, return_std=return_std)
 
 
 class _PerOutputRegressor(RegressorMixin, BaseEstimator):

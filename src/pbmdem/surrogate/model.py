@@ -5,7 +5,6 @@ offsets, the pooled tail and the training domain; the PBM calls ``frequency_matr
 
 from __future__ import annotations
 
-import copy
 import warnings
 
 import numpy as np
@@ -17,10 +16,10 @@ from pbmdem.frequency import matrix_from_pairs, upper_pairs
 from pbmdem.impact import EncounterRates, ImpactRates, WallRates
 
 from ._terms import shared_terms
+from .calibration import member_at, member_quantiles
 from .domain import TrainingDomain
 from .ensemble import EnsembleMLPRegressorCV
 from .errors import VelocityModelMissingError, checked_groups, require_fitted
-from .families import CalibratedMember, member_quantiles
 from .features import (
     FEATURE_NAMES,
     check_impeller_radius,
@@ -29,7 +28,7 @@ from .features import (
     pair_features,
     pair_table,
 )
-from .tail import fit_speed_tail, law_fractions, member_tail
+from .tail import fit_speed_tail, law_fractions
 from .velocity import check_speed_law, n_law_parameters
 from .walls import diagonal_features, wall_laws
 
@@ -66,7 +65,8 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         it predicts (:mod:`pbmdem.surrogate.velocity`); the ``velocity`` targets of ``fit`` must
         be fitted with the same law (:func:`~pbmdem.surrogate.features.training_data`).
     speed_tail_from : float or None
-        m/s: above this bin edge fractions follow :func:`~pbmdem.surrogate.tail.fit_speed_tail`; None: the law's
+        m/s: above this bin edge fractions follow :func:`~pbmdem.surrogate.tail.fit_speed_tail`; None: the
+        law's own tail.
     domain_margin : float
         Relative slack of the per-feature training ranges before :class:`OutOfDomainWarning`
         (fraction of each feature's training range).
@@ -388,8 +388,8 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
 
     def member(self, k: int) -> CollisionSurrogate:
         """A copy of the fitted surrogate that predicts with member ``k`` of its calibrated uncertainty
-        alone: :class:`~pbmdem.surrogate.families.CalibratedMember` at the k-th of
-        :func:`~pbmdem.surrogate.families.member_quantiles` ``z_k`` (``std``: the networks' spread or
+        alone: :class:`~pbmdem.surrogate.calibration.CalibratedMember` at the k-th of
+        :func:`~pbmdem.surrogate.calibration.member_quantiles` ``z_k`` (``std``: the networks' spread or
         the predictive standard deviation, times ``uncertainty_scale`` or ``velocity_uncertainty_scale``),
         the pooled tail's a times exp(-z_k spread). Frequency, speed law, tail and wall models take the
         same ``z_k``: member 0 has the fewest and slowest impacts, the last the most and the fastest;
@@ -397,15 +397,4 @@ class CollisionSurrogate(TrainingDomain, RegressorMixin, BaseEstimator):
         n = self.n_members
         if not 0 <= int(k) < n:
             raise ValueError(f"surrogate member {k!r}: allowed 0 .. {n - 1}")
-        return self._at(float(member_quantiles(n)[int(k)]))
-
-    def _at(self, z: float) -> CollisionSurrogate:
-        """:meth:`member` at the standard-normal quantile ``z`` (walls included)."""
-        out = copy.copy(self)
-        out.frequency_model_ = CalibratedMember(self.frequency_model_, z, self.uncertainty_scale)
-        if self.velocity_model_ is not None:
-            out.velocity_model_ = CalibratedMember(self.velocity_model_, z, self.velocity_uncertainty_scale)
-        walls = getattr(self, "wall_models_", None) or {}
-        out.wall_models_ = {wall: model._at(z) for wall, model in walls.items()}
-        out.speed_tail_ = member_tail(self.speed_tail_, z)
-        return out
+        return member_at(self, float(member_quantiles(n)[int(k)]))

@@ -11,7 +11,12 @@ estimates of P_ik and S_ik lie from the DEM's own (|log10(estimate / DEM)| where
 * ``held out``: the surrogate's prediction for the point's classes (``impacts(d, n, rpm)``, the call
   PBM-ANN makes) when the point's run was held out: a family fitted on the other runs of the
   surrogate package's grouped folds (surrogate.cv, whole runs; pairs and walls on the same folds);
-* ``in sample`` (with --model): a trained surrogate file, e.g. the default run's (the one PBM-ANN uses).
+* ``in sample`` (with --model): a trained surrogate file, e.g. the default run's (the one PBM-ANN uses);
+* ``noise floor`` (--floor draws): the DEM's own rates scored against DEM samples redrawn from its
+  counts (every bin Poisson(count)): what a model that knew each row's true law would score against a
+  DEM of this sampling. Column ``dem>0_few`` counts the scored rows whose DEM value rests on fewer than
+  5 impacts above v*: there the DEM's own Poisson noise is 0.2 decades or more and the median is
+  set by a handful of impacts (docs/measurements.md, "Breakage: the speed law's fast tail").
 
 Where the DEM's value is 0 (no impact that fast recorded) the estimate cannot be scored on a log
 scale: the count of such rows with an estimate > 0 is printed, and how many of them exceed the
@@ -46,6 +51,8 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 KINDS = ("pairs", "impeller", "bowl")
+#: a DEM rate counted from fewer impacts above v* than this is mostly its sampling noise (``dem>0_few``)
+FEW_IMPACTS = 5
 #: kind -> held-out total-variation distances of the last held_out_points call
 TV: dict = {}
 
@@ -64,8 +71,9 @@ def dem_point(tables: dict, point: str, law: str | None = None, law_from: float 
     """The DEM's impacts of one point as ``pbmdem.impact.ImpactRates`` plus the impacts sampled.
 
     Returns {"d", "n", "rpm", "rates", "sampled": {kind: (K,) impacts sampled per class, all replicates},
-    "counts": {kind: counts per row}}; with ``law`` every row's bin fractions are replaced by the
-    law fitted to its bins (:func:`pbmdem.surrogate.velocity.fit_speed_law`)."""
+    "counts": (pair counts (K, K, bins), wall counts (walls, K, bins)), summed over the replicates};
+    with ``law`` every row's bin fractions are replaced by the law fitted to its bins
+    (:func:`pbmdem.surrogate.velocity.fit_speed_law`)."""
     from pbmdem.impact import N_VELOCITY_BINS, WALLS, EncounterRates, ImpactRates, WallRates, binned_counts
     from pbmdem.surrogate.velocity import fit_speed_law, speed_fractions
 
@@ -98,6 +106,7 @@ def dem_point(tables: dict, point: str, law: str | None = None, law_from: float 
     sampled = {"pairs": counts.sum(axis=(1, 2)) * reps}
     wf = np.zeros((len(WALLS), K))
     wfrac = np.zeros((len(WALLS), K, N_VELOCITY_BINS))
+    wall_binned = [None] * len(WALLS)
     walls = tables["walls"][tables["walls"]["point_id"].astype(str) == point]
     wvel = tables["wall_velocities"][tables["wall_velocities"]["point_id"].astype(str) == point]
     for w, wall in enumerate(WALLS):
@@ -109,9 +118,32 @@ def dem_point(tables: dict, point: str, law: str | None = None, law_from: float 
             keys, binned = binned_counts(vw.assign(class_j=vw["class_i"]))
             wc[keys["class_i"].to_numpy(int)] = binned
         wfrac[w] = fractions(wc)
+        wall_binned[w] = wc
         sampled[wall] = wc.sum(axis=1) * reps
     rates = ImpactRates(EncounterRates(c, frac), WallRates(wf, wfrac))
-    return {"d": d, "n": n, "rpm": rpm, "rates": rates, "sampled": sampled}
+    wall_counts = np.stack([np.zeros((K, N_VELOCITY_BINS)) if w is None else w for w in wall_binned]) * reps
+    return {"d": d, "n": n, "rpm": rpm, "rates": rates, "sampled": sampled, "counts": (counts * reps, wall_counts)}
+
+
+def floor_draw(ref: dict, rng: np.random.Generator) -> dict:
+    """The point ``ref`` (:func:`dem_point`) as another DEM sample of the same beds could have
+    counted it: every bin's impacts redrawn as Poisson(count) (summed over the replicates), the
+    frequencies kept. Scoring the DEM's own rates against such draws gives the noise floor: what
+    a model that knew every row's true speed law would score against a DEM of this sampling."""
+    from pbmdem.impact import EncounterRates, ImpactRates, WallRates
+
+    def drawn(counts: np.ndarray) -> np.ndarray:
+        sim = rng.poisson(np.round(counts)).astype(float)
+        total = sim.sum(axis=-1, keepdims=True)
+        return np.divide(sim, total, out=np.zeros_like(sim), where=total > 0)
+
+    pairs, walls = ref["counts"]
+    frac = drawn(pairs)
+    iu, ju = np.triu_indices(pairs.shape[0], 1)
+    frac[ju, iu] = frac[iu, ju]  # one draw per class pair, as the DEM's one sample serves both orders
+    rates = ref["rates"]
+    walls_drawn = WallRates(rates.walls.frequency, drawn(walls), rates.walls.walls)
+    return dict(ref, rates=ImpactRates(EncounterRates(rates.pairs.frequency, frac), walls_drawn))
 
 
 def ingredients(rates, numbers, speed: float, spread: float = 0.0) -> dict:
@@ -257,6 +289,9 @@ def score(frame: pd.DataFrame) -> pd.DataFrame:
             rec[f"{what}_med"] = float(np.median(err)) if pos.any() else np.nan
             rec[f"{what}_p90"] = float(np.quantile(err, 0.9)) if pos.any() else np.nan
             rec[f"{what}_bias"] = float(np.median(bias)) if pos.any() else np.nan
+        # rows whose DEM value rests on fewer than 5 impacts above v* (Poisson noise alone >= 0.2 decades)
+        counted = g["sampled"].to_numpy(float) * g["dem_fraction"].to_numpy(float)
+        rec["dem>0_few"] = int(((counted > 0) & (counted < FEW_IMPACTS - 1e-9)).sum())
         zero = g["dem_fraction"].to_numpy(float) <= 0
         est_f = g["est_fraction"].to_numpy(float)
         limit = 3.0 / np.maximum(g["sampled"].to_numpy(float), 1e-300)
@@ -296,6 +331,12 @@ def main(argv=None) -> int:
         type=float,
         default=None,
         help="fit the laws to the bins from this speed (m/s, a bin edge) up, as surrogate.speed_law_from",
+    )
+    parser.add_argument(
+        "--floor",
+        type=int,
+        default=20,
+        help="redrawn DEM samples for the noise floor (the error of a model that knew each row's true law; 0: none)",
     )
     parser.add_argument("--quick", action="store_true", help="synthetic tables, tiny config (smoke test)")
     args = parser.parse_args(argv)
@@ -338,6 +379,13 @@ def report(args) -> int:
         f"family {args.family}, folds {settings['cv']}"
     )
     rows = []
+    if args.floor:
+        # the noise floor: the DEM's own rates scored against redrawn DEM samples (floor_draw)
+        rng = np.random.default_rng(20261206)
+        own = {p: dem[p]["rates"] for p in points}
+        for _ in range(args.floor):
+            redrawn = {p: floor_draw(dem[p], rng) for p in points}
+            rows += scored(points, redrawn, own, args.speeds, "noise floor", args.spread)
     for law in args.laws:
         t0 = time.perf_counter()
         fitted = {p: dem_point(tables, p, law, getattr(args, "law_from", None))["rates"] for p in points}
@@ -369,6 +417,8 @@ def report(args) -> int:
     table = score(frame)
     print("\n|log10(estimate / DEM)| per (point, class) where the DEM's is > 0 (med / p90 / median signed);")
     print("dem0: rows with no DEM impact above v*; est>0, est>3/N: estimates > 0 and above the detection limit")
+    print(f"dem>0_few: of the rows scored, those whose DEM value rests on fewer than {FEW_IMPACTS} impacts above v*;")
+    print("noise floor: the DEM's own rates against redrawn DEM samples (floor_draw; discrete for such rows)")
     print(table.to_string(index=False, float_format=lambda x: f"{x:.3g}"))
     # number-weighted selection rate per point, summed over kinds (the DEM's with the same spread)
     frame["N"] = [dem[p]["n"][k] for p, k in zip(frame["point_id"], frame["class"], strict=True)]

@@ -29,7 +29,12 @@ HELPERS = {"quick.py"}
 #: command (after ``python benchmarks/``) -> regular expressions its output must contain
 QUICK = {
     "render_decks.py --quick": (r"test\.yaml: [1-9]\d* decks in ",),
-    "bench_breakage_tail.py --quick": (r"gengamma held out s=0\.5 +pairs", r"number-weighted selection rate S"),
+    "bench_breakage_tail.py --quick": (
+        r"gengamma held out s=0\.5 +pairs",
+        r"noise floor s=0 +impeller",
+        r"dem>0_few",
+        r"number-weighted selection rate S",
+    ),
     "bench_breakage_samples.py --quick": (
         r"rpm 1200: median log10\(estimate / DEM\) of the pair breaking-impact rate",
         r"0\.50 +feed +\S+ +[+-]\d\.\d\d +[+-]\d\.\d\d +[+-]\d\.\d\d",

@@ -17,8 +17,11 @@ from __future__ import annotations
 
 from numba import njit
 
+from . import _compiled, _compiled_selection, _compiled_steps
 from ._compiled import ALWAYS, add_processes, class_totals
-from ._compiled_steps import ssp_stage
+from ._compiled_steps import drop_stale_cache, ssp_stage
+
+drop_stale_cache(__file__, _compiled.__file__, _compiled_steps.__file__, _compiled_selection.__file__)
 
 
 @njit("i8(f8, f8[::1])", cache=True, nogil=True)

@@ -20,11 +20,47 @@ the bit (tests/test_pbm_fast_steps.py, against the Python loop kept in tests/ste
 
 from __future__ import annotations
 
+import hashlib
+import os
+from pathlib import Path
+
 import numpy as np
 from numba import njit
 
+from . import _compiled, _compiled_selection
 from ._compiled import class_rates, flush, granule_porosity
 from ._compiled_selection import selection_of_impacts
+
+
+def drop_stale_cache(module_file: str, *dependencies: str) -> None:
+    """Remove numba's cached code of the functions of ``module_file`` if the source of a module
+    they call (``dependencies``) changed since it was cached. numba invalidates a cached function
+    when its own file changes, not when a compiled function it calls from another file does, and
+    the stale code runs silently: a change of ``_compiled.class_rates`` left the cached ``advance``
+    computing the old rates (measured 2026-12-06; tests/test_numba_cache.py). The dependencies'
+    hash is kept beside the cache (``__pycache__/<module>.deps``). A read-only source tree, whose
+    cache numba keeps elsewhere, is not checked."""
+    source = Path(module_file)
+    folder, stem = source.parent / "__pycache__", source.stem
+    digest = hashlib.sha256(b"".join(Path(d).read_bytes() for d in dependencies)).hexdigest()
+    stamp = folder / f"{stem}.deps"
+    try:
+        if stamp.read_text() == digest:
+            return
+    except OSError:
+        pass  # no stamp yet: whatever is cached may be stale
+    try:
+        for cached in folder.glob(f"{stem}.*.nb[ic]"):
+            cached.unlink(missing_ok=True)
+        folder.mkdir(exist_ok=True)
+        partial = folder / f"{stem}.deps.{os.getpid()}.tmp"  # written whole, then moved into place
+        partial.write_text(digest)
+        partial.replace(stamp)
+    except OSError:
+        pass  # a read-only tree: numba caches elsewhere (not checked)
+
+
+drop_stale_cache(__file__, _compiled.__file__, _compiled_selection.__file__)
 
 #: why ``advance`` returned: the event reached, a check of the run's limits due, refused solid over
 #: the allowed share, a step for the Python loop (it raises the error of the step)

@@ -106,7 +106,7 @@ def dem_point(tables: dict, point: str, law: str | None = None, law_from: float 
     sampled = {"pairs": counts.sum(axis=(1, 2)) * reps}
     wf = np.zeros((len(WALLS), K))
     wfrac = np.zeros((len(WALLS), K, N_VELOCITY_BINS))
-    wall_binned = [None] * len(WALLS)
+    wall_counts = np.zeros((len(WALLS), K, N_VELOCITY_BINS))
     walls = tables["walls"][tables["walls"]["point_id"].astype(str) == point]
     wvel = tables["wall_velocities"][tables["wall_velocities"]["point_id"].astype(str) == point]
     for w, wall in enumerate(WALLS):
@@ -118,11 +118,11 @@ def dem_point(tables: dict, point: str, law: str | None = None, law_from: float 
             keys, binned = binned_counts(vw.assign(class_j=vw["class_i"]))
             wc[keys["class_i"].to_numpy(int)] = binned
         wfrac[w] = fractions(wc)
-        wall_binned[w] = wc
+        wall_counts[w] = wc
         sampled[wall] = wc.sum(axis=1) * reps
     rates = ImpactRates(EncounterRates(c, frac), WallRates(wf, wfrac))
-    wall_counts = np.stack([np.zeros((K, N_VELOCITY_BINS)) if w is None else w for w in wall_binned]) * reps
-    return {"d": d, "n": n, "rpm": rpm, "rates": rates, "sampled": sampled, "counts": (counts * reps, wall_counts)}
+    totals = (counts * reps, wall_counts * reps)  # impacts per bin over all replicates (floor_draw)
+    return {"d": d, "n": n, "rpm": rpm, "rates": rates, "sampled": sampled, "counts": totals}
 
 
 def floor_draw(ref: dict, rng: np.random.Generator) -> dict:

@@ -105,7 +105,7 @@ def _prepared(outdir, loop: CoupledLoop, rpm: float, provider) -> Path | None:
 
 def _sample_record(sample, matrix: np.ndarray) -> dict:
     """An interval's sample and its class frequencies as intervals.csv records them (a loop in
-    memory, one of the design space's many short batches, skips these strings: nothing reads them)."""
+    memory, one of the design space's many short batches, skips them: nothing reads them there)."""
     return {
         "class_diameters": json.dumps(sample.diameters),
         "class_counts": json.dumps(sample.counts),

@@ -26,18 +26,12 @@ def _disc_fan(center: np.ndarray, ring: np.ndarray, upward: bool) -> np.ndarray:
     return np.stack([c, nxt, ring], axis=1)
 
 
-def bowl_mesh(bowl: Bowl) -> tuple[np.ndarray, np.ndarray]:
-    """Closed cylinder (side, bottom, lid) with normals pointing out of the fluid region.
-
-    LIGGGHTS does not care about the normal direction of a wall, but a consistent orientation
-    lets the mesh be checked for being a closed surface.
-    """
-    n = int(bowl.segments)
+def _cylinder(radius: float, z0: float, z1: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Closed n-sided prism about the z axis from z0 to z1 (side, floor, lid), normals outward."""
     theta = 2.0 * np.pi * np.arange(n) / n
-    x, y = bowl.radius * np.cos(theta), bowl.radius * np.sin(theta)
-    bottom = np.column_stack([x, y, np.zeros(n)])
-    top = np.column_stack([x, y, np.full(n, bowl.height)])
-    points = np.vstack([bottom, top, [[0.0, 0.0, 0.0]], [[0.0, 0.0, bowl.height]]])
+    x, y = radius * np.cos(theta), radius * np.sin(theta)
+    points = np.vstack([np.column_stack([x, y, np.full(n, z0)]), np.column_stack([x, y, np.full(n, z1)])])
+    points = np.vstack([points, [[0.0, 0.0, z0]], [[0.0, 0.0, z1]]])
     ib, it = np.arange(n), np.arange(n, 2 * n)
     jb, jt = np.roll(ib, -1), np.roll(it, -1)
     side = np.vstack([np.stack([ib, jb, jt], axis=1), np.stack([ib, jt, it], axis=1)])
@@ -46,21 +40,15 @@ def bowl_mesh(bowl: Bowl) -> tuple[np.ndarray, np.ndarray]:
     return points, np.vstack([side, floor, lid]).astype(np.int64)
 
 
+def bowl_mesh(bowl: Bowl) -> tuple[np.ndarray, np.ndarray]:
+    """The closed bowl (LIGGGHTS ignores the normals; consistent ones let the mesh be checked)."""
+    return _cylinder(bowl.radius, 0.0, bowl.height, int(bowl.segments))
+
+
 def _box(half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Axis-aligned box centred at the origin with outward-oriented triangles."""
-    hx, hy, hz = half
-    pts = np.array(
-        [
-            [-hx, -hy, -hz],
-            [hx, -hy, -hz],
-            [hx, hy, -hz],
-            [-hx, hy, -hz],
-            [-hx, -hy, hz],
-            [hx, -hy, hz],
-            [hx, hy, hz],
-            [-hx, hy, hz],
-        ]
-    )
+    square = ((-1, -1), (1, -1), (1, 1), (-1, 1))
+    pts = np.array([(x, y, z) for z in (-1, 1) for x, y in square]) * half
     tris = np.array(
         [
             [0, 2, 1],
@@ -112,22 +100,7 @@ def impeller_mesh(imp: Impeller) -> tuple[np.ndarray, np.ndarray]:
         parts_tris.append(tris + offset)
         offset += len(pts)
     # hub: a 12-sided closed prism from the bottom clearance to the blade top
-    m, r = 12, 0.5 * imp.hub_diameter
-    theta = 2.0 * np.pi * np.arange(m) / m
-    z0, z1 = imp.clearance, imp.clearance + imp.blade_height
-    ring0 = np.column_stack([r * np.cos(theta), r * np.sin(theta), np.full(m, z0)])
-    ring1 = np.column_stack([r * np.cos(theta), r * np.sin(theta), np.full(m, z1)])
-    hub_pts = np.vstack([ring0, ring1, [[0, 0, z0]], [[0, 0, z1]]])
-    i0, i1 = np.arange(m), np.arange(m, 2 * m)
-    j0, j1 = np.roll(i0, -1), np.roll(i1, -1)
-    hub_tris = np.vstack(
-        [
-            np.stack([i0, j0, j1], axis=1),
-            np.stack([i0, j1, i1], axis=1),
-            _disc_fan(2 * m, i0, upward=False),
-            _disc_fan(2 * m + 1, i1, upward=True),
-        ]
-    )
+    hub_pts, hub_tris = _cylinder(0.5 * imp.hub_diameter, imp.clearance, imp.clearance + imp.blade_height, 12)
     parts_pts.append(hub_pts)
     parts_tris.append(hub_tris + offset)
     return np.vstack(parts_pts), np.vstack(parts_tris).astype(np.int64)

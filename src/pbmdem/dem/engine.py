@@ -1,19 +1,6 @@
-"""Run the external LIGGGHTS engine and turn its failures into clear errors.
-
-LIGGGHTS (Debian package `liggghts`, binary `liggghts`) is run as a separate program, serially
-or under `mpirun -np N`. A run fails when the program exits non-zero, when its log contains an
-`ERROR` line (LIGGGHTS sometimes exits 0 after an error), or when particles were lost. The error
-message carries the last lines of the log; a `crash.json` beside the log records the failure so
-that crashed runs are kept and explained rather than hidden.
-
-An exit code 0 does not mean the run finished: on SIGINT or SIGTERM (Ctrl-C, `scancel`, a batch
-system's time limit) LIGGGHTS writes `restart_forced_liggghts_<step>.data`, logs
-`Forced restart written` and exits 0. `run` treats that log line as a failure; SIGINT/SIGTERM
-reaching this Python process while LIGGGHTS runs are recorded (and passed on to LIGGGHTS if it
-did not get them too), so that the run is recorded as interrupted rather than Python dying
-first. `check_finished` judges a run against its plan (last thermo step, number of dump frames and
-the particles per size class in the class map), whatever the exit code said; the restart file is
-removed and recorded in crash.json.
+"""Run the external LIGGGHTS engine (binary `liggghts`, serially or under MPI) and judge a run
+against its plan, not its exit code; every failure leaves a `crash.json` beside the log
+(docs/dem.md, "A run": how a run fails, interruptions, unfinished and corrupt runs).
 """
 
 from __future__ import annotations
@@ -210,16 +197,11 @@ CLASS_MAP = "post/classes.dump"
 def check_finished(
     workdir: str | Path, total_steps: int, dumps: dict[str, tuple[int, int]], counts: list[int] | None = None
 ) -> None:
-    """Judge a run against its plan, not its exit code: the last thermo step of the log must be
-    `total_steps` and each dump `name -> (frames, last step)` must hold exactly that many frames
-    ending at that step. Otherwise crash.json is written and an error raised, telling two cases
-    apart: a log that stops short of the plan is an **unfinished** engine run (LiggghtsError); a
-    log that reaches the planned step with a dump that does not match the plan is a **corrupt**
-    file (DumpFormatError naming the file, the line, the byte and the frame): the engine finished,
-    the file was damaged afterwards (disk, copy, edit), and rerunning the engine is not the cure.
-    With `counts` (the plan's particles per size class), the class map (CLASS_MAP) of a finished
-    run must hold exactly these: a bed that is not the planned one fails (LiggghtsError naming
-    each class, its planned and its inserted count)."""
+    """Judge a run against its plan: the log's last thermo step must be `total_steps`, each dump
+    `name -> (frames, last step)` hold that many frames ending there and the class map (CLASS_MAP)
+    the planned `counts` per class, if given. A log short of the plan is an unfinished run
+    (LiggghtsError), a finished log with a dump off the plan a corrupt file (DumpFormatError
+    naming the line, byte and frame); either writes crash.json."""
     workdir = Path(workdir)
     log = workdir / "log.liggghts"
     steps = thermo_table(log).get("Step", []) if log.exists() else []
@@ -306,9 +288,14 @@ def version_of_log(log: str | Path) -> str:
 
 def thermo_table(log: str | Path) -> dict[str, list[float]]:
     """Columns of every thermo block in a LIGGGHTS log (header line starting with 'Step')."""
+    return thermo_columns(Path(log).read_text(errors="replace"))
+
+
+def thermo_columns(text: str) -> dict[str, list[float]]:
+    """Columns of every thermo block in the text of a LIGGGHTS log."""
     columns: dict[str, list[float]] = {}
     header: list[str] | None = None
-    for line in Path(log).read_text(errors="replace").splitlines():
+    for line in text.splitlines():
         words = line.split()
         if words[:1] == ["Step"]:
             header = words

@@ -1,17 +1,6 @@
-"""The whole configuration as one frozen, typed object, and the settings each stage uses.
-
-`ConfigFile` is the file: one model per section, each setting declared once with its type,
-default, bounds, unit and description (`pbmdem config --show-defaults` lists them,
-`pbmdem config --schema` prints the JSON schema generated from them).
-`Config.from_mapping(cfg)` checks a configuration once, fills in the defaults, resolves the
-defaults that depend on other sections (the PBM grid's first pivot, the sweeps' speed ranges),
-makes the checks that span sections, and returns a `Config`. Every path goes through it: the
-Snakefile, the `pbmdem` command line, the library's entry points and the tests.
-
-A stage is handed only the settings it uses, as one of the bundles below (`DemPoint`,
-`PbmBatch`, `SurrogateTraining`, `CoupledLoop`). A bundle's plain form (`to_dict()`) is also the
-params of the stage's Snakemake rule, so a rule reruns exactly when something its stage uses
-changes, and the rule script rebuilds the bundle from its params (`from_dict`).
+"""The configuration file's model (`ConfigFile`), the checked `Config` with the defaults that depend
+on other sections resolved (`Config.from_mapping`), and the stage bundles whose plain form is their
+rule's params (docs/architecture.md, "Settings").
 """
 
 from __future__ import annotations

@@ -1,10 +1,6 @@
-"""The base of every settings model, and `setting(...)`: one line per setting.
-
-Every section of the configuration is a frozen pydantic model whose fields are declared with
-`setting(default, description, unit, bounds)`: its type, default, bounds, unit and description
-in one place, from which the JSON schema (`pbmdem config --schema`), the list of defaults
-(`pbmdem config --show-defaults`) and the checks of a config file all come. `...` as the default
-makes a setting required.
+"""The base of every settings model (`Settings`: frozen, unknown keys and non-finite numbers refused)
+and `setting(...)`: a field's default, description, unit and bounds in one place, from which the
+JSON schema, `pbmdem config --show-defaults` and the checks of a config file all come.
 """
 
 from __future__ import annotations

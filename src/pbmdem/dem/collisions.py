@@ -1,13 +1,6 @@
-"""Collision and encounter tables of one DEM run, from its contact and position snapshots.
-
-The DEM deck dumps, every `collision_interval` steps of the sampling window, all particle-particle
-contacts (`compute pair/gran/local id delta`: id1, id2, overlap) and all particle-mesh contacts
-(`compute wall/gran/local id delta`: mesh id, particle id, overlap). A **contact that begins** is a
-pair with positive overlap at one snapshot that was not in contact at the previous snapshot (pairs
-already touching at the first snapshot are not counted; rows with overlap <= 0, which liquid-bridge
-models list too, are not contacts); an **encounter** is a contact that begins between particles
-that were apart (`pbmdem.dem.encounters`). New contacts are found for all frames at once by
-sorting (pair, frame) keys.
+"""Collision and encounter tables of one DEM run from its contact and position snapshots (docs/dem.md,
+"Collisions and encounters"; columns: docs/architecture.md). New contacts are found for all frames at
+once by sorting (pair, frame) keys.
 """
 
 from __future__ import annotations
@@ -213,23 +206,15 @@ class RunTables:
 
 
 class RunAnalysis:
-    """Contact starts and encounters of one finished run (`plan`: its pbmdem.dem.DemPlan)."""
+    """Contact starts and encounters of one finished run of `plan` (a DemPlan whose class map
+    `check_finished` found as planned)."""
 
-    def __init__(self, post_dir: str | Path, plan, bowl, impeller):
+    def __init__(self, post_dir: str | Path, plan):
         post_dir = Path(post_dir)
-        self.plan, self.bowl, self.impeller = plan, bowl, impeller
+        self.plan, self.n_classes = plan, len(plan.diameters)
         ids, classes = read_classes(post_dir / "classes.dump")
-        self.n_classes = n_classes = len(plan.diameters)
-        if len(ids) != plan.n_particles:
-            raise DumpFormatError(
-                f"{plan.point_id}: {len(ids)} particles in the granulator at the start of sampling, "
-                f"{plan.n_particles} planned: insertion did not place them all (lower dem.bed_height, "
-                "or give the bowl more height / the settling phase more time)"
-            )
-        if classes.min() < 0 or classes.max() >= n_classes:
-            raise DumpFormatError(f"{plan.point_id}: atom types outside 1..{n_classes} in the class map")
         self.class_of = _class_lookup(ids, classes)
-        self.n = np.bincount(classes, minlength=n_classes)
+        self.n = np.bincount(classes, minlength=self.n_classes)
         self.radius_of_class = 0.5 * np.asarray(plan.diameters, float)
         self.pairs = read_dump(post_dir / "pairs.dump", 3, ids=(0, 1))
         self.walls = read_dump(post_dir / "walls.dump", 3, ids=(1,))
@@ -239,7 +224,6 @@ class RunAnalysis:
             raise DumpFormatError(f"{plan.point_id}: fewer than two contact snapshots in the sampling window")
         self.window_start = int(window[0])  # contacts beginning after this snapshot are counted
         self.sampling_time = float(window[-1] - window[0]) * plan.timestep
-        self._encounters = encounters
 
     def angle_of_step(self, steps):
         """Impeller angle (rad): the rotation starts with the spin-up phase."""
@@ -250,7 +234,7 @@ class RunAnalysis:
         ca, cb = self.class_of[s.first], self.class_of[s.second]
         if (ca < 0).any() or (cb < 0).any():
             raise DumpFormatError(f"{self.plan.point_id}: a contact names a particle id missing from the class map")
-        ev = self._encounters.pair_events(
+        ev = encounters.pair_events(
             self.traj,
             s.first,
             s.second,
@@ -271,7 +255,7 @@ class RunAnalysis:
             raise DumpFormatError(
                 f"{self.plan.point_id}: a wall contact names a particle id missing from the class map"
             )
-        ev = self._encounters.wall_events(
+        ev = encounters.wall_events(
             self.traj,
             s.first,
             s.second,
@@ -279,8 +263,8 @@ class RunAnalysis:
             s.step,
             s.prev_step,
             self.plan.encounter_gap_fraction,
-            self.bowl,
-            self.impeller,
+            self.plan.granulator.bowl,
+            self.plan.granulator.impeller,
             self.angle_of_step,
             self.plan.omega,
             stride=stride,
@@ -334,7 +318,7 @@ class RunAnalysis:
 
 def tabulate_run(post_dir: str | Path, plan) -> RunTables:
     """Collision and encounter tables of one finished run of `plan` (a DemPlan)."""
-    return RunAnalysis(post_dir, plan, plan.granulator.bowl, plan.granulator.impeller).tables()
+    return RunAnalysis(post_dir, plan).tables()
 
 
 #: the tables of a run (file: field of RunTables) in the order they are written: collisions.csv

@@ -1,23 +1,6 @@
-"""Encounters: impacts of granules that were apart, told from re-touches of neighbours.
-
-In a dense, sheared bed most contacts that begin between two snapshots are neighbours touching
-again after a micro-separation; their rate is about (contacts present) / (contact lifetime) and
-says little about impacts that can make granules coalesce. An **encounter** is a contact that
-begins (a pair in contact at a contact snapshot, not in contact at the previous one) between two
-particles whose surface gap exceeded ``gap_fraction`` x the smaller diameter at some position
-snapshot since their previous contact. The look-back reaches at most to the first position
-snapshot (the history before the sampling window); a contact whose partners stayed within the gap
-over the whole history is not counted, and the number of those is reported (it shrinks as the
-history grows: the count converges with history length).
-
-The **impact velocity** of an encounter is the relative normal approach speed of the two surfaces
-at the last position snapshot before the contact began, ``-(v_b - v_a) . n_ab`` (n_ab from a to b),
-clipped at 0. The same definitions apply to particle-wall contacts, with the gap to the bowl
-(cylinder, bottom, lid) or to the rotating impeller (blade boxes and hub) computed from the
-geometry, and the wall's own velocity (omega x r for the impeller) subtracted.
-
-Inputs are the contact snapshots of :mod:`pbmdem.collisions` and a position dump
-``id x y z vx vy vz`` sorted by id, whose snapshot steps are a subset of the contact steps.
+"""Encounters (contacts that begin between granules that were apart) and their impact speeds, for
+particle pairs and particle-wall contacts, from the position snapshots (docs/dem.md, "Collisions
+and encounters").
 """
 
 from __future__ import annotations

@@ -9,10 +9,10 @@ estimate says which of the two it used.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from pbmdem import layout
@@ -34,18 +34,8 @@ class Throughput:
     source: str
 
     def rate(self, n_particles: float) -> float:
-        pts = sorted(self.points)
-        if len(pts) == 1 or n_particles <= pts[0][0]:
-            return pts[0][1]
-        if n_particles >= pts[-1][0]:
-            return pts[-1][1]
-        for (n0, r0), (n1, r1) in zip(pts, pts[1:], strict=False):
-            if n0 <= n_particles <= n1:
-                if n1 == n0:
-                    return r0
-                w = (math.log(n_particles) - math.log(n0)) / (math.log(n1) - math.log(n0))
-                return r0 + w * (r1 - r0)
-        return pts[-1][1]
+        n, rate = zip(*sorted(self.points))
+        return float(np.interp(np.log(n_particles), np.log(n), rate))
 
     def seconds(self, particle_steps: float, n_particles: float, ranks: int = 1) -> float:
         """Wall time of a run of `particle_steps` (no speed-up assumed beyond the ranks)."""

@@ -1,9 +1,6 @@
-"""Granulator geometry: a closed cylindrical bowl and a bladed impeller as STL triangle meshes.
-
-The bowl's axis is the z axis, its bottom at z = 0 (dimensions: `pbmdem.config.Granulator`). The
-impeller turns about the same axis. Both meshes are written with meshio; every closed part is
-watertight with outward normals (triangles ordered counter-clockwise seen from outside), which
-tests/test_geometry.py verifies.
+"""Granulator geometry as STL meshes (meshio, ASCII): a closed cylindrical bowl on the z axis, bottom at
+z = 0, and a bladed impeller turning about it; every part closed with outward normals (docs/dem.md,
+"The granulator").
 """
 
 from __future__ import annotations

@@ -1,15 +1,6 @@
-"""The speed response of the DEM stage, with replicate error bars.
-
-From the per-replicate tables of the grid (`results/dem/collisions_replicates.csv` and
-`results/dem/runs.csv`) this module derives, per operating point:
-
-* the kernel-relevant collision rate: encounters per particle and second
-  (2 x encounters / (N x sampling time)) and the pair-weighted mean encounter frequency per pair
-  (encounters / (pairs x sampling time), summed over class pairs), each as the mean over
-  replicates with its standard error; the raw new-contact rate beside them for comparison;
-* the flow-development check: the encounter rate in the first and second halves of the sampling
-  window, their relative difference and whether the two agree within twice their replicate error.
-"""
+"""The DEM stage's speed response from the grid's per-replicate tables: whole-bed encounter and
+new-contact rates per operating point with replicate standard errors, and the flow-development
+check of the two halves of the sampling window (docs/dem.md, "Encounter rate against impeller speed")."""
 
 from __future__ import annotations
 

@@ -11,6 +11,8 @@ import numpy as np
 
 from pbmdem.config import Bowl, Impeller
 
+from .geometry import blade_box
+
 
 @dataclass
 class Trajectories:
@@ -51,10 +53,11 @@ class Events:
     undetermined: np.ndarray
 
 
-def _lookback(traj: Trajectories, event_step, prev_step, gap_fn, stride: int = 1):
+def _lookback(traj: Trajectories, event_step, prev_step, gap_fn, stride: int = 1) -> Events:
     """Generic look-back over the position snapshots strictly between `prev_step` and
     `event_step` of every event, newest first; `gap_fn(frame_idx, event_idx)` returns the gap
     (m) minus the event's threshold and the approach speed at those snapshots."""
+    event_step, prev_step = np.asarray(event_step, np.int64), np.asarray(prev_step, np.int64)
     steps = traj.steps[::stride]
     frame_map = np.arange(len(traj.steps))[::stride]
     n = len(event_step)
@@ -81,7 +84,7 @@ def _lookback(traj: Trajectories, event_step, prev_step, gap_fn, stride: int = 1
         keep = ~found & (cursor[undecided] >= np.maximum(lo[undecided], 0))
         undecided = undecided[keep]
     undetermined = ~encounter & (prev_step < steps[0]) if len(steps) else np.zeros(n, bool)
-    return encounter, np.clip(velocity, 0.0, None), lag, undetermined
+    return Events(event_step, encounter, np.clip(velocity, 0.0, None), lag, undetermined)
 
 
 def pair_events(
@@ -101,9 +104,7 @@ def pair_events(
         approach = -np.einsum("ij,ij->i", dv, n)
         return dist - ra[ev] - rb[ev] - threshold[ev], approach
 
-    event_step = np.asarray(event_step, np.int64)
-    enc, vel, lag, und = _lookback(traj, event_step, np.asarray(prev_step, np.int64), gap_fn, stride)
-    return Events(event_step, enc, vel, lag, und)
+    return _lookback(traj, event_step, prev_step, gap_fn, stride)
 
 
 def bowl_gap(pos: np.ndarray, radius: np.ndarray, bowl: Bowl):
@@ -130,10 +131,7 @@ def _rot_z(points: np.ndarray, angle: np.ndarray) -> np.ndarray:
 def impeller_gap(pos: np.ndarray, radius: np.ndarray, imp: Impeller, angle: np.ndarray):
     """Surface gap (m) of particles to the impeller turned by `angle` (rad, per particle) and
     the unit vector from the particle centre towards the nearest impeller point."""
-    r0 = 0.25 * imp.hub_diameter
-    span = imp.blade_length - r0
-    half = np.array([0.5 * span, 0.5 * imp.blade_thickness, 0.5 * imp.blade_height])
-    centre = np.array([r0 + 0.5 * span, 0.0, imp.clearance + 0.5 * imp.blade_height])
+    centre, half = blade_box(imp)
     pitch = np.radians(imp.pitch_deg)
     cp, sp = np.cos(pitch), np.sin(pitch)
     best = np.full(len(pos), np.inf)
@@ -214,6 +212,4 @@ def wall_events(
             approach[imp_rows] = np.einsum("ij,ij->i", v[imp_rows] - wall_v, n)
         return gap - threshold[ev], approach
 
-    event_step = np.asarray(event_step, np.int64)
-    enc, vel, lag, und = _lookback(traj, event_step, np.asarray(prev_step, np.int64), gap_fn, stride)
-    return Events(event_step, enc, vel, lag, und)
+    return _lookback(traj, event_step, prev_step, gap_fn, stride)

@@ -74,25 +74,27 @@ def _rotation(axis: str, angle: float) -> np.ndarray:
     raise ValueError(axis)
 
 
-def impeller_mesh(imp: Impeller) -> tuple[np.ndarray, np.ndarray]:
-    """Hub (a closed prism) plus `blades` rectangular blades, each a closed box.
+def blade_box(imp: Impeller) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and half extents (m) of blade 0 before its pitch: a plate along x from half the hub
+    radius (inside the hub, so that no two blades share a face, which LIGGGHTS rejects) to the
+    tip, its underside `clearance` above the floor."""
+    r0 = 0.25 * imp.hub_diameter
+    span = imp.blade_length - r0
+    half = np.array([0.5 * span, 0.5 * imp.blade_thickness, 0.5 * imp.blade_height])
+    return np.array([r0 + 0.5 * span, 0.0, imp.clearance + 0.5 * imp.blade_height]), half
 
-    Blade k is a plate spanning radially from half the hub radius to `blade_length`, of height
-    `blade_height` and thickness `blade_thickness`, its underside `clearance` above the bottom,
-    rotated by 2 pi k / blades about z and tilted by `pitch_deg` about its own radial axis.
-    """
+
+def impeller_mesh(imp: Impeller) -> tuple[np.ndarray, np.ndarray]:
+    """Hub (a closed prism) plus `blades` closed boxes (`blade_box`), blade k turned by
+    2 pi k / blades about z and tilted by `pitch_deg` about its own radial axis."""
     parts_pts, parts_tris, offset = [], [], 0
-    zc = imp.clearance + 0.5 * imp.blade_height
+    centre, half = blade_box(imp)
     for k in range(imp.blades):
-        # blades start inside the hub (not at the axis), so that no two blades share a face:
-        # LIGGGHTS rejects meshes with coincident triangles
-        r0 = 0.5 * (0.5 * imp.hub_diameter)
-        span = imp.blade_length - r0
-        pts, tris = _box(np.array([0.5 * span, 0.5 * imp.blade_thickness, 0.5 * imp.blade_height]))
+        pts, tris = _box(half)
         pts = pts @ _rotation("x", np.radians(imp.pitch_deg)).T
-        pts[:, 0] += r0 + 0.5 * span
+        pts[:, 0] += centre[0]
         pts = pts @ _rotation("z", 2.0 * np.pi * k / imp.blades).T
-        pts[:, 2] += zc
+        pts[:, 2] += centre[2]
         parts_pts.append(pts)
         parts_tris.append(tris + offset)
         offset += len(pts)

@@ -12,15 +12,10 @@ from pbmdem.atomic import write_csv
 from pbmdem.readers import read_json
 from pbmdem.tables import KEYS, RUN_TABLES, SE_COLUMNS
 
-# per kind (the contracts of pbmdem.tables): the keys of the replicate mean; every other column is
-# averaged over the replicates, the ones in SE_COLUMNS also get a standard error
-REPLICATE_KEYS = {kind: list(keys) for kind, keys in KEYS.items()}
-
 
 def replicate_mean(frame: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
-    """Mean over the replicates of every numeric column, with `n_replicates` and the standard
-    error `<column>_se` (sample standard deviation / sqrt(n), NaN for one replicate) of the
-    frequencies in SE_COLUMNS."""
+    """Mean over the replicates of every column but `keys`, with `n_replicates` and the standard
+    error `<column>_se` (sample sd / sqrt(n), NaN for one replicate) of the SE_COLUMNS."""
     values = [c for c in frame.columns if c not in keys and c != "replicate"]
     grouped = frame.groupby(keys, sort=True, dropna=False)
     out = grouped[values].mean()
@@ -39,19 +34,18 @@ def read_tables(tables: list[str | Path], kind: str = "pairs") -> pd.DataFrame:
     frames = [RUN_TABLES[kind].read(p) for p in tables]
     if not frames:
         raise ValueError("no collision tables to aggregate")
-    runs = pd.concat(frames, ignore_index=True)
-    sort = [c for c in ("rpm", "distribution", "replicate", "wall", "class_i", "class_j", "v_lo") if c in runs.columns]
-    return runs.sort_values(sort, kind="stable").reset_index(drop=True)
+    return _sorted(pd.concat(frames, ignore_index=True))
+
+
+def _sorted(frame: pd.DataFrame) -> pd.DataFrame:
+    sort = [c for c in ("rpm", "distribution", "replicate", "wall", "class_i", "class_j", "v_lo") if c in frame.columns]
+    return frame.sort_values(sort, kind="stable").reset_index(drop=True)
 
 
 def aggregate(tables: list[str | Path], out: str | Path, kind: str = "pairs") -> pd.DataFrame:
     """Replicate means of per-run tables (`kind`: pairs, walls or velocities), one row per point
     and class pair (or wall, or velocity bin), sorted and written atomically."""
-    runs = read_tables(tables, kind)
-    keys = REPLICATE_KEYS[kind]
-    grid = replicate_mean(runs, keys)
-    sort = [c for c in ("rpm", "distribution", "wall", "class_i", "class_j", "v_lo") if c in grid.columns]
-    grid = grid.sort_values(sort, kind="stable").reset_index(drop=True)
+    grid = _sorted(replicate_mean(read_tables(tables, kind), list(KEYS[kind])))
     write_csv(out, grid)
     return grid
 
@@ -59,7 +53,7 @@ def aggregate(tables: list[str | Path], out: str | Path, kind: str = "pairs") ->
 def run_table(summaries: list[str | Path], out: str | Path):
     """One row per run with its size, cost and convergence figures (atomically written CSV)."""
     rows = [read_json(p, "DEM run summary") for p in summaries]
-    frame = pd.DataFrame(rows).drop(columns=[c for c in ("particles_per_class",) if c in rows[0]], errors="ignore")
+    frame = pd.DataFrame(rows).drop(columns="particles_per_class", errors="ignore")
     frame = frame.sort_values(["rpm", "distribution"]).reset_index(drop=True)
     write_csv(out, frame)
     return frame

@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from pbmdem.dem import collisions, deck, engine
-from pbmdem.dem.grid_tables import aggregate
+from pbmdem.dem.collisions import aggregate
 from pbmdem.dem.plan import plan_point
 from pbmdem.dem.run import run_point
 

@@ -349,12 +349,6 @@ def read_classes(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     return rows[:, 0].astype(np.int64), rows[:, 1].astype(np.int64) - 1
 
 
-def class_lookup(ids: np.ndarray, classes: np.ndarray) -> np.ndarray:
-    lookup = np.full(int(ids.max()) + 1, -1, np.int64)
-    lookup[ids] = classes
-    return lookup
-
-
 def read_trajectories(path: str | Path, n_particles: int):
     """Position snapshots (`dump custom ... id x y z vx vy vz`, sorted by id; text or binary) as Trajectories."""
     snaps = read_dump(path, 7, ids=(0,))

@@ -77,15 +77,11 @@ class DemExecution(Settings):
 
     @classmethod
     def of_job(cls, config: dict, resources=None) -> DemExecution:
-        """The execution settings of a Snakemake job: `dem.mpi_ranks` and `dem.timeout` of the
-        workflow's completed config, the ranks replaced by the job's `tasks` resource when a
-        cluster profile sets it."""
-        dem = config["dem"]
-        ranks = int(dem["mpi_ranks"])
+        """The execution settings of a Snakemake job: those of the workflow's completed config,
+        the ranks replaced by the job's `tasks` resource when a cluster profile sets it."""
         tasks = resources.get("tasks") if resources is not None else None
-        if tasks:
-            ranks = int(tasks)
-        return cls(mpi_ranks=ranks, timeout=dem["timeout"], limits=dem["limits"])
+        own = {key: config["dem"][key] for key in cls.model_fields}
+        return cls(**own | ({"mpi_ranks": int(tasks)} if tasks else {}))
 
 
 class DemSection(Dem, DemExecution):

@@ -34,8 +34,9 @@ def _unique(values):
 T = TypeVar("T")
 #: a list of distinct values (JSON schema uniqueItems), e.g. Unique[float]
 Unique = Annotated[tuple[T, ...], AfterValidator(_unique), Field(json_schema_extra={"uniqueItems": True})]
-#: a plain name of a size distribution (letter first; letters, digits, '_' or '-')
-Name = Annotated[str, StringConstraints(pattern=r"^[A-Za-z][A-Za-z0-9_-]{0,63}$")]
+#: a plain name of a size distribution (letter first; letters, digits, '_' or '-'), also a deck's
+NAME_PATTERN = r"^[A-Za-z][A-Za-z0-9_-]{0,63}$"
+Name = Annotated[str, StringConstraints(pattern=NAME_PATTERN)]
 #: a config key of a pbm setting, e.g. pbm.aggregation.beta0
 PbmKey = Annotated[str, StringConstraints(pattern=r"^pbm(\.[a-z_0-9]+)+$")]
 #: an impeller speed (rpm)

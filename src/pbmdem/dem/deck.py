@@ -11,6 +11,8 @@ import string
 from importlib import resources
 from pathlib import Path
 
+from pbmdem.config.typed import NAME_PATTERN
+
 from .plan import BedPlan, DemPlan
 
 #: the sections of granulator.in (lines "#=== section <name>") that make each kind of deck: a
@@ -22,7 +24,7 @@ DECKS = {
     "from_bed": ("header", "restart", "model", "sample"),
 }
 _SECTION = re.compile(r"^#=== section (\w+)\n", re.MULTILINE)
-_IDENTIFIER = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,63}$")
+_IDENTIFIER = re.compile(NAME_PATTERN)
 
 
 class DeckValueError(ValueError):

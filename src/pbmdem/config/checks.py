@@ -72,20 +72,12 @@ def check(cfg) -> None:
             f"grid.max_points = {grid.max_points} (raise it if the grid is meant to be this large)"
         )
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
-    defined = sorted(cfg.size_distributions)
-    for name in cfg.grid.size_distributions:
-        if name not in cfg.size_distributions:
-            problems.append(f"grid.size_distributions: {name!r} is not defined; defined names: {defined}")
+    names = [("grid.size_distributions", name) for name in grid.size_distributions]
     for key in ("extra_points", "design_points"):
-        for k, point in enumerate(getattr(cfg.grid, key)):
-            if point.distribution not in cfg.size_distributions:
-                problems.append(
-                    f"grid.{key}[{k}].distribution: {point.distribution!r} is not defined; defined names: {defined}"
-                )
-    if cfg.validation.distribution not in cfg.size_distributions:
-        problems.append(
-            f"validation.distribution: {cfg.validation.distribution!r} is not defined; defined names: {defined}"
-        )
+        names += [(f"grid.{key}[{k}].distribution", p.distribution) for k, p in enumerate(getattr(grid, key))]
+    for where, name in [*names, ("validation.distribution", cfg.validation.distribution)]:
+        if name not in cfg.size_distributions:
+            problems.append(f"{where}: {name!r} is not defined; defined names: {sorted(cfg.size_distributions)}")
     problems += _feed_check_problems(cfg)
     sweep = cfg.validation.sweep
     if not sweep.stop > sweep.start:

@@ -97,10 +97,8 @@ class DemPoint(Settings):
     sizes: SizeDistribution
 
     def at(self, rpm: float) -> PointSpeed:
-        """Everything the impeller speed `rpm` decides for this point, each from its owner: the
-        point's id, the impeller's angular and tip speed (the granulator), the rotation period and
-        the lengths of the spin-up and sampling phases (the DEM settings). One call: the planner
-        asks the config once."""
+        """Everything the impeller speed `rpm` decides for this point, each from its owner (the
+        granulator, the DEM settings), in one call."""
         rpm = float(rpm)
         return PointSpeed(
             rpm=rpm,

@@ -79,10 +79,8 @@ def tail(path: Path, lines: int = 25) -> str:
 
 
 def _forced_restarts(workdir: Path) -> list[dict]:
-    """Remove the restart files LIGGGHTS writes when interrupted; return what was removed.
-
-    Such a file cannot resume a pbmdem run (the deck re-creates meshes and fixes), so it is only
-    recorded in crash.json."""
+    """Remove the restart files LIGGGHTS writes when interrupted (they cannot resume a pbmdem run:
+    the deck re-creates meshes and fixes); what was removed, for crash.json."""
     removed = []
     for path in sorted(workdir.glob("restart_forced_*")):
         step = re.search(r"(\d+)", path.name.rsplit("_", 1)[-1])
@@ -127,12 +125,8 @@ def run(
     progress=None,
     poll: float = 1.0,
 ) -> LiggghtsRun:
-    """Run `deck` (a file in `workdir`) with the working directory `workdir`.
-
-    `progress` (e.g. a `pbmdem.progress.ThermoProgress` on the log) gets `update()` every `poll`
-    seconds while the engine runs and `close()` when it stopped. Raises LiggghtsError (after
-    writing `workdir/crash.json`) on any failure.
-    """
+    """Run `deck` (a file in `workdir`) in `workdir`, `progress` (a ThermoProgress) updated every
+    `poll` s; LiggghtsError (after writing `workdir/crash.json`) on any failure."""
     workdir = Path(workdir)
     deck_name = Path(deck).name
     cmd = command(deck_name, ranks)

@@ -99,14 +99,11 @@ class StudyEstimate:
 
 
 def study_estimate(cfg, grid_runs, loops, results: str | Path = layout.RESULTS) -> StudyEstimate:
-    """The wall time of the DEM runs a workflow run will do: `grid_runs`, (rpm, distribution,
-    replicate) of the grid's DEM jobs (each from a settled bed, one per distribution and
-    replicate), and `loops`, (rpm, replicate) of the PBM-DEM coupled loops of the validation feed
-    or (rpm, replicate, CoupledLoop) of another loop (the feed check's), one DEM run per coupling
-    interval, on `cfg` (a pbmdem Config); the throughput from the finished runs in `results`. A
-    validation loop whose feed the grid runs at its speed and replicate borrows that run for its
-    first interval (no LIGGGHTS call); at another speed its first interval starts from the grid's
-    settled bed of the feed (pbmdem.coupling.providers.DemProvider)."""
+    """The wall time of the DEM runs of a workflow run on `cfg`: `grid_runs`, (rpm, distribution,
+    replicate) of the grid's jobs (from settled beds), and `loops`, (rpm, replicate[, CoupledLoop:
+    another loop than the validation's]) of the coupled loops, one run per coupling interval but
+    the first, which borrows the grid's run or bed of the feed (docs/validation.md, "Borrowed grid
+    runs"); the throughput from the finished runs in `results`."""
     throughput = measured_throughput(layout.dem("runs.csv", str(results)))
     ranks = cfg.dem_execution.mpi_ranks
     grid_seconds = 0.0

@@ -1,10 +1,5 @@
-"""`pbmdem config`: every setting with its default, unit and description; the JSON schema
-generated from the settings models; the check of a config file.
-
-    pbmdem config --show-defaults            # one line per setting: key, default, unit, bounds, description
-    pbmdem config --schema > config.schema.json
-    pbmdem config --check config/config.yaml
-"""
+"""`pbmdem config`: every setting with its default, unit and description, the JSON schema generated
+from the settings models, or the check of a config file (EXAMPLES)."""
 
 from __future__ import annotations
 

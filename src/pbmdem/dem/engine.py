@@ -146,20 +146,7 @@ def run(
     log_text = log.read_text(errors="replace") if log.exists() else ""
     # an error can reach the screen but not the log (e.g. when MPI aborts while reporting it)
     log_text += "\n" + stdout
-    problems, err = _problems(log_text, returncode, signals.received)
-    if problems:
-        error_line = err.group(0).strip() if err else None
-        details = {"command": cmd, "returncode": returncode, "wall_time_s": wall, "stderr_tail": stderr[-4000:]}
-        record_crash(workdir, problems, **details, error_line=error_line)
-    return LiggghtsRun(log=log, wall_time=wall, returncode=returncode, cpu_time=cpu)
-
-
-def _problems(log_text: str, returncode: int, received: list) -> tuple[list[str], re.Match | None]:
-    """What went wrong in a run, from its log and screen text, its exit code and the signals it
-    ``received`` (empty: nothing), with the log's error line (a match, or None)."""
-    problems = []
-    if received:
-        problems.append(f"interrupted by {', '.join(received)}")
+    problems = [f"interrupted by {', '.join(signals.received)}"] if signals.received else []
     if returncode != 0:
         problems.append(f"exit code {returncode}")
     err = _ERROR_LINE.search(log_text)
@@ -169,7 +156,11 @@ def _problems(log_text: str, returncode: int, received: list) -> tuple[list[str]
         problems.append("particles were lost")
     if _FORCED_RESTART.search(log_text):
         problems.append("interrupted: LIGGGHTS wrote a forced restart (it received SIGINT or SIGTERM)")
-    return problems, err
+    if problems:
+        error_line = err.group(0).strip() if err else None
+        details = {"command": cmd, "returncode": returncode, "wall_time_s": wall, "stderr_tail": stderr[-4000:]}
+        record_crash(workdir, problems, **details, error_line=error_line)
+    return LiggghtsRun(log=log, wall_time=wall, returncode=returncode, cpu_time=cpu)
 
 
 def dump_steps(path: str | Path) -> list[int]:

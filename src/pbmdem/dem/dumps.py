@@ -245,13 +245,9 @@ def read_dump(path: str | Path, columns: int, ids: tuple[int, ...] = ()) -> Snap
 
 
 def find_damage(path: str | Path) -> str | None:
-    """Where the dump `path` stops being a well-formed LIGGGHTS dump, or None if it is one.
-
-    Every line is checked against the structure LIGGGHTS writes (TIMESTEP, step, NUMBER OF
-    ENTRIES/ATOMS, count, BOX BOUNDS and its three lines, the ENTRIES/ATOMS header with its column
-    names, then exactly `count` rows of as many finite numbers); steps must increase. The answer
-    names the line, the byte offset and the frame. Slow (one Python
-    pass over the lines): for explaining a dump already found inconsistent, not for reading one."""
+    """Where the dump `path` stops being a well-formed LIGGGHTS dump (its line, byte offset and
+    frame), or None. Slow, one Python pass over the lines: for explaining a dump already found
+    inconsistent, not for reading one."""
     path = Path(path)
     raw = path.read_bytes()
     if path.suffix == BINARY_SUFFIX:

@@ -45,20 +45,16 @@ class Throughput:
 def measured_throughput(runs_csv: str | Path | None = None) -> Throughput:
     """The throughput of the finished runs in `runs_csv` (median per particle number), or the
     reference if the file is missing or holds no usable rows."""
-    if runs_csv is not None and Path(runs_csv).is_file():
-        try:
-            runs = pd.read_csv(runs_csv, usecols=["n_particles", "particle_steps_per_s"]).dropna()
-        except ValueError:
-            runs = None
-        if runs is not None and len(runs):
-            runs = runs[runs["particle_steps_per_s"] > 0]
-            med = runs.groupby("n_particles")["particle_steps_per_s"].median()
-            if len(med):
-                return Throughput(
-                    tuple((float(n), float(r)) for n, r in med.items()),
-                    f"the throughput of the {len(runs)} finished runs in {runs_csv}",
-                )
-    return Throughput(REFERENCE_THROUGHPUT, REFERENCE_SOURCE)
+    try:
+        runs = pd.read_csv(runs_csv, usecols=["n_particles", "particle_steps_per_s"]).dropna()
+    except (OSError, ValueError):  # no such file (or None), or not a run table
+        return Throughput(REFERENCE_THROUGHPUT, REFERENCE_SOURCE)
+    runs = runs[runs["particle_steps_per_s"] > 0]
+    med = runs.groupby("n_particles")["particle_steps_per_s"].median()
+    if not len(med):
+        return Throughput(REFERENCE_THROUGHPUT, REFERENCE_SOURCE)
+    source = f"the throughput of the {len(runs)} finished runs in {runs_csv}"
+    return Throughput(tuple((float(n), float(r)) for n, r in med.items()), source)
 
 
 def duration_text(seconds: float) -> str:

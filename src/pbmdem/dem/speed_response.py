@@ -67,13 +67,9 @@ def speed_response(replicates: pd.DataFrame) -> pd.DataFrame:
 
 
 def flow_development(runs: pd.DataFrame) -> pd.DataFrame:
-    """First vs second half of the sampling window per point.
-
-    `half_difference`: mean over replicates of (second / first - 1) with its standard error;
-    `half_z`: the difference of the replicate-mean counts of the two halves in units of their
-    combined replicate standard error, sqrt(SE_1^2 + SE_2^2) (for a single replicate, the Poisson
-    error of the counts); `within_error` when |half_z| <= 2, i.e. the two half-window rates agree
-    within their replicate error."""
+    """First vs second half of the sampling window per point: `half_difference` (second / first - 1,
+    replicate mean and SE), `half_z` (the halves' difference in combined replicate SE, Poisson for
+    one replicate) and `within_error` (|half_z| <= 2)."""
     r = runs.copy()
     r["half_difference"] = r.encounters_second_half / r.encounters_first_half - 1.0
     out = _mean_se(

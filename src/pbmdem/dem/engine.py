@@ -36,12 +36,13 @@ class LiggghtsError(RuntimeError):
 
 @dataclass
 class LiggghtsRun:
+    """A finished run: its log, wall time and CPU time (user + system) of LIGGGHTS and every
+    process it started (its MPI ranks: on a shared machine the cost, where the wall time also
+    counts the other users' load), s."""
+
     log: Path
     wall_time: float
-    returncode: int
-    #: CPU time (user + system) of LIGGGHTS and every process it started (its MPI ranks): on a
-    #: shared machine the cost of a run, where the wall time also counts the other users' load
-    cpu_time: float = float("nan")
+    cpu_time: float
 
 
 def executable() -> str:
@@ -160,7 +161,7 @@ def run(
         error_line = err.group(0).strip() if err else None
         details = {"command": cmd, "returncode": returncode, "wall_time_s": wall, "stderr_tail": stderr[-4000:]}
         record_crash(workdir, problems, **details, error_line=error_line)
-    return LiggghtsRun(log=log, wall_time=wall, returncode=returncode, cpu_time=cpu)
+    return LiggghtsRun(log=log, wall_time=wall, cpu_time=cpu)
 
 
 def dump_steps(path: str | Path) -> list[int]:

@@ -110,18 +110,8 @@ def _binary_row_byte(frame: BinaryFrame, row: int) -> int:
     return frame.chunks[-1][0] + 8 * frame.chunks[-1][1]
 
 
-def _read_bytes(path: Path) -> bytes:
-    try:
-        return path.read_bytes()
-    except FileNotFoundError:
-        raise DumpFormatError(f"dump file {path} does not exist (did LIGGGHTS reach the sampling phase?)") from None
-
-
-def read_binary_dump(path: str | Path, columns: int, ids: tuple[int, ...] = ()) -> Snapshots:
-    """Read a binary LIGGGHTS `dump custom` file with `columns` values per row; the 0-based
-    columns `ids` hold particle ids. Checked like a text dump (structure, finite values, ids)."""
-    path = Path(path)
-    raw = _read_bytes(path)
+def _read_binary(raw: bytes, path: Path, columns: int, ids: tuple[int, ...]) -> Snapshots:
+    """A binary LIGGGHTS `dump custom` file (`raw`, read from `path`), checked like a text dump."""
     frames, damage = binary_frames(raw, path, width=columns)
     if damage is not None:
         raise DumpFormatError(f"corrupt dump: {damage}")
@@ -186,9 +176,12 @@ def read_dump(path: str | Path, columns: int, ids: tuple[int, ...] = ()) -> Snap
     the 0-based columns `ids` hold particle ids (positive integers: anything else is corruption).
     A file named `*.bin` is read as a binary dump."""
     path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise DumpFormatError(f"dump file {path} does not exist (did LIGGGHTS reach the sampling phase?)") from None
     if path.suffix == BINARY_SUFFIX:
-        return read_binary_dump(path, columns, ids)
-    raw = _read_bytes(path)
+        return _read_binary(raw, path, columns, ids)
     if not raw.strip():
         return Snapshots(np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros((0, columns)))
     headers = list(_HEADER.finditer(raw))

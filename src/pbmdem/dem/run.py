@@ -62,16 +62,11 @@ def prepare_run(
     bed: Path | None = None,
     deck: str | None = None,
 ) -> Path:
-    """Write geometry, deck and plan into `run_dir` (emptied of any earlier attempt's output);
-    with `bed` (a settled bed's restart file, as returned by `check_bed`), a copy of it for the
-    deck to read; `deck`: the rendered deck, if the caller has it already."""
+    """Write geometry, deck and plan into the fresh folder `run_dir`; with `bed` (a settled bed's
+    restart file, as returned by `check_bed`), a copy of it for the deck to read; `deck`: the
+    rendered deck, if the caller has it already."""
     run_dir = Path(run_dir)
-    post = run_dir / "post"
-    if post.exists():
-        shutil.rmtree(post)
-    post.mkdir(parents=True)
-    for stale in ("crash.json", "log.liggghts", BED_FILE):
-        (run_dir / stale).unlink(missing_ok=True)
+    (run_dir / "post").mkdir(parents=True, exist_ok=True)
     geometry.write_granulator(plan.granulator, run_dir)
     if bed is not None:
         shutil.copyfile(bed, run_dir / BED_FILE)

@@ -42,11 +42,9 @@ def check_bed(plan: DemPlan, bed_dir: str | Path) -> Path:
     restart = bed_dir / BED_FILE
     if not restart.exists():
         raise InputFileError(f"settled bed {restart} does not exist (run the bed first: pbmdem.dem.run.settle_bed)")
-    found = read_json(record, "settled-bed record")
-    want = bed_key(plan.bed)
-    for key in (*(f"bed.{k}" for k in want["bed"]), "deck_sha256"):
-        have = found.get("bed", {}).get(key[4:]) if key.startswith("bed.") else found.get(key)
-        need = want["bed"][key[4:]] if key.startswith("bed.") else want[key]
+    found, want = read_json(record, "settled-bed record"), bed_key(plan.bed)
+    pairs = [(f"bed.{k}", found.get("bed", {}).get(k), need) for k, need in want["bed"].items()]
+    for key, have, need in [*pairs, ("deck_sha256", found.get("deck_sha256"), want["deck_sha256"])]:
         if have != need:
             raise ConfigError(
                 f"{record}: {key} = {have!r}, but the run {plan.point_id} (replicate {plan.replicate}) needs the "

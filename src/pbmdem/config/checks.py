@@ -78,7 +78,15 @@ def check(cfg) -> None:
     for where, name in [*names, ("validation.distribution", cfg.validation.distribution)]:
         if name not in cfg.size_distributions:
             problems.append(f"{where}: {name!r} is not defined; defined names: {sorted(cfg.size_distributions)}")
-    problems += _feed_check_problems(cfg)
+    feed, feeds = cfg.validation.feed_check.feed, grid.size_distributions
+    if feed is not None and all(name in cfg.size_distributions for name in feeds):  # (else reported above)
+        cases = feed_case_parents(feed_case_names({name: cfg.size_distributions[name] for name in feeds}))
+        if feed not in cases:
+            problems.append(
+                f"validation.feed_check.feed = {feed!r}: not a case of the feed study with a grid feed on either "
+                f"side (allowed: {list(cases) or 'none: the grid has fewer than two size distributions'}, or null "
+                "for no check)"
+            )
     sweep = cfg.validation.sweep
     if not sweep.stop > sweep.start:
         problems.append(f"validation.sweep: stop = {sweep.stop:g} must be greater than start = {sweep.start:g}")
@@ -86,18 +94,3 @@ def check(cfg) -> None:
     problems += design_problems(cfg)
     if problems:
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
-
-
-def _feed_check_problems(cfg) -> list[str]:
-    """validation.feed_check.feed: a case of the feed study with a grid feed on either side."""
-    feed = cfg.validation.feed_check.feed
-    grid = cfg.grid.size_distributions
-    if feed is None or any(name not in cfg.size_distributions for name in grid):
-        return []  # no check, or the grid's own names are wrong (reported above)
-    cases = feed_case_parents(feed_case_names({name: cfg.size_distributions[name] for name in grid}))
-    if feed in cases:
-        return []
-    return [
-        f"validation.feed_check.feed = {feed!r}: not a case of the feed study with a grid feed on either side "
-        f"(allowed: {list(cases) or 'none: the grid has fewer than two size distributions'}, or null for no check)"
-    ]

@@ -100,7 +100,7 @@ def bench_point(args) -> None:
         naive_total = naive_parse(post / "pairs.dump")
         naive = time.perf_counter() - t0
         t0 = time.perf_counter()
-        analysis = collisions.RunAnalysis(post, plan, cfg.granulator.bowl, cfg.granulator.impeller)
+        analysis = collisions.RunAnalysis(post, plan)
         tables = analysis.tables()
         fast = time.perf_counter() - t0
         pairs = analysis.pairs

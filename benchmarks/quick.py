@@ -149,7 +149,7 @@ def dem_grid(root: str | Path, cfg=None, rpm: float = 600.0, distribution: str =
     returns ``root``/dem. A few seconds per replicate with the tiny configuration (the default)."""
     from pbmdem import layout
     from pbmdem.atomic import write_csv
-    from pbmdem.dem.grid_tables import aggregate, read_tables, run_table
+    from pbmdem.dem.collisions import aggregate, read_tables, run_table
     from pbmdem.dem.plan import plan_bed, plan_point
     from pbmdem.dem.run import run_point, settle_bed
     from pbmdem.dem.speed_response import flow_development

@@ -89,9 +89,7 @@ def main(argv=None):
                 # half intervals on the same seed: every snapshot = h/2, every second = h
                 half = point.replace(dem=point.dem.replace(collision_interval=max(1, plan.collision_interval // 2)))
                 plan_h, _ = run(cfg, half, rpm, rep, Path(tmp) / f"half{rep}")
-                analysis = collisions.RunAnalysis(
-                    Path(tmp) / f"half{rep}" / "post", plan_h, cfg.granulator.bowl, cfg.granulator.impeller
-                )
+                analysis = collisions.RunAnalysis(Path(tmp) / f"half{rep}" / "post", plan_h)
                 fine.append(int(analysis.pair_events(stride=1)[0].encounter.sum()))
                 coarse.append(int(analysis.pair_events(stride=2)[0].encounter.sum()))
                 stiff = point.replace(

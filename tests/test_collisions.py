@@ -7,9 +7,8 @@ import pytest
 
 from pbmdem.atomic import write_csv
 from pbmdem.dem import collisions
-from pbmdem.dem.collisions import window_starts
+from pbmdem.dem.collisions import aggregate, window_starts
 from pbmdem.dem.dumps import DumpFormatError, read_dump
-from pbmdem.dem.grid_tables import aggregate
 
 
 def count_pair_collisions(snaps, class_of, k, stride=1):

@@ -29,15 +29,9 @@ def test_names_must_be_plain(value):
         deck.known_name("distribution", value)
 
 
-def test_known_name_set():
-    assert deck.known_name("wall", "bowl", {"bowl", "impeller"}) == "bowl"
-    with pytest.raises(DeckValueError, match="allowed names"):
-        deck.known_name("wall", "lid", {"bowl", "impeller"})
-
-
 def test_render_refuses_unvalidated_text():
     with pytest.raises(DeckValueError, match="not allowed"):
-        deck.render("granulator.in", {"timestep": "1e-5\nshell touch /tmp/x"})
+        deck.render({"timestep": "1e-5\nshell touch /tmp/x"}, "fresh")
 
 
 def test_rendered_deck_is_complete_and_has_no_shell(tiny_config):

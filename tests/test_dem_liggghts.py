@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from pbmdem.dem import collisions, deck, engine
-from pbmdem.dem.grid_tables import aggregate
+from pbmdem.dem.collisions import aggregate
 from pbmdem.dem.plan import plan_point
 from pbmdem.dem.run import run_point
 
@@ -61,9 +61,7 @@ def test_halving_the_snapshot_interval_changes_encounters_by_less_than_5_percent
     )
     plan = plan_point(point, 1200)
     run_point(plan, tmp_path, tiny_config.dem_execution)
-    analysis = collisions.RunAnalysis(
-        tmp_path / "post", plan, tiny_config.granulator.bowl, tiny_config.granulator.impeller
-    )
+    analysis = collisions.RunAnalysis(tmp_path / "post", plan)
     fine = analysis.pair_events(stride=1)[0].encounter.sum()
     coarse = analysis.pair_events(stride=2)[0].encounter.sum()
     assert fine > 200

@@ -51,7 +51,6 @@ STAGE_MODULES = {
         "pbmdem.dem.geometry",
         "pbmdem.dem.deck",
         "pbmdem.dem.engine",
-        "pbmdem.dem.grid_tables",
         "pbmdem.dem.speed_response",
     ],
     "pbm": ["pbmdem.pbm", "pbmdem.pbm.setup", "pbmdem.pbm.results", "pbmdem.pbm.kernels"],

@@ -18,7 +18,7 @@ from conftest import config_of, snakemake_command
 from pbmdem.config import ConfigError, load_config, point_id, rpm_text
 from pbmdem.config.describe import config_schema
 from pbmdem.dem import collisions, dumps, engine
-from pbmdem.dem.grid_tables import aggregate, run_table
+from pbmdem.dem.collisions import aggregate, run_table
 from pbmdem.dem.plan import plan_point
 from pbmdem.dem.run import FinishedRunError, is_finished, prepare_run, run_point
 

@@ -72,7 +72,7 @@ def test_a_wheel_installed_into_a_fresh_venv_runs_outside_the_checkout(root, tmp
         str(python),
         "-c",
         "import pbmdem, pbmdem.config, pbmdem.dem.deck as d, pbmdem.report.words as w; "
-        "print(pbmdem.__file__); print(d.template_dir()); "
+        "print(pbmdem.__file__); print(d.template_path()); "
         "print(w.ENV.get_template('findings.rst.j2').filename)",
     )
     assert where.returncode == 0, where.stderr

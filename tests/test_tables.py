@@ -11,7 +11,7 @@ import re
 import pandas as pd
 import pytest
 
-from pbmdem.dem.grid_tables import aggregate
+from pbmdem.dem.collisions import aggregate
 from pbmdem.readers import InputFileError
 from pbmdem.tables import (
     COMPARISON,

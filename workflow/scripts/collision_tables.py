@@ -1,7 +1,7 @@
 """Snakemake rule collision_tables: replicate means and standard errors of the grid's tables."""
 
 from pbmdem.atomic import write_csv
-from pbmdem.dem.grid_tables import aggregate, read_tables, run_table
+from pbmdem.dem.collisions import aggregate, read_tables, run_table
 from pbmdem.joblog import log_job
 
 log_job(snakemake.log[0])  # noqa: F821

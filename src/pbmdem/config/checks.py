@@ -72,21 +72,21 @@ def check(cfg) -> None:
             f"grid.max_points = {grid.max_points} (raise it if the grid is meant to be this large)"
         )
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
-    defined = sorted(cfg.size_distributions)
-    for name in cfg.grid.size_distributions:
-        if name not in cfg.size_distributions:
-            problems.append(f"grid.size_distributions: {name!r} is not defined; defined names: {defined}")
+    names = [("grid.size_distributions", name) for name in grid.size_distributions]
     for key in ("extra_points", "design_points"):
-        for k, point in enumerate(getattr(cfg.grid, key)):
-            if point.distribution not in cfg.size_distributions:
-                problems.append(
-                    f"grid.{key}[{k}].distribution: {point.distribution!r} is not defined; defined names: {defined}"
-                )
-    if cfg.validation.distribution not in cfg.size_distributions:
-        problems.append(
-            f"validation.distribution: {cfg.validation.distribution!r} is not defined; defined names: {defined}"
-        )
-    problems += _feed_check_problems(cfg)
+        names += [(f"grid.{key}[{k}].distribution", p.distribution) for k, p in enumerate(getattr(grid, key))]
+    for where, name in [*names, ("validation.distribution", cfg.validation.distribution)]:
+        if name not in cfg.size_distributions:
+            problems.append(f"{where}: {name!r} is not defined; defined names: {sorted(cfg.size_distributions)}")
+    feed, feeds = cfg.validation.feed_check.feed, grid.size_distributions
+    if feed is not None and all(name in cfg.size_distributions for name in feeds):  # (else reported above)
+        cases = feed_case_parents(feed_case_names({name: cfg.size_distributions[name] for name in feeds}))
+        if feed not in cases:
+            problems.append(
+                f"validation.feed_check.feed = {feed!r}: not a case of the feed study with a grid feed on either "
+                f"side (allowed: {list(cases) or 'none: the grid has fewer than two size distributions'}, or null "
+                "for no check)"
+            )
     sweep = cfg.validation.sweep
     if not sweep.stop > sweep.start:
         problems.append(f"validation.sweep: stop = {sweep.stop:g} must be greater than start = {sweep.start:g}")
@@ -94,18 +94,3 @@ def check(cfg) -> None:
     problems += design_problems(cfg)
     if problems:
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
-
-
-def _feed_check_problems(cfg) -> list[str]:
-    """validation.feed_check.feed: a case of the feed study with a grid feed on either side."""
-    feed = cfg.validation.feed_check.feed
-    grid = cfg.grid.size_distributions
-    if feed is None or any(name not in cfg.size_distributions for name in grid):
-        return []  # no check, or the grid's own names are wrong (reported above)
-    cases = feed_case_parents(feed_case_names({name: cfg.size_distributions[name] for name in grid}))
-    if feed in cases:
-        return []
-    return [
-        f"validation.feed_check.feed = {feed!r}: not a case of the feed study with a grid feed on either side "
-        f"(allowed: {list(cases) or 'none: the grid has fewer than two size distributions'}, or null for no check)"
-    ]

@@ -52,11 +52,8 @@ class Dem(Settings):
 
 
 class DemLimits(Settings):
-    """Bounds on what one DEM run may cost (`dem.limits`): a plan above any of them is refused
-    before anything runs (`pbmdem.dem.plan.check_limits`). Guards against a typo such as an rpm of
-    1e-9, which would plan 7e15 steps; execution settings, not params: changing them reruns nothing.
-    The default grid's largest run (rpm150_fine) plans 9.2e4 steps, 1.25 s simulated and 2.2e8
-    particle-steps: the bounds sit 24-54x above it; 30 s is ~150 revolutions at 300 rpm."""
+    """Bounds on what one DEM run may cost (`dem.limits`): a plan above any is refused before
+    anything runs (`pbmdem.dem.plan.check_limits`; docs/dem.md, "A run")."""
 
     max_steps: int = setting(
         5000000, "time steps of settling + spin-up + sampling (~40x the default grid's longest run, 1.2e5)", ge=1
@@ -80,15 +77,11 @@ class DemExecution(Settings):
 
     @classmethod
     def of_job(cls, config: dict, resources=None) -> DemExecution:
-        """The execution settings of a Snakemake job: `dem.mpi_ranks` and `dem.timeout` of the
-        workflow's completed config, the ranks replaced by the job's `tasks` resource when a
-        cluster profile sets it."""
-        dem = config["dem"]
-        ranks = int(dem["mpi_ranks"])
+        """The execution settings of a Snakemake job: those of the workflow's completed config,
+        the ranks replaced by the job's `tasks` resource when a cluster profile sets it."""
         tasks = resources.get("tasks") if resources is not None else None
-        if tasks:
-            ranks = int(tasks)
-        return cls(mpi_ranks=ranks, timeout=dem["timeout"], limits=dem["limits"])
+        own = {key: config["dem"][key] for key in cls.model_fields}
+        return cls(**own | ({"mpi_ranks": int(tasks)} if tasks else {}))
 
 
 class DemSection(Dem, DemExecution):

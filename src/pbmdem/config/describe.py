@@ -1,10 +1,5 @@
-"""`pbmdem config`: every setting with its default, unit and description; the JSON schema
-generated from the settings models; the check of a config file.
-
-    pbmdem config --show-defaults            # one line per setting: key, default, unit, bounds, description
-    pbmdem config --schema > config.schema.json
-    pbmdem config --check config/config.yaml
-"""
+"""`pbmdem config`: every setting with its default, unit and description, the JSON schema generated
+from the settings models, or the check of a config file (EXAMPLES)."""
 
 from __future__ import annotations
 
@@ -13,7 +8,7 @@ import json
 import sys
 import typing
 
-from pydantic import BaseModel
+from pydantic import BaseModel, TypeAdapter
 from pydantic_core import PydanticUndefined
 
 from . import load_config
@@ -59,13 +54,11 @@ def settings_table(model=ConfigFile, prefix: str = "") -> list[tuple[str, str, s
             )
             rows += settings_table(sub, inner)
             continue
-        if field.default_factory is not None:
-            default = json.dumps(field.default_factory().model_dump(mode="json"))
-        elif field.default is PydanticUndefined:
+        if field.is_required():
             default = "(required)"
         else:
-            value = field.default.model_dump(mode="json") if isinstance(field.default, BaseModel) else field.default
-            default = json.dumps(value if not isinstance(value, tuple) else _plain(value))
+            value = field.get_default(call_default_factory=True)
+            default = json.dumps(TypeAdapter(field.annotation).dump_python(value, mode="json"))
         bounds = [
             f"{word} {getattr(m, attr)}"
             for m in field.metadata
@@ -89,14 +82,6 @@ def _item_bounds(model, name: str) -> str:
             items = _resolve(branch["items"], root)
             return _choice(items) or (f"matches {items['pattern']}" if "pattern" in items else "")
     return ""
-
-
-def _plain(value):
-    if isinstance(value, BaseModel):
-        return value.model_dump(mode="json")
-    if isinstance(value, (tuple, list)):
-        return [_plain(v) for v in value]
-    return value
 
 
 def show_defaults(out=None) -> None:

@@ -161,8 +161,29 @@ class Sensitivity(Settings):
         return (SobolFactor(key=SPEED, low=float(speed.low), high=float(speed.high), scale="linear"), *self.parameters)
 
 
-def _sensitivity_problems(s: Sensitivity, pbm) -> list[str]:
-    out = []
+def problems(cfg) -> list[str]:
+    """What the schema cannot check of `design_space`, `calibration` and `sensitivity`: ascending
+    ranges, parameter keys that name positive pbm numbers, a specification that can be met, a
+    base sample that is a power of 2."""
+    out: list[str] = []
+    ds = cfg.design_space
+    for name, span in (("impeller_rpm", ds.impeller_rpm), ("liquid_rate", ds.liquid_rate)):
+        if span.stop < span.start:
+            out.append(f"design_space.{name}: stop = {span.stop:g} must not be below start = {span.start:g}")
+    keys = [("design_space.third_factor.key", ds.third_factor.key)]
+    keys += [(f"calibration.parameters[{k}]", key) for k, key in enumerate(cfg.calibration.parameters)]
+    keys += [(f"sensitivity.parameters[{k}].key", p.key) for k, p in enumerate(cfg.sensitivity.parameters)]
+    for where, key in keys:
+        try:
+            pbm_value(cfg.pbm, key)
+        except ConfigError as exc:
+            out.append(f"{where}: {exc}")
+    if ds.third_factor.key in ("pbm.liquid_addition.rate",):
+        out.append("design_space.third_factor.key = 'pbm.liquid_addition.rate' is already the second factor")
+    spec = ds.specification
+    if spec.d50_min is not None and spec.d50_max is not None and not spec.d50_max > spec.d50_min:
+        out.append(f"design_space.specification: d50_max = {spec.d50_max:g} must exceed d50_min = {spec.d50_min:g}")
+    s = cfg.sensitivity
     if s.impeller_rpm.high < s.impeller_rpm.low:
         out.append(
             f"sensitivity.impeller_rpm: high = {s.impeller_rpm.high:g} must not be below low = "
@@ -176,10 +197,6 @@ def _sensitivity_problems(s: Sensitivity, pbm) -> list[str]:
         if p.key in seen:
             out.append(f"{where}.key = {p.key!r}: named twice; allowed: each pbm setting once")
         seen.add(p.key)
-        try:
-            pbm_value(pbm, p.key)
-        except ConfigError as exc:
-            out.append(f"{where}.key: {exc}")
     n = s.base_samples
     if n & (n - 1):
         out.append(
@@ -187,30 +204,6 @@ def _sensitivity_problems(s: Sensitivity, pbm) -> list[str]:
             "Sobol' sequence is balanced"
         )
     return out
-
-
-def problems(cfg) -> list[str]:
-    """What the schema cannot check of `design_space`, `calibration` and `sensitivity`: ascending
-    ranges, parameter keys that name positive pbm numbers, a specification that can be met, a
-    base sample that is a power of 2."""
-    out: list[str] = []
-    ds = cfg.design_space
-    for name, span in (("impeller_rpm", ds.impeller_rpm), ("liquid_rate", ds.liquid_rate)):
-        if span.stop < span.start:
-            out.append(f"design_space.{name}: stop = {span.stop:g} must not be below start = {span.start:g}")
-    keys = [("design_space.third_factor.key", ds.third_factor.key)]
-    keys += [(f"calibration.parameters[{k}]", key) for k, key in enumerate(cfg.calibration.parameters)]
-    for where, key in keys:
-        try:
-            pbm_value(cfg.pbm, key)
-        except ConfigError as exc:
-            out.append(f"{where}: {exc}")
-    if ds.third_factor.key in ("pbm.liquid_addition.rate",):
-        out.append("design_space.third_factor.key = 'pbm.liquid_addition.rate' is already the second factor")
-    spec = ds.specification
-    if spec.d50_min is not None and spec.d50_max is not None and not spec.d50_max > spec.d50_min:
-        out.append(f"design_space.specification: d50_max = {spec.d50_max:g} must exceed d50_min = {spec.d50_min:g}")
-    return out + _sensitivity_problems(cfg.sensitivity, cfg.pbm)
 
 
 def _path(key: str) -> list[str]:

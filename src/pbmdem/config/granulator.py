@@ -1,10 +1,5 @@
-"""The granulator and its charge: bowl, impeller, settled bed, granule material.
-
-These objects own the physical quantities derived from the geometry: the impeller's tip speed,
-angular speed and Froude number at a given rpm, the height the blades reach, and the solid
-volume of the settled bed (the DEM bed and the PBM hold the same solid volume, so the PBM's
-number of granules is the DEM's particle count).
-"""
+"""The granulator and its charge (bowl, impeller, settled bed, granule material), the one owner of
+the quantities derived from them (docs/architecture.md, "Settings")."""
 
 from __future__ import annotations
 

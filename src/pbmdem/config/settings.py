@@ -1,24 +1,12 @@
-"""The whole configuration as one frozen, typed object, and the settings each stage uses.
-
-`ConfigFile` is the file: one model per section, each setting declared once with its type,
-default, bounds, unit and description (`pbmdem config --show-defaults` lists them,
-`pbmdem config --schema` prints the JSON schema generated from them).
-`Config.from_mapping(cfg)` checks a configuration once, fills in the defaults, resolves the
-defaults that depend on other sections (the PBM grid's first pivot, the sweeps' speed ranges),
-makes the checks that span sections, and returns a `Config`. Every path goes through it: the
-Snakefile, the `pbmdem` command line, the library's entry points and the tests.
-
-A stage is handed only the settings it uses, as one of the bundles below (`DemPoint`,
-`PbmBatch`, `SurrogateTraining`, `CoupledLoop`). A bundle's plain form (`to_dict()`) is also the
-params of the stage's Snakemake rule, so a rule reruns exactly when something its stage uses
-changes, and the rule script rebuilds the bundle from its params (`from_dict`).
+"""The configuration file's model (`ConfigFile`), the checked `Config` with the defaults that depend
+on other sections resolved (`Config.from_mapping`), and the stage bundles whose plain form is their
+rule's params (docs/architecture.md, "Settings").
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,36 +40,16 @@ class ConfigFile(Settings):
     sensitivity: Sensitivity = setting(Sensitivity, "global sensitivity analysis (docs/design.md)")
 
 
-def non_finite_values(obj, prefix: str = "") -> list[str]:
-    """Every NaN or infinite number in a nested config, as 'config key K = V: ...' messages."""
-    out: list[str] = []
-    if isinstance(obj, dict):
-        for k, v in obj.items():
-            out += non_finite_values(v, f"{prefix}.{k}" if prefix else str(k))
-    elif isinstance(obj, (list, tuple)):
-        for i, v in enumerate(obj):
-            out += non_finite_values(v, f"{prefix}[{i}]")
-    elif isinstance(obj, float) and not math.isfinite(obj):
-        out.append(
-            f"config key {prefix or '(top level)'} = {obj!r}: not a finite number (allowed: finite numbers "
-            "within the key's range)"
-        )
-    return out
-
-
 def parse(cfg: dict) -> ConfigFile:
     """The checked configuration file `cfg` (a parsed YAML mapping) with its defaults; ConfigError
     listing every problem otherwise. Types are checked as strictly as JSON: a number is not a
     string, an integer not a fraction, a boolean not a number."""
     if not isinstance(cfg, dict):
         raise ConfigError("the top level of a configuration must be a mapping of sections")
-    problems = non_finite_values(cfg)
-    if not problems:
-        try:
-            return ConfigFile.model_validate_json(json.dumps(cfg, default=repr), strict=True)
-        except ValidationError as exc:
-            problems = describe_errors(exc, ConfigFile)
-    raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
+    try:  # NaN and infinities pass through JSON as NaN, Infinity: the models refuse them
+        return ConfigFile.model_validate_json(json.dumps(cfg, default=repr), strict=True)
+    except ValidationError as exc:
+        raise ConfigError("invalid configuration:\n  " + "\n  ".join(describe_errors(exc, ConfigFile))) from None
 
 
 @dataclass(frozen=True)
@@ -108,10 +76,8 @@ class DemPoint(Settings):
     sizes: SizeDistribution
 
     def at(self, rpm: float) -> PointSpeed:
-        """Everything the impeller speed `rpm` decides for this point, each from its owner: the
-        point's id, the impeller's angular and tip speed (the granulator), the rotation period and
-        the lengths of the spin-up and sampling phases (the DEM settings). One call: the planner
-        asks the config once."""
+        """Everything the impeller speed `rpm` decides for this point, each from its owner (the
+        granulator, the DEM settings), in one call."""
         rpm = float(rpm)
         return PointSpeed(
             rpm=rpm,

@@ -1,10 +1,6 @@
-"""The base of every settings model, and `setting(...)`: one line per setting.
-
-Every section of the configuration is a frozen pydantic model whose fields are declared with
-`setting(default, description, unit, bounds)`: its type, default, bounds, unit and description
-in one place, from which the JSON schema (`pbmdem config --schema`), the list of defaults
-(`pbmdem config --show-defaults`) and the checks of a config file all come. `...` as the default
-makes a setting required.
+"""The base of every settings model (`Settings`: frozen, unknown keys and non-finite numbers refused)
+and `setting(...)`: a field's default, description, unit and bounds in one place, from which the
+JSON schema, `pbmdem config --show-defaults` and the checks of a config file all come.
 """
 
 from __future__ import annotations
@@ -38,8 +34,9 @@ def _unique(values):
 T = TypeVar("T")
 #: a list of distinct values (JSON schema uniqueItems), e.g. Unique[float]
 Unique = Annotated[tuple[T, ...], AfterValidator(_unique), Field(json_schema_extra={"uniqueItems": True})]
-#: a plain name of a size distribution (letter first; letters, digits, '_' or '-')
-Name = Annotated[str, StringConstraints(pattern=r"^[A-Za-z][A-Za-z0-9_-]{0,63}$")]
+#: a plain name of a size distribution (letter first; letters, digits, '_' or '-'), also a deck's
+NAME_PATTERN = r"^[A-Za-z][A-Za-z0-9_-]{0,63}$"
+Name = Annotated[str, StringConstraints(pattern=NAME_PATTERN)]
 #: a config key of a pbm setting, e.g. pbm.aggregation.beta0
 PbmKey = Annotated[str, StringConstraints(pattern=r"^pbm(\.[a-z_0-9]+)+$")]
 #: an impeller speed (rpm)

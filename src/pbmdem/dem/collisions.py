@@ -1,13 +1,7 @@
-"""Collision and encounter tables of one DEM run, from its contact and position snapshots.
-
-The DEM deck dumps, every `collision_interval` steps of the sampling window, all particle-particle
-contacts (`compute pair/gran/local id delta`: id1, id2, overlap) and all particle-mesh contacts
-(`compute wall/gran/local id delta`: mesh id, particle id, overlap). A **contact that begins** is a
-pair with positive overlap at one snapshot that was not in contact at the previous snapshot (pairs
-already touching at the first snapshot are not counted; rows with overlap <= 0, which liquid-bridge
-models list too, are not contacts); an **encounter** is a contact that begins between particles
-that were apart (`pbmdem.dem.encounters`). New contacts are found for all frames at once by
-sorting (pair, frame) keys.
+"""Collision and encounter tables of one DEM run from its contact and position snapshots (docs/dem.md,
+"Collisions and encounters"), and the grid's: every run's stacked, their replicate means with
+standard errors, the run table (columns: docs/architecture.md, "Collision tables"). New contacts
+are found for all frames at once by sorting (pair, frame) keys.
 """
 
 from __future__ import annotations
@@ -21,10 +15,11 @@ import pandas as pd
 from pbmdem.atomic import write_csv
 from pbmdem.frequency import pair_counts, upper_pairs
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, WALLS, velocity_bin
+from pbmdem.readers import read_json
+from pbmdem.tables import KEYS, RUN_TABLES, SE_COLUMNS
 
 from . import encounters
 from .dumps import DumpFormatError, Snapshots, read_classes, read_dump, read_trajectories
-from .dumps import class_lookup as _class_lookup
 
 
 def contact_starts(frame: np.ndarray, key: np.ndarray, stride: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -213,23 +208,16 @@ class RunTables:
 
 
 class RunAnalysis:
-    """Contact starts and encounters of one finished run (`plan`: its pbmdem.dem.DemPlan)."""
+    """Contact starts and encounters of one finished run of `plan` (a DemPlan whose class map
+    `check_finished` found as planned)."""
 
-    def __init__(self, post_dir: str | Path, plan, bowl, impeller):
+    def __init__(self, post_dir: str | Path, plan):
         post_dir = Path(post_dir)
-        self.plan, self.bowl, self.impeller = plan, bowl, impeller
+        self.plan, self.n_classes = plan, len(plan.diameters)
         ids, classes = read_classes(post_dir / "classes.dump")
-        self.n_classes = n_classes = len(plan.diameters)
-        if len(ids) != plan.n_particles:
-            raise DumpFormatError(
-                f"{plan.point_id}: {len(ids)} particles in the granulator at the start of sampling, "
-                f"{plan.n_particles} planned: insertion did not place them all (lower dem.bed_height, "
-                "or give the bowl more height / the settling phase more time)"
-            )
-        if classes.min() < 0 or classes.max() >= n_classes:
-            raise DumpFormatError(f"{plan.point_id}: atom types outside 1..{n_classes} in the class map")
-        self.class_of = _class_lookup(ids, classes)
-        self.n = np.bincount(classes, minlength=n_classes)
+        self.class_of = np.full(int(ids.max()) + 1, -1, np.int64)  # particle id -> class, -1: none
+        self.class_of[ids] = classes
+        self.n = np.bincount(classes, minlength=self.n_classes)
         self.radius_of_class = 0.5 * np.asarray(plan.diameters, float)
         self.pairs = read_dump(post_dir / "pairs.dump", 3, ids=(0, 1))
         self.walls = read_dump(post_dir / "walls.dump", 3, ids=(1,))
@@ -239,7 +227,6 @@ class RunAnalysis:
             raise DumpFormatError(f"{plan.point_id}: fewer than two contact snapshots in the sampling window")
         self.window_start = int(window[0])  # contacts beginning after this snapshot are counted
         self.sampling_time = float(window[-1] - window[0]) * plan.timestep
-        self._encounters = encounters
 
     def angle_of_step(self, steps):
         """Impeller angle (rad): the rotation starts with the spin-up phase."""
@@ -250,7 +237,7 @@ class RunAnalysis:
         ca, cb = self.class_of[s.first], self.class_of[s.second]
         if (ca < 0).any() or (cb < 0).any():
             raise DumpFormatError(f"{self.plan.point_id}: a contact names a particle id missing from the class map")
-        ev = self._encounters.pair_events(
+        ev = encounters.pair_events(
             self.traj,
             s.first,
             s.second,
@@ -271,7 +258,7 @@ class RunAnalysis:
             raise DumpFormatError(
                 f"{self.plan.point_id}: a wall contact names a particle id missing from the class map"
             )
-        ev = self._encounters.wall_events(
+        ev = encounters.wall_events(
             self.traj,
             s.first,
             s.second,
@@ -279,8 +266,8 @@ class RunAnalysis:
             s.step,
             s.prev_step,
             self.plan.encounter_gap_fraction,
-            self.bowl,
-            self.impeller,
+            self.plan.granulator.bowl,
+            self.plan.granulator.impeller,
             self.angle_of_step,
             self.plan.omega,
             stride=stride,
@@ -334,7 +321,7 @@ class RunAnalysis:
 
 def tabulate_run(post_dir: str | Path, plan) -> RunTables:
     """Collision and encounter tables of one finished run of `plan` (a DemPlan)."""
-    return RunAnalysis(post_dir, plan, plan.granulator.bowl, plan.granulator.impeller).tables()
+    return RunAnalysis(post_dir, plan).tables()
 
 
 #: the tables of a run (file: field of RunTables) in the order they are written: collisions.csv
@@ -350,3 +337,49 @@ TABLE_FILES = {
 def write_tables(tables: RunTables, run_dir: str | Path) -> None:
     for name, attribute in TABLE_FILES.items():
         write_csv(Path(run_dir) / name, getattr(tables, attribute))
+
+
+def replicate_mean(frame: pd.DataFrame, keys: list[str]) -> pd.DataFrame:
+    """Mean over the replicates of every column but `keys`, with `n_replicates` and the standard
+    error `<column>_se` (sample sd / sqrt(n), NaN for one replicate) of the SE_COLUMNS."""
+    values = [c for c in frame.columns if c not in keys and c != "replicate"]
+    grouped = frame.groupby(keys, sort=True, dropna=False)
+    out = grouped[values].mean()
+    out["n_replicates"] = grouped["replicate"].nunique()
+    for col in SE_COLUMNS:
+        if col in values:
+            out[f"{col}_se"] = grouped[col].std(ddof=1) / np.sqrt(out["n_replicates"])
+    out = out.reset_index()
+    first = [c for c in frame.columns if c in out.columns]
+    return out[first + [c for c in out.columns if c not in first]]
+
+
+def read_tables(tables: list[str | Path], kind: str = "pairs") -> pd.DataFrame:
+    """The per-run tables of `kind` (pairs, walls or velocities) stacked into one frame (every
+    replicate a row of its own), each checked against its contract (pbmdem.tables)."""
+    frames = [RUN_TABLES[kind].read(p) for p in tables]
+    if not frames:
+        raise ValueError("no collision tables to aggregate")
+    return _sorted(pd.concat(frames, ignore_index=True))
+
+
+def _sorted(frame: pd.DataFrame) -> pd.DataFrame:
+    sort = [c for c in ("rpm", "distribution", "replicate", "wall", "class_i", "class_j", "v_lo") if c in frame.columns]
+    return frame.sort_values(sort, kind="stable").reset_index(drop=True)
+
+
+def aggregate(tables: list[str | Path], out: str | Path, kind: str = "pairs") -> pd.DataFrame:
+    """Replicate means of per-run tables (`kind`: pairs, walls or velocities), one row per point
+    and class pair (or wall, or velocity bin), sorted and written atomically."""
+    grid = _sorted(replicate_mean(read_tables(tables, kind), list(KEYS[kind])))
+    write_csv(out, grid)
+    return grid
+
+
+def run_table(summaries: list[str | Path], out: str | Path):
+    """One row per run with its size, cost and convergence figures (atomically written CSV)."""
+    rows = [read_json(p, "DEM run summary") for p in summaries]
+    frame = pd.DataFrame(rows).drop(columns="particles_per_class", errors="ignore")
+    frame = frame.sort_values(["rpm", "distribution"]).reset_index(drop=True)
+    write_csv(out, frame)
+    return frame

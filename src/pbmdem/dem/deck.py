@@ -1,15 +1,6 @@
-"""Render LIGGGHTS input decks from the templates in `liggghts_templates/`: format a plan.
-
-Every value of a deck is decided by the planner (`plan.py`); this module only writes it as text.
-
-The templates are package data (`pbmdem/data/liggghts_templates/`, the same files as the
-project's `liggghts_templates/`), so an installed pbmdem renders decks from any directory.
-
-A LIGGGHTS input script can run shell commands (`shell ...`), so nothing from a config file is
-pasted into a deck as text. Every substituted value passes through `number()` (a finite float or
-int, formatted by Python; its range was checked where the setting entered) or `known_name()` (a
-member of a fixed set or a plain identifier), and the template is filled with
-`string.Template.substitute`, which fails on any placeholder left unfilled.
+"""Format a plan (`plan.py`, which decides every value) as a LIGGGHTS deck from the shipped
+template `pbmdem/data/liggghts_templates/granulator.in`; every value passes `number()` or
+`known_name()` first, so no config text reaches a deck (docs/dem.md, "One settled bed for every speed").
 """
 
 from __future__ import annotations
@@ -20,10 +11,10 @@ import string
 from importlib import resources
 from pathlib import Path
 
+from pbmdem.config.typed import NAME_PATTERN
+
 from .plan import BedPlan, DemPlan
 
-#: the deck of a granulator run
-GRANULATOR_TEMPLATE = "granulator.in"
 #: the sections of granulator.in (lines "#=== section <name>") that make each kind of deck: a
 #: fresh run settles its own bed; a bed run settles one and writes it to bed.restart; a run from
 #: a bed reads it and goes on with the spin-up (docs/dem.md, "One settled bed for every speed")
@@ -33,22 +24,16 @@ DECKS = {
     "from_bed": ("header", "restart", "model", "sample"),
 }
 _SECTION = re.compile(r"^#=== section (\w+)\n", re.MULTILINE)
-
-_IDENTIFIER = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,63}$")
+_IDENTIFIER = re.compile(NAME_PATTERN)
 
 
 class DeckValueError(ValueError):
     """A value meant for a LIGGGHTS deck is not an allowed number or name."""
 
 
-def template_dir() -> Path:
-    """The folder of the LIGGGHTS templates shipped with the package."""
-    return Path(str(resources.files("pbmdem") / "data" / "liggghts_templates"))
-
-
-def template_path(name: str = GRANULATOR_TEMPLATE) -> Path:
-    """The shipped template `name` (the workflow hashes the granulator deck's to rerun the DEM jobs when it changes)."""
-    return template_dir() / name
+def template_path() -> Path:
+    """The shipped granulator template (the workflow hashes it to rerun the DEM jobs when it changes)."""
+    return Path(str(resources.files("pbmdem") / "data" / "liggghts_templates" / "granulator.in"))
 
 
 def number(name: str, value, *, integer: bool = False) -> str:
@@ -62,15 +47,9 @@ def number(name: str, value, *, integer: bool = False) -> str:
     return str(int(value)) if integer else repr(float(value))
 
 
-def known_name(name: str, value, allowed: set[str] | None = None) -> str:
-    """Validate a name: a member of `allowed` if given, otherwise a plain identifier."""
-    if not isinstance(value, str):
-        raise DeckValueError(f"{name} = {value!r}: a name (string) is required")
-    if allowed is not None:
-        if value not in allowed:
-            raise DeckValueError(f"{name} = {value!r}: allowed names are {sorted(allowed)}")
-        return value
-    if not _IDENTIFIER.match(value):
+def known_name(name: str, value) -> str:
+    """`value` if it is a plain identifier, else DeckValueError naming it."""
+    if not isinstance(value, str) or not _IDENTIFIER.match(value):
         raise DeckValueError(
             f"{name} = {value!r}: a name must start with a letter and contain only letters, digits, "
             "'_' or '-' (at most 64 characters)"
@@ -78,39 +57,21 @@ def known_name(name: str, value, allowed: set[str] | None = None) -> str:
     return value
 
 
-def sections(template_name: str) -> dict[str, str]:
-    """The sections of a template, by name (a template without section lines is one section, "all")."""
-    text = (template_dir() / template_name).read_text()
-    parts = _SECTION.split(text)
-    if len(parts) == 1:
-        return {"all": text}
-    return dict(zip(parts[1::2], parts[2::2]))
-
-
-def render(template_name: str, values: dict[str, str], kind: str | None = None) -> str:
-    """Fill `liggghts_templates/<template_name>` (only the sections of deck `kind` of DECKS, if
-    given) with already-validated text values.
-
-    Values must come from `number`, `numbers` or `known_name` (or be built only from them);
-    a value containing a line break or a LIGGGHTS comment/variable character is refused as a
-    last line of defence.
-    """
+def render(values: dict[str, str], kind: str) -> str:
+    """The sections of deck `kind` (DECKS) of the template filled with `values`, text from
+    `number` or `known_name` (or built only from them); a value with a line break or a LIGGGHTS
+    comment or variable character is refused as a last line of defence."""
     for key, text in values.items():
         if not isinstance(text, str):
             raise DeckValueError(f"deck value {key} is not text; validate it with deck.number()")
-        if key.endswith("_block"):
-            continue  # multi-line blocks are assembled from validated numbers by the caller
-        if any(ch in text for ch in "\n\r#$&;\"'`"):
+        if not key.endswith("_block") and any(ch in text for ch in "\n\r#$&;\"'`"):
             raise DeckValueError(f"deck value {key} = {text!r} contains a character not allowed in a deck")
-    if kind is None:
-        text = "".join(sections(template_name).values())
-    else:
-        parts = sections(template_name)
-        text = "".join(parts[name] for name in DECKS[known_name("deck kind", kind, set(DECKS))])
+    parts = _SECTION.split(template_path().read_text())
+    sections = dict(zip(parts[1::2], parts[2::2]))
     try:
-        return string.Template(text).substitute(values)
+        return string.Template("".join(sections[name] for name in DECKS[kind])).substitute(values)
     except KeyError as exc:
-        raise DeckValueError(f"template {template_name} needs a value for {exc.args[0]}") from None
+        raise DeckValueError(f"template granulator.in needs a value for {exc.args[0]}") from None
 
 
 #: the plan's fields that fill the placeholders of the same name: numbers, integers, and the run's integers
@@ -191,9 +152,9 @@ def granulator_values(plan: DemPlan, ranks: int) -> dict[str, str]:
 def render_granulator(plan: DemPlan, ranks: int, *, from_bed: bool = False) -> str:
     """The granulator deck of a run (raises DeckValueError before any I/O): a fresh run that
     settles its own bed, or (`from_bed`) one that starts from bed.restart."""
-    return render(GRANULATOR_TEMPLATE, granulator_values(plan, ranks), "from_bed" if from_bed else "fresh")
+    return render(granulator_values(plan, ranks), "from_bed" if from_bed else "fresh")
 
 
 def render_bed(bed: BedPlan, ranks: int) -> str:
     """The deck that inserts and settles the bed `bed` and writes it to bed.restart."""
-    return render(GRANULATOR_TEMPLATE, bed_values(bed, ranks), "bed")
+    return render(bed_values(bed, ranks), "bed")

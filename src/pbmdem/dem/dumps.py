@@ -110,18 +110,8 @@ def _binary_row_byte(frame: BinaryFrame, row: int) -> int:
     return frame.chunks[-1][0] + 8 * frame.chunks[-1][1]
 
 
-def _read_bytes(path: Path) -> bytes:
-    try:
-        return path.read_bytes()
-    except FileNotFoundError:
-        raise DumpFormatError(f"dump file {path} does not exist (did LIGGGHTS reach the sampling phase?)") from None
-
-
-def read_binary_dump(path: str | Path, columns: int, ids: tuple[int, ...] = ()) -> Snapshots:
-    """Read a binary LIGGGHTS `dump custom` file with `columns` values per row; the 0-based
-    columns `ids` hold particle ids. Checked like a text dump (structure, finite values, ids)."""
-    path = Path(path)
-    raw = _read_bytes(path)
+def _read_binary(raw: bytes, path: Path, columns: int, ids: tuple[int, ...]) -> Snapshots:
+    """A binary LIGGGHTS `dump custom` file (`raw`, read from `path`), checked like a text dump."""
     frames, damage = binary_frames(raw, path, width=columns)
     if damage is not None:
         raise DumpFormatError(f"corrupt dump: {damage}")
@@ -186,9 +176,12 @@ def read_dump(path: str | Path, columns: int, ids: tuple[int, ...] = ()) -> Snap
     the 0-based columns `ids` hold particle ids (positive integers: anything else is corruption).
     A file named `*.bin` is read as a binary dump."""
     path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise DumpFormatError(f"dump file {path} does not exist (did LIGGGHTS reach the sampling phase?)") from None
     if path.suffix == BINARY_SUFFIX:
-        return read_binary_dump(path, columns, ids)
-    raw = _read_bytes(path)
+        return _read_binary(raw, path, columns, ids)
     if not raw.strip():
         return Snapshots(np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros((0, columns)))
     headers = list(_HEADER.finditer(raw))
@@ -245,13 +238,9 @@ def read_dump(path: str | Path, columns: int, ids: tuple[int, ...] = ()) -> Snap
 
 
 def find_damage(path: str | Path) -> str | None:
-    """Where the dump `path` stops being a well-formed LIGGGHTS dump, or None if it is one.
-
-    Every line is checked against the structure LIGGGHTS writes (TIMESTEP, step, NUMBER OF
-    ENTRIES/ATOMS, count, BOX BOUNDS and its three lines, the ENTRIES/ATOMS header with its column
-    names, then exactly `count` rows of as many finite numbers); steps must increase. The answer
-    names the line, the byte offset and the frame. Slow (one Python
-    pass over the lines): for explaining a dump already found inconsistent, not for reading one."""
+    """Where the dump `path` stops being a well-formed LIGGGHTS dump (its line, byte offset and
+    frame), or None. Slow, one Python pass over the lines: for explaining a dump already found
+    inconsistent, not for reading one."""
     path = Path(path)
     raw = path.read_bytes()
     if path.suffix == BINARY_SUFFIX:
@@ -347,12 +336,6 @@ def read_classes(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         raise DumpFormatError(f"{path}: no particle frame (no particles inserted?)")
     rows = snaps.data[snaps.offsets[0] : snaps.offsets[1]]
     return rows[:, 0].astype(np.int64), rows[:, 1].astype(np.int64) - 1
-
-
-def class_lookup(ids: np.ndarray, classes: np.ndarray) -> np.ndarray:
-    lookup = np.full(int(ids.max()) + 1, -1, np.int64)
-    lookup[ids] = classes
-    return lookup
 
 
 def read_trajectories(path: str | Path, n_particles: int):

@@ -1,23 +1,6 @@
-"""Encounters: impacts of granules that were apart, told from re-touches of neighbours.
-
-In a dense, sheared bed most contacts that begin between two snapshots are neighbours touching
-again after a micro-separation; their rate is about (contacts present) / (contact lifetime) and
-says little about impacts that can make granules coalesce. An **encounter** is a contact that
-begins (a pair in contact at a contact snapshot, not in contact at the previous one) between two
-particles whose surface gap exceeded ``gap_fraction`` x the smaller diameter at some position
-snapshot since their previous contact. The look-back reaches at most to the first position
-snapshot (the history before the sampling window); a contact whose partners stayed within the gap
-over the whole history is not counted, and the number of those is reported (it shrinks as the
-history grows: the count converges with history length).
-
-The **impact velocity** of an encounter is the relative normal approach speed of the two surfaces
-at the last position snapshot before the contact began, ``-(v_b - v_a) . n_ab`` (n_ab from a to b),
-clipped at 0. The same definitions apply to particle-wall contacts, with the gap to the bowl
-(cylinder, bottom, lid) or to the rotating impeller (blade boxes and hub) computed from the
-geometry, and the wall's own velocity (omega x r for the impeller) subtracted.
-
-Inputs are the contact snapshots of :mod:`pbmdem.collisions` and a position dump
-``id x y z vx vy vz`` sorted by id, whose snapshot steps are a subset of the contact steps.
+"""Encounters (contacts that begin between granules that were apart) and their impact speeds, for
+particle pairs and particle-wall contacts, from the position snapshots (docs/dem.md, "Collisions
+and encounters").
 """
 
 from __future__ import annotations
@@ -27,6 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from pbmdem.config import Bowl, Impeller
+
+from .geometry import blade_box
 
 
 @dataclass
@@ -68,10 +53,11 @@ class Events:
     undetermined: np.ndarray
 
 
-def _lookback(traj: Trajectories, event_step, prev_step, gap_fn, stride: int = 1):
+def _lookback(traj: Trajectories, event_step, prev_step, gap_fn, stride: int = 1) -> Events:
     """Generic look-back over the position snapshots strictly between `prev_step` and
     `event_step` of every event, newest first; `gap_fn(frame_idx, event_idx)` returns the gap
     (m) minus the event's threshold and the approach speed at those snapshots."""
+    event_step, prev_step = np.asarray(event_step, np.int64), np.asarray(prev_step, np.int64)
     steps = traj.steps[::stride]
     frame_map = np.arange(len(traj.steps))[::stride]
     n = len(event_step)
@@ -98,7 +84,7 @@ def _lookback(traj: Trajectories, event_step, prev_step, gap_fn, stride: int = 1
         keep = ~found & (cursor[undecided] >= np.maximum(lo[undecided], 0))
         undecided = undecided[keep]
     undetermined = ~encounter & (prev_step < steps[0]) if len(steps) else np.zeros(n, bool)
-    return encounter, np.clip(velocity, 0.0, None), lag, undetermined
+    return Events(event_step, encounter, np.clip(velocity, 0.0, None), lag, undetermined)
 
 
 def pair_events(
@@ -118,9 +104,7 @@ def pair_events(
         approach = -np.einsum("ij,ij->i", dv, n)
         return dist - ra[ev] - rb[ev] - threshold[ev], approach
 
-    event_step = np.asarray(event_step, np.int64)
-    enc, vel, lag, und = _lookback(traj, event_step, np.asarray(prev_step, np.int64), gap_fn, stride)
-    return Events(event_step, enc, vel, lag, und)
+    return _lookback(traj, event_step, prev_step, gap_fn, stride)
 
 
 def bowl_gap(pos: np.ndarray, radius: np.ndarray, bowl: Bowl):
@@ -147,10 +131,7 @@ def _rot_z(points: np.ndarray, angle: np.ndarray) -> np.ndarray:
 def impeller_gap(pos: np.ndarray, radius: np.ndarray, imp: Impeller, angle: np.ndarray):
     """Surface gap (m) of particles to the impeller turned by `angle` (rad, per particle) and
     the unit vector from the particle centre towards the nearest impeller point."""
-    r0 = 0.25 * imp.hub_diameter
-    span = imp.blade_length - r0
-    half = np.array([0.5 * span, 0.5 * imp.blade_thickness, 0.5 * imp.blade_height])
-    centre = np.array([r0 + 0.5 * span, 0.0, imp.clearance + 0.5 * imp.blade_height])
+    centre, half = blade_box(imp)
     pitch = np.radians(imp.pitch_deg)
     cp, sp = np.cos(pitch), np.sin(pitch)
     best = np.full(len(pos), np.inf)
@@ -231,6 +212,4 @@ def wall_events(
             approach[imp_rows] = np.einsum("ij,ij->i", v[imp_rows] - wall_v, n)
         return gap - threshold[ev], approach
 
-    event_step = np.asarray(event_step, np.int64)
-    enc, vel, lag, und = _lookback(traj, event_step, np.asarray(prev_step, np.int64), gap_fn, stride)
-    return Events(event_step, enc, vel, lag, und)
+    return _lookback(traj, event_step, prev_step, gap_fn, stride)

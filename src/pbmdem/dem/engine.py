@@ -1,19 +1,6 @@
-"""Run the external LIGGGHTS engine and turn its failures into clear errors.
-
-LIGGGHTS (Debian package `liggghts`, binary `liggghts`) is run as a separate program, serially
-or under `mpirun -np N`. A run fails when the program exits non-zero, when its log contains an
-`ERROR` line (LIGGGHTS sometimes exits 0 after an error), or when particles were lost. The error
-message carries the last lines of the log; a `crash.json` beside the log records the failure so
-that crashed runs are kept and explained rather than hidden.
-
-An exit code 0 does not mean the run finished: on SIGINT or SIGTERM (Ctrl-C, `scancel`, a batch
-system's time limit) LIGGGHTS writes `restart_forced_liggghts_<step>.data`, logs
-`Forced restart written` and exits 0. `run` treats that log line as a failure; SIGINT/SIGTERM
-reaching this Python process while LIGGGHTS runs are recorded (and passed on to LIGGGHTS if it
-did not get them too), so that the run is recorded as interrupted rather than Python dying
-first. `check_finished` judges a run against its plan (last thermo step, number of dump frames and
-the particles per size class in the class map), whatever the exit code said; the restart file is
-removed and recorded in crash.json.
+"""Run the external LIGGGHTS engine (binary `liggghts`, serially or under MPI) and judge a run
+against its plan, not its exit code; every failure leaves a `crash.json` beside the log
+(docs/dem.md, "A run": how a run fails, interruptions, unfinished and corrupt runs).
 """
 
 from __future__ import annotations
@@ -49,12 +36,13 @@ class LiggghtsError(RuntimeError):
 
 @dataclass
 class LiggghtsRun:
+    """A finished run: its log, wall time and CPU time (user + system) of LIGGGHTS and every
+    process it started (its MPI ranks: on a shared machine the cost, where the wall time also
+    counts the other users' load), s."""
+
     log: Path
     wall_time: float
-    returncode: int
-    #: CPU time (user + system) of LIGGGHTS and every process it started (its MPI ranks): on a
-    #: shared machine the cost of a run, where the wall time also counts the other users' load
-    cpu_time: float = float("nan")
+    cpu_time: float
 
 
 def executable() -> str:
@@ -92,10 +80,8 @@ def tail(path: Path, lines: int = 25) -> str:
 
 
 def _forced_restarts(workdir: Path) -> list[dict]:
-    """Remove the restart files LIGGGHTS writes when interrupted; return what was removed.
-
-    Such a file cannot resume a pbmdem run (the deck re-creates meshes and fixes), so it is only
-    recorded in crash.json."""
+    """Remove the restart files LIGGGHTS writes when interrupted (they cannot resume a pbmdem run:
+    the deck re-creates meshes and fixes); what was removed, for crash.json."""
     removed = []
     for path in sorted(workdir.glob("restart_forced_*")):
         step = re.search(r"(\d+)", path.name.rsplit("_", 1)[-1])
@@ -140,12 +126,8 @@ def run(
     progress=None,
     poll: float = 1.0,
 ) -> LiggghtsRun:
-    """Run `deck` (a file in `workdir`) with the working directory `workdir`.
-
-    `progress` (e.g. a `pbmdem.progress.ThermoProgress` on the log) gets `update()` every `poll`
-    seconds while the engine runs and `close()` when it stopped. Raises LiggghtsError (after
-    writing `workdir/crash.json`) on any failure.
-    """
+    """Run `deck` (a file in `workdir`) in `workdir`, `progress` (a ThermoProgress) updated every
+    `poll` s; LiggghtsError (after writing `workdir/crash.json`) on any failure."""
     workdir = Path(workdir)
     deck_name = Path(deck).name
     cmd = command(deck_name, ranks)
@@ -165,20 +147,7 @@ def run(
     log_text = log.read_text(errors="replace") if log.exists() else ""
     # an error can reach the screen but not the log (e.g. when MPI aborts while reporting it)
     log_text += "\n" + stdout
-    problems, err = _problems(log_text, returncode, signals.received)
-    if problems:
-        error_line = err.group(0).strip() if err else None
-        details = {"command": cmd, "returncode": returncode, "wall_time_s": wall, "stderr_tail": stderr[-4000:]}
-        record_crash(workdir, problems, **details, error_line=error_line)
-    return LiggghtsRun(log=log, wall_time=wall, returncode=returncode, cpu_time=cpu)
-
-
-def _problems(log_text: str, returncode: int, received: list) -> tuple[list[str], re.Match | None]:
-    """What went wrong in a run, from its log and screen text, its exit code and the signals it
-    ``received`` (empty: nothing), with the log's error line (a match, or None)."""
-    problems = []
-    if received:
-        problems.append(f"interrupted by {', '.join(received)}")
+    problems = [f"interrupted by {', '.join(signals.received)}"] if signals.received else []
     if returncode != 0:
         problems.append(f"exit code {returncode}")
     err = _ERROR_LINE.search(log_text)
@@ -188,7 +157,11 @@ def _problems(log_text: str, returncode: int, received: list) -> tuple[list[str]
         problems.append("particles were lost")
     if _FORCED_RESTART.search(log_text):
         problems.append("interrupted: LIGGGHTS wrote a forced restart (it received SIGINT or SIGTERM)")
-    return problems, err
+    if problems:
+        error_line = err.group(0).strip() if err else None
+        details = {"command": cmd, "returncode": returncode, "wall_time_s": wall, "stderr_tail": stderr[-4000:]}
+        record_crash(workdir, problems, **details, error_line=error_line)
+    return LiggghtsRun(log=log, wall_time=wall, cpu_time=cpu)
 
 
 def dump_steps(path: str | Path) -> list[int]:
@@ -210,16 +183,11 @@ CLASS_MAP = "post/classes.dump"
 def check_finished(
     workdir: str | Path, total_steps: int, dumps: dict[str, tuple[int, int]], counts: list[int] | None = None
 ) -> None:
-    """Judge a run against its plan, not its exit code: the last thermo step of the log must be
-    `total_steps` and each dump `name -> (frames, last step)` must hold exactly that many frames
-    ending at that step. Otherwise crash.json is written and an error raised, telling two cases
-    apart: a log that stops short of the plan is an **unfinished** engine run (LiggghtsError); a
-    log that reaches the planned step with a dump that does not match the plan is a **corrupt**
-    file (DumpFormatError naming the file, the line, the byte and the frame): the engine finished,
-    the file was damaged afterwards (disk, copy, edit), and rerunning the engine is not the cure.
-    With `counts` (the plan's particles per size class), the class map (CLASS_MAP) of a finished
-    run must hold exactly these: a bed that is not the planned one fails (LiggghtsError naming
-    each class, its planned and its inserted count)."""
+    """Judge a run against its plan: the log's last thermo step must be `total_steps`, each dump
+    `name -> (frames, last step)` hold that many frames ending there and the class map (CLASS_MAP)
+    the planned `counts` per class, if given. A log short of the plan is an unfinished run
+    (LiggghtsError), a finished log with a dump off the plan a corrupt file (DumpFormatError
+    naming the line, byte and frame); either writes crash.json."""
     workdir = Path(workdir)
     log = workdir / "log.liggghts"
     steps = thermo_table(log).get("Step", []) if log.exists() else []
@@ -306,9 +274,14 @@ def version_of_log(log: str | Path) -> str:
 
 def thermo_table(log: str | Path) -> dict[str, list[float]]:
     """Columns of every thermo block in a LIGGGHTS log (header line starting with 'Step')."""
+    return thermo_columns(Path(log).read_text(errors="replace"))
+
+
+def thermo_columns(text: str) -> dict[str, list[float]]:
+    """Columns of every thermo block in the text of a LIGGGHTS log."""
     columns: dict[str, list[float]] = {}
     header: list[str] | None = None
-    for line in Path(log).read_text(errors="replace").splitlines():
+    for line in text.splitlines():
         words = line.split()
         if words[:1] == ["Step"]:
             header = words

@@ -9,10 +9,10 @@ estimate says which of the two it used.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from pbmdem import layout
@@ -34,18 +34,8 @@ class Throughput:
     source: str
 
     def rate(self, n_particles: float) -> float:
-        pts = sorted(self.points)
-        if len(pts) == 1 or n_particles <= pts[0][0]:
-            return pts[0][1]
-        if n_particles >= pts[-1][0]:
-            return pts[-1][1]
-        for (n0, r0), (n1, r1) in zip(pts, pts[1:], strict=False):
-            if n0 <= n_particles <= n1:
-                if n1 == n0:
-                    return r0
-                w = (math.log(n_particles) - math.log(n0)) / (math.log(n1) - math.log(n0))
-                return r0 + w * (r1 - r0)
-        return pts[-1][1]
+        n, rate = zip(*sorted(self.points))
+        return float(np.interp(np.log(n_particles), np.log(n), rate))
 
     def seconds(self, particle_steps: float, n_particles: float, ranks: int = 1) -> float:
         """Wall time of a run of `particle_steps` (no speed-up assumed beyond the ranks)."""
@@ -55,20 +45,16 @@ class Throughput:
 def measured_throughput(runs_csv: str | Path | None = None) -> Throughput:
     """The throughput of the finished runs in `runs_csv` (median per particle number), or the
     reference if the file is missing or holds no usable rows."""
-    if runs_csv is not None and Path(runs_csv).is_file():
-        try:
-            runs = pd.read_csv(runs_csv, usecols=["n_particles", "particle_steps_per_s"]).dropna()
-        except ValueError:
-            runs = None
-        if runs is not None and len(runs):
-            runs = runs[runs["particle_steps_per_s"] > 0]
-            med = runs.groupby("n_particles")["particle_steps_per_s"].median()
-            if len(med):
-                return Throughput(
-                    tuple((float(n), float(r)) for n, r in med.items()),
-                    f"the throughput of the {len(runs)} finished runs in {runs_csv}",
-                )
-    return Throughput(REFERENCE_THROUGHPUT, REFERENCE_SOURCE)
+    try:
+        runs = pd.read_csv(runs_csv, usecols=["n_particles", "particle_steps_per_s"]).dropna()
+    except (OSError, ValueError):  # no such file (or None), or not a run table
+        return Throughput(REFERENCE_THROUGHPUT, REFERENCE_SOURCE)
+    runs = runs[runs["particle_steps_per_s"] > 0]
+    med = runs.groupby("n_particles")["particle_steps_per_s"].median()
+    if not len(med):
+        return Throughput(REFERENCE_THROUGHPUT, REFERENCE_SOURCE)
+    source = f"the throughput of the {len(runs)} finished runs in {runs_csv}"
+    return Throughput(tuple((float(n), float(r)) for n, r in med.items()), source)
 
 
 def duration_text(seconds: float) -> str:
@@ -109,14 +95,11 @@ class StudyEstimate:
 
 
 def study_estimate(cfg, grid_runs, loops, results: str | Path = layout.RESULTS) -> StudyEstimate:
-    """The wall time of the DEM runs a workflow run will do: `grid_runs`, (rpm, distribution,
-    replicate) of the grid's DEM jobs (each from a settled bed, one per distribution and
-    replicate), and `loops`, (rpm, replicate) of the PBM-DEM coupled loops of the validation feed
-    or (rpm, replicate, CoupledLoop) of another loop (the feed check's), one DEM run per coupling
-    interval, on `cfg` (a pbmdem Config); the throughput from the finished runs in `results`. A
-    validation loop whose feed the grid runs at its speed and replicate borrows that run for its
-    first interval (no LIGGGHTS call); at another speed its first interval starts from the grid's
-    settled bed of the feed (pbmdem.coupling.providers.DemProvider)."""
+    """The wall time of the DEM runs of a workflow run on `cfg`: `grid_runs`, (rpm, distribution,
+    replicate) of the grid's jobs (from settled beds), and `loops`, (rpm, replicate[, CoupledLoop:
+    another loop than the validation's]) of the coupled loops, one run per coupling interval but
+    the first, which borrows the grid's run or bed of the feed (docs/validation.md, "Borrowed grid
+    runs"); the throughput from the finished runs in `results`."""
     throughput = measured_throughput(layout.dem("runs.csv", str(results)))
     ranks = cfg.dem_execution.mpi_ranks
     grid_seconds = 0.0

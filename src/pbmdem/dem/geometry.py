@@ -1,9 +1,6 @@
-"""Granulator geometry: a closed cylindrical bowl and a bladed impeller as STL triangle meshes.
-
-The bowl's axis is the z axis, its bottom at z = 0 (dimensions: `pbmdem.config.Granulator`). The
-impeller turns about the same axis. Both meshes are written with meshio; every closed part is
-watertight with outward normals (triangles ordered counter-clockwise seen from outside), which
-tests/test_geometry.py verifies.
+"""Granulator geometry as STL meshes (meshio, ASCII): a closed cylindrical bowl on the z axis, bottom at
+z = 0, and a bladed impeller turning about it; every part closed with outward normals (docs/dem.md,
+"The granulator").
 """
 
 from __future__ import annotations
@@ -26,18 +23,12 @@ def _disc_fan(center: np.ndarray, ring: np.ndarray, upward: bool) -> np.ndarray:
     return np.stack([c, nxt, ring], axis=1)
 
 
-def bowl_mesh(bowl: Bowl) -> tuple[np.ndarray, np.ndarray]:
-    """Closed cylinder (side, bottom, lid) with normals pointing out of the fluid region.
-
-    LIGGGHTS does not care about the normal direction of a wall, but a consistent orientation
-    lets the mesh be checked for being a closed surface.
-    """
-    n = int(bowl.segments)
+def _cylinder(radius: float, z0: float, z1: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Closed n-sided prism about the z axis from z0 to z1 (side, floor, lid), normals outward."""
     theta = 2.0 * np.pi * np.arange(n) / n
-    x, y = bowl.radius * np.cos(theta), bowl.radius * np.sin(theta)
-    bottom = np.column_stack([x, y, np.zeros(n)])
-    top = np.column_stack([x, y, np.full(n, bowl.height)])
-    points = np.vstack([bottom, top, [[0.0, 0.0, 0.0]], [[0.0, 0.0, bowl.height]]])
+    x, y = radius * np.cos(theta), radius * np.sin(theta)
+    points = np.vstack([np.column_stack([x, y, np.full(n, z0)]), np.column_stack([x, y, np.full(n, z1)])])
+    points = np.vstack([points, [[0.0, 0.0, z0]], [[0.0, 0.0, z1]]])
     ib, it = np.arange(n), np.arange(n, 2 * n)
     jb, jt = np.roll(ib, -1), np.roll(it, -1)
     side = np.vstack([np.stack([ib, jb, jt], axis=1), np.stack([ib, jt, it], axis=1)])
@@ -46,21 +37,15 @@ def bowl_mesh(bowl: Bowl) -> tuple[np.ndarray, np.ndarray]:
     return points, np.vstack([side, floor, lid]).astype(np.int64)
 
 
+def bowl_mesh(bowl: Bowl) -> tuple[np.ndarray, np.ndarray]:
+    """The closed bowl (LIGGGHTS ignores the normals; consistent ones let the mesh be checked)."""
+    return _cylinder(bowl.radius, 0.0, bowl.height, int(bowl.segments))
+
+
 def _box(half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Axis-aligned box centred at the origin with outward-oriented triangles."""
-    hx, hy, hz = half
-    pts = np.array(
-        [
-            [-hx, -hy, -hz],
-            [hx, -hy, -hz],
-            [hx, hy, -hz],
-            [-hx, hy, -hz],
-            [-hx, -hy, hz],
-            [hx, -hy, hz],
-            [hx, hy, hz],
-            [-hx, hy, hz],
-        ]
-    )
+    square = ((-1, -1), (1, -1), (1, 1), (-1, 1))
+    pts = np.array([(x, y, z) for z in (-1, 1) for x, y in square]) * half
     tris = np.array(
         [
             [0, 2, 1],
@@ -89,45 +74,32 @@ def _rotation(axis: str, angle: float) -> np.ndarray:
     raise ValueError(axis)
 
 
-def impeller_mesh(imp: Impeller) -> tuple[np.ndarray, np.ndarray]:
-    """Hub (a closed prism) plus `blades` rectangular blades, each a closed box.
+def blade_box(imp: Impeller) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and half extents (m) of blade 0 before its pitch: a plate along x from half the hub
+    radius (inside the hub, so that no two blades share a face, which LIGGGHTS rejects) to the
+    tip, its underside `clearance` above the floor."""
+    r0 = 0.25 * imp.hub_diameter
+    span = imp.blade_length - r0
+    half = np.array([0.5 * span, 0.5 * imp.blade_thickness, 0.5 * imp.blade_height])
+    return np.array([r0 + 0.5 * span, 0.0, imp.clearance + 0.5 * imp.blade_height]), half
 
-    Blade k is a plate spanning radially from half the hub radius to `blade_length`, of height
-    `blade_height` and thickness `blade_thickness`, its underside `clearance` above the bottom,
-    rotated by 2 pi k / blades about z and tilted by `pitch_deg` about its own radial axis.
-    """
+
+def impeller_mesh(imp: Impeller) -> tuple[np.ndarray, np.ndarray]:
+    """Hub (a closed prism) plus `blades` closed boxes (`blade_box`), blade k turned by
+    2 pi k / blades about z and tilted by `pitch_deg` about its own radial axis."""
     parts_pts, parts_tris, offset = [], [], 0
-    zc = imp.clearance + 0.5 * imp.blade_height
+    centre, half = blade_box(imp)
     for k in range(imp.blades):
-        # blades start inside the hub (not at the axis), so that no two blades share a face:
-        # LIGGGHTS rejects meshes with coincident triangles
-        r0 = 0.5 * (0.5 * imp.hub_diameter)
-        span = imp.blade_length - r0
-        pts, tris = _box(np.array([0.5 * span, 0.5 * imp.blade_thickness, 0.5 * imp.blade_height]))
+        pts, tris = _box(half)
         pts = pts @ _rotation("x", np.radians(imp.pitch_deg)).T
-        pts[:, 0] += r0 + 0.5 * span
+        pts[:, 0] += centre[0]
         pts = pts @ _rotation("z", 2.0 * np.pi * k / imp.blades).T
-        pts[:, 2] += zc
+        pts[:, 2] += centre[2]
         parts_pts.append(pts)
         parts_tris.append(tris + offset)
         offset += len(pts)
     # hub: a 12-sided closed prism from the bottom clearance to the blade top
-    m, r = 12, 0.5 * imp.hub_diameter
-    theta = 2.0 * np.pi * np.arange(m) / m
-    z0, z1 = imp.clearance, imp.clearance + imp.blade_height
-    ring0 = np.column_stack([r * np.cos(theta), r * np.sin(theta), np.full(m, z0)])
-    ring1 = np.column_stack([r * np.cos(theta), r * np.sin(theta), np.full(m, z1)])
-    hub_pts = np.vstack([ring0, ring1, [[0, 0, z0]], [[0, 0, z1]]])
-    i0, i1 = np.arange(m), np.arange(m, 2 * m)
-    j0, j1 = np.roll(i0, -1), np.roll(i1, -1)
-    hub_tris = np.vstack(
-        [
-            np.stack([i0, j0, j1], axis=1),
-            np.stack([i0, j1, i1], axis=1),
-            _disc_fan(2 * m, i0, upward=False),
-            _disc_fan(2 * m + 1, i1, upward=True),
-        ]
-    )
+    hub_pts, hub_tris = _cylinder(0.5 * imp.hub_diameter, imp.clearance, imp.clearance + imp.blade_height, 12)
     parts_pts.append(hub_pts)
     parts_tris.append(hub_tris + offset)
     return np.vstack(parts_pts), np.vstack(parts_tris).astype(np.int64)

@@ -1,15 +1,7 @@
-"""The plan of one DEM run: every decision about it, in one frozen object.
-
-`plan_bed` turns the settings of an operating point (`pbmdem.config.DemPoint`) and its replicate
-into a `BedPlan`, everything that does not depend on the impeller speed: particle numbers per class
-(the bed's solid volume divided by the mean particle volume), the time step (a fraction of the
-Rayleigh time of the smallest particle), the settling steps, LIGGGHTS' seeds, the box, the insertion
-region and rate, the thermo interval and the neighbour skin at rest. One settled bed serves every
-speed (docs/dem.md, "One settled bed for every speed"). `plan_point` adds the speed: the spin-up
-and sampling steps, the contact-snapshot interval (a fraction of the Hertz contact duration), the
-skin at the tip speed and what is dumped. `deck.py` only formats a plan; `run.py` only runs it and
-judges the run against it. `to_dict` is the plan's record (plan.json, bed.json); the values the
-deck derives from it (fields marked `DECK`) are not repeated there (bed.json holds the deck's hash).
+"""The plan of one DEM run: every decision about it in one frozen object, `plan_bed` the part of
+a settled bed (speed-independent), `plan_point` the rest at a speed (docs/dem.md, "A run").
+`deck.py` only formats a plan; `to_dict` is its record (plan.json, bed.json) without the fields
+marked `DECK`, which the deck derives.
 """
 
 from __future__ import annotations
@@ -23,14 +15,8 @@ from pbmdem.config import ConfigError, DemPoint, SizeDistribution
 from pbmdem.config.dem import DemLimits
 from pbmdem.config.granulator import Granulator, Material
 
-from .progress import thermo_interval
-
-# Hertz contact duration t_c = 2.87 (m*^2 / (R* E*^2 v))^(1/5) (Johnson 1985); contact snapshots
-# are taken every t_c / SNAPSHOTS_PER_CONTACT, t_c of a head-on contact between two of the smallest
-# particles at the impeller tip speed (the shortest contact of a run). One snapshot per contact
-# time: over the 36 runs of the default grid, snapshots every t_c instead of t_c / 2 changed the
-# encounters by -0.1 to -0.3 % (the raw new contacts, a diagnostic, by -0.6 to -1.5 %), and every
-# run reports the change for twice its own interval (`encounter_change_when_interval_doubled`).
+#: contact snapshots per Hertz contact time t_c of two of the smallest particles meeting at the
+#: tip speed, the shortest contact of a run (docs/dem.md, "Cost of a run": one against two)
 SNAPSHOTS_PER_CONTACT = 1
 #: replicate r runs with insertion seeds derived from dem.seed + r x this prime
 REPLICATE_SEED_STRIDE = 7919
@@ -41,10 +27,11 @@ MIN_CONTACT_SPEED = 0.1
 #: steps between neighbour-list rebuilds that the skin allows a granule moving at the blade tip
 #: speed (LIGGGHTS rebuilds the lists when a granule has moved half the skin)
 SKIN_STEPS_AT_TIP_SPEED = 22
-#: LIGGGHTS' warning limit of dt over the Rayleigh time (fix check/timestep/gran); a plan whose own
-#: fraction dt / t_R is above it (a documented choice, docs/dem.md "Cost of a run") warns 2 % above
-#: that fraction instead, so that a particle smaller than planned still makes it warn
+#: LIGGGHTS' warning limit of dt / Rayleigh time; a plan above it warns 2 % above its own fraction
 RAYLEIGH_WARNING_FRACTION = 0.2
+#: a thermo line every this many particle-steps (~0.3-1 s of wall time at 2-4 M particle-steps/s),
+#: so that the progress moves between its 10 s log lines even for large beds
+THERMO_PARTICLE_STEPS = 1_000_000
 #: a field of the deck only (derived from the recorded fields and the settings), not in `to_dict`
 DECK = {"deck": True}
 
@@ -64,15 +51,8 @@ def hertz_contact_time(radius: float, density: float, youngs: float, poisson: fl
 
 
 def neighbor_skin(diameters, timestep: float, tip_speed: float = 0.0) -> float:
-    """The neighbour-list skin of a bed of granules of `diameters` at the impeller tip speed
-    `tip_speed`: the distance a granule at the tip speed travels in 2 x SKIN_STEPS_AT_TIP_SPEED
-    steps, between half the smallest and half the largest diameter.
-
-    Every skin gives the same contacts (the lists are checked every step); it only trades list
-    rebuilds (a small skin at a high speed) against pair checks (a large skin around small
-    granules). Measured on the default grid (docs/dem.md, "Cost of a run"): half the largest
-    diameter, the old skin, cost the fine bed 12 % at 600 rpm and the coupled loops' wide samples
-    18-29 %; half the smallest cost the fine bed 24 % at 1200 rpm."""
+    """The neighbour-list skin at the tip speed `tip_speed`: the travel of 2 x SKIN_STEPS_AT_TIP_SPEED
+    steps, between half the smallest and half the largest diameter (docs/dem.md, "Cost of a run")."""
     travel = 2 * SKIN_STEPS_AT_TIP_SPEED * tip_speed * timestep
     return min(max(0.5 * min(diameters), travel), 0.5 * max(diameters))
 
@@ -226,13 +206,13 @@ def bed_particle_count(bed_solid_volume: float, sizes: SizeDistribution) -> int:
     return int(round(bed_solid_volume / sizes.mean_particle_volume))
 
 
-def plan_bed(point: DemPoint, *, replicate: int = 0, counts: list[int] | None = None) -> BedPlan:
+def plan_bed(point: DemPoint, *, replicate: int = 0, counts: list[int] | None = None, where: str = "") -> BedPlan:
     """Plan the settled bed of `point`: particles, time step, settling and seeds. `replicate`
     selects the insertion seeds (replicates of one point differ only by them). `counts`
     (particles per class) replaces the count derived from the bed's solid volume: the coupled
-    PBM-DEM loop hands its own sample this way."""
+    PBM-DEM loop hands its own sample this way. `where` names the bed in errors."""
     sizes, mat, dem, granulator = point.sizes, point.material, point.dem, point.granulator
-    where = f"distribution {point.distribution}"
+    where = where or f"distribution {point.distribution}"
     counts = None if counts is None else [int(c) for c in counts]
     n_particles = bed_particle_count(granulator.bed_solid_volume, sizes) if counts is None else sum(counts)
     if n_particles > dem.max_particles:
@@ -251,13 +231,8 @@ def plan_bed(point: DemPoint, *, replicate: int = 0, counts: list[int] | None = 
     n_classes = len(sizes.diameters)
     bowl, d_max = granulator.bowl, max(sizes.diameters)
     margin, half = 0.05 * bowl.diameter, bowl.radius + 0.05 * bowl.diameter
-    # insert in small batches over the first 60 % of the settling phase, so that the fill region
-    # never saturates; one fix per class with exactly its count (one fix over all classes drew the
-    # class of each particle at random and missed the planned counts by up to 25 %, docs/dem.md).
-    # The classes insert on different steps (offsets within `insert_every`, the largest class first),
-    # so that each fix's overlap check sees the particles the others inserted also across MPI
-    # ranks. 1000 attempts per particle (LIGGGHTS: 50): with 50, the large class of `corner` missed
-    # 10 of its 50 particles in the settling time (docs/dem.md)
+    # one insertion fix per class, in small batches over the first 60 % of the settling, the classes
+    # on different steps, the largest first (docs/dem.md, "A run": insertion)
     insert_time = 0.6 * settle_steps * dt
     insert_every = max(1, int(0.002 / dt))
     largest_first = np.argsort(-np.asarray(sizes.diameters, float), kind="stable")
@@ -289,7 +264,7 @@ def plan_bed(point: DemPoint, *, replicate: int = 0, counts: list[int] | None = 
         insert_starts=tuple(int(k) for k in offsets),
         insert_attempts=INSERT_ATTEMPTS,
         # thermo reads fix check/timestep/gran, so both run at the same interval (LIGGGHTS requires it)
-        thermo_every=thermo_interval(n_particles, vtk_every),
+        thermo_every=max(1, min(vtk_every, THERMO_PARTICLE_STEPS // n_particles)),
         settle_skin=neighbor_skin(sizes.diameters, dt),
         rayleigh_limit=max(RAYLEIGH_WARNING_FRACTION, 1.02 * dt / t_r),
     )
@@ -309,10 +284,7 @@ def plan_point(point: DemPoint, rpm: float, *, replicate: int = 0, counts: list[
     # rpm was checked where it entered (the config's Rpm type, or check_rpm on a command line)
     speed = point.at(rpm)
     rpm, pid, tip_speed = speed.rpm, speed.point_id, speed.tip_speed
-    try:
-        bed = plan_bed(point, replicate=replicate, counts=counts)
-    except ConfigError as exc:
-        raise ConfigError(str(exc).replace(f"distribution {point.distribution}", f"operating point {pid}", 1)) from None
+    bed = plan_bed(point, replicate=replicate, counts=counts, where=f"operating point {pid}")
     mat, dem, dt = point.material, point.dem, bed.timestep
     t_c = hertz_contact_time(
         0.5 * min(bed.diameters), mat.density, mat.youngs_modulus, mat.poisson_ratio, max(tip_speed, MIN_CONTACT_SPEED)

@@ -1,15 +1,5 @@
-"""Progress of a running LIGGGHTS job, read from its own thermo output.
-
-LIGGGHTS writes a thermo line (`thermo_style custom step atoms ...`, flushed after each line by
-`thermo_modify flush yes` in the deck) every `thermo_every` steps into `log.liggghts`.
-`ThermoProgress` follows that file while the engine runs (`liggghts.run` calls `update()` about
-once a second) and reports the phase (settling, spin-up, sampling), the step of the total, the
-particles inserted so far, the elapsed and the estimated remaining wall time:
-
-* as a log line (logger `pbmdem.progress`) at least every `log_every` seconds of wall time and
-  at each phase change, so that Snakemake job logs and cluster logs show a run moving;
-* as a tqdm bar on a terminal when `bar=True` (the `pbmdem dem` CLI on a TTY).
-"""
+"""Progress of a running LIGGGHTS job from the thermo lines of its log: log lines (at each phase
+change and every `log_every` s) and a tqdm bar on a terminal (docs/dem.md, the paragraph "Progress")."""
 
 from __future__ import annotations
 
@@ -19,18 +9,11 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from .engine import thermo_columns
+
 log = logging.getLogger(__name__)
 
 LOG_EVERY_S = 10.0
-# a thermo line every this many particle-steps: ~0.3-1 s of wall time at the 2-4 M particle-steps/s
-# measured here, so that progress moves between the 10 s log lines even for large beds
-THERMO_PARTICLE_STEPS = 1_000_000
-
-
-def thermo_interval(n_particles: int, vtk_every: int) -> int:
-    """Steps between thermo lines: the VTK interval, or fewer for a bed large enough that a VTK
-    interval would take more than about a second of wall time."""
-    return max(1, min(int(vtk_every), THERMO_PARTICLE_STEPS // max(int(n_particles), 1)))
 
 
 def _eta(seconds: float) -> str:
@@ -68,48 +51,22 @@ class ThermoProgress:
         self.first_step = int(first_step)
         self.step = 0
         self.atoms = 0
-        self._offset = 0
-        self._partial = b""
-        self._header: list[str] | None = None
         self._start = time.monotonic()
         self._last_log = self._start
         self._last_phase: str | None = None
         self._bar = tqdm(total=self.total, unit="step", desc=label, dynamic_ncols=True, leave=True) if bar else None
 
-    # -------------------------------------------------------------- reading
-    def _read_new_lines(self) -> list[str]:
+    def _read(self) -> None:
+        """The last step (counted from `first_step`) and particles the log shows so far."""
         try:
-            with open(self.path, "rb") as fh:
-                fh.seek(self._offset)
-                chunk = fh.read()
+            text = self.path.read_text(errors="replace")
         except FileNotFoundError:
-            return []
-        self._offset += len(chunk)
-        data = self._partial + chunk
-        lines = data.split(b"\n")
-        self._partial = lines.pop()  # an unfinished last line waits for the next read
-        return [line.decode(errors="replace") for line in lines]
-
-    def _parse(self, lines: list[str]) -> None:
-        for line in lines:
-            words = line.split()
-            if words[:1] == ["Step"]:
-                self._header = [w.lower() for w in words]
-                continue
-            if self._header is None or len(words) != len(self._header):
-                if line.startswith("Loop time"):
-                    self._header = None
-                continue
-            try:
-                step = int(float(words[0]))
-            except ValueError:
-                continue
-            self.step = max(self.step, step - self.first_step)
-            if "atoms" in self._header:
-                try:
-                    self.atoms = int(float(words[self._header.index("atoms")]))
-                except ValueError:
-                    pass
+            return
+        columns = thermo_columns(text[: text.rfind("\n") + 1])  # an unfinished last line waits
+        if columns.get("Step"):
+            self.step = max(self.step, int(max(columns["Step"])) - self.first_step)
+        if columns.get("Atoms"):
+            self.atoms = int(columns["Atoms"][-1])
 
     # -------------------------------------------------------------- state
     def phase(self) -> str:
@@ -138,7 +95,7 @@ class ThermoProgress:
     # -------------------------------------------------------------- reporting
     def update(self) -> None:
         """Read what LIGGGHTS wrote since the last call; log and move the bar as due."""
-        self._parse(self._read_new_lines())
+        self._read()
         now = time.monotonic()
         phase = self.phase()
         if self._bar is not None:

@@ -1,18 +1,11 @@
-"""Run one DEM plan: geometry, deck, LIGGGHTS, tables, VTK index, in a staging folder.
-
-`run_point` writes the geometry and deck of a `DemPlan` into a staging folder beside the run
-folder, runs LIGGGHTS, judges the run against its plan (the exit code proves nothing), parses the
-contact snapshots into collision tables and writes the VTK series index; only then is the run
-moved into place, its finished markers last. A failure never removes a finished run.
-
-`settle_bed` inserts and settles the bed of a `BedPlan` once and writes it to `bed.restart`
-(with `bed.json`, which names the bed); `run_point(..., bed_dir=...)` then starts from that bed
-instead of settling its own, after checking that the bed is the one its plan would settle.
-This module decides nothing about a run: the plan (`plan.py`) holds every decision.
+"""Run one DEM plan, or settle one bed, in a staging folder moved into place only when it
+succeeded; this module decides nothing, the plan holds every decision (docs/dem.md, "A run" and
+"One settled bed for every speed").
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import shutil
@@ -49,11 +42,9 @@ def check_bed(plan: DemPlan, bed_dir: str | Path) -> Path:
     restart = bed_dir / BED_FILE
     if not restart.exists():
         raise InputFileError(f"settled bed {restart} does not exist (run the bed first: pbmdem.dem.run.settle_bed)")
-    found = read_json(record, "settled-bed record")
-    want = bed_key(plan.bed)
-    for key in (*(f"bed.{k}" for k in want["bed"]), "deck_sha256"):
-        have = found.get("bed", {}).get(key[4:]) if key.startswith("bed.") else found.get(key)
-        need = want["bed"][key[4:]] if key.startswith("bed.") else want[key]
+    found, want = read_json(record, "settled-bed record"), bed_key(plan.bed)
+    pairs = [(f"bed.{k}", found.get("bed", {}).get(k), need) for k, need in want["bed"].items()]
+    for key, have, need in [*pairs, ("deck_sha256", found.get("deck_sha256"), want["deck_sha256"])]:
         if have != need:
             raise ConfigError(
                 f"{record}: {key} = {have!r}, but the run {plan.point_id} (replicate {plan.replicate}) needs the "
@@ -69,16 +60,11 @@ def prepare_run(
     bed: Path | None = None,
     deck: str | None = None,
 ) -> Path:
-    """Write geometry, deck and plan into `run_dir` (emptied of any earlier attempt's output);
-    with `bed` (a settled bed's restart file, as returned by `check_bed`), a copy of it for the
-    deck to read; `deck`: the rendered deck, if the caller has it already."""
+    """Write geometry, deck and plan into the fresh folder `run_dir`; with `bed` (a settled bed's
+    restart file, as returned by `check_bed`), a copy of it for the deck to read; `deck`: the
+    rendered deck, if the caller has it already."""
     run_dir = Path(run_dir)
-    post = run_dir / "post"
-    if post.exists():
-        shutil.rmtree(post)
-    post.mkdir(parents=True)
-    for stale in ("crash.json", "log.liggghts", BED_FILE):
-        (run_dir / stale).unlink(missing_ok=True)
+    (run_dir / "post").mkdir(parents=True, exist_ok=True)
     geometry.write_granulator(plan.granulator, run_dir)
     if bed is not None:
         shutil.copyfile(bed, run_dir / BED_FILE)
@@ -91,58 +77,29 @@ def prepare_run(
     return run_dir / "in.granulator"
 
 
-def _fresh_stage(folder: Path) -> Path:
-    """The staging folder beside `folder` (`.<name>.staging`), what an earlier attempt left there removed."""
-    where = folder.resolve()
-    stage = where.parent / f".{where.name}.staging"
-    if stage.exists():
-        shutil.rmtree(stage)
-    return stage
-
-
 def settle_bed(bed: BedPlan, bed_dir: str | Path, execution: DemExecution) -> dict:
     """Insert and settle the bed `bed` in `bed_dir` and write it to `bed.restart`, then
-    `bed.json` (the bed's plan, the deck's hash, the wall time), last, as the finished marker.
-    Made in a staging folder and moved into place only when LIGGGHTS reached the planned step."""
+    `bed.json` (the bed's plan, the deck's hash, the wall time), last, as the finished marker."""
     bed_dir = Path(bed_dir)
     key = bed_key(bed)  # raises on any bad value, before any I/O
-    stage = _fresh_stage(bed_dir)
-    (stage / "post").mkdir(parents=True)
-    geometry.write_granulator(bed.granulator, stage)
-    write_text(stage / "in.bed", render_bed(bed, execution.mpi_ranks))
-    try:
+
+    def settle(stage: Path) -> dict:
+        geometry.write_granulator(bed.granulator, stage)
+        write_text(stage / "in.bed", render_bed(bed, execution.mpi_ranks))
         result = engine.run("in.bed", stage, ranks=execution.mpi_ranks, timeout=execution.timeout)
         engine.check_finished(stage, bed.settle_steps, {})
         if not (stage / BED_FILE).exists():
             engine.record_crash(stage, [f"LIGGGHTS finished but wrote no {BED_FILE}"])
-    except BaseException as exc:
-        if not (bed_dir / BED_RECORD).exists():  # nothing finished to protect: crash.json and logs in bed_dir
-            _move_bed(stage, bed_dir)
-            if len(exc.args) == 1 and isinstance(exc.args[0], str):
-                exc.args = (exc.args[0].replace(str(stage), str(bed_dir)),)
-        raise
-    record = key | {
-        "liggghts_wall_time_s": result.wall_time,
-        "liggghts_cpu_time_s": result.cpu_time,
-        "particle_steps": float(bed.n_particles) * bed.settle_steps,
-        "liggghts_version": engine.version_of_log(result.log),
-    }
-    write_json(stage / BED_RECORD, record)
-    _move_bed(stage, bed_dir)
-    return record
+        record = key | {
+            "liggghts_wall_time_s": result.wall_time,
+            "liggghts_cpu_time_s": result.cpu_time,
+            "particle_steps": float(bed.n_particles) * bed.settle_steps,
+            "liggghts_version": engine.version_of_log(result.log),
+        }
+        write_json(stage / BED_RECORD, record)
+        return record
 
-
-def _move_bed(stage: Path, bed_dir: Path) -> None:
-    """Move a settled (or crashed) bed from `stage` into `bed_dir`: the old bed.json goes first, the
-    new one (the finished marker) comes last."""
-    bed_dir.mkdir(parents=True, exist_ok=True)
-    (bed_dir / BED_RECORD).unlink(missing_ok=True)
-    (bed_dir / "crash.json").unlink(missing_ok=True)
-    for item in sorted(stage.iterdir(), key=lambda p: p.name == BED_RECORD):
-        if (bed_dir / item.name).exists():
-            _remove(bed_dir / item.name)
-        os.replace(item, bed_dir / item.name)
-    stage.rmdir()
+    return _staged(bed_dir, (bed_dir / BED_RECORD).exists(), (BED_RECORD,), ("crash.json",), settle)
 
 
 class FinishedRunError(ValueError):
@@ -174,6 +131,45 @@ RUN_PRODUCTS = (
 )
 
 
+def _staged(folder: Path, finished: bool, last: tuple[str, ...], products: tuple[str, ...], work):
+    """`work(stage)` in the staging folder `.<name>.staging` beside `folder`, then its output moved
+    into `folder`: `last` (the finished markers) removed first and moved in last, `products` the
+    new attempt lacks removed, anything else in `folder` left alone. A failed attempt is moved in
+    too (crash.json and logs) unless `folder` holds a `finished` one, which stays untouched."""
+    where = folder.resolve()
+    stage = where.parent / f".{where.name}.staging"
+    if stage.exists():
+        shutil.rmtree(stage)
+    (stage / "post").mkdir(parents=True)
+    try:
+        out = work(stage)
+    except BaseException as exc:
+        message = len(exc.args) == 1 and isinstance(exc.args[0], str)
+        if not finished:  # nothing to protect: keep the crash and the logs in the folder
+            _move_in(stage, folder, last, products)
+            if message:
+                exc.args = (exc.args[0].replace(str(stage), str(folder)),)
+        elif message:
+            exc.args = (f"{exc.args[0]}\n(the finished run in {folder} is untouched; this attempt is in {stage})",)
+        raise
+    _move_in(stage, folder, last, products)
+    return out
+
+
+def _move_in(stage: Path, folder: Path, last: tuple[str, ...], products: tuple[str, ...]) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in last:
+        (folder / name).unlink(missing_ok=True)
+    for name in products:
+        if not (stage / name).exists() and (folder / name).exists():
+            _remove(folder / name)
+    moved_last = [stage / n for n in last if (stage / n).exists()]
+    for item in [p for p in sorted(stage.iterdir()) if p not in moved_last] + moved_last:
+        _remove(folder / item.name)
+        os.replace(item, folder / item.name)
+    stage.rmdir()
+
+
 def _remove(path: Path) -> None:
     if path.is_dir() and not path.is_symlink():
         shutil.rmtree(path)
@@ -181,31 +177,8 @@ def _remove(path: Path) -> None:
         path.unlink(missing_ok=True)
 
 
-def _move_into(stage: Path, run_dir: Path) -> None:
-    """Move a finished (or crashed) attempt from `stage` into `run_dir`: the old run's finished
-    markers go first (so a half-replaced folder never looks finished), products of the old run
-    that the new one lacks (e.g. a stale crash.json) are removed, the new markers come last.
-    Anything else in `run_dir` is left alone."""
-    run_dir.mkdir(parents=True, exist_ok=True)
-    for name in FINISHED_MARKERS:
-        (run_dir / name).unlink(missing_ok=True)
-    for name in RUN_PRODUCTS:
-        if not (stage / name).exists() and (run_dir / name).exists():
-            _remove(run_dir / name)
-    last = [stage / n for n in LAST_PRODUCTS if (stage / n).exists()]
-    for item in [p for p in sorted(stage.iterdir()) if p not in last] + last:
-        target = run_dir / item.name
-        if target.is_dir() and not target.is_symlink():
-            shutil.rmtree(target)
-        os.replace(item, target)
-    stage.rmdir()
-
-
 def check_finished(plan: DemPlan, run_dir: str | Path) -> None:
-    """Raise LiggghtsError (and write crash.json) unless the run reached every planned step and
-    contact snapshot, and unless its class map holds exactly the planned particles per class.
-    LIGGGHTS exits 0 when interrupted, so the exit code proves nothing. (A run from a settled bed
-    goes on from the bed's last step, so its plan's steps are the same.)"""
+    """Judge the run in `run_dir` against `plan`, not its exit code (`engine.check_finished`)."""
     engine.check_finished(run_dir, plan.total_steps, plan.dumps, plan.counts)
 
 
@@ -218,19 +191,10 @@ def run_point(
     progress_bar: bool = False,
     bed_dir: str | Path | None = None,
 ) -> dict:
-    """Run LIGGGHTS for `plan` in `run_dir`, then tabulate collisions and index the VTK files.
-    With `bed_dir` (a folder written by `settle_bed` for `plan.bed`) the run starts from that
-    settled bed instead of settling its own.
-
-    The plan was checked against dem.limits where it was made (the workflow's configuration, the
-    command line); the deck is rendered once, here, before any file is touched, and a finished run
-    in `run_dir` is refused unless `force`. The run is made in a staging folder
-    beside `run_dir` and moved into place only after it succeeded, so a failure (or a signal)
-    never removes a finished run. Returns a summary dict (also `run_dir/summary.json`). Raises
-    LiggghtsError on failure, leaving `crash.json` and the log in `run_dir` (or, when `run_dir`
-    holds a finished run, in the staging folder named in the message) and no collision table.
-    `execution`: MPI ranks and wall-time limit (s).
-    """
+    """Run LIGGGHTS for `plan` in `run_dir` (from the bed `settle_bed` wrote in `bed_dir`, if
+    given), tabulate its collisions and index its VTK files; the summary (also summary.json).
+    A finished run is refused unless `force`, and never removed by a failure (LiggghtsError;
+    docs/dem.md, "A run"). `execution`: MPI ranks and wall-time limit (s)."""
     run_dir = Path(run_dir)
     deck = render_granulator(plan, execution.mpi_ranks, from_bed=bed_dir is not None)
     bed = check_bed(plan, bed_dir) if bed_dir is not None else None
@@ -242,30 +206,18 @@ def run_point(
             "refusing to overwrite it (rerunning would give it new time stamps, so Snakemake would redo "
             "everything downstream). Use --force to replace it, or --out to write elsewhere."
         )
-    stage = _fresh_stage(run_dir)
-    stage.mkdir(parents=True)
-    try:
-        summary = _run_in(plan, stage, run_dir, execution, deck, progress_bar, bed)
-    except BaseException as exc:
-        if not finished:  # nothing to protect: keep the crash and the logs in the run folder
-            _move_into(stage, run_dir)
-            if len(exc.args) == 1 and isinstance(exc.args[0], str):
-                exc.args = (exc.args[0].replace(str(stage), str(run_dir)),)
-        elif len(exc.args) == 1 and isinstance(exc.args[0], str):
-            exc.args = (f"{exc.args[0]}\n(the finished run in {run_dir} is untouched; this attempt is in {stage})",)
-        raise
-    _move_into(stage, run_dir)
-    return summary
+    work = functools.partial(_run_in, plan, run_dir, execution, deck, progress_bar, bed)
+    return _staged(run_dir, finished, LAST_PRODUCTS, RUN_PRODUCTS, work)
 
 
 def _run_in(
     plan: DemPlan,
-    run_dir: Path,
     final_dir: Path,
     execution: DemExecution,
     deck: str,
-    progress_bar: bool = False,
-    bed: Path | None = None,
+    progress_bar: bool,
+    bed: Path | None,
+    run_dir: Path,
 ) -> dict:
     """run_point's work in the (staging) folder `run_dir`; paths in the summary name `final_dir`;
     `bed`: the checked settled bed's restart file, if the run starts from one."""

@@ -47,12 +47,9 @@ def kill_tree(proc: subprocess.Popen) -> None:
 
 
 class PassSignals:
-    """While LIGGGHTS runs, SIGINT/SIGTERM sent to this process are remembered instead of killing
-    Python before it can record the interruption. A signal sent to the whole job (Ctrl-C, `scancel`,
-    a time limit) reaches LIGGGHTS too; only if LIGGGHTS is still running `grace` seconds later is
-    the signal passed on (a second signal at once would make it quit without its restart file), and
-    `run` kills it if it still runs SIGNAL_KILL seconds after the first signal (`deadline`).
-    Only possible in the main thread; elsewhere nothing is changed."""
+    """While LIGGGHTS runs (in the main thread), SIGINT/SIGTERM are remembered, passed on to it
+    after `grace` s if it still runs, and it is killed SIGNAL_KILL s after the first (`deadline`)
+    (docs/dem.md, "A run": an exit code 0 is not taken as success)."""
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
 

@@ -1,15 +1,6 @@
-"""The speed response of the DEM stage, with replicate error bars.
-
-From the per-replicate tables of the grid (`results/dem/collisions_replicates.csv` and
-`results/dem/runs.csv`) this module derives, per operating point:
-
-* the kernel-relevant collision rate: encounters per particle and second
-  (2 x encounters / (N x sampling time)) and the pair-weighted mean encounter frequency per pair
-  (encounters / (pairs x sampling time), summed over class pairs), each as the mean over
-  replicates with its standard error; the raw new-contact rate beside them for comparison;
-* the flow-development check: the encounter rate in the first and second halves of the sampling
-  window, their relative difference and whether the two agree within twice their replicate error.
-"""
+"""The DEM stage's speed response from the grid's per-replicate tables: whole-bed encounter and
+new-contact rates per operating point with replicate standard errors, and the flow-development
+check of the two halves of the sampling window (docs/dem.md, "Encounter rate against impeller speed")."""
 
 from __future__ import annotations
 
@@ -76,13 +67,9 @@ def speed_response(replicates: pd.DataFrame) -> pd.DataFrame:
 
 
 def flow_development(runs: pd.DataFrame) -> pd.DataFrame:
-    """First vs second half of the sampling window per point.
-
-    `half_difference`: mean over replicates of (second / first - 1) with its standard error;
-    `half_z`: the difference of the replicate-mean counts of the two halves in units of their
-    combined replicate standard error, sqrt(SE_1^2 + SE_2^2) (for a single replicate, the Poisson
-    error of the counts); `within_error` when |half_z| <= 2, i.e. the two half-window rates agree
-    within their replicate error."""
+    """First vs second half of the sampling window per point: `half_difference` (second / first - 1,
+    replicate mean and SE), `half_z` (the halves' difference in combined replicate SE, Poisson for
+    one replicate) and `within_error` (|half_z| <= 2)."""
     r = runs.copy()
     r["half_difference"] = r.encounters_second_half / r.encounters_first_half - 1.0
     out = _mean_se(

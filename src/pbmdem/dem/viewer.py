@@ -24,10 +24,11 @@ SERIES = {"particles": re.compile(r"^particles_(\d+)\.vtk$"), "impeller": re.com
 
 
 def snapshots(post_dir: str | Path, kind: str) -> list[tuple[int, Path]]:
-    """(step, path) of every snapshot of `kind`, in numeric step order (bounding boxes skipped)."""
+    """(step, path) of every snapshot of `kind`, in numeric step order (bounding boxes skipped);
+    of the particles, those that hold some (none before the insertion, t = 0)."""
     pattern = SERIES[kind]
-    found = [(int(m.group(1)), p) for p in Path(post_dir).iterdir() if (m := pattern.match(p.name))]
-    return sorted(found)
+    found = sorted((int(m.group(1)), p) for p in Path(post_dir).iterdir() if (m := pattern.match(p.name)))
+    return [(step, p) for step, p in found if kind != "particles" or point_count(p) != 0]
 
 
 def point_count(path: str | Path) -> int | None:
@@ -40,15 +41,12 @@ def point_count(path: str | Path) -> int | None:
 
 
 def write_series(post_dir: str | Path, timestep: float) -> dict[str, Path]:
-    """particles.pvd and impeller.pvd: the snapshots with their times in s. Particle snapshots that
-    hold no particle (before the insertion, t = 0) are left out, so that a reader of the series
-    (ParaView, `pyvista.get_reader`) opens on the first frame with particles."""
+    """particles.pvd and impeller.pvd: the snapshots with their times in s (a reader of the series,
+    ParaView or `pyvista.get_reader`, opens on the first frame with particles)."""
     post_dir = Path(post_dir)
     out = {}
     for kind in SERIES:
         snaps = snapshots(post_dir, kind)
-        if kind == "particles":
-            snaps = [(step, path) for step, path in snaps if point_count(path) != 0]
         if not snaps:
             raise FileNotFoundError(f"no {kind}_<step>.vtk snapshots in {post_dir}")
         entries = "\n".join(
@@ -108,7 +106,7 @@ def frames(run_dir: str | Path) -> list[Frame]:
     if not post.is_dir():
         raise ViewError(f"{run_dir} has no post/ folder with VTK snapshots")
     timestep = _plan(run_dir).get("timestep")
-    snaps = [(s, p) for s, p in snapshots(post, "particles") if point_count(p) != 0]
+    snaps = snapshots(post, "particles")
     if not snaps:
         raise ViewError(f"no particles snapshots in {post} (is this a finished pbmdem DEM run folder?)")
     if timestep is None:
@@ -150,13 +148,14 @@ def title(run_dir: Path, frame: Frame) -> str:
     return " ".join(parts)
 
 
-def build_scene(
+def render_run(
     run_dir: str | Path,
     time: float | str | None = None,
-    off_screen: bool = False,
+    screenshot: str | Path | None = None,
     step: int | None = None,
-):
-    """A pyvista Plotter with the particles of one frame (see `pick`), the impeller and the bowl."""
+) -> Path | None:
+    """Show the particles of one frame (see `pick`), the impeller and the bowl interactively, or
+    render them off-screen to `screenshot` (PNG)."""
     import pyvista as pv  # lazy: pyvista costs ~1.1 s to import (measured), only `pbmdem view` draws
 
     run_dir = Path(run_dir)
@@ -168,7 +167,7 @@ def build_scene(
     spheres = particles.glyph(
         scale="radius", factor=2.0, orient=False, geom=pv.Sphere(radius=0.5, theta_resolution=12, phi_resolution=12)
     )
-    plotter = pv.Plotter(off_screen=off_screen, window_size=(900, 700))
+    plotter = pv.Plotter(off_screen=screenshot is not None, window_size=(900, 700))
     plotter.add_mesh(spheres, scalars="diameter (mm)", cmap="viridis", scalar_bar_args={"title": "diameter (mm)"})
     impellers = dict(snapshots(run_dir / "post", "impeller"))
     if frame.step in impellers:
@@ -178,17 +177,6 @@ def build_scene(
         plotter.add_mesh(pv.read(bowl), style="wireframe", color="black", opacity=0.25)
     plotter.add_text(title(run_dir, frame), font_size=11)
     plotter.camera_position = "iso"
-    return plotter, frame
-
-
-def render_run(
-    run_dir: str | Path,
-    time: float | str | None = None,
-    screenshot: str | Path | None = None,
-    step: int | None = None,
-) -> Path | None:
-    """Show the run interactively, or render it off-screen to `screenshot` (PNG)."""
-    plotter, _ = build_scene(run_dir, time, off_screen=screenshot is not None, step=step)
     if screenshot is None:
         plotter.show()
         return None
@@ -220,8 +208,6 @@ def _view(args: argparse.Namespace) -> int:
         run_dir = run_folder(args.results, args.rpm, args.distribution, args.replicate)
     else:
         run_dir = Path(args.run_dir)
-    if args.time is not None and args.step is not None:
-        raise ViewError("give --time or --step, not both")
     out = render_run(run_dir, args.time, args.screenshot, step=args.step)
     if out is not None:
         print(f"wrote {out}")
@@ -237,12 +223,13 @@ def add_options(view: argparse.ArgumentParser) -> None:
     view.add_argument("--distribution", default=None, help="size distribution (feed) name of the operating point")
     view.add_argument("--replicate", type=int, default=0, help="replicate of the point (default 0)")
     view.add_argument("--results", default="results", help="the workflow's results folder (default: results)")
-    view.add_argument(
+    when = view.add_mutually_exclusive_group()
+    when.add_argument(
         "--time",
         type=_time,
         default=None,
         help="time in s (nearest snapshot), or 'last' (default: the first snapshot with particles)",
     )
-    view.add_argument("--step", type=int, default=None, help="an engine step instead of --time (expert use)")
+    when.add_argument("--step", type=int, default=None, help="an engine step instead of --time (expert use)")
     view.add_argument("--screenshot", default=None, help="render off-screen to this PNG instead of a window")
     view.set_defaults(func=_view)

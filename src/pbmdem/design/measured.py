@@ -1,11 +1,6 @@
-"""Measured granule sizes over a batch (the `MEASURED` table of `pbmdem.tables`), checked for what
-a calibration needs beyond the columns' contract, and built from a model's output for the checks
-on data of known parameters (docs/calibration.md).
-
-A measured table has one row per (impeller speed, time): `rpm` (1/min), `time` (s from the start
-of the batch, premixing included), `d10`, `d50`, `d90` (m, mass-based, as the PBM reports them) and
-`d10_sd`, `d50_sd`, `d90_sd` (m, the measurement's standard deviation). Every error names the
-file, the 1-based data row and the column.
+"""Measured granule sizes over a batch (the `MEASURED` table of `pbmdem.tables`, docs/calibration.md
+"The measured table"): checked for what a calibration needs beyond the columns' contract, and built
+from a model's output for the check on known parameters.
 """
 
 from __future__ import annotations

@@ -1,13 +1,5 @@
-"""The check of the calibration on data of known parameters (rule calibration_check,
-docs/calibration.md). Two cases, each fitted from start values `proof.start_factor` x the truth:
-
-* `pbm_dem`: PBM-DEM's own d10/d50/d90 at the validation speeds (mean of its replicates, the
-  standard error over replicates as the measurement sd), calibrated with PBM-ANN: the estimates
-  must give back the pbm settings PBM-DEM ran with, within intervals that hold the measurement
-  error and the surrogate's uncertainty;
-* `pbm_constant_noise`: PBM-constant's output at the same speeds (its frequency per speed
-  calibrated to the surrogate as in the validation) with Gaussian noise of `proof.noise` x the
-  value added, calibrated with PBM-constant: recovery at a known noise level, no surrogate error.
+"""The check of the calibration on data of known parameters, PBM-DEM's output and PBM-constant's with
+known noise (rule calibration_check; docs/calibration.md, "The check on known parameters").
 """
 
 from __future__ import annotations
@@ -26,7 +18,7 @@ from pbmdem.validation.results import load_run, run_folder
 
 from .batches import Case, run_cases
 from .calibration import Estimate, Model, calibrate
-from .measured import measured_from_series, with_noise
+from .measured import STATISTICS, measured_from_series, with_noise
 
 FREQUENCY_KEY = "pbm.aggregation.constant_frequency"
 
@@ -54,7 +46,7 @@ def constant_measured(loop: CoupledLoop, model_path, rpms, times, noise: float, 
     for o in outcomes:
         if o.failed:
             raise RuntimeError(f"PBM-constant at {o.case.rpm:g} rpm failed: {o.failed}")
-        series[o.case.rpm] = [pd.DataFrame(o.sizes, columns=["d10", "d50", "d90"]).assign(time=o.times)]
+        series[o.case.rpm] = [pd.DataFrame(o.sizes, columns=list(STATISTICS)).assign(time=o.times)]
     return with_noise(measured_from_series(series, times), noise, seed), fixed
 
 

@@ -109,11 +109,8 @@ def _batch_name(study: str, row: dict, member: bool) -> str:
 
 
 def clipping_words(studies: dict[str, pd.DataFrame]) -> str:
-    """The grid floor of the PBM-ANN studies' batches in words: 'clipping: none' when no breakage
-    fragment fell below the first pivot in any batch (ensemble means and members), else the
-    largest share of a batch's granules merged there (``merged_fraction``, the ensemble mean's, and
-    ``merged_fraction_member_max``; pbmdem.pbm.results.grid_floor) and the batches above
-    FLOOR_LIMIT (1 %), flagged. ``studies``: name -> study table (speed, feed, breakage)."""
+    """The grid floor of the PBM-ANN studies' batches (``studies``: name -> table) in words: the
+    largest shares of a batch's granules merged there (pbmdem.pbm.results.grid_floor), if any."""
     cases = []  # (share, batch)
     batches = 0
     for name, table in studies.items():

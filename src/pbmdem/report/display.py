@@ -1,10 +1,5 @@
-"""Units and number formats of the report, tables split so that they fit a page, and a display
-table written as CSV and as an HTML page.
-
-The result files are in SI units (sizes in m); the report shows sizes in mm, fractions in %, and
-names every column with its unit, e.g. "d50 at end (mm)". Missing values (NaN) read "n/a".
-Snakemake's report shows a result inline only if it is an image, a PDF or HTML (a CSV is a
-download), so a display table is written twice: the CSV holds the values, the HTML page shows them.
+"""Units and number formats of the report ("n/a" for a missing value), tables split to fit a page,
+and a display table written as CSV (the values) and as an HTML page (what Snakemake's report shows).
 """
 
 from __future__ import annotations

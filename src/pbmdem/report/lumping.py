@@ -179,9 +179,7 @@ def _liquid(liquid: pd.DataFrame, info: dict) -> dict | None:
 
 
 def lumping_words(cases: pd.DataFrame, liquid: pd.DataFrame, info: dict) -> str:
-    """The finding in words: the largest differences of the final sizes per study, whether the
-    turn speed and the feed order change, the liquid spread within the size classes of the default
-    batch and the share of solid below the success threshold, and where the lumped model is adequate."""
+    """The finding in words (template lumping.j2)."""
     worst = largest_difference(cases)
     failed = cases[cases.failed.fillna("").astype(str) != ""]
     turn1, turn2 = turn_speeds(cases)

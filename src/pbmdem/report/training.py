@@ -1,12 +1,5 @@
-"""What the surrogate was trained on, beside its accuracy on DEM runs it never saw.
-
-The training set is read from the collision table the surrogate was fitted on (the grid table,
-results/dem/collisions.csv: one row per operating point and class pair, with the replicates behind
-each mean), restricted to the operating points its metadata (results/surrogate/model.json) names;
-the accuracy is the pooled held-out score of its kernel source that the metadata records
-(`cv_scores`, grouped cross-validation: whole operating points held out). A reader judging how far
-to trust PBM-ANN needs both: how many DEM runs, operating points and replicates, which speeds and
-feeds, and how well the surrogate predicts the points it did not see.
+"""What the surrogate was trained on (from the grid collision table, the points its model.json
+names), beside its held-out accuracy (docs/validation.md, "Report").
 """
 
 from __future__ import annotations
@@ -24,9 +17,8 @@ from . import words
 
 @dataclass(frozen=True)
 class TrainingSet:
-    """The DEM runs behind a surrogate: `runs` (every replicate counted), `points` (operating
-    points: a speed and a feed), the replicates per point (sorted, distinct), the impeller speeds
-    (rpm) and the feeds (size distributions)."""
+    """The DEM runs behind a surrogate (every replicate counted), its operating points, their distinct
+    replicate counts, speeds (rpm) and feeds."""
 
     runs: int
     points: int
@@ -36,9 +28,8 @@ class TrainingSet:
 
 
 def training_set(table: pd.DataFrame, source: str = "", point_ids=None) -> TrainingSet:
-    """The training set of a grid collision table (columns point_id, rpm, distribution,
-    n_replicates), restricted to `point_ids` (the surrogate's metadata) when given; a point the
-    metadata names but the table lacks is an InputFileError naming `source`."""
+    """The training set of a grid collision table, restricted to `point_ids` (the surrogate's metadata)
+    when given; a point the metadata names but the table lacks is an InputFileError naming `source`."""
     points = table.groupby("point_id", sort=True).agg(
         rpm=("rpm", "first"), distribution=("distribution", "first"), n_replicates=("n_replicates", "max")
     )

@@ -1,20 +1,9 @@
-"""The report's words: Jinja2 templates (pbmdem/data/report_templates/*.j2, shipped with the
-package) filled from a dict of the run's numbers. The Python beside each finding computes the
-numbers (sizes in m, fractions, speeds in rpm); the template holds every word and every number
-format. A name a template uses and the dict lacks is an error (StrictUndefined), never an empty
-gap in the text.
-
-A paragraph template is written one clause per line for reading; `paragraph` folds it into the
-one line of text that reStructuredText wants: every line break with the indentation around it
-becomes one space, and ``{{ space }}`` is one space that folding keeps (the white space before it joins it), for
-the end of a paragraph that text follows on its line. The same folding is the filter ``fold`` (``{% filter fold %}``).
-
-A document template (`render`: the findings' reStructuredText) keeps its lines; a block tag there
-takes no line of its own.
-
-Filters: ``fmt(spec)`` (Python's format spec, e.g. ``"g"``, ``"+.1f"``), ``pct(spec)`` (a fraction
-in %), ``mm(decimals=2)`` (a size in m as "1.23 mm", "n/a" when missing), ``mmv(spec)`` (a size in m
-as a number in mm), ``codes`` (names as ````a``, ``b````), ``fold``.
+"""The report's words: Jinja2 templates (pbmdem/data/report_templates/*.j2) filled from a dict of the
+run's numbers, strictly (docs/validation.md, "Report"). A paragraph template is folded into one
+line (`fold`: every line break with its indentation becomes one space; ``{{ space }}`` is a space
+that folding keeps); a document template (`render`) keeps its lines. Filters: ``fmt(spec)``,
+``pct(spec)`` (a fraction in %), ``mm(decimals=2)`` ("1.23 mm"), ``mmv(spec)`` (a number in mm),
+``codes``, ``fold``.
 """
 
 from __future__ import annotations

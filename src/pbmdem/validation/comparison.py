@@ -1,18 +1,6 @@
-"""The comparison table: PBM-ANN and PBM-constant against the replicated PBM-DEM reference.
-
-One row per validation speed (`results/report/comparison.csv`, contract in docs/validation.md): the
-d50 at the start and the end of the batch of every model (the PBM-DEM figures are the replicates'
-mean, with their spread), the relative error of d50(t) against the replicates' mean (largest over
-the batch and at its end), beside the same error of one replicate against the others' mean
-(`dem_replicate_d50_rel_error_max`, the reference's own spread), the largest distance of PBM-ANN's
-d50(t) outside the PBM-DEM band (`ann_d50_outside_band_max`, a fraction of d50; 0 when always
-inside), the cost of one batch and the speed ratio, how often the surrogate left its training
-domain, and the share of each model's final number of granules merged at the PBM grid's floor
-(breakage fragments smaller than its first pivot). Cost in CPU seconds beside the wall time:
-PBM-DEM, the mean over its loops of the LIGGGHTS processes' CPU time plus the PBM's; PBM-ANN, the
-median of warm in-memory batches with the ensemble mean (`coupling.warm_batch_times`: surrogate plus
-PBM, the surrogate loaded once), as a benchmark measures it; the first batch of the rule's process
-(imports and thread pools included) is kept beside it (`pbm_ann_first_batch_wall_s`).
+"""The comparison table: PBM-ANN and PBM-constant against the replicated PBM-DEM reference, one row
+per validation speed (`results/report/comparison.csv`, contract `pbmdem.tables.COMPARISON`; its
+columns: docs/validation.md, "Comparison").
 """
 
 from __future__ import annotations

@@ -1,9 +1,6 @@
-"""Reading the validation's results of one speed: the PBM-DEM replicates, PBM-ANN (and its
-ensemble members), PBM-constant, with errors that name the file.
-
-Layout (`pbmdem.layout`, docs/architecture.md, "Validation"): `results/validation/rpm<rpm>/pbm_dem/rep<k>/`,
-`.../pbm_ann/` (with `members.csv`), `.../pbm_constant/`; each run folder holds summary.csv,
-bins.csv, final_bins.csv, timing.json and, for the loops, intervals.csv.
+"""Reading the validation's results of one speed, PBM-DEM replicates, PBM-ANN (and its ensemble
+members) and PBM-constant, with errors that name the file (layout: docs/architecture.md,
+"Validation results").
 """
 
 from __future__ import annotations

@@ -11,10 +11,11 @@ from conftest import config_of
 from pbmdem.config import ConfigError, Specification
 from pbmdem.config.design import pbm_value, with_pbm_values
 from pbmdem.design.batches import MIN_POOLED_CASES, Case, run_cases
-from pbmdem.design.calibration import Model, calibrate, profile_widths
-from pbmdem.design.measured import STATISTICS, check_measured, measured_from_series, read_measured, with_noise
+from pbmdem.design.calibration import Model, calibrate, check_measured, profile_widths, read_measured
+from pbmdem.design.proof import measured_from_series, with_noise
 from pbmdem.design.space import LIQUID_KEY, design_space, specification_status
 from pbmdem.readers import InputFileError
+from pbmdem.tables import STATISTICS
 
 THIRD = "pbm.process.wet_massing_time"
 

@@ -49,9 +49,8 @@ class Case:
 
 @dataclass
 class Outcome:
-    """A finished (or failed) case: d10/d50/d90 (m) at the recorded times, the coupling intervals
-    in which the surrogate was evaluated outside its training domain, and the error of a failed
-    batch (e.g. granules that outgrew the PBM grid)."""
+    """A finished (or failed) case: d10/d50/d90 (m) at the recorded times, its out-of-domain count and
+    the error of a failed batch (e.g. granules that outgrew the PBM grid)."""
 
     case: Case
     times: np.ndarray = field(default_factory=lambda: np.empty(0))

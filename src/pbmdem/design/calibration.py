@@ -1,7 +1,8 @@
 """Parameter estimation: the pbm settings of `calibration.parameters` that make PBM-ANN reproduce
 measured d10/d50/d90, by least squares in ln theta, with profile-likelihood and surrogate parts of
 each interval and the parameters' correlation (the method and why: docs/calibration.md, "The fit"
-and "Intervals, correlation and identifiability").
+and "Intervals, correlation and identifiability"); the measured table it fits (`read_measured`,
+docs/calibration.md "The measured table").
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -17,13 +19,48 @@ from scipy.stats import norm, qmc
 
 from pbmdem.config import Calibration, CoupledLoop
 from pbmdem.config.design import pbm_value
+from pbmdem.readers import InputFileError, first_index
 from pbmdem.surrogate import load_surrogate
+from pbmdem.tables import MEASURED, STATISTICS
 
 from .batches import Case, run_cases
-from .measured import STATISTICS
 from .profile import forward_jacobian, profile_widths
 
 log = logging.getLogger(__name__)
+
+
+def check_measured(frame: pd.DataFrame, source, end_time: float) -> pd.DataFrame:
+    """`frame` (read against `MEASURED`) if its rows make one time series per speed within the batch
+    with d10 <= d50 <= d90; InputFileError naming `source`, row and column otherwise."""
+    if frame.empty:
+        raise InputFileError(f"measured size table {source}: no data rows; at least one (rpm, time) is required")
+    times = frame.time.to_numpy(float)
+    if (row := first_index(times > end_time * (1 + 1e-12))) is not None:
+        raise InputFileError(
+            f"measured size table {source}: row {row + 1}, column 'time' = {times[row]:g}: allowed 0 .. "
+            f"{end_time:g} s (the batch of pbm.process)"
+        )
+    last: dict[float, float] = {}
+    for row, (rpm, t) in enumerate(zip(frame.rpm.to_numpy(float), times, strict=True)):
+        if rpm in last and not t > last[rpm]:
+            raise InputFileError(
+                f"measured size table {source}: row {row + 1}, column 'time' = {t:g}: the times of rpm {rpm:g} "
+                f"must be strictly ascending (previous: {last[rpm]:g})"
+            )
+        last[rpm] = t
+    for small, large in (("d10", "d50"), ("d50", "d90")):
+        if (row := first_index(frame[small].to_numpy(float) > frame[large].to_numpy(float))) is not None:
+            raise InputFileError(
+                f"measured size table {source}: row {row + 1}, column {large!r} = {frame[large].iloc[row]:g}: "
+                f"must be at least {small} = {frame[small].iloc[row]:g} (sizes of a cumulative distribution)"
+            )
+    return frame
+
+
+def read_measured(path: str | Path, end_time: float) -> pd.DataFrame:
+    """The measured size table at `path`, checked (`check_measured`)."""
+    return check_measured(MEASURED.read(path), path, end_time)
+
 
 #: residual of a measured point whose batch failed (the search is pushed back from there)
 FAILED_RESIDUAL = 1e3
@@ -213,7 +250,7 @@ def calibrate(model: Model, data: pd.DataFrame, settings: Calibration, start: di
         if len(members) > 1:
             cov_surr = np.atleast_2d(np.cov(members, rowvar=False, ddof=1))
     corr = correlation(cov_meas + cov_surr)
-    z = _z(settings.confidence)
+    z = float(norm.ppf(0.5 + settings.confidence / 2))
     span = math.log(settings.max_factor)
     sd_curvature = np.sqrt(np.clip(np.diag(cov_meas), 0.0, None))
     widths = profile_widths(residuals, x, x0 - span, x0 + span, z, n_jobs=model.n_jobs)
@@ -265,10 +302,6 @@ def calibrate(model: Model, data: pd.DataFrame, settings: Calibration, start: di
     return Estimate(
         keys, table, pd.DataFrame(corr, index=keys, columns=keys), pairs, _residual_table(residuals, x), info
     )
-
-
-def _z(confidence: float) -> float:
-    return float(norm.ppf(0.5 + confidence / 2))
 
 
 def _residual_table(residuals: Residuals, x: np.ndarray) -> pd.DataFrame:

@@ -99,9 +99,8 @@ def write_sensitivity(loop, model_path, settings, table_path, figure_path, info_
 
 
 def write_calibration_check(loop, model_path, validation_dir, rpms, replicates, settings, n_jobs, out: dict):
-    """Rule calibration_check: the recovery table (true against estimated, with intervals) of both
-    cases, their fit figure, PBM-DEM's measured table (the example data of docs/calibration.md) and
-    each case's calibration summary (JSON). `out`: table, figure, measured, summary."""
+    """Rule calibration_check: the recovery table, the fit figure, PBM-DEM's measured table and each
+    case's calibration summary (JSON). `out`: table, figure, measured, summary."""
     table, estimates, data = calibration_check(loop, model_path, validation_dir, rpms, replicates, settings, n_jobs)
     write_csv(out["table"], table)
     write_csv(out["measured"], data["pbm_dem"])

@@ -14,13 +14,44 @@ import pandas as pd
 from pbmdem.config import Calibration, CoupledLoop
 from pbmdem.config.design import pbm_value
 from pbmdem.coupling.methods import calibrated_frequency
+from pbmdem.tables import STATISTICS
 from pbmdem.validation.results import load_run, run_folder
 
 from .batches import Case, run_cases
 from .calibration import Estimate, Model, calibrate
-from .measured import STATISTICS, measured_from_series, with_noise
 
 FREQUENCY_KEY = "pbm.aggregation.constant_frequency"
+
+
+def measured_from_series(series: dict[float, list[pd.DataFrame]], times) -> pd.DataFrame:
+    """A measured table from model output: per speed the summaries of its replicates (time, d10,
+    d50, d90), read at `times`; the value is the replicates' mean and the sd its standard error
+    (sd over replicates / sqrt(n)); one replicate: sd 0 (the caller adds its own error)."""
+    rows = []
+    for rpm, summaries in sorted(series.items()):
+        at = np.stack([np.column_stack([np.interp(times, s.time, s[k]) for k in STATISTICS]) for s in summaries])
+        mean = at.mean(axis=0)
+        n = at.shape[0]
+        se = at.std(axis=0, ddof=1) / np.sqrt(n) if n > 1 else np.zeros_like(mean)
+        for j, t in enumerate(times):
+            row = {"rpm": float(rpm), "time": float(t)}
+            row.update({k: float(mean[j, i]) for i, k in enumerate(STATISTICS)})
+            row.update({f"{k}_sd": float(se[j, i]) for i, k in enumerate(STATISTICS)})
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def with_noise(table: pd.DataFrame, relative_sd: float, seed: int) -> pd.DataFrame:
+    """`table` with Gaussian noise of sd `relative_sd` x value added to d10/d50/d90 (seeded), the
+    sd columns set to that sd, and each row's sizes sorted so that d10 <= d50 <= d90 still holds."""
+    rng = np.random.default_rng(seed)
+    out = table.copy()
+    values = out[list(STATISTICS)].to_numpy(float)
+    noisy = values * (1.0 + relative_sd * rng.standard_normal(values.shape))
+    out[list(STATISTICS)] = np.sort(noisy, axis=1)
+    for i, k in enumerate(STATISTICS):
+        out[f"{k}_sd"] = relative_sd * values[:, i]
+    return out
 
 
 def proof_times(loop: CoupledLoop, step: float) -> np.ndarray:

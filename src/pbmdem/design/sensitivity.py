@@ -184,17 +184,10 @@ def sensitivity(loop: CoupledLoop, model_path: str | Path, settings: Sensitivity
         "failed_samples": failed,
     }
     log.info(
-        "sensitivity: %d PBM-ANN batches (%d samples x (mean + %d members), N = %d, %d factors) in %.1f s on %d "
-        "process(es): %.1f ms per batch, %.0f batches per minute",
-        info["batches"],
-        n,
-        n_members,
-        settings.base_samples,
-        len(factors),
-        wall,
-        settings.n_jobs,
-        1e3 * info["wall_time_per_batch_s"],
-        info["batches_per_minute"],
+        "sensitivity: %(batches)d PBM-ANN batches (%(samples)d samples x (mean + %(members)d members), N = "
+        "%(base_samples)d, %(k)d factors) in %(wall_time_s).1f s on %(n_jobs)d process(es): %(ms).1f ms per batch, "
+        "%(batches_per_minute).0f batches per minute",
+        {**info, "members": n_members, "k": len(factors), "ms": 1e3 * info["wall_time_per_batch_s"]},
     )
     if any(out_of_domain.values()):
         log.warning(

@@ -37,9 +37,8 @@ def grid_cases(design: DesignSpace, n_members: int) -> list[Case]:
 
 
 def point_table(outcomes: pd.DataFrame, third_key: str) -> pd.DataFrame:
-    """One row per grid point from the table of its cases (`batches.outcomes_table`): the mean's
-    final d10/d50/d90, the members' min and max of each, the out-of-domain intervals (the most of
-    any case of the point) and the failed cases."""
+    """One row per grid point from the table of its cases (`batches.outcomes_table`), the members'
+    range of each size, the most out-of-domain intervals of any of its cases and its failed cases."""
     keys = ["rpm", LIQUID_KEY, third_key]
     rows = []
     for (rpm, rate, third), group in outcomes.groupby(keys, sort=False):
@@ -98,15 +97,9 @@ def design_space(loop: CoupledLoop, model_path: str | Path, design: DesignSpace)
         **counts,
     }
     log.info(
-        "design space: %d PBM-ANN batches (%d points x (mean + %d members)) in %.1f s on %d process(es), "
-        "%.0f batches per minute: %s",
-        len(cases),
-        len(table),
-        n_members,
-        wall,
-        design.n_jobs,
-        per_minute,
-        ", ".join(f"{v} {k}" for k, v in counts.items()),
+        "design space: %(batches)d PBM-ANN batches (%(points)d points x (mean + %(members)d members)) in "
+        "%(wall_time_s).1f s on %(n_jobs)d process(es), %(batches_per_minute).0f batches per minute: %(statuses)s",
+        {**info, "members": n_members, "statuses": ", ".join(f"{v} {k}" for k, v in counts.items())},
     )
     if counts["out_of_domain"]:
         log.warning(
@@ -156,9 +149,7 @@ def _spec_text(spec: Specification) -> str:
 
 
 def plot_design_space(table: pd.DataFrame, third_key: str, spec: Specification, path: str | Path) -> None:
-    """The contour maps of `table` (`design_space`) as a PNG at `path`: one column per value of the
-    third factor; the top row d50 with each point's status, the bottom row d90 with the width of
-    the members' d50 band."""
+    """The contour maps of `table` (`design_space`) as a PNG at `path` (docs/design.md, "Outputs")."""
     plt = pyplot()
 
     thirds = sorted(table[third_key].unique())

@@ -51,11 +51,9 @@ def breakage_figure(study: pd.DataFrame):
 
 
 def peak_speed(s: pd.DataFrame) -> float | None:
-    """The speed of the largest final d50 when it lies inside the speed range and the granules get
-    smaller above it, else None. Smaller means below the surrogate's uncertainty at the peak: the
-    fastest speed's d50 under the smallest member d50 at the peak (`d50_member_min`, where the
-    study has it), so that a flat curve's wobble within the members is not called a peak. Speeds
-    whose ensemble mean failed (d50 NaN) are left out, not taken as the peak."""
+    """The speed of the largest final d50 (of the speeds whose mean finished) when it lies inside the
+    speed range and the fastest speed's d50 falls below the smallest member's d50 there (where the
+    study has members: a flat curve's wobble within them is no peak), else None."""
     s = s[np.isfinite(s.d50.to_numpy(float))].sort_values("rpm")
     if s.empty:
         return None

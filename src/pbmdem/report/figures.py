@@ -57,9 +57,8 @@ def _column(frame: pd.DataFrame, name: str) -> np.ndarray:
 
 
 def _models(ax, process, dem, n: int, ann, constant, members, dem_band: bool = True) -> None:
-    """One panel of a speed: the liquid addition, the PBM-DEM band (`dem`: time, min, max, mean of
-    its `n` replicates) and mean, the PBM-ANN members' band (`members`: time, min, max) and mean
-    prediction (`ann`: time, value), PBM-constant (time, value); None: not drawn."""
+    """One panel of a speed: the liquid addition, PBM-DEM's band and mean (`dem`: time, min, max, mean
+    of `n` replicates), PBM-ANN's members' band (time, min, max; None: none) and mean, PBM-constant."""
     _spray(ax, process)
     if dem_band:
         ax.fill_between(*dem[:3], **BAND["PBM-DEM"], label=f"PBM-DEM band (min-max of {n} replicates)")
@@ -125,9 +124,8 @@ def cumulative_undersize(diameter: np.ndarray, density_lnd: np.ndarray) -> tuple
 
 
 def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str):
-    """Cumulative mass undersize (%) against diameter (mm) at `snapshot_times`, one panel per model.
-    `bins`: panel title -> that run's bins.csv (`BINS_COLUMNS`). Times whose distribution has not
-    changed yet are drawn once, their label naming every such time."""
+    """Cumulative mass undersize (%) against diameter (mm) at `snapshot_times`, one panel per model
+    (`bins`: title -> its bins.csv); times with an unchanged distribution share one curve."""
     plt = pyplot()
     fig, axes = plt.subplots(1, len(bins), figsize=(4.4 * len(bins), 4.3), sharex=True, sharey=True, squeeze=False)
     first = next(iter(bins.values()))

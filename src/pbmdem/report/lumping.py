@@ -82,9 +82,8 @@ def lumping_table(cases: pd.DataFrame) -> pd.DataFrame:
 
 
 def lumping_figure(cases: pd.DataFrame, liquid: pd.DataFrame):
-    """Final d50 against impeller speed, binder rate and feed in both models, and the liquid
-    content per size class at the end of the default batch (1-D class mean; 2-D mean, spread and
-    range over the liquid classes)."""
+    """Final sizes against impeller speed, binder rate and feed in both models, and the liquid content
+    per size class at the end of the default batch."""
     plt = pyplot()
     fig, axes = plt.subplots(2, 2, figsize=(10.0, 7.6))
     panels = (

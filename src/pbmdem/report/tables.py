@@ -24,8 +24,7 @@ def _joined(values, spec: str) -> str:
 
 
 def liquid_solid_ratio(pbm: Pbm, bed_solid_volume: float) -> float:
-    """Liquid/solid volume ratio L/S at the end of the liquid addition: the initial liquid content
-    plus the binder sprayed (rate x spray time) over the bed's solid volume (docs/pbm.md)."""
+    """Liquid/solid volume ratio L/S at the end of the liquid addition (docs/validation.md, "Report")."""
     sprayed = pbm.liquid_addition.rate * pbm.process.liquid_addition_time
     return pbm.initial.liquid_content + sprayed / bed_solid_volume
 
@@ -137,8 +136,7 @@ def process_settings(
 
 
 def speeds(granulator: Granulator, validation_rpm, grid_rpm) -> pd.DataFrame:
-    """Every impeller speed of the DEM training grid and of the validation: tip speed and Froude
-    number (`Granulator.tip_speed`, `.froude_number`)."""
+    """Every impeller speed of the DEM training grid and of the validation: tip speed and Froude number."""
     grid = {float(r) for r in grid_rpm}
     validation = {float(r) for r in validation_rpm}
     rows = []

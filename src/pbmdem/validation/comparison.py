@@ -40,8 +40,7 @@ def bands_of(speed: SpeedResults) -> pd.DataFrame:
 
 
 def domain_counts(speed: SpeedResults) -> dict:
-    """PBM-ANN intervals with out-of-domain warnings (of all its intervals) and the constant
-    kernel's calibration warnings."""
+    """PBM-ANN's intervals with out-of-domain warnings and the constant kernel's calibration warnings."""
     ann = speed.ann.intervals
     counts = ann["out_of_domain_count"].fillna(0) if ann is not None and "out_of_domain_count" in ann else None
     return {
@@ -53,14 +52,12 @@ def domain_counts(speed: SpeedResults) -> dict:
 
 
 def merged_fraction(timing: dict) -> float:
-    """The share of a run's final number of granules merged at the grid floor (its timing.json's
-    ``grid_floor``, pbmdem.pbm.results.grid_floor); NaN for a record without it."""
+    """The share of a run's final number of granules merged at the grid floor; NaN when not recorded."""
     return float(timing.get("grid_floor", {}).get("merged_fraction", float("nan")))
 
 
 def floor_columns(speed: SpeedResults) -> dict:
-    """The grid floor of every model at this speed: the largest share over the PBM-DEM replicates,
-    PBM-ANN's and PBM-constant's."""
+    """The grid floor of every model at this speed (of PBM-DEM, the largest over the replicates)."""
     dem = [merged_fraction(r.timing) for r in speed.dem]
     return {
         "dem_merged_fraction_max": max(dem) if dem and not np.isnan(dem).any() else float("nan"),
@@ -76,7 +73,16 @@ def comparison_row(speed: SpeedResults, in_grid: bool) -> dict:
     ann_max, ann_end = relative_error(mean, ann)
     con_max, con_end = relative_error(mean, con)
     ends = np.array([r.summary.d50.iloc[-1] for r in speed.dem])
-    tails = {q: np.array([r.summary[q].iloc[-1] for r in speed.dem]) for q in ("d10", "d90")}
+    tails = {}  # the tails: breakage moves d10 first, aggregation d90
+    for q in ("d10", "d90"):
+        values = np.array([r.summary[q].iloc[-1] for r in speed.dem])
+        tails |= {
+            f"{q}_end_dem_mm": 1e3 * values.mean(),
+            f"{q}_end_dem_min_mm": 1e3 * values.min(),
+            f"{q}_end_dem_max_mm": 1e3 * values.max(),
+            f"{q}_end_ann_mm": 1e3 * ann[q].iloc[-1],
+            f"ann_{q}_outside_band_max": largest_outside(band, "ann", q),
+        }
     dem_wall = np.array([r.timing["total_wall_time_s"] for r in speed.dem])
     dem_liggghts = np.array([r.timing["provider_wall_time_s"] for r in speed.dem])
     nan = float("nan")
@@ -96,18 +102,7 @@ def comparison_row(speed: SpeedResults, in_grid: bool) -> dict:
         "d50_end_dem_max_mm": 1e3 * ends.max(),
         "d50_end_ann_mm": 1e3 * ann.d50.iloc[-1],
         "d50_end_constant_mm": 1e3 * con.d50.iloc[-1],
-        # the tails: breakage moves d10 first, aggregation d90
-        **{
-            key: value
-            for q, values in tails.items()
-            for key, value in (
-                (f"{q}_end_dem_mm", 1e3 * values.mean()),
-                (f"{q}_end_dem_min_mm", 1e3 * values.min()),
-                (f"{q}_end_dem_max_mm", 1e3 * values.max()),
-                (f"{q}_end_ann_mm", 1e3 * ann[q].iloc[-1]),
-                (f"ann_{q}_outside_band_max", largest_outside(band, "ann", q)),
-            )
-        },
+        **tails,
         "ann_d50_rel_error_max": ann_max,
         "ann_d50_rel_error_end": ann_end,
         "ann_d50_outside_band_max": largest_outside(band, "ann", "d50"),

@@ -82,8 +82,7 @@ def surprises(study: pd.DataFrame) -> pd.DataFrame:
 
 
 def most_surprising(study: pd.DataFrame) -> pd.Series | None:
-    """The feed study's most surprising in-domain case by the rule (module docstring): a row of
-    `surprises`, or None when no case with two parents is in domain."""
+    """The feed study's most surprising in-domain case by the rule (a row of `surprises`), or None."""
     s = surprises(study)
     s = s[s.in_domain.astype(bool)]
     if s.empty:

@@ -25,8 +25,7 @@ MAE_TARGET = 0.045
 
 @dataclass(frozen=True)
 class LoopSample:
-    """One representative sample of a PBM-DEM loop: speed (rpm), class diameters (m), particle
-    counts, the DEM's encounter frequency per pair of every class pair (1/s, upper pairs)."""
+    """One representative sample of a PBM-DEM loop and the DEM's frequency of its class pairs (upper pairs)."""
 
     rpm: float
     diameters: np.ndarray

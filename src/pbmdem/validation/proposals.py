@@ -195,7 +195,7 @@ def similar(a: tuple, b: tuple) -> bool:
 
 def fragment(grid: OperatingGrid, proposals: pd.DataFrame) -> dict:
     """The config fragment of the proposals: the new size distributions and the grid's complete
-    list of extra points with the proposed ones added (the full grid itself is left as it is)."""
+    list of extra points with the proposed ones added."""
     if proposals.empty:
         return {}
     dists = {

@@ -22,8 +22,7 @@ def run_folder(validation_dir: str | Path, rpm: str, method: str, replicate: int
 
 @dataclass
 class Run:
-    """One run of a validation model: its folder, PBM time series, final size distribution, timing
-    and (for the coupled loops) the record of its intervals."""
+    """One run of a validation model (the files it reads: docs/architecture.md, "Validation results")."""
 
     folder: Path
     summary: pd.DataFrame

@@ -370,7 +370,7 @@ def test_design_space_command(tiny_surrogate, root, tmp_path, capsys):
 def test_maps_are_drawn_for_a_grid_of_one_speed_and_for_failed_points(tmp_path):
     """Contours need two values on each axis: a grid of one speed (a DEM grid of one speed) gets
     the status markers only; NaN sizes of failed points are left blank."""
-    from pbmdem.design.maps import plot_design_space
+    from pbmdem.design.space import plot_design_space
 
     spec = Specification(d50_min=0.008, d50_max=0.010, d90_max=0.014)
     rows = []

@@ -250,7 +250,7 @@ def calibrate(model: Model, data: pd.DataFrame, settings: Calibration, start: di
         if len(members) > 1:
             cov_surr = np.atleast_2d(np.cov(members, rowvar=False, ddof=1))
     corr = correlation(cov_meas + cov_surr)
-    z = float(norm.ppf(0.5 + settings.confidence / 2))
+    z = _z(settings.confidence)
     span = math.log(settings.max_factor)
     sd_curvature = np.sqrt(np.clip(np.diag(cov_meas), 0.0, None))
     widths = profile_widths(residuals, x, x0 - span, x0 + span, z, n_jobs=model.n_jobs)
@@ -302,6 +302,10 @@ def calibrate(model: Model, data: pd.DataFrame, settings: Calibration, start: di
     return Estimate(
         keys, table, pd.DataFrame(corr, index=keys, columns=keys), pairs, _residual_table(residuals, x), info
     )
+
+
+def _z(confidence: float) -> float:
+    return float(norm.ppf(0.5 + confidence / 2))
 
 
 def _residual_table(residuals: Residuals, x: np.ndarray) -> pd.DataFrame:

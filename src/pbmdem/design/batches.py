@@ -88,15 +88,11 @@ def run_case(loop: CoupledLoop, model_path: str | Path | None, case: Case) -> Ou
         if case.kernel == "constant":
             result = run_batch(case_loop.batch, None, case.rpm)
             totals: dict = {}
-        elif case.kernel == "ann":
-            if model_path is None:
-                raise ValueError("a PBM-ANN case needs the surrogate's path")
+        else:
             mean, members = _surrogate(str(model_path), Path(model_path).stat().st_mtime)
             model = mean if case.member is None else members[case.member]
             outcome = pbm_ann(case_loop, model, case.rpm, None, log_each=False)
             result, totals = outcome.result, outcome.totals
-        else:
-            raise ValueError(f"case kernel {case.kernel!r}: allowed 'ann', 'constant'")
     except (PBMError, CouplingError, ValueError) as exc:
         # ValueError: a bed the granules outgrew so far that no representative DEM sample is left
         # (pbmdem.coupling.sample); the settings were checked before (case.loop)

@@ -45,11 +45,8 @@ def _width_text(lo, hi) -> str:
     return f"up to {width:.2g} mm wide" if np.isfinite(width) else "width n/a"
 
 
-SPRAY = dict(color="tab:cyan", alpha=0.10, lw=0)
-
-
 def _spray(ax, process) -> None:
-    ax.axvspan(process.spray_start, process.spray_end, **SPRAY, label="liquid addition")
+    ax.axvspan(process.spray_start, process.spray_end, color="tab:cyan", alpha=0.10, lw=0, label="liquid addition")
 
 
 def _column(frame: pd.DataFrame, name: str) -> np.ndarray:

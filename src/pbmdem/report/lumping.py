@@ -1,8 +1,6 @@
 """What lumping leaves out: the lumped (1-D) PBM beside the size x liquid (2-D) one under PBM-ANN
-(results/validation/lumping.csv, lumping_liquid.csv and lumping.json of
-pbmdem.coupling.lumping): one figure, one display table and the words of the findings, with the
-answers the findings give (the speed above which the granules get smaller, the order of the feeds)
-computed in both models by the findings' own rules."""
+(pbmdem.coupling.lumping's tables): one figure, one display table and the words of the findings,
+the findings' answers computed in both models by the findings' own rules."""
 
 from __future__ import annotations
 

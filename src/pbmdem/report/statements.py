@@ -147,10 +147,8 @@ def out_of_domain(speed) -> pd.DataFrame:
             "interval": "initial sample",
             "start (s)": "0",
             "end (s)": "0",
-            "sample classes (mm)": _classes(first.get("class_diameters")) if len(first) else "n/a",
-            "sample particles (count)": number(first.get("sample_particles", float("nan")), ".0f")
-            if len(first)
-            else "n/a",
+            "sample classes (mm)": _classes(first.get("class_diameters")),
+            "sample particles (count)": number(first.get("sample_particles", float("nan")), ".0f"),
             "outside the training domain": ("yes" if count > 0 else "no") if known else "not recorded",
             "warnings (count)": number(count, ".0f") if known else "not recorded",
             "what lay outside": _messages(timing.get("out_of_domain")),

@@ -4,8 +4,6 @@ names), beside its held-out accuracy (docs/validation.md, "Report").
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-
 import numpy as np
 import pandas as pd
 
@@ -15,21 +13,10 @@ from pbmdem.surrogate.plots import MODEL_LABELS
 from . import words
 
 
-@dataclass(frozen=True)
-class TrainingSet:
+def training_set(table: pd.DataFrame, source: str = "", point_ids=None) -> dict:
     """The DEM runs behind a surrogate (every replicate counted), its operating points, their distinct
-    replicate counts, speeds (rpm) and feeds."""
-
-    runs: int
-    points: int
-    replicates: tuple[int, ...]
-    speeds: tuple[float, ...]
-    feeds: tuple[str, ...]
-
-
-def training_set(table: pd.DataFrame, source: str = "", point_ids=None) -> TrainingSet:
-    """The training set of a grid collision table, restricted to `point_ids` (the surrogate's metadata)
-    when given; a point the metadata names but the table lacks is an InputFileError naming `source`."""
+    replicate counts, speeds (rpm) and feeds, from a grid collision table restricted to `point_ids` (the
+    surrogate's metadata) when given; a point the metadata names but the table lacks is an error."""
     points = table.groupby("point_id", sort=True).agg(
         rpm=("rpm", "first"), distribution=("distribution", "first"), n_replicates=("n_replicates", "max")
     )
@@ -42,16 +29,16 @@ def training_set(table: pd.DataFrame, source: str = "", point_ids=None) -> Train
             )
         points = points[points.index.astype(str).isin(set(map(str, point_ids)))]
     replicates = points["n_replicates"].astype(int)
-    return TrainingSet(
-        runs=int(replicates.sum()),
-        points=len(points),
-        replicates=tuple(sorted(set(replicates.tolist()))),
-        speeds=tuple(sorted(set(points["rpm"].astype(float).tolist()))),
-        feeds=tuple(sorted(set(points["distribution"].astype(str).tolist()))),
-    )
+    return {
+        "runs": int(replicates.sum()),
+        "points": len(points),
+        "replicates": tuple(sorted(set(replicates.tolist()))),
+        "speeds": tuple(sorted(set(points["rpm"].astype(float).tolist()))),
+        "feeds": tuple(sorted(set(points["distribution"].astype(str).tolist()))),
+    }
 
 
-def training_words(training: TrainingSet, meta: dict, table: str = "results/dem/collisions.csv") -> str:
+def training_words(training: dict, meta: dict, table: str = "results/dem/collisions.csv") -> str:
     """The training set and the held-out accuracy of the kernel source in one paragraph (rst)."""
     scores = meta.get("cv_scores") or {}
     family = scores.get("selected") or meta.get("family")
@@ -63,7 +50,7 @@ def training_words(training: TrainingSet, meta: dict, table: str = "results/dem/
     )
     return words.paragraph(
         "training",
-        **asdict(training),
+        **training,
         table=table,
         family=MODEL_LABELS.get(str(family), str(family)),
         scored=bool(summary),

@@ -8,11 +8,14 @@ that folding keeps); a document template (`render`) keeps its lines. Filters: ``
 
 from __future__ import annotations
 
+import html
 import re
 
 import jinja2
 
-from .display import MM, PERCENT, missing, write_table
+from pbmdem.atomic import write_csv, write_text
+
+from .display import MM, PERCENT, STYLE, missing, table_html
 
 #: a space that `fold` keeps (a private-use character, not whitespace, stands in for it while folding)
 _KEPT = "\ue000"
@@ -72,10 +75,17 @@ def macro(template: str, name: str):
     return lambda *args, **kwargs: fold(found(*args, **kwargs))
 
 
-def write_titled_table(csv, html, frame, name: str, numbers: dict | None = None, caption: str | None = None, **kwargs):
-    """A display table (`display.write_table`) with its title and caption from the template
-    tables.j2 (`numbers` fill them; `caption`: a caption written elsewhere)."""
+def write_titled_table(csv, html_path, frame, name: str, numbers: dict | None = None, caption=None, keys: int = 1):
+    """A display table as CSV (the values) and as an HTML page (what Snakemake's report shows), with
+    its title and caption from the template tables.j2 (`numbers` fill them; `caption`: written elsewhere)."""
     numbers = numbers or {}
     if caption is None:
         caption = macro("tables", "caption")(name, numbers)
-    write_table(csv, html, frame, macro("tables", "title")(name, numbers), caption, **kwargs)
+    title = macro("tables", "title")(name, numbers)
+    write_csv(csv, frame)
+    body = f"<h2>{html.escape(title)}</h2>" + (f"<p>{html.escape(caption)}</p>" if caption else "")
+    write_text(
+        html_path,
+        f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+        f"<style>{STYLE}</style></head><body>{body}{table_html(frame, keys)}</body></html>\n",
+    )

@@ -143,7 +143,7 @@ def _per_study(cases: pd.DataFrame) -> list[tuple]:
     largest (None for the default batch)."""
     worst = largest_difference(cases)
     parts = []
-    for study in ("default", "speed", "binder", "feed"):
+    for study in STUDY_NAMES:
         mask = cases.study == study
         if not mask.any():
             continue
@@ -180,7 +180,7 @@ def lumping_words(cases: pd.DataFrame, liquid: pd.DataFrame, info: dict) -> str:
     worst = largest_difference(cases)
     failed = cases[cases.failed.fillna("").astype(str) != ""]
     turn1, turn2 = turn_speeds(cases)
-    studies = [s for s in ("default", "speed", "binder", "feed") if (cases.study == s).any()]
+    studies = [s for s in STUDY_NAMES if (cases.study == s).any()]
     fine = {s: float(worst[cases.study == s].max()) < ADEQUATE for s in studies}
     cpu1, cpu2 = info.get("cpu_time_s_1d"), info.get("cpu_time_s_2d")
     return words.paragraph(

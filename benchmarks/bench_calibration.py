@@ -37,8 +37,8 @@ def coverage_rows(config: str, model_path: str, seeds: int) -> pd.DataFrame:
     from pbmdem.config import load_config
     from pbmdem.config.design import pbm_value
     from pbmdem.design.calibration import Model, Residuals, _z, calibrate
-    from pbmdem.design.measured import STATISTICS, with_noise
-    from pbmdem.design.proof import constant_measured, proof_times
+    from pbmdem.design.proof import constant_measured, proof_times, with_noise
+    from pbmdem.tables import STATISTICS
 
     cfg = load_config(config)
     loop, settings = cfg.coupled_loop(), cfg.calibration

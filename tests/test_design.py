@@ -11,10 +11,11 @@ from conftest import config_of
 from pbmdem.config import ConfigError, Specification
 from pbmdem.config.design import pbm_value, with_pbm_values
 from pbmdem.design.batches import MIN_POOLED_CASES, Case, run_cases
-from pbmdem.design.calibration import Model, calibrate, profile_widths
-from pbmdem.design.measured import STATISTICS, check_measured, measured_from_series, read_measured, with_noise
+from pbmdem.design.calibration import Model, calibrate, check_measured, profile_widths, read_measured
+from pbmdem.design.proof import measured_from_series, with_noise
 from pbmdem.design.space import LIQUID_KEY, design_space, specification_status
 from pbmdem.readers import InputFileError
+from pbmdem.tables import STATISTICS
 
 THIRD = "pbm.process.wet_massing_time"
 
@@ -369,7 +370,7 @@ def test_design_space_command(tiny_surrogate, root, tmp_path, capsys):
 def test_maps_are_drawn_for_a_grid_of_one_speed_and_for_failed_points(tmp_path):
     """Contours need two values on each axis: a grid of one speed (a DEM grid of one speed) gets
     the status markers only; NaN sizes of failed points are left blank."""
-    from pbmdem.design.maps import plot_design_space
+    from pbmdem.design.space import plot_design_space
 
     spec = Specification(d50_min=0.008, d50_max=0.010, d90_max=0.014)
     rows = []

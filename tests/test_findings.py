@@ -142,7 +142,7 @@ def test_the_report_states_the_surrogates_training_set_beside_its_accuracy(tmp_p
         )
     grid = GRID_PAIRS.read(csv, need=("point_id", "rpm", "distribution", "n_replicates"))
     training = training_set(grid, str(csv), meta["training_point_ids"])
-    assert (training.runs, training.points, training.replicates) == (18, 6, (3,))
+    assert (training["runs"], training["points"], training["replicates"]) == (18, 6, (3,))
     words = training_words(training, meta, "results/dem/collisions.csv")
     assert words.startswith(
         "The surrogate was trained on 18 DEM runs: 6 operating points (impeller speeds 300, 600 and 900 rpm; "

@@ -1,19 +1,7 @@
-"""Many short PBM batches at once: the engine of the design space and of the calibration.
-
-A `Case` is one batch: impeller speed, the pbm settings it changes (config key -> value), and
-its collision-frequency source: the surrogate's ensemble mean or one member (PBM-ANN, the one
-definition in `pbmdem.coupling.methods.pbm_ann`, run in memory), or the constant kernel of
-`pbm.aggregation` (PBM-constant). `run_cases` runs a list of cases, in order, over `n_jobs`
-processes forked from the caller (which has loaded the surrogate once) that run their share of
-the cases one after the other. A case's result does not depend on the process that ran it or on `n_jobs` (every batch is
-deterministic), so the same cases give the same table on any machine.
-
-Where the time goes (benchmarks/bench_design_space.py): a PBM-ANN batch of the default
-configuration (four coupling intervals, breakage on, ~15 ms) spends about two thirds of its time
-integrating the PBM (most of it in the compiled step loop) and a fifth in the surrogate's three
-predictions; loading the surrogate (~0.1 s) and writing the loop's files (~0.05 s) would cost more
-than the batch, so the cases run in memory with the surrogate loaded once per process, and a
-process keeps the PBM model of the settings it ran last (``coupling.loop``).
+"""Many short PBM batches at once, the engine of the design space and of the calibration: a `Case`
+is one batch (speed, the pbm settings it changes, its frequency source), `run_cases` runs them
+over forked processes (docs/design.md, "Many batches at once"; where the time goes:
+benchmarks/bench_design_space.py).
 """
 
 from __future__ import annotations
@@ -61,9 +49,8 @@ class Case:
 
 @dataclass
 class Outcome:
-    """A finished (or failed) case: d10/d50/d90 (m) at the recorded times, the coupling intervals
-    in which the surrogate was evaluated outside its training domain, and the error of a failed
-    batch (e.g. granules that outgrew the PBM grid)."""
+    """A finished (or failed) case: d10/d50/d90 (m) at the recorded times, its out-of-domain count and
+    the error of a failed batch (e.g. granules that outgrew the PBM grid)."""
 
     case: Case
     times: np.ndarray = field(default_factory=lambda: np.empty(0))
@@ -101,15 +88,11 @@ def run_case(loop: CoupledLoop, model_path: str | Path | None, case: Case) -> Ou
         if case.kernel == "constant":
             result = run_batch(case_loop.batch, None, case.rpm)
             totals: dict = {}
-        elif case.kernel == "ann":
-            if model_path is None:
-                raise ValueError("a PBM-ANN case needs the surrogate's path")
+        else:
             mean, members = _surrogate(str(model_path), Path(model_path).stat().st_mtime)
             model = mean if case.member is None else members[case.member]
             outcome = pbm_ann(case_loop, model, case.rpm, None, log_each=False)
             result, totals = outcome.result, outcome.totals
-        else:
-            raise ValueError(f"case kernel {case.kernel!r}: allowed 'ann', 'constant'")
     except (PBMError, CouplingError, ValueError) as exc:
         # ValueError: a bed the granules outgrew so far that no representative DEM sample is left
         # (pbmdem.coupling.sample); the settings were checked before (case.loop)
@@ -135,11 +118,8 @@ def _run_chunk(loop: CoupledLoop, model_path, cases: list[Case]) -> list[Outcome
 
 
 def run_cases(loop: CoupledLoop, model_path, cases: list[Case], n_jobs: int = 1) -> list[Outcome]:
-    """The outcomes of `cases` (in their order), over `n_jobs` processes.
-
-    The processes are forked from this one after it has loaded the surrogate (and compiled the
-    PBM), so that they start in milliseconds with both, and they end with the call: nothing is
-    left running."""
+    """The outcomes of `cases` (in their order), over `n_jobs` processes forked from this one after it
+    has loaded the surrogate and compiled the PBM; they end with the call."""
     cases = list(cases)
     if n_jobs <= 1 or len(cases) < MIN_POOLED_CASES:
         return _run_chunk(loop, model_path, cases)

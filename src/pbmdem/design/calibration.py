@@ -1,34 +1,8 @@
 """Parameter estimation: the pbm settings of `calibration.parameters` that make PBM-ANN reproduce
-measured d10/d50/d90 over a batch at one or more impeller speeds (docs/calibration.md).
-
-Least squares (`scipy.optimize.least_squares`, trust region within [start / max_factor, start x
-max_factor]) in the natural logarithms of the parameters, on the residuals (model - measured) / sd
-at every measured (speed, time, statistic); the model is read at the measured times by linear
-interpolation between its recorded times, and sd is the measured sd, at least
-`relative_error_floor` x the measured value. The Jacobian is a forward difference in ln theta, all
-its batches run at once over the processes of `batches.run_cases`.
-
-The uncertainty of ln theta has two parts, added per side of the interval:
-
-* measurement: the profile likelihood. The interval of a parameter holds the values at which the
-  sum of squares, with the other parameters fitted again, rises by less than z^2 (the chi-square
-  quantile of one degree of freedom at the `confidence` level) above its minimum (Venzon &
-  Moolgavkar 1988; Raue et al. 2009). The profile is scanned outwards and the interval is the hull of the
-  set below that rise (`profile_side`). Not the curvature (J^T J)^-1: the PBM's output is not smooth
-  in its parameters (the step success model switches a whole class of granules on when its surface
-  liquid crosses the threshold, and how the binder is shared depends on beta0), so a
-  finite-difference Jacobian that straddles such a jump is far too steep; with it the 95 %
-  intervals of beta0 held the truth in 8 of 20 noise seeds of the calibration check's
-  PBM-constant case (benchmarks/bench_calibration.py; docs/calibration.md gives the profile's).
-  A side whose profile does not reach the rise within the search box is open (0 or infinity);
-* surrogate: the estimate is repeated with each ensemble member of the surrogate in place of the
-  ensemble mean (started from the mean's estimate); the sample covariance of the members'
-  estimates is the part of the uncertainty that comes from the surrogate, the same spread the
-  validation uses as PBM-ANN's band; its z sd is added in quadrature to each side.
-
-The correlation matrix comes from (J^T J)^-1 plus the surrogate's covariance, and a pair whose
-|correlation| exceeds `identifiability_correlation` (or a Jacobian without full rank) is reported
-as not identifiable from these data.
+measured d10/d50/d90, by least squares in ln theta, with profile-likelihood and surrogate parts of
+each interval and the parameters' correlation (the method and why: docs/calibration.md, "The fit"
+and "Intervals, correlation and identifiability"); the measured table it fits (`read_measured`,
+docs/calibration.md "The measured table").
 """
 
 from __future__ import annotations
@@ -36,6 +10,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -44,13 +19,48 @@ from scipy.stats import norm, qmc
 
 from pbmdem.config import Calibration, CoupledLoop
 from pbmdem.config.design import pbm_value
+from pbmdem.readers import InputFileError, first_index
 from pbmdem.surrogate import load_surrogate
+from pbmdem.tables import MEASURED, STATISTICS
 
 from .batches import Case, run_cases
-from .measured import STATISTICS
 from .profile import forward_jacobian, profile_widths
 
 log = logging.getLogger(__name__)
+
+
+def check_measured(frame: pd.DataFrame, source, end_time: float) -> pd.DataFrame:
+    """`frame` (read against `MEASURED`) if its rows make one time series per speed within the batch
+    with d10 <= d50 <= d90; InputFileError naming `source`, row and column otherwise."""
+    if frame.empty:
+        raise InputFileError(f"measured size table {source}: no data rows; at least one (rpm, time) is required")
+    times = frame.time.to_numpy(float)
+    if (row := first_index(times > end_time * (1 + 1e-12))) is not None:
+        raise InputFileError(
+            f"measured size table {source}: row {row + 1}, column 'time' = {times[row]:g}: allowed 0 .. "
+            f"{end_time:g} s (the batch of pbm.process)"
+        )
+    last: dict[float, float] = {}
+    for row, (rpm, t) in enumerate(zip(frame.rpm.to_numpy(float), times, strict=True)):
+        if rpm in last and not t > last[rpm]:
+            raise InputFileError(
+                f"measured size table {source}: row {row + 1}, column 'time' = {t:g}: the times of rpm {rpm:g} "
+                f"must be strictly ascending (previous: {last[rpm]:g})"
+            )
+        last[rpm] = t
+    for small, large in (("d10", "d50"), ("d50", "d90")):
+        if (row := first_index(frame[small].to_numpy(float) > frame[large].to_numpy(float))) is not None:
+            raise InputFileError(
+                f"measured size table {source}: row {row + 1}, column {large!r} = {frame[large].iloc[row]:g}: "
+                f"must be at least {small} = {frame[small].iloc[row]:g} (sizes of a cumulative distribution)"
+            )
+    return frame
+
+
+def read_measured(path: str | Path, end_time: float) -> pd.DataFrame:
+    """The measured size table at `path`, checked (`check_measured`)."""
+    return check_measured(MEASURED.read(path), path, end_time)
+
 
 #: residual of a measured point whose batch failed (the search is pushed back from there)
 FAILED_RESIDUAL = 1e3
@@ -124,10 +134,8 @@ class Residuals:
 
 
 def screen(residuals: Residuals, x0: np.ndarray, lower: np.ndarray, upper: np.ndarray, keep: int) -> list[np.ndarray]:
-    """The `keep` best of `x0` and a scrambled Sobol sample of the search box (seeded: the same
-    points on every machine; 8 per parameter, at least 16), by their sum of squares: the starts
-    of the local fits. The sum of squares of a PBM in its parameters can have more than one
-    valley (a larger beta0 with a higher threshold grows the granules later but faster)."""
+    """The `keep` best of `x0` and a seeded scrambled Sobol sample of the search box (8 points per
+    parameter, at least 16) by their sum of squares: the starts of the local fits."""
     n = 2 ** max(4, math.ceil(math.log2(8 * x0.size)))
     sample = qmc.scale(qmc.Sobol(x0.size, scramble=True, seed=0).random(n), lower, upper)
     points = [x0, *sample]
@@ -197,9 +205,7 @@ def start_values(loop: CoupledLoop, keys, start: dict | None = None) -> np.ndarr
 
 @dataclass
 class Estimate:
-    """A finished calibration: the estimates with their intervals and the parts of their
-    variance, the correlation matrix, the non-identifiable pairs, the residuals at the estimate
-    (and the model curves for the fit figure), and the optimiser's figures."""
+    """A finished calibration (its files: docs/calibration.md)."""
 
     keys: tuple[str, ...]
     table: pd.DataFrame  # one row per parameter

@@ -12,8 +12,7 @@ from pathlib import Path
 from pbmdem.config import load_config
 from pbmdem.config.design import pbm_value
 
-from .calibration import Model, calibrate
-from .measured import read_measured
+from .calibration import Model, calibrate, read_measured
 from .outputs import write_design_space, write_estimate
 
 DESIGN_EXAMPLES = """examples:
@@ -44,9 +43,8 @@ def _model_path(path: Path) -> Path:
 
 
 def _with_logging(command):
-    """`command` with INFO logging on stderr and the coupled loops' per-interval lines held back
-    (hundreds of batches would flood the terminal) for the command's duration only: the level of
-    the `pbmdem.coupling` logger is restored afterwards, so a caller in the same process keeps its logs."""
+    """`command` with INFO logging on stderr and the coupled loops' per-interval lines held back for
+    its duration only (hundreds of batches would flood the terminal)."""
 
     @functools.wraps(command)
     def run(args: argparse.Namespace) -> int:

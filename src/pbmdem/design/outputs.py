@@ -13,10 +13,9 @@ from pbmdem.atomic import write_csv, write_json
 from pbmdem.plotting import pyplot, save_figure
 
 from .calibration import Estimate
-from .maps import plot_design_space
 from .proof import calibration_check
 from .sensitivity import plot_sensitivity, sensitivity
-from .space import design_space
+from .space import design_space, plot_design_space
 
 MARKERS = {"d10": "^", "d50": "o", "d90": "s"}
 COLORS = {"d10": "tab:blue", "d50": "tab:green", "d90": "tab:purple"}
@@ -34,23 +33,15 @@ def estimate_summary(estimate: Estimate) -> dict:
     }
 
 
-def write_estimate(estimate: Estimate, outdir: str | Path, title: str = "calibration") -> dict:
+def write_estimate(estimate: Estimate, outdir: str | Path, title: str = "calibration") -> None:
     """estimates.csv, correlation.csv, residuals.csv, calibration.json and fit.png in `outdir`."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
-    paths = {
-        "estimates": outdir / "estimates.csv",
-        "correlation": outdir / "correlation.csv",
-        "residuals": outdir / "residuals.csv",
-        "summary": outdir / "calibration.json",
-        "fit": outdir / "fit.png",
-    }
-    write_csv(paths["estimates"], estimate.table)
-    write_csv(paths["correlation"], estimate.correlation.rename_axis("parameter").reset_index())
-    write_csv(paths["residuals"], estimate.residuals)
-    write_json(paths["summary"], estimate_summary(estimate))
-    plot_fit({title: estimate.residuals}, paths["fit"])
-    return paths
+    write_csv(outdir / "estimates.csv", estimate.table)
+    write_csv(outdir / "correlation.csv", estimate.correlation.rename_axis("parameter").reset_index())
+    write_csv(outdir / "residuals.csv", estimate.residuals)
+    write_json(outdir / "calibration.json", estimate_summary(estimate))
+    plot_fit({title: estimate.residuals}, outdir / "fit.png")
 
 
 def plot_fit(cases: dict[str, pd.DataFrame], path: str | Path) -> None:
@@ -108,9 +99,8 @@ def write_sensitivity(loop, model_path, settings, table_path, figure_path, info_
 
 
 def write_calibration_check(loop, model_path, validation_dir, rpms, replicates, settings, n_jobs, out: dict):
-    """Rule calibration_check: the recovery table (true against estimated, with intervals) of both
-    cases, their fit figure, PBM-DEM's measured table (the example data of docs/calibration.md) and
-    each case's calibration summary (JSON). `out`: table, figure, measured, summary."""
+    """Rule calibration_check: the recovery table, the fit figure, PBM-DEM's measured table and each
+    case's calibration summary (JSON). `out`: table, figure, measured, summary."""
     table, estimates, data = calibration_check(loop, model_path, validation_dir, rpms, replicates, settings, n_jobs)
     write_csv(out["table"], table)
     write_csv(out["measured"], data["pbm_dem"])

@@ -1,9 +1,6 @@
-"""Profile-likelihood intervals of a least-squares fit in ln theta (`calibration`'s measurement
-part of the uncertainty, whose docstring gives the method and why not the curvature): the
-profile sum of squares with one parameter held and the others fitted again, its scan outwards
-from the estimate, and the widths of every parameter's interval, the sides scanned in parallel.
-`residuals` is a `calibration.Residuals`: called with ln theta, it gives the normalised residuals;
-`_evaluate` gives those of a list of points in one parallel call."""
+"""Profile-likelihood intervals of a least-squares fit in ln theta, the measurement part of a
+calibration's uncertainty (docs/calibration.md, "Intervals, correlation and identifiability").
+`residuals` is a `calibration.Residuals`."""
 
 from __future__ import annotations
 
@@ -80,13 +77,7 @@ PROFILE_GIVE_UP = 30.0
 def profile_side(residuals, x: np.ndarray, index: int, sign: int, lower, upper, rise: float):
     """The ln offset (>= 0) from the estimate `x` towards `sign` (+1, -1) of the far end of the set
     where the profile sum of squares of parameter `index` stays less than `rise` above its value at
-    `x`, or None when that set reaches the search box's bound (the side is open).
-
-    The profile is scanned at offsets PROFILE_FIRST_STEP x 2^k to the bound, stopping early above
-    PROFILE_GIVE_UP x `rise`; the set is not always one interval (a jump of the PBM's output can
-    raise the sum of squares next to the estimate and leave a valley behind it), so the scan keeps
-    the farthest offset below the rise, and four bisections towards the next scanned offset place
-    the end, which errs on the wide side."""
+    `x`, or None when that set reaches the search box's bound (the scan: docs/calibration.md)."""
     chi2_min = float(np.sum(residuals(x) ** 2))
     limit = (upper[index] - x[index]) if sign > 0 else (x[index] - lower[index])
     if limit <= 0:
@@ -111,11 +102,8 @@ def profile_side(residuals, x: np.ndarray, index: int, sign: int, lower, upper, 
 
 
 def profile_widths(residuals, x: np.ndarray, lower, upper, z: float, n_jobs: int = 1) -> np.ndarray:
-    """(p, 2) ln widths below and above the estimate of each parameter's profile-likelihood
-    interval (rise z^2, :func:`profile_side`); np.inf for a side the data do not bound within the
-    search box. With `n_jobs` > 1 the 2p sides are scanned at once in as many processes, forked
-    from this one (each scan is sequential and its PBM batches are too small to share); the
-    widths are the same as one after the other."""
+    """(p, 2) ln widths below and above the estimate of each parameter's profile-likelihood interval
+    (rise z^2; np.inf: open), the 2p sides scanned at once on up to `n_jobs` forked processes."""
     sides = [(i, sign) for i in range(x.size) for sign in (-1, +1)]
     global _PROFILE
     _PROFILE = (residuals, x, lower, upper, z * z)

@@ -1,13 +1,5 @@
-"""The check of the calibration on data of known parameters (rule calibration_check,
-docs/calibration.md). Two cases, each fitted from start values `proof.start_factor` x the truth:
-
-* `pbm_dem`: PBM-DEM's own d10/d50/d90 at the validation speeds (mean of its replicates, the
-  standard error over replicates as the measurement sd), calibrated with PBM-ANN: the estimates
-  must give back the pbm settings PBM-DEM ran with, within intervals that hold the measurement
-  error and the surrogate's uncertainty;
-* `pbm_constant_noise`: PBM-constant's output at the same speeds (its frequency per speed
-  calibrated to the surrogate as in the validation) with Gaussian noise of `proof.noise` x the
-  value added, calibrated with PBM-constant: recovery at a known noise level, no surrogate error.
+"""The check of the calibration on data of known parameters, PBM-DEM's output and PBM-constant's with
+known noise (rule calibration_check; docs/calibration.md, "The check on known parameters").
 """
 
 from __future__ import annotations
@@ -22,13 +14,44 @@ import pandas as pd
 from pbmdem.config import Calibration, CoupledLoop
 from pbmdem.config.design import pbm_value
 from pbmdem.coupling.methods import calibrated_frequency
+from pbmdem.tables import STATISTICS
 from pbmdem.validation.results import load_run, run_folder
 
 from .batches import Case, run_cases
 from .calibration import Estimate, Model, calibrate
-from .measured import measured_from_series, with_noise
 
 FREQUENCY_KEY = "pbm.aggregation.constant_frequency"
+
+
+def measured_from_series(series: dict[float, list[pd.DataFrame]], times) -> pd.DataFrame:
+    """A measured table from model output: per speed the summaries of its replicates (time, d10,
+    d50, d90), read at `times`; the value is the replicates' mean and the sd its standard error
+    (sd over replicates / sqrt(n)); one replicate: sd 0 (the caller adds its own error)."""
+    rows = []
+    for rpm, summaries in sorted(series.items()):
+        at = np.stack([np.column_stack([np.interp(times, s.time, s[k]) for k in STATISTICS]) for s in summaries])
+        mean = at.mean(axis=0)
+        n = at.shape[0]
+        se = at.std(axis=0, ddof=1) / np.sqrt(n) if n > 1 else np.zeros_like(mean)
+        for j, t in enumerate(times):
+            row = {"rpm": float(rpm), "time": float(t)}
+            row.update({k: float(mean[j, i]) for i, k in enumerate(STATISTICS)})
+            row.update({f"{k}_sd": float(se[j, i]) for i, k in enumerate(STATISTICS)})
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def with_noise(table: pd.DataFrame, relative_sd: float, seed: int) -> pd.DataFrame:
+    """`table` with Gaussian noise of sd `relative_sd` x value added to d10/d50/d90 (seeded), the
+    sd columns set to that sd, and each row's sizes sorted so that d10 <= d50 <= d90 still holds."""
+    rng = np.random.default_rng(seed)
+    out = table.copy()
+    values = out[list(STATISTICS)].to_numpy(float)
+    noisy = values * (1.0 + relative_sd * rng.standard_normal(values.shape))
+    out[list(STATISTICS)] = np.sort(noisy, axis=1)
+    for i, k in enumerate(STATISTICS):
+        out[f"{k}_sd"] = relative_sd * values[:, i]
+    return out
 
 
 def proof_times(loop: CoupledLoop, step: float) -> np.ndarray:
@@ -54,7 +77,7 @@ def constant_measured(loop: CoupledLoop, model_path, rpms, times, noise: float, 
     for o in outcomes:
         if o.failed:
             raise RuntimeError(f"PBM-constant at {o.case.rpm:g} rpm failed: {o.failed}")
-        series[o.case.rpm] = [pd.DataFrame(o.sizes, columns=["d10", "d50", "d90"]).assign(time=o.times)]
+        series[o.case.rpm] = [pd.DataFrame(o.sizes, columns=list(STATISTICS)).assign(time=o.times)]
     return with_noise(measured_from_series(series, times), noise, seed), fixed
 
 

@@ -1,22 +1,6 @@
-"""Global sensitivity analysis: Sobol' indices of PBM-ANN's final d10/d50/d90 to impeller speed and
-pbm settings over stated ranges (config `sensitivity:`, docs/design.md "Global sensitivity").
-
-The estimator is SALib's (`SALib.sample.sobol.sample`: Saltelli's scheme on a scrambled Sobol'
-sequence, without second-order indices; `SALib.analyze.sobol.analyze`: first-order S1 and total
-ST with bootstrap confidence intervals); this module only states the problem, evaluates the model,
-tabulates and draws. A model is anything in SALib's shape: a function of a sample matrix (one row per
-sample, one column per factor, in the problem's order) that returns a table with one row per
-sample and a column per output (`PbmAnnOutputs`: d10, d50, d90 in m). `sobol_study` samples once
-and evaluates every model on the same samples (PBM-ANN: the ensemble mean and each member), so that
-the members' indices differ only by the surrogate.
-
-`plot_sensitivity` draws the study's figure: one panel per output (d10, d50, d90), a pair of
-bars per factor: the total index ST and the first-order index S1 of the ensemble mean with their
-confidence intervals, and each ensemble member's index as a dot on its bar (their spread is how
-much of the answer the surrogate's uncertainty could change).
-
-A failed batch (NaN sizes) leaves its model's indices undefined (NaN, logged); an output that
-does not vary over the samples has no variance to share out, and its indices are NaN too.
+"""Global sensitivity: Sobol' indices (SALib's estimator) of PBM-ANN's final d10/d50/d90 to impeller
+speed and pbm settings over stated ranges, for the ensemble mean and every member on one sample,
+and their figure (docs/design.md, "Global sensitivity").
 """
 
 from __future__ import annotations
@@ -120,11 +104,6 @@ def sobol_study(
     tables, outputs = [], {}
     for name, model in models.items():
         y = model(x)
-        if len(y) != len(x):
-            raise ValueError(f"model {name!r} returned {len(y)} rows for {len(x)} samples")
-        missing = [c for c in columns if c not in y]
-        if missing:
-            raise ValueError(f"model {name!r} returned no column(s) {missing}")
         bad = int((~np.isfinite(y[list(columns)].to_numpy(float))).any(axis=1).sum())
         if bad:
             reasons = y["failed"].astype(str) if "failed" in y else pd.Series([], dtype=str)
@@ -144,10 +123,8 @@ def sobol_study(
 
 @dataclass(frozen=True)
 class PbmAnnOutputs:
-    """PBM-ANN as a model in SALib's shape: the final d10/d50/d90 (m) of one batch per row of a
-    sample matrix whose columns are `keys` (`SPEED` or pbm config keys), with the surrogate's
-    ensemble mean (`member` None) or one member, over `n_jobs` processes. The table also holds
-    each batch's out-of-domain coupling intervals and failure."""
+    """PBM-ANN as a model in SALib's shape: the final d10/d50/d90 (m), out-of-domain intervals and
+    failure of one batch per row of a sample matrix whose columns are `keys` (`SPEED` or pbm keys)."""
 
     loop: CoupledLoop
     model_path: str
@@ -169,13 +146,10 @@ class PbmAnnOutputs:
         return table[[*STATISTICS, "out_of_domain_intervals", "failed"]]
 
 
-def sensitivity(
-    loop: CoupledLoop, model_path: str | Path, settings: Sensitivity, members: bool = True
-) -> tuple[pd.DataFrame, dict]:
-    """Rule sensitivity: the indices table of PBM-ANN's final d10/d50/d90 (the ensemble mean and,
-    with `members`, every member; `member` 'mean' or k) and the figures of merit: batches, wall
-    time, samples out of the surrogate's training domain or failed, per model."""
-    n_members = load_surrogate(model_path).n_members if members else 0
+def sensitivity(loop: CoupledLoop, model_path: str | Path, settings: Sensitivity) -> tuple[pd.DataFrame, dict]:
+    """Rule sensitivity: the indices table of PBM-ANN's final d10/d50/d90 (`member` 'mean' or k) and
+    the figures of merit: batches, wall time, samples out of the training domain or failed, per model."""
+    n_members = load_surrogate(model_path).n_members
     factors = settings.factors()
     keys = tuple(f.key for f in factors)
     speed = float(settings.impeller_rpm.low)
@@ -210,17 +184,10 @@ def sensitivity(
         "failed_samples": failed,
     }
     log.info(
-        "sensitivity: %d PBM-ANN batches (%d samples x (mean + %d members), N = %d, %d factors) in %.1f s on %d "
-        "process(es): %.1f ms per batch, %.0f batches per minute",
-        info["batches"],
-        n,
-        n_members,
-        settings.base_samples,
-        len(factors),
-        wall,
-        settings.n_jobs,
-        1e3 * info["wall_time_per_batch_s"],
-        info["batches_per_minute"],
+        "sensitivity: %(batches)d PBM-ANN batches (%(samples)d samples x (mean + %(members)d members), N = "
+        "%(base_samples)d, %(k)d factors) in %(wall_time_s).1f s on %(n_jobs)d process(es): %(ms).1f ms per batch, "
+        "%(batches_per_minute).0f batches per minute",
+        {**info, "members": n_members, "k": len(factors), "ms": 1e3 * info["wall_time_per_batch_s"]},
     )
     if any(out_of_domain.values()):
         log.warning(

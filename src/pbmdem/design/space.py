@@ -1,17 +1,6 @@
 """The design space: PBM-ANN's final d10/d50/d90 over impeller speed x binder rate x a third
-factor, with the surrogate's uncertainty band, and the region that meets a specification.
-
-Every grid point runs PBM-ANN with the surrogate's ensemble mean and once per ensemble member
-(`batches.run_cases`); the members' range of each statistic is the uncertainty band (as in the
-validation, docs/validation.md). A point meets the specification only if the whole band does;
-`spec_status` says, per point:
-
-* `meets`: every member's d50 lies in [d50_min, d50_max] and every member's d90 <= d90_max;
-* `uncertain`: the band straddles a limit (some members meet it, or the mean does, not all);
-* `fails`: no member meets it;
-* `out_of_domain`: the surrogate was evaluated outside its training domain in some coupling
-  interval of the mean or of a member: the prediction is an extrapolation and is not judged;
-* `failed`: the PBM of the mean or of a member did not finish (e.g. granules outgrew its grid).
+factor, with the ensemble members' band, each point's status against the specification
+(`STATUSES`; docs/design.md, "The grid" and "The specification region") and its contour maps.
 """
 
 from __future__ import annotations
@@ -25,6 +14,7 @@ import pandas as pd
 
 from pbmdem.config import CoupledLoop, DesignSpace, Specification
 from pbmdem.coupling.lumping import LIQUID_KEY
+from pbmdem.plotting import ML_PER_MIN, pyplot, save_figure
 from pbmdem.surrogate import load_surrogate
 
 from .batches import STATISTICS, Case, outcomes_table, run_cases
@@ -47,9 +37,8 @@ def grid_cases(design: DesignSpace, n_members: int) -> list[Case]:
 
 
 def point_table(outcomes: pd.DataFrame, third_key: str) -> pd.DataFrame:
-    """One row per grid point from the table of its cases (`batches.outcomes_table`): the mean's
-    final d10/d50/d90, the members' min and max of each, the out-of-domain intervals (the most of
-    any case of the point) and the failed cases."""
+    """One row per grid point from the table of its cases (`batches.outcomes_table`), the members'
+    range of each size, the most out-of-domain intervals of any of its cases and its failed cases."""
     keys = ["rpm", LIQUID_KEY, third_key]
     rows = []
     for (rpm, rate, third), group in outcomes.groupby(keys, sort=False):
@@ -69,29 +58,18 @@ def point_table(outcomes: pd.DataFrame, third_key: str) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _within(d50, d90, spec: Specification) -> np.ndarray:
-    ok = np.ones(np.shape(d50), bool)
-    if spec.d50_min is not None:
-        ok &= d50 >= spec.d50_min
-    if spec.d50_max is not None:
-        ok &= d50 <= spec.d50_max
-    if spec.d90_max is not None:
-        ok &= d90 <= spec.d90_max
-    return ok
-
-
 def specification_status(table: pd.DataFrame, spec: Specification) -> pd.Series:
     """The status of every point of `table` (columns of `point_table`) against `spec`."""
-    lo50, hi50 = table.d50_member_min.to_numpy(float), table.d50_member_max.to_numpy(float)
-    lo90, hi90 = table.d90_member_min.to_numpy(float), table.d90_member_max.to_numpy(float)
-    # the whole band: the lowest d50 and the highest d90 (and the highest d50) all meet it
-    robust = _within(lo50, hi90, spec) & _within(hi50, hi90, spec)
-    # some part of the band meets it: an interval of d50 that overlaps the range, the lowest d90
     d50_min = -np.inf if spec.d50_min is None else spec.d50_min
     d50_max = np.inf if spec.d50_max is None else spec.d50_max
     d90_max = np.inf if spec.d90_max is None else spec.d90_max
+    lo50, hi50 = table.d50_member_min.to_numpy(float), table.d50_member_max.to_numpy(float)
+    lo90, hi90 = table.d90_member_min.to_numpy(float), table.d90_member_max.to_numpy(float)
+    # the whole band meets it; or some part of it: an interval of d50 that overlaps the range, the lowest d90
+    robust = (lo50 >= d50_min) & (hi50 <= d50_max) & (hi90 <= d90_max)
     possible = (hi50 >= d50_min) & (lo50 <= d50_max) & (lo90 <= d90_max)
-    possible |= _within(table.d50.to_numpy(float), table.d90.to_numpy(float), spec)
+    d50, d90 = table.d50.to_numpy(float), table.d90.to_numpy(float)
+    possible |= (d50 >= d50_min) & (d50 <= d50_max) & (d90 <= d90_max)
     status = np.where(robust, "meets", np.where(possible, "uncertain", "fails"))
     status = np.where(table.out_of_domain_intervals.to_numpy() > 0, "out_of_domain", status)
     status = np.where(table.failed_cases.to_numpy() > 0, "failed", status)
@@ -119,15 +97,9 @@ def design_space(loop: CoupledLoop, model_path: str | Path, design: DesignSpace)
         **counts,
     }
     log.info(
-        "design space: %d PBM-ANN batches (%d points x (mean + %d members)) in %.1f s on %d process(es), "
-        "%.0f batches per minute: %s",
-        len(cases),
-        len(table),
-        n_members,
-        wall,
-        design.n_jobs,
-        per_minute,
-        ", ".join(f"{v} {k}" for k, v in counts.items()),
+        "design space: %(batches)d PBM-ANN batches (%(points)d points x (mean + %(members)d members)) in "
+        "%(wall_time_s).1f s on %(n_jobs)d process(es), %(batches_per_minute).0f batches per minute: %(statuses)s",
+        {**info, "members": n_members, "statuses": ", ".join(f"{v} {k}" for k, v in counts.items())},
     )
     if counts["out_of_domain"]:
         log.warning(
@@ -139,3 +111,83 @@ def design_space(loop: CoupledLoop, model_path: str | Path, design: DesignSpace)
     if counts["failed"]:
         log.warning("design space: the PBM failed at %d of %d points (marked failed)", counts["failed"], len(table))
     return table, info
+
+
+#: marker and colour of each specification status
+STYLE = {
+    "meets": ("o", "#1a9850", "meets (whole band)"),
+    "uncertain": ("D", "#fdae61", "uncertain (band straddles a limit)"),
+    "fails": ("s", "#d73027", "fails"),
+    "out_of_domain": ("x", "black", "outside the training domain"),
+    "failed": ("*", "purple", "PBM failed"),
+}
+
+
+def _grid(panel: pd.DataFrame, column: str):
+    x = np.sort(panel.rpm.unique())
+    y = np.sort(panel.liquid_rate.unique())
+    z = panel.pivot_table(index="liquid_rate", columns="rpm", values=column, dropna=False).reindex(index=y, columns=x)
+    return x, ML_PER_MIN * y, z.to_numpy(float)  # binder rate in mL/min
+
+
+def _levels(values: pd.Series) -> np.ndarray:
+    finite = 1e3 * values[np.isfinite(values)]
+    if finite.empty or finite.max() <= finite.min():
+        return np.linspace(0.0, 1.0, 13) if finite.empty else np.linspace(finite.min() * 0.99, finite.max() * 1.01, 13)
+    return np.linspace(finite.min(), finite.max(), 13)
+
+
+def _spec_text(spec: Specification) -> str:
+    parts = []
+    if spec.d50_min is not None or spec.d50_max is not None:
+        lo = "" if spec.d50_min is None else f"{1e3 * spec.d50_min:g} mm <= "
+        hi = "" if spec.d50_max is None else f" <= {1e3 * spec.d50_max:g} mm"
+        parts.append(f"{lo}d50{hi}")
+    if spec.d90_max is not None:
+        parts.append(f"d90 <= {1e3 * spec.d90_max:g} mm")
+    return ", ".join(parts) or "no specification"
+
+
+def plot_design_space(table: pd.DataFrame, third_key: str, spec: Specification, path: str | Path) -> None:
+    """The contour maps of `table` (`design_space`) as a PNG at `path` (docs/design.md, "Outputs")."""
+    plt = pyplot()
+
+    thirds = sorted(table[third_key].unique())
+    fig, axes = plt.subplots(2, len(thirds), figsize=(4.2 * len(thirds) + 1, 7.5), squeeze=False)
+    label = third_key.split(".")[-1].replace("_", " ")
+    # one colour scale per row across the panels, so that the panels compare by eye
+    levels = {s: _levels(table[s]) for s in ("d50", "d90")}
+    for col, third in enumerate(thirds):
+        panel = table[table[third_key] == third]
+        x, y, d50 = _grid(panel, "d50")
+        _, _, d90 = _grid(panel, "d90")
+        _, _, lo = _grid(panel, "d50_member_min")
+        _, _, hi = _grid(panel, "d50_member_max")
+        top, bottom = axes[0, col], axes[1, col]
+        # contours need two values on each axis and a finite value; the markers are always drawn
+        contours = min(d50.shape) >= 2 and np.isfinite(d50).any()
+        if contours:
+            filled = top.contourf(x, y, 1e3 * d50, levels=levels["d50"], cmap="viridis", extend="both")
+            fig.colorbar(filled, ax=top, label="d50 (mm), ensemble mean")
+        for status, (marker, color, text) in STYLE.items():
+            sel = panel[panel.spec_status == status]
+            top.scatter(sel.rpm, ML_PER_MIN * sel.liquid_rate, marker=marker, color=color, s=28, label=text)
+        top.set_title(f"{label} = {third:g}")
+        if contours and np.isfinite(d90).any():
+            filled = bottom.contourf(x, y, 1e3 * d90, levels=levels["d90"], cmap="magma", extend="both")
+            fig.colorbar(filled, ax=bottom, label="d90 (mm), ensemble mean")
+        width = np.where(d50 > 0, (hi - lo) / d50, np.nan)
+        if contours and np.isfinite(width).sum() >= 4:
+            lines = bottom.contour(x, y, 100 * width, levels=5, colors="white", linewidths=0.8)
+            bottom.clabel(lines, fmt="%.0f %%", fontsize=7)
+        for ax in (top, bottom):
+            ax.set_xlabel("impeller speed (rpm)")
+            ax.set_ylabel("binder rate (mL/min)")
+    axes[0, 0].legend(fontsize=7, loc="upper left", framealpha=0.8)
+    fig.suptitle(
+        f"PBM-ANN design space: specification {_spec_text(spec)}; white lines (bottom): width of the members' "
+        "d50 band, % of d50",
+        fontsize=9,
+    )
+    fig.tight_layout()
+    save_figure(fig, path)

@@ -51,11 +51,9 @@ def breakage_figure(study: pd.DataFrame):
 
 
 def peak_speed(s: pd.DataFrame) -> float | None:
-    """The speed of the largest final d50 when it lies inside the speed range and the granules get
-    smaller above it, else None. Smaller means below the surrogate's uncertainty at the peak: the
-    fastest speed's d50 under the smallest member d50 at the peak (`d50_member_min`, where the
-    study has it), so that a flat curve's wobble within the members is not called a peak. Speeds
-    whose ensemble mean failed (d50 NaN) are left out, not taken as the peak."""
+    """The speed of the largest final d50 (of the speeds whose mean finished) when it lies inside the
+    speed range and the fastest speed's d50 falls below the smallest member's d50 there (where the
+    study has members: a flat curve's wobble within them is no peak), else None."""
     s = s[np.isfinite(s.d50.to_numpy(float))].sort_values("rpm")
     if s.empty:
         return None
@@ -109,11 +107,8 @@ def _batch_name(study: str, row: dict, member: bool) -> str:
 
 
 def clipping_words(studies: dict[str, pd.DataFrame]) -> str:
-    """The grid floor of the PBM-ANN studies' batches in words: 'clipping: none' when no breakage
-    fragment fell below the first pivot in any batch (ensemble means and members), else the
-    largest share of a batch's granules merged there (``merged_fraction``, the ensemble mean's, and
-    ``merged_fraction_member_max``; pbmdem.pbm.results.grid_floor) and the batches above
-    FLOOR_LIMIT (1 %), flagged. ``studies``: name -> study table (speed, feed, breakage)."""
+    """The grid floor of the PBM-ANN studies' batches (``studies``: name -> table) in words: the
+    largest shares of a batch's granules merged there (pbmdem.pbm.results.grid_floor), if any."""
     cases = []  # (share, batch)
     batches = 0
     for name, table in studies.items():

@@ -1,21 +1,13 @@
-"""Units and number formats of the report, tables split so that they fit a page, and a display
-table written as CSV and as an HTML page.
-
-The result files are in SI units (sizes in m); the report shows sizes in mm, fractions in %, and
-names every column with its unit, e.g. "d50 at end (mm)". Missing values (NaN) read "n/a".
-Snakemake's report shows a result inline only if it is an image, a PDF or HTML (a CSV is a
-download), so a display table is written twice: the CSV holds the values, the HTML page shows them.
+"""Units and number formats of the report ("n/a" for a missing value), and display tables as HTML,
+split to fit a page (`words.write_titled_table` writes them as CSV and HTML).
 """
 
 from __future__ import annotations
 
-import html
 import math
-from pathlib import Path
 
 import pandas as pd
 
-from pbmdem.atomic import write_csv, write_text
 from pbmdem.plotting import MM
 
 #: fraction -> %
@@ -83,19 +75,4 @@ def table_html(frame: pd.DataFrame, keys: int = 1) -> str:
     return "".join(
         part.to_html(index=False, border=0, classes="t", na_rep="n/a", escape=True)
         for part in split_columns(frame, keys)
-    )
-
-
-def write_table(
-    csv_path: str | Path, html_path: str | Path, frame: pd.DataFrame, title: str, intro: str = "", keys: int = 1
-) -> None:
-    """A display table as CSV and as an HTML page (its title, an introduction, the table), atomically."""
-    write_csv(csv_path, frame)
-    body = (
-        f"<h2>{html.escape(title)}</h2>" + (f"<p>{html.escape(intro)}</p>" if intro else "") + table_html(frame, keys)
-    )
-    write_text(
-        html_path,
-        f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
-        f"<style>{STYLE}</style></head><body>{body}</body></html>\n",
     )

@@ -1,17 +1,6 @@
-"""The figures of one validation speed (matplotlib, Agg backend; sizes in mm, times in s).
-
-* `size_bands`: d10, d50 and d90 against time: the PBM-DEM replicate band (envelope of the
-  `validation.dem_replicates` loops) with its mean, the PBM-ANN ensemble-member band with the
-  ensemble-mean PBM-ANN, and PBM-constant (from the speed's `bands.csv`);
-* `psd_evolution`: the cumulative mass size distribution (mass % finer than d) at the start, the
-  start, middle and end of the liquid addition and the end of the batch, for PBM-DEM replicate 0,
-  PBM-ANN and PBM-constant;
-* `liquid_porosity`: the mean liquid content L/S and the mean porosity against time (bands as above);
-* `collision_frequency`: the pair-weighted mean collision frequency of every coupling interval, and
-  the surrogate's c_ij against the DEM's on PBM-DEM's own samples.
-
-The liquid-addition window is shaded in every time plot. `write_speed` (rule report_speed) reads a
-speed's runs and writes these figures and its out-of-domain table.
+"""The figures of one validation speed (sizes in mm, times in s): size bands, size-distribution
+evolution, liquid and porosity, collision frequency; `write_speed` (rule report_speed) writes them
+with the speed's out-of-domain table.
 """
 
 from __future__ import annotations
@@ -56,15 +45,26 @@ def _width_text(lo, hi) -> str:
     return f"up to {width:.2g} mm wide" if np.isfinite(width) else "width n/a"
 
 
-SPRAY = dict(color="tab:cyan", alpha=0.10, lw=0)
-
-
 def _spray(ax, process) -> None:
-    ax.axvspan(process.spray_start, process.spray_end, **SPRAY, label="liquid addition")
+    ax.axvspan(process.spray_start, process.spray_end, color="tab:cyan", alpha=0.10, lw=0, label="liquid addition")
 
 
 def _column(frame: pd.DataFrame, name: str) -> np.ndarray:
     return frame[name].to_numpy(float)
+
+
+def _models(ax, process, dem, n: int, ann, constant, members, dem_band: bool = True) -> None:
+    """One panel of a speed: the liquid addition, PBM-DEM's band and mean (`dem`: time, min, max, mean
+    of `n` replicates), PBM-ANN's members' band (time, min, max; None: none) and mean, PBM-constant."""
+    _spray(ax, process)
+    if dem_band:
+        ax.fill_between(*dem[:3], **BAND["PBM-DEM"], label=f"PBM-DEM band (min-max of {n} replicates)")
+    ax.plot(dem[0], dem[3], **STYLES["PBM-DEM"], label="PBM-DEM mean")
+    if members is not None:
+        ax.fill_between(*members, **BAND["PBM-ANN"], label="PBM-ANN band (min-max of the surrogate's members)")
+    ax.plot(*ann, **STYLES["PBM-ANN"], label="PBM-ANN (mean prediction)")
+    if constant is not None:
+        ax.plot(*constant, **STYLES["PBM-constant"], label="PBM-constant")
 
 
 def legend_below(fig, ax, ncol: int, bottom: float, relabel=None) -> None:
@@ -84,27 +84,10 @@ def size_bands(bands: pd.DataFrame, process, rpm: str, what: str = "bands table"
         b = bands[bands["statistic"] == stat].sort_values("time")
         if b.empty:
             raise InputFileError(f"{what}: no rows of statistic {stat!r}")
-        n = int(b["n_dem_replicates"].iloc[0])
-        _spray(ax, process)
-        ax.fill_between(
-            b.time,
-            MM * b.dem_min,
-            MM * b.dem_max,
-            **BAND["PBM-DEM"],
-            label=f"PBM-DEM band (min-max of {n} replicates)",
-        )
-        ax.plot(b.time, MM * b.dem_mean, **STYLES["PBM-DEM"], label="PBM-DEM mean")
-        if {"ann_member_min", "ann_member_max"} <= set(b.columns):
-            ax.fill_between(
-                b.time,
-                MM * b.ann_member_min,
-                MM * b.ann_member_max,
-                **BAND["PBM-ANN"],
-                label="PBM-ANN band (min-max of the surrogate's members)",
-            )
-        ax.plot(b.time, MM * b.ann, **STYLES["PBM-ANN"], label="PBM-ANN (mean prediction)")
-        if "constant" in b.columns:
-            ax.plot(b.time, MM * b.constant, **STYLES["PBM-constant"], label="PBM-constant")
+        members = (b.time, MM * b.ann_member_min, MM * b.ann_member_max) if "ann_member_min" in b else None
+        constant = (b.time, MM * b.constant) if "constant" in b.columns else None
+        dem = (b.time, MM * b.dem_min, MM * b.dem_max, MM * b.dem_mean)
+        _models(ax, process, dem, int(b["n_dem_replicates"].iloc[0]), (b.time, MM * b.ann), constant, members)
         ax.set(xlabel="time (s)", ylabel=f"{stat} (mm)", title=f"{stat}, {rpm} rpm")
         ax.grid(alpha=0.3)
     d50 = bands[bands["statistic"] == "d50"]
@@ -127,11 +110,9 @@ def snapshot_times(recorded, process) -> list[float]:
 
 
 def cumulative_undersize(diameter: np.ndarray, density_lnd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(upper edges, mass % finer than them) of the bins at ``diameter`` (ascending), from the mass
-    density per ln d: density x d(ln d) per bin, cumulated by `pbmdem.pbm.results.cumulative_mass`.
-    A bin's edges lie halfway between its diameter and its neighbours' in ln d (the last one's a
-    half-width above it), so the curve passes through d50 where summary.csv has it, not half a
-    bin to its left. A cumulative curve is smooth where the density of a sectional grid zig-zags."""
+    """(upper edges, mass % finer than them) of the bins at ``diameter`` (ascending) from the mass
+    density per ln d; a bin's edges lie halfway between its diameter and its neighbours' in ln d, so
+    that the curve passes through d50 where summary.csv has it."""
     d, q = diameter, np.clip(density_lnd, 0.0, None)
     width = np.gradient(np.log(d)) if len(d) > 1 else np.ones_like(d)
     ln = np.log(d)
@@ -140,9 +121,8 @@ def cumulative_undersize(diameter: np.ndarray, density_lnd: np.ndarray) -> tuple
 
 
 def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str):
-    """Cumulative mass undersize (%) against diameter (mm) at `snapshot_times`, one panel per model.
-    `bins`: panel title -> that run's bins.csv (`BINS_COLUMNS`). Times whose distribution has not
-    changed yet are drawn once, their label naming every such time."""
+    """Cumulative mass undersize (%) against diameter (mm) at `snapshot_times`, one panel per model
+    (`bins`: title -> its bins.csv); times with an unchanged distribution share one curve."""
     plt = pyplot()
     fig, axes = plt.subplots(1, len(bins), figsize=(4.4 * len(bins), 4.3), sharex=True, sharey=True, squeeze=False)
     first = next(iter(bins.values()))
@@ -180,16 +160,6 @@ def psd_evolution(bins: dict[str, pd.DataFrame], process, rpm: str):
     return fig
 
 
-def _band_lines(
-    ax, times: list[np.ndarray], values: list[np.ndarray], model: str, band_label: str, line_label: str, scale: float
-) -> None:
-    grid = times[0]
-    stack = np.stack([np.interp(grid, t, v) for t, v in zip(times, values)]) * scale
-    if len(values) > 1:
-        ax.fill_between(grid, stack.min(axis=0), stack.max(axis=0), **BAND[model], label=band_label)
-    ax.plot(grid, stack.mean(axis=0), **STYLES[model], label=line_label)
-
-
 def liquid_porosity(speed, process, rpm: str):
     """Mean liquid content L/S (-) and mean porosity (%) against time (s): PBM-DEM replicates
     (band and mean), PBM-ANN ensemble members (band) and ensemble mean, PBM-constant."""
@@ -200,38 +170,20 @@ def liquid_porosity(speed, process, rpm: str):
         ("mean_porosity", PERCENT, "mean porosity (%)"),
     )
     members = speed.members
+    dem = [r.summary for r in speed.dem]
+    grid = _column(dem[0], "time")
+    ann, con = speed.ann.summary, speed.constant.summary
+    t_ann = _column(ann, "time")
     for ax, (column, scale, ylabel) in zip(axes, quantities):
-        _spray(ax, process)
-        dem = [r.summary for r in speed.dem]
-        _band_lines(
-            ax,
-            [_column(s, "time") for s in dem],
-            [_column(s, column) for s in dem],
-            "PBM-DEM",
-            f"PBM-DEM band (min-max of {len(dem)} replicates)",
-            "PBM-DEM mean",
-            scale,
-        )
-        ann = speed.ann.summary
-        t_ann = _column(ann, "time")
+        stack = np.stack([np.interp(grid, _column(s, "time"), _column(s, column)) for s in dem]) * scale
+        band = None
         if members is not None and len(members) and column in members.columns:
             per = [g.sort_values("time") for _, g in members.groupby("member")]
             curves = [np.interp(t_ann, g.time, g[column]) for g in per]
-            lo, hi = np.min(curves, axis=0) * scale, np.max(curves, axis=0) * scale
-            ax.fill_between(t_ann, lo, hi, **BAND["PBM-ANN"], label="PBM-ANN band (min-max of the surrogate's members)")
-        ax.plot(
-            t_ann,
-            scale * _column(ann, column),
-            **STYLES["PBM-ANN"],
-            label="PBM-ANN (mean prediction)",
-        )
-        con = speed.constant.summary
-        ax.plot(
-            _column(con, "time"),
-            scale * _column(con, column),
-            **STYLES["PBM-constant"],
-            label="PBM-constant",
-        )
+            band = (t_ann, np.min(curves, axis=0) * scale, np.max(curves, axis=0) * scale)
+        lines = (grid, stack.min(axis=0), stack.max(axis=0), stack.mean(axis=0))
+        constant = (_column(con, "time"), scale * _column(con, column))
+        _models(ax, process, lines, len(dem), (t_ann, scale * _column(ann, column)), constant, band, len(dem) > 1)
         ax.set(xlabel="time (s)", ylabel=ylabel, title=f"{ylabel.split(' (')[0]}, {rpm} rpm")
         ax.grid(alpha=0.3)
     legend_below(fig, axes[0], 3, 0.12)
@@ -239,10 +191,8 @@ def liquid_porosity(speed, process, rpm: str):
 
 
 def collision_frequency(frequencies: pd.DataFrame, pairs: pd.DataFrame, rpm: str):
-    """Left: the pair-weighted mean collision frequency (1/s per pair) of every coupling interval
-    of each PBM-DEM replicate, of PBM-ANN, and PBM-constant's calibrated value. Right: the
-    surrogate's c_ij against the DEM's for the class pairs of PBM-DEM's samples (`pairs`, from
-    `frequencies.surrogate_on_dem_samples`), samples outside its training domain marked."""
+    """Left: the mean collision frequency per pair of every coupling interval of every model (`frequencies`).
+    Right: the surrogate's c_ij against the DEM's on PBM-DEM's samples (`pairs`), those outside its domain marked."""
     plt = pyplot()
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
     groups = list(frequencies.groupby(["model", "run"], sort=False))

@@ -1,18 +1,6 @@
-"""The findings the report and the README open with: how impeller speed and the feed size
-distribution change granule growth, in plain words and one figure each, then how far to trust them.
-
-* `speed_figure`: final d10/d50/d90 (mm) against impeller speed (PBM-ANN ensemble mean, with the
-  ensemble members' range as a band; speeds beyond the DEM grid and intervals outside the
-  surrogate's training domain marked);
-* `feed_figure`: the same against the feed (the grid's feeds and the blends between them), with
-  the feed's own d50 for comparison;
-* `findings_rst`: the text (reStructuredText, included at the top of Snakemake's report): the
-  answers with their numbers, then the validation's verdicts, then
-  the glossary of the terms the report uses.
-
-Sizes in mm. Inputs: the tables of `pbmdem.coupling.studies` and the comparison table.
-`write_findings` (rule report_findings) reads them with the other studies' tables (breakage,
-sensitivity, lumping, the surrogate's training set) and writes the figures and the text.
+"""The findings the report and the README open with: how impeller speed and the feed change granule
+growth (a figure and words each), the other studies' findings, then how far to trust them
+(`write_findings`, rule report_findings; docs/validation.md, "Report").
 """
 
 from __future__ import annotations
@@ -26,6 +14,7 @@ import pandas as pd
 
 from pbmdem.atomic import write_text
 from pbmdem.coupling.lumping import CASE_COLUMNS, LIQUID_COLUMNS
+from pbmdem.design.sensitivity import COLUMNS as SOBOL_COLUMNS
 from pbmdem.plotting import SIZE_STYLES, final_sizes, pyplot, save_figure
 from pbmdem.readers import InputFileError, read_table
 from pbmdem.surrogate.persistence import read_metadata
@@ -215,13 +204,8 @@ def findings_rst(
     training: str | None = None,
     feed_check=None,
 ) -> str:
-    """The findings as reStructuredText (template findings.rst.j2): the two answers with their
-    figures (the PNGs at `speed_png`, `feed_png` embedded as data URIs, so that the text shows them
-    wherever it is included: Snakemake's own `embeddedimage` directive does not embed), with
-    `feed_check` (the row of the feed check's table, or None) its PBM-DEM check after the feed's,
-    then `extra` (further findings, lines of rst), then how far to trust them: the validation and,
-    with `training` (the paragraph of `pbmdem.report.training.training_words`), what the surrogate
-    was trained on and its accuracy on DEM runs it never saw; then the glossary."""
+    """The findings as reStructuredText (template findings.rst.j2), the figures embedded as data URIs
+    (Snakemake's own `embeddedimage` directive does not embed); `extra`: further findings (rst lines)."""
     return words.render(
         "findings.rst",
         speed=speed_paragraph(speed, speed_feed, batch_s),
@@ -284,15 +268,9 @@ def write_findings(
     lumping_liquid=None,
     lumping_info=None,
 ) -> None:
-    """The findings: the figures (speed, feed, and with `breakage` the breakage study) and their
-    text (rst), atomically. `speed`, `feed`, `breakage`: the PBM-ANN study tables; `comparison`: the
-    validation's comparison table; `training`, `metadata`: the grid collision table the surrogate
-    was trained on and its metadata (model.json), for its training set and held-out accuracy beside
-    the validation; `feed_check`: the feed check's table (or None: no check); `sensitivity`: the
-    Sobol' indices and `sensitivity_info` their figures of merit (JSON; their words; `confidence`:
-    the level of their intervals); `lumping`, `lumping_liquid`, `lumping_info`: the 1-D against 2-D
-    study (pbmdem.coupling.lumping; its figure, display table and words); `out`: speed_png,
-    feed_png, breakage_png, rst, and with `lumping` lumping_png, lumping_csv, lumping_html."""
+    """Rule report_findings: the figures and the text (rst) of the findings from the files of the
+    studies (each optional one left out when None). `out`: speed_png, feed_png, breakage_png, rst,
+    and with `lumping` lumping_png, lumping_csv, lumping_html."""
     speed_table = read_table(speed, "PBM-ANN speed study", columns=("rpm", "d10", "d50", "d90"))
     feed_table = read_table(feed, "PBM-ANN feed study", columns=("feed", "feed_d50", "d10", "d50", "d90"))
     comparison_table = read_table(comparison, "comparison table", columns=("rpm",))
@@ -315,12 +293,7 @@ def write_findings(
         check_table = read_table(feed_check, "feed check table", columns=CHECK_COLUMNS)
         check = check_table.iloc[0].to_dict()
     if sensitivity is not None:
-        indices = read_table(
-            sensitivity,
-            "Sobol' indices",
-            columns=("parameter", "output", "member", "S1", "S1_conf", "ST", "ST_conf"),
-            dtype={"member": str},
-        )
+        indices = read_table(sensitivity, "Sobol' indices", columns=SOBOL_COLUMNS, dtype={"member": str})
         info = None
         if sensitivity_info is not None:
             info = json.loads(Path(sensitivity_info).read_text())

@@ -1,12 +1,6 @@
-"""The collision frequencies the three models used, coupling interval by coupling interval.
-
-* `interval_frequencies`: the bed's pair-weighted mean frequency per pair (1/s per pair) of every
-  interval of every PBM-DEM replicate (LIGGGHTS) and of the PBM-ANN loop (the surrogate's ensemble
-  mean), as recorded in their `intervals.csv`, and PBM-constant's one calibrated value for the
-  whole batch (`timing.json`, key `frequency`).
-* `surrogate_on_dem_samples`: every class pair of every PBM-DEM interval, with the DEM's c_ij and
-  the surrogate's c_ij for the very same representative sample, and whether the surrogate was
-  outside its training domain on that sample (its warnings are recorded, never silenced).
+"""The collision frequencies the three models used, interval by interval (their intervals.csv and
+PBM-constant's calibrated value), and the surrogate's c_ij against the DEM's on PBM-DEM's own
+samples, its out-of-domain warnings recorded (docs/validation.md, "Report": Figures of a speed).
 """
 
 from __future__ import annotations
@@ -38,9 +32,8 @@ def _intervals(run, what: str) -> pd.DataFrame:
 
 
 def interval_frequencies(speed) -> pd.DataFrame:
-    """Long table: model, run, interval, t_start, t_end (s), mean_frequency_per_pair (1/s per pair).
-    PBM-constant is one row over the whole batch (`interval` -1) unless its timing has no
-    `frequency` (then an InputFileError naming its timing.json)."""
+    """Long table of the mean frequency per pair (1/s per pair) of every interval of every loop;
+    PBM-constant is one row over the whole batch (`interval` -1)."""
     loops = [("PBM-DEM", f"replicate {k}", rep, f"PBM-DEM replicate {k} result") for k, rep in enumerate(speed.dem)]
     loops.append(("PBM-ANN", "ensemble mean", speed.ann, "PBM-ANN result"))
     rows = []
@@ -76,9 +69,8 @@ def interval_frequencies(speed) -> pd.DataFrame:
 
 
 def surrogate_on_dem_samples(speed, surrogate) -> pd.DataFrame:
-    """One row per class pair of every PBM-DEM interval sample: replicate, interval, class_i,
-    class_j, d_i, d_j (m), dem and surrogate c_ij (1/s per pair), out_of_domain (the surrogate
-    warned on this sample) and warnings (their messages)."""
+    """One row per class pair of every PBM-DEM interval sample: the DEM's and the surrogate's c_ij
+    (1/s per pair) and whether (and what) the surrogate warned on this sample."""
     rows = []
     for k, rep in enumerate(speed.dem):
         for r in _intervals(rep, f"PBM-DEM replicate {k} result").itertuples():

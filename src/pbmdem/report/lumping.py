@@ -1,8 +1,6 @@
 """What lumping leaves out: the lumped (1-D) PBM beside the size x liquid (2-D) one under PBM-ANN
-(results/validation/lumping.csv, lumping_liquid.csv and lumping.json of
-pbmdem.coupling.lumping): one figure, one display table and the words of the findings, with the
-answers the findings give (the speed above which the granules get smaller, the order of the feeds)
-computed in both models by the findings' own rules."""
+(pbmdem.coupling.lumping's tables): one figure, one display table and the words of the findings,
+the findings' answers computed in both models by the findings' own rules."""
 
 from __future__ import annotations
 
@@ -82,9 +80,8 @@ def lumping_table(cases: pd.DataFrame) -> pd.DataFrame:
 
 
 def lumping_figure(cases: pd.DataFrame, liquid: pd.DataFrame):
-    """Final d50 against impeller speed, binder rate and feed in both models, and the liquid
-    content per size class at the end of the default batch (1-D class mean; 2-D mean, spread and
-    range over the liquid classes)."""
+    """Final sizes against impeller speed, binder rate and feed in both models, and the liquid content
+    per size class at the end of the default batch."""
     plt = pyplot()
     fig, axes = plt.subplots(2, 2, figsize=(10.0, 7.6))
     panels = (
@@ -146,7 +143,7 @@ def _per_study(cases: pd.DataFrame) -> list[tuple]:
     largest (None for the default batch)."""
     worst = largest_difference(cases)
     parts = []
-    for study in ("default", "speed", "binder", "feed"):
+    for study in STUDY_NAMES:
         mask = cases.study == study
         if not mask.any():
             continue
@@ -179,13 +176,11 @@ def _liquid(liquid: pd.DataFrame, info: dict) -> dict | None:
 
 
 def lumping_words(cases: pd.DataFrame, liquid: pd.DataFrame, info: dict) -> str:
-    """The finding in words: the largest differences of the final sizes per study, whether the
-    turn speed and the feed order change, the liquid spread within the size classes of the default
-    batch and the share of solid below the success threshold, and where the lumped model is adequate."""
+    """The finding in words (template lumping.j2)."""
     worst = largest_difference(cases)
     failed = cases[cases.failed.fillna("").astype(str) != ""]
     turn1, turn2 = turn_speeds(cases)
-    studies = [s for s in ("default", "speed", "binder", "feed") if (cases.study == s).any()]
+    studies = [s for s in STUDY_NAMES if (cases.study == s).any()]
     fine = {s: float(worst[cases.study == s].max()) < ADEQUATE for s in studies}
     cpu1, cpu2 = info.get("cpu_time_s_1d"), info.get("cpu_time_s_2d")
     return words.paragraph(

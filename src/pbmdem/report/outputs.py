@@ -1,9 +1,6 @@
-"""The files of the report's table rules, one function per rule (rules/report.smk): each reads its
-inputs (errors name the file), builds the tables of `tables`, `statements` and `provenance`, and
-writes them atomically, as CSV and as an HTML page (`words.write_titled_table`: Snakemake's report
-shows HTML inline and offers CSV for download). The rules with figures, report_speed and
-report_findings, are `figures.write_speed` and `findings.write_findings`: they need scikit-learn
-(~3 s to import, measured), which these rules do not.
+"""The files of the report's table rules, one function per rule (rules/report.smk), each a display
+table written as CSV and HTML; the figure rules are `figures.write_speed` and
+`findings.write_findings` (they need scikit-learn, ~3 s to import, which these do not).
 """
 
 from __future__ import annotations
@@ -95,8 +92,7 @@ def write_design_tables(*, design, check, third_key: str, confidence: float, out
 
 
 def write_provenance(*, config: dict, settings: dict, basedir, runs, metadata, out: dict, workdir=None) -> None:
-    """The provenance table. `config`: the completed configuration of the job (for its
-    `Config.sha256()`); `settings`: the same without the execution settings; `basedir`: the
-    project; `workdir`: where the workflow ran (recorded, not compared). `out`: csv, html."""
+    """The provenance table. `config`: the job's completed configuration; `settings`: the same without
+    the execution settings; `basedir`: the project; `workdir`: where the workflow ran. `out`: csv, html."""
     table = provenance(Config.from_mapping(config).sha256(), settings, basedir, runs, metadata, workdir=workdir)
     write_titled_table(out["csv"], out["html"], table, "provenance")

@@ -1,18 +1,5 @@
 """Where the results come from: configuration hashes, the workflow's git commit, and the versions
-of LIGGGHTS, Python and the libraries.
-
-* `config_sha256`: `Config.sha256()` of the configuration the provenance job ran under (the
-  completed configuration, every default filled in, execution settings included);
-* `settings_sha256`: the same hash without the execution settings (`dem.mpi_ranks`,
-  `dem.timeout`), which change how jobs run but not their results and rerun nothing: two runs
-  with equal settings hashes computed the same thing;
-* the git commit of the workflow's base directory (and whether tracked files had uncommitted
-  changes), or "not a git checkout";
-* the LIGGGHTS version of the DEM runs: each run reads it from the header line "LIGGGHTS (Version
-  ...)" of its log.liggghts into its summary, and so into the run table `results/dem/runs.csv`
-  (the logs themselves are not rule outputs: Snakemake would delete them with a failed job);
-* the versions of Python, pbmdem and the libraries in the environment of the job, and the
-  surrogate's own record (its sha256, when and with which versions it was trained).
+of LIGGGHTS, Python, the libraries and the surrogate (docs/validation.md, "Report", Provenance).
 """
 
 from __future__ import annotations
@@ -48,9 +35,7 @@ def settings_mapping(mapping: dict) -> dict:
 
 
 def liggghts_versions(runs_table: str | Path) -> str:
-    """The LIGGGHTS version(s) of the DEM runs, each with its number of runs: the DEM run table's
-    column `liggghts_version`, which every DEM run reads from the header line "LIGGGHTS (Version
-    ...)" of its log.liggghts (`pbmdem.dem.engine.version_of_log`)."""
+    """The LIGGGHTS version(s) of the DEM runs (the run table's `liggghts_version`), each with its number of runs."""
     runs = RUNS.read(runs_table, need=("point_id",))
     if "liggghts_version" not in runs.columns:
         return (

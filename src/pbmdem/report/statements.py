@@ -1,10 +1,6 @@
 """What the report states in words: the targets of the validation, met or not met with the
-measured values, and where the surrogate left its training domain, interval by interval.
-
-The targets (issue 13, `TARGETS`: column, relation, threshold) are checked at every validation
-speed on the comparison table. A missing measurement (NaN) is "not met (not measured)". The
-out-of-domain statement lists every PBM-ANN interval (inside or outside), every ensemble member's
-count and the constant kernel's calibration; it is never left out of the report.
+measured values, and where the surrogate left its training domain, interval by interval
+(docs/validation.md, "Report": Targets, Out-of-domain statement).
 """
 
 from __future__ import annotations
@@ -102,9 +98,8 @@ def _messages(value) -> str:
 
 
 def out_of_domain(speed) -> pd.DataFrame:
-    """Interval by interval: model, interval, start (s), end (s), sample classes (mm), sample
-    particles, outside the training domain, warnings (count), what lay outside (left out when nothing
-    did). Every PBM-ANN interval, every ensemble member, and the constant kernel's calibration are rows."""
+    """Interval by interval, every PBM-ANN interval, every ensemble member and the constant kernel's
+    calibration: where the surrogate was outside its training domain (no "what lay outside" when nothing was)."""
     ann = speed.ann.intervals
     rows = []
     recorded = ann is not None and "out_of_domain_count" in ann.columns
@@ -152,10 +147,8 @@ def out_of_domain(speed) -> pd.DataFrame:
             "interval": "initial sample",
             "start (s)": "0",
             "end (s)": "0",
-            "sample classes (mm)": _classes(first.get("class_diameters")) if len(first) else "n/a",
-            "sample particles (count)": number(first.get("sample_particles", float("nan")), ".0f")
-            if len(first)
-            else "n/a",
+            "sample classes (mm)": _classes(first.get("class_diameters")),
+            "sample particles (count)": number(first.get("sample_particles", float("nan")), ".0f"),
             "outside the training domain": ("yes" if count > 0 else "no") if known else "not recorded",
             "warnings (count)": number(count, ".0f") if known else "not recorded",
             "what lay outside": _messages(timing.get("out_of_domain")),

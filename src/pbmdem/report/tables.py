@@ -1,15 +1,6 @@
-"""Tables of the report in display form (strings, units in the column names, sizes in mm,
-fractions in %), each narrow enough for a page.
-
-* `process_settings`: the batch (phases, binder rate and amount, liquid/solid ratio, porosities,
-  beta0, the success model, the PBM grid) and the validation loops (feed, coupling intervals,
-  replicates), one row per setting with its value and unit;
-* `speeds`: impeller speed, tip speed and Froude number of every speed of the DEM training grid
-  and of the validation;
-* `comparison_tables`: the comparison table (`results/report/comparison.csv`) as four tables:
-  d50, accuracy, computing time and the surrogate's domain;
-* `design_space_table`, `calibration_check_table`: the design space and the recovery of known
-  parameters (docs/design.md, docs/calibration.md).
+"""Tables of the report in display form (strings, units in the column names, sizes in mm, fractions
+in %): the process settings, the speeds, the comparison table in four parts, the design space and
+the calibration check (docs/validation.md, "Report": Tables).
 """
 
 from __future__ import annotations
@@ -21,7 +12,7 @@ from pbmdem.config import Granulator, Pbm, SizeDistribution
 from pbmdem.pbm.results import FLOOR_LIMIT
 from pbmdem.plotting import ML_PER_MIN
 
-from .display import MM, PERCENT, number, percent, value_range, yes_no
+from .display import MM, PERCENT, mm, number, percent, value_range, yes_no
 
 #: m3 -> mL
 ML = 1e6
@@ -33,8 +24,7 @@ def _joined(values, spec: str) -> str:
 
 
 def liquid_solid_ratio(pbm: Pbm, bed_solid_volume: float) -> float:
-    """Liquid/solid volume ratio L/S at the end of the liquid addition: the initial liquid content
-    plus the binder sprayed (rate x spray time) over the bed's solid volume (docs/pbm.md)."""
+    """Liquid/solid volume ratio L/S at the end of the liquid addition (docs/validation.md, "Report")."""
     sprayed = pbm.liquid_addition.rate * pbm.process.liquid_addition_time
     return pbm.initial.liquid_content + sprayed / bed_solid_volume
 
@@ -69,10 +59,7 @@ def process_settings(
     dem_replicates: int,
     dem_sampling_time: float,
 ) -> pd.DataFrame:
-    """The settings of the validation batch: setting, value, unit and config key (one row each).
-
-    Longer than 80 lines because it is the table itself, one literal row per setting in the order
-    the report shows them; split up, the table would no longer be readable in one place."""
+    """The settings of the validation batch, one literal row per setting in the report's order."""
     p, agg = pbm.process, pbm.aggregation
     added = pbm.liquid_addition.rate * p.liquid_addition_time
     grid = pbm.grid
@@ -89,7 +76,7 @@ def process_settings(
         ),
         (
             "bed solid volume (DEM bed = PBM population)",
-            number(ML * bed_solid_volume, ".4g"),
+            number(ML * bed_solid_volume),
             "mL",
             "dem.bed_height, dem.packing_fraction, granulator.bowl",
         ),
@@ -101,14 +88,9 @@ def process_settings(
             "pbm.process.liquid_addition_time",
         ),
         ("wet massing", value_range(p.spray_end, p.end, 1), "s", "pbm.process.wet_massing_time"),
-        ("batch length", number(p.end, ".4g"), "s", "pbm.process"),
-        (
-            "binder addition rate",
-            number(ML_PER_MIN * pbm.liquid_addition.rate, ".4g"),
-            "mL/min",
-            "pbm.liquid_addition.rate",
-        ),
-        ("binder sprayed in total", number(ML * added, ".4g"), "mL", "pbm.liquid_addition"),
+        ("batch length", number(p.end), "s", "pbm.process"),
+        ("binder addition rate", number(ML_PER_MIN * pbm.liquid_addition.rate), "mL/min", "pbm.liquid_addition.rate"),
+        ("binder sprayed in total", number(ML * added), "mL", "pbm.liquid_addition"),
         (
             "binder distribution over the granules",
             pbm.liquid_addition.distribution,
@@ -117,35 +99,35 @@ def process_settings(
         ),
         (
             "initial liquid content L/S",
-            number(pbm.initial.liquid_content, ".4g"),
+            number(pbm.initial.liquid_content),
             "m3 liquid / m3 solid",
             "pbm.initial.liquid_content",
         ),
         (
             "liquid/solid ratio L/S at the end of the liquid addition",
-            number(liquid_solid_ratio(pbm, bed_solid_volume), ".4g"),
+            number(liquid_solid_ratio(pbm, bed_solid_volume)),
             "m3 liquid / m3 solid",
             "pbm.liquid_addition",
         ),
         ("initial porosity", percent(pbm.initial.porosity, 1), "%", "pbm.initial.porosity"),
-        ("consolidation rate", number(pbm.consolidation.rate, ".4g"), "1/s", "pbm.consolidation.rate"),
+        ("consolidation rate", number(pbm.consolidation.rate), "1/s", "pbm.consolidation.rate"),
         ("minimum porosity", percent(pbm.consolidation.min_porosity, 1), "%", "pbm.consolidation.min_porosity"),
-        ("aggregation rate constant beta0", number(agg.beta0, ".4g"), "-", "pbm.aggregation.beta0"),
+        ("aggregation rate constant beta0", number(agg.beta0), "-", "pbm.aggregation.beta0"),
         ("success probability", success_model(pbm), "-", "pbm.aggregation.success"),
         ("aggregation scheme", agg.scheme, "-", "pbm.aggregation.scheme"),
         (
             "collision-frequency refresh",
-            number(agg.frequency_update_interval, ".4g"),
+            number(agg.frequency_update_interval),
             "s",
             "pbm.aggregation.frequency_update_interval",
         ),
         ("PBM grid", f"{bins}, volume ratio {grid.ratio:.4g}, first pivot {start}", "-", "pbm.grid"),
         ("coupling intervals per batch", str(coupling_intervals), "-", "validation.coupling_intervals"),
-        ("coupling interval length", number(p.end / coupling_intervals, ".4g"), "s", "validation.coupling_intervals"),
+        ("coupling interval length", number(p.end / coupling_intervals), "s", "validation.coupling_intervals"),
         ("PBM-DEM replicates (DEM insertion seeds)", str(dem_replicates), "-", "validation.dem_replicates"),
         (
             "DEM sampling window per coupling interval (at least)",
-            number(dem_sampling_time, ".4g"),
+            number(dem_sampling_time),
             "s",
             "validation.dem_sampling_time",
         ),
@@ -154,8 +136,7 @@ def process_settings(
 
 
 def speeds(granulator: Granulator, validation_rpm, grid_rpm) -> pd.DataFrame:
-    """Every impeller speed of the DEM training grid and of the validation: tip speed and Froude
-    number (`Granulator.tip_speed`, `.froude_number`)."""
+    """Every impeller speed of the DEM training grid and of the validation: tip speed and Froude number."""
     grid = {float(r) for r in grid_rpm}
     validation = {float(r) for r in validation_rpm}
     rows = []
@@ -183,11 +164,6 @@ def _of(count, total) -> str:
     return "n/a" if number(count) == "n/a" else f"{int(count)} of {int(total)}"
 
 
-def _tail(r, q: str, *which: str) -> list[float]:
-    """The comparison row's ``{q}_end_{which}_mm`` values."""
-    return [getattr(r, f"{q}_end_{w}_mm") for w in which]
-
-
 def comparison_tables(table: pd.DataFrame) -> dict[str, pd.DataFrame]:
     """The comparison table in display form, split to fit a page: name -> table
     (`d50`, `tails` (d10 and d90), `accuracy`, `cost`, `domain`), each keyed by the speed."""
@@ -213,26 +189,15 @@ def comparison_tables(table: pd.DataFrame) -> dict[str, pd.DataFrame]:
                 "PBM-constant d50 at end (mm)": number(r.d50_end_constant_mm, ".3f"),
             }
         )
-        out["tails"].append(
-            {
-                "speed (rpm)": speed,
-                **{
-                    key: value
-                    for q in ("d10", "d90")
-                    for key, value in (
-                        (
-                            f"PBM-DEM {q} at end, replicates' range (mm)",
-                            value_range(*_tail(r, q, "dem_min", "dem_max")),
-                        ),
-                        (f"PBM-ANN {q} at end (mm)", number(getattr(r, f"{q}_end_ann_mm"), ".3f")),
-                        (
-                            f"PBM-ANN {q} outside the PBM-DEM band, largest (%)",
-                            percent(getattr(r, f"ann_{q}_outside_band_max")),
-                        ),
-                    )
-                },
-            }
-        )
+        tails = {"speed (rpm)": speed}
+        for q in ("d10", "d90"):
+            ends = (getattr(r, f"{q}_end_dem_min_mm"), getattr(r, f"{q}_end_dem_max_mm"))
+            tails[f"PBM-DEM {q} at end, replicates' range (mm)"] = value_range(*ends)
+            tails[f"PBM-ANN {q} at end (mm)"] = number(getattr(r, f"{q}_end_ann_mm"), ".3f")
+            tails[f"PBM-ANN {q} outside the PBM-DEM band, largest (%)"] = percent(
+                getattr(r, f"ann_{q}_outside_band_max")
+            )
+        out["tails"].append(tails)
         out["accuracy"].append(
             {
                 "speed (rpm)": speed,
@@ -285,20 +250,18 @@ def _floor(fraction) -> str:
 
 
 def design_space_table(table: pd.DataFrame, third_key: str) -> pd.DataFrame:
-    """The design-space table (`results/design/design_space.csv`) in display form: per grid point
-    the operating parameters, d50 and d90 of the ensemble mean with the members' range (mm), the
-    domain and the status against the specification."""
+    """The design-space table (`results/design/design_space.csv`) in display form."""
     third = third_key.split(".")[-1].replace("_", " ")
     return pd.DataFrame(
         {
             "rpm": [f"{r:g}" for r in table.rpm],
             "binder (mL/min)": [f"{ML_PER_MIN * q:.2f}" for q in table.liquid_rate],
             third: [f"{v:g}" for v in table[third_key]],
-            "d50 (mm)": [f"{MM * v:.2f}" if v == v else "n/a" for v in table.d50],
+            "d50 (mm)": [mm(v, 2) for v in table.d50],
             "d50 members (mm)": [
                 value_range(MM * lo, MM * hi, 2) for lo, hi in zip(table.d50_member_min, table.d50_member_max)
             ],
-            "d90 (mm)": [f"{MM * v:.2f}" if v == v else "n/a" for v in table.d90],
+            "d90 (mm)": [mm(v, 2) for v in table.d90],
             "d90 members (mm)": [
                 value_range(MM * lo, MM * hi, 2) for lo, hi in zip(table.d90_member_min, table.d90_member_max)
             ],
@@ -308,9 +271,7 @@ def design_space_table(table: pd.DataFrame, third_key: str) -> pd.DataFrame:
 
 
 def calibration_check_table(check: pd.DataFrame, confidence: float) -> pd.DataFrame:
-    """The recovery table of the calibration check (`results/design/calibration_check.csv`) in
-    display form: per case and parameter the true value, the estimate, its interval and whether
-    the truth lies inside it, the two parts of the interval and the reduced chi-square."""
+    """The recovery table of the calibration check (`results/design/calibration_check.csv`) in display form."""
     return pd.DataFrame(
         {
             "case": check.case,

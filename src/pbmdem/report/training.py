@@ -1,17 +1,8 @@
-"""What the surrogate was trained on, beside its accuracy on DEM runs it never saw.
-
-The training set is read from the collision table the surrogate was fitted on (the grid table,
-results/dem/collisions.csv: one row per operating point and class pair, with the replicates behind
-each mean), restricted to the operating points its metadata (results/surrogate/model.json) names;
-the accuracy is the pooled held-out score of its kernel source that the metadata records
-(`cv_scores`, grouped cross-validation: whole operating points held out). A reader judging how far
-to trust PBM-ANN needs both: how many DEM runs, operating points and replicates, which speeds and
-feeds, and how well the surrogate predicts the points it did not see.
+"""What the surrogate was trained on (from the grid collision table, the points its model.json
+names), beside its held-out accuracy (docs/validation.md, "Report").
 """
 
 from __future__ import annotations
-
-from dataclasses import asdict, dataclass
 
 import numpy as np
 import pandas as pd
@@ -22,23 +13,10 @@ from pbmdem.surrogate.plots import MODEL_LABELS
 from . import words
 
 
-@dataclass(frozen=True)
-class TrainingSet:
-    """The DEM runs behind a surrogate: `runs` (every replicate counted), `points` (operating
-    points: a speed and a feed), the replicates per point (sorted, distinct), the impeller speeds
-    (rpm) and the feeds (size distributions)."""
-
-    runs: int
-    points: int
-    replicates: tuple[int, ...]
-    speeds: tuple[float, ...]
-    feeds: tuple[str, ...]
-
-
-def training_set(table: pd.DataFrame, source: str = "", point_ids=None) -> TrainingSet:
-    """The training set of a grid collision table (columns point_id, rpm, distribution,
-    n_replicates), restricted to `point_ids` (the surrogate's metadata) when given; a point the
-    metadata names but the table lacks is an InputFileError naming `source`."""
+def training_set(table: pd.DataFrame, source: str = "", point_ids=None) -> dict:
+    """The DEM runs behind a surrogate (every replicate counted), its operating points, their distinct
+    replicate counts, speeds (rpm) and feeds, from a grid collision table restricted to `point_ids` (the
+    surrogate's metadata) when given; a point the metadata names but the table lacks is an error."""
     points = table.groupby("point_id", sort=True).agg(
         rpm=("rpm", "first"), distribution=("distribution", "first"), n_replicates=("n_replicates", "max")
     )
@@ -51,16 +29,16 @@ def training_set(table: pd.DataFrame, source: str = "", point_ids=None) -> Train
             )
         points = points[points.index.astype(str).isin(set(map(str, point_ids)))]
     replicates = points["n_replicates"].astype(int)
-    return TrainingSet(
-        runs=int(replicates.sum()),
-        points=len(points),
-        replicates=tuple(sorted(set(replicates.tolist()))),
-        speeds=tuple(sorted(set(points["rpm"].astype(float).tolist()))),
-        feeds=tuple(sorted(set(points["distribution"].astype(str).tolist()))),
-    )
+    return {
+        "runs": int(replicates.sum()),
+        "points": len(points),
+        "replicates": tuple(sorted(set(replicates.tolist()))),
+        "speeds": tuple(sorted(set(points["rpm"].astype(float).tolist()))),
+        "feeds": tuple(sorted(set(points["distribution"].astype(str).tolist()))),
+    }
 
 
-def training_words(training: TrainingSet, meta: dict, table: str = "results/dem/collisions.csv") -> str:
+def training_words(training: dict, meta: dict, table: str = "results/dem/collisions.csv") -> str:
     """The training set and the held-out accuracy of the kernel source in one paragraph (rst)."""
     scores = meta.get("cv_scores") or {}
     family = scores.get("selected") or meta.get("family")
@@ -72,7 +50,7 @@ def training_words(training: TrainingSet, meta: dict, table: str = "results/dem/
     )
     return words.paragraph(
         "training",
-        **asdict(training),
+        **training,
         table=table,
         family=MODEL_LABELS.get(str(family), str(family)),
         scored=bool(summary),

@@ -1,29 +1,21 @@
-"""The report's words: Jinja2 templates (pbmdem/data/report_templates/*.j2, shipped with the
-package) filled from a dict of the run's numbers. The Python beside each finding computes the
-numbers (sizes in m, fractions, speeds in rpm); the template holds every word and every number
-format. A name a template uses and the dict lacks is an error (StrictUndefined), never an empty
-gap in the text.
-
-A paragraph template is written one clause per line for reading; `paragraph` folds it into the
-one line of text that reStructuredText wants: every line break with the indentation around it
-becomes one space, and ``{{ space }}`` is one space that folding keeps (the white space before it joins it), for
-the end of a paragraph that text follows on its line. The same folding is the filter ``fold`` (``{% filter fold %}``).
-
-A document template (`render`: the findings' reStructuredText) keeps its lines; a block tag there
-takes no line of its own.
-
-Filters: ``fmt(spec)`` (Python's format spec, e.g. ``"g"``, ``"+.1f"``), ``pct(spec)`` (a fraction
-in %), ``mm(decimals=2)`` (a size in m as "1.23 mm", "n/a" when missing), ``mmv(spec)`` (a size in m
-as a number in mm), ``codes`` (names as ````a``, ``b````), ``fold``.
+"""The report's words: Jinja2 templates (pbmdem/data/report_templates/*.j2) filled from a dict of the
+run's numbers, strictly (docs/validation.md, "Report"). A paragraph template is folded into one
+line (`fold`: every line break with its indentation becomes one space; ``{{ space }}`` is a space
+that folding keeps); a document template (`render`) keeps its lines. Filters: ``fmt(spec)``,
+``pct(spec)`` (a fraction in %), ``mm(decimals=2)`` ("1.23 mm"), ``mmv(spec)`` (a number in mm),
+``codes``, ``fold``.
 """
 
 from __future__ import annotations
 
+import html
 import re
 
 import jinja2
 
-from .display import MM, PERCENT, missing, write_table
+from pbmdem.atomic import write_csv, write_text
+
+from .display import MM, PERCENT, STYLE, missing, table_html
 
 #: a space that `fold` keeps (a private-use character, not whitespace, stands in for it while folding)
 _KEPT = "\ue000"
@@ -83,10 +75,17 @@ def macro(template: str, name: str):
     return lambda *args, **kwargs: fold(found(*args, **kwargs))
 
 
-def write_titled_table(csv, html, frame, name: str, numbers: dict | None = None, caption: str | None = None, **kwargs):
-    """A display table (`display.write_table`) with its title and caption from the template
-    tables.j2 (`numbers` fill them; `caption`: a caption written elsewhere)."""
+def write_titled_table(csv, html_path, frame, name: str, numbers: dict | None = None, caption=None, keys: int = 1):
+    """A display table as CSV (the values) and as an HTML page (what Snakemake's report shows), with
+    its title and caption from the template tables.j2 (`numbers` fill them; `caption`: written elsewhere)."""
     numbers = numbers or {}
     if caption is None:
         caption = macro("tables", "caption")(name, numbers)
-    write_table(csv, html, frame, macro("tables", "title")(name, numbers), caption, **kwargs)
+    title = macro("tables", "title")(name, numbers)
+    write_csv(csv, frame)
+    body = f"<h2>{html.escape(title)}</h2>" + (f"<p>{html.escape(caption)}</p>" if caption else "")
+    write_text(
+        html_path,
+        f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+        f"<style>{STYLE}</style></head><body>{body}{table_html(frame, keys)}</body></html>\n",
+    )

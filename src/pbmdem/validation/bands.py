@@ -1,14 +1,5 @@
-"""The PBM-DEM reference band and where a model leaves it.
-
-The fully coupled PBM-DEM model is chaotic: each DEM call is one realisation of the granular flow,
-so the reference is the set of `validation.dem_replicates` loops that differ only by their DEM
-insertion seeds. At every recorded time and for each of d10, d50 and d90 the band is their
-envelope, [min, max] over the replicates (with their mean and standard deviation beside it). A
-model's distance outside the band is max(0, min - value, value - max), as a fraction of the
-replicates' mean at that time; 0 while the model stays inside.
-
-The PBM-ANN band is the envelope of PBM-ANN run once per ensemble member of the surrogate
-(`pbmdem.coupling.pbm_ann_members`): the spread the surrogate's own uncertainty implies.
+"""The PBM-DEM reference band (the replicates' envelope at every time) and a model's distance
+outside it (docs/validation.md, "The reference is a band").
 """
 
 from __future__ import annotations
@@ -29,10 +20,8 @@ def band_table(
     members: pd.DataFrame | None = None,
     constant: pd.DataFrame | None = None,
 ) -> pd.DataFrame:
-    """Long table, one row per (statistic, time) of the first PBM-DEM replicate's recorded times:
-    n_dem_replicates, dem_mean, dem_sd (NaN for one replicate), dem_min, dem_max, ann (PBM-ANN,
-    ensemble mean), ann_member_min, ann_member_max (if `members`), constant (if given), and
-    ann_outside (PBM-ANN's distance outside the band, fraction of dem_mean). Sizes in m."""
+    """The bands.csv of a speed (docs/architecture.md, "Validation results"): one row per statistic
+    and recorded time of the first PBM-DEM replicate. Sizes in m."""
     if not dem:
         raise ValueError("no PBM-DEM replicate to form a band")
     times = dem[0]["time"].to_numpy(float)

@@ -1,18 +1,6 @@
-"""The comparison table: PBM-ANN and PBM-constant against the replicated PBM-DEM reference.
-
-One row per validation speed (`results/report/comparison.csv`, contract in docs/validation.md): the
-d50 at the start and the end of the batch of every model (the PBM-DEM figures are the replicates'
-mean, with their spread), the relative error of d50(t) against the replicates' mean (largest over
-the batch and at its end), beside the same error of one replicate against the others' mean
-(`dem_replicate_d50_rel_error_max`, the reference's own spread), the largest distance of PBM-ANN's
-d50(t) outside the PBM-DEM band (`ann_d50_outside_band_max`, a fraction of d50; 0 when always
-inside), the cost of one batch and the speed ratio, how often the surrogate left its training
-domain, and the share of each model's final number of granules merged at the PBM grid's floor
-(breakage fragments smaller than its first pivot). Cost in CPU seconds beside the wall time:
-PBM-DEM, the mean over its loops of the LIGGGHTS processes' CPU time plus the PBM's; PBM-ANN, the
-median of warm in-memory batches with the ensemble mean (`coupling.warm_batch_times`: surrogate plus
-PBM, the surrogate loaded once), as a benchmark measures it; the first batch of the rule's process
-(imports and thread pools included) is kept beside it (`pbm_ann_first_batch_wall_s`).
+"""The comparison table: PBM-ANN and PBM-constant against the replicated PBM-DEM reference, one row
+per validation speed (`results/report/comparison.csv`, contract `pbmdem.tables.COMPARISON`; its
+columns: docs/validation.md, "Comparison").
 """
 
 from __future__ import annotations
@@ -52,8 +40,7 @@ def bands_of(speed: SpeedResults) -> pd.DataFrame:
 
 
 def domain_counts(speed: SpeedResults) -> dict:
-    """PBM-ANN intervals with out-of-domain warnings (of all its intervals) and the constant
-    kernel's calibration warnings."""
+    """PBM-ANN's intervals with out-of-domain warnings and the constant kernel's calibration warnings."""
     ann = speed.ann.intervals
     counts = ann["out_of_domain_count"].fillna(0) if ann is not None and "out_of_domain_count" in ann else None
     return {
@@ -65,14 +52,12 @@ def domain_counts(speed: SpeedResults) -> dict:
 
 
 def merged_fraction(timing: dict) -> float:
-    """The share of a run's final number of granules merged at the grid floor (its timing.json's
-    ``grid_floor``, pbmdem.pbm.results.grid_floor); NaN for a record without it."""
+    """The share of a run's final number of granules merged at the grid floor; NaN when not recorded."""
     return float(timing.get("grid_floor", {}).get("merged_fraction", float("nan")))
 
 
 def floor_columns(speed: SpeedResults) -> dict:
-    """The grid floor of every model at this speed: the largest share over the PBM-DEM replicates,
-    PBM-ANN's and PBM-constant's."""
+    """The grid floor of every model at this speed (of PBM-DEM, the largest over the replicates)."""
     dem = [merged_fraction(r.timing) for r in speed.dem]
     return {
         "dem_merged_fraction_max": max(dem) if dem and not np.isnan(dem).any() else float("nan"),
@@ -88,7 +73,16 @@ def comparison_row(speed: SpeedResults, in_grid: bool) -> dict:
     ann_max, ann_end = relative_error(mean, ann)
     con_max, con_end = relative_error(mean, con)
     ends = np.array([r.summary.d50.iloc[-1] for r in speed.dem])
-    tails = {q: np.array([r.summary[q].iloc[-1] for r in speed.dem]) for q in ("d10", "d90")}
+    tails = {}  # the tails: breakage moves d10 first, aggregation d90
+    for q in ("d10", "d90"):
+        values = np.array([r.summary[q].iloc[-1] for r in speed.dem])
+        tails |= {
+            f"{q}_end_dem_mm": 1e3 * values.mean(),
+            f"{q}_end_dem_min_mm": 1e3 * values.min(),
+            f"{q}_end_dem_max_mm": 1e3 * values.max(),
+            f"{q}_end_ann_mm": 1e3 * ann[q].iloc[-1],
+            f"ann_{q}_outside_band_max": largest_outside(band, "ann", q),
+        }
     dem_wall = np.array([r.timing["total_wall_time_s"] for r in speed.dem])
     dem_liggghts = np.array([r.timing["provider_wall_time_s"] for r in speed.dem])
     nan = float("nan")
@@ -108,18 +102,7 @@ def comparison_row(speed: SpeedResults, in_grid: bool) -> dict:
         "d50_end_dem_max_mm": 1e3 * ends.max(),
         "d50_end_ann_mm": 1e3 * ann.d50.iloc[-1],
         "d50_end_constant_mm": 1e3 * con.d50.iloc[-1],
-        # the tails: breakage moves d10 first, aggregation d90
-        **{
-            key: value
-            for q, values in tails.items()
-            for key, value in (
-                (f"{q}_end_dem_mm", 1e3 * values.mean()),
-                (f"{q}_end_dem_min_mm", 1e3 * values.min()),
-                (f"{q}_end_dem_max_mm", 1e3 * values.max()),
-                (f"{q}_end_ann_mm", 1e3 * ann[q].iloc[-1]),
-                (f"ann_{q}_outside_band_max", largest_outside(band, "ann", q)),
-            )
-        },
+        **tails,
         "ann_d50_rel_error_max": ann_max,
         "ann_d50_rel_error_end": ann_end,
         "ann_d50_outside_band_max": largest_outside(band, "ann", "d50"),

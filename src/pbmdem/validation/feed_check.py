@@ -1,25 +1,6 @@
-"""The PBM-DEM check of the feed study's most surprising result (docs/validation.md, "The feed check").
-
-The feed study (`pbmdem.coupling.studies.feed_study`) predicts with PBM-ANN the final sizes of the
-grid's feeds and of the 50:50 blends of neighbouring feeds, feeds no DEM run has seen. A case with
-a grid feed on either side (its *parents*, `pbmdem.config.feed_case_parents`: the two feeds of a
-blend, a feed's finer and coarser neighbours) is expected to end between them. The rule:
-
-1. A case whose final d50 lies outside the interval its parents' final d50 span ends smaller (or
-   larger) than both; its surprise is the distance outside the interval over its own d50.
-2. If no case lies outside, the surprise is the deviation from the parents' log-interpolation, the
-   final ln d50 interpolated linearly in the ln of the feed's mass-median diameter between the
-   parents: |d50 / interpolated - 1|.
-
-Only in-domain cases count: a finite final d50, no coupling interval with the surrogate outside its
-training domain (an extrapolation is no surprise). The most surprising case has the largest
-surprise of the first kind that any case has; ties go to the finer case.
-
-The DAG of the workflow is fixed before the feed study runs, so the case to check is configured
-(`validation.feed_check`); `check_table` says whether it is still the most surprising one by the
-rule. Its PBM-DEM replicate loops confirm the case's statement when every replicate's final d50
-lies on the statement's side (below the lower parent's PBM-ANN d50, above the upper one's, or on
-PBM-ANN's side of the interpolation): "yes"; "no" when none does; "partly" otherwise.
+"""The PBM-DEM check of the feed study's most surprising result: the rule that picks the case
+(`most_surprising`), its statement and PBM-DEM's verdict (`check_table`; docs/validation.md,
+"The feed check").
 """
 
 from __future__ import annotations
@@ -62,20 +43,10 @@ CHECK_COLUMNS = (
 )
 
 
-def _in_domain(row) -> bool:
-    return bool(np.isfinite(row["d50"])) and int(row["out_of_domain_intervals"]) == 0
-
-
 def surprises(study: pd.DataFrame) -> pd.DataFrame:
-    """One row per case of `study` (a feed study table: feed, feed_d50, d50, out_of_domain_intervals,
-    in_grid) with a parent on either side: its parents and their d50, `outside` (the distance of the
-    d50 outside the parents' interval over the d50, 0 inside), `kind` (`BELOW`, `ABOVE` or `OFF`),
-    `interpolated_d50` (the parents' log-interpolation at the case's feed d50), `deviation`
-    (d50 / interpolated - 1) and `in_domain` (the case's PBM-ANN batch inside the training domain,
-    its d50 finite)."""
-    missing = [c for c in STUDY_COLUMNS if c not in study.columns]
-    if missing:
-        raise ValueError(f"feed study table: missing column(s) {missing}; present: {list(study.columns)}")
+    """One row per case of `study` (`STUDY_COLUMNS`, checked where it is read) with a parent on
+    either side: its parents and their d50, how far outside their interval it lies, its `kind`, the
+    parents' log-interpolation, its deviation from it and whether it is in domain (the rule: docs)."""
     s = study.sort_values("feed_d50", kind="stable").reset_index(drop=True)
     by_name = s.set_index("feed")
     parents = feed_case_parents(zip(s.feed, s.in_grid.astype(bool)))
@@ -100,7 +71,10 @@ def surprises(study: pd.DataFrame) -> pd.DataFrame:
                 "outside": max(lo - d50, d50 - hi, 0.0) / d50,
                 "interpolated_d50": interpolated,
                 "deviation": d50 / interpolated - 1.0,
-                "in_domain": _in_domain(r) and np.isfinite(a.d50) and np.isfinite(b.d50),
+                "in_domain": bool(np.isfinite(d50))
+                and int(r.out_of_domain_intervals) == 0
+                and np.isfinite(a.d50)
+                and np.isfinite(b.d50),
             }
         )
     columns = ["feed", "parent_finer", "parent_coarser", "d50", "parent_finer_d50", "parent_coarser_d50", "kind"]
@@ -108,8 +82,7 @@ def surprises(study: pd.DataFrame) -> pd.DataFrame:
 
 
 def most_surprising(study: pd.DataFrame) -> pd.Series | None:
-    """The feed study's most surprising in-domain case by the rule (module docstring): a row of
-    `surprises`, or None when no case with two parents is in domain."""
+    """The feed study's most surprising in-domain case by the rule (a row of `surprises`), or None."""
     s = surprises(study)
     s = s[s.in_domain.astype(bool)]
     if s.empty:
@@ -133,9 +106,7 @@ def statement(case: pd.Series) -> str:
 
 
 def confirms(case: pd.Series, dem_d50) -> np.ndarray:
-    """Whether each PBM-DEM final d50 of `dem_d50` lies on the side of `case`'s statement (a row of
-    `surprises`): below both parents' d50, above both, or on PBM-ANN's side of the interpolation
-    (nowhere when PBM-ANN lies on it)."""
+    """Whether each PBM-DEM final d50 of `dem_d50` lies on the side of `case`'s statement (a row of `surprises`)."""
     d = np.asarray(dem_d50, float)
     lo, hi = min(case.parent_finer_d50, case.parent_coarser_d50), max(case.parent_finer_d50, case.parent_coarser_d50)
     if case.kind == BELOW:
@@ -163,11 +134,8 @@ def dem_finals(folders) -> pd.DataFrame:
 
 
 def check_table(feed: str, rpm: float, ann: pd.DataFrame, dem: pd.DataFrame, study: pd.DataFrame, study_rpm: float):
-    """The feed check in one row (`results/validation/feed_check.csv`, sizes in m): `feed` at `rpm`,
-    PBM-DEM (`dem`: `dem_finals` of its loops) against PBM-ANN (`ann`: rows of
-    `pbmdem.coupling.studies.run_case` for the case and its parents at `rpm`, with in_grid), the
-    statement the case makes and whether PBM-DEM confirms it, and the feed study's (`study`, at
-    `study_rpm`) most surprising case by the rule."""
+    """The feed check in one row (`CHECK_COLUMNS`, sizes in m): `feed` at `rpm`, PBM-DEM (`dem_finals`)
+    against PBM-ANN (`ann`: the case and its parents), and the feed study's most surprising case."""
     if dem.empty:
         raise ValueError(f"feed check of {feed!r}: no PBM-DEM loop finished")
     found = surprises(ann).set_index("feed")
@@ -195,9 +163,6 @@ def check_table(feed: str, rpm: float, ann: pd.DataFrame, dem: pd.DataFrame, stu
             f"dem_{s}_mean": float(dem[s].mean()),
             f"dem_{s}_min": float(dem[s].min()),
             f"dem_{s}_max": float(dem[s].max()),
-        }
-    for s in STATISTICS:
-        row |= {
             f"ann_{s}": float(mean[s]),
             f"ann_{s}_member_min": float(mean[f"{s}_member_min"]),
             f"ann_{s}_member_max": float(mean[f"{s}_member_max"]),

@@ -1,14 +1,6 @@
-"""The surrogate's pair encounter frequency on the PBM-DEM loops' own samples.
-
-Every coupling interval of a PBM-DEM loop runs LIGGGHTS on the PBM's representative sample of that
-moment and records the DEM's encounter frequency of every class pair (``intervals.csv``:
-``class_diameters``, ``class_counts``, ``class_frequencies``, per pair in the order of
-:func:`pbmdem.frequency.upper_pairs`). These samples are the states PBM-ANN passes through, so
-the surrogate's error on them is the test of the pair frequency that matters most (issue 34):
-:func:`pair_sample_table` gives, per validation speed and over all speeds, the mean error and the
-mean absolute error of log10(surrogate / DEM) (decades) over the class pairs with DEM encounters
-of the distinct samples (a sample that several intervals or replicates share, typically the feed,
-counts once), beside the targets :data:`MEAN_ERROR_TARGET` and :data:`MAE_TARGET`.
+"""The surrogate's pair encounter frequency on the PBM-DEM loops' own distinct samples against the
+DEM's, per validation speed and over all (docs/validation.md, "Pair encounter frequency on the
+PBM-DEM loops' own samples"; issue 34).
 """
 
 from __future__ import annotations
@@ -33,8 +25,7 @@ MAE_TARGET = 0.045
 
 @dataclass(frozen=True)
 class LoopSample:
-    """One representative sample of a PBM-DEM loop: speed (rpm), class diameters (m), particle
-    counts, the DEM's encounter frequency per pair of every class pair (1/s, upper pairs)."""
+    """One representative sample of a PBM-DEM loop and the DEM's frequency of its class pairs (upper pairs)."""
 
     rpm: float
     diameters: np.ndarray
@@ -43,9 +34,7 @@ class LoopSample:
 
 
 def loop_samples(validation_dir: str | Path, rpms, replicates: int) -> list[LoopSample]:
-    """The distinct samples of the PBM-DEM loops (``replicates`` per speed of ``rpms``, the speeds as
-    in the paths) under ``validation_dir``, from their ``intervals.csv`` (contract
-    :data:`pbmdem.tables.INTERVALS`)."""
+    """The distinct samples of the PBM-DEM loops (``replicates`` per speed of ``rpms``) under ``validation_dir``."""
     out, seen = [], set()
     for rpm in rpms:
         for rep in range(int(replicates)):
@@ -67,10 +56,8 @@ def loop_samples(validation_dir: str | Path, rpms, replicates: int) -> list[Loop
 
 
 def sample_errors(model, samples) -> pd.DataFrame:
-    """log10(surrogate / DEM) of every class pair with DEM encounters of every sample: columns rpm,
-    sample (its index), class_i, class_j, error (decades). ``model``: a fitted surrogate (its
-    ``frequency_matrix``, the ensemble mean PBM-ANN uses); its out-of-domain warnings are not
-    repeated here (PBM-ANN's own loops count them)."""
+    """log10(surrogate / DEM) (decades) of every class pair with DEM encounters of every sample; the
+    surrogate's out-of-domain warnings are not repeated here (PBM-ANN's own loops count them)."""
     rows = []
     for k, s in enumerate(samples):
         iu, ju = upper_pairs(len(s.diameters))
@@ -89,17 +76,11 @@ def sample_errors(model, samples) -> pd.DataFrame:
                 }
             )
         )
-    return (
-        pd.concat(rows, ignore_index=True)
-        if rows
-        else pd.DataFrame(columns=["rpm", "sample", "class_i", "class_j", "error"])
-    )
+    return pd.concat(rows, ignore_index=True) if rows else pd.DataFrame()
 
 
 def pair_sample_table(model, samples) -> pd.DataFrame:
-    """One row per speed and a last row ``all`` (contract :data:`pbmdem.tables.PAIR_SAMPLES`): the
-    speed, distinct samples, class pairs with DEM encounters, mean error and MAE of log10 c
-    (decades), the targets and whether both are met."""
+    """One row per speed and a last row ``all`` (contract :data:`pbmdem.tables.PAIR_SAMPLES`)."""
     errors = sample_errors(model, samples)
     if errors.empty:
         raise ValueError("no PBM-DEM loop sample with DEM encounters: nothing to compare the surrogate with")

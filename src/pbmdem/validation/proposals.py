@@ -1,28 +1,6 @@
-"""Active learning: the next operating points worth a DEM run.
-
-The PBM-ANN loop asks the surrogate, at the start of every coupling interval, for the encounter
-frequencies of one representative DEM sample of the PBM's size distribution. This module looks at
-those samples (the `intervals.csv` of each validation speed's PBM-ANN run) and ranks them:
-
-1. samples outside the surrogate's training domain (any feature outside its training range);
-   their extrapolated frequencies are the least trustworthy;
-2. then the samples where the surrogate's ensemble members disagree most (the pair-weighted mean
-   standard deviation of their log10 c_ij, in decades).
-
-Each chosen sample becomes proposed operating points: its classes (diameters rounded to 0.1 mm,
-outwards at both ends, number fractions to 0.001) as a new named size distribution, run at the
-sample's speed if that is a grid speed (or beyond the grid's speeds), else at the grid speeds on
-either side (`placement`). They are single points (`grid.extra_points`), not a new row of the
-full grid: a row would run the distribution at every speed, two to four times the DEM work for
-what the surrogate is missing at one or two. A sample that is a defined distribution already proposes
-that distribution at the missing speeds. A class too large for the DEM granulator (three
-diameters above the blade top, half the bowl radius) is capped at that limit, and the proposal
-says so. `write_fragment` writes them as a config fragment to add to the grid:
-
-    snakemake --cores 2 --configfile config/config.yaml results/validation/proposals.yaml
-
-(Snakemake merges the fragment's new distributions and its complete list of extra points over the
-config; only the new DEM points run, then the surrogate and everything after it.)
+"""Active learning: the next operating points worth a DEM run, from the PBM-ANN loops' samples
+outside the surrogate's training domain or where its members disagree, written as a config
+fragment to add to the grid (docs/validation.md, "Active learning").
 """
 
 from __future__ import annotations
@@ -93,10 +71,8 @@ def largest_feasible_diameter(granulator: Granulator) -> float:
 
 
 def as_distribution(a: Assessment, d_max: float) -> tuple[list[float], list[float], bool]:
-    """(diameters, number fractions, capped) of a sample: rounded, ascending, classes merged where
-    rounding makes them equal, too large classes capped at `d_max`. The smallest class is rounded
-    down and the largest up (the others to the nearest step), so that the proposal spans the sample:
-    a sample just beyond the training sizes (8.004 mm against 8 mm) proposes 8.1 mm, not 8 mm again."""
+    """(diameters, number fractions, capped) of a sample: rounded (the ends outwards, so that the
+    proposal spans the sample), ascending, classes merged where rounding makes them equal, capped at `d_max`."""
     steps = np.asarray(a.diameters, float) / DIAMETER_STEP
     order = np.argsort(steps)
     rounded = np.round(steps)
@@ -117,9 +93,8 @@ def as_distribution(a: Assessment, d_max: float) -> tuple[list[float], list[floa
 
 
 def placement(rpm: float, grid_speeds) -> list[float]:
-    """The speeds at which a sample from PBM-ANN at `rpm` is run: `rpm` itself when it is a grid
-    speed or outside the grid's speeds (the tip speed must be learnt there), else the grid speeds on
-    either side (a validation speed between grid speeds stays a test of interpolation in speed)."""
+    """The speeds at which a sample from PBM-ANN at `rpm` is run: `rpm` itself when it is a grid speed
+    or outside the grid's speeds, else the grid speeds on either side."""
     speeds = sorted(float(r) for r in grid_speeds)
     rpm = float(rpm)
     if rpm in speeds or rpm < speeds[0] or rpm > speeds[-1]:
@@ -130,14 +105,8 @@ def placement(rpm: float, grid_speeds) -> list[float]:
 def propose(
     grid: OperatingGrid, granulator: Granulator, distributions: dict, assessments: list[Assessment], max_points: int
 ) -> pd.DataFrame:
-    """The proposals: one row per chosen sample (out-of-domain first, by excess; then by ensemble
-    spread), each run as single operating points (`grid.extra_points`) at the speeds of
-    `placement`, not as a whole row of the grid. A sample that is one of the defined distributions
-    (`distributions`: name -> SizeDistribution, compared as rounded here) proposes that
-    distribution at those speeds, and is skipped if every such point exists already; any other
-    sample proposes a new distribution. Columns: name, kind ('distribution' or 'point'), rpm,
-    interval, reason, out-of-domain features, surrogate uncertainty, diameters (m) and fractions (JSON),
-    points_rpm (JSON list of the speeds to run it at), capped_at_granulator_limit."""
+    """The proposals (`PROPOSAL_COLUMNS`), one row per chosen sample, out-of-domain first (by excess),
+    then by ensemble spread; a sample like one of the defined `distributions` proposes that one."""
     ranked = sorted(
         assessments, key=lambda a: (not a.is_out_of_domain, -max(a.out_of_domain.values(), default=0.0), -a.spread)
     )
@@ -217,9 +186,7 @@ def unique_name(base: str, taken: set[str]) -> str:
 
 
 def similar(a: tuple, b: tuple) -> bool:
-    """Two rounded distributions (diameters, fractions) with as many classes, diameters within one
-    rounding step and fractions within SIMILAR_FRACTIONS of each other: they teach the surrogate
-    the same thing."""
+    """Whether two rounded distributions (diameters, fractions) teach the surrogate the same thing."""
     if len(a[0]) != len(b[0]):
         return False
     close_d = np.all(np.abs(np.subtract(a[0], b[0])) <= 1.5 * DIAMETER_STEP)
@@ -228,7 +195,7 @@ def similar(a: tuple, b: tuple) -> bool:
 
 def fragment(grid: OperatingGrid, proposals: pd.DataFrame) -> dict:
     """The config fragment of the proposals: the new size distributions and the grid's complete
-    list of extra points with the proposed ones added (the full grid itself is left as it is)."""
+    list of extra points with the proposed ones added."""
     if proposals.empty:
         return {}
     dists = {

@@ -1,9 +1,6 @@
-"""Reading the validation's results of one speed: the PBM-DEM replicates, PBM-ANN (and its
-ensemble members), PBM-constant, with errors that name the file.
-
-Layout (`pbmdem.layout`, docs/architecture.md, "Validation"): `results/validation/rpm<rpm>/pbm_dem/rep<k>/`,
-`.../pbm_ann/` (with `members.csv`), `.../pbm_constant/`; each run folder holds summary.csv,
-bins.csv, final_bins.csv, timing.json and, for the loops, intervals.csv.
+"""Reading the validation's results of one speed, PBM-DEM replicates, PBM-ANN (and its ensemble
+members) and PBM-constant, with errors that name the file (layout: docs/architecture.md,
+"Validation results").
 """
 
 from __future__ import annotations
@@ -25,8 +22,7 @@ def run_folder(validation_dir: str | Path, rpm: str, method: str, replicate: int
 
 @dataclass
 class Run:
-    """One run of a validation model: its folder, PBM time series, final size distribution, timing
-    and (for the coupled loops) the record of its intervals."""
+    """One run of a validation model (the files it reads: docs/architecture.md, "Validation results")."""
 
     folder: Path
     summary: pd.DataFrame

@@ -361,6 +361,36 @@ def test_wall_models_learn_the_wall_impacts_with_the_same_held_out_evaluation(tm
     assert member.walls.frequency.shape == (2, 3) and not np.allclose(member.walls.frequency, rates.walls.frequency)
 
 
+def test_a_wall_frequency_takes_the_family_of_the_walls_best_held_out_score():
+    """The wall model's frequency is of the family with that wall's best pooled held-out R2, its speed
+    law of the template (the pairs' speed-law family), each with its own calibration factor. The
+    template here is a response surface of degree 1 in the untransformed features, which cannot
+    follow the synthetic wall laws' power laws as Kriging in log features does: reverting to a clone
+    of the template fails."""
+    from synthetic_tables import make_synthetic_wall_tables
+
+    from pbmdem.surrogate.persistence import family_name
+    from pbmdem.surrogate.walls import train_wall_models
+
+    table, _ = make_synthetic_tables(R, rpms=(300, 600, 900), seed=11)
+    walls, wall_velocity = make_synthetic_wall_tables(table, R, seed=12)
+    settings = tiny_settings()
+    candidates = {name: build_surrogate(settings, R, family=name) for name in ("kriging", "rsm")}
+    candidates["rsm"].set_params(feature_transform="none")
+    for key in ("frequency_model", "velocity_model"):
+        getattr(candidates["rsm"], key).set_params(degree=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        models, _, summaries = train_wall_models(walls, wall_velocity, candidates["rsm"], candidates, settings, R)
+    for wall, model in models.items():
+        scores = {name: summaries[wall]["frequency"][name]["pooled_r2_log10"] for name in candidates}
+        assert scores["kriging"] > scores["rsm"]  # the premise: the template is not the best
+        assert family_name(model.frequency_model_) == "kriging"
+        assert family_name(model.velocity_model_) == "rsm" and model.velocity_model_.degrees_ == [1, 1, 1]
+        assert model.uncertainty_scale == summaries[wall]["frequency"]["kriging"]["uncertainty_scale"]
+        assert model.velocity_uncertainty_scale == summaries[wall]["impact_velocity"]["rsm"]["uncertainty_scale"]
+
+
 def test_auto_chooses_the_frequency_on_the_pbm_samples_and_the_speed_law_apart(tmp_path):
     from pbmdem.surrogate.persistence import FAMILY_CLASSES
 

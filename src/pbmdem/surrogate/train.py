@@ -107,7 +107,8 @@ def train_and_report(
     calibration factor (the held-out 90 % interval coverage made nominal), on the ``pbm_samples``
     rows when there are any, else on every held-out row, becomes ``uncertainty_scale`` and
     ``velocity_uncertainty_scale`` of the final model. The wall models take the speed law's family
-    (their use is breakage from impacts).
+    for their speed laws and, for their frequencies, the family with each wall's best held-out R2
+    (:func:`~pbmdem.surrogate.walls.train_wall_models`).
 
     ``table`` is the collision table (``results/dem/collisions.csv``), ``velocity_table`` the
     impact-velocity table (``results/dem/impact_velocity.csv``); without it the surrogate learns

@@ -308,10 +308,14 @@ def test_the_command_line_runs_pbm_constant_in_two_dimensions(tmp_path, root):
 
 
 def test_the_process_does_not_depend_on_the_unit_of_volume():
-    """The default process in m3, mm3 and units of the first pivot: steps within 1 %, numbers and
-    liquid per pivot within 1e-5 of the totals (measured 1.1e-6: unlike the 1-D model's 1e-10, the
-    round-off of the unit conversion can move a class's rebinning, a decision at a class centre,
-    by one step, so the runs agree to the solver's tolerance rather than to round-off)."""
+    """The default process in m3, mm3 and units of the first pivot: numbers and liquid per pivot
+    within 1e-5 of the totals (measured 1.1e-6 on Intel, 1.4e-6 on AMD EPYC: unlike the 1-D model's
+    1e-10, the round-off of the unit conversion can move a class's rebinning, a decision at a class
+    centre, by one step, so the runs agree to the solver's tolerance rather than to round-off), and
+    steps within 10 %. The step count follows round-off, not only the unit: on AMD EPYC (2026-12-07)
+    the feed's volumes times 1 +- 1e-15 or 3e-15, in m3, took 323-333 steps against 329, and the
+    three units 329 / 320 / 344 (within 1 % on the Intel machines before): 1 % was below the
+    count's round-off noise on this CPU."""
     base = Grid.spanning(2e-3, 0.032, 2.0 ** (1 / 3))
     runs = {}
     for unit in (1.0, 1e9, 1.0 / base.x[0]):
@@ -326,7 +330,7 @@ def test_the_process_does_not_depend_on_the_unit_of_volume():
         runs[unit] = model.run(0.0, 480.0, state, output_times=np.arange(0.0, 481.0, 60.0))
     ref = runs[1.0]
     for unit, res in runs.items():
-        assert abs(res.info["steps"] - ref.info["steps"]) <= 0.01 * ref.info["steps"]
+        assert abs(res.info["steps"] - ref.info["steps"]) <= 0.10 * ref.info["steps"]
         assert np.abs(res.number - ref.number).max() < 1e-5 * ref.number.sum(1).max()
         assert np.abs(res.liquid / unit - ref.liquid).max() < 1e-5 * ref.liquid.sum(1).max()
 

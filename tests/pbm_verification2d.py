@@ -53,7 +53,7 @@ def discretise_bivariate(grid: Grid, lg: LiquidGrid, N0: float, mx: float, my: f
 def simulate_bivariate(grid, lg, beta, t_end, N0, mx, my, rtol=1e-6, atol=1e-12, gas_per_solid=0.1):
     """Pure aggregation with the constant kernel ``beta`` from the discretised bivariate
     exponential to ``t_end``: the Result (``result.classes`` the class totals)."""
-    solver = Solver.defaults().replace(rtol=rtol, atol=atol, max_step=np.inf)
+    solver = Solver().replace(rtol=rtol, atol=atol, max_step=np.inf)
     model = GranulationPBM2D(grid, ConstantKernel(beta), solver=solver, separate_feed=False, liquid_grid=lg)
     state = model.make_state(0.0, discretise_bivariate(grid, lg, N0, mx, my, gas_per_solid))
     return model.run(0.0, t_end, state)

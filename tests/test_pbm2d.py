@@ -120,7 +120,7 @@ def test_solid_liquid_and_gas_are_conserved_in_si_units(consolidation):
     """The whole process with the step success (liquid-dependent), breakage and spraying: solid
     exact, liquid = initial + sprayed, gas exact without consolidation, to 1e-12 relative at every recorded
     time (with consolidation the gas follows the closed form of its sum, to the solver tolerance)."""
-    _, model = _process_models("step", Solver.defaults(), consolidation=consolidation)
+    _, model = _process_models("step", Solver(), consolidation=consolidation)
     volumes, numbers = _feed()
     # without consolidation the pores (g / s = 1) never fill: start near them so that granules aggregate
     state = model.initial_state(volumes, numbers, liquid_content=0.05 if consolidation else 0.95, porosity=0.5)
@@ -147,7 +147,7 @@ def test_a_liquid_independent_process_has_the_one_dimensional_size_marginal():
     size) is the 1-D model's up to the solver tolerance: the difference falls with the tolerance."""
     diffs = []
     for rtol in (1e-4, 1e-5):
-        solver = Solver.defaults().replace(rtol=rtol, atol=rtol * 1e-3)
+        solver = Solver().replace(rtol=rtol, atol=rtol * 1e-3)
         one, two = _process_models("always", solver)
         volumes, numbers = _feed()
         times = np.arange(0.0, 481.0, 60.0)
@@ -197,14 +197,14 @@ def test_settings_select_the_two_dimensional_model(default_config):
 
 
 def test_a_run_resumes_from_its_state_and_refuses_a_one_dimensional_state():
-    _, model = _process_models("step", Solver.defaults())
+    _, model = _process_models("step", Solver())
     volumes, numbers = _feed()
     state = model.initial_state(volumes, numbers, liquid_content=0.0, porosity=0.5)
     whole = model.run(0.0, 480.0, state)
     first = model.run(0.0, 200.0, state)
     second = model.run(200.0, 480.0, first.state)
     assert second.summary()["d50"].iloc[-1] == pytest.approx(whole.summary()["d50"].iloc[-1], rel=1e-2)
-    one, _ = _process_models("step", Solver.defaults())
+    one, _ = _process_models("step", Solver())
     with pytest.raises(PBMInputError, match="starts from a State2D"):
         model.run(0.0, 10.0, one.initial_state(volumes, numbers, 0.0, 0.5))
 
@@ -332,7 +332,7 @@ def test_the_process_does_not_depend_on_the_unit_of_volume():
 
 
 def test_joined_runs_keep_the_classes():
-    _, model = _process_models("step", Solver.defaults())
+    _, model = _process_models("step", Solver())
     volumes, numbers = _feed()
     first = model.run(0.0, 200.0, model.initial_state(volumes, numbers, 0.0, 0.5), output_times=[100.0])
     second = model.run(200.0, 480.0, first.state, output_times=[300.0])

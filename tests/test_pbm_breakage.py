@@ -433,7 +433,7 @@ def test_fragments_below_the_grid_floor_are_counted_against_a_grid_extended_down
     extended = Grid(33, ratio, v0=0.5 * x0)  # pivots x_0 / 2, x_0 / 2^(2/3), x_0 / 2^(1/3), x_0, ...
     rate, t_end = 0.05, 120.0  # 1/s per granule: six breakages per granule over the run
     N = np.array([0, 40, 30, 60, 50, 40, 30, 20, 10, 5], float)  # 2 mm and up: none at the first pivot
-    runs, solver = {}, Solver.defaults().replace(max_step=0.5)
+    runs, solver = {}, Solver().replace(max_step=0.5)
     for name, g, pad in (("clipped", clipped, 0), ("extended", extended, 3)):
         selection = _FromPivot(rate, 1.5 * x0)  # every pivot above the 2 mm one
         brk = Breakage(selection, "binary")

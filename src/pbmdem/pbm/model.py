@@ -31,14 +31,14 @@ from pbmdem.config import Solver
 
 from .aggregation import SCHEMES, operator
 from .breakage import Breakage, breakage_arrays
-from .errors import KernelShapeError, PBMInputError, positive
+from .errors import KernelShapeError, PBMInputError
 from .grid import Grid, diameter_of
 from .kernels import Kernel, KernelInput
 from .processes import Consolidation, LiquidAddition
 from .state import FeedGranules, State
-from .stepping import TimeIntegration, check_solver
+from .stepping import TimeIntegration
 
-__all__ = ["GranulationPBM", "check_solver"]
+__all__ = ["GranulationPBM"]
 
 
 class GranulationPBM(TimeIntegration):
@@ -68,12 +68,8 @@ class GranulationPBM(TimeIntegration):
         self.kernel = kernel
         self.liquid = liquid
         self.consolidation = consolidation
-        self.solver = check_solver(solver if solver is not None else Solver.defaults())
+        self.solver = solver if solver is not None else Solver()
         self.set_rpm(rpm)
-        if scheme not in SCHEMES:
-            raise PBMInputError(f"aggregation scheme = {scheme!r}; allowed: {sorted(SCHEMES)}")
-        if not isinstance(separate_feed, (bool, np.bool_)):
-            raise PBMInputError(f"separate_feed = {separate_feed!r}; allowed: true or false")
         self.separate_feed = bool(separate_feed)
         self.breakage = breakage
         self._brk_arrays = breakage_arrays(breakage, grid.x, grid.edges)  # None: an empty selection
@@ -93,7 +89,7 @@ class GranulationPBM(TimeIntegration):
 
     def set_rpm(self, rpm: float) -> None:
         """The impeller speed of the next runs (the kernel's input; a model reused at another speed)."""
-        self.rpm = positive("impeller speed (rpm)", rpm, allow_zero=True)
+        self.rpm = float(rpm)
 
     def __repr__(self) -> str:
         return (
@@ -193,10 +189,7 @@ class GranulationPBM(TimeIntegration):
     ) -> State:
         """State from particle classes of solid ``volumes`` (m3) and ``numbers``, each with liquid
         ``liquid_content`` x solid volume and pore volume such that G / (S + G) = ``porosity``."""
-        lc = positive("initial liquid_content", liquid_content, allow_zero=True)
-        eps = positive("initial porosity", porosity, allow_zero=True)
-        if eps >= 1:
-            raise PBMInputError(f"initial porosity = {porosity!r}; allowed: 0 <= porosity < 1")
+        lc, eps = float(liquid_content), float(porosity)
         if self.consolidation is not None and eps < self.consolidation.min_porosity:
             raise PBMInputError(
                 f"initial porosity = {eps:g} is below the minimum porosity "

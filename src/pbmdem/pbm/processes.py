@@ -16,23 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import PBMInputError, positive
-
 
 class LiquidAddition:
-    RULES = ("surface_area", "solid_volume")
-
     def __init__(self, rate: float, t_start: float, t_end: float, rule: str = "surface_area"):
-        self.rate = positive("liquid addition rate (m3/s)", rate)
-        self.t_start = positive("liquid addition t_start (s)", t_start, allow_zero=True)
-        self.t_end = positive("liquid addition t_end (s)", t_end)
-        if self.t_end <= self.t_start:
-            raise PBMInputError(
-                f"liquid addition window [{t_start}, {t_end}] s is empty; allowed: t_end > t_start >= 0"
-            )
-        if rule not in self.RULES:
-            raise PBMInputError(f"liquid addition distribution = {rule!r}; allowed: {list(self.RULES)}")
-        self.rule = rule
+        self.rate, self.t_start, self.t_end, self.rule = float(rate), float(t_start), float(t_end), rule
 
     def __repr__(self) -> str:
         return (
@@ -53,10 +40,7 @@ class LiquidAddition:
 
 class Consolidation:
     def __init__(self, rate: float, min_porosity: float):
-        self.rate = positive("consolidation rate (1/s)", rate)
-        self.min_porosity = positive("consolidation min_porosity", min_porosity, allow_zero=True)
-        if self.min_porosity >= 1:
-            raise PBMInputError(f"consolidation min_porosity = {min_porosity!r}; allowed: 0 <= eps_min < 1")
+        self.rate, self.min_porosity = float(rate), float(min_porosity)
         self.gas_per_solid = self.min_porosity / (1.0 - self.min_porosity)
 
     def __repr__(self) -> str:

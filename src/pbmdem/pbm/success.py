@@ -18,8 +18,6 @@ import math
 
 import numpy as np
 
-from .errors import PBMInputError, positive
-
 
 def harmonic_mean(a, b) -> np.ndarray:
     """2 a b / (a + b) elementwise (0 where a + b = 0)."""
@@ -69,12 +67,8 @@ class StokesCriterion:
     """
 
     def __init__(self, viscosity: float, restitution: float, asperity_height: float, density: float):
-        self.viscosity = positive("success stokes binder_viscosity (Pa s)", viscosity)
-        self.restitution = positive("success stokes restitution", restitution)
-        if self.restitution > 1:
-            raise PBMInputError(f"success stokes restitution = {restitution!r}; allowed: 0 < e <= 1")
-        self.asperity_height = positive("success stokes asperity_height (m)", asperity_height)
-        self.density = positive("success stokes granule_density (kg/m3)", density)
+        self.viscosity, self.restitution = float(viscosity), float(restitution)
+        self.asperity_height, self.density = float(asperity_height), float(density)
 
     def __repr__(self) -> str:
         return (
@@ -113,24 +107,9 @@ class SuccessProbability:
     (default) the success is velocity-independent, as in the seed study.
     """
 
-    MODELS = ("step", "logistic", "always")
-
     def __init__(self, model: str = "step", threshold: float = 0.02, width: float = 0.005, velocity=None):
-        if velocity is not None and not callable(getattr(velocity, "critical_velocity", None)):
-            raise PBMInputError(
-                f"success velocity criterion {velocity!r} lacks critical_velocity(d, phi); "
-                "allowed: None or a pbmdem.pbm.success.StokesCriterion"
-            )
         self.velocity = velocity
-        if model not in self.MODELS:
-            raise PBMInputError(f"success probability model = {model!r}; allowed: {list(self.MODELS)}")
-        self.model = model
-        self.threshold = positive("success threshold", threshold, allow_zero=True)
-        if self.threshold >= 1:
-            raise PBMInputError(
-                f"success threshold = {threshold!r}; allowed: 0 <= threshold < 1 (a surface-liquid volume fraction)"
-            )
-        self.width = positive("success width", width)
+        self.model, self.threshold, self.width = model, float(threshold), float(width)
 
     def __repr__(self) -> str:
         vel = "" if self.velocity is None else f", velocity={self.velocity!r}"

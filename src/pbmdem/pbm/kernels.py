@@ -1,19 +1,7 @@
-"""Aggregation kernels and collision-frequency sources.
-
-A kernel maps the current population (a :class:`KernelInput`) to the (K, K) symmetric matrix
-beta_ij (1/s per pair) used in the population balance. Provided:
-
-* :class:`ConstantKernel` beta_ij = beta0 (Scott's 1968 closed form in tests/pbm_analytical.py);
-* :class:`SumKernel` (Golovin) beta_ij = b (v_i + v_j) (likewise);
-* :class:`CollisionKernel` beta_ij = beta0 c_ij psi_ij: c_ij per-pair collision frequency (1/s)
-  from a pluggable source, psi_ij a success probability from the surface liquid of both granules.
-
-Collision-frequency sources share the interface of docs/architecture.md,
-``source(diameters (K,), numbers (K,), rpm) -> (K, K)``:
-:class:`ConstantFrequency` and the checks of what a source returns (``sources``),
-:class:`TableFrequency` (DEM collision table, ``table``) and the surrogate
-(``pbmdem.surrogate.CollisionSurrogate.frequency_matrix``); all re-exported here.
-"""
+"""Aggregation kernels: a kernel maps the population (:class:`KernelInput`) to the (K, K) symmetric
+matrix beta_ij (1/s per pair): :class:`ConstantKernel`, :class:`SumKernel` (the closed forms of
+tests/pbm_analytical.py) and :class:`CollisionKernel` beta0 c_ij psi_ij with c_ij from a
+collision-frequency source (docs/architecture.md: ``sources``, ``table``, the surrogate)."""
 
 from __future__ import annotations
 

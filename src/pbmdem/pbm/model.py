@@ -1,27 +1,10 @@
-"""The batch granulator population balance (its time integration: ``stepping``).
+"""The batch granulator population balance: numbers N_k, liquid L_k and gas G_k totals per bin of
+a :class:`Grid` (the feed granules as classes of their own, :class:`FeedGranules`), aggregation,
+breakage, spraying and consolidation (docs/pbm.md, "Rate processes").
 
-State: numbers N_k, liquid L_k and gas (pore) G_k volume totals per bin of a :class:`Grid`
-(solid S_k = N_k x_k). Balances (aggregation A: a scheme of ``aggregation.SCHEMES``, by default
-the cell average; breakage B, optional: ``breakage.Breakage``):
-
-    dN_k/dt = A_N,k + B_N,k
-    dL_k/dt = A_L,k + B_L,k + Q w_k [t_start <= t < t_end]
-    dG_k/dt = A_G,k + B_G,k - c (G_k - eps_min / (1 - eps_min) S_k)
-
-Time integration: strong-stability-preserving explicit Runge-Kutta, ``"ssp3"`` (SSP-RK3 with
-an embedded Heun estimate, default), ``"heun"`` (SSP-RK2 with an embedded Euler estimate) or
-``"euler"``, with positivity- and error-controlled steps (``stepping``). Internally volumes are
-in units of the first pivot (unit independence; docs/pbm.md, "Time integration"). ``run(t_start,
-t_end, state)`` resumes from any :class:`State`, so a coupled loop can swap the
-collision-frequency source between intervals.
-
-Every rate and every stage is computed by the compiled backend (``_compiled``, ``_compiled_steps``):
-a factored kernel (``Kernel.factors``) inside it, any other kernel called here and its matrix passed in.
-
-Feed granules (``separate_feed=True``, default): the feed granules not yet aggregated are classes
-of their own (:class:`FeedGranules`, docs/pbm.md, "Feed granules"), in the State's per-bin totals
-by the lever rule.
-"""
+Its time integration is ``stepping``'s; every rate and stage is computed by the compiled backend
+(``_compiled``, ``_compiled_steps``). ``run(t_start, t_end, state)`` resumes from any
+:class:`State`, so a coupled loop can swap the collision-frequency source between intervals."""
 
 from __future__ import annotations
 

@@ -1,16 +1,6 @@
-"""Liquid addition and consolidation (rate processes besides aggregation); docs/pbm.md ("Rate
-processes": liquid addition, consolidation) gives their balances and sources.
-
-Liquid addition: binder is sprayed at a volumetric rate Q (m3/s) during [t_start, t_end) and
-shared among the classes in proportion to ``"surface_area"`` (default: N_k d_k^2) or
-``"solid_volume"`` (N_k x_k), so that the total liquid is the initial + Q x overlap of the run with
-the spray window. Consolidation: dG_k/dt = -c (G_k - eps_min / (1 - eps_min) S_k), the pore volume
-approaching the minimum porosity; liquid in excess of the pore volume is surface liquid
-(``state.surface_fraction``).
-
-The classes here hold the settings; the rates themselves are computed with the other rate
-processes in the compiled backend (``_compiled.add_processes``).
-"""
+"""Liquid addition and consolidation, the rate processes besides aggregation: their settings; the
+rates are computed in the compiled backend (``_compiled.add_processes``). docs/pbm.md ("Rate
+processes") gives their balances."""
 
 from __future__ import annotations
 

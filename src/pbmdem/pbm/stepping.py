@@ -1,16 +1,6 @@
 """The PBM's explicit time integration: the run loop of a model (:class:`TimeIntegration`, the base
-of ``GranulationPBM``) and its step control: the solver settings, the step size and its
-rejections, the run's limits and the records of the output times.
-
-dt = min(safety x min over depleting entries (rate < 0) of value / |rate|, the error-controlled
-step, ``max_step``, the next output time or spray-window edge). A step that would leave a
-negative entry is repeated with half the step; after ``MAX_HALVINGS`` the run stops with
-NegativePopulationError. A step whose embedded error estimate exceeds 1 is repeated with a
-smaller step. What limited each step is counted (``STEP_LIMITS``, ``result.info["step_limits"]``).
-The stages of a step are the model's (``GranulationPBM._stages``, compiled in ``_compiled_steps``).
-The rates are those of every process at once (aggregation, breakage, spraying, consolidation),
-so the deaths of breakage limit the step and trigger the halvings as those of aggregation do.
-"""
+of ``GranulationPBM``) and its step control (docs/pbm.md, "Time integration"). What limited each
+step is counted (``STEP_LIMITS``, ``result.info["step_limits"]``)."""
 
 from __future__ import annotations
 

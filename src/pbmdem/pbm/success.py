@@ -1,16 +1,7 @@
 """Aggregation success: the success probability of a pair from the surface liquid of both
 granules (:class:`SuccessProbability`) and, velocity-dependent, the viscous Stokes criterion of wet
-granule impacts (:class:`StokesCriterion`; Ennis, Tardos & Pfeffer 1991, Powder Technol. 65:257;
-Liu, Litster, Iveson & Ennis 2000, AIChE J. 46:529).
-
-A pair meeting at relative normal approach speed w (docs/architecture.md) is held if
-St_v = m* w / (6 pi mu a*^2) < St* = (1 + 1/e) ln(h / h_a), with the reduced mass m* and radius a*,
-the pair layer h / h_a = (h_i + h_j) / (2 h_a) and the layer thickness h = d/2 (1 - (1 - phi)^(1/3))
-of a granule whose surface liquid is the volume fraction phi. docs/pbm.md ("Rate processes",
-Stokes criterion) derives these, relates them to the forms of Liu et al. and Ennis et al. and
-gives the defaults. Every quantity is in SI units; the criterion depends only on the dimensionless
-groups St_v, h/h_a and e, so any consistent unit system gives the same answer.
-"""
+granule impacts (:class:`StokesCriterion`). docs/pbm.md ("Rate processes", Stokes criterion)
+derives both and gives the references; every quantity is in SI units."""
 
 from __future__ import annotations
 

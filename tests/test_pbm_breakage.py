@@ -324,15 +324,8 @@ def test_bad_selection_rates_are_named(value, match):
         model.run(0.0, 1.0, state)
 
 
-def test_bad_breakage_arguments_are_named():
-    with pytest.raises(PBMInputError, match=r"breakage fragments = 'ternary'; allowed: \['binary', 'uniform'\]"):
-        Breakage(ConstantSelection(1.0), "ternary")
-    with pytest.raises(PBMInputError, match=r"breakage selection = 0.5; allowed: an object with prepare"):
-        Breakage(0.5)
-    with pytest.raises(PBMInputError, match=r"selection rate \(1/s\) = -1"):
-        ConstantSelection(-1.0)
-    with pytest.raises(PBMInputError, match=r"breakage = 'yes'; allowed"):
-        GranulationPBM(Grid(5, 2.0, v0=1.0), ConstantKernel(1.0), breakage="yes")
+def test_power_law_selection():
+    # bad breakage settings are refused where they enter: test_bad_breakage_settings_name_the_key
     inp = KernelInput(0.0, np.array([1.0, 2.0]), np.ones(2), np.ones(2), np.zeros(2), 0.0)
     np.testing.assert_array_equal(PowerLawSelection(3.0, 2.0)(inp), [3.0, 12.0])
 

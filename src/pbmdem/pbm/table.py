@@ -20,7 +20,7 @@ from pbmdem.readers import InputFileError, first_index
 from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES, Table
 
 from .bilinear import Bilinear
-from .errors import PBMInputError, positive
+from .errors import PBMInputError
 
 _KEY_TYPES = {"point_id": str, "class_i": int, "class_j": int}
 
@@ -42,11 +42,7 @@ class TableFrequency:
     clamped and mixed in rpm with the frequency's weights."""
 
     def _set_options(self, extrapolation: str, zero_floor: float, column: str) -> None:
-        if extrapolation not in ("clamp", "linear"):
-            raise PBMInputError(f"table extrapolation = {extrapolation!r}; allowed: 'clamp', 'linear'")
-        self.extrapolation = extrapolation
-        self.zero_floor = positive("table zero_floor", zero_floor)
-        self.column = column
+        self.extrapolation, self.zero_floor, self.column = extrapolation, float(zero_floor), column
 
     def __init__(
         self,

@@ -21,7 +21,7 @@ from pbmdem.impact import N_VELOCITY_BINS, WALLS, WallRates, velocity_bins_of
 from pbmdem.readers import InputFileError, first_index
 from pbmdem.tables import GRID_WALL_VELOCITIES, GRID_WALLS
 
-from .errors import PBMInputError, positive
+from .errors import PBMInputError
 from .table import read_grid_table, speed_weights
 
 #: Column of the wall table the breakage selection is built on (impacts of granules that were apart).
@@ -37,7 +37,7 @@ class WallTable:
     is refused (the tables come from different runs)."""
 
     def __init__(self, walls: pd.DataFrame, velocities: pd.DataFrame, zero_floor: float = 1e-3):
-        self.zero_floor = positive("wall table zero_floor", zero_floor)
+        self.zero_floor = float(zero_floor)
         need = ["point_id", "rpm", "wall", "class_i", "d_i", WALL_FREQUENCY_COLUMN]
         missing = [c for c in need if c not in walls.columns]
         missing += [

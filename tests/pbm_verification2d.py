@@ -19,6 +19,13 @@ from pbmdem.pbm.model2d import GranulationPBM2D
 _NODES = 32
 
 
+def geometric_liquid_grid(first: float, last: float, ratio: float) -> LiquidGrid:
+    """Liquid classes [0, first), [first, first r), ..., [>= last, inf): bounds first r^k up to the
+    first at or above ``last`` (the verification's exponential start spans decades of ratio)."""
+    n = int(np.ceil(np.log(last / first) / np.log(ratio) - 1e-9)) + 1
+    return LiquidGrid(first * ratio ** np.arange(n, dtype=float))
+
+
 def discretise_bivariate(grid: Grid, lg: LiquidGrid, N0: float, mx: float, my: float, gas_per_solid: float = 0.0):
     """Class totals (3, K, J) (number, liquid, gas) of the bivariate exponential start: the number,
     solid and liquid of every size cell (first from 0) and liquid class are integrated (liquid

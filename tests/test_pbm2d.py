@@ -63,7 +63,7 @@ def _verification_grids(q: int):
     over the liquid-to-solid ratios (my / mx) / 16 .. 16 (my / mx)."""
     r = 2.0 ** (1.0 / q)
     grid = Grid(int(np.ceil(np.log(400 / 1e-2) / np.log(r))) + 1, r, v0=1e-2 * MX)
-    return grid, LiquidGrid.geometric(MY / MX / 16, MY / MX * 16, r)
+    return grid, v2.geometric_liquid_grid(MY / MX / 16, MY / MX * 16, r)
 
 
 def _totals(classes, grid_x):
@@ -169,7 +169,7 @@ def test_liquid_classes_classify_by_their_bounds():
     w = np.concatenate([np.linspace(0, 1.2, 2001), uniform.bounds, np.nextafter(uniform.bounds, 0)])
     expected = np.searchsorted(uniform.bounds, w, side="right")
     np.testing.assert_array_equal(uniform.classify(w), expected)
-    geometric = LiquidGrid.geometric(0.01, 1.0, 2.0**0.5)
+    geometric = v2.geometric_liquid_grid(0.01, 1.0, 2.0**0.5)
     np.testing.assert_array_equal(geometric.classify(w), np.searchsorted(geometric.bounds, w, side="right"))
     with pytest.raises(PBMInputError, match="ascending"):
         LiquidGrid([0.1, 0.1])

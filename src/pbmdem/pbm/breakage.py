@@ -1,15 +1,8 @@
-"""Breakage of granules: the selection rate, the fragment distribution and their cell-average
-form on the aggregation grid. docs/pbm.md ("Breakage") gives the balance, the fragment
-distributions (``FRAGMENTS``: ``binary``, ``uniform``), what breaks and the discretisation.
-
-Selection rates implement the protocol of the aggregation kernels: ``prepare(inp)`` at every
-step and ``selection(inp) -> (K,)`` the rate of each grid pivot, >= 0, for the classes of a
-:class:`~pbmdem.pbm.kernels.KernelInput`. :class:`ConstantSelection` (PBM-constant) and
-:class:`PowerLawSelection` (S = a v^p, the analytical cases) live here; the selection from the DEM's
-impact statistics is ``pbm.impact_breakage.ImpactSelection``. :class:`Breakage` holds the
-fragment tables of a grid (:meth:`Breakage.fragment_tables`); the rates themselves are computed
-by the compiled backend (``_compiled.breakage_totals``).
-"""
+"""Breakage of granules: selection rates, the fragment distribution and their cell-average form on
+the aggregation grid (docs/pbm.md, "Breakage"). :class:`ConstantSelection` (PBM-constant) and
+:class:`PowerLawSelection` (the analytical cases) live here, the selection from the DEM's impacts
+in ``pbm.impact_breakage``; the rates are computed by the compiled backend
+(``_compiled.breakage_totals``)."""
 
 from __future__ import annotations
 

@@ -47,15 +47,9 @@ def critical_stokes_number(h, asperity_height: float, restitution: float) -> np.
 
 
 class StokesCriterion:
-    """Success of an impact: St_v(w) < St* (a step in the approach speed).
-
-    ``viscosity``: binder viscosity mu (Pa s); ``restitution``: e of the solid (asperity) contact;
-    ``asperity_height``: h_a (m); ``density``: granule density rho_g (kg/m3).
-
-    The step is evaluated at one speed per velocity bin (the bin's representative speed), so the
-    success of a pair is the fraction of its encounters in the bins whose speed is below the pair's
-    critical speed w* = St* 6 pi mu a*^2 / m*.
-    """
+    """Success of an impact: St_v(w) < St*, evaluated at each velocity bin's representative speed
+    (docs/pbm.md, "Rate processes": the Stokes criterion); SI units: viscosity mu (Pa s),
+    restitution e, asperity height h_a (m), granule density (kg/m3)."""
 
     def __init__(self, viscosity: float, restitution: float, asperity_height: float, density: float):
         self.viscosity, self.restitution = float(viscosity), float(restitution)
@@ -85,18 +79,10 @@ class StokesCriterion:
 
 
 class SuccessProbability:
-    """psi_ij = p(phi_i) p(phi_j) from the surface-liquid volume fraction phi of both granules.
-
-    ``model``: ``"step"`` p = 1 if phi >= threshold else 0 (default); ``"logistic"``
-    p = 1 / (1 + exp(-(phi - threshold) / width)); ``"always"`` p = 1 (dry or pure-aggregation
-    tests). phi = surface liquid / granule volume (see ``state.surface_fraction``).
-
-    ``velocity``: optional impact-velocity criterion (``pbmdem.pbm.success.StokesCriterion``: it
-    holds an impact iff its speed is below ``critical_velocity(d, phi)``); with it the success of
-    an impact at speed v is psi_ij(v) = p(phi_i) p(phi_j) x [criterion holds at v], and
-    :class:`CollisionKernel` needs velocity-resolved encounter rates from its source. Without it
-    (default) the success is velocity-independent, as in the seed study.
-    """
+    """psi_ij = p(phi_i) p(phi_j) from the surface-liquid volume fraction phi of both granules
+    (``model`` ``"step"``, ``"logistic"`` or ``"always"``, docs/pbm.md "Rate processes"); with a
+    ``velocity`` criterion (:class:`StokesCriterion`) the success of an impact at speed v also needs
+    the criterion to hold at v, and :class:`CollisionKernel` needs velocity-resolved encounter rates."""
 
     def __init__(self, model: str = "step", threshold: float = 0.02, width: float = 0.005, velocity=None):
         self.velocity = velocity

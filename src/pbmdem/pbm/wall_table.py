@@ -1,15 +1,8 @@
-"""The DEM's wall impacts as a source for breakage: :class:`WallTable`.
-
-Per wall (bowl, impeller), the encounters per granule and second of each size class
-(``encounter_frequency_per_particle`` of results/dem/wall_collisions.csv) and their impact-speed
-distribution (results/dem/wall_impact_velocity.csv, counts per bin of pbmdem.impact.VELOCITY_EDGES),
-interpolated onto any class diameters and impeller speed the way :class:`~pbmdem.pbm.table.TableFrequency`
-interpolates the pair table: per speed, rows of one diameter (several distributions) are pooled
-(frequencies averaged, counts added), log f is interpolated linearly in log d and clamped at the
-table's sizes, zero frequencies are floored at ``zero_floor`` x the smallest positive one; the
-fractions are interpolated linearly in log d (clamped); over rpm, log f and the fractions are
-mixed with the weights of :func:`pbmdem.pbm.table.speed_weights`.
-"""
+"""The DEM's wall impacts as a source for breakage (:class:`WallTable`): per wall (bowl, impeller)
+the encounters per granule and second of each size class (results/dem/wall_collisions.csv) and
+their impact-speed distribution (wall_impact_velocity.csv), interpolated onto any diameters and
+speed the way :class:`~pbmdem.pbm.table.TableFrequency` interpolates the pair table (log f linear
+in log d, clamped; zero frequencies floored at ``zero_floor`` x the smallest positive one)."""
 
 from __future__ import annotations
 

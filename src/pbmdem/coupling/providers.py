@@ -1,11 +1,7 @@
 """Collision frequencies of a coupling interval's representative sample: from LIGGGHTS (PBM-DEM)
-or from the trained surrogate (PBM-ANN).
-
-A provider is called as `provider(sample, interval_dir, index) -> (rates, info)`: `rates` is the
-(K, K) encounter frequency per class pair, an `EncounterRates` with impact-velocity fractions, or
-an `ImpactRates` that adds the wall impacts per granule (what breakage from impacts needs),
-`info` the figures recorded for the interval (wall times, DEM particle and encounter counts,
-out-of-domain warnings). `fingerprint()` names what its rates depend on, so that finished
+or from the trained surrogate (PBM-ANN). A provider is called as `provider(sample, interval_dir,
+index) -> (rates, info)` (rates: a matrix, `EncounterRates` or `ImpactRates`; info: the
+interval's recorded figures); `fingerprint()` names what its rates depend on, so that finished
 intervals of a changed provider are not reused.
 
 The DEM stage and the surrogate are imported with the module (imports at the top): a PBM-DEM job

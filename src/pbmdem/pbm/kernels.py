@@ -151,20 +151,13 @@ class SumKernel(Kernel):
 
 
 class CollisionKernel(Kernel):
-    """beta_ij = beta0 * c_ij * psi_ij, or, with a velocity-dependent success probability,
-    beta_ij = beta0 * c_ij * sum_b f_ij,b psi_ij(v_b).
+    """beta_ij = beta0 c_ij psi_ij, or with a velocity-dependent success beta0 c_ij sum_b f_ij,b psi_ij(v_b)
+    (docs/pbm.md, "Rate processes").
 
-    ``source(diameters, numbers, rpm) -> (K, K)`` per-pair collision frequency (1/s). It is
-    evaluated at the first step of a run and then again once ``update_interval`` seconds have
-    passed (0: every step); the coupled PBM-DEM loop swaps ``source`` between runs
-    (``set_source``). ``beta0`` is the dimensionless fraction of successful-when-wet collisions.
-
-    If ``success.velocity_dependent``, the source must offer ``encounters(diameters, numbers,
-    rpm) -> pbmdem.impact.EncounterRates`` (docs/architecture.md): c_ij is then the encounter
-    frequency per pair and f_ij,b the fraction of the pair's encounters in impact-velocity bin b,
-    whose speed v_b is ``pbmdem.impact.representative_velocities()[b]``. A pair whose fractions
-    are all 0 (no velocity data) gets beta_ij = 0.
-    """
+    ``source(diameters, numbers, rpm) -> (K, K)`` gives c_ij (1/s per pair) at the first step of a run
+    and again every ``update_interval`` s (0: every step); a coupled loop swaps it (``set_source``).
+    A velocity-dependent success needs ``source.encounters(...) -> pbmdem.impact.EncounterRates``
+    (docs/architecture.md); a pair without velocity data gets beta_ij = 0."""
 
     def __init__(self, source, beta0: float, success: SuccessProbability | None = None, update_interval: float = 0.0):
         self.beta0 = float(beta0)

@@ -109,7 +109,6 @@ def accuracy(qs=(1, 2, 3, 4)) -> None:
     import pbm_verification2d as v2
 
     from pbmdem.pbm.grid import Grid
-    from pbmdem.pbm.liquid_grid import LiquidGrid
 
     N0, mx, my, beta, t_end = 1000.0, 1e-9, 0.3e-9, 1e-3, 18.0  # SI; tenfold growth (tests/test_pbm2d.py)
     print("\nconstant kernel, bivariate exponential start, tenfold growth (SI units, rtol 1e-5):")
@@ -119,7 +118,7 @@ def accuracy(qs=(1, 2, 3, 4)) -> None:
     for q in qs:
         r = 2.0 ** (1.0 / q)
         grid = Grid(int(np.ceil(np.log(400 / 1e-2) / np.log(r))) + 1, r, v0=1e-2 * mx)
-        lg = LiquidGrid.geometric(my / mx / 16, my / mx * 16, r)
+        lg = v2.geometric_liquid_grid(my / mx / 16, my / mx * 16, r)
         c0 = time.process_time()
         res = v2.simulate_bivariate(grid, lg, beta, t_end, N0, mx, my, rtol=1e-5, atol=1e-10)
         cpu = time.process_time() - c0

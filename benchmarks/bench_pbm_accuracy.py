@@ -158,7 +158,7 @@ def run_case(kernel: str, start: str, growth: float, q: int, scheme: str):
         grid,
         KERNELS[kernel],
         scheme=scheme,
-        solver=Solver.defaults().replace(rtol=1e-5, atol=1e-12, max_step=np.inf, max_overflow_fraction=1.0),
+        solver=Solver().replace(rtol=1e-5, atol=1e-12, max_step=np.inf, max_overflow_fraction=1.0),
     )
     N = initial_numbers(grid, start)
     t0 = time.perf_counter()
@@ -192,7 +192,7 @@ def batch_with(cfg, section: dict, distribution: str = "fine"):
     schema's defaults (the first pivot stays the config's)."""
     from pbmdem.config import Pbm
 
-    pbm = Pbm.from_section(section)
+    pbm = Pbm.from_dict(section, "pbm")
     if section.get("grid", {}).get("min_diameter") is None:
         pbm = pbm.replace(grid=pbm.grid.replace(min_diameter=cfg.pbm.grid.min_diameter))
     return cfg.pbm_batch(distribution).replace(pbm=pbm)
@@ -351,7 +351,7 @@ def monodisperse_breakage(qs, a: float = 1.0, l: float = 1.0):
         assert abs(grid.x[k] / l - 1.0) < 1e-12, "the start must sit on a pivot"
         N = np.zeros(grid.bins)
         N[k] = 1.0
-        solver = Solver.defaults().replace(rtol=1e-8, atol=1e-14, max_step=np.inf)
+        solver = Solver().replace(rtol=1e-8, atol=1e-14, max_step=np.inf)
         model = GranulationPBM(
             grid, ver.NoAggregation(), solver=solver, breakage=Breakage(PowerLawSelection(a, 1.0), "uniform")
         )

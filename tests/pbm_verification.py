@@ -54,7 +54,7 @@ def simulate_exponential(
     M0, M1, M2 at ``t_end`` against ``pbm_analytical.moments`` (M_k = sum N x^k)."""
     N = discretise_exponential(grid, N0, m)
     K = grid.bins
-    solver = Solver.defaults().replace(rtol=rtol, atol=atol, max_overflow_fraction=max_overflow_fraction)
+    solver = Solver().replace(rtol=rtol, atol=atol, max_overflow_fraction=max_overflow_fraction)
     model = GranulationPBM(grid, kernel, scheme=scheme, solver=solver)
     res = model.run(0.0, t_end, State(0.0, N, np.zeros(K), np.zeros(K)))
     return res, res.moments()[-1] / np.array(analytical.moments(kernel, t_end, N0, m)) - 1.0
@@ -97,7 +97,7 @@ def simulate_breakage(
     n(v, 0) = N0/m e^(-v/m) to ``t_end``, liquid and gas 0.3 and 0.1 of the solid of every bin:
     the Result."""
     N = discretise_exponential(grid, N0, m)
-    solver = Solver.defaults().replace(rtol=rtol, atol=atol, max_step=np.inf)
+    solver = Solver().replace(rtol=rtol, atol=atol, max_step=np.inf)
     model = GranulationPBM(grid, NoAggregation() if kernel is None else kernel, solver=solver, breakage=breakage)
     S = N * grid.x
     return model.run(0.0, t_end, State(0.0, N, 0.3 * S, 0.1 * S), output_times=output_times)

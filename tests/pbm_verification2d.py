@@ -19,6 +19,13 @@ from pbmdem.pbm.model2d import GranulationPBM2D
 _NODES = 32
 
 
+def geometric_liquid_grid(first: float, last: float, ratio: float) -> LiquidGrid:
+    """Liquid classes [0, first), [first, first r), ..., [>= last, inf): bounds first r^k up to the
+    first at or above ``last`` (the verification's exponential start spans decades of ratio)."""
+    n = int(np.ceil(np.log(last / first) / np.log(ratio) - 1e-9)) + 1
+    return LiquidGrid(first * ratio ** np.arange(n, dtype=float))
+
+
 def discretise_bivariate(grid: Grid, lg: LiquidGrid, N0: float, mx: float, my: float, gas_per_solid: float = 0.0):
     """Class totals (3, K, J) (number, liquid, gas) of the bivariate exponential start: the number,
     solid and liquid of every size cell (first from 0) and liquid class are integrated (liquid
@@ -53,7 +60,7 @@ def discretise_bivariate(grid: Grid, lg: LiquidGrid, N0: float, mx: float, my: f
 def simulate_bivariate(grid, lg, beta, t_end, N0, mx, my, rtol=1e-6, atol=1e-12, gas_per_solid=0.1):
     """Pure aggregation with the constant kernel ``beta`` from the discretised bivariate
     exponential to ``t_end``: the Result (``result.classes`` the class totals)."""
-    solver = Solver.defaults().replace(rtol=rtol, atol=atol, max_step=np.inf)
+    solver = Solver().replace(rtol=rtol, atol=atol, max_step=np.inf)
     model = GranulationPBM2D(grid, ConstantKernel(beta), solver=solver, separate_feed=False, liquid_grid=lg)
     state = model.make_state(0.0, discretise_bivariate(grid, lg, N0, mx, my, gas_per_solid))
     return model.run(0.0, t_end, state)

@@ -6,6 +6,7 @@ import numpy as np
 import pbm_oracle
 import pytest
 
+from pbmdem.config import ConfigError, Pbm
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, EncounterRates, ImpactRates, WallRates, fraction_above
 from pbmdem.pbm.errors import PBMInputError
 from pbmdem.pbm.impact_breakage import POROSITY_LIMIT, ImpactSelection, critical_speed, selection_rates
@@ -151,11 +152,11 @@ def test_walls_and_pairs_can_be_switched_off_and_a_stronger_granule_breaks_less(
 
 
 def test_bad_settings_and_sources_are_refused_by_name():
-    source = HandMadeSource(np.eye(2), [0, 0], [0, 0], 1.0, 1.0, 1.0)
-    with pytest.raises(PBMInputError, match="yield strength"):
-        ImpactSelection(source, RHO, -1.0, ST)
-    with pytest.raises(PBMInputError, match="lid"):
-        ImpactSelection(source, RHO, Y, ST, walls=("lid",))
+    # the settings are checked where they enter, by the typed pbm.breakage section
+    with pytest.raises(ConfigError, match=r"pbm.breakage.yield_strength = -1.0"):
+        Pbm.from_dict({"breakage": {"yield_strength": -1.0}}, "pbm")
+    with pytest.raises(ConfigError, match=r"pbm.breakage.walls"):
+        Pbm.from_dict({"breakage": {"walls": ["lid"]}}, "pbm")
     with pytest.raises(PBMInputError, match="impacts"):
         ImpactSelection(object(), RHO, Y, ST)
 
@@ -287,8 +288,8 @@ def test_larger_granules_weaker_with_a_strength_size_exponent():
     parts = contributions(sized, inp)
     assert parts["pairs"] == pytest.approx([0.0, 0.01 * (10.0 + 4.0)])
     assert parts["impeller"] == pytest.approx([0.0, 2.0]) and parts["bowl"] == pytest.approx([0.0, 1.0])
-    with pytest.raises(PBMInputError, match="exponent"):
-        ImpactSelection(source, RHO, Y, ST, size_exponent=-1.0)
+    with pytest.raises(ConfigError, match=r"pbm.breakage.strength_size_exponent = -1.0"):
+        Pbm.from_dict({"breakage": {"strength_size_exponent": -1.0}}, "pbm")
 
 
 def test_breakage_study_variants_include_the_sharp_criterion(default_config):
@@ -354,10 +355,10 @@ def test_consolidated_granules_are_stronger_with_a_porosity_exponent(n):
     # the reference porosity is the one whose strength is Y
     shifted = ImpactSelection(source, RHO, Y, ST, porosity_exponent=n, reference_porosity=0.2)
     assert critical_speeds(shifted, np.array(d), inp.porosity) == pytest.approx([2.0 / 4.0 ** (n / 2), 2.0, 2.0])
-    with pytest.raises(PBMInputError, match="porosity exponent"):
-        ImpactSelection(source, RHO, Y, ST, porosity_exponent=-1.0)
-    with pytest.raises(PBMInputError, match="reference porosity"):
-        ImpactSelection(source, RHO, Y, ST, porosity_exponent=n, reference_porosity=1.0)
+    with pytest.raises(ConfigError, match=r"pbm.breakage.strength_porosity_exponent = -1.0"):
+        Pbm.from_dict({"breakage": {"strength_porosity_exponent": -1.0}}, "pbm")
+    with pytest.raises(ConfigError, match=r"pbm.breakage.reference_porosity = 1.0"):
+        Pbm.from_dict({"breakage": {"reference_porosity": 1.0}}, "pbm")
     inp.porosity = None
     with pytest.raises(PBMInputError, match="porosity"):
         sharp(inp)

@@ -63,7 +63,7 @@ def _verification_grids(q: int):
     over the liquid-to-solid ratios (my / mx) / 16 .. 16 (my / mx)."""
     r = 2.0 ** (1.0 / q)
     grid = Grid(int(np.ceil(np.log(400 / 1e-2) / np.log(r))) + 1, r, v0=1e-2 * MX)
-    return grid, LiquidGrid.geometric(MY / MX / 16, MY / MX * 16, r)
+    return grid, v2.geometric_liquid_grid(MY / MX / 16, MY / MX * 16, r)
 
 
 def _totals(classes, grid_x):
@@ -120,7 +120,7 @@ def test_solid_liquid_and_gas_are_conserved_in_si_units(consolidation):
     """The whole process with the step success (liquid-dependent), breakage and spraying: solid
     exact, liquid = initial + sprayed, gas exact without consolidation, to 1e-12 relative at every recorded
     time (with consolidation the gas follows the closed form of its sum, to the solver tolerance)."""
-    _, model = _process_models("step", Solver.defaults(), consolidation=consolidation)
+    _, model = _process_models("step", Solver(), consolidation=consolidation)
     volumes, numbers = _feed()
     # without consolidation the pores (g / s = 1) never fill: start near them so that granules aggregate
     state = model.initial_state(volumes, numbers, liquid_content=0.05 if consolidation else 0.95, porosity=0.5)
@@ -147,7 +147,7 @@ def test_a_liquid_independent_process_has_the_one_dimensional_size_marginal():
     size) is the 1-D model's up to the solver tolerance: the difference falls with the tolerance."""
     diffs = []
     for rtol in (1e-4, 1e-5):
-        solver = Solver.defaults().replace(rtol=rtol, atol=rtol * 1e-3)
+        solver = Solver().replace(rtol=rtol, atol=rtol * 1e-3)
         one, two = _process_models("always", solver)
         volumes, numbers = _feed()
         times = np.arange(0.0, 481.0, 60.0)
@@ -169,7 +169,7 @@ def test_liquid_classes_classify_by_their_bounds():
     w = np.concatenate([np.linspace(0, 1.2, 2001), uniform.bounds, np.nextafter(uniform.bounds, 0)])
     expected = np.searchsorted(uniform.bounds, w, side="right")
     np.testing.assert_array_equal(uniform.classify(w), expected)
-    geometric = LiquidGrid.geometric(0.01, 1.0, 2.0**0.5)
+    geometric = v2.geometric_liquid_grid(0.01, 1.0, 2.0**0.5)
     np.testing.assert_array_equal(geometric.classify(w), np.searchsorted(geometric.bounds, w, side="right"))
     with pytest.raises(PBMInputError, match="ascending"):
         LiquidGrid([0.1, 0.1])
@@ -197,14 +197,14 @@ def test_settings_select_the_two_dimensional_model(default_config):
 
 
 def test_a_run_resumes_from_its_state_and_refuses_a_one_dimensional_state():
-    _, model = _process_models("step", Solver.defaults())
+    _, model = _process_models("step", Solver())
     volumes, numbers = _feed()
     state = model.initial_state(volumes, numbers, liquid_content=0.0, porosity=0.5)
     whole = model.run(0.0, 480.0, state)
     first = model.run(0.0, 200.0, state)
     second = model.run(200.0, 480.0, first.state)
     assert second.summary()["d50"].iloc[-1] == pytest.approx(whole.summary()["d50"].iloc[-1], rel=1e-2)
-    one, _ = _process_models("step", Solver.defaults())
+    one, _ = _process_models("step", Solver())
     with pytest.raises(PBMInputError, match="starts from a State2D"):
         model.run(0.0, 10.0, one.initial_state(volumes, numbers, 0.0, 0.5))
 
@@ -336,7 +336,7 @@ def test_the_process_does_not_depend_on_the_unit_of_volume():
 
 
 def test_joined_runs_keep_the_classes():
-    _, model = _process_models("step", Solver.defaults())
+    _, model = _process_models("step", Solver())
     volumes, numbers = _feed()
     first = model.run(0.0, 200.0, model.initial_state(volumes, numbers, 0.0, 0.5), output_times=[100.0])
     second = model.run(200.0, 480.0, first.state, output_times=[300.0])

@@ -324,15 +324,8 @@ def test_bad_selection_rates_are_named(value, match):
         model.run(0.0, 1.0, state)
 
 
-def test_bad_breakage_arguments_are_named():
-    with pytest.raises(PBMInputError, match=r"breakage fragments = 'ternary'; allowed: \['binary', 'uniform'\]"):
-        Breakage(ConstantSelection(1.0), "ternary")
-    with pytest.raises(PBMInputError, match=r"breakage selection = 0.5; allowed: an object with prepare"):
-        Breakage(0.5)
-    with pytest.raises(PBMInputError, match=r"selection rate \(1/s\) = -1"):
-        ConstantSelection(-1.0)
-    with pytest.raises(PBMInputError, match=r"breakage = 'yes'; allowed"):
-        GranulationPBM(Grid(5, 2.0, v0=1.0), ConstantKernel(1.0), breakage="yes")
+def test_power_law_selection():
+    # bad breakage settings are refused where they enter: test_bad_breakage_settings_name_the_key
     inp = KernelInput(0.0, np.array([1.0, 2.0]), np.ones(2), np.ones(2), np.zeros(2), 0.0)
     np.testing.assert_array_equal(PowerLawSelection(3.0, 2.0)(inp), [3.0, 12.0])
 
@@ -433,7 +426,7 @@ def test_fragments_below_the_grid_floor_are_counted_against_a_grid_extended_down
     extended = Grid(33, ratio, v0=0.5 * x0)  # pivots x_0 / 2, x_0 / 2^(2/3), x_0 / 2^(1/3), x_0, ...
     rate, t_end = 0.05, 120.0  # 1/s per granule: six breakages per granule over the run
     N = np.array([0, 40, 30, 60, 50, 40, 30, 20, 10, 5], float)  # 2 mm and up: none at the first pivot
-    runs, solver = {}, Solver.defaults().replace(max_step=0.5)
+    runs, solver = {}, Solver().replace(max_step=0.5)
     for name, g, pad in (("clipped", clipped, 0), ("extended", extended, 3)):
         selection = _FromPivot(rate, 1.5 * x0)  # every pivot above the 2 mm one
         brk = Breakage(selection, "binary")

@@ -207,7 +207,7 @@ def test_a_source_that_turns_bad_between_refreshes_is_refused():
     model = GranulationPBM(
         g,
         CollisionKernel(src, 1e-4, SuccessProbability("always"), update_interval=0.5),
-        solver=Solver.defaults().replace(max_step=0.25),
+        solver=Solver().replace(max_step=0.25),
     )
     state = model.initial_state(np.pi / 6 * np.array([2e-3]) ** 3, [100])
     res = model.run(0.0, 2.0, state)

@@ -7,7 +7,7 @@ import pbm_verification as ver
 import pytest
 from conftest import config_of
 
-from pbmdem.config import ConfigError, Solver
+from pbmdem.config import ConfigError, Pbm, Solver
 from pbmdem.pbm import (
     CollisionKernel,
     Consolidation,
@@ -18,12 +18,10 @@ from pbmdem.pbm import (
     GridOverflowError,
     GridRangeError,
     KernelShapeError,
-    LiquidAddition,
     NegativePopulationError,
     PBMError,
     PBMInputError,
     State,
-    SuccessProbability,
     SumKernel,
     run_batch,
 )
@@ -37,19 +35,10 @@ def test_errors_are_value_errors():
 @pytest.mark.parametrize(
     "make,match",
     [
-        (lambda: LiquidAddition(0.0, 0, 10), r"liquid addition rate \(m3/s\) = 0.0 .*allowed: a finite number > 0"),
-        (lambda: LiquidAddition(-1e-9, 0, 10), r"liquid addition rate .*= -1e-09"),
-        (lambda: LiquidAddition(1e-9, 10, 10), r"window \[10, 10\] s is empty; allowed: t_end > t_start"),
-        (lambda: LiquidAddition(1e-9, 0, 10, "mass"), r"distribution = 'mass'; allowed"),
-        (lambda: Consolidation(0.0, 0.2), r"consolidation rate \(1/s\) = 0.0"),
-        (lambda: Consolidation(-0.1, 0.2), r"consolidation rate \(1/s\) = -0.1"),
-        (lambda: Consolidation(0.1, 1.0), r"min_porosity = 1.0; allowed: 0 <= eps_min < 1"),
         (lambda: ConstantKernel(0.0), r"beta0 = 0.0"),
         (lambda: SumKernel(-1.0), r"sum kernel b = -1.0"),
         (lambda: ConstantFrequency(0.0), r"constant collision frequency = 0.0"),
         (lambda: ConstantFrequency(float("nan")), r"constant collision frequency = nan"),
-        (lambda: CollisionKernel(ConstantFrequency(1.0), -2.0), r"aggregation beta0 = -2.0"),
-        (lambda: SuccessProbability("always_on"), r"model = 'always_on'; allowed"),
         (lambda: Grid(2, 2.0, v0=1.0), r"grid bins = 2; allowed: an integer >= 3"),
         (lambda: Grid(10, 1.0, v0=1.0), r"grid ratio = 1.0; allowed: a number > 1"),
         (lambda: Grid(10, 2.0, v0=-1.0), r"grid v0 = -1.0"),
@@ -58,6 +47,27 @@ def test_errors_are_value_errors():
 def test_bad_parameters(make, match):
     with pytest.raises(PBMInputError, match=match):
         make()
+
+
+@pytest.mark.parametrize(
+    "section,match",
+    [
+        ({"liquid_addition": {"rate": 0.0}}, r"pbm.liquid_addition.rate = 0.0"),
+        ({"liquid_addition": {"distribution": "mass"}}, r"pbm.liquid_addition.distribution = 'mass'"),
+        ({"consolidation": {"rate": -0.1}}, r"pbm.consolidation.rate = -0.1"),
+        ({"consolidation": {"min_porosity": 1.0}}, r"pbm.consolidation.min_porosity = 1.0"),
+        ({"aggregation": {"beta0": -2.0}}, r"pbm.aggregation.beta0 = -2.0"),
+        ({"aggregation": {"success": {"model": "always_on"}}}, r"pbm.aggregation.success.model = 'always_on'"),
+        ({"aggregation": {"scheme": "pivot"}}, r"pbm.aggregation.scheme = 'pivot'"),
+        ({"grid": {"separate_feed": "maybe"}}, r"pbm.grid.separate_feed = 'maybe'"),
+        ({"solver": {"max_steps": 0}}, r"pbm.solver.max_steps = 0"),
+        ({"solver": {"method": "rk4"}}, r"pbm.solver.method = 'rk4'"),
+    ],
+)
+def test_bad_settings_are_refused_where_they_enter(section, match):
+    # the PBM's classes trust their settings: the typed `pbm:` section checks every value
+    with pytest.raises(ConfigError, match=match):
+        Pbm.from_dict(section, "pbm")
 
 
 def test_initial_distribution_outside_the_grid():
@@ -101,7 +111,7 @@ def test_overflow_below_the_allowed_fraction_is_refused_and_conserves_solid():
     g = Grid(8, 2.0, v0=1e-2)
     N = ver.discretise_exponential(g, 1.0, 0.1)
 
-    model = GranulationPBM(g, ConstantKernel(1.0), solver=Solver.defaults().replace(max_overflow_fraction=1.0))
+    model = GranulationPBM(g, ConstantKernel(1.0), solver=Solver().replace(max_overflow_fraction=1.0))
     res = model.run(0.0, 2.0, State(0.0, N, np.zeros(8), np.zeros(8)))
     assert res.state.refused_volume > 0
     M1 = res.moments()[:, 1]
@@ -175,7 +185,7 @@ def test_nan_during_the_run_names_time_and_bin():
 
     g = Grid(10, 2.0, min_diameter=1e-3)
 
-    model = GranulationPBM(g, NaNLater(), solver=Solver.defaults().replace(max_step=0.2, max_overflow_fraction=1.0))
+    model = GranulationPBM(g, NaNLater(), solver=Solver().replace(max_step=0.2, max_overflow_fraction=1.0))
     N = np.zeros(10)
     N[:6] = 1.0
     s = State(0.0, N, np.zeros(10), np.zeros(10))

@@ -127,8 +127,6 @@ def test_feed_state_is_checked(default_config):
     bad.feed = FeedGranules(np.array([1.0, 2.0]), st.feed.number, st.feed.liquid, st.feed.gas)
     with pytest.raises(PBMInputError, match=r"state.feed.volumes = .* allowed: distinct solid volumes within"):
         model.run(0.0, 1.0, bad)
-    with pytest.raises(PBMInputError, match=r"separate_feed = 'yes'"):
-        GranulationPBM(grid, kernel, separate_feed="yes")
 
 
 def test_collision_source_sees_the_bins_not_the_feed_classes():

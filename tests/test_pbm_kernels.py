@@ -12,9 +12,7 @@ import pytest
 from pbmdem.pbm import (
     SCHEMES,
     CellAverageAggregation,
-    ConstantKernel,
     FixedPivotAggregation,
-    GranulationPBM,
     Grid,
     PBMInputError,
     SuccessProbability,
@@ -179,10 +177,6 @@ def test_unknown_aggregation_scheme_is_refused(default_mapping):
 
     from pbmdem.config import ConfigError
 
-    with pytest.raises(
-        PBMInputError, match=r"aggregation scheme = 'pivot'; allowed: \['cell_average', 'fixed_pivot'\]"
-    ):
-        GranulationPBM(Grid(5, 2.0, v0=1.0), ConstantKernel(1.0), scheme="pivot")
     default_mapping["pbm"]["aggregation"]["scheme"] = "pivot"
     with pytest.raises(ConfigError, match=r"pbm.aggregation.scheme = 'pivot'"):
         config_of(default_mapping)

@@ -112,7 +112,7 @@ def test_consolidation_alone_is_exponential():
     errs = []
     for rtol in (1e-3, 1e-5):
         g, model, state = _grid_and_state(
-            {"kernel": _no_aggregation(), "consolidation": cons, "solver": Solver.defaults().replace(rtol=rtol)},
+            {"kernel": _no_aggregation(), "consolidation": cons, "solver": Solver().replace(rtol=rtol)},
             porosity=0.5,
         )
         res = model.run(0.0, 60.0, state, output_times=times)

@@ -45,7 +45,7 @@ def resolved(psi: SuccessProbability, diameters, phi, velocities) -> np.ndarray:
 
 def batch_with(config, section: dict, distribution: str = "fine"):
     """The default batch with its pbm settings replaced by a (partial) pbm section (schema defaults)."""
-    pbm = Pbm.from_section(section)
+    pbm = Pbm.from_dict(section, "pbm")
     pbm = pbm.replace(grid=pbm.grid.replace(min_diameter=config.pbm.grid.min_diameter))
     return config.pbm_batch(distribution).replace(pbm=pbm)
 
@@ -135,14 +135,12 @@ def test_pair_layer_is_the_mean_of_both_layers():
 
 
 def test_bad_stokes_parameters_are_refused():
-    with pytest.raises(PBMInputError, match=r"restitution = 1.5; allowed: 0 < e <= 1"):
-        StokesCriterion(0.1, 1.5, 5e-6, 1000.0)
-    with pytest.raises(PBMInputError, match="binder_viscosity"):
-        StokesCriterion(0.0, 0.4, 5e-6, 1000.0)
+    with pytest.raises(ConfigError, match=r"pbm.aggregation.success.stokes.restitution = 1.5"):
+        Pbm.from_dict({"aggregation": {"success": {"stokes": {"restitution": 1.5}}}}, "pbm")
     with pytest.raises(ConfigError, match=r"pbm.aggregation.success.stokes.binder_viscosity = -1"):
-        Pbm.from_section({"aggregation": {"success": {"stokes": {"binder_viscosity": -1}}}})
+        Pbm.from_dict({"aggregation": {"success": {"stokes": {"binder_viscosity": -1}}}}, "pbm")
     with pytest.raises(ConfigError, match=r"pbm.aggregation.success.velocity_model = 'fast'"):
-        Pbm.from_section({"aggregation": {"success": {"velocity_model": "fast"}}})
+        Pbm.from_dict({"aggregation": {"success": {"velocity_model": "fast"}}}, "pbm")
 
 
 def test_a_velocity_criterion_needs_only_critical_velocity():
@@ -152,8 +150,6 @@ def test_a_velocity_criterion_needs_only_critical_velocity():
             return np.ones((np.size(d), np.size(d)))
 
     assert SuccessProbability("step", 0.02, velocity=OnlyCritical()).velocity_dependent
-    with pytest.raises(PBMInputError, match=r"lacks critical_velocity\(d, phi\); allowed: None or a pbmdem"):
-        SuccessProbability("step", 0.02, velocity=object())
 
 
 # ----------------------------------------------------------------------------- combination with the liquid
@@ -180,8 +176,8 @@ def test_success_combines_liquid_condition_and_stokes_criterion():
 
 
 def test_build_success_from_config():
-    assert not build_success(Pbm.defaults()).velocity_dependent  # default: seed study
-    psi = build_success(Pbm.from_section(STOKES))
+    assert not build_success(Pbm()).velocity_dependent  # default: seed study
+    psi = build_success(Pbm.from_dict(STOKES, "pbm"))
     assert psi.velocity_dependent
     assert (psi.velocity.viscosity, psi.velocity.restitution, psi.velocity.asperity_height, psi.velocity.density) == (
         0.1,
@@ -193,7 +189,7 @@ def test_build_success_from_config():
 
 def test_default_parameters_put_the_critical_speed_inside_the_bins():
     # documented in config.yaml: two 3 mm granules at phi = 0.02 are held below about 0.36 m/s
-    w = build_success(Pbm.from_section(STOKES)).velocity.critical_velocity(np.array([3e-3]), np.array([0.02]))[0, 0]
+    w = build_success(Pbm.from_dict(STOKES, "pbm")).velocity.critical_velocity(np.array([3e-3]), np.array([0.02]))[0, 0]
     assert 0.3 < w < 0.4
     assert VELOCITY_EDGES[1] < w < VELOCITY_EDGES[-1]
 

@@ -37,8 +37,8 @@ def test_a_minimal_config_is_completed_with_the_model_defaults(tiny_config):
     assert cfg.dem.seed == dem_fields["seed"].default
     assert cfg.dem_execution.timeout == dem_fields["timeout"].default
     assert cfg.dem_replicates == dem_fields["replicates"].default
-    assert cfg.pbm == Pbm.from_section({}).replace(
-        grid=Pbm.from_section({}).grid.replace(
+    assert cfg.pbm == Pbm.from_dict({}, "pbm").replace(
+        grid=Pbm.from_dict({}, "pbm").grid.replace(
             min_diameter=min(min(d.diameters) for d in cfg.size_distributions.values())
         )
     )
@@ -79,7 +79,7 @@ def test_settings_objects_are_frozen_and_round_trip(default_config):
 
 def test_every_setting_carries_a_description_and_its_default():
     """Each setting is declared once, as a field of its section's model with a description; the
-    defaults are those fields' (`Solver.defaults()` is the model's)."""
+    defaults are those fields' (`Solver()` is the model's)."""
     from pbmdem.config import ConfigFile, Settings
 
     seen, todo = set(), [ConfigFile]
@@ -94,7 +94,7 @@ def test_every_setting_carries_a_description_and_its_default():
                 if isinstance(sub, type) and issubclass(sub, Settings):
                     todo.append(sub)
     assert len(seen) >= 30
-    assert Solver.defaults() == Pbm().solver and Solver.defaults().rtol == Solver.model_fields["rtol"].default
+    assert Solver() == Pbm().solver and Solver().rtol == Solver.model_fields["rtol"].default
 
 
 def test_each_stage_fingerprint_holds_only_what_it_uses(tiny_config, tiny_mapping):

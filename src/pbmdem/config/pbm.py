@@ -168,11 +168,6 @@ class Solver(Settings):
     max_steps: int = setting(1000000, "guard: a run stops with an error after this many steps", ge=1)
     max_wall_time: float = setting(3600.0, "guard: a run stops with an error after this much wall time", "s", gt=0)
 
-    @classmethod
-    def defaults(cls) -> Solver:
-        """The default `pbm.solver` settings."""
-        return cls()
-
 
 class OutputSettings(Settings):
     interval: float = setting(10.0, "time between recorded states", "s", gt=0, le=36000)
@@ -194,14 +189,3 @@ class Pbm(Settings):
     breakage: BreakageSettings = setting(BreakageSettings, "breakage of aggregates")
     solver: Solver = setting(Solver, "time integration")
     output: OutputSettings = setting(OutputSettings, "recorded states")
-
-    @classmethod
-    def defaults(cls) -> Pbm:
-        """The defaults of the whole `pbm:` section (grid.min_diameter stays null)."""
-        return cls()
-
-    @classmethod
-    def from_section(cls, section: dict) -> Pbm:
-        """Settings from a (partial) `pbm:` section, checked and completed with the defaults (for
-        library use without a whole configuration; grid.min_diameter stays null unless given)."""
-        return cls.from_dict(section, "pbm")

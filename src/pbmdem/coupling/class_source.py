@@ -1,14 +1,7 @@
-"""Class frequencies of one coupling interval, interpolated onto the PBM bins.
-
-The DEM (or the surrogate) gives per-pair encounter frequencies between the K classes of the
-representative sample. `ClassFrequencySource` holds them for one interval and interpolates them
-onto any PBM bins: a power law in size (bilinear in log d_i, log d_j of log c), constant beyond the
-smallest and largest class (`pbmdem.pbm.kernels.TableFrequency` with clamping); with impact-velocity
-fractions, a bin takes those of the class nearest to it in log diameter. With wall impacts
-(`ImpactRates`, for breakage) a bin's impacts per granule on each wall are interpolated linearly in
-log d between the classes (constant beyond them; a class without wall impacts may have a zero
-rate, which log f could not hold), their speeds those of the nearest class.
-"""
+"""Class frequencies of one coupling interval, interpolated onto the PBM bins
+(`ClassFrequencySource`; docs/validation.md, "DEM -> PBM"): a power law in size, clamped beyond
+the classes; impact-velocity fractions of the nearest class in log d; wall impacts per granule
+linear in log d between the classes (a class may have none, which log f could not hold)."""
 
 from __future__ import annotations
 

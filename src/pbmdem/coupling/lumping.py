@@ -1,18 +1,8 @@
-"""What lumping leaves out: PBM-ANN with the one-dimensional PBM (liquid and gas lumped per size
-class) beside the two-dimensional one (size x liquid classes, `pbm.dimensions: 2`), on the same
-kernel source (the surrogate's ensemble mean) and the same cases (docs/pbm.md, "What lumping
-leaves out").
-
-Cases (``study`` column): ``default``, the validation feed at the feed study's speed with the
-configured settings; ``speed``, the speed study's speeds; ``binder``, the design space's binder
-rates at the default batch's speed; ``feed``, the feed study's feeds and blends at that speed. A
-case that several studies share runs once. Every case gives the final d10/d50/d90 of both models,
-their relative differences (2-D minus 1-D over 1-D), the solid balance of the 2-D batch and the CPU
-seconds of each batch. `liquid_per_size` gives the liquid content of every size class at the end of
-the default batch: the class mean of the 1-D model, the solid-weighted mean, spread and range over
-the liquid classes of the 2-D model, and the share of the class's solid whose surface liquid is
-below the success threshold (which cannot aggregate under the step model).
-"""
+"""What lumping leaves out: PBM-ANN with the one-dimensional PBM beside the two-dimensional one
+(`pbm.dimensions: 2`) on the same kernel source and cases (``study``: default, speed, binder, feed;
+a case shared by studies runs once): final d10/d50/d90 of both, their relative differences, the 2-D
+solid balance and CPU seconds; `liquid_per_size` the liquid content per size class at the end of the
+default batch (docs/pbm.md, "What lumping leaves out, in the workflow")."""
 
 from __future__ import annotations
 

@@ -1,11 +1,7 @@
 """Collision frequencies of a coupling interval's representative sample: from LIGGGHTS (PBM-DEM)
-or from the trained surrogate (PBM-ANN).
-
-A provider is called as `provider(sample, interval_dir, index) -> (rates, info)`: `rates` is the
-(K, K) encounter frequency per class pair, an `EncounterRates` with impact-velocity fractions, or
-an `ImpactRates` that adds the wall impacts per granule (what breakage from impacts needs),
-`info` the figures recorded for the interval (wall times, DEM particle and encounter counts,
-out-of-domain warnings). `fingerprint()` names what its rates depend on, so that finished
+or from the trained surrogate (PBM-ANN). A provider is called as `provider(sample, interval_dir,
+index) -> (rates, info)` (rates: a matrix, `EncounterRates` or `ImpactRates`; info: the
+interval's recorded figures); `fingerprint()` names what its rates depend on, so that finished
 intervals of a changed provider are not reused.
 
 The DEM stage and the surrogate are imported with the module (imports at the top): a PBM-DEM job
@@ -61,22 +57,11 @@ def dem_rates(run_dir: Path, k: int) -> ImpactRates:
 class DemProvider:
     """Class encounter frequencies from a LIGGGHTS run of the representative sample.
 
-    LIGGGHTS is deterministic for the same deck on the same number of ranks, so an interval whose
-    sample is the very sample of an earlier interval of the same loop (the same classes, counts,
-    speed, seeds and settings: typically the feed, until the binder makes granules grow) is not run
-    again: its tables are read from that interval's run, and the interval records which
-    (`dem_reused_from_interval`) with no DEM wall time.
-
-    A sample that is the loop's feed (its diameters, and the counts the feed's fractions give) is
-    planned with the feed's own name and fractions: its plan is then the DEM grid's plan of the
-    feed at this speed and replicate (docs/validation.md, "Borrowed grid runs"). With `grid_run`
-    (the grid's finished run of the feed at this speed and replicate) such an interval borrows that
-    run when it covers the interval's plan (`covers`: the same plan, a sampling window at least as
-    long): no LIGGGHTS call; its CPU and wall time, with its settled bed's, count as the interval's
-    own (`dem_borrowed_run`, `dem_borrowed_wall_time_s`). With `bed_dir` (the grid's settled bed of
-    the feed and replicate) an interval of the feed that runs starts from that bed when it is the
-    bed its plan would settle (`dem_settled_bed`; the bed's time counts as the interval's).
-    """
+    An interval whose sample is an earlier interval's is not run again (`dem_reused_from_interval`);
+    an interval of the loop's feed is planned as the DEM grid's run of the feed, borrows `grid_run`
+    when it covers the interval's plan (`covers`; `dem_borrowed_run`) and starts from the grid's
+    settled bed `bed_dir` when it is its plan's (`dem_settled_bed`): docs/validation.md,
+    "Representative sample" and "Borrowed grid runs"."""
 
     name = "pbm_dem"
 

@@ -1,20 +1,8 @@
-"""The representative DEM sample of a PBM size distribution (docs/validation.md).
-
-1. The DEM bed holds the PBM's solid volume (the PBM models the DEM bed), so the particle number
-   of a PBM class is its PBM number. The classes are the aggregates at the pivots and the feed
-   granules not yet aggregated at their own sizes, so that the first sample is the feed itself.
-2. Neighbouring bins are merged, from small to large, until a class holds at least
-   `min_particles_per_class` particles; a remainder at the large end joins the previous class;
-   then the two neighbouring classes with the fewest particles are merged until at most
-   `max_classes` remain. A class's diameter is the volume-equivalent diameter of its mean solid
-   volume, so merging conserves number and solid volume. Diameters are rounded to whole
-   nanometres (`DIAMETER_RESOLUTION`): the DEM is chaotic, and an input changed by round-off
-   alone (a diameter one unit in the last place apart) changes its collision counts and a loop's
-   final d50 by about 2 %. Rounding keeps the reference reproducible when the PBM's arithmetic is
-   reordered.
-3. Class numbers are rounded; if they exceed `max_particles` (dem.max_particles) all are scaled
-   down (a smaller bed, with a warning).
-"""
+"""The representative DEM sample of a PBM size distribution: the aggregates at the pivots and the
+feed granules at their own sizes, merged into at most `max_classes` classes of at least
+`min_particles_per_class` particles (number and solid volume conserved), diameters rounded to
+whole nanometres (`DIAMETER_RESOLUTION`: a round-off change of a diameter would change the chaotic
+DEM's counts), scaled down above `dem.max_particles` (docs/validation.md, "Representative sample")."""
 
 from __future__ import annotations
 

@@ -1,13 +1,6 @@
 """The PBM-ANN studies behind the report's findings: final granule sizes against impeller speed and
-against the feed size distribution, each with the surrogate's uncertainty and domain status.
-
-Every case (impeller speed, feed) runs PBM-ANN with the ensemble mean of the surrogate and once per
-ensemble member: the members' spread of the final d10/d50/d90 is the surrogate's uncertainty, and
-the coupling intervals where the surrogate was evaluated outside its training domain are counted.
-The feed study takes the grid's named distributions and, between each pair of neighbours (ordered
-by mass-median diameter), a 50:50 blend by mass: a feed no DEM run has seen, that PBM-ANN predicts
-in seconds.
-"""
+against the feed (the grid's distributions and 50:50 blends by mass of neighbours), each with the
+ensemble members' spread and the intervals outside the training domain (docs/validation.md)."""
 
 from __future__ import annotations
 

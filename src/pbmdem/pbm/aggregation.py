@@ -1,30 +1,10 @@
-"""Aggregation on a pivot grid: the cell-average technique (default) and the fixed pivot technique,
-selected by ``pbm.aggregation.scheme``. docs/pbm.md ("Rate processes") describes the schemes, the
-aggregates refused beyond the last pivot, the feed classes and the schemes' accuracy.
+"""Aggregation on a pivot grid: the cell-average technique (default) and the fixed pivot technique
+(``pbm.aggregation.scheme``); docs/pbm.md ("Rate processes", "Time integration") gives the schemes,
+the refused aggregates, the feed classes and why no mean volume is ever formed.
 
-Every ordered pair (i, j) is mapped once per grid: the aggregate volume s_ij = x_i + x_j and where
-it goes. A rate evaluation works on bin *totals* (numbers N, liquid L and gas G per class) and never
-divides by a number or a volume of the state: the ordered-pair rates R_ij = beta_ij N_i N_j,
-RL_ij = beta_ij L_i N_j, RG_ij = beta_ij G_i N_j (the event rate of the unordered pair i < j is
-R_ij, of i = i it is R_ii / 2) are summed, with weights fixed by the grid, into the deaths, the
-births and the refused solid rate by one compiled loop over the ordered pairs (numba,
-``_compiled.aggregation_totals``); the scheme classes here precompute the target cell and weights
-of every pair (:meth:`PivotAggregation._pair_weights`). The same sums as one sparse map in numpy
-are the test oracle (``tests/pbm_oracle.py``), equal to the bit.
-
-Cell average, volumes in units of the cell's pivot: with B_c = sum R (number born in cell c) and
-D_c = sum R (s/x_c - 1) (first moment of the births about the pivot, in units of x_c), the mean
-a_c = x_c (1 + D_c/B_c) goes up if D_c > 0: n_up = D_c x_c/(x_(c+1) - x_c), or down if D_c < 0:
-n_down = -D_c x_c/(x_c - x_(c-1)); the rest stays. |D_c| <= B_c (r - 1)/(r + 1) by construction,
-so every share is non-negative whatever the unit of volume and however small the rates; no
-mean volume a_c = V_c/B_c is ever formed (that ratio of two underflowing sums is where a run in
-m3 could produce negative births). Liquid and gas born in a cell follow the solid volume each
-pivot receives.
-
-Feed classes (``extra``): P further classes of any volume in [x_0, x_(K-1)] that die like any class
-but never receive births, ordered [pivots 0..K-1, extra 0..P-1] in ``beta`` (K+P, K+P) and in the
-(3, K+P) totals.
-"""
+The scheme classes precompute the target cell and weights of every ordered pair of classes
+(:meth:`PivotAggregation._pair_weights`) for the compiled rates (``_compiled.aggregation_totals``);
+the feed classes (``extra``) follow the K pivots in ``beta`` and the (3, K+P) totals."""
 
 from __future__ import annotations
 

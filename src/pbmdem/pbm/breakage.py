@@ -1,15 +1,8 @@
-"""Breakage of granules: the selection rate, the fragment distribution and their cell-average
-form on the aggregation grid. docs/pbm.md ("Breakage") gives the balance, the fragment
-distributions (``FRAGMENTS``: ``binary``, ``uniform``), what breaks and the discretisation.
-
-Selection rates implement the protocol of the aggregation kernels: ``prepare(inp)`` at every
-step and ``selection(inp) -> (K,)`` the rate of each grid pivot, >= 0, for the classes of a
-:class:`~pbmdem.pbm.kernels.KernelInput`. :class:`ConstantSelection` (PBM-constant) and
-:class:`PowerLawSelection` (S = a v^p, the analytical cases) live here; the selection from the DEM's
-impact statistics is ``pbm.impact_breakage.ImpactSelection``. :class:`Breakage` holds the
-fragment tables of a grid (:meth:`Breakage.fragment_tables`); the rates themselves are computed
-by the compiled backend (``_compiled.breakage_totals``).
-"""
+"""Breakage of granules: selection rates, the fragment distribution and their cell-average form on
+the aggregation grid (docs/pbm.md, "Breakage"). :class:`ConstantSelection` (PBM-constant) and
+:class:`PowerLawSelection` (the analytical cases) live here, the selection from the DEM's impacts
+in ``pbm.impact_breakage``; the rates are computed by the compiled backend
+(``_compiled.breakage_totals``)."""
 
 from __future__ import annotations
 
@@ -40,7 +33,7 @@ class ConstantSelection:
     """S = ``rate`` (1/s per granule) for every pivot."""
 
     def __init__(self, rate: float):
-        self.rate = positive("breakage selection rate (1/s)", rate, allow_zero=True)
+        self.rate = float(rate)
 
     def __repr__(self) -> str:
         return f"ConstantSelection(rate={self.rate:g})"
@@ -97,13 +90,6 @@ class Breakage:
     granule, the unit the aggregates are made of, does not break."""
 
     def __init__(self, selection: SelectionRate, fragments: str = "binary"):
-        if fragments not in FRAGMENTS:
-            raise PBMInputError(f"breakage fragments = {fragments!r}; allowed: {list(FRAGMENTS)}")
-        if not (callable(selection) and callable(getattr(selection, "prepare", None))):
-            raise PBMInputError(
-                f"breakage selection = {selection!r}; allowed: an object with prepare(inp) and "
-                "__call__(inp) -> (K,) rates (pbmdem.pbm.breakage.SelectionRate)"
-            )
         self.selection = selection
         self.fragments = fragments
         self._t_eval: float | None = None  # time of the last evaluation of the selection in a run
@@ -210,8 +196,6 @@ def breakage_arrays(breakage: Breakage | None, x: np.ndarray, edges: np.ndarray)
     ``edges`` (:meth:`Breakage.compiled_arrays`); None: an empty selection, no breakage."""
     if breakage is None:
         return np.zeros(0), np.zeros((3, 0, 0)), np.zeros((4, 0)), np.zeros((2, 0))
-    if not isinstance(breakage, Breakage):
-        raise PBMInputError(f"breakage = {breakage!r}; allowed: a pbmdem.pbm.breakage.Breakage or None")
     return breakage.compiled_arrays(x, edges)
 
 

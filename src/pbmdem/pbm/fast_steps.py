@@ -1,17 +1,9 @@
-"""The compiled step loop of a run (``_compiled_steps.advance``) and when it may be used.
-
-A step of ``GranulationPBM.run`` asks the kernel and the breakage selection to prepare (Python)
-and then computes its rates and stages (compiled). When neither preparation can change anything
-inside the run, the whole run is one compiled call instead (the states at the output times
-recorded in buffers and stored afterwards): that holds for a factored
-:class:`~pbmdem.pbm.kernels.CollisionKernel` whose frequency source depends on the diameters
-alone (``fixed_for_diameters``: a coupling interval's classes, whose matrix is fixed on the
-grid's pivots) with no breakage, or with a selection that declares ``compiled_steps``
-(:class:`~pbmdem.pbm.impact_breakage.ImpactSelection`: its impacts fixed for the pivots and the
-speed, its rates refreshed at the kernel's update interval, compiled). Everything else (a kernel
-that is called, a source asked again at its update interval, another selection) takes the Python
-loop, one step at a time. The two give the same results to the bit (tests/test_pbm_fast_steps.py).
-"""
+"""The compiled step loop of a run (``_compiled_steps.advance``) and when it may be used: when
+neither the kernel nor the breakage selection can change anything inside the run (a factored
+:class:`~pbmdem.pbm.kernels.CollisionKernel` whose source is ``fixed_for_diameters``, and no
+breakage or a selection with ``compiled_steps``), the whole run is one compiled call; otherwise the
+Python loop takes one step at a time. Both give the same results to the bit
+(tests/test_pbm_fast_steps.py)."""
 
 from __future__ import annotations
 

@@ -1,35 +1,7 @@
-"""Breakage selection from the DEM's impacts: :class:`ImpactSelection`.
-
-A granule breaks in an impact that deforms it beyond what its binder can hold. The Stokes
-deformation number of an impact at normal speed v,
-
-    St_def = rho v^2 / (2 Y),
-
-is the impact's kinetic energy per granule volume over the granule's dynamic yield strength Y
-(Tardos, Khan & Mort 1997, Powder Technol. 94, 245-258; Iveson, Litster, Hapgood & Ennis 2001,
-Powder Technol. 117, 3-39); granules break when St_def exceeds a critical St_def*, i.e. when v
-exceeds the critical speed v* = sqrt(2 Y St_def* / rho). The selection rate of a granule of
-class i (1/s) sums, over the kinds of impact k it suffers, its impact rate of that kind times
-the fraction of those impacts faster than v*:
-
-    S_i = sum_j c_ij (N_j - delta_ij) P_ij  +  sum_w f_wi P_wi,
-
-with c_ij the encounter frequency per pair, N_j the granules of class j, f_wi the impacts per
-granule on wall w (impeller, bowl) and P the fraction of the impact-velocity distribution above v*
-(:func:`pbmdem.impact.fraction_above`: impacts spread evenly in log v inside a bin). The impact
-statistics come from the frequency source's ``impacts(diameters, numbers, rpm)`` (DEM tables,
-a coupling interval's DEM run or the surrogate), evaluated at the bins' pivots.
-
-Y may depend on the granule's size d and porosity eps (both factors are 1 at d_ref and eps_ref):
-
-    Y(d, eps) = Y (d / d_ref)^(-e) [((1 - eps) / eps) / ((1 - eps_ref) / eps_ref)]^n,
-
-so v* scales with the square root of both factors. The porosity factor is the strengthening of a
-wet granule as it consolidates: Rumpf's (1962) tensile strength of a capillary-bound aggregate
-grows as (1 - eps) / eps (n = 1), the viscous dynamic yield strength of wet granules as
-((1 - eps) / eps)^2 (n = 2; Iveson, Litster, Hapgood & Ennis 2001). eps is each pivot's
-aggregate porosity G / (S + G) (``KernelInput.porosity``), eps_ref where a pivot is empty.
-"""
+"""Breakage selection from the DEM's impacts (:class:`ImpactSelection`): a granule breaks in an
+impact whose Stokes deformation number rho v^2 / (2 Y) exceeds St_def*. docs/pbm.md ("Breakage
+selection from impacts") gives the selection rate, the size and porosity dependence of Y and the
+references."""
 
 from __future__ import annotations
 
@@ -39,7 +11,7 @@ from pbmdem.config import Pbm
 from pbmdem.impact import N_VELOCITY_BINS, VELOCITY_EDGES, WALLS, ImpactRates, breaking_probability
 
 from . import _compiled_selection
-from .errors import PBMInputError, positive
+from .errors import PBMInputError
 from .kernels import KernelInput
 
 #: porosities are kept in [POROSITY_LIMIT, 1 - POROSITY_LIMIT] by the porosity-dependent strength
@@ -75,22 +47,11 @@ def selection_rates(
 
 
 class ImpactSelection:
-    """Selection rate S_i (1/s per granule) of each bin's pivot from the impacts of ``source``.
-
-    ``source`` offers ``impacts(diameters, numbers, rpm) -> pbmdem.impact.ImpactRates``;
-    ``density`` (kg/m3) the granule density, ``yield_strength`` Y (Pa) the granule's dynamic yield
-    strength, ``critical_stokes`` St_def*; ``walls`` the walls whose impacts can break a granule
-    (of "impeller", "bowl"); ``pairs`` whether granule-granule encounters can; ``strength_spread``
-    the standard deviation of ln Y across granules (log-normal strengths: an impact at v breaks
-    with probability Phi(2 ln(v / v*) / spread), v* that of the median granule; 0: every impact
-    above v* breaks, none below); ``size_exponent`` e: Y of a granule of diameter d is
-    Y (d / reference_diameter)^(-e) (0: the same for every size); ``porosity_exponent`` n: Y of a
-    granule of porosity eps is Y [((1 - eps) / eps) / ((1 - eps_ref) / eps_ref)]^n with eps_ref =
-    ``reference_porosity`` (0: the same at every porosity; 1: Rumpf's capillary strength, 2: the
-    viscous strength of Iveson et al. 2001). :meth:`prepare`
-    (at every step) asks the source for the impacts only when the pivots, the speed or the source
-    (:meth:`set_source`, a coupling interval's) changed; a call weights them with the current
-    numbers (the pair term)."""
+    """Selection rate S_i (1/s per granule) of each bin's pivot from the impacts of ``source``
+    (``impacts(diameters, numbers, rpm) -> pbmdem.impact.ImpactRates``); the parameters are those of
+    ``pbm.breakage`` (``pbmdem.config.pbm.BreakageSettings`` describes each; docs/pbm.md, "Breakage
+    selection from impacts"). :meth:`prepare` asks the source for the impacts only when the pivots, the
+    speed or the source (:meth:`set_source`) changed; a call weights them with the current numbers."""
 
     #: its impacts are fixed for the pivots and the speed and its rates are those of
     #: ``_compiled_selection.selection_of_impacts``: the compiled step loop evaluates it (``pbm.fast_steps``)
@@ -110,22 +71,15 @@ class ImpactSelection:
         porosity_exponent: float = 0.0,
         reference_porosity: float = 0.5,
     ):
-        self.density = positive("granule density (kg/m3)", density)
-        self.yield_strength = positive("granule dynamic yield strength Y (Pa)", yield_strength)
-        self.critical_stokes = positive("critical Stokes deformation number St_def*", critical_stokes)
-        unknown = [w for w in walls if w not in WALLS]
-        if unknown:
-            raise PBMInputError(f"breakage walls {list(walls)}: {unknown} unknown; allowed: {list(WALLS)}")
-        self.walls = tuple(walls)
-        self.pairs = bool(pairs)
-        self.strength_spread = positive("spread of ln Y across granules", strength_spread, allow_zero=True)
-        self.size_exponent = positive("strength size exponent", size_exponent, allow_zero=True)
-        self.reference_diameter = positive("reference diameter of Y (m)", reference_diameter)
-        self.porosity_exponent = positive("strength porosity exponent", porosity_exponent, allow_zero=True)
-        eps_ref = float(reference_porosity)
-        if not 0.0 < eps_ref < 1.0:
-            raise PBMInputError(f"reference porosity of Y = {reference_porosity!r}; allowed: 0 < porosity < 1")
-        self.reference_porosity = eps_ref
+        self.density, self.yield_strength, self.critical_stokes = (
+            float(density),
+            float(yield_strength),
+            float(critical_stokes),
+        )
+        self.walls, self.pairs = tuple(walls), bool(pairs)
+        self.strength_spread, self.size_exponent = float(strength_spread), float(size_exponent)
+        self.reference_diameter, self.porosity_exponent = float(reference_diameter), float(porosity_exponent)
+        self.reference_porosity = float(reference_porosity)
         self.speed = critical_speed(self.density, self.yield_strength, self.critical_stokes)
         # the compiled selection's strength parameters (_compiled_selection.STRENGTH_FIELDS) and "no porosity"
         strength = dict(vars(self), limit=POROSITY_LIMIT)

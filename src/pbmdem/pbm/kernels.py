@@ -1,19 +1,7 @@
-"""Aggregation kernels and collision-frequency sources.
-
-A kernel maps the current population (a :class:`KernelInput`) to the (K, K) symmetric matrix
-beta_ij (1/s per pair) used in the population balance. Provided:
-
-* :class:`ConstantKernel` beta_ij = beta0 (Scott's 1968 closed form in tests/pbm_analytical.py);
-* :class:`SumKernel` (Golovin) beta_ij = b (v_i + v_j) (likewise);
-* :class:`CollisionKernel` beta_ij = beta0 c_ij psi_ij: c_ij per-pair collision frequency (1/s)
-  from a pluggable source, psi_ij a success probability from the surface liquid of both granules.
-
-Collision-frequency sources share the interface of docs/architecture.md,
-``source(diameters (K,), numbers (K,), rpm) -> (K, K)``:
-:class:`ConstantFrequency` and the checks of what a source returns (``sources``),
-:class:`TableFrequency` (DEM collision table, ``table``) and the surrogate
-(``pbmdem.surrogate.CollisionSurrogate.frequency_matrix``); all re-exported here.
-"""
+"""Aggregation kernels: a kernel maps the population (:class:`KernelInput`) to the (K, K) symmetric
+matrix beta_ij (1/s per pair): :class:`ConstantKernel`, :class:`SumKernel` (the closed forms of
+tests/pbm_analytical.py) and :class:`CollisionKernel` beta0 c_ij psi_ij with c_ij from a
+collision-frequency source (docs/architecture.md: ``sources``, ``table``, the surrogate)."""
 
 from __future__ import annotations
 
@@ -163,31 +151,22 @@ class SumKernel(Kernel):
 
 
 class CollisionKernel(Kernel):
-    """beta_ij = beta0 * c_ij * psi_ij, or, with a velocity-dependent success probability,
-    beta_ij = beta0 * c_ij * sum_b f_ij,b psi_ij(v_b).
+    """beta_ij = beta0 c_ij psi_ij, or with a velocity-dependent success beta0 c_ij sum_b f_ij,b psi_ij(v_b)
+    (docs/pbm.md, "Rate processes").
 
-    ``source(diameters, numbers, rpm) -> (K, K)`` per-pair collision frequency (1/s). It is
-    evaluated at the first step of a run and then again once ``update_interval`` seconds have
-    passed (0: every step); the coupled PBM-DEM loop swaps ``source`` between runs
-    (``set_source``). ``beta0`` is the dimensionless fraction of successful-when-wet collisions.
-
-    If ``success.velocity_dependent``, the source must offer ``encounters(diameters, numbers,
-    rpm) -> pbmdem.impact.EncounterRates`` (docs/architecture.md): c_ij is then the encounter
-    frequency per pair and f_ij,b the fraction of the pair's encounters in impact-velocity bin b,
-    whose speed v_b is ``pbmdem.impact.representative_velocities()[b]``. A pair whose fractions
-    are all 0 (no velocity data) gets beta_ij = 0.
-    """
+    ``source(diameters, numbers, rpm) -> (K, K)`` gives c_ij (1/s per pair) at the first step of a run
+    and again every ``update_interval`` s (0: every step); a coupled loop swaps it (``set_source``).
+    A velocity-dependent success needs ``source.encounters(...) -> pbmdem.impact.EncounterRates``
+    (docs/architecture.md); a pair without velocity data gets beta_ij = 0."""
 
     def __init__(self, source, beta0: float, success: SuccessProbability | None = None, update_interval: float = 0.0):
-        self.beta0 = positive("aggregation beta0", beta0)
+        self.beta0 = float(beta0)
         self.success = success if success is not None else SuccessProbability()
         if self.success.velocity_dependent:
             self._speeds = representative_velocities()
-            if not np.all(np.diff(self._speeds) > 0):  # pragma: no cover - guards pbmdem.impact
-                raise PBMInputError("representative impact speeds must rise with the velocity bin")
         self._check_source(source)
         self.source = source
-        self.update_interval = positive("frequency update_interval", update_interval, allow_zero=True)
+        self.update_interval = float(update_interval)
         self.evaluations = 0
         self.reset()
 

@@ -1,13 +1,9 @@
 """The liquid axis of the two-dimensional PBM: classes of liquid-to-solid volume ratio.
 
-Class e holds the granules whose liquid-to-solid ratio w = l / s lies in [b_(e-1), b_e) (b_(-1) = 0,
-the last class open above): J classes from J - 1 ascending inner bounds. ``LiquidGrid.uniform(step,
-top)`` gives the bounds step, 2 step, ..., top (the model's, ``pbm.grid.liquid_step`` /
-``liquid_max``), ``LiquidGrid.geometric`` a geometric sequence (the verification's, whose exponential
-start spans decades of ratio). Why the ratio and not the liquid volume (docs/pbm.md, "Two-dimensional
-PBM"): the surface liquid, which decides aggregation, is a function of the ratio; an aggregate's ratio
-is the solid-weighted mean of its partners', so aggregation never leaves the range of ratios present,
-and fragments keep their parent's.
+Class e holds the granules whose ratio w = l / s lies in [b_(e-1), b_e) (b_(-1) = 0, the last class
+open above): J classes from J - 1 ascending inner bounds; ``LiquidGrid.uniform(step, top)`` gives
+step, 2 step, ..., top (``pbm.grid.liquid_step`` / ``liquid_max``). Why the ratio: docs/pbm.md,
+"Two-dimensional PBM".
 """
 
 from __future__ import annotations
@@ -43,22 +39,8 @@ class LiquidGrid:
     def uniform(cls, step: float, top: float) -> LiquidGrid:
         """Classes [0, step), [step, 2 step), ..., [top, inf): top / step + 1 classes (top rounded to a
         whole number of steps, at least one)."""
-        step = positive("pbm.grid.liquid_step", step)
-        top = positive("pbm.grid.liquid_max", top)
         n = max(1, int(round(top / step)))
         return cls(step * np.arange(1, n + 1, dtype=float), step)
-
-    @classmethod
-    def geometric(cls, first: float, last: float, ratio: float) -> LiquidGrid:
-        """Classes [0, first), [first, first r), ..., [>= last, inf) with bounds first r^k up to the
-        first at or above ``last``."""
-        first, last, ratio = positive("first bound", first), positive("last bound", last), positive("ratio", ratio)
-        if ratio <= 1 or last <= first:
-            raise PBMInputError(
-                f"geometric liquid classes: need ratio > 1 and last > first (got {ratio}, {first}, {last})"
-            )
-        n = int(np.ceil(np.log(last / first) / np.log(ratio) - 1e-9)) + 1
-        return cls(first * ratio ** np.arange(n, dtype=float))
 
     def __repr__(self) -> str:
         kind = f"step={self.step:g}" if self.step > 0 else f"geometric {self.bounds[0]:g}..{self.bounds[-1]:g}"

@@ -1,27 +1,10 @@
-"""The batch granulator population balance (its time integration: ``stepping``).
+"""The batch granulator population balance: numbers N_k, liquid L_k and gas G_k totals per bin of
+a :class:`Grid` (the feed granules as classes of their own, :class:`FeedGranules`), aggregation,
+breakage, spraying and consolidation (docs/pbm.md, "Rate processes").
 
-State: numbers N_k, liquid L_k and gas (pore) G_k volume totals per bin of a :class:`Grid`
-(solid S_k = N_k x_k). Balances (aggregation A: a scheme of ``aggregation.SCHEMES``, by default
-the cell average; breakage B, optional: ``breakage.Breakage``):
-
-    dN_k/dt = A_N,k + B_N,k
-    dL_k/dt = A_L,k + B_L,k + Q w_k [t_start <= t < t_end]
-    dG_k/dt = A_G,k + B_G,k - c (G_k - eps_min / (1 - eps_min) S_k)
-
-Time integration: strong-stability-preserving explicit Runge-Kutta, ``"ssp3"`` (SSP-RK3 with
-an embedded Heun estimate, default), ``"heun"`` (SSP-RK2 with an embedded Euler estimate) or
-``"euler"``, with positivity- and error-controlled steps (``stepping``). Internally volumes are
-in units of the first pivot (unit independence; docs/pbm.md, "Time integration"). ``run(t_start,
-t_end, state)`` resumes from any :class:`State`, so a coupled loop can swap the
-collision-frequency source between intervals.
-
-Every rate and every stage is computed by the compiled backend (``_compiled``, ``_compiled_steps``):
-a factored kernel (``Kernel.factors``) inside it, any other kernel called here and its matrix passed in.
-
-Feed granules (``separate_feed=True``, default): the feed granules not yet aggregated are classes
-of their own (:class:`FeedGranules`, docs/pbm.md, "Feed granules"), in the State's per-bin totals
-by the lever rule.
-"""
+Its time integration is ``stepping``'s; every rate and stage is computed by the compiled backend
+(``_compiled``, ``_compiled_steps``). ``run(t_start, t_end, state)`` resumes from any
+:class:`State`, so a coupled loop can swap the collision-frequency source between intervals."""
 
 from __future__ import annotations
 
@@ -31,14 +14,14 @@ from pbmdem.config import Solver
 
 from .aggregation import SCHEMES, operator
 from .breakage import Breakage, breakage_arrays
-from .errors import KernelShapeError, PBMInputError, positive
+from .errors import KernelShapeError, PBMInputError
 from .grid import Grid, diameter_of
 from .kernels import Kernel, KernelInput
 from .processes import Consolidation, LiquidAddition
 from .state import FeedGranules, State
-from .stepping import TimeIntegration, check_solver
+from .stepping import TimeIntegration
 
-__all__ = ["GranulationPBM", "check_solver"]
+__all__ = ["GranulationPBM"]
 
 
 class GranulationPBM(TimeIntegration):
@@ -68,12 +51,8 @@ class GranulationPBM(TimeIntegration):
         self.kernel = kernel
         self.liquid = liquid
         self.consolidation = consolidation
-        self.solver = check_solver(solver if solver is not None else Solver.defaults())
+        self.solver = solver if solver is not None else Solver()
         self.set_rpm(rpm)
-        if scheme not in SCHEMES:
-            raise PBMInputError(f"aggregation scheme = {scheme!r}; allowed: {sorted(SCHEMES)}")
-        if not isinstance(separate_feed, (bool, np.bool_)):
-            raise PBMInputError(f"separate_feed = {separate_feed!r}; allowed: true or false")
         self.separate_feed = bool(separate_feed)
         self.breakage = breakage
         self._brk_arrays = breakage_arrays(breakage, grid.x, grid.edges)  # None: an empty selection
@@ -93,7 +72,7 @@ class GranulationPBM(TimeIntegration):
 
     def set_rpm(self, rpm: float) -> None:
         """The impeller speed of the next runs (the kernel's input; a model reused at another speed)."""
-        self.rpm = positive("impeller speed (rpm)", rpm, allow_zero=True)
+        self.rpm = float(rpm)
 
     def __repr__(self) -> str:
         return (
@@ -193,10 +172,7 @@ class GranulationPBM(TimeIntegration):
     ) -> State:
         """State from particle classes of solid ``volumes`` (m3) and ``numbers``, each with liquid
         ``liquid_content`` x solid volume and pore volume such that G / (S + G) = ``porosity``."""
-        lc = positive("initial liquid_content", liquid_content, allow_zero=True)
-        eps = positive("initial porosity", porosity, allow_zero=True)
-        if eps >= 1:
-            raise PBMInputError(f"initial porosity = {porosity!r}; allowed: 0 <= porosity < 1")
+        lc, eps = float(liquid_content), float(porosity)
         if self.consolidation is not None and eps < self.consolidation.min_porosity:
             raise PBMInputError(
                 f"initial porosity = {eps:g} is below the minimum porosity "

@@ -1,38 +1,15 @@
-"""Liquid addition and consolidation (rate processes besides aggregation); docs/pbm.md ("Rate
-processes": liquid addition, consolidation) gives their balances and sources.
-
-Liquid addition: binder is sprayed at a volumetric rate Q (m3/s) during [t_start, t_end) and
-shared among the classes in proportion to ``"surface_area"`` (default: N_k d_k^2) or
-``"solid_volume"`` (N_k x_k), so that the total liquid is the initial + Q x overlap of the run with
-the spray window. Consolidation: dG_k/dt = -c (G_k - eps_min / (1 - eps_min) S_k), the pore volume
-approaching the minimum porosity; liquid in excess of the pore volume is surface liquid
-(``state.surface_fraction``).
-
-The classes here hold the settings; the rates themselves are computed with the other rate
-processes in the compiled backend (``_compiled.add_processes``).
-"""
+"""Liquid addition and consolidation, the rate processes besides aggregation: their settings; the
+rates are computed in the compiled backend (``_compiled.add_processes``). docs/pbm.md ("Rate
+processes") gives their balances."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from .errors import PBMInputError, positive
-
 
 class LiquidAddition:
-    RULES = ("surface_area", "solid_volume")
-
     def __init__(self, rate: float, t_start: float, t_end: float, rule: str = "surface_area"):
-        self.rate = positive("liquid addition rate (m3/s)", rate)
-        self.t_start = positive("liquid addition t_start (s)", t_start, allow_zero=True)
-        self.t_end = positive("liquid addition t_end (s)", t_end)
-        if self.t_end <= self.t_start:
-            raise PBMInputError(
-                f"liquid addition window [{t_start}, {t_end}] s is empty; allowed: t_end > t_start >= 0"
-            )
-        if rule not in self.RULES:
-            raise PBMInputError(f"liquid addition distribution = {rule!r}; allowed: {list(self.RULES)}")
-        self.rule = rule
+        self.rate, self.t_start, self.t_end, self.rule = float(rate), float(t_start), float(t_end), rule
 
     def __repr__(self) -> str:
         return (
@@ -53,10 +30,7 @@ class LiquidAddition:
 
 class Consolidation:
     def __init__(self, rate: float, min_porosity: float):
-        self.rate = positive("consolidation rate (1/s)", rate)
-        self.min_porosity = positive("consolidation min_porosity", min_porosity, allow_zero=True)
-        if self.min_porosity >= 1:
-            raise PBMInputError(f"consolidation min_porosity = {min_porosity!r}; allowed: 0 <= eps_min < 1")
+        self.rate, self.min_porosity = float(rate), float(min_porosity)
         self.gas_per_solid = self.min_porosity / (1.0 - self.min_porosity)
 
     def __repr__(self) -> str:

@@ -33,10 +33,6 @@ def build_success(pbm: Pbm) -> SuccessProbability:
     if succ.velocity_model == "stokes":
         st = succ.stokes
         velocity = StokesCriterion(st.binder_viscosity, st.restitution, st.asperity_height, st.granule_density)
-    elif succ.velocity_model != "none":
-        raise PBMInputError(
-            f"pbm.aggregation.success.velocity_model = {succ.velocity_model!r}; allowed: 'none', 'stokes'"
-        )
     return SuccessProbability(succ.model, succ.threshold, succ.width, velocity=velocity)
 
 
@@ -83,8 +79,6 @@ def build_model(pbm: Pbm, source=None, rpm: float = 0.0, selection=None) -> Gran
     the constant one of `pbm.aggregation`. With `pbm.breakage.enabled`, the breakage's selection
     rate is `selection`; None: PBM-constant's constant rate, allowed only with the constant
     source (a DEM or surrogate source needs the selection from its impact statistics)."""
-    if pbm.dimensions not in (1, 2):
-        raise PBMInputError(f"pbm.dimensions = {pbm.dimensions!r}; allowed: 1 or 2")
     if pbm.dimensions == 2 and pbm.aggregation.success.velocity_resolved:
         raise PBMInputError(
             f"pbm.dimensions = 2 with pbm.aggregation.success.velocity_model = "
@@ -121,11 +115,6 @@ def initial_state(batch: PbmBatch, model: GranulationPBM) -> State:
     holds the bed's solid volume, with the initial liquid content and porosity."""
     d = np.asarray(batch.sizes.diameters, float)
     f = np.asarray(batch.sizes.number_fractions, float)
-    if d.shape != f.shape or f.sum() <= 0:
-        raise PBMInputError(
-            f"size_distributions.{batch.distribution}: {d.size} diameters, {f.size} fractions "
-            f"summing to {f.sum():g}; need one fraction per diameter and a positive sum"
-        )
     u = volume_of(d)
     f = f / f.sum()
     numbers = batch.bed_solid_volume / float(np.sum(f * u)) * f

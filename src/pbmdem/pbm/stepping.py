@@ -1,16 +1,6 @@
 """The PBM's explicit time integration: the run loop of a model (:class:`TimeIntegration`, the base
-of ``GranulationPBM``) and its step control: the solver settings, the step size and its
-rejections, the run's limits and the records of the output times.
-
-dt = min(safety x min over depleting entries (rate < 0) of value / |rate|, the error-controlled
-step, ``max_step``, the next output time or spray-window edge). A step that would leave a
-negative entry is repeated with half the step; after ``MAX_HALVINGS`` the run stops with
-NegativePopulationError. A step whose embedded error estimate exceeds 1 is repeated with a
-smaller step. What limited each step is counted (``STEP_LIMITS``, ``result.info["step_limits"]``).
-The stages of a step are the model's (``GranulationPBM._stages``, compiled in ``_compiled_steps``).
-The rates are those of every process at once (aggregation, breakage, spraying, consolidation),
-so the deaths of breakage limit the step and trigger the halvings as those of aggregation do.
-"""
+of ``GranulationPBM``) and its step control (docs/pbm.md, "Time integration"). What limited each
+step is counted (``STEP_LIMITS``, ``result.info["step_limits"]``)."""
 
 from __future__ import annotations
 
@@ -21,7 +11,7 @@ import numpy as np
 
 from pbmdem.config import Solver
 
-from .errors import GridOverflowError, NegativePopulationError, PBMInputError, SolverLimitError, positive
+from .errors import GridOverflowError, NegativePopulationError, PBMInputError, SolverLimitError
 from .fast_steps import FastSteps
 from .results import Result
 from .state import State, check_state, feed_volumes
@@ -37,27 +27,6 @@ FLUSH = 1e-100
 MAX_HALVINGS = 60
 #: what can limit a step (``result.info["step_limits"]`` counts them; ``rejected_*`` count retries)
 STEP_LIMITS = ("positivity", "error", "max_step", "event", "rejected_negative", "rejected_error")
-
-
-def check_solver(opt: Solver) -> Solver:
-    """The solver settings `opt` if every value is allowed, else PBMInputError naming it (the
-    schema checks a configuration; this checks settings made in code, e.g. Solver.replace)."""
-    if opt.method not in METHODS:
-        raise PBMInputError(f"solver method = {opt.method!r}; allowed: {list(METHODS)}")
-    safety = positive("solver safety", opt.safety)
-    if safety > 1:
-        raise PBMInputError(
-            f"solver safety = {opt.safety!r}; allowed: 0 < safety <= 1 (fraction of the fastest depletion time)"
-        )
-    if opt.max_step != np.inf:
-        positive("solver max_step (s)", opt.max_step)
-    positive("solver rtol", opt.rtol)
-    positive("solver atol", opt.atol)
-    positive("solver max_overflow_fraction", opt.max_overflow_fraction, allow_zero=True)
-    if isinstance(opt.max_steps, bool) or int(opt.max_steps) != opt.max_steps or opt.max_steps < 1:
-        raise PBMInputError(f"solver max_steps = {opt.max_steps!r}; allowed: an integer >= 1")
-    positive("solver max_wall_time (s)", opt.max_wall_time)
-    return opt
 
 
 @dataclass

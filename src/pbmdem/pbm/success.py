@@ -1,24 +1,13 @@
 """Aggregation success: the success probability of a pair from the surface liquid of both
 granules (:class:`SuccessProbability`) and, velocity-dependent, the viscous Stokes criterion of wet
-granule impacts (:class:`StokesCriterion`; Ennis, Tardos & Pfeffer 1991, Powder Technol. 65:257;
-Liu, Litster, Iveson & Ennis 2000, AIChE J. 46:529).
-
-A pair meeting at relative normal approach speed w (docs/architecture.md) is held if
-St_v = m* w / (6 pi mu a*^2) < St* = (1 + 1/e) ln(h / h_a), with the reduced mass m* and radius a*,
-the pair layer h / h_a = (h_i + h_j) / (2 h_a) and the layer thickness h = d/2 (1 - (1 - phi)^(1/3))
-of a granule whose surface liquid is the volume fraction phi. docs/pbm.md ("Rate processes",
-Stokes criterion) derives these, relates them to the forms of Liu et al. and Ennis et al. and
-gives the defaults. Every quantity is in SI units; the criterion depends only on the dimensionless
-groups St_v, h/h_a and e, so any consistent unit system gives the same answer.
-"""
+granule impacts (:class:`StokesCriterion`). docs/pbm.md ("Rate processes", Stokes criterion)
+derives both and gives the references; every quantity is in SI units."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
-
-from .errors import PBMInputError, positive
 
 
 def harmonic_mean(a, b) -> np.ndarray:
@@ -58,23 +47,13 @@ def critical_stokes_number(h, asperity_height: float, restitution: float) -> np.
 
 
 class StokesCriterion:
-    """Success of an impact: St_v(w) < St* (a step in the approach speed).
-
-    ``viscosity``: binder viscosity mu (Pa s); ``restitution``: e of the solid (asperity) contact;
-    ``asperity_height``: h_a (m); ``density``: granule density rho_g (kg/m3).
-
-    The step is evaluated at one speed per velocity bin (the bin's representative speed), so the
-    success of a pair is the fraction of its encounters in the bins whose speed is below the pair's
-    critical speed w* = St* 6 pi mu a*^2 / m*.
-    """
+    """Success of an impact: St_v(w) < St*, evaluated at each velocity bin's representative speed
+    (docs/pbm.md, "Rate processes": the Stokes criterion); SI units: viscosity mu (Pa s),
+    restitution e, asperity height h_a (m), granule density (kg/m3)."""
 
     def __init__(self, viscosity: float, restitution: float, asperity_height: float, density: float):
-        self.viscosity = positive("success stokes binder_viscosity (Pa s)", viscosity)
-        self.restitution = positive("success stokes restitution", restitution)
-        if self.restitution > 1:
-            raise PBMInputError(f"success stokes restitution = {restitution!r}; allowed: 0 < e <= 1")
-        self.asperity_height = positive("success stokes asperity_height (m)", asperity_height)
-        self.density = positive("success stokes granule_density (kg/m3)", density)
+        self.viscosity, self.restitution = float(viscosity), float(restitution)
+        self.asperity_height, self.density = float(asperity_height), float(density)
 
     def __repr__(self) -> str:
         return (
@@ -100,37 +79,14 @@ class StokesCriterion:
 
 
 class SuccessProbability:
-    """psi_ij = p(phi_i) p(phi_j) from the surface-liquid volume fraction phi of both granules.
-
-    ``model``: ``"step"`` p = 1 if phi >= threshold else 0 (default); ``"logistic"``
-    p = 1 / (1 + exp(-(phi - threshold) / width)); ``"always"`` p = 1 (dry or pure-aggregation
-    tests). phi = surface liquid / granule volume (see ``state.surface_fraction``).
-
-    ``velocity``: optional impact-velocity criterion (``pbmdem.pbm.success.StokesCriterion``: it
-    holds an impact iff its speed is below ``critical_velocity(d, phi)``); with it the success of
-    an impact at speed v is psi_ij(v) = p(phi_i) p(phi_j) x [criterion holds at v], and
-    :class:`CollisionKernel` needs velocity-resolved encounter rates from its source. Without it
-    (default) the success is velocity-independent, as in the seed study.
-    """
-
-    MODELS = ("step", "logistic", "always")
+    """psi_ij = p(phi_i) p(phi_j) from the surface-liquid volume fraction phi of both granules
+    (``model`` ``"step"``, ``"logistic"`` or ``"always"``, docs/pbm.md "Rate processes"); with a
+    ``velocity`` criterion (:class:`StokesCriterion`) the success of an impact at speed v also needs
+    the criterion to hold at v, and :class:`CollisionKernel` needs velocity-resolved encounter rates."""
 
     def __init__(self, model: str = "step", threshold: float = 0.02, width: float = 0.005, velocity=None):
-        if velocity is not None and not callable(getattr(velocity, "critical_velocity", None)):
-            raise PBMInputError(
-                f"success velocity criterion {velocity!r} lacks critical_velocity(d, phi); "
-                "allowed: None or a pbmdem.pbm.success.StokesCriterion"
-            )
         self.velocity = velocity
-        if model not in self.MODELS:
-            raise PBMInputError(f"success probability model = {model!r}; allowed: {list(self.MODELS)}")
-        self.model = model
-        self.threshold = positive("success threshold", threshold, allow_zero=True)
-        if self.threshold >= 1:
-            raise PBMInputError(
-                f"success threshold = {threshold!r}; allowed: 0 <= threshold < 1 (a surface-liquid volume fraction)"
-            )
-        self.width = positive("success width", width)
+        self.model, self.threshold, self.width = model, float(threshold), float(width)
 
     def __repr__(self) -> str:
         vel = "" if self.velocity is None else f", velocity={self.velocity!r}"

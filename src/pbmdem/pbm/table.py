@@ -20,7 +20,7 @@ from pbmdem.readers import InputFileError, first_index
 from pbmdem.tables import GRID_PAIRS, GRID_VELOCITIES, Table
 
 from .bilinear import Bilinear
-from .errors import PBMInputError, positive
+from .errors import PBMInputError
 
 _KEY_TYPES = {"point_id": str, "class_i": int, "class_j": int}
 
@@ -31,42 +31,18 @@ FREQUENCY_COLUMN = "encounter_frequency_per_pair"
 
 
 class TableFrequency:
-    """Per-pair encounter frequency interpolated from the DEM collision table.
+    """Per-pair encounter frequency interpolated from the DEM collision table (docs/pbm.md, "Rate
+    processes": symmetric rows, zero frequencies floored at ``zero_floor`` x the smallest positive one,
+    bilinear in (log d_i, log d_j) of log c, ``extrapolation`` ``"clamp"`` or ``"linear"`` beyond the
+    table's sizes, log c linear in rpm between table speeds; ``numbers`` is ignored).
 
-    ``table``: DataFrame with columns ``d_i, d_j`` and ``column`` (default
-    ``encounter_frequency_per_pair``; and ``rpm``; without it one speed is assumed), one row per
-    class pair as in docs/architecture.md. For each speed:
-
-    * rows are made symmetric (the (d_j, d_i) mirror of each row is added) and rows for the same
-      pair (several distributions at one speed) are averaged;
-    * interpolation is bilinear in (log d_i, log d_j) of log c (a power law between table
-      sizes); zero frequencies are replaced by ``zero_floor`` x the smallest positive frequency
-      of the table before taking logs;
-    * outside the table's size range: ``extrapolation="clamp"`` (default) uses the value at the
-      nearest table size (c constant beyond the range: large aggregates of a PBM far outside the
-      DEM sizes get the frequency of the largest DEM class); ``"linear"`` extends the power law.
-
-    Over impeller speed: log c linear in rpm between neighbouring table speeds, the nearest speed
-    outside them (:func:`speed_weights`). ``numbers`` is ignored (the table holds the DEM
-    population's own frequencies).
-
-    ``velocity_table`` (optional): the impact-velocity table (results/dem/impact_velocity.csv,
-    columns ``point_id, class_i, class_j, v_lo, v_hi, encounters``), joined to ``table`` on
-    (point_id, class_i, class_j) (rows of points absent from ``table`` are left out); it enables
-    :meth:`encounters`. Per speed, the encounter counts of a pair (and of its mirror and of
-    duplicate rows) are pooled and normalised to fractions per velocity bin; a table pair without
-    encounters gets the pooled distribution of all pairs at that speed (its frequency is floored,
-    not zero, see above). The fractions are interpolated bilinearly in (log d_i, log d_j), always
-    clamped at the table's sizes (a linearly extrapolated distribution could turn negative), and
-    mixed linearly in rpm with the weights of the frequency interpolation.
-    """
+    ``velocity_table`` (optional): the impact-velocity table joined on (point_id, class_i, class_j);
+    it enables :meth:`encounters`: per speed the pooled fractions of a pair's encounters per velocity
+    bin (a pair without encounters gets all pairs' pooled distribution), interpolated in sizes always
+    clamped and mixed in rpm with the frequency's weights."""
 
     def _set_options(self, extrapolation: str, zero_floor: float, column: str) -> None:
-        if extrapolation not in ("clamp", "linear"):
-            raise PBMInputError(f"table extrapolation = {extrapolation!r}; allowed: 'clamp', 'linear'")
-        self.extrapolation = extrapolation
-        self.zero_floor = positive("table zero_floor", zero_floor)
-        self.column = column
+        self.extrapolation, self.zero_floor, self.column = extrapolation, float(zero_floor), column
 
     def __init__(
         self,

@@ -1,15 +1,8 @@
-"""The DEM's wall impacts as a source for breakage: :class:`WallTable`.
-
-Per wall (bowl, impeller), the encounters per granule and second of each size class
-(``encounter_frequency_per_particle`` of results/dem/wall_collisions.csv) and their impact-speed
-distribution (results/dem/wall_impact_velocity.csv, counts per bin of pbmdem.impact.VELOCITY_EDGES),
-interpolated onto any class diameters and impeller speed the way :class:`~pbmdem.pbm.table.TableFrequency`
-interpolates the pair table: per speed, rows of one diameter (several distributions) are pooled
-(frequencies averaged, counts added), log f is interpolated linearly in log d and clamped at the
-table's sizes, zero frequencies are floored at ``zero_floor`` x the smallest positive one; the
-fractions are interpolated linearly in log d (clamped); over rpm, log f and the fractions are
-mixed with the weights of :func:`pbmdem.pbm.table.speed_weights`.
-"""
+"""The DEM's wall impacts as a source for breakage (:class:`WallTable`): per wall (bowl, impeller)
+the encounters per granule and second of each size class (results/dem/wall_collisions.csv) and
+their impact-speed distribution (wall_impact_velocity.csv), interpolated onto any diameters and
+speed the way :class:`~pbmdem.pbm.table.TableFrequency` interpolates the pair table (log f linear
+in log d, clamped; zero frequencies floored at ``zero_floor`` x the smallest positive one)."""
 
 from __future__ import annotations
 
@@ -21,7 +14,7 @@ from pbmdem.impact import N_VELOCITY_BINS, WALLS, WallRates, velocity_bins_of
 from pbmdem.readers import InputFileError, first_index
 from pbmdem.tables import GRID_WALL_VELOCITIES, GRID_WALLS
 
-from .errors import PBMInputError, positive
+from .errors import PBMInputError
 from .table import read_grid_table, speed_weights
 
 #: Column of the wall table the breakage selection is built on (impacts of granules that were apart).
@@ -37,7 +30,7 @@ class WallTable:
     is refused (the tables come from different runs)."""
 
     def __init__(self, walls: pd.DataFrame, velocities: pd.DataFrame, zero_floor: float = 1e-3):
-        self.zero_floor = positive("wall table zero_floor", zero_floor)
+        self.zero_floor = float(zero_floor)
         need = ["point_id", "rpm", "wall", "class_i", "d_i", WALL_FREQUENCY_COLUMN]
         missing = [c for c in need if c not in walls.columns]
         missing += [

@@ -146,10 +146,13 @@ class PbmAnnOutputs:
         return table[[*STATISTICS, "out_of_domain_intervals", "failed"]]
 
 
-def sensitivity(loop: CoupledLoop, model_path: str | Path, settings: Sensitivity) -> tuple[pd.DataFrame, dict]:
-    """Rule sensitivity: the indices table of PBM-ANN's final d10/d50/d90 (`member` 'mean' or k) and
-    the figures of merit: batches, wall time, samples out of the training domain or failed, per model."""
-    n_members = load_surrogate(model_path).n_members
+def sensitivity(
+    loop: CoupledLoop, model_path: str | Path, settings: Sensitivity, members: bool = True
+) -> tuple[pd.DataFrame, dict]:
+    """Rule sensitivity: the indices table of PBM-ANN's final d10/d50/d90 (the mean and, with
+    `members`, every member; `member` 'mean' or k) and the figures of merit: batches, wall time,
+    samples out of the training domain or failed, per model."""
+    n_members = load_surrogate(model_path).n_members if members else 0
     factors = settings.factors()
     keys = tuple(f.key for f in factors)
     speed = float(settings.impeller_rpm.low)

@@ -38,7 +38,7 @@ def _read_table(table, contract, need=()) -> tuple[pd.DataFrame, str]:
 
 
 def _train_walls(surrogate, selected: str, metrics, tables, settings, impeller_radius, n_jobs):
-    """The wall models (pbmdem.surrogate.walls, of the family ``selected``: the impact-speed law's)
+    """The wall models (pbmdem.surrogate.walls: speed laws of the family ``selected``, the pairs' impact-speed law's)
     of the wall ``tables`` (collisions, impact velocities) into ``surrogate.wall_models_``:
     (``metrics`` with theirs appended, their summary); without wall tables (None) ``metrics`` and
     no summary."""

@@ -157,9 +157,8 @@ def train_wall_models(walls, velocities, template, candidates: dict, settings: d
         for key, s, name in (("uncertainty_scale", frequency, chosen), ("velocity_uncertainty_scale", speed, family)):
             scale = s.get(name, {}).get("uncertainty_scale", float("nan"))
             scales[key] = float(scale) if np.isfinite(scale) and scale > 0 else 1.0
-        velocity = template.velocity_model if template.velocity_model is not None else template.frequency_model
-        velocity = None if velocity is None else clone(velocity)
-        model = clone(candidates[chosen]).set_params(velocity_model=velocity, **scales)
+        # as the pair model's (train._calibrated): the family's frequency, the template's speed law
+        model = clone(candidates[chosen]).set_params(velocity_model=clone(template.velocity_model), **scales)
         with warnings.catch_warnings():
             warnings.filterwarnings("ignore", message=f"features ({'|'.join(DIAGONAL_TWINS)}) are")
             models[wall] = model.fit(
